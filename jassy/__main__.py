@@ -1,0 +1,5 @@
+import sys
+
+from jassy.cli import main
+
+sys.exit(main())

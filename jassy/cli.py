@@ -1,0 +1,165 @@
+"""The ``jassy`` command line: render, list, info, bench.
+
+Exit codes: 0 success, 2 bad input (one line on stderr, no output file created or
+overwritten), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from jassy.errors import JassyError
+
+DEFAULT_RATE = 48000
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from jassy.files import audio_format
+    from jassy.offline import OfflineEngine
+    from jassy.patchfile import load_patch
+
+    audio_format(args.output, args.format)  # bad output names fail before any work
+    patch = load_patch(args.patch, args.set or ())
+    rate = args.sr or patch.sample_rate or DEFAULT_RATE
+    duration = args.duration or patch.duration
+    if duration is None:
+        raise JassyError("--duration: the patch sets no duration; give one in seconds")
+    if args.haptic and not patch.graph.haptic:
+        raise JassyError(f"--haptic: patch {patch.name!r} has no haptic output ([outputs] haptic = ...)")
+    t0 = time.perf_counter()
+    engine = OfflineEngine(patch.graph, patch.score, rate, args.block)
+    summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
+    elapsed = time.perf_counter() - t0
+    for warning in summary["warnings"]:
+        print(f"jassy: warning: {warning}", file=sys.stderr)
+    if not args.quiet:
+        peak_db = 20 * __import__("math").log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
+        print(
+            f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
+            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, "
+            f"{summary['duration'] / elapsed:.0f}x real time"
+            + (f"; haptic -> {args.haptic}" if args.haptic else "")
+        )
+    return 0
+
+
+def _first_line(text: str | None) -> str:
+    return (text or "").strip().splitlines()[0] if (text or "").strip() else ""
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from jassy.patchfile import builtin_patches, load_patch
+    from jassy.registry import ugen_types
+
+    print("patches:")
+    for name in sorted(builtin_patches()):
+        print(f"  {name:<12} {load_patch(name).description}")
+    print("ugens:")
+    for name, cls in ugen_types().items():
+        params = ", ".join(cls.param_specs)
+        actions = ", ".join(cls.actions)
+        extra = f"; actions: {actions}" if actions else ""
+        print(f"  {name:<14} {_first_line(cls.__doc__)}")
+        print(f"  {'':<14} params: {params or '-'}{extra}")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from jassy.patchfile import load_patch
+
+    patch = load_patch(args.patch, args.set or ())
+    print(f"patch {patch.name}: {patch.description}")
+    print(f"source: {patch.source}")
+    print(f"duration: {patch.duration} s, sample rate: {patch.sample_rate or DEFAULT_RATE} Hz")
+    print("nodes (in processing order):")
+    print(patch.graph.summary())
+    for node in patch.graph.order:
+        model = node.values.get("model")
+        if model is not None:
+            print(
+                f"  model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
+                f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
+                + (f" ({', '.join(model.points)})" if model.points else "")
+            )
+    actions: dict[str, int] = {}
+    for ev in patch.score:
+        actions[ev.action] = actions.get(ev.action, 0) + 1
+    last = max((ev.time for ev in patch.score), default=0.0)
+    print(
+        f"score: {len(patch.score)} events ({', '.join(f'{k} x{v}' for k, v in actions.items()) or 'none'}), "
+        f"last at {last:g} s"
+    )
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from jassy import bench
+
+    if args.name == "modal":
+        counts = (64, 1024) if args.quick else (64, 1024, 16384)
+        rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
+        graph = bench.graph_bench(seconds=2.0 if args.quick else 10.0)
+        if args.json:
+            print(json.dumps({"modal": rows, "graph": graph}, indent=2))
+        else:
+            bench.print_modal(rows, graph)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="jassy", description="Physically based sound synthesis.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("render", help="render a patch to a WAV/FLAC file")
+    p.add_argument("patch", help="patch file (.toml) or built-in patch name (see 'jassy list')")
+    p.add_argument("-o", "--output", required=True, help="output file (.wav or .flac)")
+    p.add_argument("--duration", type=float, help="seconds to render (default: the patch's)")
+    p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
+    p.add_argument("--block", type=int, default=64, help="block size in frames (default 64)")
+    p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
+    p.add_argument(
+        "--format",
+        default="float32",
+        choices=["float32", "pcm16", "pcm24"],
+        help="sample format (default float32; FLAC needs pcm16/pcm24)",
+    )
+    p.add_argument("--haptic", metavar="FILE", help="also write the haptic force track (.wav, .npz or .csv)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
+    p.set_defaults(func=_cmd_render)
+
+    p = sub.add_parser("list", help="list built-in patches and ugen types")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("info", help="show a patch's graph, models and score")
+    p.add_argument("patch")
+    p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("bench", help="measure throughput against references")
+    p.add_argument("name", choices=["modal"], help="modal: ModalBank vs plain numba and scipy, and the graph")
+    p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=_cmd_bench)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "block", 1) is not None and getattr(args, "block", 1) < 1:
+        parser.error(f"--block: expected an integer >= 1, got {args.block}")
+    try:
+        return args.func(args)
+    except JassyError as exc:
+        print(f"jassy: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("jassy: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""Atomic output files: write to a hidden temporary beside the target, then rename.
+
+A failure or Ctrl-C (KeyboardInterrupt) removes the temporary, so nothing ever appears
+under the requested name unless the whole file was written and flushed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from jassy.errors import RenderError
+
+AUDIO_FORMATS = {".wav": "WAV", ".flac": "FLAC"}
+AUDIO_SUBTYPES = {"float32": "FLOAT", "pcm16": "PCM_16", "pcm24": "PCM_24"}
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[str]:
+    """Yield a temporary path; on success rename it to ``path``, else delete it."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise RenderError(f"{path}: directory {directory} does not exist")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
+    except OSError as exc:
+        raise RenderError(f"{path}: cannot create a file there ({exc.strerror})") from None
+    os.close(fd)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def audio_format(path: str | os.PathLike, sample_format: str = "float32") -> tuple[str, str]:
+    """(soundfile format, subtype) for an output path and sample format name."""
+    ext = Path(path).suffix.lower()
+    if ext not in AUDIO_FORMATS:
+        raise RenderError(f"{path}: expected a .wav or .flac file name")
+    if sample_format not in AUDIO_SUBTYPES:
+        raise RenderError(f"--format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {sample_format!r}")
+    fmt, subtype = AUDIO_FORMATS[ext], AUDIO_SUBTYPES[sample_format]
+    if fmt == "FLAC" and subtype == "FLOAT":
+        raise RenderError(f"{path}: FLAC stores integers; use --format pcm16 or pcm24")
+    return fmt, subtype
+
+
+class AtomicAudioWriter:
+    """Stream frames into a WAV/FLAC file that appears only when complete.
+
+    Use as a context manager; ``write(block)`` takes (channels, frames) float arrays,
+    which must be finite and within [-1, 1] (the engine's limiter guarantees both).
+    """
+
+    def __init__(
+        self, path: str | os.PathLike, sample_rate: int, channels: int, sample_format: str = "float32"
+    ):
+        import soundfile
+
+        self.path = Path(path)
+        self.format, self.subtype = audio_format(path, sample_format)
+        self._ctx = atomic_path(self.path)
+        self._tmp = self._ctx.__enter__()
+        try:
+            self._file = soundfile.SoundFile(
+                self._tmp, "w", int(sample_rate), channels, self.subtype, format=self.format
+            )
+        except BaseException:
+            self._ctx.__exit__(*__import__("sys").exc_info())
+            raise
+
+    def write(self, block: np.ndarray) -> None:
+        if not np.all(np.isfinite(block)):
+            raise RenderError(f"{self.path}: refusing to write non-finite samples")
+        self._file.write(np.ascontiguousarray(block.T, dtype=np.float32))
+
+    def __enter__(self) -> AtomicAudioWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self._file.close()
+        return bool(self._ctx.__exit__(exc_type, exc, tb))
+
+
+def write_signal(path: str | os.PathLike, data: np.ndarray, sample_rate: float, label: str = "force") -> None:
+    """Write a (channels, frames) signal atomically as .wav (float32), .npz or .csv.
+
+    NPZ holds ``data``, ``sample_rate`` and ``frames`` (sample index of each column);
+    CSV has columns frame, time_s and one per channel.
+    """
+    path = Path(path)
+    if not np.all(np.isfinite(data)):
+        raise RenderError(f"{path}: refusing to write non-finite samples")
+    ext = path.suffix.lower()
+    frames = np.arange(data.shape[1])
+    with atomic_path(path) as tmp:
+        if ext == ".wav":
+            import soundfile
+
+            soundfile.write(tmp, data.T.astype(np.float32), int(sample_rate), "FLOAT", format="WAV")
+        elif ext == ".npz":
+            with open(tmp, "wb") as fh:
+                np.savez(fh, data=data, sample_rate=np.float64(sample_rate), frames=frames)
+        elif ext == ".csv":
+            cols = [frames, frames / sample_rate, *data]
+            header = ",".join(["frame", "time_s"] + [f"{label}{c}" for c in range(data.shape[0])])
+            np.savetxt(
+                tmp,
+                np.column_stack(cols),
+                delimiter=",",
+                header=header,
+                comments="",
+                fmt=["%d", "%.9f"] + ["%.9g"] * data.shape[0],
+            )
+        else:
+            raise RenderError(f"{path}: expected a .wav, .npz or .csv file name")

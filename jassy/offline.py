@@ -1,0 +1,211 @@
+"""Offline engine: render a graph and its score to arrays or to an audio file.
+
+The engine runs the scheduler chunk by chunk (a chunk is only a unit of output handling:
+sub-block boundaries come from the absolute clock, the block size and the events, so the
+chunk size does not change the result). Each chunk is checked for NaN/Inf, which are
+replaced by silence and reported once with the node that produced them, and the audio
+passes the final limiter so it stays within [-CEILING, CEILING].
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.events import Event
+from jassy.files import AtomicAudioWriter, audio_format, write_signal
+from jassy.graph import Graph
+from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, zero_nonfinite
+from jassy.scheduler import Scheduler
+
+CHUNK_FRAMES = 8192
+
+
+@nb.njit(cache=True)
+def gather(bus, rows, buf, offset, m):
+    """buf[r, offset:offset+m] = bus[rows[r], :m] for every output channel r."""
+    for r in range(rows.shape[0]):
+        src = bus[rows[r]]
+        dst = buf[r]
+        for i in range(m):
+            dst[offset + i] = src[i]
+
+
+@dataclass
+class Rendering:
+    """Rendered signals: audio (channels, frames) in [-1, 1], haptic force (channels, frames) in N."""
+
+    audio: np.ndarray
+    haptic: np.ndarray
+    sample_rate: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def _nonfinite_nodes(graph: Graph) -> list[str]:
+    bad = []
+    for node in graph.order:
+        arrays = [node.out, *node.state_arrays().values()]
+        if any(a.dtype.kind == "f" and not np.all(np.isfinite(a)) for a in arrays):
+            bad.append(node.name)
+    return bad
+
+
+class OfflineEngine:
+    """Steps a graph through its score on one sample clock, faster than real time."""
+
+    def __init__(
+        self,
+        graph: Graph,
+        score: Sequence[Event] = (),
+        sample_rate: float = 48000,
+        block: int = 64,
+        limiter: bool = True,
+        release: float = 0.05,
+    ):
+        if not (isinstance(sample_rate, (int, float)) and 1000 <= sample_rate <= 768000):
+            raise PatchError(f"sample_rate: expected a rate in [1000, 768000] Hz, got {sample_rate!r}")
+        if not isinstance(block, int) or block < 1:
+            raise PatchError(f"block: expected an integer >= 1, got {block!r}")
+        self.graph = graph
+        self.sample_rate = float(sample_rate)
+        graph.prepare(self.sample_rate, block)
+        self.scheduler = Scheduler(graph, score, self.sample_rate, block)
+        self.limiter = limiter
+        self._limiter_state = np.ones(1)
+        self._release = release_coefficient(release, self.sample_rate)
+        self.warnings: list[str] = []
+
+    @property
+    def frame(self) -> int:
+        """Frames rendered so far (the sample clock)."""
+        return self.scheduler.frame
+
+    def chunks(self, frames: int, progress: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Yield (audio, haptic) chunks covering the next ``frames`` frames."""
+        graph = self.graph
+        n_audio = len(graph.audio)
+        size = min(CHUNK_FRAMES, max(frames, 1))
+        buf = np.zeros((len(graph.bus_rows), size))
+        abuf, hbuf = buf[:n_audio], buf[n_audio:]
+        bus, rows = graph.bus, graph.bus_rows
+
+        def emit(offset: int, m: int) -> None:
+            gather(bus, rows, buf, offset, m)
+
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(
+                total=round(frames / self.sample_rate, 2),
+                unit="s",
+                delay=2.0,
+                desc="render",
+                leave=False,
+                bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s audio [{elapsed}<{remaining}]",
+            )
+        try:
+            done = 0
+            while done < frames:
+                n = min(size, frames - done)
+                self.scheduler.run(n, emit)
+                a, h = abuf[:, :n], hbuf[:, :n]
+                if count_nonfinite(a) or count_nonfinite(h):
+                    self._quarantine(a, h)
+                if self.limiter:
+                    limit(a, n, self._limiter_state, CEILING, self._release)
+                done += n
+                if bar is not None:
+                    bar.update(round(n / self.sample_rate, 6))
+                yield a, h
+        finally:
+            if bar is not None:
+                bar.close()
+
+    def _quarantine(self, audio: np.ndarray, haptic: np.ndarray) -> None:
+        """Replace NaN/Inf by silence, reset the nodes that hold them, report once per node."""
+        t = self.frame / self.sample_rate
+        for name in _nonfinite_nodes(self.graph):
+            msg = f"node {name!r} produced NaN/Inf near t = {t:.3f} s; replaced by silence and reset"
+            if msg.split(" near")[0] not in " ".join(self.warnings):
+                self.warnings.append(msg)
+            self.graph.nodes[name].reset()
+        if not self.warnings:
+            self.warnings.append(f"NaN/Inf in the output near t = {t:.3f} s; replaced by silence")
+        zero_nonfinite(audio)
+        zero_nonfinite(haptic)
+
+    def render(self, duration: float, progress: bool = False) -> Rendering:
+        """Render ``duration`` seconds into arrays."""
+        frames = frames_for(duration, self.sample_rate)
+        audio = np.zeros((len(self.graph.audio), frames))
+        haptic = np.zeros((len(self.graph.haptic), frames))
+        pos = 0
+        for a, h in self.chunks(frames, progress):
+            n = a.shape[1]
+            audio[:, pos : pos + n] = a
+            haptic[:, pos : pos + n] = h
+            pos += n
+        return Rendering(audio, haptic, self.sample_rate, list(self.warnings))
+
+    def render_to_file(
+        self,
+        path: str | os.PathLike,
+        duration: float,
+        sample_format: str = "float32",
+        haptic_path: str | os.PathLike | None = None,
+        progress: bool = False,
+    ) -> dict:
+        """Stream ``duration`` seconds to an audio file (and the haptic track), atomically.
+
+        Returns a summary: frames, duration, peak, haptic peak, warnings.
+        """
+        frames = frames_for(duration, self.sample_rate)
+        audio_format(path, sample_format)  # fail before rendering
+        if self.sample_rate != int(self.sample_rate):
+            raise PatchError(f"sample_rate: files need an integer rate, got {self.sample_rate}")
+        haptic = np.zeros((len(self.graph.haptic), frames)) if haptic_path else None
+        peak = 0.0
+        pos = 0
+        with AtomicAudioWriter(path, int(self.sample_rate), len(self.graph.audio), sample_format) as out:
+            for a, h in self.chunks(frames, progress):
+                out.write(a)
+                peak = max(peak, float(np.max(np.abs(a))) if a.size else 0.0)
+                if haptic is not None:
+                    haptic[:, pos : pos + a.shape[1]] = h
+                pos += a.shape[1]
+            if haptic is not None:
+                write_signal(haptic_path, haptic, self.sample_rate)
+        return {
+            "frames": frames,
+            "duration": frames / self.sample_rate,
+            "peak": peak,
+            "haptic_peak": float(np.max(np.abs(haptic))) if haptic is not None and haptic.size else None,
+            "warnings": list(self.warnings),
+        }
+
+
+def frames_for(duration: float, sample_rate: float) -> int:
+    """Number of frames in ``duration`` seconds (rounded); PatchError if not positive."""
+    if not isinstance(duration, (int, float)) or not math.isfinite(duration) or duration <= 0:
+        raise PatchError(f"duration: expected seconds > 0, got {duration!r}")
+    return max(1, int(round(duration * sample_rate)))
+
+
+def render(
+    graph: Graph,
+    score: Sequence[Event] = (),
+    duration: float = 1.0,
+    sample_rate: float = 48000,
+    block: int = 64,
+    limiter: bool = True,
+    progress: bool = False,
+) -> Rendering:
+    """Render a graph and score offline into arrays (see :class:`OfflineEngine`)."""
+    return OfflineEngine(graph, score, sample_rate, block, limiter).render(duration, progress)

@@ -1,0 +1,166 @@
+"""Parameter specifications, validation and per-sample linear smoothing.
+
+A :class:`ParamSpec` describes one ugen parameter (type, default, range, unit). The same
+spec validates Python keyword arguments, TOML patch values, ``--set`` overrides and score
+events, so every entry point gives the same error for the same mistake.
+
+Smoothing is defined per sample from the sample at which a change is applied: a linear
+ramp of ``round(smooth * sample_rate)`` samples. It is therefore independent of how the
+render is cut into blocks, which keeps the block-size invariance of the scheduler.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+
+_KINDS = ("float", "int", "bool", "str", "location", "model", "floats")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of a ugen.
+
+    kind: ``float``, ``int``, ``bool``, ``str`` (one of ``choices``), ``location``
+    (vertex index or barycentric triple, see :func:`jassy.modal_model.parse_location`),
+    ``model`` (a ModalModel or the name of one in the patch) or ``floats`` (list of numbers).
+    ``smooth`` marks float parameters whose changes are ramped unless a jump is asked for.
+    """
+
+    kind: str
+    default: Any = None
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    unit: str = ""
+    doc: str = ""
+    smooth: bool = False
+    required: bool = False
+    fixed: bool = False
+    choices: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.kind not in _KINDS:
+            raise ValueError(f"unknown param kind {self.kind!r}")
+
+    def expected(self) -> str:
+        """Human description of an acceptable value, for error messages."""
+        if self.kind == "str":
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        if self.kind in ("float", "int"):
+            what = "a number" if self.kind == "float" else "an integer"
+            if self.low is not None and self.high is not None:
+                return f"{what} in {'(' if self.low_open else '['}{self.low}, {self.high}]"
+            if self.low is not None:
+                return f"{what} {'>' if self.low_open else '>='} {self.low}"
+            if self.high is not None:
+                return f"{what} <= {self.high}"
+            return what
+        return {
+            "bool": "true or false",
+            "location": "a location: vertex index, or {vertices=[i,j,k], weights=[u,v,w]}",
+            "model": "the name of a modal model",
+            "floats": "a list of numbers",
+        }[self.kind]
+
+    def coerce(self, value: Any, where: str) -> Any:
+        """Return ``value`` converted to this kind, or raise PatchError naming ``where``."""
+        bad = PatchError(f"{where}: expected {self.expected()}, got {value!r}")
+        if self.kind == "float":
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise bad
+            value = float(value)
+            if not math.isfinite(value):
+                raise bad
+        elif self.kind == "int":
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                if isinstance(value, float) and value.is_integer():
+                    value = int(value)
+                else:
+                    raise bad
+            value = int(value)
+        elif self.kind == "bool":
+            if not isinstance(value, (bool, np.bool_)):
+                raise bad
+            return bool(value)
+        elif self.kind == "str":
+            if not isinstance(value, str) or (self.choices and value not in self.choices):
+                raise bad
+            return value
+        elif self.kind == "floats":
+            try:
+                arr = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise bad from None
+            if arr.ndim != 1 or not np.all(np.isfinite(arr)):
+                raise bad
+            return arr
+        else:
+            return value  # location and model are checked by their owners
+        if self.low is not None and (value < self.low or (self.low_open and value == self.low)):
+            raise bad
+        if self.high is not None and value > self.high:
+            raise bad
+        return value
+
+
+@nb.njit(cache=True)
+def ramp_fill(ramp, out, n):
+    """Write n per-sample values of a linear ramp into out[:n] and advance it.
+
+    ramp = [current, target, increment, remaining]: each sample first advances the value,
+    so a ramp of m samples reaches the target exactly at its m-th sample.
+    """
+    cur = ramp[0]
+    remaining = int(ramp[3])
+    for i in range(n):
+        if remaining > 0:
+            remaining -= 1
+            cur = ramp[1] if remaining == 0 else cur + ramp[2]
+        out[i] = cur
+    ramp[0] = cur
+    ramp[3] = remaining
+
+
+class Smoothed:
+    """A smoothed scalar parameter: linear ramp over a fixed number of samples.
+
+    ``steady`` and ``value`` are plain attributes (read on every block by ugens).
+    """
+
+    __slots__ = ("ramp", "steady", "value")
+
+    def __init__(self, value: float):
+        self.ramp = np.array([value, value, 0.0, 0.0])
+        self.steady = True
+        self.value = float(value)
+
+    @property
+    def target(self) -> float:
+        return float(self.ramp[1])
+
+    def set(self, value: float, ramp_samples: int, jump: bool = False) -> None:
+        """Move to ``value``: at once if ``jump`` or ramp_samples < 1, else linearly."""
+        if jump or ramp_samples < 1:
+            self.ramp[:] = (value, value, 0.0, 0.0)
+        else:
+            cur = self.ramp[0]
+            self.ramp[:] = (cur, value, (value - cur) / ramp_samples, ramp_samples)
+        self.sync()
+
+    def sync(self) -> None:
+        """Refresh ``steady``/``value`` after the ramp array changed (e.g. state restore)."""
+        self.steady = bool(self.ramp[3] == 0)
+        self.value = float(self.ramp[0])
+
+    def fill(self, out: np.ndarray, n: int) -> np.ndarray:
+        """Per-sample values for the next n samples (advances the ramp)."""
+        ramp_fill(self.ramp, out, n)
+        self.sync()
+        return out[:n]

@@ -1,0 +1,266 @@
+"""TOML patch files: nodes, connections, outputs, models and a score.
+
+Everything is validated before anything runs, and every error names the file, the key and
+what was expected. Loading a patch never executes code: TOML is data, model files are
+TOML, NPZ (no pickles) or JASS .sy text.
+
+Layout::
+
+    [patch]            name, description, duration (s), sample_rate (Hz)
+    [models.NAME]      file = "x.toml" (relative to the patch) or inline frequencies/decays/gains/points
+    [nodes.NAME]       type = "ModalBank"; input names map to source nodes (Mixer: inputs = [...]);
+                       other keys are parameters; a "model" parameter names a [models] entry
+    [outputs]          audio = "node" or ["left", "right"]; haptic = "node" or [...]
+    [[score]]          time (s), node, then one action: set = {param = value}, jump = true|false,
+                       or an action of the node type, e.g. impact = {impulse = 0.01, location = 2}
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from jassy.errors import ModelError, PatchError
+from jassy.events import Event
+from jassy.graph import Graph
+from jassy.modal_model import ModalModel
+from jassy.registry import ugen_class
+from jassy.scheduler import validate_event
+
+TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
+PATCH_KEYS = {"name", "description", "duration", "sample_rate"}
+
+
+@dataclass
+class Patch:
+    """A graph with its score and rendering defaults."""
+
+    graph: Graph
+    score: list[Event] = field(default_factory=list)
+    name: str = "patch"
+    description: str = ""
+    duration: float | None = None
+    sample_rate: float | None = None
+    source: str = ""
+
+
+def builtin_patches() -> dict[str, Path]:
+    """Built-in patch names -> TOML paths (the ``patches`` package)."""
+    root = resources.files("patches")
+    return {
+        Path(p.name).stem: Path(str(p))
+        for p in root.iterdir()
+        if p.name.endswith(".toml") and not p.name.endswith("_model.toml")
+    }
+
+
+def resolve_patch(spec: str) -> Path:
+    """A patch path, or the path of the built-in patch named ``spec``."""
+    path = Path(spec)
+    if path.suffix == ".toml" or os.sep in spec:
+        if not path.is_file():
+            raise PatchError(f"{spec}: no such patch file")
+        return path
+    builtins = builtin_patches()
+    if spec not in builtins:
+        raise PatchError(
+            f"{spec}: not a patch file or built-in patch; built-ins are {', '.join(sorted(builtins))}"
+        )
+    return builtins[spec]
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """Parse ``node.param=value`` (value in TOML syntax, or a bare string)."""
+    key, sep, raw = text.partition("=")
+    node, dot, param = key.strip().partition(".")
+    if not sep or not dot or not node or not param:
+        raise PatchError(f"--set {text!r}: expected node.param=value")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return node, param.strip(), value
+
+
+def load_patch(spec: str | os.PathLike, overrides: list[str] | tuple[str, ...] = ()) -> Patch:
+    """Load and validate a patch file (or built-in name), applying ``node.param=value`` overrides."""
+    path = resolve_patch(str(spec))
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise PatchError(f"{path}: not valid TOML ({exc})") from None
+    except OSError as exc:
+        raise PatchError(f"{path}: cannot read ({exc.strerror})") from None
+    return build_patch(data, str(path), path.parent, overrides)
+
+
+def _table(data: dict, key: str, where: str) -> dict:
+    value = data.get(key, {})
+    if not isinstance(value, dict):
+        raise PatchError(f"{where}: {key}: expected a table")
+    return value
+
+
+def _load_models(models: dict, where: str, base: Path) -> dict[str, ModalModel]:
+    out = {}
+    for name, entry in models.items():
+        key = f"{where}: models.{name}"
+        if not isinstance(entry, dict):
+            raise PatchError(f"{key}: expected a table with 'file' or frequencies/decays/gains")
+        try:
+            if "file" in entry:
+                if set(entry) != {"file"}:
+                    raise PatchError(f"{key}: 'file' cannot be combined with other keys")
+                model = ModalModel.load(base / entry["file"])
+            else:
+                model = ModalModel.from_dict({"name": name, **entry}, key)
+        except ModelError as exc:
+            raise PatchError(f"{key}: {exc}") from None
+        out[name] = model
+    return out
+
+
+def _names(value: Any, key: str) -> list[str]:
+    items = [value] if isinstance(value, str) else value
+    if not isinstance(items, list) or not all(isinstance(v, str) for v in items):
+        raise PatchError(f"{key}: expected a node name or a list of node names, got {value!r}")
+    return items
+
+
+def build_patch(
+    data: dict, source: str = "patch", base: Path = Path("."), overrides: list[str] | tuple[str, ...] = ()
+) -> Patch:
+    """Build a validated :class:`Patch` from parsed TOML data."""
+    where = source
+    for key in data:
+        if key not in TOP_KEYS:
+            raise PatchError(
+                f"{where}: unknown top-level key {key!r}; expected {', '.join(sorted(TOP_KEYS))}"
+            )
+    meta = _table(data, "patch", where)
+    for key in meta:
+        if key not in PATCH_KEYS:
+            raise PatchError(f"{where}: patch.{key}: unknown key; expected {', '.join(sorted(PATCH_KEYS))}")
+    models = _load_models(_table(data, "models", where), where, base)
+    tables = _table(data, "nodes", where)
+    if not tables:
+        raise PatchError(f"{where}: nodes: expected at least one [nodes.NAME] table")
+    tables = {name: dict(t) if isinstance(t, dict) else t for name, t in tables.items()}
+    for text in overrides:
+        node, param, value = parse_override(text)
+        if node not in tables:
+            raise PatchError(f"--set {text}: unknown node {node!r}; nodes are {', '.join(tables)}")
+        if param in ("type", "input", "inputs"):
+            raise PatchError(f"--set {text}: only parameters can be overridden, not {param!r}")
+        tables[node][param] = value
+
+    nodes, wiring = {}, {}
+    for name, table in tables.items():
+        key = f"{where}: nodes.{name}"
+        if not isinstance(table, dict) or not isinstance(table.get("type"), str):
+            raise PatchError(f"{key}.type: expected the name of a ugen type")
+        cls = ugen_class(table["type"], f"{key}.type")
+        params = {k: v for k, v in table.items() if k != "type"}
+        connect = {}
+        if cls.variadic:
+            if "inputs" not in params:
+                raise PatchError(
+                    f"{key}.inputs: expected a list of node names ({cls.type_name} mixes any number)"
+                )
+            connect = {f"in{i}": n for i, n in enumerate(_names(params.pop("inputs"), f"{key}.inputs"))}
+        else:
+            for inp in cls.inputs:
+                if inp in params:
+                    value = params.pop(inp)
+                    if not isinstance(value, str):
+                        raise PatchError(f"{key}.{inp}: expected the name of the source node, got {value!r}")
+                    connect[inp] = value
+        for pkey, spec in cls.all_specs().items():
+            if spec.kind == "model" and pkey in params:
+                ref = params[pkey]
+                if ref not in models:
+                    known = ", ".join(models) or "none (add [models.NAME])"
+                    raise PatchError(f"{key}.{pkey}: unknown model {ref!r}; models are {known}")
+                params[pkey] = models[ref]
+        nodes[name] = cls(name=name, where=key, **params)
+        wiring[name] = connect
+    for name, connect in wiring.items():
+        for inp, src in connect.items():
+            label = "inputs" if nodes[name].variadic else inp
+            if src not in nodes:
+                raise PatchError(
+                    f"{where}: nodes.{name}.{label}: unknown node {src!r}; nodes are {', '.join(nodes)}"
+                )
+            nodes[name].connect(nodes[src], inp)
+
+    outputs = _table(data, "outputs", where)
+    for key in outputs:
+        if key not in ("audio", "haptic"):
+            raise PatchError(f"{where}: outputs.{key}: unknown output; expected audio or haptic")
+    if "audio" not in outputs:
+        raise PatchError(f"{where}: outputs.audio: missing (name the node(s) to hear)")
+    picked = {}
+    for key in ("audio", "haptic"):
+        names = _names(outputs.get(key, []), f"{where}: outputs.{key}")
+        for n in names:
+            if n not in nodes:
+                raise PatchError(f"{where}: outputs.{key}: unknown node {n!r}; nodes are {', '.join(nodes)}")
+        picked[key] = [nodes[n] for n in names]
+    try:
+        graph = Graph(picked["audio"], picked["haptic"])
+    except PatchError as exc:
+        raise PatchError(f"{where}: {exc}") from None
+    unused = sorted(set(nodes) - set(graph.nodes))
+    if unused:
+        raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")
+
+    score = _parse_score(data.get("score", []), graph, where)
+    duration = meta.get("duration")
+    if duration is not None and (not isinstance(duration, (int, float)) or duration <= 0):
+        raise PatchError(f"{where}: patch.duration: expected seconds > 0, got {duration!r}")
+    rate = meta.get("sample_rate")
+    if rate is not None and (not isinstance(rate, int) or not 1000 <= rate <= 768000):
+        raise PatchError(
+            f"{where}: patch.sample_rate: expected an integer rate in [1000, 768000] Hz, got {rate!r}"
+        )
+    return Patch(
+        graph,
+        score,
+        str(meta.get("name", Path(source).stem)),
+        str(meta.get("description", "")),
+        duration,
+        rate,
+        source,
+    )
+
+
+def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
+    if not isinstance(entries, list):
+        raise PatchError(f"{where}: score: expected an array of tables ([[score]])")
+    events = []
+    for i, entry in enumerate(entries):
+        key = f"{where}: score[{i}]"
+        if not isinstance(entry, dict):
+            raise PatchError(f"{key}: expected a table")
+        for req in ("time", "node"):
+            if req not in entry:
+                raise PatchError(f"{key}.{req}: missing")
+        actions = [k for k in entry if k not in ("time", "node", "jump")]
+        if len(actions) != 1:
+            raise PatchError(
+                f"{key}: expected exactly one action (set = {{...}} or e.g. impact = {{...}}), got {actions}"
+            )
+        action = actions[0]
+        args = entry[action]
+        if not isinstance(args, dict):
+            raise PatchError(f"{key}.{action}: expected a table of arguments")
+        jump = entry.get("jump", False)
+        if not isinstance(jump, bool):
+            raise PatchError(f"{key}.jump: expected true or false")
+        events.append(validate_event(graph, Event(entry["time"], entry["node"], action, args, jump), key))
+    return events

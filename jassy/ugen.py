@@ -1,0 +1,233 @@
+"""The unit-generator base class.
+
+A UGen owns an output buffer of ``max_block`` float64 samples and its state arrays. The
+graph calls ``process(start, n)`` with the absolute frame ``start`` of the sub-block and
+its length ``n``; the ugen reads its inputs' buffers ``[:n]`` and writes ``self.out[:n]``.
+Because every ugen carries its state across calls, and events are applied between
+sub-blocks at their exact sample, the output does not depend on how frames are grouped.
+
+Subclasses declare ``type_name``, ``inputs``, ``param_specs`` and ``actions``, implement
+``_prepare`` (allocate state, design coefficients), ``process`` and ``_reset``, and return
+their state arrays from ``state_arrays``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.params import ParamSpec, Smoothed
+
+SMOOTH_SPEC = ParamSpec(
+    "float",
+    0.005,
+    low=0.0,
+    high=10.0,
+    unit="s",
+    fixed=True,
+    doc="duration of the linear ramp applied to smoothed parameter changes",
+)
+
+
+class UGen:
+    """Base class of all unit generators."""
+
+    type_name: ClassVar[str] = ""
+    #: Names of audio-rate inputs, in positional order.
+    inputs: ClassVar[tuple[str, ...]] = ()
+    #: Inputs that may stay unconnected (read as silence).
+    optional_inputs: ClassVar[tuple[str, ...]] = ()
+    #: True for ugens that take any number of inputs (``in0``, ``in1``, ...).
+    variadic: ClassVar[bool] = False
+    param_specs: ClassVar[dict[str, ParamSpec]] = {}
+    #: Event actions other than ``set``: name -> argument specs.
+    actions: ClassVar[dict[str, dict[str, ParamSpec]]] = {}
+    #: True if the output depends on the input only after a delay (may close a cycle).
+    is_delay: ClassVar[bool] = False
+    #: True if impact locations downstream of a force source apply to this ugen.
+    accepts_location: ClassVar[bool] = False
+
+    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
+        """Create with inputs ``sources`` and parameters; ``where`` prefixes error keys."""
+        self.name = name
+        where = where or self.type_name
+        self.sources: dict[str, UGen] = {}
+        self.values: dict[str, Any] = {}
+        self.sample_rate: float | None = None
+        self.max_block = 0
+        self.out = np.zeros(0)
+        specs = self.all_specs()
+        for key in params:
+            if key not in specs:
+                raise PatchError(f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}")
+        for key, spec in specs.items():
+            if key in params:
+                self.values[key] = self.check_param(key, params[key], f"{where}.{key}")
+            elif spec.required:
+                raise PatchError(f"{where}.{key}: missing ({self.type_name} needs {spec.expected()})")
+            else:
+                self.values[key] = spec.default
+        self.initial = dict(self.values)
+        self(*sources)
+
+    # ----------------------------------------------------------------- composition
+    @classmethod
+    def all_specs(cls) -> dict[str, ParamSpec]:
+        return {**cls.param_specs, "smooth": SMOOTH_SPEC}
+
+    def check_param(self, key: str, value: Any, where: str) -> Any:
+        """Validate the value of parameter ``key``; PatchError naming ``where``."""
+        return self.check_value(self.all_specs()[key], value, where)
+
+    def check_value(self, spec: ParamSpec, value: Any, where: str) -> Any:
+        """Validate a value against ``spec``; subclasses extend for model/location kinds."""
+        if spec.kind == "location":
+            from jassy.modal_model import parse_location
+
+            return parse_location(value, where)
+        return spec.coerce(value, where)
+
+    def input_names(self, count: int | None = None) -> tuple[str, ...]:
+        if self.variadic:
+            n = len(self.sources) if count is None else count
+            return tuple(f"in{i}" for i in range(n))
+        return self.inputs
+
+    def __call__(self, *sources: UGen, **named: UGen) -> UGen:
+        """Connect sources to inputs, positionally or by name; returns self."""
+        if self.variadic:
+            start = len(self.sources)
+            for i, src in enumerate(sources):
+                self.connect(src, f"in{start + i}")
+        else:
+            if len(sources) > len(self.inputs):
+                raise PatchError(f"{self.type_name}: takes {len(self.inputs)} input(s), got {len(sources)}")
+            for src, inp in zip(sources, self.inputs[: len(sources)], strict=True):
+                self.connect(src, inp)
+        for inp, src in named.items():
+            self.connect(src, inp)
+        return self
+
+    def connect(self, source: UGen, input_name: str = "input") -> None:
+        if not isinstance(source, UGen):
+            raise PatchError(f"{self.type_name}.{input_name}: expected a ugen, got {source!r}")
+        if not self.variadic and input_name not in self.inputs:
+            raise PatchError(
+                f"{self.type_name}: no input {input_name!r}; inputs are {', '.join(self.inputs) or 'none'}"
+            )
+        self.sources[input_name] = source
+
+    def _combine(self, other: Any, type_name: str, reverse: bool = False) -> UGen:
+        from jassy.registry import ugen_class
+
+        if isinstance(other, UGen):
+            parts = (other, self) if reverse else (self, other)
+            return ugen_class(type_name)(*parts)
+        if isinstance(other, (int, float)) and type_name == "Multiply":
+            return ugen_class("Gain")(self, gain=float(other))
+        return NotImplemented
+
+    def __add__(self, other: Any) -> UGen:
+        return self._combine(other, "Mixer")
+
+    def __radd__(self, other: Any) -> UGen:
+        return self._combine(other, "Mixer", reverse=True)
+
+    def __mul__(self, other: Any) -> UGen:
+        return self._combine(other, "Multiply")
+
+    def __rmul__(self, other: Any) -> UGen:
+        return self._combine(other, "Multiply", reverse=True)
+
+    def __repr__(self) -> str:
+        return f"{self.type_name}(name={self.name!r})"
+
+    # ------------------------------------------------------------------ lifecycle
+    def prepare(self, sample_rate: float, max_block: int, out: np.ndarray | None = None) -> None:
+        """Allocate buffers and state for a render at ``sample_rate`` (Hz).
+
+        ``out``: a float64 buffer of ``max_block`` samples to write into (the graph passes
+        a row of its output bus for output nodes); ugens must not keep views of it.
+        """
+        self.sample_rate = float(sample_rate)
+        self.max_block = int(max_block)
+        self.values = dict(self.initial)
+        self.out = np.zeros(self.max_block) if out is None else out
+        self._silence = np.zeros(self.max_block)
+        self._prepare()
+        self.reset()
+
+    def input_buffer(self, input_name: str) -> np.ndarray:
+        """The buffer feeding ``input_name`` (silence if unconnected)."""
+        src = self.sources.get(input_name)
+        return self._silence if src is None else src.out
+
+    def ramp_samples(self) -> int:
+        return int(round(self.values["smooth"] * (self.sample_rate or 0.0)))
+
+    def smoothed(self, key: str) -> Smoothed:
+        """A Smoothed holder initialised to the parameter's current value."""
+        return Smoothed(float(self.values[key]))
+
+    def _prepare(self) -> None:
+        """Allocate state and design coefficients (sample_rate is set)."""
+
+    def _reset(self) -> None:
+        """Zero the signal state."""
+
+    def reset(self) -> None:
+        """Return to silence, with parameters at their current targets."""
+        if self.sample_rate is not None:
+            self._reset()
+
+    def process(self, start: int, n: int) -> None:
+        """Compute ``self.out[:n]`` for frames ``start .. start + n - 1``."""
+        raise NotImplementedError
+
+    # ---------------------------------------------------------- params and events
+    def configure(self, key: str, value: Any) -> None:
+        """Set a parameter's initial value (the value every render starts from)."""
+        if key not in self.all_specs():
+            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+        value = self.check_param(key, value, f"{self.name}.{key}")
+        self.initial[key] = value
+        self.values[key] = value
+
+    def set_param(self, key: str, value: Any, jump: bool = False) -> None:
+        """Change a parameter during a render; smoothed parameters ramp unless ``jump``."""
+        spec = self.all_specs().get(key)
+        if spec is None:
+            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+        if spec.fixed and self.sample_rate is not None:
+            raise PatchError(
+                f"{self.type_name} {self.name!r}: parameter {key!r} cannot change during a render"
+            )
+        value = self.check_param(key, value, f"{self.name}.{key}")
+        self.values[key] = value
+        if self.sample_rate is not None:
+            self._param_changed(key, value, jump)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        """React to a validated parameter change during a render."""
+
+    def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """Perform an event action (validated args) at fractional ``sample_time``."""
+        raise PatchError(f"{self.type_name}: no action {action!r}")
+
+    # ----------------------------------------------------------------------- state
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The arrays this ugen owns as state (by reference)."""
+        return {}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """A copy of the state, for saving and later :meth:`set_state`."""
+        return {k: v.copy() for k, v in self.state_arrays().items()}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        arrays = self.state_arrays()
+        if set(state) != set(arrays):
+            raise PatchError(f"{self.type_name}: state keys {sorted(state)} != {sorted(arrays)}")
+        for key, value in state.items():
+            arrays[key][...] = value
