@@ -22,6 +22,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     audio_format(args.output, args.format)  # bad output names fail before any work
+    if args.block < 1:
+        raise JassyError(f"--block: expected an integer >= 1, got {args.block}")
     patch = load_patch(args.patch, args.set or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration or patch.duration
@@ -147,10 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "block", 1) is not None and getattr(args, "block", 1) < 1:
-        parser.error(f"--block: expected an integer >= 1, got {args.block}")
+    args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except JassyError as exc:

@@ -231,3 +231,10 @@ class UGen:
             raise PatchError(f"{self.type_name}: state keys {sorted(state)} != {sorted(arrays)}")
         for key, value in state.items():
             arrays[key][...] = value
+        self._state_restored()
+
+    def _state_restored(self) -> None:
+        """Refresh Python-side caches of the state after :meth:`set_state`."""
+        for value in vars(self).values():
+            if isinstance(value, Smoothed):
+                value.sync()

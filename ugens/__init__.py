@@ -1,7 +1,27 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
+from ugens.delay import Delay
+from ugens.dynamics import Limiter
+from ugens.envelope import Envelope
+from ugens.filters import Biquad, OnePole
 from ugens.impact import ImpactForce
 from ugens.mix import Gain, Mixer, Multiply
 from ugens.modal import ModalBank
+from ugens.noise import FractalNoise, WhiteNoise
+from ugens.oscillators import Sine
 
-__all__ = ["Gain", "ImpactForce", "Mixer", "ModalBank", "Multiply"]
+__all__ = [
+    "Biquad",
+    "Delay",
+    "Envelope",
+    "FractalNoise",
+    "Gain",
+    "ImpactForce",
+    "Limiter",
+    "Mixer",
+    "ModalBank",
+    "Multiply",
+    "OnePole",
+    "Sine",
+    "WhiteNoise",
+]

@@ -117,8 +117,9 @@ class ImpactForce(UGen):
         self._idle = False
 
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """``impact``: start a pulse (impulse N s, optional duration s) at ``sample_time``."""
         if action != "impact":
-            super().act(action, args, sample_time)
+            return super().act(action, args, sample_time)
         self.strike(sample_time, args["impulse"], args.get("duration"))
 
     def process(self, start: int, n: int) -> None:
@@ -133,6 +134,8 @@ class ImpactForce(UGen):
         return {"pulses": self.pulses, "count": self.count}
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
-        self.pulses = np.zeros_like(state["pulses"])
+        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
         super().set_state(state)
+
+    def _state_restored(self) -> None:
         self._idle = False

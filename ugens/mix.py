@@ -52,10 +52,6 @@ class Gain(UGen):
     def state_arrays(self):
         return {"gain": self.gain.ramp}
 
-    def set_state(self, state) -> None:
-        super().set_state(state)
-        self.gain.sync()
-
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mix(inputs, gains, out, n):

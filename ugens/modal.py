@@ -272,6 +272,5 @@ class ModalBank(UGen):
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {"coef": self.coef, "y": self.y, "delta": self.delta, "target": self.target, "meta": self.meta}
 
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        super().set_state(state)
+    def _state_restored(self) -> None:
         self._ramping = self.meta[1] > 0

@@ -1,0 +1,131 @@
+"""ModalBank against the closed-form modal impulse response and physical expectations."""
+
+import numpy as np
+import pytest
+from helpers import ArraySource
+
+from jassy import Event, Graph, ModalModel, PatchError, render
+from ugens.modal import ModalBank, design
+
+FS = 48000
+
+
+def spread_model(n=40, seed=3):
+    """Modes log-spread over 20 Hz - 20 kHz with decays 0.5 - 500 1/s (the spec's range)."""
+    rng = np.random.default_rng(seed)
+    f = np.geomspace(20.0, 20000.0, n)
+    d = np.geomspace(0.5, 500.0, n)[rng.permutation(n)]
+    a = rng.uniform(-1.0, 1.0, (2, n))
+    return ModalModel(f, d, a)
+
+
+def impulse_response(model, seconds, location=0, block=64):
+    """Bank response to the unit impulse F = fs * delta[n] (1 N s in one sample)."""
+    x = np.zeros(int(seconds * FS))
+    x[0] = FS
+    bank = ModalBank(model, location=location, name="bank")(ArraySource(x))
+    return render(Graph(bank), [], seconds, FS, block, limiter=False).audio[0]
+
+
+def error_db(y, ref):
+    return 20 * np.log10(np.max(np.abs(y - ref)) / np.max(np.abs(ref)))
+
+
+def test_impulse_response_matches_closed_form_within_minus_60_db():
+    model = spread_model()
+    y = impulse_response(model, 2.0)
+    ref = model.impulse_response(2.0, FS)
+    assert error_db(y, ref) < -60.0
+    # in fact the recursion is exact up to rounding: far below the bound
+    assert error_db(y, ref) < -120.0
+
+
+def test_float32_state_would_fail_the_accuracy_bound():
+    """Why the state is float64: the same recursion with float32 state drifts (low, light modes)."""
+    model = ModalModel([20.0, 31.0, 45.0], [0.5, 0.6, 0.8], [[1.0, 1.0, 1.0]])
+    c1, c2, s = design(model.frequencies, model.decays, FS)
+    n = 2 * FS
+    y1 = np.zeros(3, np.float32)
+    y2 = np.zeros(3, np.float32)
+    c1f, c2f, gf = c1.astype(np.float32), c2.astype(np.float32), s.astype(np.float32)
+    out = np.zeros(n)
+    for i in range(n):  # plain numpy reference of a float32 bank (3 modes, loop is fine)
+        v = c1f * y1 - c2f * y2 + (gf if i == 0 else np.float32(0))
+        y2, y1 = y1, v.astype(np.float32)
+        out[i] = float(v.sum())
+    ref = model.impulse_response(2.0, FS)
+    assert error_db(out, ref) > -60.0
+    assert error_db(impulse_response(model, 2.0), ref) < -60.0
+
+
+def test_impulse_of_one_newton_second_is_sample_rate_independent():
+    model = ModalModel([440.0], [5.0], [[1.0]])
+    peaks = []
+    for fs in (44100, 96000):
+        x = np.zeros(fs // 10)
+        x[0] = fs
+        bank = ModalBank(model)(ArraySource(x))
+        y = render(Graph(bank), [], 0.1, fs, 64, limiter=False).audio[0]
+        peaks.append(np.max(np.abs(y)))
+    assert peaks[0] == pytest.approx(peaks[1], rel=2e-3)
+    assert peaks[0] == pytest.approx(1.0, rel=2e-2)  # e^{-d t} ~ 1 at the first peak
+
+
+def test_location_gains_are_barycentric_and_response_is_linear_in_them():
+    model = spread_model(12)
+    loc = {"vertices": [0, 1], "weights": [0.25, 0.75]}
+    y = impulse_response(model, 0.2, loc)
+    y0 = impulse_response(model, 0.2, 0)
+    y1 = impulse_response(model, 0.2, 1)
+    np.testing.assert_allclose(y, 0.25 * y0 + 0.75 * y1, atol=1e-9 * np.max(np.abs(y)))
+    np.testing.assert_allclose(model.gains_at(loc), 0.25 * model.gains[0] + 0.75 * model.gains[1])
+
+
+def test_freq_scale_jump_moves_the_spectral_peak():
+    model = ModalModel([1000.0], [2.0], [[1.0]])
+    x = np.zeros(FS)
+    x[0] = FS
+    x[FS // 2] = FS
+    bank = ModalBank(model, name="bank")(ArraySource(x))
+    score = [Event(0.5, "bank", "set", {"freq_scale": 1.5}, jump=True)]
+    y = render(Graph(bank), score, 1.0, FS, 64, limiter=False).audio[0]
+    tail = y[FS // 2 + 100 :]
+    spec = np.abs(np.fft.rfft(tail * np.hanning(tail.size)))
+    peak = np.fft.rfftfreq(tail.size, 1 / FS)[np.argmax(spec)]
+    assert peak == pytest.approx(1500.0, abs=3.0)
+
+
+def test_silent_modes_are_zeroed_and_skipped():
+    model = ModalModel([300.0, 3000.0], [400.0, 900.0], [[1.0, 1.0]])
+    x = np.zeros(FS)
+    x[0] = FS
+    bank = ModalBank(model, name="bank")(ArraySource(x))
+    y = render(Graph(bank), [], 1.0, FS, 64, limiter=False).audio[0]
+    # e^{-400 t} falls below 1e-10 well before 0.1 s: state flushed, active count zero
+    assert bank.meta[0] == 0
+    assert np.all(bank.y == 0.0)
+    assert np.all(y[FS // 10 :] == 0.0)
+    assert not np.any((y != 0) & (np.abs(y) < np.finfo(float).tiny))  # no subnormal output
+
+
+def test_state_save_and_restore_continues_identically():
+    model = spread_model(8)
+    x = np.random.default_rng(0).standard_normal(FS)
+    bank = ModalBank(model, name="bank")(ArraySource(x))
+    from jassy import OfflineEngine
+
+    eng = OfflineEngine(Graph(bank), [], FS, 64, limiter=False)
+    eng.render(0.25)
+    saved = bank.get_state()
+    a = eng.render(0.25).audio
+    bank.set_state(saved)
+    eng.scheduler.frame -= int(0.25 * FS)
+    b = eng.render(0.25).audio
+    np.testing.assert_array_equal(a, b)
+
+
+def test_mode_above_nyquist_is_a_clear_error():
+    model = ModalModel([100.0, 30000.0], [1.0, 1.0], [[1.0, 1.0]])
+    bank = ModalBank(model, name="bank")(ArraySource(np.zeros(10)))
+    with pytest.raises(PatchError, match=r"nodes\.bank\.model.*frequencies\[1\].*Nyquist"):
+        render(Graph(bank), [], 0.01, FS)

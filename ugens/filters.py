@@ -1,0 +1,220 @@
+"""Biquad (RBJ Audio-EQ-Cookbook low-, high- and band-pass) and OnePole low-pass filters.
+
+Coefficients are designed in float64. While a smoothed parameter ramps, coefficients are
+recomputed every sample from the per-sample parameter values, so the output does not
+depend on block boundaries; once the ramps are steady the last coefficients are reused.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.params import ParamSpec
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.kernels import FASTMATH
+
+MODES = ("lowpass", "highpass", "bandpass")
+_LOWPASS, _HIGHPASS = 0, 1
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def design_biquad(mode, freq, q, inv_fs, coef):
+    """RBJ cookbook coefficients normalised by a0: coef = [b0, b1, b2, a1, a2].
+
+    mode 0 low-pass, 1 high-pass, 2 band-pass with 0 dB peak gain; freq in Hz.
+    """
+    w0 = 2.0 * math.pi * freq * inv_fs
+    cw = math.cos(w0)
+    alpha = math.sin(w0) / (2.0 * q)
+    if mode == _LOWPASS:
+        b1 = 2.0 * math.sin(0.5 * w0) ** 2  # 1 - cos(w0), accurate at low freq
+        b0 = 0.5 * b1
+        b2 = b0
+    elif mode == _HIGHPASS:
+        b1 = -2.0 * math.cos(0.5 * w0) ** 2  # -(1 + cos(w0))
+        b0 = -0.5 * b1
+        b2 = b0
+    else:
+        b0 = alpha
+        b1 = 0.0
+        b2 = -alpha
+    inv_a0 = 1.0 / (1.0 + alpha)
+    coef[0] = b0 * inv_a0
+    coef[1] = b1 * inv_a0
+    coef[2] = b2 * inv_a0
+    coef[3] = -2.0 * cw * inv_a0
+    coef[4] = (1.0 - alpha) * inv_a0
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def biquad(x, out, n, coef, state):
+    """Direct Form II transposed with fixed coefficients; state = [s1, s2]."""
+    b0, b1, b2, a1, a2 = coef[0], coef[1], coef[2], coef[3], coef[4]
+    s1, s2 = state[0], state[1]
+    for i in range(n):
+        xi = x[i]
+        y = b0 * xi + s1
+        s1 = b1 * xi - a1 * y + s2
+        s2 = b2 * xi - a2 * y
+        out[i] = y
+    state[0] = s1
+    state[1] = s2
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def biquad_ramp(x, out, n, mode, freqs, qs, inv_fs, coef, state):
+    """Direct Form II transposed, coefficients redesigned each sample from freqs[i], qs[i]."""
+    s1, s2 = state[0], state[1]
+    for i in range(n):
+        design_biquad(mode, freqs[i], qs[i], inv_fs, coef)
+        xi = x[i]
+        y = coef[0] * xi + s1
+        s1 = coef[1] * xi - coef[3] * y + s2
+        s2 = coef[2] * xi - coef[4] * y
+        out[i] = y
+    state[0] = s1
+    state[1] = s2
+
+
+@register
+class Biquad(UGen):
+    """Second-order RBJ filter: low-pass, high-pass or band-pass (0 dB peak) at ``freq``."""
+
+    type_name = "Biquad"
+    inputs = ("input",)
+    param_specs = {
+        "mode": ParamSpec("str", "lowpass", choices=MODES, fixed=True, doc="filter response"),
+        "freq": ParamSpec(
+            "float",
+            1000.0,
+            low=0.0,
+            low_open=True,
+            unit="Hz",
+            smooth=True,
+            doc="cutoff (low/high-pass) or centre (band-pass) frequency, below Nyquist",
+        ),
+        "q": ParamSpec(
+            "float", 1.0 / math.sqrt(2.0), low=0.0, low_open=True, smooth=True, doc="quality factor"
+        ),
+    }
+
+    def check_param(self, key, value, where):
+        """Also reject ``freq`` at or above Nyquist once the sample rate is known."""
+        value = super().check_param(key, value, where)
+        if key == "freq" and self.sample_rate is not None and value >= 0.5 * self.sample_rate:
+            raise PatchError(
+                f"{where}: expected a frequency below Nyquist ({0.5 * self.sample_rate:g} Hz), got {value!r}"
+            )
+        return value
+
+    def _prepare(self) -> None:
+        self.check_param("freq", self.values["freq"], f"nodes.{self.name}.freq")
+        self.mode = MODES.index(self.values["mode"])
+        self.freq = self.smoothed("freq")
+        self.q = self.smoothed("q")
+        self.coef = np.zeros(5)
+        self.state = np.zeros(2)
+        self._freqs = np.zeros(self.max_block)
+        self._qs = np.zeros(self.max_block)
+
+    def _design(self) -> None:
+        """Coefficients for the current values (the ramp kernel redesigns while ramping)."""
+        design_biquad(self.mode, self.freq.value, self.q.value, 1.0 / self.sample_rate, self.coef)
+
+    def _reset(self) -> None:
+        for ramp in (self.freq, self.q):
+            ramp.set(ramp.target, 0, jump=True)
+        self.state[:] = 0.0
+        self._design()
+
+    def _param_changed(self, key, value, jump) -> None:
+        getattr(self, key).set(value, self.ramp_samples(), jump)
+        self._design()
+
+    def process(self, start: int, n: int) -> None:
+        x = self.sources["input"].out
+        if self.freq.steady and self.q.steady:
+            biquad(x, self.out, n, self.coef, self.state)
+        else:
+            freqs = self.freq.fill(self._freqs, n)
+            qs = self.q.fill(self._qs, n)
+            biquad_ramp(x, self.out, n, self.mode, freqs, qs, 1.0 / self.sample_rate, self.coef, self.state)
+
+    def state_arrays(self):
+        return {"state": self.state, "coef": self.coef, "freq": self.freq.ramp, "q": self.q.ramp}
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def onepole_coefficient(cutoff, inv_fs):
+    """a = 1 - exp(-2 pi cutoff / fs), cutoff in Hz."""
+    return -math.expm1(-2.0 * math.pi * cutoff * inv_fs)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def onepole(x, out, n, a, state):
+    """y[i] = y[i-1] + a (x[i] - y[i-1]); state = [y]."""
+    y = state[0]
+    for i in range(n):
+        y += a * (x[i] - y)
+        out[i] = y
+    state[0] = y
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def onepole_ramp(x, out, n, cutoffs, inv_fs, coef, state):
+    """One-pole with a recomputed each sample from cutoffs[i]; the last a is left in coef[0]."""
+    y = state[0]
+    a = coef[0]
+    for i in range(n):
+        a = onepole_coefficient(cutoffs[i], inv_fs)
+        y += a * (x[i] - y)
+        out[i] = y
+    state[0] = y
+    coef[0] = a
+
+
+@register
+class OnePole(UGen):
+    """One-pole low-pass y[n] = y[n-1] + a (x[n] - y[n-1]), a = 1 - exp(-2 pi cutoff / fs)."""
+
+    type_name = "OnePole"
+    inputs = ("input",)
+    param_specs = {
+        "cutoff": ParamSpec(
+            "float", 1000.0, low=0.0, low_open=True, unit="Hz", smooth=True, doc="cutoff frequency"
+        ),
+    }
+
+    def _prepare(self) -> None:
+        self.cutoff = self.smoothed("cutoff")
+        self.coef = np.zeros(1)
+        self.state = np.zeros(1)
+        self._cutoffs = np.zeros(self.max_block)
+
+    def _design(self) -> None:
+        self.coef[0] = onepole_coefficient(self.cutoff.value, 1.0 / self.sample_rate)
+
+    def _reset(self) -> None:
+        self.cutoff.set(self.cutoff.target, 0, jump=True)
+        self.state[0] = 0.0
+        self._design()
+
+    def _param_changed(self, key, value, jump) -> None:
+        self.cutoff.set(value, self.ramp_samples(), jump)
+        self._design()
+
+    def process(self, start: int, n: int) -> None:
+        x = self.sources["input"].out
+        if self.cutoff.steady:
+            onepole(x, self.out, n, self.coef[0], self.state)
+        else:
+            cutoffs = self.cutoff.fill(self._cutoffs, n)
+            onepole_ramp(x, self.out, n, cutoffs, 1.0 / self.sample_rate, self.coef, self.state)
+
+    def state_arrays(self):
+        return {"state": self.state, "coef": self.coef, "cutoff": self.cutoff.ramp}
