@@ -158,8 +158,8 @@ class Graph:
         for d in self.cycle_delays:
             limit = min(limit, d.min_delay_samples())
         self.max_sub_block = limit
-        self._process_calls = [node.process for node in self.order]
-        self._commit_calls = [node.commit for node in self.delays]
+        #: What one sub-block runs, in order: every node's process, then delay commits.
+        self.steps = [node.process for node in self.order] + [node.commit for node in self.delays]
 
     def reset(self) -> None:
         for node in self.order:
@@ -171,10 +171,8 @@ class Graph:
         Output nodes write into rows of ``bus``; ``bus_rows`` lists the row of each audio
         channel, then of each haptic channel.
         """
-        for call in self._process_calls:
-            call(start, n)
-        for commit in self._commit_calls:
-            commit(start, n)
+        for step in self.steps:
+            step(start, n)
 
     def location_targets(self, name: str) -> list[UGen]:
         """Ugens whose contact location follows impacts at node ``name``."""

@@ -14,7 +14,6 @@ import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
-import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
@@ -25,16 +24,6 @@ from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, z
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
-
-
-@nb.njit(cache=True)
-def gather(bus, rows, buf, offset, m):
-    """buf[r, offset:offset+m] = bus[rows[r], :m] for every output channel r."""
-    for r in range(rows.shape[0]):
-        src = bus[rows[r]]
-        dst = buf[r]
-        for i in range(m):
-            dst[offset + i] = src[i]
 
 
 @dataclass
@@ -93,10 +82,6 @@ class OfflineEngine:
         size = min(CHUNK_FRAMES, max(frames, 1))
         buf = np.zeros((len(graph.bus_rows), size))
         abuf, hbuf = buf[:n_audio], buf[n_audio:]
-        bus, rows = graph.bus, graph.bus_rows
-
-        def emit(offset: int, m: int) -> None:
-            gather(bus, rows, buf, offset, m)
 
         bar = None
         if progress:
@@ -114,7 +99,7 @@ class OfflineEngine:
             done = 0
             while done < frames:
                 n = min(size, frames - done)
-                self.scheduler.run(n, emit)
+                self.scheduler.run(n, buf)
                 a, h = abuf[:, :n], hbuf[:, :n]
                 if count_nonfinite(a) or count_nonfinite(h):
                     self._quarantine(a, h)

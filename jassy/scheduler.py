@@ -9,12 +9,16 @@ need the fraction (impacts) receive ``t`` itself.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
+
+import numba as nb
+import numpy as np
 
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.graph import Graph
+from jassy.jit import specialise
 
 # Times are converted as t * sample_rate; this slack keeps 0.01 s * 48000 on frame 480.
 _SAMPLE_SLACK = 1e-6
@@ -67,6 +71,16 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
     return Event(float(event.time), event.node, event.action, args, bool(event.jump))
 
 
+@nb.njit(cache=True)
+def gather(bus, rows, out, offset, m):
+    """out[r, offset:offset+m] = bus[rows[r], :m] for every output channel r."""
+    for r in range(rows.shape[0]):
+        src = bus[rows[r]]
+        dst = out[r]
+        for i in range(m):
+            dst[offset + i] = src[i]
+
+
 class Scheduler:
     """Applies a score to a graph while rendering frames in sub-blocks."""
 
@@ -97,14 +111,17 @@ class Scheduler:
                 target.set_param("location", location, jump=True)
         node.act(ev.action, ev.args, self.sample_times[index])
 
-    def run(self, n: int, emit: Callable[[int, int], None]) -> None:
-        """Render the next ``n`` frames; ``emit(offset, m)`` after each sub-block.
+    def run(self, n: int, out: np.ndarray) -> None:
+        """Render the next ``n`` frames into ``out[:, :n]`` (rows: the graph's audio then
+        haptic channels).
 
-        ``offset`` counts from the start of this call. Sub-blocks end at block
-        boundaries (multiples of ``block`` on the clock), at event frames and at the
-        graph's feedback limit.
+        Sub-blocks end at block boundaries (multiples of ``block`` on the clock), at
+        event frames and at the graph's feedback limit.
         """
         process = self.graph.process
+        steps = self.graph.steps
+        bus, rows = self.graph.bus, self.graph.bus_rows
+        copy = specialise(gather, bus, rows, out, 0, 0)
         block = self.block
         limit = min(block, self.graph.max_sub_block)
         frames = self.apply_frames
@@ -118,8 +135,18 @@ class Scheduler:
                 self._dispatch(self.next_event)
                 self.next_event += 1
                 upcoming = frames[self.next_event] if self.next_event < count else never
+            if limit == block and pos % block == 0:
+                # fast path: whole blocks up to the next event or the end
+                whole = (min(end, upcoming) - pos) // block
+                for _ in range(whole):
+                    for step in steps:  # Graph.process, inlined on the hot path
+                        step(pos, block)
+                    copy(bus, rows, out, pos - begin, block)
+                    pos += block
+                if whole:
+                    continue
             stop = min(end, (pos // block + 1) * block, pos + limit, upcoming)
             process(pos, stop - pos)
-            emit(pos - begin, stop - pos)
+            copy(bus, rows, out, pos - begin, stop - pos)
             pos = stop
         self.frame = end

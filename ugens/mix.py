@@ -5,6 +5,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
@@ -35,6 +36,7 @@ class Gain(UGen):
         self.gain = self.smoothed("gain")
         self.gains = np.zeros(self.max_block)
         self._input = self.sources["input"]
+        self._scale = specialise(scale, self.out, self.out, 0, 0.0)
 
     def _reset(self) -> None:
         self.gain.set(self.gain.target, 0, jump=True)
@@ -45,7 +47,7 @@ class Gain(UGen):
     def process(self, start: int, n: int) -> None:
         x = self._input.out
         if self.gain.steady:
-            scale(x, self.out, n, self.gain.value)
+            self._scale(x, self.out, n, self.gain.value)
         else:
             scale_ramp(x, self.out, n, self.gain.fill(self.gains, n))
 

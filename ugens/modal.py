@@ -27,6 +27,7 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import ModelError, PatchError
+from jassy.jit import specialise
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
@@ -125,25 +126,30 @@ def flush_silent(y1, y2, active, floor):
     return last
 
 
+#: Silent modes are looked for once per this many frames of the clock.
+FLUSH_PERIOD = 1024
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def bank_step(force, out, n, coef, y, meta, floor):
+def bank_step(force, out, start, n, bank, meta, floor):
     """One sub-block without ramps: excite all modes if there is input, else run the
-    audible ones and drop those that fell silent. meta[0] = active mode count."""
+    audible ones and, each time the clock crosses a multiple of FLUSH_PERIOD, drop those
+    that fell silent. bank rows: c1, c2, g, y1, y2; meta[0] = active mode count."""
     excited = False
     for i in range(n):
         if force[i] != 0.0:
             excited = True
             break
     if excited:
-        meta[0] = coef.shape[1]
+        meta[0] = bank.shape[1]
     active = meta[0]
     if active == 0:
         for i in range(n):
             out[i] = 0.0
         return
-    resonate(force, out, n, coef[0], coef[1], coef[2], y[0], y[1], active)
-    if not excited:
-        meta[0] = flush_silent(y[0], y[1], active, floor)
+    resonate(force, out, n, bank[0], bank[1], bank[2], bank[3], bank[4], active)
+    if not excited and (start + n) // FLUSH_PERIOD != start // FLUSH_PERIOD:
+        meta[0] = flush_silent(bank[3], bank[4], active, floor)
 
 
 def design(frequencies, decays, sample_rate):
@@ -221,8 +227,8 @@ class ModalBank(UGen):
             raise PatchError(f"nodes.{self.name}.model: {exc}") from None
         self.order = np.argsort(model.decays, kind="stable")
         k = model.n_modes
-        self.coef = np.zeros((3, k))  # current c1, c2, g
-        self.y = np.zeros((2, k))
+        self.bank = np.zeros((5, k))  # c1, c2, g (current coefficients), y1, y2 (state)
+        self.coef, self.y = self.bank[:3], self.bank[3:]
         self.delta = np.zeros((3, k))
         self.target = np.zeros((3, k))
         self.meta = np.zeros(2, dtype=np.int64)  # [active modes, ramp samples left]
@@ -231,6 +237,7 @@ class ModalBank(UGen):
         self._floor = float(self.values["floor"])
         self._input = self.sources["input"]
         self._ramping = False
+        self._step = specialise(bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor)
 
     def _design(self) -> np.ndarray:
         """Target (c1, c2, g) from the current parameter values, in internal mode order."""
@@ -267,10 +274,10 @@ class ModalBank(UGen):
             meta[0] = c.shape[1]
             self._ramping = meta[1] > 0
         else:
-            bank_step(self._input.out, self.out, n, self.coef, self.y, self.meta, self._floor)
+            self._step(self._input.out, self.out, start, n, self.bank, self.meta, self._floor)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"coef": self.coef, "y": self.y, "delta": self.delta, "target": self.target, "meta": self.meta}
+        return {"bank": self.bank, "delta": self.delta, "target": self.target, "meta": self.meta}
 
     def _state_restored(self) -> None:
         self._ramping = self.meta[1] > 0
