@@ -133,7 +133,9 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     """The bell patch with an n-mode bell, rendered whole, vs the bare kernel on the same force.
 
     The graph is timed twice: as shipped (silent modes skipped) and with skipping off
-    (``floor = 0``), which does exactly the kernel's work plus the graph's overhead.
+    (``floor = 0``), which does exactly the kernel's work plus the graph's overhead. The
+    bare kernel (all modes) is timed in one call and in direct per-block calls; the
+    faster of the two is the reference (on this VM either can win by up to 30 %).
     """
     from patches.models import bell_model
     from ugens.impact import ImpactForce
@@ -165,13 +167,24 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     force = result["rendering"].haptic[0].copy()
     bank = graph.nodes["bell"]
     frames = force.size
-    coef, y = bank.coef.copy(), np.zeros_like(bank.y)
+    state = bank.bank.copy()  # the bank's own layout: rows c1, c2, g, y1, y2
+    out = np.zeros(frames)
 
     def run_kernel():
-        y[:] = 0.0
-        resonate(force, np.zeros(frames), frames, coef[0], coef[1], coef[2], y[0], y[1], coef.shape[1])
+        state[3:] = 0.0
+        resonate(force, out, frames, state[0], state[1], state[2], state[3], state[4], state.shape[1])
 
-    t_graph, t_full, t_kernel = _best_times([run_graph, run_graph_full, run_kernel], repeats=7)
+    pieces = [(force[i : i + block], out[i : i + block]) for i in range(0, frames, block)]
+
+    def run_kernel_blocks():
+        state[3:] = 0.0
+        c1, c2, g, y1, y2 = state
+        for f, o in pieces:
+            resonate(f, o, f.size, c1, c2, g, y1, y2, state.shape[1])
+
+    times = _best_times([run_graph, run_graph_full, run_kernel, run_kernel_blocks], repeats=7)
+    t_graph, t_full = times[:2]
+    t_kernel = min(times[2:])  # the faster of one call and per-block calls: the kernel's best
     return {
         "modes": n_modes,
         "seconds": seconds,
@@ -201,7 +214,7 @@ def print_modal(rows: list[dict], graph: dict) -> None:
         )
     print(
         f"bell patch, {graph['modes']} modes, {graph['seconds']:g} s, block {graph['block']}: "
-        f"bare kernel {graph['kernel_s'] * 1e3:.1f} ms (one call, all modes); "
+        f"bare kernel {graph['kernel_s'] * 1e3:.1f} ms (all modes, best of one call and per-block calls); "
         f"graph {graph['graph_s'] * 1e3:.1f} ms = {graph['ratio']:.2f}x "
         f"({graph['realtime_factor']:.0f}x real time); without silence skipping "
         f"{graph['graph_no_skip_s'] * 1e3:.1f} ms = {graph['ratio_no_skip']:.2f}x"

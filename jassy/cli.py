@@ -41,8 +41,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         peak_db = 20 * __import__("math").log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
         print(
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
-            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, "
-            f"{summary['duration'] / elapsed:.0f}x real time"
+            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
         )
     return 0

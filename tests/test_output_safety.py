@@ -130,3 +130,42 @@ def test_writing_non_finite_data_is_refused(tmp_path):
     with pytest.raises(RenderError, match="non-finite"):
         write_signal(tmp_path / "h.npz", np.array([[0.0, np.nan]]), FS)
     assert leftovers(tmp_path) == []
+
+
+def test_offline_rendering_never_imports_sounddevice(tmp_path):
+    code = (
+        "import sys; from jassy.cli import main; "
+        f"main(['render', 'bell', '-o', r'{tmp_path / 'b.wav'}', '--duration', '0.1', '-q']); "
+        "print('sounddevice' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "False"
+
+
+def test_stereo_patch_writes_two_channels(tmp_path):
+    from jassy.patchfile import build_patch
+
+    patch = build_patch(
+        {
+            "nodes": {
+                "hit": {"type": "ImpactForce"},
+                "left": {"type": "Gain", "input": "hit", "gain": 0.001},
+                "right": {"type": "Gain", "input": "hit", "gain": -0.002},
+            },
+            "outputs": {"audio": ["left", "right"]},
+            "score": [{"time": 0.01, "node": "hit", "impact": {"impulse": 1.0}}],
+        }
+    )
+    out = tmp_path / "s.wav"
+    OfflineEngine(patch.graph, patch.score, FS, 64).render_to_file(out, 0.05)
+    data, _ = sf.read(out)
+    assert data.shape == (int(0.05 * FS), 2)
+    np.testing.assert_allclose(data[:, 1], -2 * data[:, 0], atol=1e-6)
+
+
+def test_examples_run(tmp_path):
+    root = os.path.dirname(os.path.dirname(__file__))
+    out = tmp_path / "c.wav"
+    subprocess.run([sys.executable, os.path.join(root, "examples", "compose_patch.py"), str(out)], check=True,
+                   capture_output=True)
+    assert sf.info(out).frames == 3 * FS
