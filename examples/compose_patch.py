@@ -13,8 +13,9 @@ from ugens import Biquad, Envelope, FractalNoise, ImpactForce, ModalBank, Multip
 def main(path: str) -> None:
     mallet = ImpactForce(name="mallet", duration=0.0006)
     bar = ModalBank(free_bar_model(n_modes=6), name="bar")(mallet)
-    breath = Multiply(FractalNoise(beta=1.0, amp=0.05, seed=3), Envelope(name="env", attack=0.3, decay=1.0,
-                                                                          sustain=0.0))
+    breath = Multiply(
+        FractalNoise(beta=1.0, amp=0.05, seed=3), Envelope(name="env", attack=0.3, decay=1.0, sustain=0.0)
+    )
     air = Biquad(breath, mode="bandpass", freq=880.0, q=8.0, name="air")
     mix = 12.0 * bar + air
     score = [Event(0.0, "env", "trigger"), Event(0.0, "air", "set", {"freq": 1760.0})]

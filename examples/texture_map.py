@@ -20,8 +20,9 @@ def main() -> None:
         i = min(int(x * 8), 7)
         w = x * 8 - i
         loc = {"vertices": [i, i + 1], "weights": [1.0 - w, w]}
-        out = render(graph, [Event(0.0, "hit", "impact", {"impulse": 0.01, "location": loc})], 0.25,
-                     limiter=False).audio[0]
+        out = render(
+            graph, [Event(0.0, "hit", "impact", {"impulse": 0.01, "location": loc})], 0.25, limiter=False
+        ).audio[0]
         spectrum = np.abs(np.fft.rfft(out))
         bins = np.round(model.frequencies * out.size / 48000).astype(int)
         levels = 20 * np.log10(spectrum[bins] / spectrum.max() + 1e-12)

@@ -17,8 +17,9 @@ import numpy as np
 class Event:
     """A timed action on one node.
 
-    action ``set`` changes parameters (``args`` maps name -> value; ramped unless ``jump``);
-    any other action is one the node's type declares (e.g. ``impact`` on ImpactForce).
+    action ``set`` changes parameters (``args`` maps name -> value): linearly over
+    ``ramp`` seconds if given, else over the node's ``smooth`` time, or at once if
+    ``jump``. Any other action is one the node's type declares (e.g. ``impact``).
     """
 
     time: float
@@ -26,6 +27,7 @@ class Event:
     action: str = "set"
     args: dict[str, Any] = field(default_factory=dict)
     jump: bool = False
+    ramp: float | None = None
 
 
 @dataclass(frozen=True)
@@ -68,3 +70,34 @@ class HapticFrame:
     time: float
     force: np.ndarray
     torque: np.ndarray | None = None
+
+
+def track_events(track: ContactTrack, controls: dict[str, tuple[str, str]]) -> list[Event]:
+    """Events that make node parameters follow a ContactTrack, linearly interpolated.
+
+    ``controls`` maps a track field (``normal_force``, ``slip_speed``, ``rolling_speed``,
+    ``locations``) to (node, parameter). The parameter jumps to the first sample at
+    ``times[0]``, then each event ramps to the next sample over the interval between them,
+    so the audio-rate parameter is the piecewise-linear interpolation of the track.
+    """
+    times = np.asarray(track.times, dtype=np.float64)
+    if times.ndim != 1 or times.size == 0 or np.any(np.diff(times) <= 0):
+        raise ValueError("ContactTrack.times: expected increasing times in seconds")
+    columns = {}
+    for name, (node, param) in controls.items():
+        values = getattr(track, name)
+        if len(values) != times.size:
+            raise ValueError(f"ContactTrack.{name}: expected {times.size} samples, got {len(values)}")
+        columns.setdefault(node, []).append((param, values))
+    events = []
+    for node, cols in columns.items():
+        events.append(Event(float(times[0]), node, "set", {p: _plain(v[0]) for p, v in cols}, jump=True))
+        for i in range(times.size - 1):
+            args = {p: _plain(v[i + 1]) for p, v in cols}
+            events.append(Event(float(times[i]), node, "set", args, ramp=float(times[i + 1] - times[i])))
+    return events
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars to Python numbers (events hold plain values)."""
+    return value.item() if isinstance(value, np.generic) else value

@@ -67,8 +67,9 @@ class Graph:
                 if node.name in self.nodes and self.nodes[node.name] is not node:
                     raise PatchError(f"node name {node.name!r} is used by two different ugens")
                 self.nodes[node.name] = node
-        for node in seen:
-            if node.name is None:
+        is_tap = [node.type_name == "Tap" for node in seen]
+        for node, tap in zip(seen, is_tap, strict=True):
+            if node.name is None and not tap:
                 base = node.type_name.lower()
                 while True:
                     counters[base] = counters.get(base, 0) + 1
@@ -77,6 +78,10 @@ class Graph:
                         break
                 node.name = candidate
                 self.nodes[candidate] = node
+        for node, tap in zip(seen, is_tap, strict=True):
+            if node.name is None and tap:  # taps are named after their source: "node.output"
+                node.name = f"{node.sources['source'].name}.{node.output}"
+                self.nodes[node.name] = node
 
     def _check_inputs(self) -> None:
         for name, node in self.nodes.items():

@@ -30,6 +30,7 @@ from jassy.graph import Graph
 from jassy.modal_model import ModalModel
 from jassy.registry import ugen_class
 from jassy.scheduler import validate_event
+from jassy.ugen import UGen
 
 TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
 PATCH_KEYS = {"name", "description", "duration", "sample_rate"}
@@ -125,6 +126,19 @@ def _load_models(models: dict, where: str, base: Path) -> dict[str, ModalModel]:
     return out
 
 
+def _reference(nodes: dict[str, UGen], ref: str, key: str) -> UGen:
+    """The node named ``ref``, or for ``node.output`` a tap of that node's extra output."""
+    name, _, output = ref.partition(".")
+    if name not in nodes:
+        raise PatchError(f"{key}: unknown node {name!r}; nodes are {', '.join(nodes)}")
+    if not output:
+        return nodes[name]
+    try:
+        return nodes[name].tap(output)
+    except PatchError as exc:
+        raise PatchError(f"{key}: {exc}") from None
+
+
 def _names(value: Any, key: str) -> list[str]:
     items = [value] if isinstance(value, str) else value
     if not isinstance(items, list) or not all(isinstance(v, str) for v in items):
@@ -192,11 +206,7 @@ def build_patch(
     for name, connect in wiring.items():
         for inp, src in connect.items():
             label = "inputs" if nodes[name].variadic else inp
-            if src not in nodes:
-                raise PatchError(
-                    f"{where}: nodes.{name}.{label}: unknown node {src!r}; nodes are {', '.join(nodes)}"
-                )
-            nodes[name].connect(nodes[src], inp)
+            nodes[name].connect(_reference(nodes, src, f"{where}: nodes.{name}.{label}"), inp)
 
     outputs = _table(data, "outputs", where)
     for key in outputs:
@@ -207,10 +217,7 @@ def build_patch(
     picked = {}
     for key in ("audio", "haptic"):
         names = _names(outputs.get(key, []), f"{where}: outputs.{key}")
-        for n in names:
-            if n not in nodes:
-                raise PatchError(f"{where}: outputs.{key}: unknown node {n!r}; nodes are {', '.join(nodes)}")
-        picked[key] = [nodes[n] for n in names]
+        picked[key] = [_reference(nodes, n, f"{where}: outputs.{key}") for n in names]
     try:
         graph = Graph(picked["audio"], picked["haptic"])
     except PatchError as exc:
@@ -250,7 +257,7 @@ def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
         for req in ("time", "node"):
             if req not in entry:
                 raise PatchError(f"{key}.{req}: missing")
-        actions = [k for k in entry if k not in ("time", "node", "jump")]
+        actions = [k for k in entry if k not in ("time", "node", "jump", "ramp")]
         if len(actions) != 1:
             raise PatchError(
                 f"{key}: expected exactly one action (set = {{...}} or e.g. impact = {{...}}), got {actions}"
@@ -262,5 +269,6 @@ def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
         jump = entry.get("jump", False)
         if not isinstance(jump, bool):
             raise PatchError(f"{key}.jump: expected true or false")
-        events.append(validate_event(graph, Event(entry["time"], entry["node"], action, args, jump), key))
+        event = Event(entry["time"], entry["node"], action, args, jump, entry.get("ramp"))
+        events.append(validate_event(graph, event, key))
     return events

@@ -32,6 +32,13 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
     if node is None:
         raise PatchError(f"{where}.node: unknown node {event.node!r}; nodes are {', '.join(graph.nodes)}")
     args: dict[str, Any] = {}
+    ramp = event.ramp
+    if ramp is not None and (
+        isinstance(ramp, bool) or not isinstance(ramp, (int, float)) or not math.isfinite(ramp) or ramp < 0
+    ):
+        raise PatchError(f"{where}.ramp: expected seconds >= 0, got {ramp!r}")
+    if ramp is not None and event.action != "set":
+        raise PatchError(f"{where}.ramp: only 'set' events ramp")
     if event.action == "set":
         if not event.args:
             raise PatchError(f"{where}.set: expected at least one parameter to set")
@@ -68,7 +75,14 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
         if args.get("location") is not None:
             for target in graph.location_targets(event.node):
                 target.check_param("location", args["location"], f"{where}.{event.action}.location")
-    return Event(float(event.time), event.node, event.action, args, bool(event.jump))
+    return Event(
+        float(event.time),
+        event.node,
+        event.action,
+        args,
+        bool(event.jump),
+        None if ramp is None else float(ramp),
+    )
 
 
 @nb.njit(cache=True)
@@ -103,7 +117,7 @@ class Scheduler:
         node = self.graph.nodes[ev.node]
         if ev.action == "set":
             for key, value in ev.args.items():
-                node.set_param(key, value, jump=ev.jump)
+                node.set_param(key, value, jump=ev.jump, ramp=ev.ramp)
             return
         location = ev.args.get("location")
         if location is not None:

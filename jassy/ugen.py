@@ -48,6 +48,9 @@ class UGen:
     is_delay: ClassVar[bool] = False
     #: True if impact locations downstream of a force source apply to this ugen.
     accepts_location: ClassVar[bool] = False
+    #: Names of additional outputs (e.g. the contact force of a closed-loop interaction),
+    #: written to ``self.extra[name][:n]`` and read by others through :meth:`tap`.
+    outputs: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
         """Create with inputs ``sources`` and parameters; ``where`` prefixes error keys."""
@@ -70,6 +73,9 @@ class UGen:
             else:
                 self.values[key] = spec.default
         self.initial = dict(self.values)
+        self.extra: dict[str, np.ndarray] = {}
+        self._taps: dict[str, UGen] = {}
+        self._event_ramp: float | None = None
         self(*sources)
 
     # ----------------------------------------------------------------- composition
@@ -141,6 +147,15 @@ class UGen:
     def __rmul__(self, other: Any) -> UGen:
         return self._combine(other, "Multiply", reverse=True)
 
+    def tap(self, output: str) -> UGen:
+        """A node carrying the additional output ``output`` (see :attr:`outputs`)."""
+        if output not in self.outputs:
+            have = ", ".join(self.outputs) or "none besides its main output"
+            raise PatchError(f"{self.type_name} {self.name or ''}: no output {output!r}; it has {have}")
+        if output not in self._taps:
+            self._taps[output] = Tap(self, output)
+        return self._taps[output]
+
     def __repr__(self) -> str:
         return f"{self.type_name}(name={self.name!r})"
 
@@ -155,6 +170,7 @@ class UGen:
         self.max_block = int(max_block)
         self.values = dict(self.initial)
         self.out = np.zeros(self.max_block) if out is None else out
+        self.extra = {name: np.zeros(self.max_block) for name in self.outputs}
         self._silence = np.zeros(self.max_block)
         self._prepare()
         self.reset()
@@ -165,7 +181,9 @@ class UGen:
         return self._silence if src is None else src.out
 
     def ramp_samples(self) -> int:
-        return int(round(self.values["smooth"] * (self.sample_rate or 0.0)))
+        """Samples of the ramp for the parameter change being applied."""
+        seconds = self._event_ramp if self._event_ramp is not None else self.values["smooth"]
+        return int(round(seconds * (self.sample_rate or 0.0)))
 
     def smoothed(self, key: str) -> Smoothed:
         """A Smoothed holder initialised to the parameter's current value."""
@@ -195,8 +213,9 @@ class UGen:
         self.initial[key] = value
         self.values[key] = value
 
-    def set_param(self, key: str, value: Any, jump: bool = False) -> None:
-        """Change a parameter during a render; smoothed parameters ramp unless ``jump``."""
+    def set_param(self, key: str, value: Any, jump: bool = False, ramp: float | None = None) -> None:
+        """Change a parameter during a render; smoothed parameters ramp (over ``ramp``
+        seconds if given, else the ``smooth`` time) unless ``jump``."""
         spec = self.all_specs().get(key)
         if spec is None:
             raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
@@ -207,7 +226,11 @@ class UGen:
         value = self.check_param(key, value, f"{self.name}.{key}")
         self.values[key] = value
         if self.sample_rate is not None:
-            self._param_changed(key, value, jump)
+            self._event_ramp = ramp
+            try:
+                self._param_changed(key, value, jump)
+            finally:
+                self._event_ramp = None
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         """React to a validated parameter change during a render."""
@@ -238,3 +261,17 @@ class UGen:
         for value in vars(self).values():
             if isinstance(value, Smoothed):
                 value.sync()
+
+
+class Tap(UGen):
+    """Carries one additional output of another ugen as a main output (``node.output``)."""
+
+    type_name = "Tap"
+    inputs = ("source",)
+
+    def __init__(self, source: UGen, output: str):
+        super().__init__(source, name=f"{source.name}.{output}" if source.name else None)
+        self.output = output
+
+    def process(self, start: int, n: int) -> None:
+        self.out[:n] = self.sources["source"].extra[self.output][:n]

@@ -166,6 +166,9 @@ def test_stereo_patch_writes_two_channels(tmp_path):
 def test_examples_run(tmp_path):
     root = os.path.dirname(os.path.dirname(__file__))
     out = tmp_path / "c.wav"
-    subprocess.run([sys.executable, os.path.join(root, "examples", "compose_patch.py"), str(out)], check=True,
-                   capture_output=True)
+    subprocess.run(
+        [sys.executable, os.path.join(root, "examples", "compose_patch.py"), str(out)],
+        check=True,
+        capture_output=True,
+    )
     assert sf.info(out).frames == 3 * FS
