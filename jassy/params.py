@@ -114,16 +114,17 @@ class ParamSpec:
 def ramp_fill(ramp, out, n):
     """Write n per-sample values of a linear ramp into out[:n] and advance it.
 
-    ramp = [current, target, increment, remaining]: each sample first advances the value,
-    so a ramp of m samples reaches the target exactly at its m-th sample.
+    ramp = [value of the next sample, target, increment, samples left]. A ramp of m samples
+    set at frame e outputs the old value at e and the target from e + m on: the parameter
+    is the straight line through (e, old) and (e + m, new), sampled.
     """
     cur = ramp[0]
     remaining = int(ramp[3])
     for i in range(n):
+        out[i] = cur
         if remaining > 0:
             remaining -= 1
             cur = ramp[1] if remaining == 0 else cur + ramp[2]
-        out[i] = cur
     ramp[0] = cur
     ramp[3] = remaining
 
@@ -160,7 +161,7 @@ class Smoothed:
         self.value = float(self.ramp[0])
 
     def fill(self, out: np.ndarray, n: int) -> np.ndarray:
-        """Per-sample values for the next n samples (advances the ramp)."""
+        """Per-sample values for the next n samples (advances the ramp; see ramp_fill)."""
         ramp_fill(self.ramp, out, n)
         self.sync()
         return out[:n]

@@ -116,8 +116,12 @@ class Scheduler:
         ev = self.events[index]
         node = self.graph.nodes[ev.node]
         if ev.action == "set":
+            ramp = ev.ramp
+            if ramp is not None:  # end on the frame where time + ramp applies: tracks join exactly
+                end = math.ceil((ev.time + ramp) * self.sample_rate - _SAMPLE_SLACK)
+                ramp = (end - self.apply_frames[index]) / self.sample_rate
             for key, value in ev.args.items():
-                node.set_param(key, value, jump=ev.jump, ramp=ev.ramp)
+                node.set_param(key, value, jump=ev.jump, ramp=ramp)
             return
         location = ev.args.get("location")
         if location is not None:

@@ -95,8 +95,8 @@ def test_parameter_change_is_a_linear_ramp_from_the_event_sample():
     start = int(np.ceil(t * FS))  # first frame at or after the event
     ramp = int(round(0.01 * FS))
     assert np.all(y[:start] == 1.0)
-    expected = 1.0 - np.arange(1, ramp + 1) / ramp
-    np.testing.assert_allclose(y[start : start + ramp], expected, atol=1e-12)
+    expected = 1.0 - np.arange(0, ramp + 1) / ramp  # the line through (start, 1) and (start + ramp, 0)
+    np.testing.assert_allclose(y[start : start + ramp + 1], expected, atol=1e-12)
     assert np.all(y[start + ramp :] == 0.0)
 
 

@@ -19,13 +19,13 @@ def test_track_parameter_is_the_linear_interpolation_of_the_track():
     force = 1.0 + np.sin(2 * np.pi * 3 * t)
     track = ContactTrack((0, 1), t, force, np.zeros_like(t), np.zeros_like(t))
     g = Gain(ArraySource(np.ones(FS)), name="g")
-    for block in (1, 64, 1000):
+    for block, fs in ((1, FS), (64, FS), (1000, FS), (64, 44100)):
         y = render(
-            Graph(g), track_events(track, {"normal_force": ("g", "gain")}), 0.5, FS, block, limiter=False
+            Graph(g), track_events(track, {"normal_force": ("g", "gain")}), 0.5, fs, block, limiter=False
         ).audio[0]
         # each track sample applies at the first frame at or after its time (parameters move
         # on the sample grid; only impacts keep sub-sample times), and ramps join them linearly
-        anchors = np.ceil(t * FS - 1e-6)
+        anchors = np.ceil(t * fs - 1e-6)  # the line through (anchor_i, F_i) and (anchor_i+1, F_i+1)
         frames = np.arange(int(anchors[0]), y.size)
         np.testing.assert_allclose(y[frames], np.interp(frames, anchors, force), atol=1e-9)
 
@@ -48,7 +48,7 @@ def test_event_ramp_overrides_the_smooth_time():
         0
     ]
     np.testing.assert_allclose(
-        y[: int(0.1 * FS)], 1 - np.arange(1, int(0.1 * FS) + 1) / (0.1 * FS), atol=1e-12
+        y[: int(0.1 * FS) + 1], 1 - np.arange(0, int(0.1 * FS) + 1) / (0.1 * FS), atol=1e-12
     )
     with pytest.raises(PatchError, match=r"ramp: expected seconds >= 0"):
         render(Graph(g), [Event(0.0, "g", "set", {"gain": 0.0}, ramp=-1.0)], 0.01)

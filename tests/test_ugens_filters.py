@@ -102,7 +102,7 @@ def test_biquad_ramp_redesigns_coefficients_every_sample():
     x = noise(frames, seed=2)
     score = [Event(at / FS, "f", "set", {"freq": 4000.0, "q": 3.0})]
     y = run(lambda s: Biquad(s, mode="bandpass", freq=500.0, q=0.7, name="f"), x, score=score)
-    k = np.clip(np.arange(frames) - at + 1, 0, ramp) / ramp  # ramp_fill: target at the 240th sample
+    k = np.clip(np.arange(frames) - at, 0, ramp) / ramp  # ramp_fill: old value at "at", target at at + ramp
     freqs, qs = 500.0 + k * 3500.0, 0.7 + k * 2.3
     ref, s1, s2 = np.zeros(frames), 0.0, 0.0
     for i in range(frames):

@@ -41,7 +41,7 @@ def test_sine_frequency_changes_are_phase_continuous():
     freqs = np.full(x.size, f0)
     a, b, m = apply_frame(t1), apply_frame(t2), round(0.005 * FS)
     freqs[a:b] = f1
-    freqs[a : a + m] = f0 + (f1 - f0) * np.arange(1, m + 1) / m
+    freqs[a : a + m] = f0 + (f1 - f0) * np.arange(0, m) / m  # the line through (a, f0), (a + m, f1)
     freqs[b:] = f2
     phase = 2 * np.pi * np.concatenate([[0.0], np.cumsum(freqs[:-1])]) / FS
     assert np.max(np.abs(x - np.sin(phase))) < 1e-9
@@ -55,7 +55,7 @@ def test_sine_amp_ramp():
     a, m = apply_frame(0.05), round(0.005 * FS)
     amps = np.ones(x.size)
     amps[a:] = 0.25
-    amps[a : a + m] = 1.0 - 0.75 * np.arange(1, m + 1) / m
+    amps[a : a + m] = 1.0 - 0.75 * np.arange(0, m) / m
     assert np.max(np.abs(x - amps * np.sin(2 * np.pi * 1000.0 * n / FS))) < 1e-9
 
 

@@ -144,6 +144,8 @@ class Biquad(UGen):
             freqs = self.freq.fill(self._freqs, n)
             qs = self.q.fill(self._qs, n)
             biquad_ramp(x, self.out, n, self.mode, freqs, qs, 1.0 / self.sample_rate, self.coef, self.state)
+            if self.freq.steady and self.q.steady:
+                self._design()  # the ramps just ended: coefficients for the targets
 
     def state_arrays(self):
         return {"state": self.state, "coef": self.coef, "freq": self.freq.ramp, "q": self.q.ramp}
@@ -215,6 +217,8 @@ class OnePole(UGen):
         else:
             cutoffs = self.cutoff.fill(self._cutoffs, n)
             onepole_ramp(x, self.out, n, cutoffs, 1.0 / self.sample_rate, self.coef, self.state)
+            if self.cutoff.steady:
+                self._design()  # the ramp just ended: coefficient for the target
 
     def state_arrays(self):
         return {"state": self.state, "coef": self.coef, "cutoff": self.cutoff.ramp}

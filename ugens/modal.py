@@ -85,11 +85,20 @@ def resonate(force, out, n, c1, c2, g, y1, y2, active):
 def resonate_ramp(force, out, n, c1, c2, g, y1, y2, delta, target, remaining):
     """As :func:`resonate` over all modes while c1, c2, g ramp linearly.
 
-    delta, target: (3, K) per-sample increments and final values of (c1, c2, g). Returns
-    the samples of ramp left; at the ramp's last sample the coefficients equal target.
+    delta, target: (3, K) per-sample increments and final values of (c1, c2, g). Each
+    sample uses the current coefficients, then they step (as in params.ramp_fill), so the
+    coefficients equal target from the ramp's m-th sample on. Returns the samples left.
     """
     K = c1.shape[0]
     for i in range(n):
+        f = force[i]
+        s = 0.0
+        for k in range(K):
+            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * f
+            y2[k] = y1[k]
+            y1[k] = v
+            s += v
+        out[i] = s
         if remaining > 0:
             remaining -= 1
             if remaining == 0:
@@ -102,14 +111,6 @@ def resonate_ramp(force, out, n, c1, c2, g, y1, y2, delta, target, remaining):
                     c1[k] += delta[0, k]
                     c2[k] += delta[1, k]
                     g[k] += delta[2, k]
-        f = force[i]
-        s = 0.0
-        for k in range(K):
-            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * f
-            y2[k] = y1[k]
-            y1[k] = v
-            s += v
-        out[i] = s
     return remaining
 
 
