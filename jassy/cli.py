@@ -31,6 +31,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise JassyError("--duration: the patch sets no duration; give one in seconds")
     if args.haptic and not patch.graph.haptic:
         raise JassyError(f"--haptic: patch {patch.name!r} has no haptic output ([outputs] haptic = ...)")
+    if args.mode_budget is not None:
+        from jassy.anytime import ModeBudget
+
+        patch.graph.budget = ModeBudget(max_modes=args.mode_budget)
     t0 = time.perf_counter()
     engine = OfflineEngine(patch.graph, patch.score, rate, args.block)
     summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
@@ -128,6 +132,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="sample format (default float32; FLAC needs pcm16/pcm24)",
     )
     p.add_argument("--haptic", metavar="FILE", help="also write the haptic force track (.wav, .npz or .csv)")
+    p.add_argument(
+        "--mode-budget",
+        type=int,
+        metavar="N",
+        help="anytime synthesis: compute at most N modes across all modal banks",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 

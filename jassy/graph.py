@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from jassy.anytime import ModeBudget
 from jassy.errors import PatchError
 from jassy.ugen import UGen
 
@@ -30,7 +31,14 @@ def _as_list(outputs: UGen | Sequence[UGen] | None) -> list[UGen]:
 class Graph:
     """Ugens wired together, ordered once, processed sub-block by sub-block."""
 
-    def __init__(self, audio: UGen | Sequence[UGen], haptic: UGen | Sequence[UGen] | None = None):
+    def __init__(
+        self,
+        audio: UGen | Sequence[UGen],
+        haptic: UGen | Sequence[UGen] | None = None,
+        budget: ModeBudget | None = None,
+    ):
+        """``budget``: an anytime-synthesis mode budget shared by the graph's ModalBanks."""
+        self.budget = budget
         self.audio = _as_list(audio)
         self.haptic = _as_list(haptic)
         if not self.audio:
@@ -163,8 +171,14 @@ class Graph:
         for d in self.cycle_delays:
             limit = min(limit, d.min_delay_samples())
         self.max_sub_block = limit
-        #: What one sub-block runs, in order: every node's process, then delay commits.
+        #: What one sub-block runs, in order: every node's process, then delay commits; with
+        #: a budget, its decision runs just before the first ModalBank.
         self.steps = [node.process for node in self.order] + [node.commit for node in self.delays]
+        self.budgeted = [node for node in self.order if hasattr(node, "anytime_importance")]
+        if self.budget is not None and self.budgeted:
+            for node in self.budgeted:
+                node.budgeted = True
+            self.steps.insert(self.order.index(self.budgeted[0]), self.budget.step)
 
     def reset(self) -> None:
         for node in self.order:

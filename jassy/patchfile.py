@@ -24,6 +24,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from jassy.anytime import ModeBudget
 from jassy.errors import ModelError, PatchError
 from jassy.events import Event
 from jassy.graph import Graph
@@ -33,7 +34,7 @@ from jassy.scheduler import validate_event
 from jassy.ugen import UGen
 
 TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
-PATCH_KEYS = {"name", "description", "duration", "sample_rate"}
+PATCH_KEYS = {"name", "description", "duration", "sample_rate", "mode_budget", "cpu_budget"}
 
 
 @dataclass
@@ -218,10 +219,17 @@ def build_patch(
     for key in ("audio", "haptic"):
         names = _names(outputs.get(key, []), f"{where}: outputs.{key}")
         picked[key] = [_reference(nodes, n, f"{where}: outputs.{key}") for n in names]
+    budget = None
+    if "mode_budget" in meta or "cpu_budget" in meta:
+        try:
+            budget = ModeBudget(max_modes=meta.get("mode_budget"), cpu_fraction=meta.get("cpu_budget"))
+        except PatchError as exc:
+            raise PatchError(f"{where}: patch.{exc}") from None
     try:
-        graph = Graph(picked["audio"], picked["haptic"])
+        graph = Graph(picked["audio"], picked["haptic"], budget)
     except PatchError as exc:
         raise PatchError(f"{where}: {exc}") from None
+
     unused = sorted(set(nodes) - set(graph.nodes))
     if unused:
         raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")

@@ -8,6 +8,7 @@ need the fraction (impacts) receive ``t`` itself.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -111,6 +112,22 @@ class Scheduler:
         self.apply_frames = [math.ceil(t - _SAMPLE_SLACK) for t in self.sample_times]
         self.next_event = 0
         self.frame = 0
+        budget = graph.budget
+        self.period = budget.period if budget is not None and graph.budgeted else None
+        if self.period is not None:
+            budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses)
+
+    def upcoming_impulses(self, start: int, end: int) -> list[tuple[list, float]]:
+        """(ugens downstream, impulse N s) of the impact-like events applied in frames
+        [start, end); an action without an ``impulse`` argument counts as 1 N s."""
+        out = []
+        i = bisect.bisect_left(self.apply_frames, start)
+        while i < len(self.events) and self.apply_frames[i] < end:
+            ev = self.events[i]
+            if ev.action != "set":
+                out.append((self.graph.location_targets(ev.node), float(ev.args.get("impulse", 1.0))))
+            i += 1
+        return out
 
     def _dispatch(self, index: int) -> None:
         ev = self.events[index]
@@ -138,6 +155,7 @@ class Scheduler:
         """
         process = self.graph.process
         steps = self.graph.steps
+        period = self.period
         bus, rows = self.graph.bus, self.graph.bus_rows
         copy = specialise(gather, bus, rows, out, 0, 0)
         block = self.block
@@ -153,7 +171,7 @@ class Scheduler:
                 self._dispatch(self.next_event)
                 self.next_event += 1
                 upcoming = frames[self.next_event] if self.next_event < count else never
-            if limit == block and pos % block == 0:
+            if limit == block and pos % block == 0 and (period is None or period % block == 0):
                 # fast path: whole blocks up to the next event or the end
                 whole = (min(end, upcoming) - pos) // block
                 for _ in range(whole):
@@ -164,6 +182,8 @@ class Scheduler:
                 if whole:
                     continue
             stop = min(end, (pos // block + 1) * block, pos + limit, upcoming)
+            if period is not None:
+                stop = min(stop, (pos // period + 1) * period)
             process(pos, stop - pos)
             copy(bus, rows, out, pos - begin, stop - pos)
             pos = stop

@@ -26,6 +26,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
 from jassy.modal_model import ModalModel, parse_location
@@ -82,14 +83,15 @@ def resonate(force, out, n, c1, c2, g, y1, y2, active):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_ramp(force, out, n, c1, c2, g, y1, y2, delta, target, remaining):
+def resonate_ramp(force, out, n, c1, c2, g, y1, y2, delta, target, remaining, active):
     """As :func:`resonate` over all modes while c1, c2, g ramp linearly.
 
     delta, target: (3, K) per-sample increments and final values of (c1, c2, g). Each
     sample uses the current coefficients, then they step (as in params.ramp_fill), so the
     coefficients equal target from the ramp's m-th sample on. Returns the samples left.
+    Only modes [0, active) are computed and ramped.
     """
-    K = c1.shape[0]
+    K = active
     for i in range(n):
         f = force[i]
         s = 0.0
@@ -135,14 +137,15 @@ FLUSH_PERIOD = 1024
 def bank_step(force, out, start, n, bank, meta, floor):
     """One sub-block without ramps: excite all modes if there is input, else run the
     audible ones and, each time the clock crosses a multiple of FLUSH_PERIOD, drop those
-    that fell silent. bank rows: c1, c2, g, y1, y2; meta[0] = active mode count."""
+    that fell silent. bank rows: c1, c2, g, y1, y2; meta[0] = active mode count, meta[2] =
+    the most modes that may be active (all, or the anytime budget's share)."""
     excited = False
     for i in range(n):
         if force[i] != 0.0:
             excited = True
             break
     if excited:
-        meta[0] = bank.shape[1]
+        meta[0] = meta[2]
     active = meta[0]
     if active == 0:
         for i in range(n):
@@ -232,12 +235,16 @@ class ModalBank(UGen):
         self.coef, self.y = self.bank[:3], self.bank[3:]
         self.delta = np.zeros((3, k))
         self.target = np.zeros((3, k))
-        self.meta = np.zeros(2, dtype=np.int64)  # [active modes, ramp samples left]
+        self.meta = np.zeros(3, dtype=np.int64)  # [active modes, ramp samples left, active cap]
         self.coef[:] = self._design()
         self.target[:] = self.coef
         self._floor = float(self.values["floor"])
         self._input = self.sources["input"]
         self._ramping = False
+        self.budgeted = False
+        self._faded = np.zeros(k, dtype=bool)
+        self._weights = a_weighting_power(self.model.frequencies[self.order])
+        self._refresh_design_cache()
         self._step = specialise(bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor)
 
     def _design(self) -> np.ndarray:
@@ -252,11 +259,25 @@ class ModalBank(UGen):
     def _reset(self) -> None:
         self.y[:] = 0.0
         self.coef[:] = self.target
-        self.meta[:] = 0
+        self.meta[:] = (0, 0, self.model.n_modes)
         self._ramping = False
+        self._impulse = 0.0  # |force| integrated over the current anytime period (N s)
+        self._last_impulse = 0.0
+
+    def _refresh_design_cache(self) -> None:
+        """Keep the design for the current parameters (``fresh``) and each mode's squared
+        amplitude per unit impulse (``unit2``) for the anytime budget."""
+        self._fresh = self._design()
+        c1, c2, g = self._fresh
+        self._fresh_c2 = c2.copy()  # R^2: energy decay per sample
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sin2 = np.maximum(np.where(c2 > 0, 1.0 - c1 * c1 / (4 * c2), 1.0), 1e-12)
+            self._sin2 = sin2
+            self._unit2 = np.where(c2 > 0, (g * self.sample_rate) ** 2 / (c2 * sin2), 0.0)
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
-        self.target[:] = self._design()
+        self._refresh_design_cache()
+        self.target[:] = self._fresh
         ramp = self.ramp_samples()
         if jump or ramp < 1:
             self.coef[:] = self.target
@@ -269,13 +290,76 @@ class ModalBank(UGen):
     def process(self, start: int, n: int) -> None:
         if self._ramping:
             c, y, meta = self.coef, self.y, self.meta
+            meta[0] = meta[2]
             meta[1] = resonate_ramp(
-                self._input.out, self.out, n, c[0], c[1], c[2], y[0], y[1], self.delta, self.target, meta[1]
+                self._input.out,
+                self.out,
+                n,
+                c[0],
+                c[1],
+                c[2],
+                y[0],
+                y[1],
+                self.delta,
+                self.target,
+                meta[1],
+                meta[0],
             )
-            meta[0] = c.shape[1]
             self._ramping = meta[1] > 0
         else:
             self._step(self._input.out, self.out, start, n, self.bank, self.meta, self._floor)
+        if self.budgeted:
+            self._impulse += float(np.abs(self._input.out[:n]).sum()) / self.sample_rate
+
+    # ------------------------------------------------------------ anytime synthesis
+    def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
+        """Per mode, in internal order: importance for this period, importance for the
+        next one (amplitude decayed by a period, the impulses scheduled then), and whether
+        it sounds now. See jassy.anytime."""
+        impulse = max(self._impulse, impulse_now)
+        self._impulse = 0.0
+        y1, y2 = self.y
+        amp2 = np.maximum(y1 * y1 - self.coef[0] * y1 * y2 + self.coef[1] * y2 * y2, 0.0) / self._sin2
+        weighted = self._weights * amp2
+        now = weighted + self._weights * self._unit2 * (impulse * impulse)
+        later = weighted * self._fresh_c2**period + self._weights * self._unit2 * (
+            impulse_next * impulse_next
+        )
+        return now, later, amp2 > self._floor * self._floor
+
+    def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
+        """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
+        rest; the computed modes are moved to the front. Returns how many are computed."""
+        old_active = int(self.meta[0])
+        n_keep, n_fade = int(keep.sum()), int(fade.sum())
+        if not n_fade and not self._faded.any() and n_keep == old_active and keep[:old_active].all():
+            self.meta[2] = old_active  # the same modes as now: nothing to move
+            return old_active
+        perm = np.concatenate([np.flatnonzero(keep), np.flatnonzero(fade), np.flatnonzero(~keep & ~fade)])
+        restore = (perm >= old_active) | self._faded[perm]  # entering, or back from a fade
+        for arr in (self.bank, self.delta, self.target):
+            arr[:] = arr[:, perm]
+        self.order = self.order[perm]
+        for name in ("_weights", "_fresh", "_fresh_c2", "_sin2", "_unit2"):
+            setattr(self, name, getattr(self, name)[..., perm])
+        cols = np.flatnonzero(restore[:n_keep]) if self._ramping else np.arange(n_keep)
+        self.coef[:, cols] = self.target[:, cols] = self._fresh[:, cols]
+        self.delta[:, cols] = 0.0
+        fading = slice(n_keep, n_keep + n_fade)
+        shrink = np.exp(-np.log(1000.0) / period)  # -60 dB over one period
+        self.coef[0, fading] *= shrink
+        self.coef[1, fading] *= shrink * shrink
+        self.coef[2, fading] = 0.0
+        self.target[:, fading] = self.coef[:, fading]
+        self.delta[:, fading] = 0.0
+        silent = slice(n_keep + n_fade, None)
+        self.y[:, silent] = 0.0
+        self.coef[:, silent] = self.target[:, silent] = self._fresh[:, silent]
+        self.delta[:, silent] = 0.0
+        self._faded[:] = False
+        self._faded[fading] = True
+        self.meta[0] = self.meta[2] = n_keep + n_fade
+        return n_keep + n_fade
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {"bank": self.bank, "delta": self.delta, "target": self.target, "meta": self.meta}
