@@ -223,3 +223,46 @@ def print_modal(rows: list[dict], graph: dict) -> None:
         f"bare kernel in one call {graph['kernel_one_call_s'] * 1e3:.1f} ms "
         f"-> {graph['ratio_vs_one_call']:.2f}x"
     )
+
+
+def contact_bench(names: list[str] | None = None, block: int = 64) -> list[dict]:
+    """Real-time factor of every built-in patch at 48 kHz (one process, one core).
+
+    Each patch is rendered once to warm up (JIT, caches), then timed twice; the faster
+    run counts. Modes: the total over the patch's modal models.
+    """
+    from jassy.patchfile import builtin_patches, load_patch
+
+    rows = []
+    for name in names or sorted(builtin_patches()):
+        patch = load_patch(name)
+        duration = patch.duration or 5.0
+        rate = patch.sample_rate or SAMPLE_RATE
+
+        def run(patch=patch, duration=duration, rate=rate):
+            OfflineEngine(patch.graph, patch.score, rate, block).render(duration)
+
+        (elapsed,) = _best_times([run], repeats=2)
+        models = [
+            n.values["model"] for n in patch.graph.order if isinstance(n.values.get("model"), ModalModel)
+        ]
+        rows.append(
+            {
+                "patch": name,
+                "modes": sum(m.n_modes for m in models),
+                "seconds": duration,
+                "render_s": elapsed,
+                "realtime_factor": duration / elapsed,
+            }
+        )
+    return rows
+
+
+def print_contact(rows: list[dict]) -> None:
+    print(f"built-in patches at {SAMPLE_RATE} Hz, block 64, one core (best of 2 after a warm-up)")
+    print(f"{'patch':<14} {'modes':>6} {'audio s':>8} {'render s':>9} {'x real time':>12}")
+    for r in rows:
+        print(
+            f"{r['patch']:<14} {r['modes']:>6} {r['seconds']:>8.1f} {r['render_s']:>9.3f} "
+            f"{r['realtime_factor']:>12.0f}"
+        )

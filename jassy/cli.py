@@ -103,6 +103,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from jassy import bench
 
+    if args.name == "contact":
+        rows = bench.contact_bench()
+        if args.json:
+            print(json.dumps(rows, indent=2))
+        else:
+            bench.print_contact(rows)
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -150,7 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("bench", help="measure throughput against references")
-    p.add_argument("name", choices=["modal"], help="modal: ModalBank vs plain numba and scipy, and the graph")
+    p.add_argument(
+        "name",
+        choices=["modal", "contact"],
+        help="modal: ModalBank vs plain numba and scipy, and the graph; "
+        "contact: real-time factor of every built-in patch",
+    )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
