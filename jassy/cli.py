@@ -36,7 +36,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
         patch.graph.budget = ModeBudget(max_modes=args.mode_budget)
     t0 = time.perf_counter()
-    engine = OfflineEngine(patch.graph, patch.score, rate, args.block)
+    safety, offsets = _haptic_options(args)
+    engine = OfflineEngine(
+        patch.graph, patch.score, rate, args.block, haptic_safety=safety, offsets_ms=offsets
+    )
     summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
     elapsed = time.perf_counter() - t0
     for warning in summary["warnings"]:
@@ -47,6 +50,65 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
+        )
+    return 0
+
+
+def _haptic_options(args: argparse.Namespace):
+    from jassy.haptics import HapticSafety
+
+    safety = HapticSafety(max_force=args.max_force, max_slew=args.max_slew)
+    offsets = {"audio": args.audio_offset, "haptic": args.haptic_offset}
+    return safety, offsets
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    from jassy.live import LiveEngine
+    from jassy.patchfile import load_patch
+
+    patch = load_patch(args.patch, args.set or ())
+    rate = args.sr or patch.sample_rate or DEFAULT_RATE
+    duration = args.duration or patch.duration
+    safety, offsets = _haptic_options(args)
+    engine = LiveEngine(
+        patch.graph,
+        patch.score,
+        rate,
+        args.block,
+        args.ring,
+        args.device,
+        haptic_to_card=not args.no_haptic_card,
+        haptic_udp=args.haptic_udp,
+        haptic_safety=safety,
+        offsets_ms=offsets,
+    )
+    engine.start()
+    print(
+        f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
+        f"{engine.stats().latency * 1e3:.2f} ms; Ctrl-C stops",
+        flush=True,
+    )
+    try:
+        end = time.monotonic() + duration if duration else None
+        while end is None or time.monotonic() < end:
+            time.sleep(0.5)
+            if not args.quiet:
+                print(f"\r{engine.stats().summary()}", end="", flush=True)
+    except KeyboardInterrupt:
+        pass
+    stats = engine.stop()
+    print(f"\n{stats.summary()}")
+    return 0
+
+
+def _cmd_devices(args: argparse.Namespace) -> int:
+    from jassy import portaudio
+
+    for d in portaudio.devices():
+        mark = "*" if d["default"] else " "
+        print(
+            f"{mark}{d['index']:>3}  {d['name']} ({d['host_api']}): {d['max_output_channels']} out, "
+            f"{d['default_sample_rate']:g} Hz, low latency {d['default_low_output_latency'] * 1e3:.1f} ms"
         )
     return 0
 
@@ -120,6 +182,21 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_haptic_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--max-force", type=float, default=float("inf"), help="haptic force clamp, N (default none)"
+    )
+    p.add_argument("--max-slew", type=float, default=float("inf"), help="haptic slew-rate limit, N/s")
+    p.add_argument("--audio-offset", type=float, default=0.0, metavar="MS", help="delay audio by MS ms")
+    p.add_argument(
+        "--haptic-offset",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="delay haptics by MS ms (2 = audio leads by 2 ms, applied exactly in samples)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="jassy", description="Physically based sound synthesis.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -146,6 +223,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
+
+    p = sub.add_parser("play", help="play a patch live (audio + haptic channels on one clock)")
+    p.add_argument("patch", help="patch file (.toml) or built-in patch name")
+    p.add_argument("--device", help="output device index or name substring (see 'jassy devices')")
+    p.add_argument("--duration", type=float, help="seconds to play (default: the patch's; 0 = until Ctrl-C)")
+    p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
+    p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
+    p.add_argument("--ring", type=int, default=3, help="blocks rendered ahead (latency; default 3)")
+    p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
+    p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
+    p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
+    _add_haptic_arguments(p)
+    p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
+    p.set_defaults(func=_cmd_play)
+
+    p = sub.add_parser("devices", help="list audio output devices")
+    p.set_defaults(func=_cmd_devices)
 
     p = sub.add_parser("list", help="list built-in patches and ugen types")
     p.set_defaults(func=_cmd_list)

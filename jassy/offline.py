@@ -20,6 +20,7 @@ from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
+from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
 from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, zero_nonfinite
 from jassy.scheduler import Scheduler
 
@@ -56,7 +57,15 @@ class OfflineEngine:
         block: int = 64,
         limiter: bool = True,
         release: float = 0.05,
+        haptic_safety: HapticSafety | None = None,
+        offsets_ms: dict[str, float] | None = None,
     ):
+        """Render ``graph`` through ``score`` at ``sample_rate`` Hz in blocks of ``block``.
+
+        The output stage, in order: NaN/Inf quarantine, the audio limiter, the haptic
+        safety limits (if given) and per-kind offsets in ms applied exactly in samples
+        (e.g. {"haptic": 2.0}: haptics 96 samples after audio at 48 kHz).
+        """
         if not (isinstance(sample_rate, (int, float)) and 1000 <= sample_rate <= 768000):
             raise PatchError(f"sample_rate: expected a rate in [1000, 768000] Hz, got {sample_rate!r}")
         if not isinstance(block, int) or block < 1:
@@ -68,6 +77,11 @@ class OfflineEngine:
         self.limiter = limiter
         self._limiter_state = np.ones(1)
         self._release = release_coefficient(release, self.sample_rate)
+        self.haptic_safety = haptic_safety
+        self._haptic_last = np.zeros(len(graph.haptic))
+        self.haptic_flags = 0
+        self.delays = channel_delays(offsets_ms or {}, len(graph.audio), len(graph.haptic), self.sample_rate)
+        self._delay = ChannelDelay(self.delays)
         self.warnings: list[str] = []
 
     @property
@@ -99,12 +113,8 @@ class OfflineEngine:
             done = 0
             while done < frames:
                 n = min(size, frames - done)
-                self.scheduler.run(n, buf)
+                self.produce(buf, n)
                 a, h = abuf[:, :n], hbuf[:, :n]
-                if count_nonfinite(a) or count_nonfinite(h):
-                    self._quarantine(a, h)
-                if self.limiter:
-                    limit(a, n, self._limiter_state, CEILING, self._release)
                 done += n
                 if bar is not None:
                     bar.update(round(n / self.sample_rate, 6))
@@ -112,6 +122,21 @@ class OfflineEngine:
         finally:
             if bar is not None:
                 bar.close()
+
+    def produce(self, buf: np.ndarray, n: int) -> None:
+        """Render the next n frames into buf[:, :n] (audio rows, then haptic rows) through
+        the whole output stage."""
+        self.scheduler.run(n, buf)
+        n_audio = len(self.graph.audio)
+        a, h = buf[:n_audio, :n], buf[n_audio:, :n]
+        if count_nonfinite(a) or count_nonfinite(h):
+            self._quarantine(a, h)
+        if self.limiter:
+            limit(a, n, self._limiter_state, CEILING, self._release)
+        if self.haptic_safety is not None and h.shape[0]:
+            s = self.haptic_safety
+            self.haptic_flags |= limit_force(h, n, self._haptic_last, s.max_force, s.step(self.sample_rate))
+        self._delay(buf, n)
 
     def _quarantine(self, audio: np.ndarray, haptic: np.ndarray) -> None:
         """Replace NaN/Inf by silence, reset the nodes that hold them, report once per node."""
@@ -191,6 +216,11 @@ def render(
     block: int = 64,
     limiter: bool = True,
     progress: bool = False,
+    haptic_safety: HapticSafety | None = None,
+    offsets_ms: dict[str, float] | None = None,
 ) -> Rendering:
     """Render a graph and score offline into arrays (see :class:`OfflineEngine`)."""
-    return OfflineEngine(graph, score, sample_rate, block, limiter).render(duration, progress)
+    engine = OfflineEngine(
+        graph, score, sample_rate, block, limiter, haptic_safety=haptic_safety, offsets_ms=offsets_ms
+    )
+    return engine.render(duration, progress)

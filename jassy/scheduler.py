@@ -117,6 +117,16 @@ class Scheduler:
         if self.period is not None:
             budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses)
 
+    def insert(self, event: Event) -> None:
+        """Add a validated event during a render (live input). An event whose time has
+        passed applies at the next frame to be rendered."""
+        sample_time = max(event.time * self.sample_rate, float(self.frame))
+        frame = max(math.ceil(sample_time - _SAMPLE_SLACK), self.frame)
+        i = bisect.bisect_right(self.apply_frames, frame, lo=self.next_event)
+        self.events.insert(i, event)
+        self.sample_times.insert(i, sample_time)
+        self.apply_frames.insert(i, frame)
+
     def upcoming_impulses(self, start: int, end: int) -> list[tuple[list, float]]:
         """(ugens downstream, impulse N s) of the impact-like events applied in frames
         [start, end); an action without an ``impulse`` argument counts as 1 N s."""

@@ -1,0 +1,232 @@
+"""A small, stable ctypes binding to the PortAudio C library (libportaudio2).
+
+Only what jassy needs: device listing and opening an output stream whose callback is a
+C function pointer (a numba ``@cfunc``), so the audio thread never enters Python. It
+relies on PortAudio's public, versioned C API only (no private attributes of other
+packages). Loading fails with a clear :class:`LiveError` where the library is missing;
+nothing else in jassy imports this module.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import os
+
+from jassy.errors import JassyError
+
+PA_FLOAT32 = 0x00000001
+PA_CLIP_OFF = 0x00000001
+PA_NO_DEVICE = -1
+
+
+class LiveError(JassyError):
+    """Live audio is unavailable or a stream could not be opened."""
+
+
+class DeviceInfo(ctypes.Structure):
+    _fields_ = [
+        ("struct_version", ctypes.c_int),
+        ("name", ctypes.c_char_p),
+        ("host_api", ctypes.c_int),
+        ("max_input_channels", ctypes.c_int),
+        ("max_output_channels", ctypes.c_int),
+        ("default_low_input_latency", ctypes.c_double),
+        ("default_low_output_latency", ctypes.c_double),
+        ("default_high_input_latency", ctypes.c_double),
+        ("default_high_output_latency", ctypes.c_double),
+        ("default_sample_rate", ctypes.c_double),
+    ]
+
+
+class HostApiInfo(ctypes.Structure):
+    _fields_ = [
+        ("struct_version", ctypes.c_int),
+        ("type", ctypes.c_int),
+        ("name", ctypes.c_char_p),
+        ("device_count", ctypes.c_int),
+        ("default_input_device", ctypes.c_int),
+        ("default_output_device", ctypes.c_int),
+    ]
+
+
+class StreamParameters(ctypes.Structure):
+    _fields_ = [
+        ("device", ctypes.c_int),
+        ("channel_count", ctypes.c_int),
+        ("sample_format", ctypes.c_ulong),
+        ("suggested_latency", ctypes.c_double),
+        ("host_api_specific_stream_info", ctypes.c_void_p),
+    ]
+
+
+class StreamInfo(ctypes.Structure):
+    _fields_ = [
+        ("struct_version", ctypes.c_int),
+        ("input_latency", ctypes.c_double),
+        ("output_latency", ctypes.c_double),
+        ("sample_rate", ctypes.c_double),
+    ]
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence the C library's stderr chatter (ALSA probing) during initialisation."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+_LIB = None
+
+
+def library() -> ctypes.CDLL:
+    """The initialised PortAudio library (loaded once)."""
+    global _LIB
+    if _LIB is not None:
+        return _LIB
+    name = ctypes.util.find_library("portaudio") or "libportaudio.so.2"
+    try:
+        lib = ctypes.CDLL(name)
+    except OSError:
+        raise LiveError(
+            "live audio needs the PortAudio library (Debian/Ubuntu: apt-get install libportaudio2); "
+            "offline rendering works without it"
+        ) from None
+    lib.Pa_GetErrorText.restype = ctypes.c_char_p
+    lib.Pa_GetDeviceInfo.restype = ctypes.POINTER(DeviceInfo)
+    lib.Pa_GetHostApiInfo.restype = ctypes.POINTER(HostApiInfo)
+    lib.Pa_GetStreamInfo.restype = ctypes.POINTER(StreamInfo)
+    lib.Pa_GetStreamInfo.argtypes = [ctypes.c_void_p]
+    lib.Pa_OpenStream.argtypes = [
+        ctypes.POINTER(ctypes.c_void_p),
+        ctypes.POINTER(StreamParameters),
+        ctypes.POINTER(StreamParameters),
+        ctypes.c_double,
+        ctypes.c_ulong,
+        ctypes.c_ulong,
+        ctypes.c_void_p,
+        ctypes.c_void_p,
+    ]
+    for fn in ("Pa_StartStream", "Pa_StopStream", "Pa_CloseStream", "Pa_IsStreamActive"):
+        getattr(lib, fn).argtypes = [ctypes.c_void_p]
+    with _quiet_stderr():
+        check(lib, lib.Pa_Initialize(), "initialise PortAudio")
+    _LIB = lib
+    return lib
+
+
+def check(lib: ctypes.CDLL, code: int, what: str) -> int:
+    if code < 0:
+        raise LiveError(f"cannot {what}: {lib.Pa_GetErrorText(code).decode(errors='replace')}")
+    return code
+
+
+def devices() -> list[dict]:
+    """Output-capable and input devices: index, name, host API, channels, rate, latency."""
+    lib = library()
+    out = []
+    default = lib.Pa_GetDefaultOutputDevice()
+    for i in range(check(lib, lib.Pa_GetDeviceCount(), "count devices")):
+        d = lib.Pa_GetDeviceInfo(i).contents
+        out.append(
+            {
+                "index": i,
+                "name": d.name.decode(errors="replace"),
+                "host_api": lib.Pa_GetHostApiInfo(d.host_api).contents.name.decode(errors="replace"),
+                "max_output_channels": d.max_output_channels,
+                "default_sample_rate": d.default_sample_rate,
+                "default_low_output_latency": d.default_low_output_latency,
+                "default": i == default,
+            }
+        )
+    return out
+
+
+def find_device(spec: str | int | None) -> int:
+    """A device index from an index, a name substring, or None for the default output."""
+    lib = library()
+    if spec is None:
+        index = lib.Pa_GetDefaultOutputDevice()
+        if index == PA_NO_DEVICE:
+            raise LiveError("no default output device (see 'jassy devices')")
+        return index
+    found = devices()
+    if isinstance(spec, int) or (isinstance(spec, str) and spec.isdigit()):
+        index = int(spec)
+        if not any(d["index"] == index for d in found):
+            raise LiveError(f"--device {spec}: no such device (see 'jassy devices')")
+        return index
+    matches = [d for d in found if spec.lower() in d["name"].lower() and d["max_output_channels"] > 0]
+    if len(matches) != 1:
+        names = ", ".join(d["name"] for d in found) or "none"
+        raise LiveError(f"--device {spec!r}: expected one matching output device; devices: {names}")
+    return matches[0]["index"]
+
+
+class OutputStream:
+    """A float32 interleaved output stream driven by a C callback (its address)."""
+
+    def __init__(
+        self,
+        device: int,
+        channels: int,
+        sample_rate: float,
+        frames_per_buffer: int,
+        callback_address: int,
+        user_data: int,
+        latency: float | None = None,
+    ):
+        lib = library()
+        info = lib.Pa_GetDeviceInfo(device).contents
+        if channels > info.max_output_channels:
+            have = info.max_output_channels
+            raise LiveError(f"device {info.name.decode()!r} has {have} output channels, {channels} needed")
+        params = StreamParameters(
+            device,
+            channels,
+            PA_FLOAT32,
+            info.default_low_output_latency if latency is None else latency,
+            None,
+        )
+        self._lib = lib
+        self._stream = ctypes.c_void_p()
+        check(
+            lib,
+            lib.Pa_OpenStream(
+                ctypes.byref(self._stream),
+                None,
+                ctypes.byref(params),
+                float(sample_rate),
+                frames_per_buffer,
+                PA_CLIP_OFF,
+                ctypes.c_void_p(callback_address),
+                ctypes.c_void_p(user_data),
+            ),
+            "open the output stream",
+        )
+
+    @property
+    def output_latency(self) -> float:
+        """Device output latency reported by PortAudio (s)."""
+        return float(self._lib.Pa_GetStreamInfo(self._stream).contents.output_latency)
+
+    def start(self) -> None:
+        check(self._lib, self._lib.Pa_StartStream(self._stream), "start the stream")
+
+    def close(self) -> None:
+        if self._stream:
+            self._lib.Pa_StopStream(self._stream)
+            self._lib.Pa_CloseStream(self._stream)
+            self._stream = ctypes.c_void_p()

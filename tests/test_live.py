@@ -1,0 +1,158 @@
+"""The live engine against a private JACK server with the dummy driver (a paced clock).
+
+Skipped, with the reason, where jackd or libportaudio2 is missing.
+"""
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from jassy import Event, Graph, ModalModel
+from jassy.haptics import HapticReceiver, HapticSafety
+from jassy.offline import OfflineEngine
+from jassy.patchfile import load_patch
+from jassy.portaudio import LiveError
+from ugens import Gain, ImpactForce, ModalBank
+
+FS = 48000
+
+
+@pytest.fixture(scope="module")
+def jack():
+    from jassy.jackserver import dummy_jack
+
+    try:
+        with dummy_jack(f"jassy-test-{os.getpid()}", FS, 64, channels=4) as name:
+            from jassy import portaudio
+
+            portaudio.library()
+            yield name
+    except LiveError as exc:
+        pytest.skip(f"no JACK dummy server: {exc}")
+
+
+def tap_graph():
+    hit = ImpactForce(name="hit", duration=0.001)
+    bank = ModalBank(ModalModel([440.0, 1320.0], [2.0, 5.0], [[1.0, 0.5]]), name="bank")(hit)
+    return Graph(Gain(bank, gain=0.5, name="out"), haptic=hit)
+
+
+def first_onset(x, threshold=1e-9):
+    return int(np.flatnonzero(np.abs(x) > threshold)[0])
+
+
+def test_live_output_is_the_offline_rendering_sample_for_sample(jack):
+    from jassy.live import LiveEngine
+
+    patch = load_patch("bell")
+    live = LiveEngine(patch.graph, patch.score, FS, 64, ring_blocks=3, monitor_seconds=3.0)
+    live.start()
+    time.sleep(1.2)
+    stats = live.stop()
+    heard = live.monitor()
+    assert stats.callbacks == pytest.approx(1.2 * FS / 64, rel=0.15)
+    assert stats.underrun_callbacks <= 2
+    assert stats.max_callback_frames == 64
+    ref = OfflineEngine(load_patch("bell").graph, load_patch("bell").score, FS, 64).render(1.0)
+    n = min(heard.shape[1], FS)
+    np.testing.assert_array_equal(heard[0, :n], ref.audio[0, :n].astype(np.float32))
+    np.testing.assert_array_equal(heard[1, :n], ref.haptic[0, :n].astype(np.float32))
+
+
+def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
+    from jassy.live import LiveEngine
+
+    score = [Event(0.2 + 0.5 / FS, "hit", "impact", {"impulse": 0.01})]
+    for offsets, lag in (({}, 0), ({"haptic": 2.0}, 96)):
+        live = LiveEngine(tap_graph(), score, FS, 64, ring_blocks=3, offsets_ms=offsets, monitor_seconds=2.0)
+        live.start()
+        time.sleep(0.5)
+        live.stop()
+        heard = live.monitor()
+        audio_on, haptic_on = first_onset(heard[0]), first_onset(heard[1])
+        assert audio_on == int(0.2 * FS) + 1  # the first frame after the impact's time
+        assert haptic_on - audio_on == lag
+
+
+def test_posted_events_play_within_the_latency(jack):
+    from jassy.live import LiveEngine
+
+    live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0)
+    live.start()
+    time.sleep(0.3)
+    posted_at = int(live.header[3])  # frames rendered when the event is posted
+    live.post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
+    time.sleep(0.3)
+    stats = live.stop()
+    onset = first_onset(live.monitor()[1])
+    assert posted_at <= onset <= posted_at + 2 * 64  # rendered with the next block or the one after
+    assert stats.latency <= 0.006
+
+
+def test_watchdog_fades_haptics_to_zero_within_10_ms_when_the_producer_stalls(jack):
+    from jassy.live import LiveEngine
+
+    hit = ImpactForce(name="hit", duration=0.5)  # a long, slow push: force is high when we stall
+    graph = Graph(Gain(hit, gain=0.0), haptic=hit)
+    score = [Event(0.0, "hit", "impact", {"impulse": 2.0})]
+    safety = HapticSafety(max_force=3.0, max_slew=2000.0, watchdog=0.01)
+    live = LiveEngine(graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, monitor_seconds=2.0)
+    live.start()
+    time.sleep(0.25)
+    live.pause_producer(True)
+    time.sleep(0.1)
+    live.pause_producer(False)
+    time.sleep(0.2)
+    stats = live.stop()
+    force = live.monitor()[1]
+    assert stats.underrun_callbacks > 0
+    assert np.max(np.abs(force)) <= 3.0 + 1e-6
+    # the stall: the first exact zero after the push began; before it, a linear fade
+    stall_end = np.flatnonzero((force == 0) & (np.arange(force.size) > first_onset(force)))[0]
+    fade = force[stall_end - 479 : stall_end + 1]  # the 480 stalled samples (10 ms), ending at 0
+    start = force[stall_end - 480]  # the last sample the producer delivered
+    assert start > 0.5  # force was on when the stall began
+    np.testing.assert_allclose(fade, start * np.arange(479, -1, -1) / 480, atol=1e-6)  # 10 ms to zero
+    # when the producer resumes, force comes back at the slew limit, without a jump
+    resumed = force[stall_end:]
+    assert np.max(np.abs(np.diff(resumed))) <= 2000.0 / FS + 1e-6
+
+
+def test_udp_haptic_frames_follow_the_rendered_force(jack):
+    from jassy.live import LiveEngine
+
+    rx = HapticReceiver()
+    score = [Event(0.05, "hit", "impact", {"impulse": 0.01})]
+    live = LiveEngine(tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address)
+    live.start()
+    frames = []
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline and len(frames) < 100:
+        f = rx.receive()
+        if f is not None:
+            frames.append(f)
+    live.stop()
+    rx.close()
+    times = [f[0] for f in frames]
+    assert times[:3] == [0, 48, 96] and np.all(np.diff(times) == 48)
+    ref = OfflineEngine(tap_graph(), score, FS, 64).render(0.1).haptic[0]
+    for t, _, force in frames[:100]:
+        assert force[0] == pytest.approx(ref[t : t + 48].mean(), rel=1e-5, abs=1e-6)
+
+
+def test_missing_portaudio_is_a_clear_error(monkeypatch):
+    import ctypes
+
+    from jassy import portaudio
+
+    monkeypatch.setattr(portaudio, "_LIB", None)
+    monkeypatch.setattr(portaudio.ctypes.util, "find_library", lambda name: None)
+
+    def no_lib(name, *a, **k):
+        raise OSError("not found")
+
+    monkeypatch.setattr(ctypes, "CDLL", no_lib)
+    with pytest.raises(LiveError, match="apt-get install libportaudio2"):
+        portaudio.library()
