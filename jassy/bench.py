@@ -266,3 +266,79 @@ def print_contact(rows: list[dict]) -> None:
             f"{r['patch']:<14} {r['modes']:>6} {r['seconds']:>8.1f} {r['render_s']:>9.3f} "
             f"{r['realtime_factor']:>12.0f}"
         )
+
+
+def _busy_python(seconds: float) -> int:
+    """Heavy pure-Python work on the calling thread (holds the GIL, allocates)."""
+    end = time.perf_counter() + seconds
+    count = 0
+    while time.perf_counter() < end:
+        data = [i * i for i in range(2000)]
+        count += sum(data) % 7
+        count += len({str(x) for x in data[:200]})
+    return count
+
+
+def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: int = 3) -> dict:
+    """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
+    the main thread does heavy Python work; underruns, latency and audio-haptic skew
+    (measured on the frames the callback sent to the device)."""
+    from jassy.jackserver import dummy_jack
+    from jassy.live import LiveEngine
+    from ugens.impact import ImpactForce
+    from ugens.mix import Gain, Mixer
+    from ugens.modal import ModalBank
+    from ugens.scrape import Scrape
+
+    scrape = Scrape(name="scrape", force=1.0, speed=0.0)
+    tap = ImpactForce(name="tap", duration=0.001)
+    force = Mixer(scrape, tap, name="force")
+    bank = ModalBank(random_model(n_modes), name="plate")(force)
+    graph = Graph(Gain(bank, gain=0.02, name="out"), haptic=force)
+    score = []
+    for k in range(int(seconds) - 5):  # speed sweeps up and down, force varies
+        score.append(
+            Event(
+                float(k),
+                "scrape",
+                "set",
+                {"speed": 0.05 + 0.45 * (k % 4) / 3, "force": 1.0 + k % 3},
+                ramp=0.5,
+            )
+        )
+    quiet_at = seconds - 5.0  # scraping stops and the plate is damped to silence, then a tap
+    score.append(Event(quiet_at, "scrape", "set", {"speed": 0.0, "force": 0.0}, jump=True))
+    score.append(Event(quiet_at, "plate", "set", {"decay_scale": 1e4}, jump=True))
+    score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
+    tap_at = quiet_at + 2.0
+    score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
+        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0)
+        live.start()
+        _busy_python(seconds)
+        stats = live.stop()
+    heard = live.monitor()  # the last 6 s the device received: silence, then the tap
+    audio_on = int(np.flatnonzero(heard[0])[-1] if not np.any(heard[0]) else np.flatnonzero(heard[0])[0])
+    haptic_on = int(np.flatnonzero(heard[1])[0]) if np.any(heard[1]) else -1
+    return {
+        "seconds": seconds,
+        "modes": n_modes,
+        "block": block,
+        "callbacks": stats.callbacks,
+        "underrun_callbacks": stats.underrun_callbacks,
+        "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
+        "latency_ms": stats.latency * 1e3,
+        "ring_ms": stats.ring_latency * 1e3,
+        "device_ms": stats.device_latency * 1e3,
+        "skew_samples": audio_on - haptic_on,
+    }
+
+
+def print_live(r: dict) -> None:
+    print(
+        f"live, JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, block {r['block']}, "
+        f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
+        f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
+        f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
+        f"audio-haptic skew {r['skew_samples']} samples"
+    )

@@ -165,6 +165,11 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from jassy import bench
 
+    if args.name == "live":
+        result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
+        print(json.dumps(result, indent=2) if args.json else "", end="")
+        if not args.json:
+            bench.print_live(result)
     if args.name == "contact":
         rows = bench.contact_bench()
         if args.json:
@@ -221,6 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="anytime synthesis: compute at most N modes across all modal banks",
     )
+    _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -252,10 +258,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact"],
+        choices=["modal", "contact", "live"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
-        "contact: real-time factor of every built-in patch",
+        "contact: real-time factor of every built-in patch; "
+        "live: underruns, latency and skew on a JACK dummy server",
     )
+    p.add_argument("--seconds", type=float, help="live: duration (default 60)")
+    p.add_argument("--ring", type=int, default=3, help="live: blocks rendered ahead (default 3)")
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)

@@ -16,7 +16,11 @@ force to zero within the watchdog time (at most 10 ms).
 
 from __future__ import annotations
 
-import queue
+import gc
+import mmap
+import multiprocessing
+import os
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -36,8 +40,13 @@ from jassy.scheduler import validate_event
 HEADER, STATE, DATA_OFFSET_F32 = 32, 128, 256  # int64 slots, float64 slots, first float32 slot
 CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, FLAGS = range(9)
 WATCHDOG, FADE_LEFT, PLAYED, MONITOR_CAP, MAX_FRAMES, STALLED = range(9, 15)
-MAX_FORCE, MAX_STEP, LAST, FADE_FROM = 32, 33, 40, 72  # float64 slots (per haptic channel: 32 max)
+RUNNING, STOP, PAUSED, LATE, REALTIME = range(15, 20)
+MAX_FORCE, MAX_STEP, DEVICE_LATENCY, LAST, FADE_FROM = 32, 33, 34, 40, 72  # float64 slots
 MAX_HAPTIC = 32
+#: GIL switch interval while live (s): short enough for the producer to keep the ring full.
+SWITCH_INTERVAL = 0.0002
+#: SCHED_FIFO priority of the producer thread where the OS grants it (JACK uses 70-95).
+REALTIME_PRIORITY = 40
 
 
 @nb.cfunc(
@@ -89,7 +98,7 @@ def ring_callback(inp, out, frames, time_info, status, user):
             o[i * ch + na + c] = x
         if not have and left > 0:
             hdr[FADE_LEFT] = left - 1
-    if n < frames:
+    if n < frames and hdr[STOP] == 0:  # the ring running dry while stopping is no glitch
         hdr[UNDER_FRAMES] += frames - n
         hdr[UNDER_CALLBACKS] += 1
     hdr[READ] = r + n
@@ -115,6 +124,17 @@ def _ring_write(hdr, f32, block, n):
     hdr[WRITE] = w + n
 
 
+def _request_realtime_priority() -> bool:
+    """Ask the OS to schedule the calling thread with SCHED_FIFO (needs root, CAP_SYS_NICE
+    or an rtprio limit); True if granted. It wakes the producer promptly after its sleeps,
+    which matters far more than CPU speed for keeping a few-ms ring full."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+    except (AttributeError, OSError):
+        return False
+    return True
+
+
 @dataclass
 class LiveStats:
     """Counters of a live run."""
@@ -128,6 +148,7 @@ class LiveStats:
     ring_latency: float
     device_latency: float
     late_events: int
+    realtime: bool
 
     @property
     def latency(self) -> float:
@@ -148,6 +169,12 @@ class LiveEngine:
 
     Audio channels, then haptic channels if ``haptic_to_card``, go to the device in one
     stream, so they share the clock exactly. ``ring_blocks`` blocks are rendered ahead.
+
+    isolation: "process" runs the producer (and the stream) in a forked child process, so
+    the caller's Python work never holds the GIL the producer needs: the robust choice
+    for a few-ms ring; "thread" runs it in a thread of this process (shares the GIL;
+    the switch interval is shortened while playing); "auto" picks "process" where fork
+    is available and PortAudio is not yet loaded in this process.
     """
 
     def __init__(
@@ -163,24 +190,30 @@ class LiveEngine:
         haptic_safety: HapticSafety | None = None,
         offsets_ms: dict[str, float] | None = None,
         monitor_seconds: float = 0.0,
+        isolation: str = "auto",
     ):
         if ring_blocks < 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
         if haptic_to_card and len(graph.haptic) > MAX_HAPTIC:
             raise JassyError(f"at most {MAX_HAPTIC} haptic channels can go to a sound card")
+        if isolation not in ("auto", "thread", "process"):
+            raise JassyError(f"isolation: expected auto, thread or process, got {isolation!r}")
         self.graph, self.score = graph, list(score)
         self.sample_rate, self.block = float(sample_rate), int(block)
         self.safety = haptic_safety or HapticSafety()
         self.offsets_ms = offsets_ms
         self.device = device
+        self.isolation = isolation
         self.haptic_to_card = haptic_to_card and bool(graph.haptic)
         self.n_audio = len(graph.audio)
         self.channels = self.n_audio + (len(graph.haptic) if self.haptic_to_card else 0)
         self.capacity = ring_blocks * self.block
         self.monitor_capacity = int(round(monitor_seconds * self.sample_rate))
         floats = DATA_OFFSET_F32 + (self.capacity + self.monitor_capacity) * self.channels
-        self._memory = np.zeros(floats // 2 + 16, dtype=np.float64)  # 8-byte aligned, zeroed
-        raw = self._memory
+        # anonymous shared memory: seen by a forked producer process at the same address
+        self._mmap = mmap.mmap(-1, (floats // 2 + 16) * 8)
+        raw = np.frombuffer(self._mmap, dtype=np.float64)
+        self._memory = raw
         self.header = raw.view(np.int64)[:HEADER]
         self.state = raw[:STATE]
         self.f32 = raw.view(np.float32)[:floats]
@@ -193,81 +226,65 @@ class LiveEngine:
         self.header[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
         self.state[MAX_FORCE] = self.safety.max_force
         self.state[MAX_STEP] = self.safety.step(self.sample_rate)
-        self._udp = (
-            UdpHapticSink(haptic_udp, self.sample_rate, len(graph.haptic))
-            if haptic_udp and graph.haptic
-            else None
-        )
-        self._posted: queue.SimpleQueue[Event] = queue.SimpleQueue()
-        self._stop = threading.Event()
-        self._running = threading.Event()
-        self._running.set()
-        self._thread: threading.Thread | None = None
-        self._stream = None
-        self.late_events = 0
-        self.error: BaseException | None = None
+        self._haptic_udp = haptic_udp if graph.haptic else None
+        self._events_rx, self._events_tx = multiprocessing.Pipe(duplex=False)
+        self._errors_rx, self._errors_tx = multiprocessing.Pipe(duplex=False)
+        self._worker = None
 
     # ------------------------------------------------------------------ control
-    def start(self) -> None:
-        """Warm every kernel, prefill the ring, open the stream and start producing."""
+    def start(self, timeout: float = 60.0) -> None:
+        """Start the producer (warm-up, prefill, open and start the stream) and wait
+        until the device is running."""
         from jassy import portaudio
 
-        warm = OfflineEngine(self.graph, [], self.sample_rate, self.block)
-        scratch = np.zeros((len(self.graph.bus_rows), self.block))
-        for _ in range(4):
-            warm.produce(scratch, self.block)
-        self.engine = OfflineEngine(
-            self.graph,
-            self.score,
-            self.sample_rate,
-            self.block,
-            haptic_safety=self.safety,
-            offsets_ms=self.offsets_ms,
+        use_process = self.isolation == "process" or (
+            self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
         )
-        self._buf = np.zeros((len(self.graph.bus_rows), self.block))
-        self._out = np.zeros((self.channels, self.block))
-        while self._fill_once():
-            pass
-        device = portaudio.find_device(self.device)
-        self._stream = portaudio.OutputStream(
-            device,
-            self.channels,
-            self.sample_rate,
-            self.block,
-            ring_callback.address,
-            self._memory.ctypes.data,
-        )
-        self.device_latency = self._stream.output_latency
-        self._thread = threading.Thread(target=self._produce, name="jassy-producer", daemon=True)
-        self._thread.start()
-        self._stream.start()
+        if use_process:
+            if portaudio.loaded():
+                raise JassyError("isolation='process' needs PortAudio not yet loaded in this process")
+            self._worker = multiprocessing.get_context("fork").Process(
+                target=self._producer_main, name="jassy-producer", daemon=True
+            )
+        else:
+            self._switch_interval = sys.getswitchinterval()
+            sys.setswitchinterval(SWITCH_INTERVAL)
+            self._worker = threading.Thread(target=self._producer_main, name="jassy-producer", daemon=True)
+        self._worker.start()
+        deadline = time.monotonic() + timeout
+        while self.header[RUNNING] == 0:
+            self._raise_producer_error()
+            if time.monotonic() > deadline:
+                self.stop()
+                raise JassyError(f"the live engine did not start within {timeout:g} s")
+            time.sleep(0.01)
 
     def post(self, event: Event) -> None:
         """Schedule ``event`` from any thread: at its time if still ahead, else at the
         next frame to be rendered (``time = 0`` means as soon as possible; a later time
         already rendered counts as a late event)."""
-        self._posted.put(event)
+        self._events_tx.send(event)
 
     def pause_producer(self, paused: bool) -> None:
         """Stall (True) or resume the producer: for testing the haptic watchdog."""
-        if paused:
-            self._running.clear()
-        else:
-            self._running.set()
+        self.header[PAUSED] = int(paused)
 
     def stop(self) -> LiveStats:
         """Stop the stream and the producer; return the counters."""
-        if self._stream is not None:
-            self._stream.close()  # first, so the device never sees the producer stop
-        self._stop.set()
-        self._running.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        if self._udp is not None:
-            self._udp.close()
-        if self.error is not None:
-            raise JassyError(f"the producer failed: {self.error!r}")
+        self.header[STOP] = 1
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+            if isinstance(self._worker, threading.Thread):
+                sys.setswitchinterval(self._switch_interval)
+            elif self._worker.is_alive():
+                self._worker.kill()
+        self._raise_producer_error()
         return self.stats()
+
+    def _raise_producer_error(self) -> None:
+        if self._errors_rx.poll():
+            message = self._errors_rx.recv()
+            raise JassyError(f"live engine: {message}")
 
     def stats(self) -> LiveStats:
         h = self.header
@@ -279,8 +296,9 @@ class LiveEngine:
             int(h[MAX_FRAMES]),
             int(h[FLAGS]),
             self.capacity / self.sample_rate,
-            getattr(self, "device_latency", 0.0),
-            self.late_events,
+            float(self.state[DEVICE_LATENCY]),
+            int(h[LATE]),
+            bool(h[REALTIME]),
         )
 
     def monitor(self) -> np.ndarray:
@@ -294,37 +312,79 @@ class LiveEngine:
         return ring[order].T.astype(np.float64)
 
     # ----------------------------------------------------------------- producer
-    def _take_posted(self) -> None:
-        scheduler = self.engine.scheduler
-        while True:
-            try:
-                event = self._posted.get_nowait()
-            except queue.Empty:
-                return
+    def _producer_main(self) -> None:
+        """Producer: runs in the child process or thread until ``stop``."""
+        stream = None
+        try:
+            from jassy import portaudio
+
+            engine = self._warm_engine()
+            udp = (
+                UdpHapticSink(self._haptic_udp, self.sample_rate, len(self.graph.haptic))
+                if self._haptic_udp
+                else None
+            )
+            buf = np.zeros((len(self.graph.bus_rows), self.block))
+            out = np.zeros((self.channels, self.block))
+            while self._fill_once(engine, buf, out, udp):
+                pass
+            stream = portaudio.OutputStream(
+                portaudio.find_device(self.device),
+                self.channels,
+                self.sample_rate,
+                self.block,
+                ring_callback.address,
+                self._memory.ctypes.data,
+            )
+            self.state[DEVICE_LATENCY] = stream.output_latency
+            self.header[REALTIME] = int(_request_realtime_priority())
+            gc.freeze()  # objects alive now are never scanned by the collector during the run
+            stream.start()
+            self.header[RUNNING] = 1
+            pause = self.block / self.sample_rate / 4
+            while not self.header[STOP]:
+                if self.header[PAUSED] or not self._fill_once(engine, buf, out, udp):
+                    time.sleep(pause)
+        except BaseException as exc:  # reported to the caller; the callback keeps the device safe
+            self._errors_tx.send(f"{type(exc).__name__}: {exc}")
+        finally:
+            if stream is not None:
+                stream.close()
+            gc.unfreeze()
+
+    def _warm_engine(self) -> OfflineEngine:
+        """Compile and warm every kernel on a scratch run, then the engine for real."""
+        warm = OfflineEngine(self.graph, [], self.sample_rate, self.block)
+        scratch = np.zeros((len(self.graph.bus_rows), self.block))
+        for _ in range(4):
+            warm.produce(scratch, self.block)
+        return OfflineEngine(
+            self.graph,
+            self.score,
+            self.sample_rate,
+            self.block,
+            haptic_safety=self.safety,
+            offsets_ms=self.offsets_ms,
+        )
+
+    def _take_posted(self, engine: OfflineEngine) -> None:
+        scheduler = engine.scheduler
+        while self._events_rx.poll():
+            event = self._events_rx.recv()
             if 0 < event.time * self.sample_rate < scheduler.frame - self.block:
-                self.late_events += 1  # asked for a time already rendered: applied now
+                self.header[LATE] += 1  # asked for a time already rendered: applied now
             scheduler.insert(validate_event(self.graph, event, "posted event"))
 
-    def _fill_once(self) -> bool:
+    def _fill_once(self, engine: OfflineEngine, buf: np.ndarray, out: np.ndarray, udp) -> bool:
         """Render one block into the ring if there is room; False if full."""
         h = self.header
         if self.capacity - (h[WRITE] - h[READ]) < self.block:
             return False
-        self._take_posted()
-        start = self.engine.frame
-        self.engine.produce(self._buf, self.block)
-        self._out[:] = self._buf[: self.channels]
-        _ring_write(h, self.f32, self._out, self.block)
-        if self._udp is not None:
-            self._udp.send(self._buf[self.n_audio :], start)
+        self._take_posted(engine)
+        start = engine.frame
+        engine.produce(buf, self.block)
+        out[:] = buf[: self.channels]
+        _ring_write(h, self.f32, out, self.block)
+        if udp is not None:
+            udp.send(buf[self.n_audio :], start)
         return True
-
-    def _produce(self) -> None:
-        pause = self.block / self.sample_rate / 4
-        try:
-            while not self._stop.is_set():
-                self._running.wait()
-                if not self._fill_once():
-                    time.sleep(pause)
-        except BaseException as exc:  # reported by stop(); the callback keeps the device safe
-            self.error = exc

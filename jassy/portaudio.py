@@ -91,6 +91,11 @@ def _quiet_stderr():
 _LIB = None
 
 
+def loaded() -> bool:
+    """True once this process has initialised PortAudio."""
+    return _LIB is not None
+
+
 def library() -> ctypes.CDLL:
     """The initialised PortAudio library (loaded once)."""
     global _LIB
@@ -119,7 +124,7 @@ def library() -> ctypes.CDLL:
         ctypes.c_void_p,
         ctypes.c_void_p,
     ]
-    for fn in ("Pa_StartStream", "Pa_StopStream", "Pa_CloseStream", "Pa_IsStreamActive"):
+    for fn in ("Pa_StartStream", "Pa_StopStream", "Pa_AbortStream", "Pa_CloseStream", "Pa_IsStreamActive"):
         getattr(lib, fn).argtypes = [ctypes.c_void_p]
     with _quiet_stderr():
         check(lib, lib.Pa_Initialize(), "initialise PortAudio")
@@ -226,7 +231,8 @@ class OutputStream:
         check(self._lib, self._lib.Pa_StartStream(self._stream), "start the stream")
 
     def close(self) -> None:
+        """Stop at once (pending buffers are dropped, not played) and close."""
         if self._stream:
-            self._lib.Pa_StopStream(self._stream)
+            self._lib.Pa_AbortStream(self._stream)
             self._lib.Pa_CloseStream(self._stream)
             self._stream = ctypes.c_void_p()

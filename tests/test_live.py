@@ -23,11 +23,12 @@ FS = 48000
 def jack():
     from jassy.jackserver import dummy_jack
 
+    import ctypes.util
+
+    if ctypes.util.find_library("portaudio") is None:
+        pytest.skip("libportaudio2 is not installed (apt-get install libportaudio2)")
     try:
         with dummy_jack(f"jassy-test-{os.getpid()}", FS, 64, channels=4) as name:
-            from jassy import portaudio
-
-            portaudio.library()
             yield name
     except LiveError as exc:
         pytest.skip(f"no JACK dummy server: {exc}")
@@ -43,17 +44,20 @@ def first_onset(x, threshold=1e-9):
     return int(np.flatnonzero(np.abs(x) > threshold)[0])
 
 
-def test_live_output_is_the_offline_rendering_sample_for_sample(jack):
+@pytest.mark.parametrize("isolation", ["process", "thread"])
+def test_live_output_is_the_offline_rendering_sample_for_sample(jack, isolation):
     from jassy.live import LiveEngine
 
     patch = load_patch("bell")
-    live = LiveEngine(patch.graph, patch.score, FS, 64, ring_blocks=3, monitor_seconds=3.0)
+    live = LiveEngine(
+        patch.graph, patch.score, FS, 64, ring_blocks=3, monitor_seconds=3.0, isolation=isolation
+    )
     live.start()
     time.sleep(1.2)
     stats = live.stop()
     heard = live.monitor()
     assert stats.callbacks == pytest.approx(1.2 * FS / 64, rel=0.15)
-    assert stats.underrun_callbacks <= 2
+    assert stats.underrun_callbacks == 0, stats  # an underrun would also shift what was heard
     assert stats.max_callback_frames == 64
     ref = OfflineEngine(load_patch("bell").graph, load_patch("bell").score, FS, 64).render(1.0)
     n = min(heard.shape[1], FS)
@@ -82,7 +86,7 @@ def test_posted_events_play_within_the_latency(jack):
     live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0)
     live.start()
     time.sleep(0.3)
-    posted_at = int(live.header[3])  # frames rendered when the event is posted
+    posted_at = int(live.header[3])  # frames written to the ring when the event is posted
     live.post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
     time.sleep(0.3)
     stats = live.stop()

@@ -1,5 +1,6 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
+from ugens.bubbles import Bubble, BubbleStream
 from ugens.delay import Delay
 from ugens.dynamics import Limiter
 from ugens.envelope import Envelope
@@ -9,9 +10,15 @@ from ugens.mix import Gain, Mixer, Multiply
 from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.oscillators import Sine
+from ugens.stochastic import Bounce, Break, Crumple
 
 __all__ = [
     "Biquad",
+    "Bounce",
+    "Break",
+    "Bubble",
+    "BubbleStream",
+    "Crumple",
     "Delay",
     "Envelope",
     "FractalNoise",

@@ -1,0 +1,428 @@
+"""Bubbles: van den Doel's physically based liquid sounds (single bubbles and streams).
+
+K. van den Doel, "Physically based models for liquid sounds", ACM Trans. Applied
+Perception 2(4), 2005 (and ICAD 2004); SDT ``bubble~`` / ``fluidflow~`` (references/audio.md
+section 3.3 "Bubbles"). A bubble of radius r (m) born at t = 0 radiates
+
+    p(t) = a e^{-d t} sin(phi(t)),   phi(t) = 2 pi f0 (t + sigma d t^2 / 2),
+
+i.e. a damped sinusoid whose instantaneous frequency phi'(t) / 2 pi = f0 (1 + sigma d t)
+rises linearly (the bubble rising towards the surface), with
+
+    f0 = 3 / r Hz (Minnaert),   d = 0.13 / r + 0.0072 r^(-3/2) 1/s,
+    a = gain * depth * (r / 1 mm)^(3/2)    (amplitude proportional to r^(3/2) * depth,
+                                            normalised to 1 for a 1 mm bubble at depth 1)
+
+and sigma the rise factor (``rise``, about 0.1). The output is this sound pressure,
+normalised as above (a pressure at an arbitrary reference distance), not a force.
+
+Each bubble is a voice of a numba kernel, all voices updated together per sample. A
+voice's phase accumulator is kept as a phasor z = a e^{i phi}: per sample z <- z c with
+c = R e^{i dphi} (R = e^{-d / fs}), and c <- c e^{i ddphi}, ddphi = 2 pi f0 sigma d / fs^2,
+so that a decays by R and the phase step dphi grows linearly: exact for the quadratic
+phase above, and no sine per sample (a voice starting between samples is initialised at
+its first sample). A voice ends when its amplitude falls below ``floor``
+times its initial amplitude, or when its frequency reaches Nyquist. When all
+``max_voices`` voices are busy, a new bubble takes over the quietest one (as SDT's
+fluidflow~).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.jit import specialise
+from jassy.params import ParamSpec
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.kernels import FASTMATH
+from ugens.stochastic import u01
+
+#: Radius at which a bubble at depth 1 has amplitude 1 (m).
+R_REF = 1e-3
+TWO_PI = 2.0 * math.pi
+
+# voice rows (struct of arrays, one column per voice): the phasor z = a e^{i phi} (real,
+# imaginary), its per-sample factor c = R e^{i dphi}, the factor's own rotation
+# q = e^{i ddphi}, and the squared end level
+_ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
+# meta: active voices, pending bubbles, births, logged births
+_ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
+# st: accumulated rate, threshold, held radius
+_ACC, _TARGET, _RADIUS = range(3)
+
+
+def minnaert_frequency(radius):
+    """f0 = 3 / r (Hz) for a radius in m (van den Doel 2005)."""
+    return 3.0 / radius
+
+
+def bubble_decay(radius):
+    """d = 0.13 / r + 0.0072 r^(-3/2) (1/s), viscous plus thermal damping (van den Doel 2005)."""
+    return 0.13 / radius + 0.0072 * radius**-1.5
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def spawn(voices, active, t, fs, radius, depth, rise, gain, floor):
+    """Start a bubble whose next computed sample is t seconds after its birth.
+
+    Takes a free voice, or the quietest one when all are busy. Returns the active count.
+    Bubbles at or above Nyquist are not started.
+    """
+    f0 = 3.0 / radius
+    d = 0.13 / radius + 0.0072 * radius**-1.5
+    if f0 * (1.0 + rise * d * max(t, 0.0)) >= 0.5 * fs:
+        return active
+    a0 = gain * depth * (radius / R_REF) ** 1.5
+    if a0 == 0.0:
+        return active
+    if active < voices.shape[1]:
+        k = active
+        active += 1
+    else:
+        k = 0
+        quietest = voices[_ZR, 0] ** 2 + voices[_ZI, 0] ** 2
+        for j in range(1, active):
+            level = voices[_ZR, j] ** 2 + voices[_ZI, j] ** 2
+            if level < quietest:
+                quietest = level
+                k = j
+    w = TWO_PI * f0
+    amp = a0 * math.exp(-d * t)
+    phase = w * (t + 0.5 * rise * d * t * t)
+    phase -= TWO_PI * math.floor(phase / TWO_PI)
+    inc = w * (1.0 + rise * d * (t + 0.5 / fs)) / fs
+    decay = math.exp(-d / fs)
+    dinc = w * rise * d / (fs * fs)
+    voices[_ZR, k] = amp * math.cos(phase)
+    voices[_ZI, k] = amp * math.sin(phase)
+    voices[_CR, k] = decay * math.cos(inc)
+    voices[_CI, k] = decay * math.sin(inc)
+    voices[_QR, k] = math.cos(dinc)
+    voices[_QI, k] = math.sin(dinc)
+    voices[_END, k] = (a0 * floor) ** 2
+    return active
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def voices_frame(voices, active):
+    """Sum of the active voices at this sample (Im z), advanced to the next sample
+    (z <- z c, c <- c q); voices that fall below their end level or whose frequency
+    reaches Nyquist (Im c <= 0: the phase step passed pi) are removed. Returns
+    (sum, active count).
+    """
+    zr, zi, cr, ci = voices[_ZR], voices[_ZI], voices[_CR], voices[_CI]
+    qr, qi, end = voices[_QR], voices[_QI], voices[_END]
+    s = 0.0
+    ended = 0
+    for k in range(active):
+        a, b = zr[k], zi[k]
+        s += b
+        c, e = cr[k], ci[k]
+        a2 = a * c - b * e
+        b2 = a * e + b * c
+        e2 = c * qi[k] + e * qr[k]
+        zr[k] = a2
+        zi[k] = b2
+        cr[k] = c * qr[k] - e * qi[k]
+        ci[k] = e2
+        ended += (a2 * a2 + b2 * b2 < end[k]) | (e2 <= 0.0)
+    if ended:
+        k = 0
+        while k < active:
+            if zr[k] * zr[k] + zi[k] * zi[k] < end[k] or ci[k] <= 0.0:
+                active -= 1
+                for j in range(7):
+                    voices[j, k] = voices[j, active]
+            else:
+                k += 1
+    return s, active
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def power_law_radius(u, lo, hi, exponent):
+    """Inverse CDF of p(r) ~ r^-exponent on [lo, hi] at u in [0, 1)."""
+    if hi <= lo:
+        return lo
+    q = 1.0 - exponent
+    if abs(q) < 1e-12:
+        return lo * (hi / lo) ** u
+    a = lo**q
+    return (a + u * (hi**q - a)) ** (1.0 / q)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def bubbles(out, radius_out, start, n, fs, voices, meta, pending, rate, par, st, rng, log):
+    """Frames start .. start + n - 1 of scheduled bubbles (pending) plus a Poisson stream.
+
+    pending[j] = (t0 in samples, radius, depth), in time order; a bubble sounds from the
+    first frame after t0. Stream births in [idx, idx + 1) start at frame idx + 1.
+    par = (min radius, max radius, exponent, min depth, max depth, rise, gain, floor).
+    """
+    r_lo, r_hi, exponent, d_lo, d_hi = par[0], par[1], par[2], par[3], par[4]
+    rise, gain, floor = par[5], par[6], par[7]
+    active = meta[_ACTIVE]
+    for i in range(n):
+        idx = start + i
+        while meta[_PENDING] > 0 and math.floor(pending[0, 0]) + 1 <= idx:
+            t = (idx - pending[0, 0]) / fs
+            active = spawn(voices, active, t, fs, pending[0, 1], pending[0, 2], rise, gain, floor)
+            meta[_PENDING] -= 1
+            for j in range(meta[_PENDING]):
+                pending[j, 0] = pending[j + 1, 0]
+                pending[j, 1] = pending[j + 1, 1]
+                pending[j, 2] = pending[j + 1, 2]
+        s, active = voices_frame(voices, active)
+        out[i] = s
+        radius_out[i] = st[_RADIUS]
+        h = rate[i] / fs
+        pos = 0.0
+        while h > 0.0:
+            if st[_TARGET] <= 0.0:
+                st[_TARGET] = -math.log(1.0 - u01(rng))
+            need = st[_TARGET] - st[_ACC]
+            avail = h * (1.0 - pos)
+            if need > avail:
+                st[_ACC] += avail
+                break
+            pos = min(pos + need / h, 1.0)
+            st[_ACC] = 0.0
+            st[_TARGET] = -math.log(1.0 - u01(rng))
+            radius = power_law_radius(u01(rng), r_lo, r_hi, exponent)
+            depth = d_lo + (d_hi - d_lo) * u01(rng)
+            t0 = idx + pos
+            active = spawn(voices, active, (idx + 1 - t0) / fs, fs, radius, depth, rise, gain, floor)
+            st[_RADIUS] = radius
+            meta[_BIRTHS] += 1
+            k = meta[_LOGGED]
+            if k < log.shape[0]:
+                log[k, 0] = t0
+                log[k, 1] = radius
+                log[k, 2] = depth
+                meta[_LOGGED] = k + 1
+    meta[_ACTIVE] = active
+
+
+_RISE = ParamSpec("float", 0.1, low=0.0, high=10.0, doc="rise factor sigma: frequency f0 (1 + sigma d t)")
+_GAIN = ParamSpec("float", 1.0, doc="amplitude of a 1 mm bubble at depth 1 (bubbles born after a change)")
+_VOICES = ParamSpec("int", 32, low=1, high=4096, fixed=True, doc="maximum number of sounding bubbles")
+_FLOOR = ParamSpec(
+    "float",
+    1e-5,
+    low=0.0,
+    low_open=True,
+    high=0.1,
+    fixed=True,
+    doc="a bubble ends when its amplitude falls below floor * its initial amplitude",
+)
+
+
+class _Bubbles(UGen):
+    """Voices, pending births and the stream state shared by Bubble and BubbleStream."""
+
+    #: Rows kept by the birth log (see :meth:`birth_log`); 0 disables it.
+    log_capacity = 0
+
+    def _prepare(self) -> None:
+        self.voices = np.zeros((7, self.values["max_voices"]))
+        self.meta = np.zeros(4, dtype=np.int64)
+        self.pending = np.zeros((8, 3))
+        self.st = np.zeros(3)
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.log = np.zeros((int(self.log_capacity), 3))
+        self._rates = np.zeros(self.max_block)
+        self._radii = np.zeros(self.max_block)
+        self.par = np.zeros(8)
+        self._update_params()
+        x = self.out
+        args = (
+            x,
+            x,
+            0,
+            0,
+            1.0,
+            self.voices,
+            self.meta,
+            self.pending,
+            x,
+            self.par,
+            self.st,
+            self.rng,
+            self.log,
+        )
+        self._kernel = specialise(bubbles, *args)
+        self._steady_rate: float | None = None
+
+    def _reset(self) -> None:
+        self.voices[:] = 0.0
+        self.meta[:] = 0
+        self.pending[:] = 0.0
+        self.st[:] = 0.0
+        self.rng[0] = self.values.get("seed", 0)
+
+    @property
+    def active_voices(self) -> int:
+        """Bubbles sounding now."""
+        return int(self.meta[_ACTIVE])
+
+    @property
+    def births(self) -> int:
+        """Bubbles born from the stream since the render started."""
+        return int(self.meta[_BIRTHS])
+
+    def birth_log(self) -> np.ndarray:
+        """Logged stream births as rows (time s, radius m, depth); set ``log_capacity`` first."""
+        rows = self.log[: int(self.meta[_LOGGED])].copy()
+        rows[:, 0] /= self.sample_rate
+        return rows
+
+    def _update_params(self) -> None:
+        """Pack the parameters read at each birth for the kernel (bounds in either order)."""
+        v = self.values
+        radii = (v.get("min_radius", 1.0), v.get("max_radius", 1.0))
+        depths = (v.get("min_depth", 0.0), v.get("max_depth", 0.0))
+        self.par[:] = (
+            min(radii),
+            max(radii),
+            v.get("exponent", 0.0),
+            min(depths),
+            max(depths),
+            v["rise"],
+            v["gain"],
+            v["floor"],
+        )
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        self._update_params()
+
+    def _run(self, start: int, n: int, rates: np.ndarray, radius_out: np.ndarray) -> None:
+        self._kernel(
+            self.out,
+            radius_out,
+            start,
+            n,
+            self.sample_rate,
+            self.voices,
+            self.meta,
+            self.pending,
+            rates,
+            self.par,
+            self.st,
+            self.rng,
+            self.log,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "voices": self.voices,
+            "meta": self.meta,
+            "pending": self.pending,
+            "st": self.st,
+            "rng": self.rng,
+        }
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.pending = np.zeros_like(state["pending"])  # the queue may have grown since
+        super().set_state(state)
+
+
+@register
+class Bubble(_Bubbles):
+    """Single bubbles on demand (SDT bubble~, van den Doel 2005): sound pressure (normalised).
+
+    ``bubble`` {radius (m), depth} starts a bubble at the event's sub-sample time:
+    p = a e^{-d t} sin(2 pi f0 (t + rise d t^2 / 2)), f0 = 3 / r Hz,
+    d = 0.13 / r + 0.0072 r^(-3/2) 1/s, a = gain * depth * (r / 1 mm)^(3/2).
+    """
+
+    type_name = "Bubble"
+    param_specs = {"rise": _RISE, "gain": _GAIN, "max_voices": _VOICES, "floor": _FLOOR}
+    actions = {
+        "bubble": {
+            "radius": ParamSpec(
+                "float",
+                1e-3,
+                low=1e-5,
+                high=1.0,
+                unit="m",
+                doc="bubble radius: f0 = 3 / r Hz (0.15 mm = 20 kHz .. 150 mm = 20 Hz)",
+            ),
+            "depth": ParamSpec("float", 1.0, low=0.0, high=1e6, doc="depth factor: amplitude ~ depth"),
+        }
+    }
+
+    def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """``bubble`` {radius, depth}: start a bubble at fractional sample ``sample_time``."""
+        if action != "bubble":
+            return super().act(action, args, sample_time)
+        k = int(self.meta[_PENDING])
+        if k == self.pending.shape[0]:
+            self.pending = np.concatenate([self.pending, np.zeros_like(self.pending)])
+        self.pending[k] = (sample_time, args["radius"], args["depth"])
+        self.meta[_PENDING] = k + 1
+
+    def process(self, start: int, n: int) -> None:
+        self._run(start, n, self._rates, self._radii)
+
+
+@register
+class BubbleStream(_Bubbles):
+    """A stream of bubbles (SDT fluidflow~, van den Doel 2005): sound pressure (normalised).
+
+    Bubbles are born as a Poisson process of ``rate`` per second (exact, sub-sample birth
+    times, seeded), with radius r drawn from the power law p(r) ~ r^-exponent on
+    [min_radius, max_radius] and depth uniform in [min_depth, max_depth]; each sounds as a
+    Bubble (f0 = 3 / r, d = 0.13 / r + 0.0072 r^(-3/2), a = gain depth (r / 1 mm)^(3/2),
+    rising frequency). At most ``max_voices`` sound at once (the quietest is reused).
+    Extra output ``radius``: the radius (m) of the latest bubble, held.
+    """
+
+    type_name = "BubbleStream"
+    outputs = ("radius",)
+    param_specs = {
+        "rate": ParamSpec("float", 100.0, low=0.0, high=1e6, unit="1/s", smooth=True, doc="mean births"),
+        "min_radius": ParamSpec("float", 1e-3, low=1e-5, high=1.0, unit="m", doc="smallest bubble radius"),
+        "max_radius": ParamSpec("float", 5e-3, low=1e-5, high=1.0, unit="m", doc="largest bubble radius"),
+        "exponent": ParamSpec(
+            "float", 1.5, low=-10.0, high=10.0, doc="radius density p(r) ~ r^-exponent (larger: more small)"
+        ),
+        "min_depth": ParamSpec("float", 0.5, low=0.0, high=1e6, doc="smallest depth factor"),
+        "max_depth": ParamSpec("float", 1.0, low=0.0, high=1e6, doc="largest depth factor"),
+        "rise": _RISE,
+        "gain": _GAIN,
+        "max_voices": ParamSpec(
+            "int", 64, low=1, high=4096, fixed=True, doc="maximum number of sounding bubbles"
+        ),
+        "floor": _FLOOR,
+        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed (splitmix64 stream)"),
+    }
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self.rate = self.smoothed("rate")
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.rate.set(self.rate.target, 0, jump=True)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key == "rate":
+            self.rate.set(value, self.ramp_samples(), jump)
+        else:
+            super()._param_changed(key, value, jump)
+
+    def process(self, start: int, n: int) -> None:
+        if self.rate.steady:  # a steady rate is written into the buffer once
+            if self._steady_rate != self.rate.value:
+                self._rates[:] = self._steady_rate = self.rate.value
+        else:
+            self._steady_rate = None
+            self.rate.fill(self._rates, n)
+        self._run(start, n, self._rates, self.extra["radius"])
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), "rate": self.rate.ramp}

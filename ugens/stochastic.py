@@ -1,0 +1,583 @@
+"""Stochastic contact controllers (SDT control layer): crumpling, breaking, bouncing.
+
+These emit micro-impacts, each with an energy E (J) and a fragment size s, and output the
+resulting contact force in N as raised-cosine pulses (as ImpactForce: exact impulse per
+pulse, sub-sample onsets), to drive a ModalBank. The sources are the control algorithms
+of the Sound Design Toolkit (``SDTControl.c``; Baldan, Delle Monache & Rocchesso, "The
+Sound Design Toolkit", SoftwareX 2017; Rocchesso & Fontana (eds.), "The Sounding Object",
+2003, ch. 8 "Crumpling"), see references/audio.md section 3.3.
+
+Energy to impulse: a micro-impact of kinetic energy E delivered by a fragment of mass m
+(the ``mass`` parameter) has speed v = sqrt(2 E / m) and momentum J = m v = sqrt(2 m E)
+(N s), the impulse of its pulse. Bounce uses the momentum exchanged in each bounce,
+J = m (v_in + v_out).
+
+Timing (Crumple, Break): micro-impacts form a Poisson process of rate ``density``
+(events/s; for Break scaled by the energy left). SDT draws a Bernoulli trial per sample;
+here the process is simulated exactly, per sample and with sub-sample event times: the
+integrated rate is accumulated sample by sample (the rate is constant within a sample)
+and an event fires when it reaches a threshold drawn from Exp(1) (the time-change
+construction of an inhomogeneous Poisson process), so the inter-event times of a
+constant rate are exactly exponential. Random draws come from the seeded splitmix64
+stream of ugens.noise, one stream per ugen, drawn in event order: the output does not
+depend on the block size.
+
+Every ugen has the extra output ``size``: the fragment size of the most recent
+micro-impact, held from the first sample of its pulse on (SDT feeds it to the resonator's
+fragment size, which scales its frequencies by 1/sqrt(size)).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.jit import specialise
+from jassy.params import ParamSpec, Smoothed
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.impact import pulse_sum
+from ugens.kernels import FASTMATH
+from ugens.noise import uniform
+
+#: Rate of the exponential energy distribution of SDT's crumpling (lambda = 1.45).
+ENERGY_LAMBDA = 1.45
+#: Clip range of the exponential energy draw (multiples of the crushing energy).
+ENERGY_CLIP = (0.1, 10.0)
+#: A pulse lasts at least this many samples (as ImpactForce).
+MIN_PULSE_SAMPLES = 2.0
+
+# layout of the float state st[]
+_ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
+# layout of the int state cnt[]: pulses in the table, micro-impacts so far, logged rows
+_PULSES, _EVENTS, _LOGGED = range(3)
+_CRUMPLE, _BREAK = 0, 1
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def u01(rng):
+    """A uniform draw in [0, 1) from the splitmix64 state rng[0] (advanced)."""
+    s, u = uniform(rng[0])
+    rng[0] = s
+    return 0.5 * (u + 1.0)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def pulse_frame(pulses, count, idx):
+    """Sum of the active 1 - cos pulses at frame idx; finished ones are dropped.
+
+    pulses[p] = (t0, T, A): A (1 - cos(2 pi (idx - t0) / T)) for t0 < idx < t0 + T.
+    Returns (sum, pulses still active after idx).
+    """
+    s = 0.0
+    kept = 0
+    for p in range(count):
+        t0 = pulses[p, 0]
+        T = pulses[p, 1]
+        x = idx - t0
+        if 0.0 < x < T:
+            s += pulses[p, 2] * (1.0 - math.cos(2.0 * math.pi * x / T))
+        if t0 + T > idx + 1:
+            if kept != p:
+                pulses[kept, 0] = t0
+                pulses[kept, 1] = T
+                pulses[kept, 2] = pulses[p, 2]
+            kept += 1
+    return s, kept
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def add_pulse(pulses, count, t0, T, impulse, fs):
+    """Append a pulse of ``impulse`` N s at fractional sample t0 (T samples long).
+
+    Returns the table (a larger copy if it was full). The amplitude makes the sampled
+    pulse sum to exactly impulse * fs (ugens.impact.pulse_sum).
+    """
+    if count == pulses.shape[0]:
+        grown = np.zeros((2 * pulses.shape[0], 3))
+        grown[:count] = pulses[:count]
+        pulses = grown
+    pulses[count, 0] = t0
+    pulses[count, 1] = T
+    pulses[count, 2] = impulse * fs / pulse_sum(t0, T)
+    return pulses
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def log_event(log, cnt, t0, energy, size, impulse):
+    """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
+    k = cnt[_LOGGED]
+    if k < log.shape[0]:
+        log[k, 0] = t0
+        log[k, 1] = energy
+        log[k, 2] = size
+        log[k, 3] = impulse
+        cnt[_LOGGED] = k + 1
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def micro_impacts(
+    out, size_out, start, n, fs, density, crush, frag, mass, T, mode, st, cnt, rng, pulses, log
+):
+    """Crumple / Break kernel for frames start .. start + n - 1; returns the pulse table.
+
+    Per frame idx: output the pulses and the held size, then fire the Poisson events of
+    the interval [idx, idx + 1): their pulses start at the next frame. density, crush,
+    frag: per-sample density (1/s), crushing energy (J) and fragment scale. mode 0:
+    rate = density; mode 1 (break): rate = density * energy left / budget.
+    """
+    count = cnt[_PULSES]
+    for i in range(n):
+        idx = start + i
+        s, count = pulse_frame(pulses, count, idx)
+        out[i] = s
+        size_out[i] = st[_SIZE]
+        pos = 0.0  # position inside [idx, idx + 1) already accounted for
+        while st[_RUNNING] != 0.0:
+            rate = density[i] / fs
+            if mode == _BREAK:
+                rate *= st[_LEFT] / st[_BUDGET]
+            if rate <= 0.0:
+                break
+            if st[_TARGET] <= 0.0:
+                st[_TARGET] = -math.log(1.0 - u01(rng))
+            need = st[_TARGET] - st[_ACC]
+            avail = rate * (1.0 - pos)
+            if need > avail:
+                st[_ACC] += avail
+                break
+            pos = min(pos + need / rate, 1.0)
+            st[_ACC] = 0.0
+            st[_TARGET] = -math.log(1.0 - u01(rng))
+            x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
+            energy = crush[i] * min(max(x, ENERGY_CLIP[0]), ENERGY_CLIP[1])
+            size = frag[i] * (0.5 + 0.5 * u01(rng))
+            if st[_BUDGET] > 0.0:
+                if energy >= st[_LEFT]:
+                    energy = st[_LEFT]
+                    st[_RUNNING] = 0.0
+                st[_LEFT] -= energy
+            t0 = idx + pos
+            impulse = math.sqrt(2.0 * mass * energy)
+            pulses = add_pulse(pulses, count, t0, T, impulse, fs)
+            count += 1
+            st[_SIZE] = size
+            cnt[_EVENTS] += 1
+            log_event(log, cnt, t0, energy, size, impulse)
+    cnt[_PULSES] = count
+    return pulses
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def bounces(
+    out, size_out, start, n, fs, g, e, irregularity, mass, T, min_speed, fragment, st, cnt, rng, pulses, log
+):
+    """Bounce kernel: ballistic flights between impacts; returns the pulse table.
+
+    st[_NEXT]: fractional sample of the next impact, st[_V]: its impact speed (m/s).
+    An impact at speed v leaves at v' = v e (1 - irregularity U), pushes J = m (v + v'),
+    and the next impact follows after the flight time 2 v' / g; bouncing stops once
+    v' < min_speed.
+    """
+    count = cnt[_PULSES]
+    for i in range(n):
+        idx = start + i
+        s, count = pulse_frame(pulses, count, idx)
+        out[i] = s
+        size_out[i] = st[_SIZE]
+        while st[_RUNNING] != 0.0 and st[_NEXT] < idx + 1:
+            t0 = st[_NEXT]
+            v = st[_V]
+            u = u01(rng)
+            v_out = v * e * (1.0 - irregularity * u)
+            impulse = mass * (v + v_out)
+            pulses = add_pulse(pulses, count, t0, T, impulse, fs)
+            count += 1
+            cnt[_EVENTS] += 1
+            st[_SIZE] = fragment
+            log_event(log, cnt, t0, 0.5 * mass * v * v, fragment, impulse)
+            if v_out < min_speed or v_out <= 0.0:
+                st[_RUNNING] = 0.0
+            else:
+                st[_V] = v_out
+                st[_NEXT] = t0 + 2.0 * v_out / g * fs
+    cnt[_PULSES] = count
+    return pulses
+
+
+_SEED = ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed (splitmix64 stream)")
+_MASS = ParamSpec(
+    "float",
+    1e-3,
+    low=0.0,
+    low_open=True,
+    high=1e3,
+    unit="kg",
+    doc="impacting mass: impulse = sqrt(2 mass energy) per micro-impact",
+)
+_DURATION = ParamSpec(
+    "float",
+    2e-4,
+    low=0.0,
+    low_open=True,
+    high=0.1,
+    unit="s",
+    doc="contact duration of a micro-impact pulse (at least 2 samples; shorter = harder)",
+)
+_FRAGMENT = ParamSpec(
+    "float",
+    1.0,
+    low=0.0,
+    low_open=True,
+    high=1.0,
+    smooth=True,
+    doc="fragment size scale: size = fragment * U(0.5, 1) per micro-impact",
+)
+_DENSITY = ParamSpec("float", 100.0, low=0.0, high=1e6, unit="1/s", smooth=True, doc="mean micro-impact rate")
+_CRUSH = ParamSpec(
+    "float",
+    1e-3,
+    low=0.0,
+    high=1e6,
+    unit="J",
+    smooth=True,
+    doc="crushing energy E: micro-impact energy = E * clip(Exp(1.45), 0.1, 10)",
+)
+
+
+class _MicroImpacts(UGen):
+    """Pulse table, RNG, state and event log shared by the controllers."""
+
+    outputs = ("size",)
+    #: Rows kept by the event log (see :meth:`event_log`); 0 disables it.
+    log_capacity = 0
+
+    def _prepare(self) -> None:
+        self.st = np.zeros(8)
+        self.cnt = np.zeros(3, dtype=np.int64)
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.pulses = np.zeros((16, 3))
+        self.log = np.zeros((int(self.log_capacity), 4))
+        self._constant: dict[int, float] = {}
+
+    def _reset(self) -> None:
+        self.st[:] = 0.0
+        self.cnt[:] = 0
+        self.rng[0] = self.values["seed"]
+        self.pulses[:] = 0.0
+
+    def _per_sample(self, ramp: Smoothed, buffer: np.ndarray, n: int) -> np.ndarray:
+        """Per-sample values of a smoothed parameter; a steady one is written once."""
+        if ramp.steady:
+            if self._constant.get(id(buffer)) != ramp.value:
+                buffer[:] = ramp.value
+                self._constant[id(buffer)] = ramp.value
+            return buffer
+        self._constant.pop(id(buffer), None)
+        return ramp.fill(buffer, n)
+
+    def _pulse_samples(self) -> float:
+        return max(self.values["duration"] * self.sample_rate, MIN_PULSE_SAMPLES)
+
+    @property
+    def events(self) -> int:
+        """Micro-impacts emitted since the render started."""
+        return int(self.cnt[_EVENTS])
+
+    def event_log(self) -> np.ndarray:
+        """Logged micro-impacts as rows (time s, energy J, size, impulse N s).
+
+        Set ``log_capacity`` (rows) on the instance before rendering; the first
+        ``log_capacity`` events are kept. For analysis and tests; not part of the state.
+        """
+        rows = self.log[: int(self.cnt[_LOGGED])].copy()
+        rows[:, 0] /= self.sample_rate
+        return rows
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {"st": self.st, "cnt": self.cnt, "rng": self.rng, "pulses": self.pulses}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
+        super().set_state(state)
+
+
+class _Granular(_MicroImpacts):
+    """Crumple and Break: Poisson micro-impacts with smoothed density, energy, fragment."""
+
+    _mode = _CRUMPLE
+    _SMOOTHED = ("density", "crushing_energy", "fragment")
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self.ramps = {key: self.smoothed(key) for key in self._SMOOTHED}
+        self.buffers = {key: np.zeros(self.max_block) for key in self._SMOOTHED}
+        x = self.out
+        self._kernel = specialise(
+            micro_impacts,
+            x,
+            x,
+            0,
+            0,
+            1.0,
+            x,
+            x,
+            x,
+            1.0,
+            1.0,
+            0,
+            self.st,
+            self.cnt,
+            self.rng,
+            self.pulses,
+            self.log,
+        )
+
+    def _reset(self) -> None:
+        super()._reset()
+        for ramp in self.ramps.values():
+            ramp.set(ramp.target, 0, jump=True)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key in self.ramps:
+            self.ramps[key].set(value, self.ramp_samples(), jump)
+
+    def _arm(self, budget: float | None) -> None:
+        """Start emitting; a budget (J) makes the run stop once that energy is spent."""
+        self.st[_RUNNING] = 1.0
+        self.st[_BUDGET] = 0.0 if budget is None else budget
+        self.st[_LEFT] = self.st[_BUDGET]
+        if budget is not None and budget <= 0.0:
+            self.st[_RUNNING] = 0.0
+
+    def process(self, start: int, n: int) -> None:
+        r, b = self.ramps, self.buffers
+        v = self.values
+        self.pulses = self._kernel(
+            self.out,
+            self.extra["size"],
+            start,
+            n,
+            self.sample_rate,
+            self._per_sample(r["density"], b["density"], n),
+            self._per_sample(r["crushing_energy"], b["crushing_energy"], n),
+            self._per_sample(r["fragment"], b["fragment"], n),
+            v["mass"],
+            self._pulse_samples(),
+            self._mode,
+            self.st,
+            self.cnt,
+            self.rng,
+            self.pulses,
+            self.log,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), **{k: r.ramp for k, r in self.ramps.items()}}
+
+
+@register
+class Crumple(_Granular):
+    """Crumpling (SDT crumpling~): Poisson micro-impacts, force in N, extra output ``size``.
+
+    Between ``start`` and ``stop`` micro-impacts occur at ``density`` per second, each of
+    energy E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), fragment size
+    ``fragment`` * U(0.5, 1), impulse sqrt(2 ``mass`` energy) N s, as a 1 - cos pulse of
+    ``duration``. ``start`` with ``energy`` (J) crumples a finite budget: the last
+    micro-impact takes what is left and the crumpling stops. Source: SDT (Baldan et al.
+    2017), Rocchesso & Fontana, "The Sounding Object" (2003) ch. 8.
+    """
+
+    type_name = "Crumple"
+    param_specs = {
+        "density": _DENSITY,
+        "crushing_energy": _CRUSH,
+        "fragment": _FRAGMENT,
+        "mass": _MASS,
+        "duration": _DURATION,
+        "seed": _SEED,
+    }
+    actions = {
+        "start": {
+            "energy": ParamSpec(
+                "float",
+                None,
+                low=0.0,
+                low_open=True,
+                high=1e9,
+                unit="J",
+                doc="total energy to crumple, then stop (omitted: until stop)",
+            )
+        },
+        "stop": {},
+    }
+
+    def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """``start`` {energy}: begin (again) at this frame; ``stop``: no new micro-impacts."""
+        if action == "start":
+            self._arm(args.get("energy"))
+        elif action == "stop":
+            self.st[_RUNNING] = 0.0
+        else:
+            super().act(action, args, sample_time)
+
+
+@register
+class Break(_Granular):
+    """Breaking (SDT breaking~): micro-impacts that draw down a stored energy budget.
+
+    ``break`` {energy} stores ``energy`` J; micro-impacts then occur at the rate
+    ``density`` * (energy left / energy stored), so the cascade thins out as it goes, each
+    taking E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), the last one what is
+    left, until the budget is spent. Impulse sqrt(2 ``mass`` energy) N s per pulse, so the
+    energies of all pulses sum to the budget. Extra output ``size``. Source: SDT
+    (Baldan et al. 2017).
+    """
+
+    type_name = "Break"
+    _mode = _BREAK
+    param_specs = {
+        "density": ParamSpec(
+            "float",
+            1000.0,
+            low=0.0,
+            high=1e6,
+            unit="1/s",
+            smooth=True,
+            doc="micro-impact rate at a full budget",
+        ),
+        "crushing_energy": _CRUSH,
+        "fragment": _FRAGMENT,
+        "mass": _MASS,
+        "duration": _DURATION,
+        "seed": _SEED,
+    }
+    actions = {
+        "break": {
+            "energy": ParamSpec(
+                "float", 0.05, low=0.0, low_open=True, high=1e9, unit="J", doc="stored energy to release"
+            )
+        },
+        "stop": {},
+    }
+
+    def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """``break`` {energy}: store the budget and start; ``stop``: abandon what is left."""
+        if action == "break":
+            self._arm(args["energy"])
+        elif action == "stop":
+            self.st[_RUNNING] = 0.0
+        else:
+            super().act(action, args, sample_time)
+
+
+@register
+class Bounce(_MicroImpacts):
+    """Bouncing (SDT bouncing~): ballistic bounces of a dropped object, force in N.
+
+    ``drop`` {height} releases the object at rest ``height`` m above the surface (first
+    impact sqrt(2 h / g) later, at speed sqrt(2 g h)); ``drop`` {speed} makes it hit the
+    surface now at ``speed`` m/s. Each impact at speed v leaves at
+    v' = v * restitution * (1 - irregularity * U), U ~ U(0, 1), is a 1 - cos pulse of
+    impulse mass * (v + v') N s (the momentum exchanged), and the next impact follows
+    after the exact flight time 2 v' / g. With irregularity 0 the times and impulses are
+    the closed form t_{i+1} - t_i = 2 e v_i / g, v_{i+1} = e v_i. Bouncing stops when
+    v' < ``min_speed``. Extra output ``size``: the ``fragment`` parameter at each impact.
+    Source: SDT (Baldan et al. 2017).
+    """
+
+    type_name = "Bounce"
+    param_specs = {
+        "restitution": ParamSpec(
+            "float", 0.7, low=0.0, high=1.0, doc="coefficient of restitution e (speed ratio)"
+        ),
+        "irregularity": ParamSpec(
+            "float", 0.0, low=0.0, high=1.0, doc="random loss per bounce: e * (1 - irregularity * U)"
+        ),
+        "gravity": ParamSpec(
+            "float", 9.81, low=0.0, low_open=True, high=1e4, unit="m/s^2", doc="gravitational acceleration"
+        ),
+        "mass": ParamSpec(
+            "float", 0.01, low=0.0, low_open=True, high=1e4, unit="kg", doc="mass of the bouncing object"
+        ),
+        "duration": ParamSpec(
+            "float",
+            5e-4,
+            low=0.0,
+            low_open=True,
+            high=0.1,
+            unit="s",
+            doc="contact duration of an impact pulse (at least 2 samples)",
+        ),
+        "min_speed": ParamSpec(
+            "float",
+            0.02,
+            low=0.0,
+            low_open=True,
+            high=1e3,
+            unit="m/s",
+            doc="bouncing stops when the rebound speed falls below this",
+        ),
+        "fragment": ParamSpec(
+            "float", 1.0, low=0.0, low_open=True, high=1.0, doc="size reported on the size output"
+        ),
+        "seed": _SEED,
+    }
+    actions = {
+        "drop": {
+            "height": ParamSpec(
+                "float", None, low=0.0, low_open=True, high=1e4, unit="m", doc="release height (at rest)"
+            ),
+            "speed": ParamSpec(
+                "float", None, low=0.0, low_open=True, high=1e4, unit="m/s", doc="impact speed, hitting now"
+            ),
+        },
+        "stop": {},
+    }
+
+    def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
+        """``drop`` {height | speed}: start a bouncing sequence; ``stop``: no more impacts."""
+        if action == "stop":
+            self.st[_RUNNING] = 0.0
+            return
+        if action != "drop":
+            return super().act(action, args, sample_time)
+        height, speed = args.get("height"), args.get("speed")
+        if (height is None) == (speed is None):
+            raise PatchError(f"{self.type_name} {self.name!r}: drop: give either height (m) or speed (m/s)")
+        g = self.values["gravity"]
+        if speed is None:
+            speed = math.sqrt(2.0 * g * height)
+            sample_time += math.sqrt(2.0 * height / g) * self.sample_rate
+        self.st[_NEXT] = sample_time
+        self.st[_V] = speed
+        self.st[_RUNNING] = 1.0
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        pass  # read at each impact
+
+    def process(self, start: int, n: int) -> None:
+        v = self.values
+        self.pulses = bounces(
+            self.out,
+            self.extra["size"],
+            start,
+            n,
+            self.sample_rate,
+            v["gravity"],
+            v["restitution"],
+            v["irregularity"],
+            v["mass"],
+            self._pulse_samples(),
+            v["min_speed"],
+            v["fragment"],
+            self.st,
+            self.cnt,
+            self.rng,
+            self.pulses,
+            self.log,
+        )
