@@ -21,9 +21,9 @@ FS = 48000
 
 @pytest.fixture(scope="module")
 def jack():
-    from jassy.jackserver import dummy_jack
-
     import ctypes.util
+
+    from jassy.jackserver import dummy_jack
 
     if ctypes.util.find_library("portaudio") is None:
         pytest.skip("libportaudio2 is not installed (apt-get install libportaudio2)")
