@@ -279,7 +279,7 @@ def _busy_python(seconds: float) -> int:
     return count
 
 
-def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: int = 3) -> dict:
+def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5) -> dict:
     """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
     the main thread does heavy Python work; underruns, latency and audio-haptic skew
     (measured on the frames the callback sent to the device)."""

@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="seconds to play (default: the patch's; 0 = until Ctrl-C)")
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
-    p.add_argument("--ring", type=int, default=3, help="blocks rendered ahead (latency; default 3)")
+    p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
@@ -264,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
         "live: underruns, latency and skew on a JACK dummy server",
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
-    p.add_argument("--ring", type=int, default=3, help="live: blocks rendered ahead (default 3)")
+    p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)

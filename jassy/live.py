@@ -168,7 +168,9 @@ class LiveEngine:
     """Plays a graph and score in real time on a PortAudio device.
 
     Audio channels, then haptic channels if ``haptic_to_card``, go to the device in one
-    stream, so they share the clock exactly. ``ring_blocks`` blocks are rendered ahead.
+    stream, so they share the clock exactly. ``ring_blocks`` blocks (may be fractional:
+    2.5 blocks of 64 = 160 frames) are rendered ahead; that ring depth is the engine's
+    latency, on top of the device's.
 
     isolation: "process" runs the producer (and the stream) in a forked child process, so
     the caller's Python work never holds the GIL the producer needs: the robust choice
@@ -183,7 +185,7 @@ class LiveEngine:
         score: Sequence[Event] = (),
         sample_rate: float = 48000,
         block: int = 64,
-        ring_blocks: int = 3,
+        ring_blocks: float = 2.5,
         device: str | int | None = None,
         haptic_to_card: bool = True,
         haptic_udp: str | None = None,
@@ -192,7 +194,7 @@ class LiveEngine:
         monitor_seconds: float = 0.0,
         isolation: str = "auto",
     ):
-        if ring_blocks < 1:
+        if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
         if haptic_to_card and len(graph.haptic) > MAX_HAPTIC:
             raise JassyError(f"at most {MAX_HAPTIC} haptic channels can go to a sound card")
@@ -207,7 +209,7 @@ class LiveEngine:
         self.haptic_to_card = haptic_to_card and bool(graph.haptic)
         self.n_audio = len(graph.audio)
         self.channels = self.n_audio + (len(graph.haptic) if self.haptic_to_card else 0)
-        self.capacity = ring_blocks * self.block
+        self.capacity = int(round(ring_blocks * self.block))  # frames; refilled a block at a time
         self.monitor_capacity = int(round(monitor_seconds * self.sample_rate))
         floats = DATA_OFFSET_F32 + (self.capacity + self.monitor_capacity) * self.channels
         # anonymous shared memory: seen by a forked producer process at the same address
