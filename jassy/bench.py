@@ -317,7 +317,7 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
         live.start()
         _busy_python(seconds)
         stats = live.stop()
-    heard = live.monitor()  # the last 6 s the device received: silence, then the tap
+    heard, _ = live.monitor()  # the last 6 s the device received: silence, then the tap
     audio_on = int(np.flatnonzero(heard[0])[-1] if not np.any(heard[0]) else np.flatnonzero(heard[0])[0])
     haptic_on = int(np.flatnonzero(heard[1])[0]) if np.any(heard[1]) else -1
     return {

@@ -3,9 +3,10 @@ callback is a numba ``@cfunc`` that only copies frames, so it never takes the GI
 allocates and never compiles.
 
 Shared memory (one aligned block, see ``_layout``): an int64 header (positions and
-counters), float64 haptic state, float32 interleaved ring frames, and an optional float32
-monitor ring where the callback keeps a copy of what it sent to the device (tests and
-benchmarks read the true output from it). Single producer (``_ring_write``, publishes the
+counters), float64 haptic state, float32 interleaved ring frames, and an optional monitor:
+a float32 ring where the callback keeps a copy of what it sent to the device, with an
+int64 ring of the rendered frame each output frame came from (-1 for silence inserted on
+an underrun); tests and benchmarks read the true output from it. Single producer (``_ring_write``, publishes the
 write position after the frames) and single consumer (the callback, publishes the read
 position after reading); positions only grow, so ``write - read`` is the fill level.
 
@@ -105,10 +106,14 @@ def ring_callback(inp, out, frames, time_info, status, user):
     if mcap > 0:
         p = hdr[PLAYED]
         mbase = DATA_OFFSET_F32 + cap * ch
+        ibase = (DATA_OFFSET_F32 + (cap + mcap) * ch + 1) // 2  # int64 slot after the float32 data
+        index = nb.carray(user, (ibase + mcap,), np.int64)
         for i in range(frames):
-            k = mbase + ((p + i) % mcap) * ch
+            slot = (p + i) % mcap
+            k = mbase + slot * ch
             for c in range(ch):
                 f32[k + c] = o[i * ch + c]
+            index[ibase + slot] = r + i if i < n else -1
     hdr[PLAYED] += frames
     return 0
 
@@ -212,8 +217,9 @@ class LiveEngine:
         self.capacity = int(round(ring_blocks * self.block))  # frames; refilled a block at a time
         self.monitor_capacity = int(round(monitor_seconds * self.sample_rate))
         floats = DATA_OFFSET_F32 + (self.capacity + self.monitor_capacity) * self.channels
+        self._index_start = (floats + 1) // 2  # int64 slot of the monitor's frame index
         # anonymous shared memory: seen by a forked producer process at the same address
-        self._mmap = mmap.mmap(-1, (floats // 2 + 16) * 8)
+        self._mmap = mmap.mmap(-1, (self._index_start + self.monitor_capacity + 16) * 8)
         raw = np.frombuffer(self._mmap, dtype=np.float64)
         self._memory = raw
         self.header = raw.view(np.int64)[:HEADER]
@@ -303,15 +309,17 @@ class LiveEngine:
             bool(h[REALTIME]),
         )
 
-    def monitor(self) -> np.ndarray:
-        """The last frames sent to the device, (channels, frames) in playing order."""
+    def monitor(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the device received last: (channels, frames) signals in playing order, and
+        per frame the rendered frame it came from (-1 for silence inserted on an underrun)."""
         if not self.monitor_capacity:
             raise JassyError("no monitor: create the engine with monitor_seconds > 0")
         played = int(self.header[PLAYED])
         size = min(played, self.monitor_capacity)
         ring = self.f32[DATA_OFFSET_F32 + self.capacity * self.channels :].reshape(-1, self.channels)
         order = (np.arange(played - size, played)) % self.monitor_capacity
-        return ring[order].T.astype(np.float64)
+        index = self._memory.view(np.int64)[self._index_start : self._index_start + self.monitor_capacity]
+        return ring[order].T.astype(np.float64), index[order].copy()
 
     # ----------------------------------------------------------------- producer
     def _producer_main(self) -> None:
