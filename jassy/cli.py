@@ -101,6 +101,20 @@ def _cmd_play(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from patches import demo
+
+    if args.script:
+        from jassy.files import write_signal
+
+        rendering = demo.render_script(demo.stroke(), 2.0, args.mode)
+        write_signal(args.script, rendering.audio, rendering.sample_rate)
+        print(f"wrote {args.script}: a scripted tap and {args.mode} stroke (2 s)")
+        return 0
+    demo.run_window(args.mode, block=args.block, ring_blocks=args.ring, device=args.device)
+    return 0
+
+
 def _cmd_devices(args: argparse.Namespace) -> int:
     from jassy import portaudio
 
@@ -243,6 +257,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
+
+    p = sub.add_parser(
+        "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
+    )
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll"])
+    p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
+    p.add_argument("--device", help="output device index or name substring")
+    p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
+    p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (default 2.5)")
+    p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)

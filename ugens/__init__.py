@@ -10,6 +10,8 @@ from ugens.mix import Gain, Mixer, Multiply
 from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.oscillators import Sine
+from ugens.roll import RathRoll, Roll
+from ugens.scrape import ResonantScrape, Scrape
 from ugens.stochastic import Bounce, Break, Crumple
 
 __all__ = [

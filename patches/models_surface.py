@@ -1,0 +1,130 @@
+"""Builders of the plate and board models of the scrape and roll patches.
+
+The shipped ``steel_plate_model.toml`` and ``wood_board_model.toml`` are the output of
+:func:`steel_plate_model` and :func:`wood_board_model` (a test checks it); regenerate
+them with ``python -m patches.models_surface``.
+
+Both are simply supported rectangular Kirchhoff plates with analytic modes
+(Leissa, "Vibration of Plates", NASA SP-160, 1969, ch. 4 and 11):
+
+    f_mn = (pi / 2) sqrt((D1 (m/a)^4 + 2 H (m/a)^2 (n/b)^2 + D2 (n/b)^4) / (rho h)),
+    phi_mn(x, y) = sin(m pi x / a) sin(n pi y / b),  modal mass M = rho h a b / 4,
+
+with D_i = E_i h^3 / (12 (1 - nu^2)) and, for the orthotropic (wood) board, Huber's
+H = sqrt(D1 D2); isotropic plates have D1 = D2 = H = D, i.e. the familiar
+f_mn = (pi / 2) sqrt(D / (rho h)) ((m/a)^2 + (n/b)^2).
+
+Gains: the velocity at a fixed pickup point q (a contact microphone) per N s of impulse
+at contact point p, a[p, k] = phi_k(p) phi_k(q) / M (m/s per N s; ModalBank renders each
+mode as sin instead of cos, same magnitude). Decay d = d0 + pi f eta (1/s) for a loss
+factor eta (internal friction) plus a constant d0 (air and supports).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from jassy.modal_model import ModalModel
+
+
+def ss_plate_model(
+    a: float,
+    b: float,
+    h: float,
+    rho: float,
+    e1: float,
+    e2: float,
+    nu: float,
+    eta: float,
+    d0: float,
+    track: tuple[tuple[float, float], tuple[float, float]],
+    pickup: tuple[float, float],
+    n_points: int = 9,
+    n_modes: int = 300,
+    f_max: float = 20000.0,
+    name: str = "plate",
+) -> ModalModel:
+    """The lowest ``n_modes`` modes below ``f_max`` Hz of a simply supported plate.
+
+    a, b: sides (m); h: thickness (m); rho: density (kg/m^3); e1, e2: Young's moduli
+    along a and b (Pa); nu: Poisson's ratio; eta: loss factor; d0: constant decay (1/s).
+    Locations: ``n_points`` points t0 .. t{n-1} evenly spaced on the straight ``track``
+    between two (x/a, y/b) points; pickup: (x/a, y/b) of the listening point.
+    """
+    d1 = e1 * h**3 / (12 * (1 - nu**2))
+    d2 = e2 * h**3 / (12 * (1 - nu**2))
+    hub = np.sqrt(d1 * d2)
+    orders = np.arange(1, 200)
+    m, n = (g.reshape(-1) for g in np.meshgrid(orders, orders, indexing="ij"))
+    km, kn = m / a, n / b
+    freqs = np.pi / 2 * np.sqrt((d1 * km**4 + 2 * hub * km**2 * kn**2 + d2 * kn**4) / (rho * h))
+    order = np.argsort(freqs, kind="stable")
+    order = order[freqs[order] < f_max][:n_modes]
+    m, n, freqs = m[order], n[order], freqs[order]
+    mass = rho * h * a * b / 4
+
+    def shape(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.sin(np.pi * np.outer(u, m)) * np.sin(np.pi * np.outer(v, n))
+
+    w = np.linspace(0.0, 1.0, n_points)
+    (u0, v0), (u1, v1) = track
+    points = shape(u0 + w * (u1 - u0), v0 + w * (v1 - v0))
+    listen = shape(np.array([pickup[0]]), np.array([pickup[1]]))[0]
+    gains = points * listen / mass
+    names = tuple(f"t{i}" for i in range(n_points))
+    return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name)
+
+
+def steel_plate_model() -> ModalModel:
+    """A 0.6 x 0.45 m steel plate, 2 mm thick: 300 modes from 37 Hz to 7.3 kHz, ringing for seconds."""
+    return ss_plate_model(
+        a=0.6,
+        b=0.45,
+        h=0.002,
+        rho=7850.0,
+        e1=200e9,
+        e2=200e9,
+        nu=0.3,
+        eta=2e-4,
+        d0=1.5,
+        track=((0.12, 0.3), (0.88, 0.62)),
+        pickup=(0.37, 0.71),
+        name="steel_plate",
+    )
+
+
+def wood_board_model() -> ModalModel:
+    """A 0.8 x 0.3 m pine board, 18 mm thick (E along the grain 10 GPa, across 0.8 GPa):
+    the 160 modes below 20 kHz (190 Hz up), loss factor 0.015 (short, dull decays)."""
+    return ss_plate_model(
+        a=0.8,
+        b=0.3,
+        h=0.018,
+        rho=450.0,
+        e1=10e9,
+        e2=0.8e9,
+        nu=0.3,
+        eta=0.015,
+        d0=8.0,
+        track=((0.1, 0.5), (0.9, 0.4)),
+        pickup=(0.33, 0.62),
+        n_modes=200,
+        name="wood_board",
+    )
+
+
+#: Shipped model files -> builders.
+SHIPPED = {"steel_plate_model.toml": steel_plate_model, "wood_board_model.toml": wood_board_model}
+
+
+def write_models(folder: Path | None = None) -> None:
+    """Write the shipped model files (next to this module by default)."""
+    folder = Path(__file__).parent if folder is None else Path(folder)
+    for filename, builder in SHIPPED.items():
+        builder().save(folder / filename)
+
+
+if __name__ == "__main__":
+    write_models()

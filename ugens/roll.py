@@ -1,0 +1,285 @@
+"""Rolling contact forces: Roll (van den Doel's filtered profile) and RathRoll (Rath's rolling filter).
+
+Both are open-loop force generators (output in N, to drive a ModalBank) controlled by the
+smoothed contact parameters ``force`` (N) and ``speed`` (rolling speed, m/s).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from jassy.jit import specialise
+from jassy.params import ParamSpec
+from jassy.registry import register
+from ugens.filters import design_biquad
+from ugens.kernels import FASTMATH
+from ugens.scrape import (
+    NYQUIST_FRACTION,
+    NeedleContact,
+    ProfileContact,
+    contact_specs,
+    law_specs,
+    profile_specs,
+    read_profile,
+    wrap,
+)
+
+#: Standard gravity, m/s^2 (SDT_EARTH).
+GRAVITY = 9.81
+
+
+@register
+class Roll(NeedleContact):
+    """Rolling force: a smooth profile read at the rolling speed through a speed-tracking low-pass.
+
+    van den Doel, Kry & Pai, FoleyAutomatic (SIGGRAPH 2001), JASS ``ContactForce`` roll:
+    the same needle mechanism as Scrape on a smoother profile (1/k^beta, beta = 2 by
+    default; heights in m, RMS ``roughness``), read at ``speed / (dx fs)`` points per
+    sample, then a second-order Butterworth low-pass whose cutoff follows the speed,
+    fc = fc0 |v| / v0 (clamped to [0.5 Hz, 0.45 fs]). JASS uses a fixed 100 Hz; a cutoff
+    proportional to speed is a fixed spatial cutoff fc0 / v0 cycles per m (the ball cannot
+    follow details shorter than its contact), so the whole spectrum scales with speed.
+
+    Output force (N): stiffness * s(F, v) * h_lp(x(t)), with the amplitude law s of
+    ugens/scrape.py (sqrt(F v / (f_ref v_ref)) by default): RMS = stiffness * roughness
+    (times the low-pass's share of the profile's variance) at the reference contact.
+    """
+
+    type_name = "Roll"
+    param_specs = {
+        **contact_specs("rolling speed (signed: the profile is read backwards for v < 0)"),
+        **profile_specs(beta=2.0, roughness=2e-5, dx=1e-4, length=2**16, k_low=20.0),
+        "stiffness": ParamSpec(
+            "float",
+            1e5,
+            low=0.0,
+            high=1e12,
+            unit="N/m",
+            fixed=True,
+            doc="contact stiffness: force per m of profile height at the reference contact",
+        ),
+        "fc0": ParamSpec(
+            "float",
+            100.0,
+            low=0.0,
+            low_open=True,
+            high=1e5,
+            unit="Hz",
+            fixed=True,
+            doc="low-pass cutoff at the speed v0 (JASS's 100 Hz)",
+        ),
+        "v0": ParamSpec(
+            "float",
+            0.2,
+            low=0.0,
+            low_open=True,
+            high=100.0,
+            unit="m/s",
+            fixed=True,
+            doc="speed at which the cutoff is fc0",
+        ),
+        **law_specs(v_ref=0.2),
+    }
+
+    def cutoff_per_speed(self) -> float:
+        """kc = fc0 / v0 (Hz per m/s)."""
+        return self.values["fc0"] / self.values["v0"]
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg):
+    """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
+
+    cfg = [1/(dx fs), mass, grain, depth, has_input, cubic, smoothed];
+    state = [pos, trace, airborne, flight counter c (N samples), bump B (N), s1, s2];
+    coef = [b0, b1, b2, a1, a2] of the optional contact low-pass (DF2T, states s1, s2).
+    Per sample: W = m g + F; x = input or profile; decay = clip(2 grain |v|, 0, 2);
+    ground = max(trace - decay, x). Airborne: c -= W; land when c <= 0 (output B - c - W),
+    else output -W. On the ground: if ground > trace and decay > 0, launch with
+    B = (ground - trace) depth (m v^2 / 2) / sqrt(decay), c = 2 B (output B).
+    contact = output + W (0 in flight). With smoothing, the output is low-passed first.
+    """
+    inv_dxfs = cfg[0]
+    mass = cfg[1]
+    grain = cfg[2]
+    depth = cfg[3]
+    has_input = cfg[4] != 0.0
+    cubic = cfg[5] != 0.0
+    smoothed = cfg[6] != 0.0
+    L = prof.shape[0]
+    pos = state[0]
+    trace = state[1]
+    airborne = state[2] != 0.0
+    c = state[3]
+    bump = state[4]
+    s1 = state[5]
+    s2 = state[6]
+    weight = mass * GRAVITY
+    for i in range(n):
+        v = speeds[i]
+        load = weight + forces[i]
+        x = inputs[i] if has_input else read_profile(prof, pos, cubic)
+        decay = min(2.0 * grain * abs(v), 2.0)
+        ground = max(trace - decay, x)
+        y = 0.0
+        if airborne:
+            c -= load
+            if c <= 0.0:
+                y = bump - c - load
+                airborne = False
+            else:
+                y = -load
+        elif ground > trace and decay > 0.0:
+            b = (ground - trace) * depth * 0.5 * mass * v * v / math.sqrt(decay)
+            if b > 0.0:
+                bump = b
+                c = 2.0 * b
+                airborne = True
+                y = b
+        trace = ground
+        if smoothed:
+            z = coef[0] * y + s1
+            s1 = coef[1] * y - coef[3] * z + s2
+            s2 = coef[2] * y - coef[4] * z
+            y = z
+        out[i] = y
+        contact[i] = y + load
+        if not has_input:
+            pos = wrap(pos + v * inv_dxfs, L)
+    state[0] = pos
+    state[1] = trace
+    state[2] = 1.0 if airborne else 0.0
+    state[3] = c
+    state[4] = bump
+    state[5] = s1
+    state[6] = s2
+
+
+@register
+class RathRoll(ProfileContact):
+    """Rolling as micro-impacts: Rath's rolling filter (DAFx-03; SDT ``SDTRolling_dsp``).
+
+    A ball of ``mass`` m pressed by its weight and the extra normal ``force`` F (total load
+    W = m g + F, N) rolls at ``speed`` v over a surface signal x: its own looped 1/k^beta
+    profile (unit RMS, dimensionless) read at v / (dx fs) points per sample, or the
+    optional ``input`` (an audio-rate surface signal, e.g. noise; then speed only sets the
+    dynamics). A ground trace follows max(trace - decay, x), decay = clip(2 grain |v|, 0, 2)
+    per sample; a rise while the ball is on the ground launches it with the bump force
+    B = (ground - trace) * depth * (m v^2 / 2) / sqrt(decay) N for one sample (impulse
+    B / fs), and it stays airborne until a counter of 2 B, decremented by W every sample,
+    reaches zero: 2 B / W samples, the ballistic flight time 2 u / g_eff of a launch speed
+    u = B / (m fs) under the load W (SDT: flight = 2 bump, decremented by m g per sample).
+    B grows about as depth v^2.5, so the take-off rate rises with speed until flights get
+    long (about 0.8 m/s with the defaults); faster, the ball skips bumps: fewer, harder hops.
+
+    Output (N): the force the ball exerts on the surface minus the static load W: +B at a
+    take-off, -W while airborne (the surface is unloaded), B + r - W at the landing sample
+    (r = -counter in [0, W): the landing stops the ball, and r makes each flight's contact
+    impulses equal W times its duration, i.e. momentum balance), 0 while rolling on the
+    ground. The output therefore sums to zero over every flight (DC-free; the mean contact
+    force is the load W) and can drive a ModalBank directly: the static load would only
+    deflect the resonator. Optionally (``contact_cutoff``) the output is low-passed for the
+    finite duration of each micro-impact. Extra output ``contact``: the total contact force
+    on the surface (N), output + W (0 in flight without the low-pass), e.g. for haptics.
+    """
+
+    type_name = "RathRoll"
+    inputs = ("input",)
+    optional_inputs = ("input",)
+    outputs = ("contact",)
+    unit_rms = True
+    param_specs = {
+        **contact_specs("rolling speed", 0.0, "normal force pressing the ball besides its weight m g"),
+        "mass": ParamSpec(
+            "float", 0.05, low=0.0, low_open=True, high=1e4, unit="kg", fixed=True, doc="mass of the ball"
+        ),
+        "grain": ParamSpec(
+            "float",
+            0.5,
+            low=0.0,
+            high=1.0,
+            fixed=True,
+            doc="surface grain: the ground trace falls 2 grain |v| per sample (denser micro-impacts)",
+        ),
+        "depth": ParamSpec(
+            "float",
+            50.0,
+            low=0.0,
+            high=1e9,
+            unit="1/m",
+            fixed=True,
+            doc="bump depth: B = rise * depth * kinetic energy / sqrt(decay)",
+        ),
+        "contact_cutoff": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=1e5,
+            unit="Hz",
+            fixed=True,
+            doc="second-order Butterworth low-pass of the output for the micro-impacts' contact "
+            "duration (~1/cutoff s; SDT gets it from its impact interactor); 0: none",
+        ),
+        **profile_specs(beta=1.0, roughness=None, dx=1e-5, length=2**16, k_low=100.0),
+    }
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        v = self.values
+        self.cfg = np.array(
+            [
+                1.0 / (v["dx"] * self.sample_rate),
+                v["mass"],
+                v["grain"],
+                v["depth"],
+                float("input" in self.sources),
+                float(v["interp"] == "cubic"),
+                float(v["contact_cutoff"] > 0),
+            ]
+        )
+        self.state = np.zeros(7)
+        self.coef = np.zeros(5)
+        if v["contact_cutoff"] > 0:
+            fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
+            design_biquad(0, fc, 1.0 / math.sqrt(2.0), 1.0 / self.sample_rate, self.coef)
+        self._kernel = specialise(
+            rolling_filter,
+            self.out,
+            self.extra["contact"],
+            0,
+            self._forces,
+            self._speeds,
+            self.input_buffer("input"),
+            self.prof,
+            self.state,
+            self.coef,
+            self.cfg,
+        )
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.state[:] = 0.0
+        # start on the ground with the trace at the surface
+        x0 = self.prof[0] if "input" not in self.sources else 0.0
+        self.state[1] = x0
+
+    def process(self, start: int, n: int) -> None:
+        forces, speeds = self._controls(n)
+        self._kernel(
+            self.out,
+            self.extra["contact"],
+            n,
+            forces,
+            speeds,
+            self.input_buffer("input"),
+            self.prof,
+            self.state,
+            self.coef,
+            self.cfg,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), "state": self.state}

@@ -1,0 +1,567 @@
+"""Scraping and sliding contact forces: Scrape (phonograph needle) and ResonantScrape (JASS AR).
+
+Both are open-loop force generators: their output is a force in N, to drive a ModalBank
+(and the haptic channel). They are controlled by the contact parameters ``force``
+(normal force F, N) and ``speed`` (slip speed v, m/s), smoothed per sample (``set``
+events ramp over ``smooth`` s or their own ``ramp``, or jump; a ContactTrack drives them
+through :func:`jassy.events.track_events`).
+
+**Amplitude law** (JASS ``ContactForce.setSlideProperties``: g sqrt(F v / vmax)). The
+force is shaped by a dimensionless contact factor
+
+    s(F, v) = sqrt(F |v| / (f_ref v_ref))    (law = "sqrt", default: power ~ F v)
+    s(F, v) = F |v| / (f_ref v_ref)          (law = "linear")
+
+and s = 0 while |v| < ``min_speed`` (JASS: silent below vslide0), so at the reference
+contact (f_ref, v_ref) s = 1.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.jit import specialise
+from jassy.params import ParamSpec
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.filters import design_biquad
+from ugens.kernels import FASTMATH
+from ugens.noise import uniform
+from ugens.profile import ProfileError, fractal_profile, load_profile
+
+LAWS = ("sqrt", "linear")
+INTERPOLATIONS = ("linear", "cubic")
+#: Speed-dependent filter cutoffs are clamped to [F_MIN, NYQUIST_FRACTION * fs].
+F_MIN = 0.5
+NYQUIST_FRACTION = 0.45
+_BUTTERWORTH_Q = 1.0 / math.sqrt(2.0)
+#: "No coefficients designed yet" (outside every valid speed), kept finite for NaN checks.
+UNDESIGNED = 1e300
+
+
+# ------------------------------------------------------------------------------ kernels
+@nb.njit(fastmath=FASTMATH, cache=True)
+def contact_factor(force, speed, law, inv_ref, min_speed):
+    """s(F, v) of the module docstring (law 0 = sqrt, 1 = linear); inv_ref = 1/(f_ref v_ref)."""
+    av = abs(speed)
+    if av < min_speed or force <= 0.0:
+        return 0.0
+    p = force * av * inv_ref
+    return math.sqrt(p) if law == 0 else p
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def read_profile(prof, pos, cubic):
+    """Height at fractional index pos in [0, L) of the looped profile (linear or Catmull-Rom)."""
+    L = prof.shape[0]
+    i = int(pos)
+    t = pos - i
+    if i >= L:  # pos rounded up to L
+        i -= L
+    p1 = prof[i]
+    p2 = prof[i + 1 if i + 1 < L else i + 1 - L]
+    if not cubic:
+        return p1 + t * (p2 - p1)
+    p0 = prof[i - 1 if i > 0 else L - 1]
+    p3 = prof[i + 2 if i + 2 < L else i + 2 - L]
+    return p1 + 0.5 * t * (
+        p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0))
+    )
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def wrap(pos, length):
+    """pos modulo length, in [0, length)."""
+    if pos >= length or pos < 0.0:
+        pos -= length * math.floor(pos / length)
+        if pos >= length:
+            pos = 0.0
+    return pos
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
+    """Needle on a looped profile, low-passed with cutoff kc |v|, times gain s(F, v).
+
+    cfg = [1/(dx fs), kc (Hz per m/s; 0 = no filter), f_max (Hz), 1/fs, gain, law,
+    1/(f_ref v_ref), min_speed, cubic]; state = [pos (points), s1, s2, v of coef];
+    coef = RBJ low-pass [b0, b1, b2, a1, a2] for the speed state[3].
+    """
+    inv_dxfs = cfg[0]
+    kc = cfg[1]
+    f_max = cfg[2]
+    inv_fs = cfg[3]
+    gain = cfg[4]
+    law = int(cfg[5])
+    inv_ref = cfg[6]
+    min_speed = cfg[7]
+    cubic = cfg[8] != 0.0
+    L = prof.shape[0]
+    pos = state[0]
+    s1 = state[1]
+    s2 = state[2]
+    v_coef = state[3]
+    for i in range(n):
+        v = speeds[i]
+        h = read_profile(prof, pos, cubic)
+        if kc > 0.0:
+            if v != v_coef:
+                fc = min(max(kc * abs(v), F_MIN), f_max)
+                design_biquad(0, fc, _BUTTERWORTH_Q, inv_fs, coef)
+                v_coef = v
+            y = coef[0] * h + s1
+            s1 = coef[1] * h - coef[3] * y + s2
+            s2 = coef[2] * h - coef[4] * y
+            h = y
+        out[i] = gain * contact_factor(forces[i], v, law, inv_ref, min_speed) * h
+        pos = wrap(pos + v * inv_dxfs, L)
+    state[0] = pos
+    state[1] = s1
+    state[2] = s2
+    state[3] = v_coef
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonant_noise(out, n, forces, speeds, rng, state, cfg):
+    """White noise (unit RMS) through a unit-noise-gain resonator tuned by the speed.
+
+    y = g (x - x[-2]) + 2 R cos(theta) y[-1] - R^2 y[-2], g = sqrt((1 - R^2) / 2), with
+    theta = 2 pi clamp(f0 + slope |v|) / fs and R = exp(-(d0 + d_slope |v|) / fs).
+    cfg = [f0, slope, d0, d_slope, 1/fs, f_max, gain, law, 1/(f_ref v_ref), min_speed];
+    state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
+    """
+    f0 = cfg[0]
+    slope = cfg[1]
+    d0 = cfg[2]
+    d_slope = cfg[3]
+    inv_fs = cfg[4]
+    f_max = cfg[5]
+    gain = cfg[6]
+    law = int(cfg[7])
+    inv_ref = cfg[8]
+    min_speed = cfg[9]
+    x1, x2, y1, y2 = state[0], state[1], state[2], state[3]
+    v_coef, c1, c2, g = state[4], state[5], state[6], state[7]
+    s = rng[0]
+    root3 = math.sqrt(3.0)
+    for i in range(n):
+        v = speeds[i]
+        if v != v_coef:
+            av = abs(v)
+            f = min(max(f0 + slope * av, F_MIN), f_max)
+            R = math.exp(-(d0 + d_slope * av) * inv_fs)
+            c1 = 2.0 * R * math.cos(2.0 * math.pi * f * inv_fs)
+            c2 = R * R
+            g = math.sqrt(0.5 * (1.0 - c2))
+            v_coef = v
+        s, u = uniform(s)
+        x = root3 * u
+        y = g * (x - x2) + c1 * y1 - c2 * y2
+        x2 = x1
+        x1 = x
+        y2 = y1
+        y1 = y
+        out[i] = gain * contact_factor(forces[i], v, law, inv_ref, min_speed) * y
+    rng[0] = s
+    state[0], state[1], state[2], state[3] = x1, x2, y1, y2
+    state[4], state[5], state[6], state[7] = v_coef, c1, c2, g
+
+
+# ------------------------------------------------------------------------------- params
+def contact_specs(
+    speed_doc: str = "slip speed (signed: the profile is read backwards for v < 0)",
+    force: float = 1.0,
+    force_doc: str = "normal contact force F",
+):
+    """The smoothed contact controls ``force`` and ``speed``."""
+    return {
+        "force": ParamSpec("float", force, low=0.0, high=1e5, unit="N", smooth=True, doc=force_doc),
+        "speed": ParamSpec("float", 0.0, low=-100.0, high=100.0, unit="m/s", smooth=True, doc=speed_doc),
+    }
+
+
+def law_specs(v_ref: float = 1.0, min_speed: float = 1e-4):
+    """Parameters of the amplitude law s(F, v) (module docstring)."""
+    return {
+        "law": ParamSpec(
+            "str", "sqrt", choices=LAWS, fixed=True, doc="amplitude law: sqrt(F v) (power ~ F v) or F v"
+        ),
+        "f_ref": ParamSpec(
+            "float", 1.0, low=0.0, low_open=True, high=1e5, unit="N", fixed=True, doc="reference normal force"
+        ),
+        "v_ref": ParamSpec(
+            "float", v_ref, low=0.0, low_open=True, high=100.0, unit="m/s", fixed=True, doc="reference speed"
+        ),
+        "min_speed": ParamSpec(
+            "float",
+            min_speed,
+            low=0.0,
+            high=100.0,
+            unit="m/s",
+            fixed=True,
+            doc="silent while |speed| is below this",
+        ),
+    }
+
+
+def profile_specs(
+    beta: float, roughness: float | None, dx: float, length: int, k_low: float, interp: str = "linear"
+):
+    """Parameters that make or load the looped surface profile (roughness None: unit RMS)."""
+    specs = {
+        "beta": ParamSpec(
+            "float", beta, low=0.0, high=5.0, fixed=True, doc="spectral exponent of the 1/k^beta profile"
+        ),
+        "k_low": ParamSpec(
+            "float",
+            k_low,
+            low=0.0,
+            high=1e7,
+            unit="1/m",
+            fixed=True,
+            doc="low spatial cutoff of the generated profile (cycles per m): longer waves, which a "
+            "needle follows quasi-statically (sub-audio force), are left out; 0 keeps all",
+        ),
+    }
+    if roughness is not None:
+        specs["roughness"] = ParamSpec(
+            "float",
+            roughness,
+            low=0.0,
+            low_open=True,
+            high=0.1,
+            unit="m",
+            fixed=True,
+            doc="RMS height of the profile (also the RMS a given profile is scaled to)",
+        )
+    specs.update(
+        {
+            "seed": ParamSpec(
+                "int", 0, low=0, high=2**63 - 1, fixed=True, doc="seed of the generated profile"
+            ),
+            "dx": ParamSpec(
+                "float",
+                dx,
+                low=0.0,
+                low_open=True,
+                high=1.0,
+                unit="m",
+                fixed=True,
+                doc="profile spacing (m per point): the profile moves |v| / (dx fs) points per sample",
+            ),
+            "length": ParamSpec(
+                "int", length, low=16, high=2**24, fixed=True, doc="points of the generated (looped) profile"
+            ),
+            "profile": ParamSpec(
+                "floats",
+                None,
+                fixed=True,
+                doc="profile heights (shape only: mean removed, scaled to the RMS height); "
+                "replaces the generated one",
+            ),
+            "profile_file": ParamSpec(
+                "str",
+                "",
+                fixed=True,
+                doc="profile file (.npy, .wav, one-column .csv; shape only, like 'profile')",
+            ),
+            "interp": ParamSpec(
+                "str", interp, choices=INTERPOLATIONS, fixed=True, doc="interpolation between profile points"
+            ),
+        }
+    )
+    return specs
+
+
+# ------------------------------------------------------------------------------ classes
+class ContactControls(UGen):
+    """Shared handling of the smoothed ``force`` and ``speed`` controls."""
+
+    def _prepare(self) -> None:
+        self._force = self.smoothed("force")
+        self._speed = self.smoothed("speed")
+        self._forces = np.zeros(self.max_block)
+        self._speeds = np.zeros(self.max_block)
+
+    def _reset(self) -> None:
+        for ramp in (self._force, self._speed):
+            ramp.set(ramp.target, 0, jump=True)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key == "force":
+            self._force.set(value, self.ramp_samples(), jump)
+        elif key == "speed":
+            self._speed.set(value, self.ramp_samples(), jump)
+
+    def _controls(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        return self._force.fill(self._forces, n), self._speed.fill(self._speeds, n)
+
+    def _law_config(self) -> tuple[float, float, float]:
+        v = self.values
+        return float(LAWS.index(v["law"])), 1.0 / (v["f_ref"] * v["v_ref"]), float(v["min_speed"])
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {"force": self._force.ramp, "speed": self._speed.ramp}
+
+
+class ProfileContact(ContactControls):
+    """A needle reading a looped surface profile at the contact speed (base of Scrape, Roll).
+
+    Subclasses set ``unit_rms`` (profile scaled to RMS 1 instead of ``roughness``).
+    """
+
+    unit_rms = False
+
+    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
+        self._loaded: dict[str, np.ndarray] = {}
+        super().__init__(*sources, name=name, where=where, **params)
+        where = where or self.type_name
+        if self.values["profile"] is not None and self.values["profile_file"]:
+            raise PatchError(f"{where}.profile: give either profile or profile_file, not both")
+        self._generated: tuple[tuple, np.ndarray] | None = None
+        self.heights(where)  # generate now: bad profile parameters fail when the patch loads
+
+    def check_param(self, key: str, value: Any, where: str) -> Any:
+        """Also read ``profile_file`` (errors name the key and the file) and check ``profile``."""
+        value = super().check_param(key, value, where)
+        if key == "profile_file" and value:
+            if value not in self._loaded:
+                try:
+                    self._loaded[value] = self._shape(load_profile(value), value)
+                except ProfileError as exc:
+                    raise PatchError(f"{where}: {exc}") from None
+        elif key == "profile" and value is not None:
+            value = np.array(value, dtype=np.float64)
+            try:
+                self._shape(value, "profile")
+            except ProfileError as exc:
+                raise PatchError(f"{where}: {exc}") from None
+        return value
+
+    @staticmethod
+    def _shape(heights: np.ndarray, what: str) -> np.ndarray:
+        """Zero-mean, unit-RMS copy of a given profile."""
+        if heights.size < 4:
+            raise ProfileError(f"{what}: expected at least 4 points, got {heights.size}")
+        h = heights - heights.mean()
+        rms = math.sqrt(float(np.mean(h * h)))
+        if not rms > 0:
+            raise ProfileError(f"{what}: the profile is flat (all heights equal)")
+        return h / rms
+
+    def heights(self, where: str | None = None) -> np.ndarray:
+        """The looped profile: heights in m (RMS ``roughness``), or unit RMS if ``unit_rms``."""
+        v = self.values
+        rms = 1.0 if self.unit_rms else v["roughness"]
+        if v["profile"] is not None:
+            return self._shape(v["profile"], "profile") * rms
+        if v["profile_file"]:
+            return self._loaded[v["profile_file"]] * rms
+        key = (v["length"], v["beta"], rms, v["seed"], v["dx"], v["k_low"])
+        if self._generated is None or self._generated[0] != key:
+            try:
+                heights = fractal_profile(*key[:5], k_low=v["k_low"] or None)
+            except ProfileError as exc:
+                raise PatchError(f"{where or f'nodes.{self.name}'}: {exc}") from None
+            self._generated = (key, heights)
+        return self._generated[1]
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self.prof = self.heights()
+
+
+class NeedleContact(ProfileContact):
+    """The profile read by a needle, low-passed at kc |v| and scaled by the amplitude law.
+
+    Subclasses define :meth:`cutoff_per_speed` (kc, Hz per m/s; 0 for no low-pass) and
+    the ``stiffness`` and amplitude-law parameters.
+    """
+
+    def cutoff_per_speed(self) -> float:
+        raise NotImplementedError
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        v, fs = self.values, self.sample_rate
+        law, inv_ref, min_speed = self._law_config()
+        self.cfg = np.array(
+            [
+                1.0 / (v["dx"] * fs),
+                self.cutoff_per_speed(),
+                NYQUIST_FRACTION * fs,
+                1.0 / fs,
+                v["stiffness"],
+                law,
+                inv_ref,
+                min_speed,
+                float(v["interp"] == "cubic"),
+            ]
+        )
+        self.state = np.zeros(4)  # pos, s1, s2, v of coef
+        self.coef = np.zeros(5)
+        self._kernel = specialise(
+            profile_contact,
+            self.out,
+            0,
+            self._forces,
+            self._speeds,
+            self.prof,
+            self.state,
+            self.coef,
+            self.cfg,
+        )
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.state[:] = (0.0, 0.0, 0.0, UNDESIGNED)  # design the low-pass on the first sample
+        self.coef[:] = 0.0
+
+    def process(self, start: int, n: int) -> None:
+        forces, speeds = self._controls(n)
+        self._kernel(self.out, n, forces, speeds, self.prof, self.state, self.coef, self.cfg)
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), "state": self.state, "coef": self.coef}
+
+
+@register
+class Scrape(NeedleContact):
+    """Scraping/sliding force: a needle reading a looped fractal surface profile.
+
+    The phonograph-needle model of FoleyAutomatic (van den Doel, Kry & Pai, SIGGRAPH 2001)
+    and JASS ``ContactForce.setSlideProperties``. The profile h (m; 1/k^beta fractal noise
+    of RMS ``roughness``, or a given one) is read at the slip speed, ``speed / (dx fs)``
+    points per sample (linear or cubic interpolation), so its spectrum scales with speed.
+    Optionally a second-order Butterworth low-pass at fc = |v| / ``patch`` (a fixed
+    spatial cutoff of 1/patch cycles per m) models the smoothing by the contact patch.
+
+    Output force (N): F_out = stiffness * s(F, v) * h_lp(x(t)), s the amplitude law of
+    ugens/scrape.py (sqrt(F v / (f_ref v_ref)) by default): RMS = stiffness * roughness
+    at the reference contact. The profile must be fine enough for the top speed: content
+    above fs/2 aliases once |v| > dx fs (FoleyAutomatic: resolution v_max / fs; the
+    default dx = 0.03 mm gives 1.44 m/s at 48 kHz).
+    """
+
+    type_name = "Scrape"
+    param_specs = {
+        **contact_specs(),
+        **profile_specs(beta=1.0, roughness=5e-6, dx=3e-5, length=2**16, k_low=100.0),
+        "stiffness": ParamSpec(
+            "float",
+            1e5,
+            low=0.0,
+            high=1e12,
+            unit="N/m",
+            fixed=True,
+            doc="contact stiffness: force per m of profile height at the reference contact",
+        ),
+        "patch": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=1.0,
+            unit="m",
+            fixed=True,
+            doc="contact patch size: low-pass at |v| / patch Hz (0: no low-pass)",
+        ),
+        **law_specs(),
+    }
+
+    def cutoff_per_speed(self) -> float:
+        """kc (Hz per m/s) of the speed-dependent low-pass; 0 for none."""
+        patch = self.values["patch"]
+        return 1.0 / patch if patch > 0 else 0.0
+
+
+@register
+class ResonantScrape(ContactControls):
+    """Scraping force with a speed-dependent pitch: JASS ``ARContactForce``.
+
+    Seeded white noise (unit RMS, splitmix64 per sample) through a resonator whose centre
+    frequency is linear in speed, f = f0 + slope |v| (clamped to [0.5 Hz, 0.45 fs]), and
+    whose decay rate (half the -3 dB bandwidth in rad/s; bandwidth ~ d / pi Hz) grows with
+    speed, d = d0 + d_slope |v| (JASS: damping maxARd v / vmax). The resonator
+    H(z) = g (1 - z^-2) / (1 - 2 R cos(theta) z^-1 + R^2 z^-2), R = exp(-d / fs),
+    g = sqrt((1 - R^2) / 2), has unit white-noise power gain at every centre and bandwidth:
+    with its zeros at z = +-1 (Steiglitz's constant-gain resonator) the sum of its squared
+    impulse response is 2 / (1 - R^2) times g^2 whatever theta. So the output force has
+    RMS gain * s(F, v) (N) at steady speed.
+    """
+
+    type_name = "ResonantScrape"
+    param_specs = {
+        **contact_specs("slip speed (its magnitude tunes the resonance)"),
+        "f0": ParamSpec(
+            "float", 300.0, low=0.0, high=1e5, unit="Hz", fixed=True, doc="centre frequency at zero speed"
+        ),
+        "slope": ParamSpec(
+            "float",
+            2000.0,
+            low=-1e6,
+            high=1e6,
+            unit="Hz s/m",
+            fixed=True,
+            doc="centre frequency increase per m/s",
+        ),
+        "damping": ParamSpec(
+            "float",
+            200.0,
+            low=0.0,
+            low_open=True,
+            high=1e6,
+            unit="1/s",
+            fixed=True,
+            doc="decay rate d0 of the resonance at zero speed (bandwidth ~ d / pi Hz)",
+        ),
+        "damping_slope": ParamSpec(
+            "float", 500.0, low=0.0, high=1e7, unit="1/m", fixed=True, doc="decay-rate increase per m/s"
+        ),
+        "gain": ParamSpec(
+            "float", 1.0, low=0.0, high=1e6, unit="N", fixed=True, doc="RMS force at the reference contact"
+        ),
+        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        **law_specs(),
+    }
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        v, fs = self.values, self.sample_rate
+        law, inv_ref, min_speed = self._law_config()
+        self.cfg = np.array(
+            [
+                v["f0"],
+                v["slope"],
+                v["damping"],
+                v["damping_slope"],
+                1.0 / fs,
+                NYQUIST_FRACTION * fs,
+                v["gain"],
+                law,
+                inv_ref,
+                min_speed,
+            ]
+        )
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.state = np.zeros(8)
+        self._kernel = specialise(
+            resonant_noise, self.out, 0, self._forces, self._speeds, self.rng, self.state, self.cfg
+        )
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.rng[0] = self.values["seed"]
+        self.state[:] = 0.0
+        self.state[4] = UNDESIGNED  # design the resonator on the first sample
+
+    def process(self, start: int, n: int) -> None:
+        forces, speeds = self._controls(n)
+        self._kernel(self.out, n, forces, speeds, self.rng, self.state, self.cfg)
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), "rng": self.rng, "state": self.state}
