@@ -5,6 +5,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
@@ -56,12 +57,9 @@ class Gain(UGen):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def mix(inputs, gains, out, n):
+def accumulate(x, out, n, gain):
     for i in range(n):
-        s = 0.0
-        for j in range(len(inputs)):
-            s += gains[j] * inputs[j][i]
-        out[i] = s
+        out[i] += gain * x[i]
 
 
 @register
@@ -78,16 +76,18 @@ class Mixer(UGen):
         if gains is None:
             gains = np.ones(len(names))
         if len(gains) != len(names):
-            from jassy.errors import PatchError
-
             raise PatchError(
                 f"nodes.{self.name}.gains: expected {len(names)} gains (one per input), got {len(gains)}"
             )
-        self._gains = np.asarray(gains, dtype=np.float64)
-        self._inputs = nb.typed.List([self.sources[k].out for k in names])
+        self._terms = [(self.sources[k], float(g)) for k, g in zip(names, gains, strict=True)]
+        self._first = specialise(scale, self.out, self.out, 0, 0.0)
+        self._add = specialise(accumulate, self.out, self.out, 0, 0.0)
 
     def process(self, start: int, n: int) -> None:
-        mix(self._inputs, self._gains, self.out, n)
+        (src, gain), *rest = self._terms
+        self._first(src.out, self.out, n, gain)
+        for src, gain in rest:
+            self._add(src.out, self.out, n, gain)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
