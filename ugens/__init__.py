@@ -6,9 +6,11 @@ from ugens.dynamics import Limiter
 from ugens.envelope import Envelope
 from ugens.filters import Biquad, OnePole
 from ugens.impact import ImpactForce
+from ugens.impact_train import ImpactTrain
 from ugens.mix import Gain, Mixer, Multiply
 from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
+from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape

@@ -129,31 +129,39 @@ def flush_silent(y1, y2, active, floor):
     return last
 
 
-#: Silent modes are looked for once per this many frames of the clock.
+#: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor):
-    """One sub-block without ramps: excite all modes if there is input, else run the
-    audible ones and, each time the clock crosses a multiple of FLUSH_PERIOD, drop those
-    that fell silent. bank rows: c1, c2, g, y1, y2; meta[0] = active mode count, meta[2] =
-    the most modes that may be active (all, or the anytime budget's share)."""
-    excited = False
-    for i in range(n):
-        if force[i] != 0.0:
-            excited = True
-            break
-    if excited:
-        meta[0] = meta[2]
-    active = meta[0]
-    if active == 0:
-        for i in range(n):
-            out[i] = 0.0
-        return
-    resonate(force, out, n, bank[0], bank[1], bank[2], bank[3], bank[4], active)
-    if not excited and (start + n) // FLUSH_PERIOD != start // FLUSH_PERIOD:
-        meta[0] = flush_silent(bank[3], bank[4], active, floor)
+    """One sub-block without ramps. bank rows: c1, c2, g, y1, y2; meta[0] = active mode
+    count, meta[2] = the most modes that may be active (all, or the anytime budget's share).
+
+    The sub-block is cut at multiples of FLUSH_PERIOD on the clock. In each piece, any
+    input activates every allowed mode (the inactive ones hold exact zeros, so when they
+    start does not matter); at each multiple, modes whose state fell below ``floor`` are
+    zeroed and the active count shrinks to the last audible mode. The flush frames do not
+    depend on the block size, so neither does the output."""
+    i = 0
+    while i < n:
+        frame = start + i
+        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        f = force[i : i + m]
+        o = out[i : i + m]
+        for j in range(m):
+            if f[j] != 0.0:
+                meta[0] = meta[2]
+                break
+        active = meta[0]
+        if active == 0:
+            for j in range(m):
+                o[j] = 0.0
+        else:
+            resonate(f, o, m, bank[0], bank[1], bank[2], bank[3], bank[4], active)
+        i += m
+        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
+            meta[0] = flush_silent(bank[3], bank[4], active, floor)
 
 
 def design(frequencies, decays, sample_rate):
