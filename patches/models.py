@@ -80,16 +80,3 @@ def free_bar_model(
 
 
 SHIPPED = {"bell_model.toml": bell_model, "bar_model.toml": free_bar_model}
-
-
-def main() -> None:
-    """Regenerate the shipped model files: ``python -m patches.models``."""
-    from pathlib import Path
-
-    here = Path(__file__).parent
-    for filename, builder in SHIPPED.items():
-        builder().save(here / filename)
-
-
-if __name__ == "__main__":
-    main()

@@ -69,16 +69,3 @@ def plate_model(
 
 
 SHIPPED = {"glass_plate_model.toml": plate_model}
-
-
-def main() -> None:
-    """Regenerate the shipped model files: ``python -m patches.models_impacts``."""
-    from pathlib import Path
-
-    here = Path(__file__).parent
-    for filename, builder in SHIPPED.items():
-        builder().save(here / filename)
-
-
-if __name__ == "__main__":
-    main()

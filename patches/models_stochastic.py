@@ -189,16 +189,3 @@ def wok_model(
 
 
 SHIPPED = {"paper_sheet_model.toml": paper_sheet_model, "wok_model.toml": wok_model}
-
-
-def main() -> None:
-    """Regenerate the shipped model files: ``python -m patches.models_stochastic``."""
-    from pathlib import Path
-
-    here = Path(__file__).parent
-    for filename, builder in SHIPPED.items():
-        builder().save(here / filename)
-
-
-if __name__ == "__main__":
-    main()

@@ -22,8 +22,6 @@ factor eta (internal friction) plus a constant d0 (air and supports).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from jassy.modal_model import ModalModel
@@ -117,14 +115,3 @@ def wood_board_model() -> ModalModel:
 
 #: Shipped model files -> builders.
 SHIPPED = {"steel_plate_model.toml": steel_plate_model, "wood_board_model.toml": wood_board_model}
-
-
-def write_models(folder: Path | None = None) -> None:
-    """Write the shipped model files (next to this module by default)."""
-    folder = Path(__file__).parent if folder is None else Path(folder)
-    for filename, builder in SHIPPED.items():
-        builder().save(folder / filename)
-
-
-if __name__ == "__main__":
-    write_models()

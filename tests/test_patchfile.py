@@ -9,7 +9,7 @@ from scipy.optimize import brentq
 from jassy import PatchError, render
 from jassy.modal_model import ModalModel
 from jassy.patchfile import builtin_patches, load_patch
-from patches.models import SHIPPED, free_bar_model
+from patches.models import free_bar_model
 
 GOOD = """
 [patch]
@@ -154,12 +154,17 @@ def test_shipped_models_are_the_builders_output():
     from pathlib import Path
 
     import patches
+    from patches.shipped import shipped_models
 
-    for filename, builder in SHIPPED.items():
+    files = {p.name for p in Path(patches.__file__).parent.glob("*_model.toml")}
+    assert files == set(shipped_models())  # every shipped model file has its builder
+    for filename, builder in shipped_models().items():
         shipped = ModalModel.load(Path(patches.__file__).parent / filename)
         built = builder()
         np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-15)
+        np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-15)
         np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15)
+        assert shipped.points == built.points
 
 
 def test_bar_model_matches_euler_bernoulli():

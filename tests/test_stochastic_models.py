@@ -14,7 +14,7 @@ from scipy.linalg import eigh
 
 from jassy import Event, Graph, ModalModel, PatchError, render
 from jassy.patchfile import load_patch
-from patches.models_stochastic import SHIPPED, free_plate_roots, paper_sheet_model
+from patches.models_stochastic import free_plate_roots, paper_sheet_model
 from ugens.bubbles import Bubble, BubbleStream, bubble_decay
 from ugens.stochastic import Bounce, Break, Crumple
 
@@ -405,17 +405,6 @@ def test_paper_sheet_modes_are_simply_supported_plate_modes():
     assert model.n_modes <= 300 and np.all(model.gains >= 0)
 
 
-def test_shipped_models_are_the_builders_output():
-    here = Path(__file__).parents[1] / "patches"
-    for filename, builder in SHIPPED.items():
-        shipped, built = ModalModel.load(here / filename), builder()
-        np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-15)
-        np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-15)
-        np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15)
-        assert shipped.points == built.points
-
-
-# -------------------------------------------------------------------------- patches
 @pytest.fixture(scope="module")
 def rendered():
     out = {}

@@ -17,7 +17,7 @@ from scipy import signal
 from jassy import ContactTrack, Event, Graph, ModalModel, PatchError, render
 from jassy.events import track_events
 from jassy.patchfile import load_patch
-from patches.models_surface import SHIPPED, ss_plate_model
+from patches.models_surface import ss_plate_model
 from ugens.mix import Mixer
 from ugens.modal import ModalBank
 from ugens.noise import WhiteNoise
@@ -369,20 +369,6 @@ def test_contact_track_drives_force_and_speed():
 # -------------------------------------------------------------------------------- patches
 def segment(x, t0, t1):
     return x[int(t0 * FS) : int(t1 * FS)]
-
-
-def test_shipped_surface_models_are_the_builders_output():
-    from pathlib import Path
-
-    import patches
-
-    for filename, builder in SHIPPED.items():
-        shipped = ModalModel.load(Path(patches.__file__).parent / filename)
-        built = builder()
-        np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-15)
-        np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-15)
-        np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15)
-        assert built.n_modes <= 300
 
 
 def test_plate_model_matches_kirchhoff_formula():
