@@ -178,8 +178,36 @@ def design(frequencies, decays, sample_rate):
     return c1, c2, s
 
 
+class ModelParams:
+    """Validation of a ``model`` param (a ModalModel) and a ``location`` param (checked
+    against the model), for ugens that own a modal resonator. With ``driving_point``,
+    the gains at the location must be >= 0 (a contact's driving-point response)."""
+
+    driving_point = False
+
+    def check_value(self, spec: ParamSpec, value: Any, where: str) -> Any:
+        if spec.kind == "model":
+            if not isinstance(value, ModalModel):
+                raise PatchError(f"{where}: expected a ModalModel, got {value!r}")
+            return value
+        if spec.kind == "location":
+            loc = parse_location(value, where)
+            model = self.values.get("model")
+            if model is not None:
+                model.check_location(loc, where)
+                gains = model.gains_at(loc)
+                if self.driving_point and np.any(gains < 0):
+                    k = int(np.argmax(gains < 0))
+                    raise PatchError(
+                        f"{where}: the model's gain of mode {k} here is {gains[k]:g} < 0; a contact needs "
+                        "the driving-point response (gains >= 0, e.g. squared mode shapes / (M w))"
+                    )
+            return loc
+        return super().check_value(spec, value, where)
+
+
 @register
-class ModalBank(UGen):
+class ModalBank(ModelParams, UGen):
     """Modal resonator bank (JASS ModalObjectWithOneContact) driven by a force input.
 
     Output for a unit impulse of force at location p: sum_k a[p,k] e^{-d_k t} sin(2 pi f_k t).
@@ -213,19 +241,6 @@ class ModalBank(UGen):
             params.setdefault("model", sources[0])
             sources = sources[1:]
         super().__init__(*sources, name=name, where=where, **params)
-
-    def check_value(self, spec: ParamSpec, value: Any, where: str) -> Any:
-        if spec.kind == "model":
-            if not isinstance(value, ModalModel):
-                raise PatchError(f"{where}: expected a ModalModel, got {value!r}")
-            return value
-        if spec.kind == "location":
-            loc = parse_location(value, where)
-            model = self.values.get("model")
-            if model is not None:
-                model.check_location(loc, where)
-            return loc
-        return super().check_value(spec, value, where)
 
     @property
     def model(self) -> ModalModel:

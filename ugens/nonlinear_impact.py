@@ -59,11 +59,12 @@ import numpy as np
 
 from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
-from jassy.modal_model import ModalModel, parse_location
+from jassy.modal_model import ModalModel
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
+from ugens.modal import ModelParams
 
 # hammer array: position x_h, velocity v_h, compression x_n at the current instant, force of
 # the last sample (not yet applied to the stored mode states), energy E_n, active flag,
@@ -366,31 +367,6 @@ def design(frequencies, decays, gains, sample_rate):
     return coef
 
 
-class ModelParams:
-    """Validation of ``model`` (a ModalModel) and ``location`` (checked against the model,
-    with non-negative gains: a driving point) params, as ModalBank.check_value."""
-
-    def check_value(self, spec: ParamSpec, value: Any, where: str) -> Any:
-        if spec.kind == "model":
-            if not isinstance(value, ModalModel):
-                raise PatchError(f"{where}: expected a ModalModel, got {value!r}")
-            return value
-        if spec.kind == "location":
-            loc = parse_location(value, where)
-            model = self.values.get("model")
-            if model is not None:
-                model.check_location(loc, where)
-                gains = model.gains_at(loc)
-                if np.any(gains < 0):
-                    k = int(np.argmax(gains < 0))
-                    raise PatchError(
-                        f"{where}: the model's gain of mode {k} here is {gains[k]:g} < 0; a contact needs "
-                        "the driving-point response (gains >= 0, e.g. squared mode shapes / (M w))"
-                    )
-            return loc
-        return super().check_value(spec, value, where)
-
-
 @register
 class HuntCrossleyImpact(ModelParams, UGen):
     """Hammer (mass m) striking a modal resonator: Hunt-Crossley force k x^alpha (1 + lambda v).
@@ -403,6 +379,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     type_name = "HuntCrossleyImpact"
     outputs = ("force", "energy")
+    driving_point = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
         "location": ParamSpec("location", 0, doc="contact location: vertex, point name or barycentric"),
