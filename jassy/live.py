@@ -2,13 +2,14 @@
 callback is a numba ``@cfunc`` that only copies frames, so it never takes the GIL, never
 allocates and never compiles.
 
-Shared memory (one aligned block, see ``_layout``): an int64 header (positions and
-counters), float64 haptic state, float32 interleaved ring frames, and an optional monitor:
-a float32 ring where the callback keeps a copy of what it sent to the device, with an
-int64 ring of the rendered frame each output frame came from (-1 for silence inserted on
-an underrun); tests and benchmarks read the true output from it. Single producer (``_ring_write``, publishes the
-write position after the frames) and single consumer (the callback, publishes the read
-position after reading); positions only grow, so ``write - read`` is the fill level.
+Shared memory (one anonymous mmap, laid out by the slot constants below): an int64 header
+(positions, counters, control flags), float64 haptic state, float32 interleaved ring
+frames, and an optional monitor: a float32 ring where the callback keeps a copy of what it
+sent to the device, with an int64 ring of the rendered frame each output frame came from
+(-1 for silence inserted on an underrun); tests and benchmarks read the true output from
+it. Single producer (``_ring_write`` publishes the write position after the frames) and
+single consumer (the callback publishes the read position after reading); positions only
+grow, so ``write - read`` is the fill level.
 
 The haptic channels are made safe in the callback itself, the last stage before the
 device: |force| clamp, slew-rate limit, and on a stall (ring empty) a linear fade of the

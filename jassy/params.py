@@ -165,3 +165,30 @@ class Smoothed:
         ramp_fill(self.ramp, out, n)
         self.sync()
         return out[:n]
+
+
+class Control:
+    """A smoothed control's per-sample values for the kernels.
+
+    While the control is steady its buffer holds the value throughout and is not
+    rewritten on every block (the common case costs nothing).
+    """
+
+    __slots__ = ("buffer", "held", "ramp")
+
+    def __init__(self, ramp: Smoothed, size: int):
+        self.ramp = ramp
+        self.buffer = np.zeros(size)
+        self.held: float | None = None
+
+    def values(self, n: int) -> np.ndarray:
+        """Values for the next n samples (advances the ramp); read buffer[:n]."""
+        ramp = self.ramp
+        if ramp.steady:
+            if self.held != ramp.value:
+                self.buffer[:] = ramp.value
+                self.held = ramp.value
+        else:
+            ramp.fill(self.buffer, n)
+            self.held = None
+        return self.buffer

@@ -16,6 +16,7 @@ from jassy.modal_model import ModalModel
 MODEL_MODULES = (
     "patches.models",
     "patches.models_impacts",
+    "patches.models_machines",
     "patches.models_stochastic",
     "patches.models_surface",
 )

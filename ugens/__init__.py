@@ -3,8 +3,10 @@
 from ugens.bubbles import Bubble, BubbleStream
 from ugens.delay import Delay
 from ugens.dynamics import Limiter
+from ugens.engine import Engine
 from ugens.envelope import Envelope
 from ugens.filters import Biquad, OnePole
+from ugens.friction import Friction
 from ugens.impact import ImpactForce
 from ugens.impact_train import ImpactTrain
 from ugens.mix import Gain, Mixer, Multiply
@@ -24,8 +26,10 @@ __all__ = [
     "BubbleStream",
     "Crumple",
     "Delay",
+    "Engine",
     "Envelope",
     "FractalNoise",
+    "Friction",
     "Gain",
     "HuntCrossleyImpact",
     "ImpactForce",

@@ -1,0 +1,348 @@
+"""Engine: firing pulses of a combustion engine through an exhaust-pipe waveguide.
+
+Firing. A phase accumulator counts firings: it advances by f_fire / fs per sample with
+
+    f_fire = rpm / 60 * cylinders / 2   (four strokes: each cylinder fires every 2 turns)
+    f_fire = rpm / 60 * cylinders       (two strokes),
+
+rpm smoothed per sample, so rpm ramps bend the pitch without any phase jump. Each
+wrap of the phase is a firing at its exact fractional sample time. Per firing, three
+draws of the seeded splitmix64 stream (always three, so the stream does not depend on
+the settings) give: a timing jitter (a delay of up to ``irregularity`` * JITTER of the
+firing interval), an amplitude factor 1 + ``irregularity`` * AMPLITUDE_JITTER * U[-1, 1),
+and a misfire (amplitude 0) with probability ``misfire`` (JASS EngineApplet
+"Beatupness"). The amplitude is proportional to ``throttle``.
+
+Pulse. Each firing releases an exhaust-gas pressure pulse p(t) = A (t/tau) e^{1 - t/tau}
+(peak A at t = tau = ``pulse`` s: a fast rise as the exhaust valve opens, then a decaying
+blow-down), evaluated at its sub-sample onset. The sum of all pulses is computed by an
+exact two-state recursion (S1 = sum A r^(n - t_k), S2 = sum A (n - t_k) r^(n - t_k),
+r = e^{-1/(tau fs)}), so overlapping pulses cost nothing extra.
+
+Exhaust (a digital waveguide, the design of SDT ``motor~``, Baldan et al., SIVE 2015, cut
+down to one pipe). The pulse train enters the forward pressure wave at the port end of a
+pipe of length L = ``exhaust_length``; waves travel L / c one way (fractional delay,
+linear interpolation). At the open end the reflection is R(z) = -(1 - p) / (1 - p z^-1)
+(an inverting one-pole low-pass: |R| ~ 1 - (ka)^2 / 2 for an unflanged pipe of radius a,
+Levine & Schwinger, so the cut-off is c / (2 pi a)); at the port end the backward wave
+reflects with ``port_reflection`` (< 1: the loop is stable). The pipe resonates near
+(2m - 1) c / (4 L). The radiated sound is the wave transmitted at the open end,
+(1 + R) p+ = p (1 - z^-1) / (1 - p z^-1) p+: a high-pass with a zero at DC, which
+removes the mean exhaust pressure.
+
+Output: sound pressure (unitless), scaled so that throttle 1 at 3000 rpm with no
+irregularity peaks at 0.5 (the scale is measured at prepare time by running the kernel).
+Extra output ``pulses``: the port pressure pulse train on the same scale. Not modelled:
+intake, cylinder waveguides, mufflers, engine-block vibration, backfire (SDT ``motor~``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import PatchError
+from jassy.jit import specialise
+from jassy.params import Control, ParamSpec
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.kernels import FASTMATH
+from ugens.noise import uniform
+
+#: Largest firing delay, as a fraction of the firing interval, at irregularity 1.
+JITTER = 0.25
+#: Largest relative amplitude deviation of a firing at irregularity 1.
+AMPLITUDE_JITTER = 0.5
+#: Reference operating point of the output scale: throttle 1 at this rpm peaks at PEAK.
+REFERENCE_RPM = 3000.0
+PEAK = 0.5
+#: Capacity of the queue of firings waiting for their (jittered) onset.
+QUEUE = 16
+
+# parameter vector layout
+_FS, _PER_REV, _IRR, _MIS, _R, _NORM, _DELAY, _PORT, _POLE, _GAIN = range(10)
+# float state layout
+_PHASE, _S1, _S2, _LP_BACK, _LP_OUT = range(5)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _tap(ring, w, delay):
+    """The ring's sample written ``delay`` (>= 1, fractional) samples before slot w."""
+    size = ring.size
+    d = int(delay)
+    frac = delay - d
+    i0 = w - d
+    if i0 < 0:
+        i0 += size
+    i1 = i0 - 1
+    if i1 < 0:
+        i1 += size
+    return (1.0 - frac) * ring[i0] + frac * ring[i1]
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, ring, par):
+    """n samples from absolute frame ``start``. st: float state (_PHASE..); queue rows:
+    (onset sample time, amplitude); ist = [queued firings, ring write slot]."""
+    fs = par[_FS]
+    per_rev = par[_PER_REV]
+    irr = par[_IRR]
+    mis = par[_MIS]
+    r = par[_R]
+    norm = par[_NORM]
+    delay = par[_DELAY]
+    port = par[_PORT]
+    pole = par[_POLE]
+    gain = par[_GAIN]
+    phase = st[_PHASE]
+    s1 = st[_S1]
+    s2 = st[_S2]
+    lp_back = st[_LP_BACK]
+    lp_out = st[_LP_OUT]
+    count = ist[0]
+    w = ist[1]
+    s = rng[0]
+    size = ring.size
+    log_r = math.log(r)
+    for i in range(n):
+        t = float(start + i)
+        inc = rpms[i] * per_rev / (60.0 * fs)
+        phase += inc
+        while phase >= 1.0:
+            phase -= 1.0
+            crossing = t - phase / inc
+            s, u1 = uniform(s)
+            s, u2 = uniform(s)
+            s, u3 = uniform(s)
+            amp = throttles[i] * (1.0 + irr * AMPLITUDE_JITTER * u2)
+            if 0.5 * (u3 + 1.0) < mis:
+                amp = 0.0
+            if count < queue.shape[0]:
+                queue[count, 0] = crossing + irr * JITTER * 0.5 * (u1 + 1.0) / inc
+                queue[count, 1] = amp
+                count += 1
+        # propagate the pulse sum to frame t, then start the pulses whose onset has come
+        s2 = r * (s2 + s1)
+        s1 = r * s1
+        k = 0
+        while k < count:
+            onset = queue[k, 0]
+            if onset <= t:
+                x = t - onset
+                e = queue[k, 1] * math.exp(x * log_r)
+                s1 += e
+                s2 += x * e
+                count -= 1
+                queue[k, 0] = queue[count, 0]
+                queue[k, 1] = queue[count, 1]
+            else:
+                k += 1
+        p = norm * s2
+        # exhaust waveguide: forward wave written at the port, read at the open end
+        back = _tap(ring, w, 2.0 * delay)
+        lp_back += (1.0 - pole) * (back - lp_back)
+        x_port = p - port * lp_back
+        ring[w] = x_port
+        w += 1
+        if w == size:
+            w = 0
+        front = _tap(ring, w, delay)
+        lp_out += (1.0 - pole) * (front - lp_out)
+        out[i] = gain * (front - lp_out)
+        pulses_out[i] = gain * p
+    st[_PHASE] = phase
+    st[_S1] = s1
+    st[_S2] = s2
+    st[_LP_BACK] = lp_back
+    st[_LP_OUT] = lp_out
+    ist[0] = count
+    ist[1] = w
+    rng[0] = s
+
+
+@register
+class Engine(UGen):
+    """Combustion engine: firing pulses of N cylinders (2 or 4 strokes) at ``rpm`` through
+    an exhaust-pipe waveguide (after SDT ``motor~``, Baldan et al., SIVE 2015, and the JASS
+    EngineApplet). Output: sound pressure, throttle 1 at 3000 rpm peaks at ~0.5."""
+
+    type_name = "Engine"
+    outputs = ("pulses",)
+    param_specs = {
+        "rpm": ParamSpec(
+            "float", 800.0, low=0.0, high=20000.0, unit="1/min", smooth=True, doc="crankshaft speed"
+        ),
+        "throttle": ParamSpec(
+            "float", 0.2, low=0.0, high=1.0, smooth=True, doc="firing amplitude (0 closed, 1 open)"
+        ),
+        "cylinders": ParamSpec("int", 4, low=1, high=16, fixed=True, doc="number of cylinders"),
+        "strokes": ParamSpec("int", 4, low=2, high=4, fixed=True, doc="2 or 4 strokes per cycle"),
+        "irregularity": ParamSpec(
+            "float", 0.1, low=0.0, high=1.0, doc="per-firing jitter of timing and amplitude (0: periodic)"
+        ),
+        "misfire": ParamSpec("float", 0.0, low=0.0, high=1.0, doc="probability that a firing fails"),
+        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "pulse": ParamSpec(
+            "float",
+            0.0015,
+            low=1e-5,
+            high=0.1,
+            unit="s",
+            fixed=True,
+            doc="rise time tau of a firing's pressure pulse (its peak)",
+        ),
+        "exhaust_length": ParamSpec(
+            "float", 1.2, low=0.0, low_open=True, high=50.0, unit="m", fixed=True, doc="exhaust pipe length"
+        ),
+        "c": ParamSpec(
+            "float",
+            450.0,
+            low=100.0,
+            high=5000.0,
+            unit="m/s",
+            fixed=True,
+            doc="speed of sound in the exhaust gas (~450 m/s at 500 K)",
+        ),
+        "radius": ParamSpec(
+            "float",
+            0.025,
+            low=0.0,
+            low_open=True,
+            high=1.0,
+            unit="m",
+            fixed=True,
+            doc="pipe radius: open-end reflection low-pass cut-off c / (2 pi radius)",
+        ),
+        "port_reflection": ParamSpec(
+            "float", 0.7, low=0.0, high=0.99, doc="reflection coefficient at the port (engine) end"
+        ),
+    }
+
+    def check_param(self, key: str, value: Any, where: str) -> Any:
+        value = super().check_param(key, value, where)
+        if key == "strokes" and value not in (2, 4):
+            raise PatchError(f"{where}: expected 2 or 4 strokes, got {value!r}")
+        return value
+
+    def _prepare(self) -> None:
+        v, fs = self.values, self.sample_rate
+        delay = v["exhaust_length"] / v["c"] * fs
+        if delay < 1.0:
+            raise PatchError(
+                f"nodes.{self.name}.exhaust_length: the pipe must be at least one sample long "
+                f"(c / fs = {v['c'] / fs:.3g} m at {fs:g} Hz), got {v['exhaust_length']!r} m"
+            )
+        self.st = np.zeros(5)
+        self.queue = np.zeros((QUEUE, 2))
+        self.ist = np.zeros(2, dtype=np.int64)
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.ring = np.zeros(int(math.ceil(2.0 * delay)) + 2)
+        self.par = np.zeros(10)
+        self.rpm = self.smoothed("rpm")
+        self.throttle = self.smoothed("throttle")
+        self._rpms = Control(self.rpm, self.max_block)
+        self._throttles = Control(self.throttle, self.max_block)
+        tau = v["pulse"] * fs
+        self.par[:] = (
+            fs,
+            v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
+            v["irregularity"],
+            v["misfire"],
+            math.exp(-1.0 / tau),
+            math.e / tau,
+            delay,
+            v["port_reflection"],
+            math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
+            1.0,
+        )
+        self.par[_GAIN] = PEAK / self._reference_peak()
+        self._run = specialise(
+            engine_run,
+            self.out,
+            self.out,
+            0,
+            0,
+            self._rpms.buffer,
+            self._throttles.buffer,
+            self.st,
+            self.queue,
+            self.ist,
+            self.rng,
+            self.ring,
+            self.par,
+        )
+
+    def _reference_peak(self) -> float:
+        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity."""
+        fs = self.sample_rate
+        par = self.par.copy()
+        par[_IRR] = 0.0
+        par[_MIS] = 0.0
+        n = int(0.6 * fs)
+        out, pulses = np.zeros(n), np.zeros(n)
+        engine_run(
+            out,
+            pulses,
+            0,
+            n,
+            np.full(n, REFERENCE_RPM),
+            np.ones(n),
+            np.zeros(5),
+            np.zeros((QUEUE, 2)),
+            np.zeros(2, dtype=np.int64),
+            np.zeros(1, dtype=np.uint64),
+            np.zeros_like(self.ring),
+            par,
+        )
+        peak = float(np.max(np.abs(out[n // 2 :])))
+        return peak if peak > 0.0 else 1.0
+
+    def _reset(self) -> None:
+        self.st[:] = 0.0
+        self.queue[:] = 0.0
+        self.ist[:] = 0
+        self.rng[0] = self.values["seed"]
+        self.ring[:] = 0.0
+        for ramp in (self.rpm, self.throttle):
+            ramp.set(ramp.target, 0, jump=True)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key in ("rpm", "throttle"):
+            getattr(self, key).set(value, self.ramp_samples(), jump)
+        elif key == "irregularity":
+            self.par[_IRR] = value
+        elif key == "misfire":
+            self.par[_MIS] = value
+        elif key == "port_reflection":
+            self.par[_PORT] = value
+
+    def process(self, start: int, n: int) -> None:
+        self._run(
+            self.out,
+            self.extra["pulses"],
+            start,
+            n,
+            self._rpms.values(n),
+            self._throttles.values(n),
+            self.st,
+            self.queue,
+            self.ist,
+            self.rng,
+            self.ring,
+            self.par,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "st": self.st,
+            "queue": self.queue,
+            "ist": self.ist,
+            "rng": self.rng,
+            "ring": self.ring,
+            "par": self.par,
+            "rpm": self.rpm.ramp,
+            "throttle": self.throttle.ramp,
+        }

@@ -1,0 +1,377 @@
+"""Friction: elasto-plastic (bristle) friction in a closed loop with a modal resonator.
+
+An exciter (bow, finger, hinge pin) moves at velocity ``speed`` (m/s) against the contact
+point of a modal resonator, pressed with normal force ``force`` (N). The relative velocity
+v = v_exciter - v_contact drives the mean bristle deflection z (m) of the elasto-plastic
+model (Dupont, Hayward, Armstrong & Altpeter, IEEE TAC 2002; Avanzini, Serafin &
+Rocchesso, IEEE TSAP 2005; SDT ``SDTFriction_ElastoPlastic``):
+
+    f_s = static * F_N,   f_c = dynamic * F_N,   f_ss(v) = f_c + (f_s - f_c) e^{-(v/v_s)^2}
+    z_ss(v) = sgn(v) f_ss(v) / sigma0,          z_ba = sgn(v) breakaway * f_c / sigma0
+    alpha(z, v) = 0 if sgn z != sgn v or |z| < |z_ba|; 1 if |z| > |z_ss|;
+                  1/2 + 1/2 sin(pi (z - (z_ss + z_ba)/2) / (z_ss - z_ba)) in between
+    dz/dt = v (1 - alpha(z, v) z / z_ss(v))
+    f = sigma0 z + sigma1 dz/dt + sigma2 v + sigma3 w,   w = u sqrt(|v| F_N),  u ~ U[-1, 1)
+
+and f pushes the resonator's contact point. In steady sliding z = z_ss and
+f = sgn(v) f_ss(v) + sigma2 v (Coulomb + Stribeck + viscous). Below the break-away
+deflection the contact is a pure spring-damper; between z_ba and z_ss it creeps only
+while it moves (dz/dt is proportional to v), so a constant load below f_s is held with
+no drift (true sticking, unlike the LuGre model).
+
+Resonator (the closed-loop convention of jassy): each mode obeys
+q_k'' + 2 d_k q_k' + (w_k^2 + d_k^2) q_k = a_k w_k f, the contact displacement is
+x_c = sum_k q_k (the main output, in m) and its modes are stepped with ModalBank's exact
+impulse-invariant recursion q_k[n] = c1 q_k[n-1] - c2 q_k[n-2] + g_k f[n] with
+g_k = a_k R_k sin(theta_k) / fs, so for the same force the output equals a ModalBank's.
+The gains a[p, k] at the contact are a driving-point response (force applied and motion
+observed at the same point): they must be >= 0, or the loop would create energy.
+
+Discretisation (per sample, no delay in the loop). The contact velocity is the mean
+velocity over the last sample, v_c[n] = (x_c[n] - x_c[n-1]) fs; with the resonator
+recursion it is affine in this sample's force, v_c = V_h + G_v f with
+G_v = sum_k a_k R_k sin(theta_k) >= 0 (the instantaneous admittance). The bristle uses
+backward Euler, z[n] = z[n-1] + T g(z[n], v[n]), and dz/dt = (z[n] - z[n-1]) / T in f.
+Eliminating f and v leaves one scalar equation in z[n],
+
+    R(z) = z - z[n-1] - T g(z, v(z)) = 0,   v(z) = (A - K z) / D,
+    K = G_v (sigma0 + sigma1 fs),  D = 1 + G_v sigma2,
+
+solved by Newton's method from z[n-1] with the analytic derivative (two iterations when
+sticking, where R is linear; two to four when sliding); if Newton stalls (dR/dz <= 0 at a
+fold of the Stribeck branch) a bracket is grown from z[n-1] until R changes sign (R -> +-inf
+as z -> +-inf because K >= 0, D >= 1) and closed by safeguarded Newton-bisection. Backward
+Euler is L-stable, so there is no step limit on sigma0, sigma1 or the bristle time
+constant f_ss / (sigma0 |v|): bristle dynamics faster than a sample are resolved as their
+quasi-static limit. (An explicit Euler step, as in the SDT, needs sigma0 |v| T / f_ss < 2;
+at the defaults, F_N = 1 N and a slip velocity of 0.5 m/s at 48 kHz it is 5.2: unstable.) The noise amplitude
+sqrt(|v| F_N) uses the previous sample's v (keeps R smooth). With F_N <= 1e-9 N the
+exciter is off the resonator: f = 0 and z = 0.
+
+Units: sigma0 N/m, sigma1 and sigma2 N s/m, sigma3 (``noise``) sqrt(N s/m) so that
+sigma3 w is in N. The SDT defaults (sigma0 = 1000, sigma1 = 10, sigma2 = 10) are in the
+SDT's own resonator units; the defaults here are scaled for a real string. A violin G
+string has wave impedance Z = sqrt(T mu) ~ 0.35 N s/m, so the bow sees 2 Z ~ 0.7 N s/m:
+sigma0 = 1e5 N/m (z_ss ~ 8 um at F_N = 1 N) relaxes through it in 2 Z / sigma0 ~ 7 us,
+a third of a sample, so the bow holds the string firmly while sticking (in
+bowed-string.toml the slip lasts 16 % of the period, Helmholtz motion's ideal being the
+bowing point, 12 %); sigma1 = 0.02 and sigma2 = 0.01
+N s/m stay far below 2 Z, so the Stribeck drop, not viscosity, shapes the motion.
+Location changes during a render take effect at once (the gains jump; the state is kept).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from jassy.errors import ModelError, PatchError
+from jassy.jit import specialise
+from jassy.modal_model import ModalModel
+from jassy.params import Control, ParamSpec
+from jassy.registry import register
+from jassy.ugen import UGen
+from ugens.kernels import FASTMATH
+from ugens.modal import ModelParams, design
+from ugens.noise import uniform
+
+#: Normal forces at or below this (N) mean no contact (keeps z_ss representable).
+MIN_CONTACT = 1e-9
+#: Floor of f_ss relative to f_c (static = 0 would make z_ss vanish at v = 0).
+FSS_FLOOR = 1e-3
+#: Newton iterations before the bracketed fallback.
+NEWTON_ITERATIONS = 8
+#: Residual tolerance, relative to the deflection scale (f_s + f_c) / sigma0 + |z|.
+RELATIVE_TOLERANCE = 1e-11
+
+# layout of the parameter vector passed to the kernel
+_FS, _S0, _S1, _S2, _S3, _MUS, _MUD, _VS, _KBA, _G = range(10)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
+    """R(z) = z - z0 - T g(z, v(z)) and dR/dz, with v(z) = (A - K z) / D and
+    g = dz/dt of the elasto-plastic bristle (magnitudes f_s, f_c in N, z_ba in m)."""
+    v = (A - K * z) / D
+    if v == 0.0:
+        g = 0.0
+        dgdz = 0.0
+        dgdv = 1.0
+    else:
+        a = abs(v)
+        sgn = 1.0 if v > 0.0 else -1.0
+        x = a / v_s
+        e = math.exp(-x * x)
+        fss = f_c + (f_s - f_c) * e
+        floored = fss < FSS_FLOOR * f_c
+        z_ss = (FSS_FLOOR * f_c if floored else fss) / s0
+        m = z * sgn  # deflection along the sliding direction (negative: opposite sign)
+        if m < z_ss and m < z_ba:
+            g = v
+            dgdz = 0.0
+            dgdv = 1.0
+        else:
+            if m >= z_ss:
+                alpha = 1.0
+                da_dm = 0.0
+                da_dzss = 0.0
+            else:
+                width = z_ss - z_ba
+                phi = math.pi * (m - 0.5 * (z_ss + z_ba)) / width
+                alpha = 0.5 + 0.5 * math.sin(phi)
+                c = 0.5 * math.pi * math.cos(phi) / width
+                da_dm = c
+                da_dzss = c * (z_ba - m) / width
+            h = alpha * m / z_ss
+            g = v * (1.0 - h)
+            dgdz = -a * (da_dm * m + alpha) / z_ss
+            dh_dzss = (m / z_ss) * (da_dzss * z_ss - alpha) / z_ss
+            dzss_da = 0.0 if floored else -2.0 * a / (v_s * v_s) * (f_s - f_c) * e / s0
+            dgdv = (1.0 - h) - a * dh_dzss * dzss_da
+    r = z - z0 - T * g
+    dr = 1.0 - T * (dgdz - dgdv * K / D)
+    return r, dr
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
+    """The bristle deflection z[n] solving R(z) = 0 (see the module docstring)."""
+    tol = RELATIVE_TOLERANCE * ((f_s + f_c) / s0 + abs(z0))
+    z = z0
+    for _ in range(NEWTON_ITERATIONS):
+        r, dr = bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        if abs(r) <= tol:
+            return z
+        if not dr > 0.0:
+            break
+        z -= r / dr
+    # fallback: grow a bracket from z0 in the direction of the root, then Newton-bisection
+    r0, _ = bristle_residual(z0, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+    if r0 == 0.0:
+        return z0
+    step = T * abs(A) / D + 1e-3 * ((f_s + f_c) / s0 + abs(z0)) + 1e-300
+    direction = 1.0 if r0 < 0.0 else -1.0
+    near = z0
+    far = z0 + direction * step
+    for _ in range(2000):
+        rf, _ = bristle_residual(far, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        if rf * direction >= 0.0:
+            break
+        near = far
+        step *= 2.0
+        far = z0 + direction * step
+    lo = min(near, far)
+    hi = max(near, far)
+    z = 0.5 * (lo + hi)
+    for _ in range(200):
+        r, dr = bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        if abs(r) <= tol or hi - lo <= 1e-15 * (abs(lo) + abs(hi)):
+            return z
+        if r < 0.0:
+            lo = z
+        else:
+            hi = z
+        znew = z - r / dr if dr > 0.0 else lo - 1.0
+        z = znew if lo < znew < hi else 0.5 * (lo + hi)
+    return z
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def friction_run(out, fout, n, speeds, normals, modes, h, state, rng, par):
+    """n samples of the closed loop. modes rows: c1, c2, g, y1, y2; h: scratch per mode;
+    state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
+    fs = par[_FS]
+    T = 1.0 / fs
+    s0 = par[_S0]
+    s1 = par[_S1]
+    s2 = par[_S2]
+    s3 = par[_S3]
+    G = par[_G]
+    Gv = G * fs
+    c1 = modes[0]
+    c2 = modes[1]
+    g = modes[2]
+    y1 = modes[3]
+    y2 = modes[4]
+    nm = c1.shape[0]
+    z = state[0]
+    x_prev = state[1]
+    v_prev = state[2]
+    s = rng[0]
+    for i in range(n):
+        xh = 0.0
+        for k in range(nm):
+            hk = c1[k] * y1[k] - c2[k] * y2[k]
+            h[k] = hk
+            xh += hk
+        s, u = uniform(s)
+        fn = normals[i]
+        vb = speeds[i]
+        if fn > MIN_CONTACT:
+            f_s = par[_MUS] * fn
+            f_c = par[_MUD] * fn
+            z_ba = par[_KBA] * f_c / s0
+            w = s3 * u * math.sqrt(abs(v_prev) * fn)
+            z0 = z
+            D = 1.0 + Gv * s2
+            K = Gv * (s0 + s1 * fs)
+            A = vb - (xh - x_prev) * fs + Gv * (s1 * fs * z0 - w)
+            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, par[_VS], z_ba)
+            v = (A - K * z) / D
+            f = s0 * z + s1 * fs * (z - z0) + s2 * v + w
+        else:
+            z = 0.0
+            f = 0.0
+            v = vb - (xh - x_prev) * fs
+        for k in range(nm):
+            y2[k] = y1[k]
+            y1[k] = h[k] + g[k] * f
+        x = xh + G * f
+        out[i] = x
+        fout[i] = f
+        x_prev = x
+        v_prev = v
+    state[0] = z
+    state[1] = x_prev
+    state[2] = v_prev
+    rng[0] = s
+
+
+def _coef(default, low, high, unit, doc, low_open=False):
+    return ParamSpec("float", default, low=low, high=high, low_open=low_open, unit=unit, doc=doc)
+
+
+@register
+class Friction(ModelParams, UGen):
+    """Elasto-plastic bristle friction driving its own modal resonator (bow on a string,
+    finger on a glass, a squeaking hinge). Dupont et al., IEEE TAC 2002; Avanzini, Serafin
+    & Rocchesso, IEEE TSAP 2005; SDT ``friction~``.
+
+    Output: the resonator's contact displacement (m). Extra output ``force``: the friction
+    force on the resonator (N, positive along +speed).
+    """
+
+    type_name = "Friction"
+    driving_point = True
+    outputs = ("force",)
+    param_specs = {
+        "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
+        "location": ParamSpec("location", 0, doc="contact location on the model (gains >= 0)"),
+        "force": ParamSpec(
+            "float", 0.0, low=0.0, high=1e4, unit="N", smooth=True, doc="normal force F_N (0: no contact)"
+        ),
+        "speed": ParamSpec(
+            "float", 0.0, low=-100.0, high=100.0, unit="m/s", smooth=True, doc="exciter velocity"
+        ),
+        "static": _coef(0.8, 0.0, 10.0, "", "static friction coefficient k_s (f_s = k_s F_N)"),
+        "dynamic": _coef(
+            0.2, 0.0, 10.0, "", "dynamic (Coulomb) coefficient k_d (f_c = k_d F_N)", low_open=True
+        ),
+        "stribeck": _coef(0.1, 0.0, 100.0, "m/s", "Stribeck velocity v_s", low_open=True),
+        "breakaway": _coef(0.1, 0.0, 0.99, "", "break-away deflection k_ba, relative to f_c / sigma0"),
+        "sigma0": _coef(1e5, 0.0, 1e9, "N/m", "bristle stiffness", low_open=True),
+        "sigma1": _coef(0.02, 0.0, 1e4, "N s/m", "bristle damping"),
+        "sigma2": _coef(0.01, 0.0, 1e4, "N s/m", "viscous friction"),
+        "noise": _coef(0.0, 0.0, 1e3, "sqrt(N s/m)", "sigma3: roughness noise sigma3 u sqrt(|v| F_N)"),
+        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed of the noise"),
+    }
+
+    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
+        if sources and isinstance(sources[0], ModalModel):
+            params.setdefault("model", sources[0])
+            sources = sources[1:]
+        super().__init__(*sources, name=name, where=where, **params)
+
+    @property
+    def model(self) -> ModalModel:
+        return self.values["model"]
+
+    def _prepare(self) -> None:
+        try:
+            self.model.validate(self.sample_rate)
+        except ModelError as exc:
+            raise PatchError(f"nodes.{self.name}.model: {exc}") from None
+        self.check_param("location", self.values["location"], f"nodes.{self.name}.location")  # gains >= 0
+        self.modes = np.zeros((5, self.model.n_modes))  # c1, c2, g, y1, y2
+        self.scratch = np.zeros(self.model.n_modes)
+        self.state = np.zeros(3)  # z, x_prev, v_prev
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.par = np.zeros(10)
+        self.speed = self.smoothed("speed")
+        self.force = self.smoothed("force")
+        self._speeds = Control(self.speed, self.max_block)
+        self._forces = Control(self.force, self.max_block)
+        self._design()
+        self._run = specialise(
+            friction_run,
+            self.out,
+            self.out,
+            0,
+            self._speeds.buffer,
+            self._forces.buffer,
+            self.modes,
+            self.scratch,
+            self.state,
+            self.rng,
+            self.par,
+        )
+
+    def _design(self) -> None:
+        """Mode coefficients and the parameter vector from the current values."""
+        v, fs = self.values, self.sample_rate
+        c1, c2, s = design(self.model.frequencies, self.model.decays, fs)
+        self.modes[0] = c1
+        self.modes[1] = c2
+        self.modes[2] = s / fs * self.model.gains_at(v["location"])
+        self.par[:] = (
+            fs,
+            v["sigma0"],
+            v["sigma1"],
+            v["sigma2"],
+            v["noise"],
+            v["static"],
+            v["dynamic"],
+            v["stribeck"],
+            v["breakaway"],
+            float(np.sum(self.modes[2])),
+        )
+
+    def _reset(self) -> None:
+        self.modes[3:] = 0.0
+        self.state[:] = 0.0
+        self.rng[0] = self.values["seed"]
+        for ramp in (self.speed, self.force):
+            ramp.set(ramp.target, 0, jump=True)
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key in ("speed", "force"):
+            getattr(self, key).set(value, self.ramp_samples(), jump)
+        else:
+            self._design()
+
+    def process(self, start: int, n: int) -> None:
+        self._run(
+            self.out,
+            self.extra["force"],
+            n,
+            self._speeds.values(n),
+            self._forces.values(n),
+            self.modes,
+            self.scratch,
+            self.state,
+            self.rng,
+            self.par,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "modes": self.modes,
+            "state": self.state,
+            "rng": self.rng,
+            "speed": self.speed.ramp,
+            "force": self.force.ramp,
+            "par": self.par,
+        }
