@@ -15,6 +15,7 @@ from jassy.modal_model import ModalModel
 #: Modules that define ``SHIPPED = {file name: builder}``.
 MODEL_MODULES = (
     "patches.models",
+    "patches.models_bottle",
     "patches.models_impacts",
     "patches.models_machines",
     "patches.models_stochastic",

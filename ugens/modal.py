@@ -12,6 +12,10 @@ depend on the sample rate.) Coefficients are designed in float64 and the
 state is float64: float32 state fails the -60 dB accuracy bound for low, lightly damped
 modes (tests/test_modal_bank.py shows both).
 
+Parameter changes ramp the coefficients (c1, c2, g) linearly, as SuperCollider's Ringz
+does; along a ``freq_scale`` ramp it is therefore cos(theta), i.e. about f^2, that moves
+linearly.
+
 The kernel is vectorised across modes and unrolled four samples deep, so each mode's
 state and coefficients are loaded once per four samples. Modes are stored sorted by
 decay rate (slowest first); once the input is silent, modes whose state falls below
