@@ -16,6 +16,45 @@ from jassy.errors import JassyError
 DEFAULT_RATE = 48000
 
 
+#: Built-in scenes that run physics before rendering: name -> (module, function). The
+#: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
+SCENES = {"drill": ("patches.drill", "render_drill")}
+
+
+def _render_scene(args: argparse.Namespace) -> int:
+    import importlib
+
+    module, function = SCENES[args.patch]
+    render = getattr(importlib.import_module(module), function)
+    options = {}
+    for text in args.set or ():
+        key, sep, raw = text.partition("=")
+        if not sep or not key.strip():
+            raise JassyError(f"--set {text!r}: expected name=value for scene {args.patch!r}")
+        try:
+            options[key.strip()] = float(raw) if "." in raw or "e" in raw.lower() else int(raw)
+        except ValueError:
+            raise JassyError(f"--set {text!r}: expected a number") from None
+    kwargs = {"duration": args.duration} if args.duration else {}
+    summary = render(
+        args.output,
+        args.haptic,
+        args.csv,
+        sample_rate=args.sr or DEFAULT_RATE,
+        block=args.block,
+        **kwargs,
+        **options,
+    )
+    if not args.quiet:
+        print(
+            f"wrote {args.output}"
+            + (f", {args.haptic}" if args.haptic else "")
+            + (f", {args.csv}" if args.csv else "")
+            + f": {summary}"
+        )
+    return 0
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.files import audio_format
     from jassy.offline import OfflineEngine
@@ -24,6 +63,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     audio_format(args.output, args.format)  # bad output names fail before any work
     if args.block < 1:
         raise JassyError(f"--block: expected an integer >= 1, got {args.block}")
+    if args.patch in SCENES:
+        return _render_scene(args)
+    if args.csv:
+        raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
     patch = load_patch(args.patch, args.set or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration or patch.duration
@@ -138,6 +181,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("patches:")
     for name in sorted(builtin_patches()):
         print(f"  {name:<12} {load_patch(name).description}")
+    print("scenes (physics, then sound):")
+    for name in sorted(SCENES):
+        module, function = SCENES[name]
+        print(f"  {name:<12} {module}.{function}")
     print("ugens:")
     for name, cls in ugen_types().items():
         params = ", ".join(cls.param_specs)
@@ -179,6 +226,16 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from jassy import bench
 
+    if args.name == "batch":
+        from jassy.batch import bench_batch, print_bench
+
+        result = bench_batch(duration=1.0, repeats=1) if args.quick else bench_batch()
+        print(json.dumps(result, indent=2)) if args.json else print_bench(result)
+    if args.name == "burr":
+        from physics.burr.bench import bench_burr, print_burr
+
+        rows = bench_burr(n=128 if args.quick else 256)
+        print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
         result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
         print(json.dumps(result, indent=2) if args.json else "", end="")
@@ -235,6 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--haptic", metavar="FILE", help="also write the haptic force track (.wav, .npz or .csv)")
     p.add_argument(
+        "--csv", metavar="FILE", help="physics scenes (drill): also write their measurements as CSV"
+    )
+    p.add_argument(
         "--mode-budget",
         type=int,
         metavar="N",
@@ -271,6 +331,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
+    from jassy import batch
+    from jassy.study.cli import add_command as add_study
+
+    batch.add_command(sub)
+    add_study(sub)
+
     p = sub.add_parser("list", help="list built-in patches and ugen types")
     p.set_defaults(func=_cmd_list)
 
@@ -282,10 +348,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live"],
+        choices=["modal", "contact", "live", "batch", "burr"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
-        "live: underruns, latency and skew on a JACK dummy server",
+        "live: underruns, latency and skew on a JACK dummy server; "
+        "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom",
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")

@@ -7,8 +7,11 @@ under the requested name unless the whole file was written and flushed.
 from __future__ import annotations
 
 import contextlib
+import io
 import os
+import struct
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -48,6 +51,54 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def _peak_time_offset(fh) -> int | None:
+    """Offset of the time stamp in a WAV file's PEAK chunk (libsndfile writes the time of
+    writing there for float data), or None."""
+    fh.seek(0)
+    head = fh.read(12)
+    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+        return None
+    pos = 12
+    while True:
+        fh.seek(pos)
+        header = fh.read(8)
+        if len(header) < 8:
+            return None
+        chunk, size = header[:4], struct.unpack("<I", header[4:])[0]
+        if chunk == b"PEAK" and size >= 8:
+            return pos + 12
+        if chunk == b"data":
+            return None
+        pos += 8 + size + (size & 1)
+
+
+def deterministic_wav(data: bytes) -> bytes:
+    """WAV bytes with the PEAK chunk's time stamp zeroed: the same signal, the same bytes."""
+    offset = _peak_time_offset(io.BytesIO(data))
+    if offset is None:
+        return data
+    return data[:offset] + b"\0\0\0\0" + data[offset + 4 :]
+
+
+def deterministic_npz(data: bytes) -> bytes:
+    """An .npz (zip) with its members' time stamps set to 1980-01-01."""
+    src = zipfile.ZipFile(io.BytesIO(data))
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w") as dst:
+        for info in src.infolist():
+            fixed = zipfile.ZipInfo(info.filename, date_time=(1980, 1, 1, 0, 0, 0))
+            fixed.compress_type, fixed.external_attr = info.compress_type, info.external_attr
+            dst.writestr(fixed, src.read(info))
+    return out.getvalue()
+
+
+def deterministic_bytes(data: bytes) -> bytes:
+    """File bytes without the time of writing (WAV PEAK time stamps, NPZ member dates)."""
+    if data[:4] == b"PK\x03\x04":
+        return deterministic_npz(data)
+    return deterministic_wav(data)
 
 
 def audio_format(path: str | os.PathLike, sample_format: str = "float32") -> tuple[str, str]:
@@ -97,6 +148,12 @@ class AtomicAudioWriter:
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         self._file.close()
+        if exc_type is None and self.format == "WAV":
+            with open(self._tmp, "r+b") as fh:  # the same render gives the same bytes
+                offset = _peak_time_offset(fh)
+                if offset is not None:
+                    fh.seek(offset)
+                    fh.write(b"\0\0\0\0")
         return bool(self._ctx.__exit__(exc_type, exc, tb))
 
 
@@ -115,10 +172,13 @@ def write_signal(path: str | os.PathLike, data: np.ndarray, sample_rate: float, 
         if ext == ".wav":
             import soundfile
 
-            soundfile.write(tmp, data.T.astype(np.float32), int(sample_rate), "FLOAT", format="WAV")
+            buffer = io.BytesIO()
+            soundfile.write(buffer, data.T.astype(np.float32), int(sample_rate), "FLOAT", format="WAV")
+            Path(tmp).write_bytes(deterministic_wav(buffer.getvalue()))
         elif ext == ".npz":
-            with open(tmp, "wb") as fh:
-                np.savez(fh, data=data, sample_rate=np.float64(sample_rate), frames=frames)
+            buffer = io.BytesIO()
+            np.savez(buffer, data=data, sample_rate=np.float64(sample_rate), frames=frames)
+            Path(tmp).write_bytes(deterministic_npz(buffer.getvalue()))
         elif ext == ".csv":
             cols = [frames, frames / sample_rate, *data]
             header = ",".join(["frame", "time_s"] + [f"{label}{c}" for c in range(data.shape[0])])

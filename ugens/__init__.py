@@ -2,6 +2,7 @@
 
 from ugens.bubbles import Bubble, BubbleStream
 from ugens.delay import Delay
+from ugens.drill import DrillSource
 from ugens.dynamics import Limiter
 from ugens.engine import Engine
 from ugens.envelope import Envelope
@@ -26,6 +27,7 @@ __all__ = [
     "BubbleStream",
     "Crumple",
     "Delay",
+    "DrillSource",
     "Engine",
     "Envelope",
     "FractalNoise",
