@@ -362,6 +362,10 @@ class LiveEngine:
             if stream is not None:
                 stream.close()
             gc.unfreeze()
+            if isinstance(self._worker, threading.Thread):
+                from jassy import portaudio
+
+                portaudio.release()  # leave this process as it was: the next engine may fork
 
     def _warm_engine(self) -> OfflineEngine:
         """Compile and warm every kernel on a scratch run, then the engine for real."""

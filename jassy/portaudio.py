@@ -132,6 +132,15 @@ def library() -> ctypes.CDLL:
     return lib
 
 
+def release() -> None:
+    """Terminate PortAudio in this process (closes its JACK client, if any); the next
+    use initialises it again, e.g. against another JACK server."""
+    global _LIB
+    if _LIB is not None:
+        _LIB.Pa_Terminate()
+        _LIB = None
+
+
 def check(lib: ctypes.CDLL, code: int, what: str) -> int:
     if code < 0:
         raise LiveError(f"cannot {what}: {lib.Pa_GetErrorText(code).decode(errors='replace')}")

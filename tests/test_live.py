@@ -95,7 +95,9 @@ def test_posted_events_play_within_the_latency(jack):
     stats = live.stop()
     heard, rendered = live.monitor()
     onset = rendered[first_onset(heard[1])]
-    assert posted_at <= onset <= posted_at + 2 * 64  # rendered with the next block or the one after
+    # rendered as soon as the producer takes it: within the ring's depth of what was written
+    # when it was posted (+1: an impact's first non-zero sample follows its time)
+    assert posted_at <= onset <= posted_at + live.capacity + 1
     assert stats.latency <= 0.006
 
 
