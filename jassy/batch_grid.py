@@ -55,11 +55,10 @@ RENDER_KEYS = {"duration", "sample_rate", "block", "format", "container", "hapti
 SWEEPABLE_RENDER = ("duration", "sample_rate", "block", "format")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice", "randint")
 HAPTIC_FORMATS = ("wav", "npz", "csv")
-#: Manifest columns that are not parameters: a factor cannot take one of these names.
-RESERVED_COLUMNS = [
-    "index",
-    "variant",
-    "patch",
+#: Manifest columns around the parameter columns (HAPTIC when haptic tracks are written);
+#: a factor cannot take one of these names.
+HEAD = ["index", "variant", "patch"]
+TAIL = [
     "output",
     "status",
     "error",
@@ -72,9 +71,9 @@ RESERVED_COLUMNS = [
     "warnings",
     "render_s",
     "worker",
-    "haptic_output",
-    "haptic_sha256",
 ]
+HAPTIC = ["haptic_output", "haptic_sha256"]
+RESERVED_COLUMNS = [*HEAD, *TAIL, *HAPTIC]
 _SCORE_KEY = re.compile(r"^score\[(\d+)\]\.(.+)$")
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 

@@ -21,29 +21,14 @@ import os
 from pathlib import Path
 from typing import Any
 
-from jassy.batch_grid import canonical
+from jassy.batch_grid import HAPTIC, HEAD, TAIL, canonical
 from jassy.errors import JassyError
 from jassy.files import atomic_path
 
 MANIFEST = "manifest.csv"
 PARQUET = "manifest.parquet"
 JOURNAL = ".manifest.journal"
-HEAD = ["index", "variant", "patch"]
-TAIL = [
-    "output",
-    "status",
-    "error",
-    "duration",
-    "sample_rate",
-    "frames",
-    "peak",
-    "peak_dbfs",
-    "sha256",
-    "warnings",
-    "render_s",
-    "worker",
-]
-HAPTIC = ["haptic_output", "haptic_sha256"]
+
 INT_COLUMNS = {"index", "frames"}
 FLOAT_COLUMNS = {"duration", "sample_rate", "peak", "peak_dbfs", "render_s"}
 

@@ -68,9 +68,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
-from jassy.modal_model import ModalModel
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
@@ -279,21 +277,8 @@ class Friction(ModelParams, UGen):
         "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed of the noise"),
     }
 
-    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
-        if sources and isinstance(sources[0], ModalModel):
-            params.setdefault("model", sources[0])
-            sources = sources[1:]
-        super().__init__(*sources, name=name, where=where, **params)
-
-    @property
-    def model(self) -> ModalModel:
-        return self.values["model"]
-
     def _prepare(self) -> None:
-        try:
-            self.model.validate(self.sample_rate)
-        except ModelError as exc:
-            raise PatchError(f"nodes.{self.name}.model: {exc}") from None
+        self.validate_model()
         self.check_param("location", self.values["location"], f"nodes.{self.name}.location")  # gains >= 0
         self.modes = np.zeros((5, self.model.n_modes))  # c1, c2, g, y1, y2
         self.scratch = np.zeros(self.model.n_modes)

@@ -189,6 +189,24 @@ class ModelParams:
 
     driving_point = False
 
+    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
+        """The model may also be given as the first positional argument."""
+        if sources and isinstance(sources[0], ModalModel):
+            params.setdefault("model", sources[0])
+            sources = sources[1:]
+        super().__init__(*sources, name=name, where=where, **params)
+
+    @property
+    def model(self) -> ModalModel:
+        return self.values["model"]
+
+    def validate_model(self) -> None:
+        """At render start: the model against the sample rate, as a patch error."""
+        try:
+            self.model.validate(self.sample_rate)
+        except ModelError as exc:
+            raise PatchError(f"nodes.{self.name}.model: {exc}") from None
+
     def check_value(self, spec: ParamSpec, value: Any, where: str) -> Any:
         if spec.kind == "model":
             if not isinstance(value, ModalModel):
@@ -240,22 +258,9 @@ class ModalBank(ModelParams, UGen):
         ),
     }
 
-    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
-        if sources and isinstance(sources[0], ModalModel):
-            params.setdefault("model", sources[0])
-            sources = sources[1:]
-        super().__init__(*sources, name=name, where=where, **params)
-
-    @property
-    def model(self) -> ModalModel:
-        return self.values["model"]
-
     def _prepare(self) -> None:
+        self.validate_model()
         model = self.model
-        try:
-            model.validate(self.sample_rate)
-        except ModelError as exc:
-            raise PatchError(f"nodes.{self.name}.model: {exc}") from None
         self.order = np.argsort(model.decays, kind="stable")
         k = model.n_modes
         self.bank = np.zeros((5, k))  # c1, c2, g (current coefficients), y1, y2 (state)

@@ -57,9 +57,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
-from jassy.modal_model import ModalModel
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
@@ -425,23 +423,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         }
     }
 
-    def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
-        if sources and isinstance(sources[0], ModalModel):
-            params.setdefault("model", sources[0])
-            sources = sources[1:]
-        super().__init__(*sources, name=name, where=where, **params)
-
-    @property
-    def model(self) -> ModalModel:
-        return self.values["model"]
-
     # --------------------------------------------------------------- lifecycle
     def _prepare(self) -> None:
+        self.validate_model()
         model = self.model
-        try:
-            model.validate(self.sample_rate)
-        except ModelError as exc:
-            raise PatchError(f"nodes.{self.name}.model: {exc}") from None
         self.check_param("location", self.values["location"], f"nodes.{self.name}.location")
         self.order = np.argsort(model.decays, kind="stable")  # slowest first: silent modes last
         k = model.n_modes
