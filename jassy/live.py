@@ -42,7 +42,7 @@ from jassy.scheduler import validate_event
 HEADER, STATE, DATA_OFFSET_F32 = 32, 128, 256  # int64 slots, float64 slots, first float32 slot
 CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, FLAGS = range(9)
 WATCHDOG, FADE_LEFT, PLAYED, MONITOR_CAP, MAX_FRAMES, STALLED = range(9, 15)
-RUNNING, STOP, PAUSED, LATE, REALTIME = range(15, 20)
+RUNNING, STOP, PAUSED, LATE, REALTIME, TAKEN_AT = range(15, 21)
 MAX_FORCE, MAX_STEP, DEVICE_LATENCY, LAST, FADE_FROM = 32, 33, 34, 40, 72  # float64 slots
 MAX_HAPTIC = 32
 #: GIL switch interval while live (s): short enough for the producer to keep the ring full.
@@ -389,6 +389,7 @@ class LiveEngine:
             if 0 < event.time * self.sample_rate < scheduler.frame - self.block:
                 self.header[LATE] += 1  # asked for a time already rendered: applied now
             scheduler.insert(validate_event(self.graph, event, "posted event"))
+            self.header[TAKEN_AT] = scheduler.frame  # the first frame it can affect
 
     def _fill_once(self, engine: OfflineEngine, buf: np.ndarray, out: np.ndarray, udp) -> bool:
         """Render one block into the ring if there is room; False if full."""

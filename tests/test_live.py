@@ -84,7 +84,7 @@ def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
 
 
 def test_posted_events_play_within_the_latency(jack):
-    from jassy.live import LiveEngine
+    from jassy.live import TAKEN_AT, LiveEngine
 
     live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0)
     live.start()
@@ -95,9 +95,10 @@ def test_posted_events_play_within_the_latency(jack):
     stats = live.stop()
     heard, rendered = live.monitor()
     onset = rendered[first_onset(heard[1])]
-    # rendered as soon as the producer takes it: within the ring's depth of what was written
-    # when it was posted (+1: an impact's first non-zero sample follows its time)
-    assert posted_at <= onset <= posted_at + live.capacity + 1
+    taken_at = int(live.header[TAKEN_AT])  # the frame the producer was at when it took the event
+    # applied at once (+1: an impact's first non-zero sample follows its time), so it is heard
+    # one ring depth later; how long the post itself took depends on the machine's load
+    assert posted_at <= taken_at and onset == taken_at + 1
     assert stats.latency <= 0.006
 
 
