@@ -93,19 +93,13 @@ def lens_centroid(d, R, r):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def brute_moments(dens, cx, cy, cz, R, out):
-    """Brute-force m0, m1 (out[0:4]) over every voxel of the burr's bounding box."""
+def voxel_moments(dens, cx, cy, cz, R, i0, i1, j0, j1, k0, k1):
+    """(m0, m1x, m1y, m1z) of the voxels in the grid box [i0..i1] x [j0..j1] x [k0..k1],
+    each a sphere of radius R_VOXEL weighted by its lens overlap with the burr (radius R,
+    centre (cx, cy, cz), grid units)."""
     r = R_VOXEL
-    nx, ny, nz = dens.shape
-    reach = R + r
-    i0 = max(0, int(math.ceil(cx - reach)))
-    i1 = min(nx - 1, int(math.floor(cx + reach)))
-    j0 = max(0, int(math.ceil(cy - reach)))
-    j1 = min(ny - 1, int(math.floor(cy + reach)))
-    k0 = max(0, int(math.ceil(cz - reach)))
-    k1 = min(nz - 1, int(math.floor(cz + reach)))
+    reach2 = (R + r) * (R + r)
     inner2 = (R - r) * (R - r) if r < R else -1.0
-    reach2 = reach * reach
     m0 = 0.0
     mx = 0.0
     my = 0.0
@@ -130,6 +124,22 @@ def brute_moments(dens, cx, cy, cz, R, out):
                 mx += w * dx
                 my += w * dy
                 mz += w * dz
+    return m0, mx, my, mz
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def brute_moments(dens, cx, cy, cz, R, out):
+    """Brute-force m0, m1 (out[0:4]) over every voxel of the burr's bounding box."""
+    r = R_VOXEL
+    nx, ny, nz = dens.shape
+    reach = R + r
+    i0 = max(0, int(math.ceil(cx - reach)))
+    i1 = min(nx - 1, int(math.floor(cx + reach)))
+    j0 = max(0, int(math.ceil(cy - reach)))
+    j1 = min(ny - 1, int(math.floor(cy + reach)))
+    k0 = max(0, int(math.ceil(cz - reach)))
+    k1 = min(nz - 1, int(math.floor(cz + reach)))
+    m0, mx, my, mz = voxel_moments(dens, cx, cy, cz, R, i0, i1, j0, j1, k0, k1)
     out[0] = m0
     out[1] = mx
     out[2] = my

@@ -32,7 +32,7 @@ import math
 import numba as nb
 import numpy as np
 
-from physics.burr.contact import FASTMATH, R_VOXEL, lens_centroid, lens_volume
+from physics.burr.contact import FASTMATH, R_VOXEL, lens_centroid, lens_volume, voxel_moments
 
 
 @nb.njit(cache=True)
@@ -225,26 +225,11 @@ def _descend(dens, base, top, mom, off, dims, cx, cy, cz, R, leaf, out, stack):
             continue
         if level == base:
             # refine to voxels: exact voxel-sphere sum over the brick
-            for i in range(x0, x1 + 1):
-                dx = i - cx
-                for j in range(y0, y1 + 1):
-                    dy = j - cy
-                    dxy = dx * dx + dy * dy
-                    if dxy >= reach2:
-                        continue
-                    for k in range(z0, z1 + 1):
-                        c = dens[i, j, k]
-                        if c == 0:
-                            continue
-                        dz = k - cz
-                        d2 = dxy + dz * dz
-                        if d2 >= reach2:
-                            continue
-                        w = float(c) if d2 <= inner2 else float(c) * lens_volume(math.sqrt(d2), R, r)
-                        m0 += w
-                        mx += w * dx
-                        my += w * dy
-                        mz += w * dz
+            b0, bx, by, bz = voxel_moments(dens, cx, cy, cz, R, x0, x1, y0, y1, z0, z1)
+            m0 += b0
+            mx += bx
+            my += by
+            mz += bz
             continue
         cl = level - 1
         for a in range(2):
