@@ -196,7 +196,13 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from jassy.patchfile import load_patch
+    from jassy.patchfile import is_model_file, load_patch
+
+    if is_model_file(args.patch):
+        from physics.modal.cli import describe_model
+
+        print(describe_model(args.patch))
+        return 0
 
     patch = load_patch(args.patch, args.set or ())
     print(f"patch {patch.name}: {patch.description}")
@@ -333,14 +339,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     from jassy import batch
     from jassy.study.cli import add_command as add_study
+    from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
     add_study(sub)
+    add_modal(sub)
 
     p = sub.add_parser("list", help="list built-in patches and ugen types")
     p.set_defaults(func=_cmd_list)
 
-    p = sub.add_parser("info", help="show a patch's graph, models and score")
+    p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")
     p.add_argument("patch")
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE")
     p.set_defaults(func=_cmd_info)

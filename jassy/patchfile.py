@@ -60,6 +60,20 @@ def builtin_patches() -> dict[str, Path]:
     }
 
 
+def is_model_file(spec: str) -> bool:
+    """True for a model file (.npz, .sy, or a .toml holding frequencies) rather than a patch."""
+    path = Path(spec)
+    if path.suffix in (".npz", ".sy"):
+        return True
+    if path.suffix == ".toml" and path.is_file():
+        try:
+            with open(path, "rb") as fh:
+                return "frequencies" in tomllib.load(fh)
+        except (OSError, tomllib.TOMLDecodeError):
+            return False
+    return False
+
+
 def resolve_patch(spec: str) -> Path:
     """A patch path, or the path of the built-in patch named ``spec``."""
     path = Path(spec)

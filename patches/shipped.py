@@ -20,6 +20,7 @@ MODEL_MODULES = (
     "patches.models_machines",
     "patches.models_stochastic",
     "patches.models_surface",
+    "physics.modal.shipped",
 )
 
 
