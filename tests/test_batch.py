@@ -548,7 +548,9 @@ def test_without_dask_the_pool_gives_identical_files(serial_run, tmp_path, monke
     assert (result.rendered, result.failed) == (8, 0)
     assert files(tmp_path / "out") == files(tmp / "out")
     workers = {r["worker"] for r in manifest(tmp_path / "out")}
-    assert manifest(tmp / "out")[0]["worker"] not in workers and len(workers) >= 2
+    assert manifest(tmp / "out")[0]["worker"] not in workers  # rendered by pool workers
+    # the variant whose worker died was rendered again by another one (which worker takes
+    # which chunk depends on the machine's load, so no more is asserted)
     assert not manifest(tmp_path / "out")[4]["worker"].endswith(":" + marker.read_text())
 
 
