@@ -5,8 +5,12 @@ play live on one clock. The plate's sound texture map follows the probe along th
 plate's track of gain locations (x across the window). :class:`Probe` turns pointer
 input into jassy events; the window posts them to a :class:`jassy.live.LiveEngine`, and
 :func:`render_script` renders a scripted probe path offline through the same Probe
-(that is how the tests drive it). A drill mode needs the burr-drilling physics module,
-which this build does not have yet, so it is not offered.
+(that is how the tests drive it).
+
+Drill mode (when ``physics.burr`` is installed, as here): holding the button pushes a
+spinning burr down into a bone phantom at the pointer's x with a constant force; the
+burr-bone simulation steps at 1 kHz (:class:`DrillProbe`) and its contact force and
+removal rate drive the drilling sound, the force going to the haptic channel.
 """
 
 from __future__ import annotations
@@ -15,12 +19,14 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.offline import OfflineEngine, Rendering
 
-MODES = ("scrape", "roll")
+MODES = ("scrape", "roll", "drill")
 PRESS_FORCE = 2.0  # N, normal force while the button is held
 TAP_IMPULSE = 0.02  # N s, of the tap when the button goes down
 MOVE_RAMP = 0.02  # s, parameters glide between pointer samples
@@ -37,11 +43,84 @@ def build_scene(mode: str = "scrape") -> Graph:
 
     if mode not in MODES:
         raise JassyError(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    if mode == "drill":
+        return build_drill_scene()
     tap = ImpactForce(name="tap", duration=0.0008)
     contact = (Scrape if mode == "scrape" else Roll)(name="contact", force=0.0, speed=0.0, seed=1)
     force = Mixer(tap, contact, name="force")
     plate = ModalBank(steel_plate_model(), name="plate")(force)
     return Graph(Gain(plate, gain=4.0, name="out"), haptic=force)
+
+
+def build_drill_scene() -> Graph:
+    """DrillSource -> bone resonances, plus the handpiece whine; haptic = the burr force."""
+    from patches.drill import bone_model
+    from ugens.drill import DrillSource
+    from ugens.mix import Gain, Mixer
+    from ugens.modal import ModalBank
+
+    drill = DrillSource(name="drill", rpm=0.0)
+    bone = ModalBank(bone_model(), name="bone")(drill)
+    out = Mixer(Gain(bone, gain=0.3), Gain(drill.tap("motor"), gain=1.5), name="out")
+    return Graph(out, haptic=drill)
+
+
+class DrillProbe:
+    """The burr-bone simulation under the pointer, stepped at ``rate`` Hz.
+
+    While pressed, the burr sits at the pointer's x over the phantom and sinks with the
+    force imbalance against a constant ``push`` (N); each step sends the contact's normal
+    force, removal rate and the burr's speed to the DrillSource ``drill``.
+    """
+
+    def __init__(
+        self,
+        send: Callable[[Event], None],
+        live: bool = False,
+        n: int = 96,
+        push: float = 2.0,
+        rpm: float = 30000.0,
+        rate: float = 1000.0,
+    ):
+        from physics.burr.loop import BurrSim, Descent
+        from physics.burr.volume import phantom
+
+        self.send, self.live, self.rate, self.rpm = send, live, rate, rpm
+        self.volume = phantom(n)
+        self.sim = BurrSim(self.volume)
+        self.push = push
+        self._descent = Descent
+        self.controller = None
+        self.depth = 0.0
+        self.removed = 0.0
+
+    def _world(self, x: float) -> np.ndarray:
+        v = self.volume
+        nx, ny, nz = v.density.shape
+        centre = v.to_world([min(max(x, 0.05), 0.95) * (nx - 1), (ny - 1) / 2, nz - 1])
+        centre[2] += self.sim.params.radius  # starts above the volume
+        return centre
+
+    def press(self, x: float, t: float) -> None:
+        self.controller = self._descent(self._world(x), push=self.push, rpm=self.rpm, v_max=0.05)
+        self.send(Event(0.0 if self.live else t, "drill", "set", {"rpm": self.rpm}, ramp=0.05))
+
+    def release(self, t: float) -> None:
+        self.controller = None
+        args = {"force": 0.0, "removal": 0.0, "rpm": 0.0}
+        self.send(Event(0.0 if self.live else t, "drill", "set", args, ramp=0.1))
+
+    def step(self, t: float) -> None:
+        """One physics tick at time t (s): no-op while the button is up."""
+        if self.controller is None:
+            return
+        centre, omega, velocity = self.controller(t, getattr(self, "_state", None))
+        state = self.sim.step(centre, omega, velocity, 1.0 / self.rate)
+        self._state = state
+        self.removed += state.removed
+        removal = state.removed * 1e9 / self.volume.rho_full * self.rate  # mm^3/s
+        args = {"force": float(np.linalg.norm(state.elastic)), "removal": removal}
+        self.send(Event(0.0 if self.live else t, "drill", "set", args, ramp=1.0 / self.rate))
 
 
 @dataclass
@@ -88,6 +167,30 @@ class Probe:
         self.send(Event(self._time(t), "contact", "set", {"force": 0.0, "speed": 0.0}, ramp=MOVE_RAMP))
 
 
+def render_drill_script(
+    path: Sequence[tuple[float, str, float]], duration: float, sample_rate: float = 48000, block: int = 64
+) -> tuple[Rendering, DrillProbe]:
+    """Drill mode, scripted: press/release actions of ``path``; the simulation steps at
+    1 kHz between them. Returns the rendering and the probe (its simulation state)."""
+    events: list[Event] = []
+    probe = DrillProbe(events.append)
+    actions = sorted(path)
+    k = 0
+    for i in range(int(duration * probe.rate)):
+        t = i / probe.rate
+        while k < len(actions) and actions[k][0] <= t:
+            at, kind, x = actions[k]
+            if kind == "press":
+                probe.press(x, at)
+            elif kind == "release":
+                probe.release(at)
+            elif kind != "move":
+                raise JassyError(f"probe path: unknown action {kind!r}; expected press, move or release")
+            k += 1
+        probe.step(t)
+    return OfflineEngine(build_drill_scene(), events, sample_rate, block).render(duration), probe
+
+
 def render_script(
     path: Sequence[tuple[float, str, float]],
     duration: float,
@@ -96,6 +199,8 @@ def render_script(
     block: int = 64,
 ) -> Rendering:
     """Render a scripted probe path offline: (time s, "press" | "move" | "release", x)."""
+    if mode == "drill":
+        return render_drill_script(path, duration, sample_rate, block)[0]
     events: list[Event] = []
     probe = Probe(events.append)
     for t, kind, x in path:
@@ -135,9 +240,12 @@ def run_window(mode: str = "scrape", **live_options) -> None:
         raise JassyError(f"cannot open a window ({exc}); use --script to run headless") from None
     engine = LiveEngine(build_scene(mode), [], **live_options)
     engine.start()
-    probe = Probe(engine.post, live=True)
+    probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
+    if mode == "drill":
+        _start_physics(probe)
     width, height = 600, 300
-    root.title(f"jassy demo: {mode} a steel plate (click to tap, drag to {mode})")
+    what = "hold to drill into a bone phantom" if mode == "drill" else f"click to tap, drag to {mode}"
+    root.title(f"jassy demo, {mode} mode: {what}")
     canvas = tk.Canvas(root, width=width, height=height, background="#8a9199")
     canvas.pack()
     status = tk.Label(root, anchor="w")
@@ -147,7 +255,8 @@ def run_window(mode: str = "scrape", **live_options) -> None:
         return event.x / width
 
     canvas.bind("<ButtonPress-1>", lambda e: probe.press(position(e), e.time / 1000.0))
-    canvas.bind("<B1-Motion>", lambda e: probe.move(position(e), e.time / 1000.0))
+    if mode != "drill":
+        canvas.bind("<B1-Motion>", lambda e: probe.move(position(e), e.time / 1000.0))
     canvas.bind("<ButtonRelease-1>", lambda e: probe.release(e.time / 1000.0))
 
     def refresh() -> None:
@@ -158,4 +267,25 @@ def run_window(mode: str = "scrape", **live_options) -> None:
     try:
         root.mainloop()
     finally:
+        probe.running = False
         engine.stop()
+
+
+def _start_physics(probe: DrillProbe) -> None:
+    """Step the drill simulation at its rate in a thread (the sound runs in its own process)."""
+    import threading
+    import time
+
+    probe.running = True
+
+    def loop() -> None:
+        start = time.monotonic()
+        tick = 0
+        while probe.running:
+            probe.step(tick / probe.rate)
+            tick += 1
+            delay = start + tick / probe.rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+
+    threading.Thread(target=loop, name="drill-physics", daemon=True).start()

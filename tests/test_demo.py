@@ -52,3 +52,17 @@ def test_probe_events_and_location_map():
     assert probe.location(1.0)["vertices"] == ["t7", "t8"]
     with pytest.raises(JassyError, match="unknown action 'hover'"):
         render_script([(0.0, "hover", 0.5)], 0.1)
+
+
+def test_drill_mode_cuts_bone_while_the_button_is_held():
+    from patches.demo import render_drill_script
+
+    r, probe = render_drill_script([(0.2, "press", 0.5), (1.2, "release", 0.5)], 1.6)
+    force, audio = r.haptic[0], r.audio[0]
+    assert np.all(force[: int(0.2 * FS)] == 0)  # nothing touches before the press
+    assert np.mean(np.abs(force[int(0.7 * FS) : int(1.1 * FS)])) > 0.1  # pushing into bone, N
+    assert np.all(force[int(1.35 * FS) :] == 0)  # lifted after the release ramp
+    assert probe.removed > 0  # bone was cut
+    rms = lambda a, b: np.sqrt(np.mean(audio[int(a * FS) : int(b * FS)] ** 2))  # noqa: E731
+    assert rms(0.7, 1.1) > 3 * rms(0.0, 0.15)  # drilling is louder than the idle handpiece
+    assert np.max(np.abs(audio)) < 1.0
