@@ -256,7 +256,7 @@ def _apply(dens, cx, cy, cz, R, defined, a2, count, idx, geo, p_scale, mu, omega
         xi2 = geo[m, 1]
         if defined and xi2 >= a2:
             continue
-        ds, rc = _share(d2, R)
+        ds, rc = geo[m, 2], geo[m, 3]  # surface share and contact radius, from surface_pass
         if ds <= 0.0:
             continue
         w = math.sqrt(1.0 - xi2 / a2) if defined else 1.0
@@ -350,7 +350,8 @@ def surface_pass(
     decrement by Russian roulette (floor, plus one with probability equal to the
     fractional part), never below 0.
 
-    idx (int64, (N, 3)) and geo (float64, (N, 2)): scratch, N >= voxels in the ball's box.
+    idx (int64, (N, 3)) and geo (float64, (N, 4): d^2, xi^2, dsigma, contact radius):
+    scratch, N >= voxels in the ball's box.
     out: [Fx, Fy, Fz, Tx, Ty, Tz, power W, expected decrement (counts), actual decrement
     (counts), contact voxels, sum dsigma (m^2)]; box: the grid box of the changed voxels.
     """
@@ -375,6 +376,8 @@ def surface_pass(
         if defined and geo[m, 1] >= a2:
             continue
         ds, rc = _share(geo[m, 0], R)
+        geo[m, 2] = ds  # kept for _apply
+        geo[m, 3] = rc
         wsum += ds * (math.sqrt(1.0 - geo[m, 1] / a2) if defined else 1.0)
     if wsum <= 0.0 or load <= 0.0:
         return

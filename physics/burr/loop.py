@@ -107,7 +107,7 @@ class BurrSim:
         self._box = np.zeros(6, dtype=np.int64)
         side = 2 * int(math.ceil(self.params.radius / volume.voxel + 1.0)) + 3
         self._idx = np.zeros((side**3, 3), dtype=np.int64)
-        self._geo = np.zeros((side**3, 2))
+        self._geo = np.zeros((side**3, 4))
         self.removed_total = 0.0
         self.work_total = 0.0
 
