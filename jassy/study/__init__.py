@@ -9,26 +9,42 @@ a CSV file (JSON header in a sidecar) so a session can be interrupted and resume
 CIs), pools participants and plots.
 """
 
-from jassy.study.analysis import Fit, analyze, fit_psychometric, format_report, plot_report
-from jassy.study.design import Design, DesignError, ObserverSpec, load_design, parse_design
-from jassy.study.observer import (
-    CallableResponder,
-    KeyboardResponder,
-    Response,
-    SimulatedObserver,
-    TrialInfo,
-    p_positive,
-)
-from jassy.study.runner import (
-    LivePresenter,
-    OfflinePresenter,
-    Session,
-    SessionResult,
-    measure_offset,
-    read_rows,
-    render_trial,
-    run_study,
-)
+import importlib
+
+#: Public names -> the module defining them, imported on first use (the CLI stays light).
+_EXPORTS = {
+    "CallableResponder": "jassy.study.observer",
+    "Design": "jassy.study.design",
+    "DesignError": "jassy.study.design",
+    "Fit": "jassy.study.analysis",
+    "KeyboardResponder": "jassy.study.observer",
+    "LivePresenter": "jassy.study.runner",
+    "ObserverSpec": "jassy.study.design",
+    "OfflinePresenter": "jassy.study.runner",
+    "Response": "jassy.study.observer",
+    "Session": "jassy.study.runner",
+    "SessionResult": "jassy.study.runner",
+    "SimulatedObserver": "jassy.study.observer",
+    "TrialInfo": "jassy.study.observer",
+    "analyze": "jassy.study.analysis",
+    "fit_psychometric": "jassy.study.analysis",
+    "format_report": "jassy.study.analysis",
+    "load_design": "jassy.study.design",
+    "measure_offset": "jassy.study.runner",
+    "p_positive": "jassy.study.observer",
+    "parse_design": "jassy.study.design",
+    "plot_report": "jassy.study.analysis",
+    "read_rows": "jassy.study.runner",
+    "render_trial": "jassy.study.runner",
+    "run_study": "jassy.study.runner",
+}
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'jassy.study' has no attribute {name!r}")
+
 
 __all__ = [
     "CallableResponder",

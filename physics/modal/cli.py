@@ -241,7 +241,7 @@ def cmd_describe(args: argparse.Namespace) -> int:
 
 def add_commands(subparsers) -> None:
     """Add ``modes`` and ``fit`` to the ``jassy`` argparse subparsers."""
-    from physics.modal.fem import RADIATION
+    from physics.modal.materials import RADIATION
 
     p = subparsers.add_parser(
         "modes",

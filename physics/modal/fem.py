@@ -45,7 +45,7 @@ import numpy as np
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
 from physics.modal._blas import single_threaded
-from physics.modal.materials import Material
+from physics.modal.materials import RADIATION, Material
 from physics.modal.solver import MultifrontalCholesky, eigsh_shift_invert, nested_dissection
 
 # ------------------------------------------------------------------------------- element
@@ -419,9 +419,6 @@ def sample_displacements(fem: FEModel, shapes: np.ndarray, points: np.ndarray) -
     w = np.where(CORNERS[None, :, :] == 1, local[:, None, :], 1.0 - local[:, None, :]).prod(axis=2)
     u = shapes.reshape(-1, 3, shapes.shape[1])  # (n_nodes, 3, n_modes)
     return np.einsum("pa,paim->pim", w, u[node])
-
-
-RADIATION = ("displacement", "velocity", "acceleration")
 
 
 def gains_from_shapes(

@@ -116,3 +116,8 @@ def material(name: str, **overrides) -> Material:
         names = ", ".join(sorted(set(MATERIALS) - {"aluminum"}))
         raise JassyError(f"--material: unknown material {name!r}; expected one of {names}")
     return MATERIALS[key].with_overrides(**overrides)
+
+
+#: What a model's gains measure at a vertex (``jassy modes --radiation``): the driving-point
+#: displacement (n . phi)^2 / omega, or that times omega (velocity) or omega^2 (acceleration).
+RADIATION = ("displacement", "velocity", "acceleration")
