@@ -307,7 +307,7 @@ def test_materials_table_and_damping_law():
 
 
 def run_cli(argv):
-    from physics.modal.cli import main
+    from jassy.cli import main
 
     return main(argv)
 

@@ -40,7 +40,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
-from ugens.stochastic import u01
+from ugens.stochastic import next_event, u01
 
 #: Radius at which a bubble at depth 1 has amplitude 1 (m).
 R_REF = 1e-3
@@ -53,7 +53,7 @@ _ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
 # meta: active voices, pending bubbles, births, logged births
 _ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
 # st: accumulated rate, threshold, held radius
-_ACC, _TARGET, _RADIUS = range(3)
+_ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects
 
 
 def minnaert_frequency(radius):
@@ -182,16 +182,9 @@ def bubbles(out, radius_out, start, n, fs, voices, meta, pending, rate, par, st,
         h = rate[i] / fs
         pos = 0.0
         while h > 0.0:
-            if st[_TARGET] <= 0.0:
-                st[_TARGET] = -math.log(1.0 - u01(rng))
-            need = st[_TARGET] - st[_ACC]
-            avail = h * (1.0 - pos)
-            if need > avail:
-                st[_ACC] += avail
+            pos = next_event(st, rng, h, pos)
+            if pos < 0.0:
                 break
-            pos = min(pos + need / h, 1.0)
-            st[_ACC] = 0.0
-            st[_TARGET] = -math.log(1.0 - u01(rng))
             radius = power_law_radius(u01(rng), r_lo, r_hi, exponent)
             depth = d_lo + (d_hi - d_lo) * u01(rng)
             t0 = idx + pos

@@ -18,6 +18,7 @@ from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.scrape import (
     NYQUIST_FRACTION,
+    STIFFNESS_SPEC,
     NeedleContact,
     ProfileContact,
     contact_specs,
@@ -52,15 +53,7 @@ class Roll(NeedleContact):
     param_specs = {
         **contact_specs("rolling speed (signed: the profile is read backwards for v < 0)"),
         **profile_specs(beta=2.0, roughness=2e-5, dx=1e-4, length=2**16, k_low=20.0),
-        "stiffness": ParamSpec(
-            "float",
-            1e5,
-            low=0.0,
-            high=1e12,
-            unit="N/m",
-            fixed=True,
-            doc="contact stiffness: force per m of profile height at the reference contact",
-        ),
+        "stiffness": STIFFNESS_SPEC,
         "fc0": ParamSpec(
             "float",
             100.0,

@@ -35,6 +35,16 @@ from ugens.noise import uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
 
 LAWS = ("sqrt", "linear")
+#: Force per m of profile height of the needle contacts (Scrape, Roll).
+STIFFNESS_SPEC = ParamSpec(
+    "float",
+    1e5,
+    low=0.0,
+    high=1e12,
+    unit="N/m",
+    fixed=True,
+    doc="contact stiffness: force per m of profile height at the reference contact",
+)
 INTERPOLATIONS = ("linear", "cubic")
 #: Speed-dependent filter cutoffs are clamped to [F_MIN, NYQUIST_FRACTION * fs].
 F_MIN = 0.5
@@ -452,15 +462,7 @@ class Scrape(NeedleContact):
     param_specs = {
         **contact_specs(),
         **profile_specs(beta=1.0, roughness=5e-6, dx=3e-5, length=2**16, k_low=100.0),
-        "stiffness": ParamSpec(
-            "float",
-            1e5,
-            low=0.0,
-            high=1e12,
-            unit="N/m",
-            fixed=True,
-            doc="contact stiffness: force per m of profile height at the reference contact",
-        ),
+        "stiffness": STIFFNESS_SPEC,
         "patch": ParamSpec(
             "float",
             0.0,

@@ -67,6 +67,25 @@ def u01(rng):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def next_event(st, rng, rate, pos):
+    """Exact Poisson event times at ``rate`` events per sample.
+
+    st[_ACC] accumulates the integrated rate, st[_TARGET] is the Exp(1) threshold of the
+    next event. From position pos in [0, 1) of the current sample, returns the position of
+    the next event in this sample, or -1 if there is none (the rate is accumulated)."""
+    if st[_TARGET] <= 0.0:
+        st[_TARGET] = -math.log(1.0 - u01(rng))
+    need = st[_TARGET] - st[_ACC]
+    avail = rate * (1.0 - pos)
+    if need > avail:
+        st[_ACC] += avail
+        return -1.0
+    st[_ACC] = 0.0
+    st[_TARGET] = -math.log(1.0 - u01(rng))
+    return min(pos + need / rate, 1.0)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def pulse_frame(pulses, count, idx):
     """Sum of the active 1 - cos pulses at frame idx; finished ones are dropped.
 
@@ -143,16 +162,9 @@ def micro_impacts(
                 rate *= st[_LEFT] / st[_BUDGET]
             if rate <= 0.0:
                 break
-            if st[_TARGET] <= 0.0:
-                st[_TARGET] = -math.log(1.0 - u01(rng))
-            need = st[_TARGET] - st[_ACC]
-            avail = rate * (1.0 - pos)
-            if need > avail:
-                st[_ACC] += avail
+            pos = next_event(st, rng, rate, pos)
+            if pos < 0.0:
                 break
-            pos = min(pos + need / rate, 1.0)
-            st[_ACC] = 0.0
-            st[_TARGET] = -math.log(1.0 - u01(rng))
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
             energy = crush[i] * min(max(x, ENERGY_CLIP[0]), ENERGY_CLIP[1])
             size = frag[i] * (0.5 + 0.5 * u01(rng))

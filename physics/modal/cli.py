@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 import time
 
 from jassy.errors import JassyError
@@ -233,12 +232,6 @@ def describe_model(path: str | os.PathLike) -> str:
     return "\n".join(lines)
 
 
-def cmd_describe(args: argparse.Namespace) -> int:
-    """Print :func:`describe_model` (for a stand-alone ``modes-info``-style command)."""
-    print(describe_model(args.model))
-    return 0
-
-
 def add_commands(subparsers) -> None:
     """Add ``modes`` and ``fit`` to the ``jassy`` argparse subparsers."""
     from physics.modal.materials import RADIATION
@@ -322,26 +315,3 @@ def add_commands(subparsers) -> None:
     p.add_argument("--name", help="model name (default: the first recording's stem)")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_fit)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry (``python -m physics.modal.cli modes ...``) until jassy's CLI wires it."""
-    parser = argparse.ArgumentParser(prog="jassy", description="modal models from meshes and recordings")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_commands(sub)
-    p = sub.add_parser("model-info", help="print a model file's modes")
-    p.add_argument("model")
-    p.set_defaults(func=cmd_describe)
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except JassyError as exc:
-        print(f"jassy: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("jassy: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
