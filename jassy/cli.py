@@ -161,7 +161,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_devices(args: argparse.Namespace) -> int:
     from jassy import portaudio
 
-    for d in portaudio.devices():
+    found = portaudio.devices()
+    portaudio.release()  # a later live engine in this process may then fork its producer
+    for d in found:
         mark = "*" if d["default"] else " "
         print(
             f"{mark}{d['index']:>3}  {d['name']} ({d['host_api']}): {d['max_output_channels']} out, "

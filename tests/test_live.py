@@ -167,3 +167,15 @@ def test_missing_portaudio_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(ctypes, "CDLL", no_lib)
     with pytest.raises(LiveError, match="apt-get install libportaudio2"):
         portaudio.library()
+
+
+def test_cli_devices_and_play(jack, capsys):
+    from jassy.cli import main
+
+    assert main(["devices"]) == 0
+    assert "JACK" in capsys.readouterr().out
+    assert main(["play", "bar", "--duration", "0.3", "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "playing bar" in out and "underruns" in out
+    assert main(["play", "bar", "--duration", "0.3", "--ring", "0.5"]) == 2
+    assert "--ring: expected at least 1 block" in capsys.readouterr().err

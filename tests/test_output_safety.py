@@ -172,3 +172,13 @@ def test_examples_run(tmp_path):
         capture_output=True,
     )
     assert sf.info(out).frames == 3 * FS
+
+
+def test_cli_list_names_every_patch_scene_and_ugen(capsys):
+    from jassy.patchfile import builtin_patches
+    from jassy.registry import ugen_types
+
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in [*builtin_patches(), "drill", *ugen_types()]:
+        assert name in out
