@@ -18,7 +18,13 @@ DEFAULT_RATE = 48000
 
 #: Built-in scenes that run physics before rendering: name -> (module, function). The
 #: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
-SCENES = {"drill": ("patches.drill", "render_drill")}
+SCENES = {
+    "drill": ("patches.drill", "render_drill"),
+    "wok": ("patches.wok", "render_wok"),
+    "drop": ("patches.drop", "render_drop"),
+    "poke": ("patches.poke", "render_poke"),
+    "archery": ("patches.archery", "render_archery"),
+}
 
 
 def _render_scene(args: argparse.Namespace) -> int:
@@ -255,6 +261,30 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             print(json.dumps(rows, indent=2))
         else:
             bench.print_contact(rows)
+    if args.name == "rigid":
+        from physics.rigid.bench import bench_rigid, print_rigid
+        from physics.rigid.solver_bench import bench_solvers, print_solvers
+
+        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
+            print_rigid(rows), print_solvers(solvers))  # fmt: skip
+    if args.name == "deform":
+        from physics.deform.bench import bench_deform, print_deform
+        from physics.deform.cataract_bench import bench_cataract, print_cataract
+
+        rows, cataract = bench_deform(quick=args.quick), bench_cataract(quick=args.quick)
+        print(json.dumps({"bem": rows, "cataract": cataract}, indent=2)) if args.json else (
+            print_deform(rows), print_cataract(cataract))  # fmt: skip
+    if args.name == "rod":
+        from physics.modal._blas import single_threaded
+        from physics.rod.bench import bench_rod, print_rod
+        from physics.rod.contact_bench import bench_rod_contact, print_rod_contact
+
+        with single_threaded():
+            rows = bench_rod(quick=args.quick)
+            contact = bench_rod_contact(quick=args.quick)
+        print(json.dumps({"models": rows, "contact": contact}, indent=2)) if args.json else (
+            print_rod(rows), print_rod_contact(contact))  # fmt: skip
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -358,18 +388,44 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr"],
+        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
-        "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom",
+        "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom; "
+        "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
+        "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
+        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts",
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser("rod", help="run a 2D-rod experiment (prints JSON)")
+    p.add_argument("name", help="experiment name (see 'jassy rod list')")
+    p.add_argument("--plot", metavar="PNG", help="also write a plot")
+    p.add_argument("--quick", action="store_true", help="smaller sizes")
+    p.set_defaults(func=_cmd_rod)
     return parser
+
+
+def _cmd_rod(args: argparse.Namespace) -> int:
+    from physics.rod.experiments import EXPERIMENTS
+
+    if args.name == "list":
+        print("\n".join(sorted(EXPERIMENTS)))
+        return 0
+    if args.name not in EXPERIMENTS:
+        raise JassyError(
+            f"rod: unknown experiment {args.name!r}; expected one of {', '.join(sorted(EXPERIMENTS))}"
+        )
+    if args.plot and not args.plot.lower().endswith(".png"):
+        raise JassyError(f"--plot: expected a .png file name, got {args.plot!r}")
+    result = EXPERIMENTS[args.name](plot=args.plot, quick=args.quick)
+    print(json.dumps(result, indent=2))
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,7 +13,6 @@ the sound, the haptic force frames and a CSV of time, depth, force and removed m
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -21,8 +20,7 @@ from jassy.errors import JassyError
 from jassy.events import Event, track_events
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
-
-PEAK = 10 ** (-6.0 / 20.0)  # -6 dBFS
+from patches.scene_io import render_normalised, write_csv
 
 
 def bone_model(n_modes: int = 36, seed: int = 1) -> ModalModel:
@@ -93,8 +91,7 @@ def render_drill(out_wav, haptic_path=None, csv_path=None, duration: float = 6.0
     removed_mass_kg (cumulative) and removal_rate_mm3_s. Returns a summary dict."""
     import time
 
-    from jassy.files import AtomicAudioWriter, atomic_path, write_signal
-    from jassy.offline import OfflineEngine
+    from jassy.files import write_signal
 
     if not (isinstance(duration, (int, float)) and 0 < duration <= 60):
         raise JassyError(f"duration: expected seconds in (0, 60], got {duration!r}")
@@ -104,32 +101,24 @@ def render_drill(out_wav, haptic_path=None, csv_path=None, duration: float = 6.0
     radius = sim.params.radius
     depth = surface - (res.centres[:, 2] - radius)
     graph, score = build_scene(res.track, seed=seed)
-    engine = OfflineEngine(graph, score, sample_rate, block, limiter=False)
-    rendering = engine.render(duration)
-    audio = rendering.audio
+    audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block)
     peak = float(np.max(np.abs(audio))) if audio.size else 0.0
-    if peak > 0:
-        audio = audio * (PEAK / peak)
-    with AtomicAudioWriter(out_wav, int(sample_rate), audio.shape[0]) as out:
-        out.write(audio)
     if haptic_path:
         write_signal(haptic_path, res.forces.T.copy(), 1.0 / (res.times[1] - res.times[0]), label="force_")
     if csv_path:
         rows = np.column_stack(
             [res.times, depth, res.forces[:, 2], res.track.normal_force, res.removed, res.track.removal_rate]
         )
-        header = "time_s,depth_m,force_n,normal_force_n,removed_mass_kg,removal_rate_mm3_s"
-        with atomic_path(Path(csv_path)) as tmp:
-            np.savetxt(tmp, rows, delimiter=",", fmt="%.9g", comments="", header=header)
+        write_csv(csv_path, rows, "time_s,depth_m,force_n,normal_force_n,removed_mass_kg,removal_rate_mm3_s")
     return {
         "frames": audio.shape[1],
         "duration": duration,
-        "peak": PEAK if peak > 0 else 0.0,
+        "peak": peak,
         "final_depth_m": float(depth[-1]),
         "removed_mass_kg": float(res.removed[-1]),
         "haptic_steps": int(res.times.size),
         "haptic_median_us": float(np.median(res.step_seconds) * 1e6),
         "physics_seconds": t_phys,
         "render_seconds": time.perf_counter() - t0,
-        "warnings": list(rendering.warnings),
+        "warnings": warnings,
     }

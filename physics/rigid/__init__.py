@@ -1,0 +1,1 @@
+"""Rigid-body dynamics and contact: bodies, collision, LCP/PGS contact solvers, articulated chains."""

@@ -1,0 +1,154 @@
+"""Closest points on triangle meshes: the point-triangle kernel and a uniform grid of triangles.
+
+A static (or kinematic) surface is bucketed once into a uniform grid in its own frame; a
+query visits the cells overlapping a ball and returns the closest point among their
+triangles, with the triangle index and barycentric coordinates (the contact's location on
+the mesh). Point-triangle closest point: Ericson, Real-Time Collision Detection, 5.1.5.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True)
+def closest_weights(p, a, b, c):
+    """Barycentric weights (u, v, w) of the point of triangle abc closest to p (no allocation)."""
+    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    ap0, ap1, ap2 = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0
+    bp0, bp1, bp2 = p[0] - b[0], p[1] - b[1], p[2] - b[2]
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 1.0 - v, v, 0.0
+    cp0, cp1, cp2 = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 1.0 - w, 0.0, w
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - w, w
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return 1.0 - v - w, v, w
+
+
+@nb.njit(cache=True)
+def weighted_distance2(p, tri, u, v, w):
+    d = 0.0
+    for k in range(3):
+        x = p[k] - (u * tri[0, k] + v * tri[1, k] + w * tri[2, k])
+        d += x * x
+    return d
+
+
+@nb.njit(cache=True)
+def closest_on_triangle(p, a, b, c):
+    """(closest point, barycentric weights (u, v, w) of a, b, c) on triangle abc to point p."""
+    u, v, w = closest_weights(p, a, b, c)
+    return u * a + v * b + w * c, np.array([u, v, w])
+
+
+@dataclass(frozen=True)
+class TriangleGrid:
+    """Triangles (T, 3, 3), normals (T, 3) and bounding spheres (T, 4: centroid, radius) of one
+    surface, bucketed in a uniform grid: cell (i, j, k) holds items[start[c]:start[c + 1]],
+    c = (i * ny + j) * nz + k."""
+
+    triangles: np.ndarray
+    normals: np.ndarray
+    spheres: np.ndarray
+    origin: np.ndarray
+    cell: float
+    dims: np.ndarray
+    start: np.ndarray
+    items: np.ndarray
+
+
+def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = None) -> TriangleGrid:
+    """Bucket the triangles by the cells their bounding boxes overlap. The default cell is
+    twice the mean edge length (a few triangles per cell)."""
+    tri = np.ascontiguousarray(vertices[faces], dtype=np.float64)
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    centroids = tri.mean(axis=1)
+    spheres = np.c_[centroids, np.linalg.norm(tri - centroids[:, None], axis=2).max(axis=1)]
+    if cell is None:
+        edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
+        cell = 2.0 * float(edges.mean())
+    lo = tri.min(axis=(0, 1)) - 1e-9
+    hi = tri.max(axis=(0, 1)) + 1e-9
+    dims = np.maximum(1, np.ceil((hi - lo) / cell)).astype(np.int64)
+    tlo = np.floor((tri.min(axis=1) - lo) / cell).astype(np.int64)
+    thi = np.minimum(np.floor((tri.max(axis=1) - lo) / cell).astype(np.int64), dims - 1)
+    cells, owners = [], []
+    for t in range(len(tri)):  # build once per mesh
+        ii, jj, kk = np.meshgrid(*(np.arange(tlo[t, a], thi[t, a] + 1) for a in range(3)), indexing="ij")
+        ids = ((ii * dims[1] + jj) * dims[2] + kk).ravel()
+        cells.append(ids)
+        owners.append(np.full(ids.size, t))
+    cells_a = np.concatenate(cells)
+    owners_a = np.concatenate(owners)
+    order = np.argsort(cells_a, kind="stable")
+    start = np.searchsorted(cells_a[order], np.arange(int(np.prod(dims)) + 1)).astype(np.int64)
+    return TriangleGrid(tri, normals, spheres, lo, float(cell), dims, start, owners_a[order].astype(np.int64))
+
+
+@nb.njit(cache=True)
+def grid_closest(p, reach, tri, normals, spheres, origin, cell, dims, start, items):
+    """Closest point within ``reach`` (m) of p: (triangle index or -1, distance, point, normal
+    of the triangle, barycentric weights)."""
+    best = -1
+    best_d2 = reach * reach
+    best_pt = np.zeros(3)
+    best_bary = np.zeros(3)
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for a in range(3):
+        lo[a] = max(0, int(math.floor((p[a] - reach - origin[a]) / cell)))
+        hi[a] = min(dims[a] - 1, int(math.floor((p[a] + reach - origin[a]) / cell)))
+        if lo[a] > hi[a]:
+            return -1, math.inf, best_pt, best_bary, best_bary
+    for i in range(lo[0], hi[0] + 1):
+        for j in range(lo[1], hi[1] + 1):
+            for k in range(lo[2], hi[2] + 1):
+                c = (i * dims[1] + j) * dims[2] + k
+                for s in range(start[c], start[c + 1]):
+                    t = items[s]
+                    dx = p[0] - spheres[t, 0]
+                    dy = p[1] - spheres[t, 1]
+                    dz = p[2] - spheres[t, 2]
+                    lim = math.sqrt(best_d2) + spheres[t, 3]
+                    if dx * dx + dy * dy + dz * dz > lim * lim:
+                        continue  # the triangle's bounding sphere is beyond the best so far
+                    u, v, w = closest_weights(p, tri[t, 0], tri[t, 1], tri[t, 2])
+                    d2 = weighted_distance2(p, tri[t], u, v, w)
+                    if d2 < best_d2:
+                        best_d2 = d2
+                        best = t
+                        best_bary[0], best_bary[1], best_bary[2] = u, v, w
+    if best < 0:
+        return -1, math.inf, best_pt, best_bary, best_bary
+    t = tri[best]
+    best_pt = best_bary[0] * t[0] + best_bary[1] * t[1] + best_bary[2] * t[2]
+    return best, math.sqrt(best_d2), best_pt, normals[best], best_bary

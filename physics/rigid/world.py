@@ -1,0 +1,474 @@
+"""Rigid worlds: the model (bodies, materials, parameters), the state, and simulation runs.
+
+Model/state separation: a :class:`World` holds what does not change (shapes, materials,
+masses, modal models, kinematic paths, step parameters) as frozen data and the flat arrays
+the numba stepper reads; a :class:`WorldState` holds time, poses (position of each centre
+of mass in m, unit quaternion of its principal frame) and body-frame twists (rad/s, m/s).
+:func:`simulate` runs a world from a state and returns the contact records
+(physics.rigid.stepper) plus sampled poses; physics.rigid.events turns records into Impact
+events, ContactTracks and haptic frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jassy.errors import JassyError
+from jassy.modal_model import ModalModel
+from physics.rigid import stepper as st
+from physics.rigid.integrate import METHODS
+from physics.rigid.meshgrid import build_grid
+from physics.rigid.shapes import (
+    BOX,
+    CAPSULE,
+    CONVEX,
+    MESH,
+    PLANE,
+    SPHERE,
+    Box,
+    Plane,
+    Shape,
+    TriangleMesh,
+    bounding_radius,
+    mass_properties,
+)
+
+
+@dataclass(frozen=True)
+class Material:
+    """density (kg/m^3), Newton restitution e in [0, 1], Coulomb friction mu >= 0, rolling
+    resistance length (m: the rolling torque is bounded by rolling * normal force)."""
+
+    name: str
+    density: float
+    restitution: float
+    friction: float
+    rolling: float = 0.0
+
+    def __post_init__(self):
+        checks = {
+            "density": self.density > 0,
+            "restitution": 0 <= self.restitution <= 1,
+            "friction": self.friction >= 0,
+            "rolling": self.rolling >= 0,
+        }
+        for key, ok in checks.items():
+            if not ok or not np.isfinite(getattr(self, key)):
+                raise JassyError(f"Material {self.name!r}.{key}: got {getattr(self, key)!r}, out of range")
+
+
+MATERIALS = {
+    "steel": Material("steel", 7850.0, 0.6, 0.3, 2e-5),
+    "wood": Material("wood", 650.0, 0.45, 0.45, 2e-4),
+    "glass": Material("glass", 2500.0, 0.7, 0.25, 2e-5),
+    "ceramic": Material("ceramic", 2400.0, 0.6, 0.4, 5e-5),
+    "rubber": Material("rubber", 1100.0, 0.8, 0.9, 1e-3),
+    "plastic": Material("plastic", 1100.0, 0.55, 0.35, 1e-4),
+    "food": Material("food", 1000.0, 0.25, 0.5, 5e-4),
+}
+
+
+@dataclass(frozen=True)
+class Body:
+    """A body of the model. ``kind``: "dynamic", "static" or "kinematic" (follows ``path``, a
+    function of time s -> (position (3,), quaternion (4,)), e.g. a hand-held wok). ``sound``:
+    the ModalModel struck by this body's contacts; ``sound_points`` (P, 3): where each of its
+    gain rows sits in the shape's frame (nearest row is struck), or None for row 0 (or
+    mesh vertices for a TriangleMesh whose model rows are its vertices: "vertices")."""
+
+    name: str
+    shape: Shape
+    material: Material
+    kind: str = "dynamic"
+    sound: ModalModel | None = None
+    sound_points: np.ndarray | str | None = None
+    path: Callable[[float], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        if self.kind not in ("dynamic", "static", "kinematic"):
+            raise JassyError(
+                f"Body {self.name!r}.kind: expected dynamic, static or kinematic, got {self.kind!r}"
+            )
+        if self.kind == "kinematic" and self.path is None:
+            raise JassyError(
+                f"Body {self.name!r}.path: a kinematic body needs a path t -> (position, quaternion)"
+            )
+        if self.kind == "dynamic" and isinstance(self.shape, (Plane, TriangleMesh)):
+            raise JassyError(f"Body {self.name!r}.shape: a {type(self.shape).__name__} cannot be dynamic")
+
+
+@dataclass(frozen=True)
+class StepParams:
+    """h (s) outer step; integrator semi-implicit | rk4 | adaptive; contact impulse | linear |
+    hunt-crossley; gravity (m/s^2); PGS iterations and relative tolerance; slop (m) below
+    which a gap counts as touching; bounce_threshold (m/s) approach speed above which a
+    contact is an impact (restitution, an Impact event); beta: penetration recovery per step;
+    max_events: impact sub-steps per step; stiffness k (N/m^p), damping c (N s/m or N s/m^(p+1)),
+    exponent p and friction regularisation speed (m/s) of the penalty models."""
+
+    h: float = 1e-3
+    integrator: str = "semi-implicit"
+    contact: str = "impulse"
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    iterations: int = 60
+    tolerance: float = 1e-9
+    slop: float = 1e-6
+    bounce_threshold: float = 0.1
+    beta: float = 0.2
+    max_events: int = 8
+    adaptive_tolerance: float = 1e-9
+    stiffness: float = 1e5
+    damping: float = 10.0
+    exponent: float = 1.5
+    friction_speed: float = 1e-3
+
+    def vector(self) -> np.ndarray:
+        if self.integrator not in METHODS:
+            raise JassyError(
+                f"StepParams.integrator: expected one of {sorted(METHODS)}, got {self.integrator!r}"
+            )
+        models = {"impulse": st.IMPULSE, "linear": st.LINEAR, "hunt-crossley": st.HUNT_CROSSLEY}
+        if self.contact not in models:
+            raise JassyError(f"StepParams.contact: expected one of {sorted(models)}, got {self.contact!r}")
+        if not (self.h > 0 and np.isfinite(self.h)):
+            raise JassyError(f"StepParams.h: expected a positive step in s, got {self.h!r}")
+        p = np.zeros(st.N_PARAMS)
+        p[st.P_GX : st.P_GZ + 1] = self.gravity
+        p[st.P_SLOP], p[st.P_BOUNCE], p[st.P_BETA] = self.slop, self.bounce_threshold, self.beta
+        p[st.P_ITER], p[st.P_TOL] = self.iterations, self.tolerance
+        p[st.P_METHOD], p[st.P_ADAPT_TOL] = METHODS[self.integrator], self.adaptive_tolerance
+        p[st.P_MODEL], p[st.P_K], p[st.P_C], p[st.P_EXP] = (
+            models[self.contact],
+            self.stiffness,
+            self.damping,
+            self.exponent,
+        )
+        p[st.P_MAX_EVENTS], p[st.P_VEPS] = self.max_events, self.friction_speed
+        return p
+
+
+@dataclass
+class WorldState:
+    """time (s); pos (N, 3) centre-of-mass positions (m); quat (N, 4) unit quaternions (w, x,
+    y, z) of the principal frames; phi (N, 6) body-frame twists (rad/s, m/s)."""
+
+    time: float
+    pos: np.ndarray
+    quat: np.ndarray
+    phi: np.ndarray
+
+    def copy(self) -> WorldState:
+        return WorldState(self.time, self.pos.copy(), self.quat.copy(), self.phi.copy())
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Initial pose and velocity of a body, in world coordinates (shape frame origin at
+    ``position``, rotated by ``quaternion``; linear velocity of the centre of mass, angular
+    velocity)."""
+
+    position: tuple = (0.0, 0.0, 0.0)
+    quaternion: tuple = (1.0, 0.0, 0.0, 0.0)
+    velocity: tuple = (0.0, 0.0, 0.0)
+    angular_velocity: tuple = (0.0, 0.0, 0.0)
+
+
+class World:
+    """The model: bodies with their shapes, materials and sound models, and step parameters."""
+
+    def __init__(self, params: StepParams | None = None):
+        self.params = params or StepParams()
+        self.bodies: list[Body] = []
+        self.placements: list[Placement] = []
+        self._geo = None
+
+    def add(self, body: Body, placement: Placement | None = None) -> int:
+        """Add a body at its initial placement; returns its index."""
+        if any(b.name == body.name for b in self.bodies):
+            raise JassyError(f"World.add: a body named {body.name!r} exists already")
+        self.bodies.append(body)
+        self.placements.append(placement or Placement())
+        self._geo = None
+        return len(self.bodies) - 1
+
+    def index(self, name: str) -> int:
+        for i, b in enumerate(self.bodies):
+            if b.name == name:
+                return i
+        raise JassyError(f"World: no body named {name!r} (have {[b.name for b in self.bodies]})")
+
+    # -- model arrays ---------------------------------------------------------------------
+    def arrays(self):
+        """(geometry tuple, kind, mass, inertia, body tuple, frames) for the stepper;
+        frames[i] = (com, rotation) of body i's principal frame in its shape frame."""
+        if self._geo is None:
+            self._geo = _build_arrays(self.bodies)
+        return self._geo
+
+    def initial_state(self) -> WorldState:
+        """WorldState of the placements (shape-frame poses moved to the principal frames)."""
+        _, kind, _, _, _, frames = self.arrays()
+        n = len(self.bodies)
+        pos, quat, phi = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 6))
+        for i, (body, pl) in enumerate(zip(self.bodies, self.placements, strict=False)):
+            if body.kind == "kinematic":
+                p, q = body.path(0.0)
+            else:
+                p, q = np.asarray(pl.position, float), np.asarray(pl.quaternion, float)
+            pos[i], quat[i] = _principal_pose(p, q, *frames[i])
+            rot = _quat_matrix(quat[i])
+            phi[i, :3] = rot.T @ np.asarray(pl.angular_velocity, float)
+            phi[i, 3:] = rot.T @ np.asarray(pl.velocity, float)
+        return WorldState(0.0, pos, quat, phi)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    from physics.rigid.spatial import rotation_matrices
+
+    return rotation_matrices(np.asarray(q, float)[None])[0]
+
+
+def _matrix_quat(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion of a rotation matrix (Shepperd's method)."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(r).as_quat()
+    return np.array([w, x, y, z])
+
+
+def _principal_pose(position, quaternion, com, rotation):
+    """World pose of the principal frame given the shape frame's pose."""
+    q = np.asarray(quaternion, float)
+    norm = np.linalg.norm(q)
+    if not np.isfinite(norm) or norm < 1e-12:
+        raise JassyError(f"Placement.quaternion: expected a non-zero quaternion, got {quaternion!r}")
+    r_shape = _quat_matrix(q / norm)
+    return np.asarray(position, float) + r_shape @ com, _matrix_quat(r_shape @ rotation)
+
+
+def _polytope(shape, com, rotation):
+    """(vertices, face planes (n, d), hull triangles) of a box or convex hull, principal frame."""
+    if isinstance(shape, Box):
+        import trimesh
+
+        mesh = trimesh.creation.box(extents=2.0 * np.asarray(shape.half_extents, float))
+    else:
+        mesh = shape.hull
+    verts = (np.asarray(mesh.vertices) - com) @ rotation
+    tris = verts[np.asarray(mesh.faces)]
+    normals = np.asarray(mesh.face_normals) @ rotation
+    offsets = np.einsum("ij,ij->i", normals, tris[:, 0])
+    planes = np.unique(np.round(np.c_[normals, offsets], 12), axis=0)  # coplanar triangles share a plane
+    return verts, planes, tris
+
+
+def _build_arrays(bodies: list[Body]):
+    n = len(bodies)
+    btype = np.zeros(n, np.int64)
+    kind = np.zeros(n, np.int64)
+    param = np.zeros((n, 4))
+    bound = np.zeros(n)
+    mass = np.ones(n)
+    inertia = np.ones((n, 3))
+    inv_mass = np.zeros(n)
+    inv_inertia = np.zeros((n, 3))
+    rest, fric, roll = (
+        np.array([getattr(b.material, k) for b in bodies]) for k in ("restitution", "friction", "rolling")
+    )
+    verts, planes, htris, frames = [], [], [], []
+    vstart, pstart, hstart = [0], [0], [0]
+    mesh_id = np.full(n, -1, np.int64)
+    grids = []
+    kinds = {"dynamic": st.DYNAMIC, "static": st.STATIC, "kinematic": st.KINEMATIC}
+    for i, body in enumerate(bodies):
+        shape = body.shape
+        btype[i] = shape.kind
+        kind[i] = kinds[body.kind]
+        if body.kind == "dynamic":
+            props = mass_properties(shape, body.material.density)
+            com, rotation = props.com, props.rotation
+            mass[i], inertia[i] = props.mass, props.inertia
+            inv_mass[i], inv_inertia[i] = 1.0 / props.mass, 1.0 / props.inertia
+        else:
+            com, rotation = np.zeros(3), np.eye(3)
+        frames.append((com, rotation))
+        bound[i] = bounding_radius(shape, com, rotation)
+        v = p = t = np.zeros((0, 3))
+        if shape.kind == SPHERE:
+            param[i, 0] = shape.radius
+        elif shape.kind == CAPSULE:
+            param[i, :2] = shape.radius, shape.half_length
+            v = np.array([[0, 0, -shape.half_length], [0, 0, shape.half_length]], float)
+        elif shape.kind in (BOX, CONVEX):
+            v, p, t = _polytope(shape, com, rotation)
+        elif shape.kind == PLANE:
+            nrm = np.asarray(shape.normal, float)
+            param[i, :3] = nrm / np.linalg.norm(nrm)
+            param[i, 3] = shape.offset / np.linalg.norm(nrm)
+        elif shape.kind == MESH:
+            param[i, :2] = shape.thickness, shape.depth
+            mesh_id[i] = len(grids)
+            grids.append(
+                build_grid(np.asarray(shape.surface.vertices, float), np.asarray(shape.surface.faces))
+            )
+        verts.append(np.asarray(v, float).reshape(-1, 3))
+        planes.append(np.asarray(p, float).reshape(-1, 4))
+        htris.append(np.asarray(t, float).reshape(-1, 3, 3))
+        vstart.append(vstart[-1] + len(verts[-1]))
+        pstart.append(pstart[-1] + len(planes[-1]))
+        hstart.append(hstart[-1] + len(htris[-1]))
+    mesh_tables = _mesh_tables(grids)
+    geo = (
+        btype,
+        kind,
+        param,
+        bound,
+        np.array(vstart, np.int64),
+        np.concatenate(verts),
+        np.array(pstart, np.int64),
+        np.concatenate(planes),
+        np.array(hstart, np.int64),
+        np.concatenate(htris),
+        mesh_id,
+        *mesh_tables,
+    )
+    body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
+    return geo, kind, mass, inertia, body_arrays, frames
+
+
+def _mesh_tables(grids):
+    """Concatenated triangle grids: tri_off, tris, normals, grid_f (origin, cell), grid_i (dims),
+    cell_off, starts, item_off, items, spheres."""
+    if not grids:
+        z3 = np.zeros((0, 3))
+        return (
+            np.zeros(1, np.int64),
+            np.zeros((0, 3, 3)),
+            z3,
+            np.zeros((0, 4)),
+            np.zeros((0, 3), np.int64),
+            np.zeros(1, np.int64),
+            np.zeros(1, np.int64),
+            np.zeros(1, np.int64),
+            np.zeros(0, np.int64),
+            np.zeros((0, 4)),
+        )
+    tri_off = np.cumsum([0] + [len(g.triangles) for g in grids]).astype(np.int64)
+    cell_off = np.cumsum([0] + [len(g.start) for g in grids]).astype(np.int64)
+    item_off = np.cumsum([0] + [len(g.items) for g in grids]).astype(np.int64)
+    return (
+        tri_off,
+        np.concatenate([g.triangles for g in grids]),
+        np.concatenate([g.normals for g in grids]),
+        np.array([[*g.origin, g.cell] for g in grids]),
+        np.array([g.dims for g in grids], np.int64),
+        cell_off,
+        np.concatenate([g.start for g in grids]),
+        item_off,
+        np.concatenate([g.items for g in grids]),
+        np.concatenate([g.spheres for g in grids]),
+    )
+
+
+@dataclass
+class RunResult:
+    """Contact records (rows, stepper.REC_* columns), sampled poses every ``sample_every``
+    steps (times (S,), pos (S, N, 3), quat (S, N, 4), phi (S, N, 6)), the start time (s), the
+    final state, and stepper statistics (impact sub-steps, late impacts, contacts, solves)."""
+
+    world: World
+    start_time: float
+    records: np.ndarray
+    times: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    phi: np.ndarray
+    state: WorldState
+    stats: dict
+
+
+def simulate(
+    world: World, duration: float, state: WorldState | None = None, sample_every: int = 1, chunk: int = 2000
+) -> RunResult:
+    """Run ``world`` for ``duration`` seconds (a whole number of steps of world.params.h),
+    sampling the poses after every ``sample_every`` steps (0: only the final state)."""
+    prm = world.params.vector()
+    h = world.params.h
+    if not (duration > 0 and np.isfinite(duration)):
+        raise JassyError(f"simulate: duration: expected a positive time in s, got {duration!r}")
+    if sample_every < 0:
+        raise JassyError(f"simulate: sample_every: expected an integer >= 0, got {sample_every!r}")
+    geo, kind, mass, inertia, body, frames = world.arrays()
+    state = (state or world.initial_state()).copy()
+    n = len(world.bodies)
+    n_steps = int(round(duration / h))
+    first = int(round(state.time / h))
+    kin_index = np.array([i for i, b in enumerate(world.bodies) if b.kind == "kinematic"], np.int64)
+    every = sample_every or n_steps + 1
+    traj = np.zeros((n_steps // every, n, 13))
+    rec = np.zeros((max(4096, 64 * n), st.REC_WIDTH))
+    nrec = 0
+    stats = np.zeros(4, np.int64)
+    done = 0
+    while done < n_steps:
+        todo = min(chunk, n_steps - done)
+        kin_pos, kin_quat = _kinematic_samples(world, kin_index, frames, first + done, todo, h)
+        steps, nrec = st.run_steps(
+            first + done,
+            todo,
+            h,
+            state.pos,
+            state.quat,
+            state.phi,
+            kind,
+            kin_index,
+            kin_pos,
+            kin_quat,
+            mass,
+            inertia,
+            body,
+            geo,
+            prm,
+            rec,
+            nrec,
+            stats,
+            traj,
+            every,
+            first,
+        )
+        if steps < todo:  # the record buffer might not hold the next step: grow it
+            rec = np.concatenate([rec, np.zeros_like(rec)])
+        done += steps
+        if not (np.all(np.isfinite(state.pos)) and np.all(np.isfinite(state.phi))):
+            raise JassyError(f"simulate: the state became non-finite near t = {(first + done) * h:.6f} s")
+    state.time = (first + n_steps) * h
+    names = ("impact_substeps", "late_impacts", "contacts", "solves")
+    info = {name: int(x) for name, x in zip(names, stats, strict=True)}
+    times = (first + every * np.arange(1, traj.shape[0] + 1)) * h
+    return RunResult(
+        world,
+        first * h,
+        rec[:nrec].copy(),
+        times,
+        traj[:, :, :3].copy(),
+        traj[:, :, 3:7].copy(),
+        traj[:, :, 7:].copy(),
+        state,
+        info,
+    )
+
+
+def _kinematic_samples(world, kin_index, frames, first, steps, h):
+    """Principal-frame poses of the kinematic bodies at steps first .. first + steps."""
+    k = len(kin_index)
+    pos = np.zeros((steps + 1, k, 3))
+    quat = np.zeros((steps + 1, k, 4))
+    for j, i in enumerate(kin_index):
+        path = world.bodies[i].path
+        for s in range(steps + 1):
+            p, q = path((first + s) * h)
+            pos[s, j], quat[s, j] = _principal_pose(p, q, *frames[i])
+    return pos, quat

@@ -1,0 +1,297 @@
+"""Rigid contact against closed forms: bounces, sliding, rolling, penalty contact, events."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from jassy.errors import JassyError
+from physics.rigid import stepper as st
+from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
+from physics.rigid.meshgrid import build_grid, grid_closest
+from physics.rigid.narrow import closest_segments, sweep_and_prune
+from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
+from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
+
+G = 9.81
+
+
+def _ball_world(e, integrator="rk4", h=1e-3, height=1.0, radius=0.05, **params):
+    w = World(StepParams(h=h, integrator=integrator, bounce_threshold=0.05, **params))
+    w.add(Body("ground", Plane(), Material("g", 1000, e, 0.0), kind="static"))
+    w.add(
+        Body("ball", Sphere(radius), Material("b", 1000, e, 0.0)), Placement(position=(0, 0, height + radius))
+    )
+    return w
+
+
+@pytest.mark.parametrize("e", [0.8, 0.5])
+def test_bouncing_ball_impact_times_and_intervals(e):
+    """Impact times exact (within 1e-6 s) though they fall inside 1 ms steps; flight times
+    shrink by e; the impulse is m (1 + e) v."""
+    w = _ball_world(e)
+    result = simulate(w, 3.0, sample_every=0)
+    hits = impacts(result)
+    v0 = math.sqrt(2 * G)
+    n = min(len(hits), 6)
+    expected = math.sqrt(2 / G) + np.r_[0, np.cumsum(2 * v0 * e ** np.arange(1, n) / G)]
+    times = np.array([h.time for h in hits[:n]])
+    assert np.max(np.abs(times - expected)) < 1e-6
+    assert np.any(np.abs(times / 1e-3 - np.round(times / 1e-3)) > 0.05)  # not on the step grid
+    intervals = np.diff(times)
+    assert np.allclose(intervals[1:] / intervals[:-1], e, rtol=1e-6)
+    mass = 1000 * 4 / 3 * math.pi * 0.05**3
+    speeds = v0 * e ** np.arange(n)
+    assert np.allclose([h.impulse for h in hits[:n]], mass * (1 + e) * speeds, rtol=1e-6)
+    assert np.allclose([h.speed for h in hits[:n]], speeds, rtol=1e-6)
+
+
+def test_bouncing_ball_time_to_rest():
+    """Zeno limit: rest at t1 + (v0/g) 2e/(1-e) after the first impact; bounces stop when the
+    approach speed falls below the bounce threshold (a remainder below 2 v_thr / (g (1-e)))."""
+    e = 0.5
+    w = _ball_world(e, integrator="semi-implicit")
+    result = simulate(w, 2.0)
+    v0 = math.sqrt(2 * G)
+    rest = math.sqrt(2 / G) + v0 / G * 2 * e / (1 - e)
+    z, vz = result.pos[:, 1, 2], result.phi[:, 1, 5]
+    resting = (np.abs(z - 0.05) < 1e-5) & (np.abs(vz) < 1e-6)
+    first_rest = result.times[np.argmax(resting)]
+    assert np.all(resting[result.times > first_rest])
+    assert abs(first_rest - rest) < 2 * 0.05 / (G * (1 - e)) + 2e-3
+
+
+@pytest.mark.parametrize("h", [1e-3, 5e-4])
+def test_sliding_block_stops_at_coulomb_distance(h):
+    v0, mu = 2.0, 0.5
+    w = World(StepParams(h=h))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, mu), kind="static"))
+    w.add(
+        Body("box", Box((0.1, 0.1, 0.05)), Material("b", 500, 0, mu)),
+        Placement(position=(0, 0, 0.05), velocity=(v0, 0, 0)),
+    )
+    result = simulate(w, 0.6)
+    x = result.pos[:, 1, 0]
+    assert x[-1] == pytest.approx(v0**2 / (2 * mu * G), abs=v0 * h)
+    stop = result.times[np.argmax(np.abs(result.phi[:, 1, 3]) < 1e-9)]
+    assert stop == pytest.approx(v0 / (mu * G), abs=2 * h)
+    assert np.max(np.abs(result.pos[:, 1, 2] - 0.05)) < 1e-5  # stays on the plane, no tipping
+    tracks = contact_tracks(result)
+    assert len(tracks) == 1
+    track = tracks[0]
+    mass = 500 * 0.2 * 0.2 * 0.1
+    sliding = track.times < 0.35
+    assert np.allclose(track.normal_force[sliding], mass * G, rtol=1e-6)
+    slope = np.polyfit(track.times[sliding], track.slip_speed[sliding], 1)[0]
+    assert slope == pytest.approx(-mu * G, rel=1e-3)
+
+
+@pytest.mark.parametrize("mu, expected", [(0.5, 5 / 7), (0.0, 1.0)])
+def test_sphere_on_incline(mu, expected):
+    """Rolls without slipping at 5/7 g sin(theta) (mu > 2/7 tan theta); slides at g sin(theta)
+    without friction."""
+    theta = math.radians(30)
+    n = (0.0, -math.sin(theta), math.cos(theta))
+    w = World(StepParams(h=1e-3))
+    w.add(Body("slope", Plane(n, 0.0), Material("g", 1000, 0, mu), kind="static"))
+    w.add(Body("ball", Sphere(0.1), Material("b", 1000, 0, mu)), Placement(position=np.array(n) * 0.1))
+    result = simulate(w, 1.0)
+    s = np.linalg.norm(result.pos[:, 1] - result.pos[0, 1], axis=1)
+    accel = 2 * np.polyfit(result.times, s, 2)[0]
+    assert accel == pytest.approx(expected * G * math.sin(theta), rel=2e-3)
+    if mu > 0:
+        roll = contact_tracks(result)[0]
+        assert np.max(roll.slip_speed) < 1e-6
+        a = expected * G * math.sin(theta)  # rolling speed = centre speed (sampled at the step end)
+        assert np.max(np.abs(roll.rolling_speed - a * roll.times)) < 1.01 * a * 1e-3
+
+
+def _bounce_ode(k, c, m, v_in):
+    """Independent reference: m x'' = -max(k x + c x', 0) from first touch to separation
+    (scipy solve_ivp, tight tolerances); returns (rebound speed, contact time)."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(t, y):
+        return [y[1], -max(k * y[0] + c * y[1], 0.0) / m]
+
+    def leave(t, y):
+        return y[0] if t > 1e-6 else 1.0
+
+    leave.terminal, leave.direction = True, -1
+    sol = solve_ivp(rhs, (0, 1), [0.0, v_in], events=leave, rtol=1e-11, atol=1e-14, max_step=1e-5)
+    return -sol.y_events[0][0][1], sol.t_events[0][0]
+
+
+def test_linear_spring_damper_contact_matches_ode():
+    """k = 1e4, c = 5, m = 0.1 (physics.md A4: unclamped e = 0.779467, t_c = 9.96578e-3 s).
+    The force is clamped at zero (no pull before separation), so the reference is the
+    clamped ODE, which separates slightly earlier and faster."""
+    k, c, m = 1e4, 5.0, 0.1
+    radius = 0.02
+    density = m / (4 / 3 * math.pi * radius**3)
+    w = World(StepParams(h=1e-5, contact="linear", stiffness=k, damping=c, gravity=(0, 0, 0), slop=0.0))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, 0), kind="static"))
+    w.add(
+        Body("ball", Sphere(radius), Material("b", density, 0, 0)),
+        Placement(position=(0, 0, radius + 1e-3), velocity=(0, 0, -1.0)),
+    )
+    result = simulate(w, 0.03)
+    v_out, t_c = _bounce_ode(k, c, m, 1.0)
+    assert 0.779467 < v_out < 0.80 and 9.5e-3 < t_c < 9.96578e-3
+    rows = result.records
+    t_contact = rows[-1, st.REC_TIME] - rows[0, st.REC_TIME] + 1e-5
+    assert t_contact == pytest.approx(t_c, abs=3e-5)
+    assert result.phi[-1, 1, 5] == pytest.approx(v_out, rel=2e-3)
+
+
+@pytest.mark.parametrize("mass, exponent", [(0.1, 1.5), (0.4, 1.0)])
+def test_hunt_crossley_restitution_and_zero_force_at_touch(mass, exponent):
+    """e from v_out - v_in = (1/a) ln((1 + a v_out)/(1 + a v_in)), a = lambda/k, for any m, n."""
+    from scipy.optimize import brentq
+
+    k, lam, v_in = 1e5, 2e4, 1.0
+    radius = 0.02
+    density = mass / (4 / 3 * math.pi * radius**3)
+    w = World(
+        StepParams(
+            h=2e-6,
+            contact="hunt-crossley",
+            stiffness=k,
+            damping=lam,
+            exponent=exponent,
+            gravity=(0, 0, 0),
+            slop=0.0,
+        )
+    )
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, 0), kind="static"))
+    w.add(
+        Body("ball", Sphere(radius), Material("b", density, 0, 0)),
+        Placement(position=(0, 0, radius + 1e-5), velocity=(0, 0, -v_in)),
+    )
+    result = simulate(w, 0.02, sample_every=0)
+    alpha = lam / k
+    v_out = brentq(
+        lambda v: (-v - v_in) - np.log((1 - alpha * v) / (1 + alpha * v_in)) / alpha, 1e-9, 1 / alpha - 1e-9
+    )
+    assert result.state.phi[1, 5] == pytest.approx(v_out, rel=2e-3)
+    first = np.linalg.norm(result.records[0, st.REC_IMPULSE : st.REC_IMPULSE + 3]) / 2e-6
+    assert first < 1e-3 * lam * v_in  # a linear damper would start at lambda-like c v_in
+
+
+def test_box_resting_on_four_corners_carries_its_weight():
+    w = World(StepParams(h=1e-3))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, 0.5), kind="static"))
+    w.add(Body("box", Box((0.1, 0.05, 0.02)), Material("b", 800, 0, 0.5)), Placement(position=(0, 0, 0.0205)))
+    result = simulate(w, 0.5)
+    times, force, _ = contact_wrench(result, 1)
+    mass = 800 * 0.2 * 0.1 * 0.04
+    assert np.allclose(force[times > 0.1, 2], mass * G, rtol=1e-6)
+    assert np.max(np.abs(result.pos[:, 1, 2] - 0.02)) < 1e-3
+    frames = haptic_frames(result, 1)
+    assert len(frames) == 500 and np.allclose(frames[-1].force, [0, 0, mass * G], rtol=1e-6)
+
+
+def test_impact_location_on_a_mesh_is_the_hit_triangle():
+    """A sphere dropped on a mesh floor whose model rows are its vertices strikes the triangle
+    under it, with barycentric weights of the contact point."""
+    floor = trimesh.creation.box(extents=(1.0, 1.0, 0.1))
+    floor.apply_translation((0, 0, -0.05))
+    w = World(StepParams(h=1e-3))
+    w.add(
+        Body(
+            "floor", TriangleMesh(floor), Material("g", 1000, 0.5, 0), kind="static", sound_points="vertices"
+        )
+    )
+    w.add(Body("ball", Sphere(0.02), Material("b", 1000, 0.5, 0)), Placement(position=(0.13, -0.21, 0.3)))
+    hit = impacts(simulate(w, 0.3, sample_every=0))[0]
+    loc = hit.locations[0] if hit.bodies[0] == 0 else hit.locations[1]
+    verts = np.asarray(floor.vertices)[list(loc.vertices)]
+    point = np.asarray(loc.weights) @ verts
+    assert sum(loc.weights) == pytest.approx(1.0)
+    assert np.allclose(point, [0.13, -0.21, 0.0], atol=1e-6)
+
+
+def test_grid_closest_point_matches_brute_force():
+    """Against trimesh's vectorised point-triangle routine over every triangle."""
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
+    grid = build_grid(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(100, 3))
+    pts *= ((0.3 + rng.uniform(-0.05, 0.05, 100)) / np.linalg.norm(pts, axis=1))[:, None]
+    tris = np.asarray(mesh.triangles)
+    for p in pts:
+        cand = trimesh.triangles.closest_point(tris, np.tile(p, (len(tris), 1)))
+        d = np.linalg.norm(cand - p, axis=1)
+        q = cand[np.argmin(d)]
+        tri, got, point, _, bary = grid_closest(
+            p,
+            0.2,
+            grid.triangles,
+            grid.normals,
+            grid.spheres,
+            grid.origin,
+            grid.cell,
+            grid.dims,
+            grid.start,
+            grid.items,
+        )
+        assert got == pytest.approx(d.min(), abs=1e-9)
+        assert np.allclose(point, q, atol=1e-9)
+        assert np.allclose(bary @ grid.triangles[tri], q, atol=1e-9)
+
+
+def test_closest_segments_against_dense_sampling():
+    rng = np.random.default_rng(4)
+    s = np.linspace(0, 1, 801)
+    for _ in range(20):
+        p1, q1, p2, q2 = rng.normal(size=(4, 3))
+        c1, c2 = closest_segments(p1, q1, p2, q2)
+        a = p1 + s[:, None] * (q1 - p1)
+        b = p2 + s[:, None] * (q2 - p2)
+        brute = np.min(np.linalg.norm(a[:, None] - b[None], axis=2))
+        assert np.linalg.norm(c1 - c2) <= brute + 1e-12
+        assert np.linalg.norm(c1 - c2) >= brute - 1e-2
+
+
+def test_sweep_and_prune_equals_all_pairs():
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(0, 1, (300, 3))
+    hi = lo + rng.uniform(0, 0.1, (300, 3))
+    movable = rng.uniform(size=300) < 0.8
+    got = {tuple(p) for p in sweep_and_prune(lo, hi, movable)}
+    overlap = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
+    expected = {
+        (i, j) for i in range(300) for j in range(i + 1, 300) if overlap[i, j] and (movable[i] or movable[j])
+    }
+    assert got == expected
+
+
+def test_mass_properties_against_trimesh():
+    for shape, mesh in [
+        (Box((0.1, 0.2, 0.3)), trimesh.creation.box(extents=(0.2, 0.4, 0.6))),
+        (Sphere(0.1), trimesh.creation.icosphere(subdivisions=5, radius=0.1)),
+        (Capsule(0.05, 0.1), trimesh.creation.capsule(height=0.2, radius=0.05, count=[64, 64])),
+    ]:
+        props = mass_properties(shape, 1000.0)
+        ref = np.sort(np.linalg.eigvalsh(mesh.moment_inertia * 1000.0))
+        assert props.mass == pytest.approx(1000.0 * mesh.volume, rel=2e-3)
+        assert np.allclose(np.sort(props.inertia), ref, rtol=5e-3)
+    hull = Convex(trimesh.creation.box(extents=(0.2, 0.4, 0.6)).vertices)
+    assert np.allclose(
+        np.sort(mass_properties(hull, 1000.0).inertia),
+        np.sort(mass_properties(Box((0.1, 0.2, 0.3)), 1000.0).inertia),
+    )
+
+
+def test_bad_input_is_named():
+    with pytest.raises(JassyError, match="restitution"):
+        Material("x", 1000, 1.5, 0.3)
+    with pytest.raises(JassyError, match="cannot be dynamic"):
+        Body("p", Plane(), Material("x", 1000, 0.5, 0.3))
+    with pytest.raises(JassyError, match="integrator"):
+        StepParams(integrator="euler").vector()
+    with pytest.raises(JassyError, match="Sphere.radius"):
+        Sphere(-1.0)
+    with pytest.raises(JassyError, match="duration"):
+        simulate(_ball_world(0.5), -1.0)
