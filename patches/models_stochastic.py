@@ -188,4 +188,16 @@ def wok_model(
     return ModalModel(freqs, decays, gains, WOK_POINTS, "wok")
 
 
-SHIPPED = {"paper_sheet_model.toml": paper_sheet_model, "wok_model.toml": wok_model}
+def wok_deep_model() -> ModalModel:
+    """The tossing wok of the ``wok`` scene (patches/wok.py): rim radius 0.18 m, radius of
+    curvature 0.35 m (5 cm deep; the shallow-shell analogy is stretched here)."""
+    model = wok_model(radius=0.18, curvature=0.35)
+    model.name = "wok_deep"
+    return model
+
+
+SHIPPED = {
+    "paper_sheet_model.toml": paper_sheet_model,
+    "wok_model.toml": wok_model,
+    "wok_deep_model.toml": wok_deep_model,
+}

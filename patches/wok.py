@@ -4,7 +4,7 @@ A carbon-steel wok (a spherical cap of rim radius 0.18 m and radius of curvature
 a kinematic triangle mesh held by its handle) is shaken and tossed by a scripted hand: the
 food (peas, tofu cubes, shrimp-like capsules and irregular convex bits) is dropped in, slides
 and rolls while the wok is swirled, and flies and lands when it is tossed. Every impact
-strikes the wok's modal model (patches/models_stochastic.wok_model at this curvature) where
+strikes the wok's modal model (wok_deep_model.toml: models_stochastic.wok_deep_model) where
 the food landed and the food piece's own few damped modes; sliding and rolling contacts
 drive Scrape and Roll generators; the contact force and torque of the food on the wok, about
 the hand on the handle, is the haptic channel.
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -79,7 +80,7 @@ def food_model(size: float, seed: int) -> ModalModel:
 
 def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
     """The wok world: kinematic wok + n_food pieces placed above it."""
-    from patches.models_stochastic import WOK_RADII, wok_model
+    from patches.models_stochastic import WOK_RADII
     from physics.rigid.shapes import Box, Capsule, Convex, Sphere, TriangleMesh
     from physics.rigid.world import MATERIALS, Body, Placement, StepParams, World
 
@@ -97,7 +98,7 @@ def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
             TriangleMesh(wok_surface()),
             steel,
             kind="kinematic",
-            sound=wok_model(radius=WOK_RIM, curvature=WOK_CURVATURE),
+            sound=ModalModel.load(Path(__file__).with_name("wok_deep_model.toml")),
             sound_points=points,
             path=hand_path,
         )

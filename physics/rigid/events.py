@@ -146,7 +146,8 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
         f = sign * rows[:, st.REC_IMPULSE : st.REC_IMPULSE + 3] / h
         np.add.at(force, k, f)
         if point is not None:
-            centres = np.array([point(t) for t in rows[:, st.REC_TIME]])
+            times, which = np.unique(rows[:, st.REC_TIME], return_inverse=True)
+            centres = np.array([point(t) for t in times])[which]
             np.add.at(torque, k, np.cross(rows[:, st.REC_POINT : st.REC_POINT + 3] - centres, f))
     return steps * h, force, torque
 

@@ -124,11 +124,10 @@ def _sphere_points(a, pos, rot, geo):
 
 
 @nb.njit(cache=True)
-def _polytope_distance(x, b, pos, rot, geo):
-    """Signed distance from world point x to polytope b, with the outward normal (world) at
-    the closest point and the index of the face plane or hull triangle reached."""
-    pstart, planes, hstart, htris = geo[6], geo[7], geo[8], geo[9]
-    local = mtv(rot[b], x - pos[b])
+def _deepest_plane(local, b, geo):
+    """(largest signed distance of the body-frame point ``local`` over polytope b's face
+    planes, index of that plane): negative inside, an under-estimate of the distance outside."""
+    pstart, planes = geo[6], geo[7]
     best = -math.inf
     face = -1
     for j in range(pstart[b], pstart[b + 1]):
@@ -136,6 +135,16 @@ def _polytope_distance(x, b, pos, rot, geo):
         if sd > best:
             best = sd
             face = j
+    return best, face
+
+
+@nb.njit(cache=True)
+def _polytope_distance(x, b, pos, rot, geo):
+    """Signed distance from world point x to polytope b, with the outward normal (world) at
+    the closest point and the index of the face plane or hull triangle reached."""
+    pstart, planes, hstart, htris = geo[6], geo[7], geo[8], geo[9]
+    local = mtv(rot[b], x - pos[b])
+    best, face = _deepest_plane(local, b, geo)
     if best <= 0.0:
         return best, mv(rot[b], planes[face, :3]), face - pstart[b]
     best_d2 = math.inf
@@ -173,14 +182,7 @@ def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
     pstart, planes = geo[6], geo[7]
     for v in range(vstart[a], vstart[a + 1]):
         x = pos[a] + mv(rot[a], verts[v])
-        local = mtv(rot[b], x - pos[b])
-        best = -math.inf
-        face = -1
-        for j in range(pstart[b], pstart[b + 1]):
-            sd = dot3(planes[j, :3], local) - planes[j, 3]
-            if sd > best:
-                best = sd
-                face = j
+        best, face = _deepest_plane(mtv(rot[b], x - pos[b]), b, geo)
         if best <= margin:
             n = mv(rot[b], planes[face, :3])
             point = x - 0.5 * best * n

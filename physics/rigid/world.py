@@ -415,7 +415,7 @@ def simulate(
     done = 0
     while done < n_steps:
         todo = min(chunk, n_steps - done)
-        kin_pos, kin_quat = _kinematic_samples(world, kin_index, frames, first + done, todo, h)
+        kin_pos, kin_quat = _kinematic_samples(world, kin_index, first + done, todo, h)
         steps, nrec = st.run_steps(
             first + done,
             todo,
@@ -461,14 +461,16 @@ def simulate(
     )
 
 
-def _kinematic_samples(world, kin_index, frames, first, steps, h):
-    """Principal-frame poses of the kinematic bodies at steps first .. first + steps."""
+def _kinematic_samples(world, kin_index, first, steps, h):
+    """Poses of the kinematic bodies at steps first .. first + steps."""
     k = len(kin_index)
     pos = np.zeros((steps + 1, k, 3))
     quat = np.zeros((steps + 1, k, 4))
     for j, i in enumerate(kin_index):
         path = world.bodies[i].path
         for s in range(steps + 1):
-            p, q = path((first + s) * h)
-            pos[s, j], quat[s, j] = _principal_pose(p, q, *frames[i])
-    return pos, quat
+            pos[s, j], quat[s, j] = path((first + s) * h)
+    norms = np.linalg.norm(quat, axis=2, keepdims=True)
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(norms)) and np.all(norms > 1e-12)):
+        raise JassyError("kinematic path: expected finite positions and non-zero quaternions")
+    return pos, quat / norms  # a kinematic body's frame is its shape frame
