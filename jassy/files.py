@@ -157,11 +157,14 @@ class AtomicAudioWriter:
         return bool(self._ctx.__exit__(exc_type, exc, tb))
 
 
-def write_signal(path: str | os.PathLike, data: np.ndarray, sample_rate: float, label: str = "force") -> None:
+def write_signal(
+    path: str | os.PathLike, data: np.ndarray, sample_rate: float, label: str | list[str] = "force"
+) -> None:
     """Write a (channels, frames) signal atomically as .wav (float32), .npz or .csv.
 
     NPZ holds ``data``, ``sample_rate`` and ``frames`` (sample index of each column);
-    CSV has columns frame, time_s and one per channel.
+    CSV has columns frame, time_s and one per channel, named ``label`` + index, or by the
+    list of names ``label``.
     """
     path = Path(path)
     if not np.all(np.isfinite(data)):
@@ -181,7 +184,10 @@ def write_signal(path: str | os.PathLike, data: np.ndarray, sample_rate: float, 
             Path(tmp).write_bytes(deterministic_npz(buffer.getvalue()))
         elif ext == ".csv":
             cols = [frames, frames / sample_rate, *data]
-            header = ",".join(["frame", "time_s"] + [f"{label}{c}" for c in range(data.shape[0])])
+            names = [f"{label}{c}" for c in range(data.shape[0])] if isinstance(label, str) else list(label)
+            if len(names) != data.shape[0]:
+                raise RenderError(f"{path}: {len(names)} column names for {data.shape[0]} channels")
+            header = ",".join(["frame", "time_s", *names])
             np.savetxt(
                 tmp,
                 np.column_stack(cols),

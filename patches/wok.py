@@ -148,7 +148,7 @@ def render_wok(
 ) -> dict:
     """Render the wok: sound to ``out_wav`` (-6 dBFS peak), the force (N) and torque (N m) of
     the food on the wok about the hand to ``haptic_path`` (1 kHz frames: .csv/.npz/.wav via
-    jassy.files.write_signal; columns force_0..2, torque x, y, z), and a CSV of impacts
+    jassy.files.write_signal; columns force_x_n .. torque_z_nm), and a CSV of impacts
     (time_s, body_a, body_b, impulse_ns, speed_ms) to ``csv_path``. Returns a summary."""
     from jassy.files import write_signal
     from physics.rigid.events import contact_tracks, contact_wrench, impacts
@@ -170,8 +170,9 @@ def render_wok(
 
     times, force, torque = contact_wrench(result, world.index("wok"), hand)
     if haptic_path:
+        names = ["force_x_n", "force_y_n", "force_z_n", "torque_x_nm", "torque_y_nm", "torque_z_nm"]
         write_signal(
-            haptic_path, np.column_stack([force, torque]).T.copy(), 1.0 / world.params.h, label="force_"
+            haptic_path, np.column_stack([force, torque]).T.copy(), 1.0 / world.params.h, label=names
         )
     if csv_path:
         write_csv(csv_path, impact_rows(hits), IMPACT_HEADER)

@@ -82,14 +82,13 @@ def semi_implicit_step(p, q, phi, inertia, mass, gravity, ext, h):
         wm = 0.5 * (w0 + w1)
         iwm = inertia * wm
         g = inertia * (w1 - w0) / h + cross(wm, iwm) - tau
-        # dg/dw1 = I/h + 0.5 ([wm] I - [I wm])
-        for a in range(3):
-            e = np.zeros(3)
-            e[a] = 0.5
-            col = cross(e, iwm) + cross(wm, inertia * e)
-            for b in range(3):
-                jac[b, a] = col[b]
-            jac[a, a] += inertia[a] / h
+        # dg/dw1 = I/h + 0.5 ([wm] I - [I wm]), [x] the cross-product matrix
+        x0, x1, x2 = wm[0], wm[1], wm[2]
+        y0, y1, y2 = iwm[0], iwm[1], iwm[2]
+        i0, i1, i2 = inertia[0], inertia[1], inertia[2]
+        jac[0, 0], jac[0, 1], jac[0, 2] = i0 / h, 0.5 * (-x2 * i1 + y2), 0.5 * (x1 * i2 - y1)
+        jac[1, 0], jac[1, 1], jac[1, 2] = 0.5 * (x2 * i0 - y2), i1 / h, 0.5 * (-x0 * i2 + y0)
+        jac[2, 0], jac[2, 1], jac[2, 2] = 0.5 * (-x1 * i0 + y1), 0.5 * (x0 * i1 - y0), i2 / h
         dw = solve3(jac, g)
         w1 = w1 - dw
         if abs(dw[0]) + abs(dw[1]) + abs(dw[2]) <= 1e-14 * (1.0 + abs(w1[0]) + abs(w1[1]) + abs(w1[2])):

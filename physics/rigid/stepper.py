@@ -473,10 +473,22 @@ def _boxes(pos, rot, phi, kind, kin_v, kin_w, geo, prm, margin, dt):
 
 
 @nb.njit(cache=True)
+def _apart(a, b, pos, geo, margin):
+    """Whether the bounding spheres of a and b are more than ``margin`` apart (cheap reject)."""
+    bound = geo[3]
+    reach = bound[a] + bound[b] + margin  # inf for a plane: never apart
+    d0, d1, d2 = pos[a, 0] - pos[b, 0], pos[a, 1] - pos[b, 1], pos[a, 2] - pos[b, 2]
+    return d0 * d0 + d1 * d1 + d2 * d2 > reach * reach
+
+
+@nb.njit(cache=True)
 def _detect(pairs, pos, rot, geo, margin, buf, touching):
     """Contacts of all pairs; touching[p] tells whether pair p has one within margin."""
     count = 0
     for p in range(pairs.shape[0]):
+        touching[p] = False
+        if _apart(pairs[p, 0], pairs[p, 1], pos, geo, margin):
+            continue
         before = count
         count = pair_contacts(pairs[p, 0], pairs[p, 1], pos, rot, geo, margin, buf, count)
         touching[p] = count > before
@@ -601,6 +613,8 @@ def run_steps(
                     if touching[p]:
                         continue  # in contact already: the solve handles it
                     a, b = pairs[p, 0], pairs[p, 1]
+                    if _apart(a, b, new_pos, geo, slop):
+                        continue
                     g1 = _pair_gap(a, b, new_pos, new_rot, geo, slop, scratch)
                     if g1 >= -slop:
                         continue
