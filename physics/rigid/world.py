@@ -401,7 +401,7 @@ def simulate(
         raise JassyError(f"simulate: duration: expected a positive time in s, got {duration!r}")
     if sample_every < 0:
         raise JassyError(f"simulate: sample_every: expected an integer >= 0, got {sample_every!r}")
-    geo, kind, mass, inertia, body, frames = world.arrays()
+    geo, kind, mass, inertia, body, _ = world.arrays()
     state = (state or world.initial_state()).copy()
     n = len(world.bodies)
     n_steps = int(round(duration / h))
