@@ -280,6 +280,42 @@ def _goals(x, m, order, starts, qrest, q9, aqq, aqq9, mode, beta, prior, tol, go
 
 
 @numba.njit(cache=True)
+def _body_moments(x, v, m, order, lo, hi, c, vc, L, inertia):
+    """Mass (kg) of the particles order[lo:hi]; fills their centre of mass c, mean velocity
+    vc, angular momentum L about c and inertia tensor about c."""
+    M = 0.0
+    c[:] = 0.0
+    vc[:] = 0.0
+    for j in range(lo, hi):
+        i = order[j]
+        M += m[i]
+        for a in range(3):
+            c[a] += m[i] * x[i, a]
+            vc[a] += m[i] * v[i, a]
+    c /= M
+    vc /= M
+    L[:] = 0.0
+    inertia[:, :] = 0.0
+    for j in range(lo, hi):
+        i = order[j]
+        r0, r1, r2 = x[i, 0] - c[0], x[i, 1] - c[1], x[i, 2] - c[2]
+        L[0] += m[i] * (r1 * v[i, 2] - r2 * v[i, 1])
+        L[1] += m[i] * (r2 * v[i, 0] - r0 * v[i, 2])
+        L[2] += m[i] * (r0 * v[i, 1] - r1 * v[i, 0])
+        rr = r0 * r0 + r1 * r1 + r2 * r2
+        inertia[0, 0] += m[i] * (rr - r0 * r0)
+        inertia[1, 1] += m[i] * (rr - r1 * r1)
+        inertia[2, 2] += m[i] * (rr - r2 * r2)
+        inertia[0, 1] -= m[i] * r0 * r1
+        inertia[0, 2] -= m[i] * r0 * r2
+        inertia[1, 2] -= m[i] * r1 * r2
+    inertia[1, 0] = inertia[0, 1]
+    inertia[2, 0] = inertia[0, 2]
+    inertia[2, 1] = inertia[1, 2]
+    return M
+
+
+@numba.njit(cache=True)
 def _damp_rigid(x, v, m, order, starts, k):
     """v_i += k (v_rigid,i - v_i) per body, v_rigid = v_cm + w x r_i with w = I^+ L: removes
     the non-rigid part of the velocity, keeping linear and angular momentum."""
@@ -289,35 +325,7 @@ def _damp_rigid(x, v, m, order, starts, k):
     inertia = np.empty((3, 3))
     for b in range(starts.size - 1):
         lo, hi = starts[b], starts[b + 1]
-        M = 0.0
-        c[:] = 0.0
-        vc[:] = 0.0
-        for j in range(lo, hi):
-            i = order[j]
-            M += m[i]
-            for a in range(3):
-                c[a] += m[i] * x[i, a]
-                vc[a] += m[i] * v[i, a]
-        c /= M
-        vc /= M
-        L[:] = 0.0
-        inertia[:, :] = 0.0
-        for j in range(lo, hi):
-            i = order[j]
-            r0, r1, r2 = x[i, 0] - c[0], x[i, 1] - c[1], x[i, 2] - c[2]
-            L[0] += m[i] * (r1 * v[i, 2] - r2 * v[i, 1])
-            L[1] += m[i] * (r2 * v[i, 0] - r0 * v[i, 2])
-            L[2] += m[i] * (r0 * v[i, 1] - r1 * v[i, 0])
-            rr = r0 * r0 + r1 * r1 + r2 * r2
-            inertia[0, 0] += m[i] * (rr - r0 * r0)
-            inertia[1, 1] += m[i] * (rr - r1 * r1)
-            inertia[2, 2] += m[i] * (rr - r2 * r2)
-            inertia[0, 1] -= m[i] * r0 * r1
-            inertia[0, 2] -= m[i] * r0 * r2
-            inertia[1, 2] -= m[i] * r1 * r2
-        inertia[1, 0] = inertia[0, 1]
-        inertia[2, 0] = inertia[0, 2]
-        inertia[2, 1] = inertia[1, 2]
+        _body_moments(x, v, m, order, lo, hi, c, vc, L, inertia)
         w = np.linalg.pinv(inertia) @ L
         for j in range(lo, hi):
             i = order[j]
@@ -416,30 +424,7 @@ def _contact_impulses(x, v, m, body, starts, order, cid, cn, cdep, nc, rest, mu,
         lo, hi = first[b], first[b + 1]
         if lo >= hi:
             continue
-        M = 0.0
-        c[:] = 0.0
-        vc[:] = 0.0
-        for j in range(starts[b], starts[b + 1]):
-            i = order[j]
-            M += m[i]
-            for a in range(3):
-                c[a] += m[i] * x[i, a]
-                vc[a] += m[i] * v[i, a]
-        c /= M
-        vc /= M
-        L[:] = 0.0
-        inertia[:, :] = 0.0
-        for j in range(starts[b], starts[b + 1]):
-            i = order[j]
-            for a in range(3):
-                tmp[a] = x[i, a] - c[a]
-            _cross(tmp, v[i], rt)
-            rr = tmp[0] * tmp[0] + tmp[1] * tmp[1] + tmp[2] * tmp[2]
-            for a in range(3):
-                L[a] += m[i] * rt[a]
-                inertia[a, a] += m[i] * rr
-                for e in range(3):
-                    inertia[a, e] -= m[i] * tmp[a] * tmp[e]
+        M = _body_moments(x, v, m, order, starts[b], starts[b + 1], c, vc, L, inertia)
         iinv = np.linalg.pinv(inertia)
         w = iinv @ L
         w0 = w.copy()

@@ -27,6 +27,7 @@ import numpy as np
 from jassy.errors import JassyError
 from physics.rod.mixed import MixedRod
 from physics.rod.model import RodModel
+from physics.rod.plotting import save_plot
 from physics.rod.system import Anchor, Disk, Joint, Plane, RigidBody, RodSystem, contact_events
 
 
@@ -123,17 +124,11 @@ def snap_fit(
 
 
 def _plot_xy(path, x, y, xl, yl, title):
-    import matplotlib
+    def draw(ax):
+        ax.plot(x, y)
+        ax.set(xlabel=xl, ylabel=yl, title=title)
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 3.5))
-    ax.plot(x, y)
-    ax.set(xlabel=xl, ylabel=yl, title=title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_plot(path, draw, size=(5.0, 3.5), dpi=100)
 
 
 def shell_stack(
@@ -214,26 +209,20 @@ def _node_speed(forms, before, after, h) -> float:
 
 
 def _plot_rods(path, forms, states, title, extra=None):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from physics.rod import arc
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for f, st in zip(forms, states, strict=True):
-        a = f.arcs(st.q)
-        s = np.linspace(0, 1, 9)[None, :] * a.l[:, None]
-        p = arc.point(a.x[:, None], a.y[:, None], a.theta[:, None], a.kappa[:, None], s).ravel()
-        ax.plot(p.real, p.imag, lw=2)
-    if extra:
-        extra(ax)
-    ax.set_aspect("equal")
-    ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    def draw(ax):
+        for f, st in zip(forms, states, strict=True):
+            a = f.arcs(st.q)
+            s = np.linspace(0, 1, 9)[None, :] * a.l[:, None]
+            p = arc.point(a.x[:, None], a.y[:, None], a.theta[:, None], a.kappa[:, None], s).ravel()
+            ax.plot(p.real, p.imag, lw=2)
+        if extra:
+            extra(ax)
+        ax.set_aspect("equal")
+        ax.set_title(title)
+
+    save_plot(path, draw, size=(6.0, 4.0), dpi=100)
 
 
 def bicycle_on_rope(

@@ -24,6 +24,7 @@ from physics.rod.chained import ChainedRod
 from physics.rod.mixed import MixedRod
 from physics.rod.model import PointLoad, RodModel
 from physics.rod.modes import rod_modes
+from physics.rod.plotting import save_plot
 from physics.rod.statics import solve_static
 
 BETA_L = np.array([1.8751040687, 4.6940911330, 7.8547574382])
@@ -68,18 +69,12 @@ def cantilever_tip(name: str, n: int, gamma: float, load_steps: int | None = Non
 
 
 def _plot(path, draw) -> None:
-    import matplotlib
+    def decorated(ax):
+        draw(ax)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    draw(ax)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_plot(path, decorated)
 
 
 def cantilever(plot: str | None = None, quick: bool = False) -> dict:
