@@ -5,7 +5,7 @@ Each body with a ModalModel gets a ModalBank whose input is the sum of
   time, after the bank's location jumps to where the impact landed), and
 - for each sustained contact of the body (one pair of bodies), a Scrape driven by the
   contact's normal force and slip speed and a Roll driven by its normal force and rolling
-  speed (jassy.events.track_events: audio-rate interpolation of the ContactTrack).
+  speed (control curves: audio-rate linear interpolation of the pair's ContactTracks).
 
 The generators of one contact feed both bodies' banks.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jassy.events import ContactTrack, Event, Impact, track_events
+from jassy.events import ContactTrack, Event, Impact
 from jassy.graph import Graph
 
 
@@ -36,27 +36,24 @@ def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name)
 
 
-def decimate(track: ContactTrack, interval: float) -> ContactTrack:
-    """The track sampled every ``interval`` seconds (block means of force and speeds; the last
-    sample kept), for audio-rate control lines that need no more than envelope detail."""
-    dt = float(track.times[1] - track.times[0]) if len(track.times) > 1 else interval
-    k = max(1, int(round(interval / dt)))
-    if k == 1 or len(track.times) <= 2 * k:
-        return track
-    n = len(track.times) // k * k
-
-    def mean(x):
-        return np.asarray(x)[:n].reshape(-1, k).mean(axis=1)
-
-    idx = list(range(0, n, k))
-    return ContactTrack(
-        track.bodies,
-        np.asarray(track.times)[idx],
-        mean(track.normal_force),
-        mean(track.slip_speed),
-        mean(track.rolling_speed),
-        [track.locations[i] for i in idx] if track.locations else [],
-    )
+def contact_curves(tracks: list[ContactTrack]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(times s, normal force N, slip speed m/s, rolling speed m/s) of one pair of bodies
+    through all its tracks: each track's samples, with zeros one sample interval before it
+    starts and after it ends (where no other track of the pair is running)."""
+    rows = []
+    for tr in sorted(tracks, key=lambda t: t.times[0]):
+        t = np.asarray(tr.times, dtype=np.float64)
+        dt = float(t[1] - t[0]) if t.size > 1 else 1e-3
+        body = np.column_stack([t, tr.normal_force, tr.slip_speed, tr.rolling_speed])
+        rows += [np.array([[t[0] - dt, 0.0, 0.0, 0.0]]), body, np.array([[t[-1] + dt, 0.0, 0.0, 0.0]])]
+    table = np.concatenate(rows)
+    keep = np.ones(len(table), bool)
+    latest = -np.inf
+    for i, t in enumerate(table[:, 0]):  # where tracks touch or overlap, the earlier rows win
+        keep[i] = t > latest
+        latest = max(latest, t)
+    table = table[keep]
+    return table[:, 0], table[:, 1], table[:, 2], table[:, 3]
 
 
 def scene_graph(
@@ -65,14 +62,14 @@ def scene_graph(
     tracks: list[ContactTrack],
     voices: dict[int, Voice],
     max_contacts: int = 8,
-    control_interval: float = 5e-3,
 ):
     """(Graph, score) for ``bodies`` (list of physics.rigid.world.Body) and their events.
     Only the ``max_contacts`` pairs with the longest sustained contact get sliding/rolling
-    generators (the rest are too brief to hear as sliding); their controls follow the tracks
-    decimated to ``control_interval`` seconds."""
+    generators (the rest are too brief to hear as sliding); the generators follow the pair's
+    tracks at their full rate as control curves (ContactControls.follow), so the score holds
+    only the impacts."""
     from ugens.impact import ImpactForce
-    from ugens.mix import Gain, Mixer
+    from ugens.mix import Mixer
     from ugens.modal import ModalBank
     from ugens.roll import Roll
     from ugens.scrape import Scrape
@@ -107,27 +104,17 @@ def scene_graph(
         roll = Roll(
             name=f"roll_{tag}", roughness=voice.roll_roughness, stiffness=voice.stiffness, seed=a * 104729 + b
         )
+        times, force, slip, rolling = contact_curves(by_pair[(a, b)])
+        scrape.follow(times, force, slip)
+        roll.follow(times, force, rolling)
         for body in (a, b):
             if body in hits:
                 inputs[body].extend([scrape, roll])
-        for tr in (decimate(t, control_interval) for t in by_pair[(a, b)]):
-            score += track_events(
-                tr, {"normal_force": (scrape.name, "force"), "slip_speed": (scrape.name, "speed")}
-            )
-            score += track_events(
-                tr, {"normal_force": (roll.name, "force"), "rolling_speed": (roll.name, "speed")}
-            )
-            dt = float(tr.times[1] - tr.times[0]) if len(tr.times) > 1 else 1e-3
-            for node in (scrape.name, roll.name):
-                score.append(
-                    Event(float(tr.times[-1]) + dt, node, "set", {"force": 0.0, "speed": 0.0}, jump=True)
-                )
-    outs = []
+    banks = []
     for i in sounding:
         drive = inputs[i][0] if len(inputs[i]) == 1 else Mixer(*inputs[i], name=f"drive_{names[i]}")
-        bank = ModalBank(bodies[i].sound, name=f"bank_{names[i]}")(drive)
-        outs.append(Gain(bank, gain=voices[i].level, name=f"level_{names[i]}"))
-    mix = outs[0] if len(outs) == 1 else Mixer(*outs, name="mix")
+        banks.append(ModalBank(bodies[i].sound, name=f"bank_{names[i]}")(drive))
+    mix = Mixer(*banks, gains=[voices[i].level for i in sounding], name="mix")
     return Graph(mix), sorted(score, key=lambda e: e.time)
 
 

@@ -10,7 +10,7 @@ from jassy.errors import JassyError
 from physics.rigid import stepper as st
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
 from physics.rigid.meshgrid import build_grid, grid_closest
-from physics.rigid.narrow import closest_segments, sweep_and_prune
+from physics.rigid.narrow import segment_params, sweep_and_prune
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
@@ -224,11 +224,10 @@ def test_grid_closest_point_matches_brute_force():
         cand = trimesh.triangles.closest_point(tris, np.tile(p, (len(tris), 1)))
         d = np.linalg.norm(cand - p, axis=1)
         q = cand[np.argmin(d)]
-        tri, got, point, _, bary = grid_closest(
-            p,
+        tri, d2, u, v, w = grid_closest(
+            *p,
             0.2,
             grid.triangles,
-            grid.normals,
             grid.spheres,
             grid.origin,
             grid.cell,
@@ -236,9 +235,8 @@ def test_grid_closest_point_matches_brute_force():
             grid.start,
             grid.items,
         )
-        assert got == pytest.approx(d.min(), abs=1e-9)
-        assert np.allclose(point, q, atol=1e-9)
-        assert np.allclose(bary @ grid.triangles[tri], q, atol=1e-9)
+        assert np.sqrt(d2) == pytest.approx(d.min(), abs=1e-9)
+        assert np.allclose(np.array([u, v, w]) @ grid.triangles[tri], q, atol=1e-9)
 
 
 def test_closest_segments_against_dense_sampling():
@@ -246,7 +244,8 @@ def test_closest_segments_against_dense_sampling():
     s = np.linspace(0, 1, 801)
     for _ in range(20):
         p1, q1, p2, q2 = rng.normal(size=(4, 3))
-        c1, c2 = closest_segments(p1, q1, p2, q2)
+        s1, s2 = segment_params(tuple(p1), tuple(q1), tuple(p2), tuple(q2))
+        c1, c2 = p1 + s1 * (q1 - p1), p2 + s2 * (q2 - p2)
         a = p1 + s[:, None] * (q1 - p1)
         b = p2 + s[:, None] * (q2 - p2)
         brute = np.min(np.linalg.norm(a[:, None] - b[None], axis=2))
@@ -295,3 +294,38 @@ def test_bad_input_is_named():
         Sphere(-1.0)
     with pytest.raises(JassyError, match="duration"):
         simulate(_ball_world(0.5), -1.0)
+
+
+def test_kinematic_lift_carries_a_resting_ball_and_a_bad_path_is_named():
+    """A kinematic slab rising at 0.2 m/s under a resting ball: the ball rides on it (speed
+    0.2 m/s, centre one radius above the slab's top). A path that is not vectorised over
+    times is refused with the body's name."""
+    speed, r = 0.2, 0.05
+
+    def lift(t):
+        t = np.asarray(t, float)
+        pos = np.zeros((t.size, 3))
+        pos[:, 2] = speed * t
+        quat = np.zeros((t.size, 4))
+        quat[:, 0] = 1.0
+        return pos, quat
+
+    w = World(StepParams(h=1e-3, iterations=40))
+    w.add(Body("lift", Box((0.5, 0.5, 0.05)), Material("m", 1000, 0.0, 0.5), kind="kinematic", path=lift))
+    w.add(Body("ball", Sphere(r), Material("m", 1000, 0.0, 0.5)), Placement(position=(0, 0, 0.05 + r)))
+    result = simulate(w, 0.5)
+    assert result.state.phi[1, 5] == pytest.approx(speed, rel=1e-3)
+    assert result.state.pos[1, 2] == pytest.approx(0.05 + r + speed * 0.5, abs=1e-4)
+
+    bad = World(StepParams())
+    bad.add(
+        Body(
+            "lift",
+            Box((0.5, 0.5, 0.05)),
+            Material("m", 1000, 0.0, 0.5),
+            kind="kinematic",
+            path=lambda t: (np.zeros(3), np.array([1.0, 0, 0, 0])),
+        )
+    )
+    with pytest.raises(JassyError, match="'lift'.path"):
+        simulate(bad, 0.01)

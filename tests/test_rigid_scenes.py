@@ -21,7 +21,7 @@ def _food_height_above_wok(world, result, k):
     from physics.rigid.spatial import rotation_matrices
 
     p, q = hand_path(result.times[k])
-    local = (result.pos[k, 1:] - p) @ rotation_matrices(q[None])[0]
+    local = (result.pos[k, 1:] - p[0]) @ rotation_matrices(q)[0]
     r2 = np.sum(local[:, :2] ** 2, axis=1)
     return local[:, 2] - (WOK_CURVATURE - np.sqrt(WOK_CURVATURE**2 - r2))
 
@@ -82,3 +82,21 @@ def test_render_drop_comes_to_rest_and_sounds_the_table(tmp_path):
     low = (freqs > 100) & (freqs < 2000)
     peak = freqs[low][np.argmax(spectrum[low])]
     assert np.min(np.abs(board.frequencies - peak) / board.frequencies) < 0.01  # a table mode
+
+
+def test_contact_curves_join_a_pairs_tracks_with_zeros_between():
+    from jassy import ContactTrack
+    from patches.rigid_sound import contact_curves
+
+    def track(t0, n, force, slip):
+        t = t0 + 1e-3 * np.arange(n)
+        return ContactTrack((1, 2), t, np.full(n, force), np.full(n, slip), np.zeros(n))
+
+    # the second track starts half a step after the first ends; the third after a silence
+    first, touching, later = track(0.10, 50, 2.0, 0.3), track(0.1495, 20, 3.0, 0.0), track(0.30, 10, 1.0, 0.2)
+    times, force, slip, rolling = contact_curves([later, touching, first])
+    assert np.all(np.diff(times) > 0)
+    assert force[0] == 0.0 and force[-1] == 0.0 and np.all(rolling == 0.0)
+    assert np.interp(0.2, times, force) == 0.0  # silent between the contacts
+    assert np.interp(0.12, times, force) == 2.0 and np.interp(0.16, times, force) == 3.0
+    assert np.interp(0.305, times, slip) == pytest.approx(0.2)

@@ -412,3 +412,47 @@ def test_patches_are_block_size_invariant(name):
     patch = load_patch(name)
     outs = [render(patch.graph, patch.score, 0.3, FS, b, limiter=False).audio for b in BLOCKS]
     assert max_abs_diff(outs[0], outs[1]) < 1e-6 and max_abs_diff(outs[0], outs[2]) < 1e-6
+
+
+def test_follow_curves_equal_the_track_event_score():
+    """Scrape and Roll driven by follow() sound exactly like the same ContactTrack sent as
+    ramped events (both are the piecewise-linear interpolation; track times on the 1 ms grid
+    fall on samples), at any block size. The track starts at 0 (before its first event the
+    evented generator plays its default parameters)."""
+    t = 1e-3 * np.arange(450)
+    force = 1.0 + 0.5 * np.sin(2 * np.pi * 3 * t)
+    slip = 0.2 + 0.15 * np.sin(2 * np.pi * 2 * t) ** 2
+    rolling = 0.3 + 0.25 * np.cos(2 * np.pi * 1.5 * t)
+    track = ContactTrack((0, 1), t, force, slip, rolling)
+    for make in (Scrape, Roll):
+        evented = make(name="g", seed=3)
+        score = track_events(track, {"normal_force": ("g", "force"), "slip_speed": ("g", "speed")})
+        reference = run(evented, score, 0.5)
+        for block in BLOCKS:
+            followed = make(name="g", seed=3)
+            followed.follow(t, force, slip)
+            assert max_abs_diff(run(followed, (), 0.5, block), reference) < 1e-9 * np.max(np.abs(reference))
+        assert np.max(np.abs(reference)) > 0
+
+
+def test_curve_fill_is_linear_interpolation_held_at_the_ends():
+    from ugens.scrape import curve_fill
+
+    rng = np.random.default_rng(7)
+    times = np.sort(rng.uniform(0.01, 0.09, 12))
+    values = rng.normal(size=12)
+    out = np.empty(700)
+    for first in (0, 1234, 4000):
+        curve_fill(out, first, 700, 48000.0, times, values)
+        expected = np.interp((first + np.arange(700)) / 48000.0, times, values)
+        assert np.allclose(out, expected, atol=1e-12)
+
+
+def test_follow_names_bad_curves():
+    node = Scrape(name="s")
+    with pytest.raises(PatchError, match="s.follow: times"):
+        node.follow([0.0, 0.0], [1.0, 1.0], [0.1, 0.1])
+    with pytest.raises(PatchError, match="s.follow: speed"):
+        node.follow([0.0, 1.0], [1.0, 1.0], [0.1])
+    with pytest.raises(PatchError, match=">= 0"):
+        node.follow([0.0, 1.0], [-1.0, 1.0], [0.1, 0.1])

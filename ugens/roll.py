@@ -260,7 +260,7 @@ class RathRoll(ProfileContact):
         self.state[1] = x0
 
     def process(self, start: int, n: int) -> None:
-        forces, speeds = self._controls(n)
+        forces, speeds = self._controls(start, n)
         self._kernel(
             self.out,
             self.extra["contact"],

@@ -288,15 +288,60 @@ def profile_specs(
     return specs
 
 
+@nb.njit(cache=True)
+def curve_fill(out, first, n, rate, times, values):
+    """out[i] = the piecewise-linear curve through (times s, values) at frame first + i of a
+    clock of ``rate`` Hz, held at the end values outside the times."""
+    last = times.size - 1
+    t = first / rate
+    j = np.searchsorted(times, t, side="right")  # times[j - 1] <= t < times[j]
+    for i in range(n):
+        t = (first + i) / rate
+        while j <= last and times[j] <= t:
+            j += 1
+        if j == 0:
+            out[i] = values[0]
+        elif j > last:
+            out[i] = values[last]
+        else:
+            w = (t - times[j - 1]) / (times[j] - times[j - 1])
+            out[i] = values[j - 1] + w * (values[j] - values[j - 1])
+
+
 # ------------------------------------------------------------------------------ classes
 class ContactControls(UGen):
-    """Shared handling of the smoothed ``force`` and ``speed`` controls."""
+    """Shared handling of the ``force`` and ``speed`` controls: smoothed parameters set by
+    events, or curves given once with :meth:`follow` (physics-driven contacts)."""
+
+    _curves: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def follow(self, times, force, speed) -> None:
+        """Drive ``force`` (N) and ``speed`` (m/s) by the piecewise-linear curves through
+        (times s, force) and (times s, speed), read at each frame's time, held at their end
+        values outside [times[0], times[-1]]; replaces the parameters and their events. One
+        call instead of an event per control sample: a contact track of any length costs no
+        scheduling. ``None`` returns to the parameters."""
+        if times is None:
+            self._curves = None
+            return
+        arrays = [np.ascontiguousarray(x, dtype=np.float64) for x in (times, force, speed)]
+        where = f"{self.name}.follow"
+        t = arrays[0]
+        if t.ndim != 1 or t.size < 1 or np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
+            raise PatchError(f"{where}: times: expected increasing finite times in s")
+        for key, x in zip(("force", "speed"), arrays[1:], strict=True):
+            if x.shape != t.shape or not np.all(np.isfinite(x)):
+                raise PatchError(f"{where}: {key}: expected {t.size} finite values, one per time")
+        if np.any(arrays[1] < 0) or np.any(arrays[2] < 0):
+            raise PatchError(f"{where}: force and speed: expected values >= 0")
+        self._curves = (arrays[0], arrays[1], arrays[2])
 
     def _prepare(self) -> None:
         self._force = self.smoothed("force")
         self._speed = self.smoothed("speed")
         self._forces = np.zeros(self.max_block)
         self._speeds = np.zeros(self.max_block)
+        self._curve_fill = specialise(curve_fill, self._forces, 0, 1.0, self._forces, self._forces)
 
     def _reset(self) -> None:
         for ramp in (self._force, self._speed):
@@ -308,7 +353,12 @@ class ContactControls(UGen):
         elif key == "speed":
             self._speed.set(value, self.ramp_samples(), jump)
 
-    def _controls(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+    def _controls(self, start: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        if self._curves is not None:
+            times, force, speed = self._curves
+            self._curve_fill(self._forces, start, n, self.sample_rate, times, force)
+            self._curve_fill(self._speeds, start, n, self.sample_rate, times, speed)
+            return self._forces[:n], self._speeds[:n]
         return self._force.fill(self._forces, n), self._speed.fill(self._speeds, n)
 
     def _law_config(self) -> tuple[float, float, float]:
@@ -433,7 +483,7 @@ class NeedleContact(ProfileContact):
         self.coef[:] = 0.0
 
     def process(self, start: int, n: int) -> None:
-        forces, speeds = self._controls(n)
+        forces, speeds = self._controls(start, n)
         self._kernel(self.out, n, forces, speeds, self.prof, self.state, self.coef, self.cfg)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
@@ -562,7 +612,7 @@ class ResonantScrape(ContactControls):
         self.state[4] = UNDESIGNED  # design the resonator on the first sample
 
     def process(self, start: int, n: int) -> None:
-        forces, speeds = self._controls(n)
+        forces, speeds = self._controls(start, n)
         self._kernel(self.out, n, forces, speeds, self.rng, self.state, self.cfg)
 
     def state_arrays(self) -> dict[str, np.ndarray]:

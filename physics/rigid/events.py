@@ -131,7 +131,8 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
 
 def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times (S,), force (S, 3) N, torque (S, 3) N m) of the contacts on ``body`` per outer
-    step; torque about ``point``: a function of time -> (3,) world point, or None for none."""
+    step; torque about ``point``: a vectorised function of times (T,) s -> (T, 3) world points
+    (m), or None for none."""
     h = result.world.params.h
     rec = result.records
     first = int(round(result.start_time / h))
@@ -147,7 +148,7 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
         np.add.at(force, k, f)
         if point is not None:
             times, which = np.unique(rows[:, st.REC_TIME], return_inverse=True)
-            centres = np.array([point(t) for t in times])[which]
+            centres = np.asarray(point(times), float)[which]
             np.add.at(torque, k, np.cross(rows[:, st.REC_POINT : st.REC_POINT + 3] - centres, f))
     return steps * h, force, torque
 

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from physics.rigid.spatial import cross, dot3, mtv, mv, newton_euler, quat_exp, quat_mul, quat_to_mat
+from physics.rigid.spatial import mtv, mv, newton_euler, quat_mul, quat_to_mat
 
 SEMI_IMPLICIT = 0
 RK4 = 1
@@ -62,46 +62,96 @@ def rk4_step(p, q, phi, inertia, mass, gravity, ext, h):
 
 
 @nb.njit(cache=True)
-def solve3(m, b):
-    """Solution of the 3 x 3 system m x = b by Cramer's rule."""
-    c0 = cross(m[:, 1], m[:, 2])
-    det = m[0, 0] * c0[0] + m[1, 0] * c0[1] + m[2, 0] * c0[2]
-    c1 = cross(m[:, 2], m[:, 0])
-    c2 = cross(m[:, 0], m[:, 1])
-    return np.array([dot3(c0, b), dot3(c1, b), dot3(c2, b)]) / det
+def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
+    """Solution (x0, x1, x2) of a 3 x 3 linear system by Cramer's rule (scalars)."""
+    c00, c01, c02 = j11 * j22 - j12 * j21, j12 * j20 - j10 * j22, j10 * j21 - j11 * j20
+    det = j00 * c00 + j01 * c01 + j02 * c02
+    x0 = b0 * c00 + b1 * (j02 * j21 - j01 * j22) + b2 * (j01 * j12 - j02 * j11)
+    x1 = b0 * c01 + b1 * (j00 * j22 - j02 * j20) + b2 * (j02 * j10 - j00 * j12)
+    x2 = b0 * c02 + b1 * (j01 * j20 - j00 * j21) + b2 * (j00 * j11 - j01 * j10)
+    return x0 / det, x1 / det, x2 / det
+
+
+@nb.njit(cache=True)
+def _implicit_midpoint_omega(w0, w1, w2, i0, i1, i2, t0, t1, t2, h):
+    """w(t + h) of Euler's equations I dw/dt + w x I w = tau by the implicit midpoint rule,
+    Newton's method on g(w') = I (w' - w)/h + wm x I wm - tau, wm = (w + w')/2 (scalars)."""
+    # explicit guess
+    x0 = w0 + h * (t0 - (w1 * i2 * w2 - w2 * i1 * w1)) / i0
+    x1 = w1 + h * (t1 - (w2 * i0 * w0 - w0 * i2 * w2)) / i1
+    x2 = w2 + h * (t2 - (w0 * i1 * w1 - w1 * i0 * w0)) / i2
+    for _ in range(20):
+        m0, m1, m2 = 0.5 * (w0 + x0), 0.5 * (w1 + x1), 0.5 * (w2 + x2)
+        y0, y1, y2 = i0 * m0, i1 * m1, i2 * m2
+        g0 = i0 * (x0 - w0) / h + (m1 * y2 - m2 * y1) - t0
+        g1 = i1 * (x1 - w1) / h + (m2 * y0 - m0 * y2) - t1
+        g2 = i2 * (x2 - w2) / h + (m0 * y1 - m1 * y0) - t2
+        # dg/dw' = I/h + 0.5 ([wm] I - [I wm]), [x] the cross-product matrix
+        d0, d1, d2 = _solve3(
+            i0 / h,
+            0.5 * (-m2 * i1 + y2),
+            0.5 * (m1 * i2 - y1),
+            0.5 * (m2 * i0 - y2),
+            i1 / h,
+            0.5 * (-m0 * i2 + y0),
+            0.5 * (-m1 * i0 + y1),
+            0.5 * (m0 * i1 - y0),
+            i2 / h,
+            g0,
+            g1,
+            g2,
+        )
+        x0, x1, x2 = x0 - d0, x1 - d1, x2 - d2
+        if abs(d0) + abs(d1) + abs(d2) <= 1e-14 * (1.0 + abs(x0) + abs(x1) + abs(x2)):
+            break
+    return x0, x1, x2
+
+
+@nb.njit(cache=True)
+def _rotate(qw, qx, qy, qz, x, y, z):
+    """The vector (x, y, z) rotated by the unit quaternion q: v + 2 w (u x v) + 2 u x (u x v)."""
+    cx, cy, cz = qy * z - qz * y, qz * x - qx * z, qx * y - qy * x
+    return (
+        x + 2.0 * (qw * cx + qy * cz - qz * cy),
+        y + 2.0 * (qw * cy + qz * cx - qx * cz),
+        z + 2.0 * (qw * cz + qx * cy - qy * cx),
+    )
+
+
+@nb.njit(cache=True)
+def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi):
+    """Symplectic Euler with an implicit-midpoint angular update (see module doc), written
+    into out_p, out_q, out_phi (scalar arithmetic, no allocation)."""
+    x0, x1, x2 = _implicit_midpoint_omega(
+        phi[0], phi[1], phi[2], inertia[0], inertia[1], inertia[2], ext[0], ext[1], ext[2], h
+    )
+    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
+    vx, vy, vz = _rotate(
+        qw, qx, qy, qz, phi[3] + h * ext[3] / mass, phi[4] + h * ext[4] / mass, phi[5] + h * ext[5] / mass
+    )
+    vx, vy, vz = vx + h * gravity[0], vy + h * gravity[1], vz + h * gravity[2]
+    out_p[0], out_p[1], out_p[2] = p[0] + h * vx, p[1] + h * vy, p[2] + h * vz
+    # q1 = q exp(h wm): exp of the rotation vector r = h (w0 + w1) / 2
+    r0, r1, r2 = 0.5 * h * (phi[0] + x0), 0.5 * h * (phi[1] + x1), 0.5 * h * (phi[2] + x2)
+    angle = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    s = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0
+    ew, ex, ey, ez = math.cos(0.5 * angle), s * r0, s * r1, s * r2
+    w1 = qw * ew - qx * ex - qy * ey - qz * ez
+    a1 = qw * ex + qx * ew + qy * ez - qz * ey
+    b1 = qw * ey - qx * ez + qy * ew + qz * ex
+    c1 = qw * ez + qx * ey - qy * ex + qz * ew
+    norm = math.sqrt(w1 * w1 + a1 * a1 + b1 * b1 + c1 * c1)
+    w1, a1, b1, c1 = w1 / norm, a1 / norm, b1 / norm, c1 / norm
+    out_q[0], out_q[1], out_q[2], out_q[3] = w1, a1, b1, c1
+    out_phi[0], out_phi[1], out_phi[2] = x0, x1, x2
+    out_phi[3], out_phi[4], out_phi[5] = _rotate(w1, -a1, -b1, -c1, vx, vy, vz)
 
 
 @nb.njit(cache=True)
 def semi_implicit_step(p, q, phi, inertia, mass, gravity, ext, h):
     """Symplectic Euler with an implicit-midpoint angular update (see module doc)."""
-    w0 = phi[:3]
-    tau = ext[:3]
-    w1 = w0 + h * (tau - cross(w0, inertia * w0)) / inertia  # explicit guess
-    jac = np.empty((3, 3))
-    for _ in range(20):  # Newton on g(w1) = I (w1 - w0)/h + wm x I wm - tau, wm = (w0 + w1)/2
-        wm = 0.5 * (w0 + w1)
-        iwm = inertia * wm
-        g = inertia * (w1 - w0) / h + cross(wm, iwm) - tau
-        # dg/dw1 = I/h + 0.5 ([wm] I - [I wm]), [x] the cross-product matrix
-        x0, x1, x2 = wm[0], wm[1], wm[2]
-        y0, y1, y2 = iwm[0], iwm[1], iwm[2]
-        i0, i1, i2 = inertia[0], inertia[1], inertia[2]
-        jac[0, 0], jac[0, 1], jac[0, 2] = i0 / h, 0.5 * (-x2 * i1 + y2), 0.5 * (x1 * i2 - y1)
-        jac[1, 0], jac[1, 1], jac[1, 2] = 0.5 * (x2 * i0 - y2), i1 / h, 0.5 * (-x0 * i2 + y0)
-        jac[2, 0], jac[2, 1], jac[2, 2] = 0.5 * (-x1 * i0 + y1), 0.5 * (x0 * i1 - y0), i2 / h
-        dw = solve3(jac, g)
-        w1 = w1 - dw
-        if abs(dw[0]) + abs(dw[1]) + abs(dw[2]) <= 1e-14 * (1.0 + abs(w1[0]) + abs(w1[1]) + abs(w1[2])):
-            break
-    wm = 0.5 * (w0 + w1)
-    r0 = quat_to_mat(q)
-    v_world = mv(r0, phi[3:]) + h * (mv(r0, ext[3:]) / mass + gravity)
-    p1 = p + h * v_world
-    q1 = quat_mul(q, quat_exp(h * wm))
-    q1 /= math.sqrt(np.sum(q1 * q1))
-    phi1 = np.empty(6)
-    phi1[:3] = w1
-    phi1[3:] = mtv(quat_to_mat(q1), v_world)
+    p1, q1, phi1 = np.empty(3), np.empty(4), np.empty(6)
+    semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, p1, q1, phi1)
     return p1, q1, phi1
 
 
@@ -149,6 +199,18 @@ def advance_body(p, q, phi, inertia, mass, gravity, ext, h, method, tol):
         return rk4_step(p, q, phi, inertia, mass, gravity, ext, h)
     p1, q1, f1, _, _ = adaptive_advance(p, q, phi, inertia, mass, gravity, ext, h, tol, h)
     return p1, q1, f1
+
+
+@nb.njit(cache=True)
+def advance_body_into(p, q, phi, inertia, mass, gravity, ext, h, method, tol, out_p, out_q, out_phi):
+    """advance_body written into out_p, out_q, out_phi (no allocation for SEMI_IMPLICIT)."""
+    if method == SEMI_IMPLICIT and h > 0.0:
+        semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi)
+        return
+    p1, q1, f1 = advance_body(p, q, phi, inertia, mass, gravity, ext, h, method, tol)
+    out_p[:] = p1
+    out_q[:] = q1
+    out_phi[:] = f1
 
 
 def integrate_free(p, q, phi, inertia, mass, h, steps, method="rk4", gravity=(0.0, 0.0, 0.0), tol=1e-10):

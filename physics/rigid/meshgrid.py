@@ -16,16 +16,18 @@ import numpy as np
 
 
 @nb.njit(cache=True)
-def closest_weights(p, a, b, c):
-    """Barycentric weights (u, v, w) of the point of triangle abc closest to p (no allocation)."""
-    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    ap0, ap1, ap2 = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+def triangle_weights(px, py, pz, tri, t):
+    """Barycentric weights (u, v, w) of the point of triangle tri[t] (vertices a, b, c) closest
+    to the point (px, py, pz); scalar arithmetic, no allocation."""
+    ax, ay, az = tri[t, 0, 0], tri[t, 0, 1], tri[t, 0, 2]
+    ab0, ab1, ab2 = tri[t, 1, 0] - ax, tri[t, 1, 1] - ay, tri[t, 1, 2] - az
+    ac0, ac1, ac2 = tri[t, 2, 0] - ax, tri[t, 2, 1] - ay, tri[t, 2, 2] - az
+    ap0, ap1, ap2 = px - ax, py - ay, pz - az
     d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
     d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
     if d1 <= 0.0 and d2 <= 0.0:
         return 1.0, 0.0, 0.0
-    bp0, bp1, bp2 = p[0] - b[0], p[1] - b[1], p[2] - b[2]
+    bp0, bp1, bp2 = ap0 - ab0, ap1 - ab1, ap2 - ab2
     d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
     d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
     if d3 >= 0.0 and d4 <= d3:
@@ -34,7 +36,7 @@ def closest_weights(p, a, b, c):
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
         return 1.0 - v, v, 0.0
-    cp0, cp1, cp2 = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+    cp0, cp1, cp2 = ap0 - ac0, ap1 - ac1, ap2 - ac2
     d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
     d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
     if d6 >= 0.0 and d5 <= d6:
@@ -54,19 +56,13 @@ def closest_weights(p, a, b, c):
 
 
 @nb.njit(cache=True)
-def weighted_distance2(p, tri, u, v, w):
-    d = 0.0
-    for k in range(3):
-        x = p[k] - (u * tri[0, k] + v * tri[1, k] + w * tri[2, k])
-        d += x * x
-    return d
-
-
-@nb.njit(cache=True)
-def closest_on_triangle(p, a, b, c):
-    """(closest point, barycentric weights (u, v, w) of a, b, c) on triangle abc to point p."""
-    u, v, w = closest_weights(p, a, b, c)
-    return u * a + v * b + w * c, np.array([u, v, w])
+def triangle_point(tri, t, u, v, w):
+    """The point u a + v b + w c of triangle tri[t]."""
+    return (
+        u * tri[t, 0, 0] + v * tri[t, 1, 0] + w * tri[t, 2, 0],
+        u * tri[t, 0, 1] + v * tri[t, 1, 1] + w * tri[t, 2, 1],
+        u * tri[t, 0, 2] + v * tri[t, 1, 2] + w * tri[t, 2, 2],
+    )
 
 
 @dataclass(frozen=True)
@@ -115,40 +111,34 @@ def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = Non
 
 
 @nb.njit(cache=True)
-def grid_closest(p, reach, tri, normals, spheres, origin, cell, dims, start, items):
-    """Closest point within ``reach`` (m) of p: (triangle index or -1, distance, point, normal
-    of the triangle, barycentric weights)."""
+def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items):
+    """Closest point of the surface within ``reach`` (m) of (px, py, pz): (triangle index or -1,
+    squared distance, barycentric weights u, v, w); no allocation."""
     best = -1
     best_d2 = reach * reach
-    best_pt = np.zeros(3)
-    best_bary = np.zeros(3)
-    lo = np.empty(3, np.int64)
-    hi = np.empty(3, np.int64)
-    for a in range(3):
-        lo[a] = max(0, int(math.floor((p[a] - reach - origin[a]) / cell)))
-        hi[a] = min(dims[a] - 1, int(math.floor((p[a] + reach - origin[a]) / cell)))
-        if lo[a] > hi[a]:
-            return -1, math.inf, best_pt, best_bary, best_bary
-    for i in range(lo[0], hi[0] + 1):
-        for j in range(lo[1], hi[1] + 1):
-            for k in range(lo[2], hi[2] + 1):
+    bu = bv = bw = 0.0
+    i0 = max(0, int(math.floor((px - reach - origin[0]) / cell)))
+    i1 = min(dims[0] - 1, int(math.floor((px + reach - origin[0]) / cell)))
+    j0 = max(0, int(math.floor((py - reach - origin[1]) / cell)))
+    j1 = min(dims[1] - 1, int(math.floor((py + reach - origin[1]) / cell)))
+    k0 = max(0, int(math.floor((pz - reach - origin[2]) / cell)))
+    k1 = min(dims[2] - 1, int(math.floor((pz + reach - origin[2]) / cell)))
+    for i in range(i0, i1 + 1):
+        for j in range(j0, j1 + 1):
+            for k in range(k0, k1 + 1):
                 c = (i * dims[1] + j) * dims[2] + k
                 for s in range(start[c], start[c + 1]):
                     t = items[s]
-                    dx = p[0] - spheres[t, 0]
-                    dy = p[1] - spheres[t, 1]
-                    dz = p[2] - spheres[t, 2]
+                    dx = px - spheres[t, 0]
+                    dy = py - spheres[t, 1]
+                    dz = pz - spheres[t, 2]
                     lim = math.sqrt(best_d2) + spheres[t, 3]
                     if dx * dx + dy * dy + dz * dz > lim * lim:
                         continue  # the triangle's bounding sphere is beyond the best so far
-                    u, v, w = closest_weights(p, tri[t, 0], tri[t, 1], tri[t, 2])
-                    d2 = weighted_distance2(p, tri[t], u, v, w)
+                    u, v, w = triangle_weights(px, py, pz, tri, t)
+                    qx, qy, qz = triangle_point(tri, t, u, v, w)
+                    d2 = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
                     if d2 < best_d2:
-                        best_d2 = d2
-                        best = t
-                        best_bary[0], best_bary[1], best_bary[2] = u, v, w
-    if best < 0:
-        return -1, math.inf, best_pt, best_bary, best_bary
-    t = tri[best]
-    best_pt = best_bary[0] * t[0] + best_bary[1] * t[1] + best_bary[2] * t[2]
-    return best, math.sqrt(best_d2), best_pt, normals[best], best_bary
+                        best_d2, best = d2, t
+                        bu, bv, bw = u, v, w
+    return best, best_d2, bu, bv, bw

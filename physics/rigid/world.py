@@ -74,7 +74,8 @@ MATERIALS = {
 @dataclass(frozen=True)
 class Body:
     """A body of the model. ``kind``: "dynamic", "static" or "kinematic" (follows ``path``, a
-    function of time s -> (position (3,), quaternion (4,)), e.g. a hand-held wok). ``sound``:
+    vectorised function of times (T,) s -> (positions (T, 3) m, quaternions (T, 4)), e.g. a
+    hand-held wok). ``sound``:
     the ModalModel struck by this body's contacts; ``sound_points`` (P, 3): where each of its
     gain rows sits in the shape's frame (nearest row is struck), or None for row 0 (or
     mesh vertices for a TriangleMesh whose model rows are its vertices: "vertices")."""
@@ -85,7 +86,7 @@ class Body:
     kind: str = "dynamic"
     sound: ModalModel | None = None
     sound_points: np.ndarray | str | None = None
-    path: Callable[[float], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
+    path: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.kind not in ("dynamic", "static", "kinematic"):
@@ -94,7 +95,7 @@ class Body:
             )
         if self.kind == "kinematic" and self.path is None:
             raise JassyError(
-                f"Body {self.name!r}.path: a kinematic body needs a path t -> (position, quaternion)"
+                f"Body {self.name!r}.path: a kinematic body needs a path times -> (positions, quaternions)"
             )
         if self.kind == "dynamic" and isinstance(self.shape, (Plane, TriangleMesh)):
             raise JassyError(f"Body {self.name!r}.shape: a {type(self.shape).__name__} cannot be dynamic")
@@ -215,7 +216,8 @@ class World:
         pos, quat, phi = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 6))
         for i, (body, pl) in enumerate(zip(self.bodies, self.placements, strict=False)):
             if body.kind == "kinematic":
-                p, q = body.path(0.0)
+                ps, qs = _path_samples(body, np.zeros(1))
+                p, q = ps[0], qs[0]
             else:
                 p, q = np.asarray(pl.position, float), np.asarray(pl.quaternion, float)
             pos[i], quat[i] = _principal_pose(p, q, *frames[i])
@@ -334,9 +336,19 @@ def _build_arrays(bodies: list[Body]):
         np.concatenate(htris),
         mesh_id,
         *mesh_tables,
+        np.cumsum([0] + [_point_count(b.shape, len(v)) for b, v in zip(bodies, verts, strict=True)]),
     )
     body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
     return geo, kind, mass, inertia, body_arrays, frames
+
+
+def _point_count(shape: Shape, vertices: int) -> int:
+    """How many points stand for a body against planes and meshes (narrow.point_count)."""
+    if shape.kind == SPHERE:
+        return 1
+    if shape.kind == CAPSULE:
+        return 3
+    return vertices if shape.kind in (BOX, CONVEX) else 0
 
 
 def _mesh_tables(grids):
@@ -411,7 +423,8 @@ def simulate(
     traj = np.zeros((n_steps // every, n, 13))
     rec = np.zeros((max(4096, 64 * n), st.REC_WIDTH))
     nrec = 0
-    stats = np.zeros(4, np.int64)
+    stats = np.zeros(6, np.int64)
+    warm = st.new_warm_start(st.MAX_CONTACTS)
     done = 0
     while done < n_steps:
         todo = min(chunk, n_steps - done)
@@ -438,6 +451,7 @@ def simulate(
             traj,
             every,
             first,
+            warm,
         )
         if steps < todo:  # the record buffer might not hold the next step: grow it
             rec = np.concatenate([rec, np.zeros_like(rec)])
@@ -445,7 +459,7 @@ def simulate(
         if not (np.all(np.isfinite(state.pos)) and np.all(np.isfinite(state.phi))):
             raise JassyError(f"simulate: the state became non-finite near t = {(first + done) * h:.6f} s")
     state.time = (first + n_steps) * h
-    names = ("impact_substeps", "late_impacts", "contacts", "solves")
+    names = ("impact_substeps", "late_impacts", "contacts", "solves", "sweeps", "impact_checks")
     info = {name: int(x) for name, x in zip(names, stats, strict=True)}
     times = (first + every * np.arange(1, traj.shape[0] + 1)) * h
     return RunResult(
@@ -461,16 +475,26 @@ def simulate(
     )
 
 
+def _path_samples(body: Body, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (T, 3), unit quaternions (T, 4)) of a kinematic body's path at ``times``."""
+    pos, quat = body.path(times)
+    pos, quat = np.asarray(pos, float), np.asarray(quat, float)
+    if pos.shape != (times.size, 3) or quat.shape != (times.size, 4):
+        raise JassyError(
+            f"Body {body.name!r}.path: expected arrays ({times.size}, 3) and ({times.size}, 4) for "
+            f"{times.size} times, got {pos.shape} and {quat.shape}"
+        )
+    norms = np.linalg.norm(quat, axis=1, keepdims=True)
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(norms)) and np.all(norms > 1e-12)):
+        raise JassyError(f"Body {body.name!r}.path: expected finite positions and non-zero quaternions")
+    return pos, quat / norms
+
+
 def _kinematic_samples(world, kin_index, first, steps, h):
     """Poses of the kinematic bodies at steps first .. first + steps."""
-    k = len(kin_index)
-    pos = np.zeros((steps + 1, k, 3))
-    quat = np.zeros((steps + 1, k, 4))
+    times = (first + np.arange(steps + 1)) * h
+    pos = np.zeros((steps + 1, len(kin_index), 3))
+    quat = np.zeros((steps + 1, len(kin_index), 4))
     for j, i in enumerate(kin_index):
-        path = world.bodies[i].path
-        for s in range(steps + 1):
-            pos[s, j], quat[s, j] = path((first + s) * h)
-    norms = np.linalg.norm(quat, axis=2, keepdims=True)
-    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(norms)) and np.all(norms > 1e-12)):
-        raise JassyError("kinematic path: expected finite positions and non-zero quaternions")
-    return pos, quat / norms  # a kinematic body's frame is its shape frame
+        pos[:, j], quat[:, j] = _path_samples(world.bodies[i], times)
+    return pos, quat  # a kinematic body's frame is its shape frame
