@@ -91,7 +91,9 @@ def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
     if not 1 <= n_food <= 200:
         raise JassyError(f"n_food: expected 1..200 pieces, got {n_food!r}")
     rng = np.random.default_rng(seed)
-    world = World(StepParams(h=h, integrator="semi-implicit", bounce_threshold=0.08, iterations=20, tolerance=1e-3))
+    world = World(
+        StepParams(h=h, integrator="semi-implicit", bounce_threshold=0.08, iterations=20, tolerance=1e-3)
+    )
     steel = MATERIALS["steel"]
     food = MATERIALS["food"]
     r = WOK_RIM * np.asarray(WOK_RADII)
