@@ -341,7 +341,7 @@ class ContactControls(UGen):
         self._speed = self.smoothed("speed")
         self._forces = np.zeros(self.max_block)
         self._speeds = np.zeros(self.max_block)
-        self._curve_fill = specialise(curve_fill, self._forces, 0, 1.0, self._forces, self._forces)
+        self._curve_fill = specialise(curve_fill, self._forces, 0, 0, 1.0, self._forces, self._forces)
 
     def _reset(self) -> None:
         for ramp in (self._force, self._speed):

@@ -97,14 +97,14 @@ def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = Non
     dims = np.maximum(1, np.ceil((hi - lo) / cell)).astype(np.int64)
     tlo = np.floor((tri.min(axis=1) - lo) / cell).astype(np.int64)
     thi = np.minimum(np.floor((tri.max(axis=1) - lo) / cell).astype(np.int64), dims - 1)
-    cells, owners = [], []
-    for t in range(len(tri)):  # build once per mesh
-        ii, jj, kk = np.meshgrid(*(np.arange(tlo[t, a], thi[t, a] + 1) for a in range(3)), indexing="ij")
-        ids = ((ii * dims[1] + jj) * dims[2] + kk).ravel()
-        cells.append(ids)
-        owners.append(np.full(ids.size, t))
-    cells_a = np.concatenate(cells)
-    owners_a = np.concatenate(owners)
+    # every (triangle, cell) of the triangle's cell range, triangle by triangle
+    span = thi - tlo + 1
+    counts = span.prod(axis=1)
+    owners_a = np.repeat(np.arange(len(tri)), counts)
+    local = np.arange(owners_a.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    sy, sz = span[owners_a, 1], span[owners_a, 2]
+    ijk = tlo[owners_a] + np.column_stack([local // (sy * sz), (local // sz) % sy, local % sz])
+    cells_a = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     order = np.argsort(cells_a, kind="stable")
     start = np.searchsorted(cells_a[order], np.arange(int(np.prod(dims)) + 1)).astype(np.int64)
     return TriangleGrid(tri, normals, spheres, lo, float(cell), dims, start, owners_a[order].astype(np.int64))

@@ -421,7 +421,7 @@ def simulate(
     kin_index = np.array([i for i, b in enumerate(world.bodies) if b.kind == "kinematic"], np.int64)
     every = sample_every or n_steps + 1
     traj = np.zeros((n_steps // every, n, 13))
-    rec = np.zeros((max(4096, 64 * n), st.REC_WIDTH))
+    rec = np.empty((max(4096, 64 * n), st.REC_WIDTH))
     nrec = 0
     stats = np.zeros(6, np.int64)
     warm = st.new_warm_start(st.MAX_CONTACTS)
@@ -454,7 +454,9 @@ def simulate(
             warm,
         )
         if steps < todo:  # the record buffer might not hold the next step: grow it
-            rec = np.concatenate([rec, np.zeros_like(rec)])
+            grown = np.empty((2 * rec.shape[0], st.REC_WIDTH))  # the stepper writes whole rows
+            grown[:nrec] = rec[:nrec]
+            rec = grown
         done += steps
         if not (np.all(np.isfinite(state.pos)) and np.all(np.isfinite(state.phi))):
             raise JassyError(f"simulate: the state became non-finite near t = {(first + done) * h:.6f} s")
