@@ -312,3 +312,48 @@ def test_schur_delassus_matches_direct_for_stacked_rods():
         state, info = sysm.step(state, 2e-3)
     assert np.any(info.bodies[:, 1] == 1)  # rod-rod contacts present
     _compare_paths(make, state, 3, 2e-3)
+
+
+# ---------------------------------------------------------------- rolling on a rod
+def test_disk_rolls_on_a_straight_rod_at_r_omega_without_slip():
+    from physics.rod.mixed import MixedRod
+    from physics.rod.model import RodModel
+    from physics.rod.system import contact_events
+
+    r, R, v0 = 5e-3, 0.05, 0.4
+    rod = MixedRod(RodModel(20, 1.0, 1e3, 1.0, radius=r, end_bc="roller"))  # stiff: sags < 1e-4 m
+    disk = RigidBody(1.0, 0.5 * R * R, ((0.0, 0.0, R),))
+    system = RodSystem([rod], [disk], mu=1.0, margin=1e-3)
+    state = system.initial_state(poses=[[0.3, r + R, 0.0]], velocities=[[v0, 0.0, -v0 / R]])
+    infos = []
+    for _ in range(60):
+        prev = state
+        state, info = system.step(state, 1e-3)
+        infos.append(info)
+    assert len(info.r) == 1 and info.r[0, 0] > 0
+    omega = state.v[0, 2]
+    assert info.rolling[0] == pytest.approx(R * abs(omega), rel=1e-3)
+    assert R * abs(omega) == pytest.approx(v0, rel=1e-2)
+    assert abs(info.u[0, 1]) < 1e-8  # no slip between the surfaces
+    # u_T of the last step from the surface point velocities (geometry at its start, velocities at
+    # its end), computed independently (n points from the disk to the rod): the rod's surface point
+    # (centre line - r n) turns with the cross-section (tangent angle theta + kappa s), the disk's
+    # (centre + R n) with omega
+    n = info.normals[0]
+    t = np.array([-n[1], n[0]])
+    det = system.detect(prev)
+    e, s = int(det["meta"][0, 2]), float(det["geo"][0, 0])
+    q, vr = prev.rods[0].q, state.rods[0].v
+    _, cols, J = rod.point_jacobian(q, e, s)
+    phi_dot = vr[4 * e + 2] + s * vr[4 * e + 3]
+
+    def turn(w, arm):  # w e_z x arm
+        return w * np.array([-arm[1], arm[0]])
+
+    v_rod = J @ vr[cols] + turn(phi_dot, -r * n)
+    v_disk = state.v[0, :2] + turn(omega, R * n)
+    assert abs(t @ (v_rod - v_disk) - info.u[0, 1]) < 1e-9 * v0
+    _, tracks = contact_events(infos)
+    track = next(tr for tr in tracks if tr.bodies == (0, 1))
+    assert track.rolling_speed[-1] == pytest.approx(R * abs(omega), rel=1e-3)
+    assert track.slip_speed[-1] < 1e-8

@@ -28,27 +28,37 @@ GAUSS_W = 0.5 * _wq
 """Quadrature weights on [0, 1] (sum 1)."""
 
 
+_INV = 1.0 / np.arange(1.0, 25.0)
+
+
 @numba.njit(cache=True)
 def unit_moments(z: float) -> tuple[complex, complex, complex]:
-    """E_m(z) = int_0^1 u^m e^{i z u} du for m = 0, 1, 2 (series for |z| < 0.5)."""
-    iz = 1j * z
+    """E_m(z) = int_0^1 u^m e^{i z u} du for m = 0, 1, 2: for |z| < 0.5 the series
+    sum_k (i z)^k / (k! (k + m + 1)), else the recurrence E_m = (e^{iz} - m E_{m-1}) / (i z)
+    (real arithmetic: numba's complex division is slow)."""
     if abs(z) < 0.5:
-        e0 = 0j
-        e1 = 0j
-        e2 = 0j
-        term = 1.0 + 0j
+        r0 = r1 = r2 = i0 = i1 = i2 = 0.0
+        t = 1.0  # z^k / k!; i^k cycles through 1, i, -1, -i
         for k in range(22):
-            e0 += term / (k + 1)
-            e1 += term / (k + 2)
-            e2 += term / (k + 3)
-            term *= iz / (k + 1)
-            if abs(term.real) + abs(term.imag) < 1e-18:
+            a0, a1, a2 = t * _INV[k], t * _INV[k + 1], t * _INV[k + 2]
+            ph = k & 3
+            if ph == 0:
+                r0, r1, r2 = r0 + a0, r1 + a1, r2 + a2
+            elif ph == 1:
+                i0, i1, i2 = i0 + a0, i1 + a1, i2 + a2
+            elif ph == 2:
+                r0, r1, r2 = r0 - a0, r1 - a1, r2 - a2
+            else:
+                i0, i1, i2 = i0 - a0, i1 - a1, i2 - a2
+            t *= z * _INV[k]
+            if abs(t) < 1e-18:
                 break
-        return e0, e1, e2
-    e = np.exp(iz)
-    e0 = (e - 1.0) / iz
-    e1 = (e - e0) / iz
-    e2 = (e - 2.0 * e1) / iz
+        return complex(r0, i0), complex(r1, i1), complex(r2, i2)
+    c, s = np.cos(z), np.sin(z)
+    inv = 1.0 / z  # (a + i b) / (i z) = (b - i a) / z
+    e0 = complex(s * inv, (1.0 - c) * inv)
+    e1 = complex((s - e0.imag) * inv, (e0.real - c) * inv)
+    e2 = complex((s - 2.0 * e1.imag) * inv, (2.0 * e1.real - c) * inv)
     return e0, e1, e2
 
 

@@ -1,12 +1,14 @@
 """``bench_rod``: time of one contact-free implicit step against n, chained vs mixed model.
 
-Rows: model ("chained" dense LU, "mixed" banded LU, "mixed_splu" the same KKT with SuperLU as
-the reference measured in the same run), n, ndof, median step time (ms) and, for the mixed
-rows, the ratio splu / banded. Final rows give, per model, the fitted log-log slope of step time
-against n (1 = linear) over all sizes and over n >= 100 (where the fixed per-step overhead no
-longer dominates). The rod is a heavy cantilever (Gamma = 10) stepped from rest at
-h = 1 ms. The chained model is run up to n = ``chained_max`` (O(n^3)). The contact row of the
-talk (1000 elements, 100 contacts) lives in R2's module; the integrator appends it.
+Rows: model ("chained" dense LU; "mixed": MixedRod.step, the KKT matrix assembled per element
+straight into band storage and factored by a banded LU; "mixed_splu": the same step through the
+sparse ``linear_system`` and SuperLU, the reference measured in the same run), n, ndof, median step
+time (ms) and, for the mixed rows, the ratio splu / banded. Every step carries the previous step's
+constraint impulses (geometric stiffness), as ``step`` does. Final rows give, per model, the
+fitted log-log slope of step time against n (1 = linear) over all sizes and over n >= 100 (where
+the fixed per-step overhead no longer dominates). The rod is a heavy cantilever (Gamma = 10)
+stepped from rest at h = 1 ms. The chained model is run up to n = ``chained_max`` (O(n^3)). The
+contact row of the talk (1000 elements, 100 contacts) is physics.rod.contact_bench.
 """
 
 from __future__ import annotations
@@ -21,14 +23,18 @@ from physics.rod.model import RodModel
 
 
 def _time_steps(form, method: str | None, steps: int, h: float = 1e-3) -> float:
+    """Median time (ms) of a step: ``form.step``, or with ``method`` the sparse system and that
+    kkt_factor method."""
     state = form.initial_state()
     times = []
     for _ in range(steps + 2):
         t0 = time.perf_counter()
-        A, b, C, c = form.linear_system(state, h)
-        kkt = form.kkt_factor(A, C) if method is None else form.kkt_factor(A, C, method=method)
-        v, _ = kkt.solve(b, c)
-        state = form.advance(state, v, h)
+        if method is None:
+            state = form.step(state, h)
+        else:
+            A, b, C, c = form.linear_system(state, h)
+            v, lam = form.kkt_factor(A, C, method=method).solve(b, c)
+            state = form.advance(state, v, h, lam)
         times.append(time.perf_counter() - t0)
     return float(np.median(times[2:]) * 1e3)
 
@@ -60,7 +66,7 @@ def bench_rod(
                 }
             )
         form = MixedRod(model)
-        banded = _time_steps(form, "banded", steps)
+        banded = _time_steps(form, None, steps)
         ref = _time_steps(form, "splu", steps)
         rows.append(
             {

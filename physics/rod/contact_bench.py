@@ -1,5 +1,6 @@
 """``bench_rod_contact``: step time of a long mixed rod resting on pegs, split into detection /
-assembly / Delassus / DFCP solve, against the direct Delassus (2c full KKT solves) in the same run."""
+assembly / Delassus / DFCP solve, against the direct Delassus (2c solves with one band LU of the
+whole KKT matrix) in the same run."""
 
 from __future__ import annotations
 
@@ -67,9 +68,9 @@ def bench_rod_contact(
     warm-up steps (JIT, contacts settle), split into detection / assembly (rod linear systems,
     constraint and contact rows) / Delassus (factorisations, Schur complement, W) / DFCP solve, with
     the active-contact count, PGS sweeps and the largest natural-map residual; and the same scene with
-    the direct Delassus (2c solves with the whole KKT factorisation) over ``reference_steps`` steps
-    from the same state, as the reference (``direct_step_ms``, ``speedup``). ``quick``: 5 steps and
-    1 reference step."""
+    the direct Delassus (2c solves with one band LU of the whole KKT matrix) over ``reference_steps``
+    steps from the same state, as the reference (``direct_step_ms``, ``speedup``). ``quick``: 5 steps
+    and 1 reference step."""
     if quick:
         steps, reference_steps = 5, 1
     system, state = peg_scene(n, contacts)

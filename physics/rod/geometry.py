@@ -14,7 +14,8 @@ its centre line is p(s) = (x, y) + s sinc(kappa s / 2) (cos, sin)(theta + kappa 
   tangent is parallel to it) or on an edge (each end point against the other arc). Centre lines that
   cross (penetration deeper than r1 + r2) are not detected as such.
 * broad phase: each element lies in the disk of radius l/2 about its arc-length midpoint; candidate
-  pairs come from scipy's cKDTree on these disks.
+  pairs come from scipy's cKDTree on these disks (``broad_phase`` within one set, ``cross_pairs``
+  between two sets: elements against disks).
 
 A contact is (s_a, s_b, p_a, p_b, n, gap): closest centre-line points, unit normal n from b to a,
 gap = |p_a - p_b| - r_a - r_b (m, negative when penetrating).
@@ -247,3 +248,20 @@ def broad_phase(centres: np.ndarray, radii: np.ndarray, margin: float) -> np.nda
         return np.zeros((0, 2), dtype=np.int64)
     d = np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1)
     return pairs[d <= radii[pairs[:, 0]] + radii[pairs[:, 1]] + margin].astype(np.int64)
+
+
+def cross_pairs(
+    centres_a: np.ndarray, radii_a: np.ndarray, centres_b: np.ndarray, radii_b: np.ndarray, margin: float
+) -> np.ndarray:
+    """Pairs (P, 2) (index in a, index in b), in lexicographic order, of a disk of set a and a disk of
+    set b closer than ``margin`` (m): cKDTree neighbours within max(radii_a) + max(radii_b) + margin,
+    then the exact disk test."""
+    if len(centres_a) == 0 or len(centres_b) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    reach = float(np.max(radii_a)) + float(np.max(radii_b)) + margin
+    near = cKDTree(centres_a).sparse_distance_matrix(cKDTree(centres_b), reach, output_type="ndarray")
+    i, j = near["i"].astype(np.int64), near["j"].astype(np.int64)
+    d = np.linalg.norm(centres_a[i] - centres_b[j], axis=1)
+    ok = d <= radii_a[i] + radii_b[j] + margin
+    pairs = np.column_stack([i[ok], j[ok]])
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]

@@ -6,13 +6,16 @@ boundary rows (start: rows on X_0; end: rows on Phi(X_{n-1})) give the bilateral
 C v = c. M, D and K are block diagonal (4 x 4 blocks, ``bsr_matrix``); M is the kinetic energy
 rho_A int |r_dot|^2 ds of each arc by Gauss-Legendre quadrature (arc.NQ points).
 ``kkt_factor`` orders the KKT unknowns element by element (multipliers between the blocks they
-glue) so [[A, C^T], [C, 0]] is banded (half-bandwidth <= 7) and factors it with a banded
-LU with partial pivoting (numba, LAPACK gbtrf storage): O(n) time. ``advance`` re-glues the
-elements exactly by forward kinematics from X_0 (continuity holds to round-off after every step).
+glue) so [[A, C^T], [C, 0]] is banded (half-bandwidth BAND = 4) and factors it with a banded
+LU with partial pivoting (physics.rod.band, numba): O(n) time. ``kkt_band`` writes the KKT matrix
+of a step straight into that band storage from the per-element blocks (no sparse matrices), and
+``step`` factors it. ``advance`` re-glues the elements exactly by forward kinematics from X_0
+(continuity holds to round-off after every step).
 
 Additions to the R1/R2 contract: RodState.lam and advance(..., lam) (geometric stiffness of
 the gluing constraints in the next step, see physics.rod.model); ``constraint_hessian``,
-``potential``, ``dynamics``, ``point_hessian``, ``project`` and ``kkt_factor`` are extra.
+``potential``, ``dynamics``, ``point_hessian``, ``point_jacobians``, ``angle_jacobians``,
+``project``, ``kkt_factor`` and ``kkt_band`` are extra.
 """
 
 from __future__ import annotations
@@ -24,27 +27,28 @@ import scipy.sparse.linalg as spla
 
 from jassy.errors import JassyError
 from physics.rod import arc
+from physics.rod.band import band_fill, band_lu, band_solve, band_solve_vec
 from physics.rod.model import BC_ROWS, Arcs, Dynamics, FormulationBase, RodModel, RodState, sparse_from_blocks
+
+BAND = 4
+"""Half-bandwidth of the KKT matrix in MixedRod.perm order: a gluing multiplier sits between the
+element it leaves and the one it enters; its row on the element it leaves is d Phi_r/d(x, y, theta,
+kappa), where d Phi_x/dy = d Phi_y/dx = d Phi_theta/d(x, y) = 0, so it reaches at most 4 positions."""
 
 
 @numba.njit(cache=True)
 def _element_terms(theta, kappa, seg, thd, kd, rho_a, g, gx, gw, mass, gyro, grad, hess, hess_psd):
     """Per element: mass block, gyroscopic force, gravity gradient/Hessian on (theta, kappa).
-    Returns the gravity potential minus rho_A g sum l y_i."""
+    Returns the gravity potential minus rho_A g sum l y_i. With c = (1, i, dr/dtheta, dr/dkappa)
+    (complex), M_ab = rho_A int Re(conj(c_a) c_b) ds; the (x, y) block is rho_A l I."""
     v_sum = 0.0
     for i in range(theta.size):
         rot = np.exp(1j * theta[i])
         li = seg[i]
-        for a in range(4):
-            gyro[i, a] = 0.0
-            grad[i, a] = 0.0
-            for b in range(4):
-                mass[i, a, b] = 0.0
-        for a in range(2):
-            for b in range(2):
-                hess[i, a, b] = 0.0
-                hess_psd[i, a, b] = 0.0
-        grad[i, 1] = rho_a * g * li
+        m02 = m03 = m12 = m13 = m22 = m23 = m33 = 0.0
+        g0 = g1 = g2 = g3 = 0.0
+        r2 = r3 = 0.0
+        h00 = h01 = h11 = p00 = p01 = p11 = 0.0
         for k in range(gx.size):
             tau = li * gx[k]
             w = li * gw[k]
@@ -52,124 +56,145 @@ def _element_terms(theta, kappa, seg, thd, kd, rho_a, g, gx, gw, mass, gyro, gra
             f0 = tau * e0
             f1 = tau * tau * e1
             f2 = tau * tau * tau * e2
-            c = (1.0 + 0j, 1j, 1j * rot * f0, 1j * rot * f1)
+            c2 = 1j * rot * f0
+            c3 = 1j * rot * f1
             acc = -rot * (thd[i] * thd[i] * f0 + 2.0 * thd[i] * kd[i] * f1 + kd[i] * kd[i] * f2)
-            for a in range(4):
-                ca = c[a].conjugate()
-                gyro[i, a] -= rho_a * w * (ca * acc).real
-                for b in range(4):
-                    mass[i, a, b] += rho_a * w * (ca * c[b]).real
-            phi = theta[i] + kappa[i] * tau
+            m02 += w * c2.real
+            m12 += w * c2.imag
+            m03 += w * c3.real
+            m13 += w * c3.imag
+            m22 += w * (c2.real * c2.real + c2.imag * c2.imag)
+            m23 += w * (c2.real * c3.real + c2.imag * c3.imag)
+            m33 += w * (c3.real * c3.real + c3.imag * c3.imag)
+            g0 += w * acc.real
+            g1 += w * acc.imag
+            g2 += w * (c2.real * acc.real + c2.imag * acc.imag)
+            g3 += w * (c3.real * acc.real + c3.imag * acc.imag)
             wg = rho_a * g * w * (li - tau)
-            cphi, sphi = np.cos(phi), np.sin(phi)
+            tangent = rot * (1.0 + 1j * kappa[i] * tau * e0)  # e^{i phi}, e^{iz} = 1 + i z E_0(z)
+            cphi, sphi = tangent.real, tangent.imag
             v_sum += wg * sphi
-            grad[i, 2] += wg * cphi
-            grad[i, 3] += wg * tau * cphi
+            r2 += wg * cphi
+            r3 += wg * tau * cphi
             h = -wg * sphi
             hp = -wg * min(sphi, 0.0)
-            vv = (1.0, tau, tau * tau)
-            hess[i, 0, 0] += h * vv[0]
-            hess[i, 0, 1] += h * vv[1]
-            hess[i, 1, 1] += h * vv[2]
-            hess_psd[i, 0, 0] += hp * vv[0]
-            hess_psd[i, 0, 1] += hp * vv[1]
-            hess_psd[i, 1, 1] += hp * vv[2]
-        hess[i, 1, 0] = hess[i, 0, 1]
-        hess_psd[i, 1, 0] = hess_psd[i, 0, 1]
+            h00 += h
+            h01 += h * tau
+            h11 += h * tau * tau
+            p00 += hp
+            p01 += hp * tau
+            p11 += hp * tau * tau
+        mass[i, 0, 0] = mass[i, 1, 1] = rho_a * li
+        mass[i, 0, 1] = mass[i, 1, 0] = 0.0
+        mass[i, 0, 2] = mass[i, 2, 0] = rho_a * m02
+        mass[i, 0, 3] = mass[i, 3, 0] = rho_a * m03
+        mass[i, 1, 2] = mass[i, 2, 1] = rho_a * m12
+        mass[i, 1, 3] = mass[i, 3, 1] = rho_a * m13
+        mass[i, 2, 2] = rho_a * m22
+        mass[i, 2, 3] = mass[i, 3, 2] = rho_a * m23
+        mass[i, 3, 3] = rho_a * m33
+        gyro[i, 0] = -rho_a * g0
+        gyro[i, 1] = -rho_a * g1
+        gyro[i, 2] = -rho_a * g2
+        gyro[i, 3] = -rho_a * g3
+        grad[i, 0] = 0.0
+        grad[i, 1] = rho_a * g * li
+        grad[i, 2] = r2
+        grad[i, 3] = r3
+        hess[i, 0, 0], hess[i, 0, 1], hess[i, 1, 0], hess[i, 1, 1] = h00, h01, h01, h11
+        hess_psd[i, 0, 0], hess_psd[i, 0, 1], hess_psd[i, 1, 0], hess_psd[i, 1, 1] = p00, p01, p01, p11
     return v_sum
 
 
 @numba.njit(cache=True)
-def _bandwidths(rows, cols, perm):
-    kl = 0
-    ku = 0
-    for k in range(rows.size):
-        d = perm[rows[k]] - perm[cols[k]]
-        kl = max(kl, d)
-        ku = max(ku, -d)
-    return kl, ku
+def _scatter_kkt(A, jac, start_rows, end_rows, K, kv):
+    """[[A, C^T], [C, 0]] into band storage K (physics.rod.band) in MixedRod.perm order, from the
+    element blocks A (n, 4, 4) and end-pose Jacobians jac (n, 3, 4) (gluing rows -jac on element i,
+    identity on the start of element i + 1); the structural zeros of jac (see BAND) are skipped."""
+    n, ns = A.shape[0], start_rows.size
+    for i in range(n):
+        base = ns + 7 * i
+        for a in range(4):
+            for b in range(4):
+                K[base + b, kv + a - b] = A[i, a, b]
+    for r in range(ns):
+        d = ns + start_rows[r]
+        K[d, kv + r - d] = 1.0
+        K[r, kv + d - r] = 1.0
+    for i in range(n):
+        last = i == n - 1
+        for r in range(end_rows.size if last else 3):
+            m = ns + 7 * i + 4 + r
+            row = end_rows[r] if last else r
+            for a in range(4):
+                if a < 2 and a != row:
+                    continue
+                d = ns + 7 * i + a
+                val = jac[i, row, a] if last else -jac[i, row, a]
+                K[d, kv + m - d] = val
+                K[m, kv + d - m] = val
+            if not last:
+                d = ns + 7 * (i + 1) + r
+                K[d, kv + m - d] = 1.0
+                K[m, kv + d - m] = 1.0
 
 
 @numba.njit(cache=True)
-def _scatter(rows, cols, vals, perm, kv, ab):
-    """Add entries (rows, cols, vals), renumbered by perm, into band storage."""
-    for k in range(rows.size):
-        i = perm[rows[k]]
-        j = perm[cols[k]]
-        ab[kv + i - j, j] += vals[k]
-
-
-@numba.njit(cache=True)
-def _band_lu(ab, kl, ku, piv):
-    """In-place LU with partial pivoting of a band matrix in LAPACK gbtrf storage
-    (row kl + ku + i - j holds A[i, j]; kl extra rows for fill-in). Returns 0 or the
-    1-based index of a zero pivot."""
-    n = ab.shape[1]
-    kv = kl + ku
-    ju = 0
-    for j in range(n):
-        km = min(kl, n - 1 - j)
-        jp = 0
-        best = abs(ab[kv, j])
-        for i in range(1, km + 1):
-            if abs(ab[kv + i, j]) > best:
-                best = abs(ab[kv + i, j])
-                jp = i
-        piv[j] = j + jp
-        if best == 0.0:
-            return j + 1
-        ju = max(ju, min(j + ku + jp, n - 1))
-        if jp != 0:
-            for c in range(j, ju + 1):
-                a = ab[kv + j - c, c]
-                ab[kv + j - c, c] = ab[kv + j + jp - c, c]
-                ab[kv + j + jp - c, c] = a
-        inv = 1.0 / ab[kv, j]
-        for i in range(1, km + 1):
-            ab[kv + i, j] *= inv
-        for c in range(j + 1, ju + 1):
-            f = ab[kv + j - c, c]
-            if f != 0.0:
-                for i in range(1, km + 1):
-                    ab[kv + j + i - c, c] -= ab[kv + i, j] * f
-    return 0
-
-
-@numba.njit(cache=True)
-def _band_solve(lu, kl, ku, piv, b):
-    """Solve in place with the factors of _band_lu; b has shape (n, k)."""
-    n = lu.shape[1]
-    kv = kl + ku
-    for r in range(b.shape[1]):
-        for j in range(n):
-            p = piv[j]
-            if p != j:
-                t = b[j, r]
-                b[j, r] = b[p, r]
-                b[p, r] = t
-            for i in range(1, min(kl, n - 1 - j) + 1):
-                b[j + i, r] -= lu[kv + i, j] * b[j, r]
-        for j in range(n - 1, -1, -1):
-            b[j, r] /= lu[kv, j]
-            for i in range(1, min(j, kv) + 1):
-                b[j - i, r] -= lu[kv - i, j] * b[j, r]
+def _lam_blocks(theta, kappa, seg, lam_xy, psd, out):
+    """out[i] = lam_x d2x/dq2 + lam_y d2y/dq2 of each element's end point on (theta, kappa)
+    (arc.position_hessian at s = l); psd: the positive part of each 2 x 2 block (its negative
+    eigenvalue dropped, in closed form)."""
+    for i in range(theta.size):
+        e0, e1, e2 = arc.unit_moments(kappa[i] * seg[i])
+        rot = -np.exp(1j * theta[i])
+        li = seg[i]
+        h00 = rot * (li * e0)
+        h01 = rot * (li * li * e1)
+        h11 = rot * (li * li * li * e2)
+        lx, ly = lam_xy[i, 0], lam_xy[i, 1]
+        a = lx * h00.real + ly * h00.imag
+        b = lx * h01.real + ly * h01.imag
+        d = lx * h11.real + ly * h11.imag
+        if psd:
+            m = 0.5 * (a + d)
+            rad = np.hypot(0.5 * (a - d), b)
+            hi, lo = m + rad, m - rad
+            if hi <= 0.0:
+                a = b = d = 0.0
+            elif lo < 0.0:  # hi u u^T = hi (H - lo I) / (hi - lo)
+                f = hi / (hi - lo)
+                a, b, d = f * (a - lo), f * b, f * (d - lo)
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = a, b, b, d
 
 
 class BandedKKT:
-    """LU of [[A, C^T], [C, 0]] in an element-by-element order (banded, partial pivoting)."""
+    """LU of [[A, C^T], [C, 0]] in an element-by-element order (banded, partial pivoting): from
+    sparse A, C, or (``from_band``) from band storage already in that order."""
 
     def __init__(self, A, C, perm: np.ndarray):
         ndof = A.shape[0]
         a, c = A.tocoo(), C.tocoo()
-        rows = np.concatenate((a.row, c.row + ndof, c.col))
-        cols = np.concatenate((a.col, c.col, c.row + ndof))
         vals = np.concatenate((a.data, c.data, c.data))
-        self.kl, self.ku = _bandwidths(rows, cols, perm)
-        self.perm, self.ndof, self.size = perm, ndof, perm.size
-        self.lu = np.zeros((2 * self.kl + self.ku + 1, self.size))
-        _scatter(rows, cols, vals, perm, self.kl + self.ku, self.lu)
+        nz = vals != 0.0
+        rows = perm[np.concatenate((a.row, c.row + ndof, c.col))[nz]]
+        cols = perm[np.concatenate((a.col, c.col, c.row + ndof))[nz]]
+        kl = int(max(0, np.max(rows - cols, initial=0)))
+        ku = int(max(0, np.max(cols - rows, initial=0)))
+        ab = np.zeros((perm.size, 2 * kl + ku + 1))
+        band_fill(rows, cols, vals[nz], kl + ku, ab)
+        self._factor(ab, kl, ku, perm, ndof)
+
+    @classmethod
+    def from_band(cls, ab: np.ndarray, kl: int, ku: int, perm: np.ndarray, ndof: int) -> BandedKKT:
+        """Factor band storage ab (overwritten) of the KKT matrix in ``perm`` order."""
+        self = cls.__new__(cls)
+        self._factor(ab, kl, ku, perm, ndof)
+        return self
+
+    def _factor(self, ab, kl, ku, perm, ndof):
+        self.lu, self.kl, self.ku, self.perm, self.ndof, self.size = ab, kl, ku, perm, ndof, perm.size
         self.piv = np.empty(self.size, dtype=np.int64)
-        info = _band_lu(self.lu, self.kl, self.ku, self.piv)
+        info = band_lu(self.lu, kl, ku, self.piv)
         if info != 0:
             raise JassyError(
                 f"KKT system: singular (pivot {info}); check the boundary conditions and constraints"
@@ -178,12 +203,13 @@ class BandedKKT:
     def solve(self, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(v, lam) with A v + C^T lam = b, C v = c; b (ndof,) or (ndof, k)."""
         rhs = np.concatenate((np.asarray(b, dtype=np.float64), np.asarray(c, dtype=np.float64)))
-        vec = rhs.ndim == 1
-        x = np.empty((self.size, 1 if vec else rhs.shape[1]))
-        x[self.perm] = rhs.reshape(self.size, -1)
-        _band_solve(self.lu, self.kl, self.ku, self.piv, x)
+        x = np.empty(rhs.shape)
+        x[self.perm] = rhs
+        if rhs.ndim == 1:
+            band_solve_vec(self.lu, self.kl, self.ku, self.piv, x, 0, self.size)
+        else:
+            band_solve(self.lu, self.kl, self.ku, self.piv, x, 0, self.size)
         x = x[self.perm]
-        x = x[:, 0] if vec else x
         return x[: self.ndof], x[self.ndof :]
 
 
@@ -301,14 +327,27 @@ class MixedRod(FormulationBase):
         _, _, grad, hess, _, V = self._terms(q, None)
         return V, grad.ravel(), self._stiffness(hess)
 
-    def constraints(self, q):
-        """(C sparse (m, 4n), g (m,)): boundary rows, gluing rows, end rows."""
+    def _gluing(self, q):
+        """(end-pose Jacobians jac (n, 3, 4), constraint values g (m,))."""
         x, y, th, k = self._split(q)
-        n, ns, ne = self.n, self.start_rows.size, self.end_rows.size
         jac = arc.end_pose_jacobian(th, k, self.l)
         ex, ey, et = arc.end_pose(x, y, th, k, self.l)
         ends = np.stack((ex, ey, et), axis=1)
         starts = np.stack((x, y, th), axis=1)
+        g = np.concatenate((
+            starts[0, self.start_rows] - np.asarray(self.model.start)[self.start_rows],
+            (starts[1:] - ends[:-1]).ravel(),
+            ends[-1, self.end_rows] - self.end_target[self.end_rows],
+        ))  # fmt: skip
+        return jac, g
+
+    def constraints(self, q):
+        """(C sparse (m, 4n), g (m,)): boundary rows, gluing rows, end rows."""
+        jac, g = self._gluing(q)
+        return self._c_matrix(jac), g
+
+    def _c_matrix(self, jac: np.ndarray):
+        n, ns, ne = self.n, self.start_rows.size, self.end_rows.size
         rc = ns + 3 * np.arange(n - 1)[:, None] + np.arange(3)[None, :]
         re = ns + 3 * (n - 1) + np.arange(ne)
         rows = np.concatenate((
@@ -322,32 +361,92 @@ class MixedRod(FormulationBase):
         vals = np.concatenate(
             (np.ones(ns), -jac[:-1].ravel(), np.ones(3 * (n - 1)), jac[-1][self.end_rows].ravel())
         )
-        C = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_constraints, self.ndof))
-        g = np.concatenate((
-            starts[0, self.start_rows] - np.asarray(self.model.start)[self.start_rows],
-            (starts[1:] - ends[:-1]).ravel(),
-            ends[-1, self.end_rows] - self.end_target[self.end_rows],
-        ))  # fmt: skip
-        return C, g
+        return sp.csr_matrix((vals, (rows, cols)), shape=(self.n_constraints, self.ndof))
 
-    def constraint_hessian(self, q, lam: np.ndarray, psd: bool = False):
-        """sum_k lam_k d2 g_k / dq2 (sparse, blocks on (theta_i, kappa_i)); psd: keep only the
-        positive part of each 2 x 2 block."""
+    def _lam_hessian(self, q, lam: np.ndarray, psd: bool) -> np.ndarray:
+        """(n, 2, 2) blocks on (theta_i, kappa_i) of sum_k lam_k d2 g_k / dq2."""
         _, _, th, k = self._split(q)
         n, ns = self.n, self.start_rows.size
-        h = arc.position_hessian(th, k, self.l)
         lam_xy = np.zeros((n, 2))
         lam_xy[:-1] = -lam[ns : ns + 3 * (n - 1)].reshape(n - 1, 3)[:, :2]
         lam_end = np.zeros(3)
         lam_end[self.end_rows] = lam[ns + 3 * (n - 1) :]
         lam_xy[-1] += lam_end[:2]
-        blocks = np.zeros((n, 4, 4))
-        hb = lam_xy[:, 0, None, None] * h.real + lam_xy[:, 1, None, None] * h.imag
-        if psd:
-            w, U = np.linalg.eigh(hb)
-            hb = np.einsum("nij,nj,nkj->nik", U, np.maximum(w, 0.0), U)
-        blocks[:, 2:, 2:] = hb
+        out = np.empty((n, 2, 2))
+        _lam_blocks(th, k, self.l, lam_xy, psd, out)
+        return out
+
+    def constraint_hessian(self, q, lam: np.ndarray, psd: bool = False):
+        """sum_k lam_k d2 g_k / dq2 (sparse, blocks on (theta_i, kappa_i)); psd: keep only the
+        positive part of each 2 x 2 block."""
+        blocks = np.zeros((self.n, 4, 4))
+        blocks[:, 2:, 2:] = self._lam_hessian(q, lam, psd)
         return sparse_from_blocks(blocks)
+
+    def _step_terms(self, state: RodState, h: float):
+        """(A blocks (n, 4, 4), b (ndof,), jac (n, 3, 4), g (m,)) of one linearly implicit step (the
+        terms of FormulationBase.linear_system, per element)."""
+        self.check_step(h)
+        v = np.asarray(state.v, dtype=np.float64)
+        if v.shape != (self.ndof,):
+            raise JassyError(f"v: expected {self.ndof} velocities, got shape {v.shape}")
+        m = self.model
+        A, gyro, grad, _, hess_psd, _ = self._terms(state.q, v)
+        b = np.einsum("nab,nb->na", A, v.reshape(-1, 4)) + h * (gyro - grad)
+        A[:, 3, 3] += (h * m.damping + h * h * m.EI) * self.l
+        A[:, 2:, 2:] += (h * h) * hess_psd
+        jac, g = self._gluing(state.q)
+        if state.lam is not None and state.lam.shape == g.shape:
+            A[:, 2:, 2:] += h * self._lam_hessian(state.q, state.lam, psd=True)
+        return A, b.ravel(), jac, g
+
+    def linear_system(self, state: RodState, h: float) -> tuple:
+        """(A, b, C, c) as FormulationBase.linear_system, assembled per element."""
+        A, b, jac, g = self._step_terms(state, h)
+        return sparse_from_blocks(A), b, self._c_matrix(jac), -g / h
+
+    def kkt_band(self, state: RodState, h: float, out: np.ndarray | None = None):
+        """(K, rhs): the KKT matrix of ``linear_system(state, h)`` in band storage (physics.rod.band;
+        ``perm`` order, kl = ku = BAND) and rhs = (b, c) in natural order, without sparse matrices.
+        ``out``: a zeroed (ndof + m, 3 BAND + 1) array to fill."""
+        A, b, jac, g = self._step_terms(state, h)
+        K = np.zeros((self.perm.size, 3 * BAND + 1)) if out is None else out
+        _scatter_kkt(A, jac, self.start_rows, self.end_rows, K, 2 * BAND)
+        return K, np.concatenate((b, -g / h))
+
+    def step(self, state: RodState, h: float) -> RodState:
+        """One contact-free step (band KKT assembled and factored directly)."""
+        K, rhs = self.kkt_band(state, h)
+        v, lam = BandedKKT.from_band(K, BAND, BAND, self.perm, self.ndof).solve(
+            rhs[: self.ndof], rhs[self.ndof :]
+        )
+        return self.advance(state, v, h, lam)
+
+    def angle_jacobians(self, q, elements: np.ndarray, s: np.ndarray):
+        """(cols (m, 4), d phi / dq (m, 4)) of the tangent angle phi = theta_i + kappa_i s at arc
+        length s (m) of each element (the cross-section's rotation)."""
+        e = np.asarray(elements, dtype=np.int64)
+        d = np.zeros((e.size, 4))
+        d[:, 2] = 1.0
+        d[:, 3] = s
+        return 4 * e[:, None] + np.arange(4), d
+
+    def point_jacobians(self, q, elements: np.ndarray, s: np.ndarray):
+        """Vectorised point_jacobian: (points (m, 2), cols (m, 4), J (m, 2, 4))."""
+        x, y, th, k = self._split(q)
+        e = np.asarray(elements, dtype=np.int64)
+        s = np.asarray(s, dtype=np.float64)
+        le = self.model.length / self.n
+        if np.any((e < 0) | (e >= self.n)) or not np.all((s >= -1e-12 * le) & (s <= le * (1 + 1e-12))):
+            raise JassyError(f"elements, s: expected elements in [0, {self.n - 1}] and s in [0, {le:g}] m")
+        f = arc.moments(k[e], s)
+        rot = np.exp(1j * th[e])
+        p = x[e] + 1j * y[e] + rot * f[0]
+        d0, d1 = 1j * rot * f[0], 1j * rot * f[1]
+        J = np.zeros((e.size, 2, 4))
+        J[:, 0, 0] = J[:, 1, 1] = 1.0
+        J[:, 0, 2], J[:, 1, 2], J[:, 0, 3], J[:, 1, 3] = d0.real, d0.imag, d1.real, d1.imag
+        return np.column_stack((p.real, p.imag)), 4 * e[:, None] + np.arange(4), J
 
     def kkt_factor(self, A, C, method: str = "banded"):
         """Factor [[A, C^T], [C, 0]] once; ``.solve(b, c) -> (v, lam)`` (banded LU or "splu")."""

@@ -204,6 +204,19 @@ class FormulationBase:
             blocks.append((hcols, -(f[0] * H[0] + f[1] * H[1])))
         return V, grad, blocks
 
+    def point_jacobians(self, q, elements: np.ndarray, s: np.ndarray):
+        """point_jacobian at each (element, s): (points (m, 2), cols (m, k), J (m, 2, k)); narrower
+        rows are padded with zero columns (repeating their first index)."""
+        out = [self.point_jacobian(q, int(e), float(si)) for e, si in zip(elements, s, strict=True)]
+        k = max((len(c) for _, c, _ in out), default=0)
+        cols = np.zeros((len(out), k), dtype=np.int64)
+        J = np.zeros((len(out), 2, k))
+        for m, (_, c, Jm) in enumerate(out):
+            cols[m] = c[0]
+            cols[m, : len(c)] = c
+            J[m, :, : len(c)] = Jm
+        return np.array([p for p, _, _ in out]).reshape(-1, 2), cols, J
+
     def check_point(self, element: int, s: float) -> None:
         n, le = self.model.n, self.model.length / self.model.n
         if isinstance(element, bool) or not isinstance(element, (int, np.integer)) or not 0 <= element < n:

@@ -7,18 +7,26 @@ One step (velocity level, linearly implicit Euler, impulses in N s):
 
 * A, b, C, c: each rod's ``linear_system`` (boundary conditions, gluing), rigid bodies M v + h f;
   joint rows J_a v - J_b v = -rate (p_a - p_b)/h and drive rows v_k = v_target are appended.
-* Schur reductions: W = H K^{-1}|_v H^T with K = [[A, C^T], [C, 0]], w = H v_free + g_stab, then
-  v+ = v_free + K^{-1}|_v H^T r. Default (``schur=True``): a partitioned Schur complement on the
-  dofs touched by H (``_SchurDelassus``: K_II factorised once, banded LU in reverse Cuthill-McKee
-  order, columns of K_II^{-1} K_IB shared by colouring, iterative refinement to a componentwise
-  backward error < 1e-10); if K_II is singular it falls back to the direct path: K factorised once
-  (the rod's banded KKT for a lone rod, else SuperLU) and 2c solves with [H^T; 0].
-  H has rows n^T(J_a - J_b), t^T(J_a - J_b) (n from b to a, t = e_z x n).
+  K = [[A, C^T], [C, 0]] is kept in band storage (physics.rod.band): for mixed rods only (no
+  rigid bodies, joints or drives) each rod's ``kkt_band`` one after the other, assembled per
+  element; otherwise from the entries in a reverse Cuthill-McKee order computed once per set of
+  driven bodies (SuperLU when that band is wider than 64).
+* Schur reductions: W = H K^{-1}|_v H^T, w = H v_free + g_stab, then v+ = v_free + K^{-1}|_v H^T r.
+  Default (``schur=True``): the partitioned Schur complement of physics.rod.delassus (O(N) for
+  rods with contacts spread along them, iterative refinement of v+); if it is singular (e.g. a
+  rigid body held by several joints) the direct path: K factorised once and 2c solves with
+  [H^T; 0] (``schur=False`` always). H has rows n^T(J_a - J_b), t^T(J_a - J_b) (n from b to a,
+  t = e_z x n), built per body with the formulations' vectorised ``point_jacobians``.
 * Penetration at velocity level: g_stab = g/h on the normal row when the gap g >= 0 (contacts are
   kept from ``margin`` on, and only act if they would close within the step) and beta g/h when
   g < 0 (Baumgarte, beta = ``stabilisation``). Moreau-type: restitution 0.
-* Rigid surface points include the rotation (omega x (P - X)), so disks roll; on rods the contact
-  velocity is the centre-line velocity (the r theta_dot term of the thickness is neglected).
+* Contact velocities are those of the surface points: rigid points include the rotation
+  (omega x (P - X)), so disks roll; a rod's surface point at radius r turns with its cross-section,
+  the tangent angle phi = theta + kappa s of a mixed rod (u_T gets -r phi_dot; formulations without
+  ``angle_jacobians``, the chained one, use the centre-line velocity). Rolling speed of a contact:
+  |R_a omega_a + R_b omega_b|, the relative tangential velocity of the two surfaces' turning parts
+  (R: disk or rod radius, omega: body or cross-section angular velocity, 0 for static obstacles);
+  the speed at which a disk rolls along a rod or plane.
 * Contact reduction: per body pair, a contact within half an element length of a closer one is
   dropped (adjacent elements meeting at a node give duplicate rows).
 * Not handled: rod self-contact; crossing centre lines (geometry.py).
@@ -31,17 +39,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.linalg import lapack
-from scipy.sparse import csgraph
 
 from jassy.errors import JassyError
 from jassy.events import ContactTrack, Impact
 from physics.rod import geometry
+from physics.rod.band import BandOrder
+from physics.rod.delassus import BandKKT, DirectDelassus, SchurDelassus, SparseKKT
 from physics.rod.dfcp import solve_dfcp
+from physics.rod.mixed import BAND, MixedRod
 
 
 @dataclass(frozen=True)
@@ -107,8 +114,9 @@ class SystemState:
 @dataclass(frozen=True)
 class StepInfo:
     """One step: contact bodies (c, 2), points on a (c, 2), normals (c, 2), gaps (m), impulses r (c, 2)
-    (N s), relative velocities u (c, 2) after and free normal velocity before (m/s), bilateral
-    impulses lam, solver sweeps and residual, and times (s) of detection / assembly / Delassus / solve."""
+    (N s), relative velocities u (c, 2) of the surface points after and free normal velocity before
+    (m/s), bilateral impulses lam, solver sweeps and residual, times (s) of detection / assembly /
+    Delassus / solve, and rolling speeds (c,) after the step (m/s, see the module docstring)."""
 
     time: float
     bodies: np.ndarray
@@ -122,6 +130,7 @@ class StepInfo:
     iterations: int
     residual: float
     timings: dict
+    rolling: np.ndarray
 
 
 class RodSystem:
@@ -171,6 +180,32 @@ class RodSystem:
         )
         self._static = [i for i, ob in enumerate(self.obstacles) if isinstance(ob, Disk)]
         self._planes = [i for i, ob in enumerate(self.obstacles) if isinstance(ob, Plane)]
+        self._static_disks = (
+            np.array([self.obstacles[i].centre for i in self._static], dtype=np.float64).reshape(-1, 2),
+            np.array([self.obstacles[i].radius for i in self._static], dtype=np.float64),
+        )
+        self._disk_owner = np.concatenate(
+            [self.nr + self._disk_body, self.nr + self.nb + np.array(self._static, np.int64)]
+        )
+        self._disk_feature = np.concatenate([np.arange(len(self._disk_body)), np.arange(len(self._static))])
+        nid = self.nr + self.nb + len(self.obstacles)
+        self._mu_table = np.full((nid, nid), self.mu)
+        for (a, b), m in self.mu_pairs.items():  # (a, b) wins over (b, a)
+            if 0 <= a < nid and 0 <= b < nid:
+                self._mu_table[a, b] = m
+                if (b, a) not in self.mu_pairs:
+                    self._mu_table[b, a] = m
+        self._band, self._orders = None, {}
+        if self.nr and not self.nb and all(isinstance(f, MixedRod) for f in self.rods):
+            # rods only: K is the rods' band KKT matrices one after the other (no coupling rows)
+            sizes = [f.perm.size for f in self.rods]
+            start = np.cumsum([0] + sizes)
+            m_off = self.ndof + np.cumsum([0] + [f.n_constraints for f in self.rods])
+            pos = np.empty(start[-1], dtype=np.int64)
+            for k, f in enumerate(self.rods):
+                pos[self.offsets[k] : self.offsets[k + 1]] = start[k] + f.perm[: f.ndof]
+                pos[m_off[k] : m_off[k + 1]] = start[k] + f.perm[f.ndof :]
+            self._band = (start, m_off, pos)
 
     # ---- state -------------------------------------------------------------------------------
     def initial_state(self, rod_states=None, poses=None, velocities=None) -> SystemState:
@@ -224,39 +259,33 @@ class RodSystem:
         elem_of = np.concatenate(elem_of).astype(np.int64) if elem_of else np.zeros(0, np.int64)
         rr = self.radius[rod_of] if rod_of.size else np.zeros(0)
         dc, dr = self.world_disks(state.q)
-        sc = np.array([self.obstacles[i].centre for i in self._static], dtype=np.float64).reshape(-1, 2)
-        sr = np.array([self.obstacles[i].radius for i in self._static], dtype=np.float64)
+        sc, sr = self._static_disks
         # disk owners: rigid body ids, then static obstacle ids
-        d_owner = np.concatenate(
-            [self.nr + self._disk_body, self.nr + self.nb + np.array(self._static, np.int64)]
-        )
-        d_feat = np.concatenate([np.arange(len(dr)), np.arange(len(sr))]).astype(np.int64)
+        d_owner, d_feat = self._disk_owner, self._disk_feature
         centres_d, radii_d = np.concatenate([dc, sc]), np.concatenate([dr, sr])
         ac, ar = geometry.element_bounds(arcs)
         na = len(arcs)
-        pairs = geometry.broad_phase(
-            np.concatenate([ac, centres_d]), np.concatenate([ar + rr, radii_d]), self.margin
-        )
         rows, meta = [], []
-        i, j = pairs[:, 0], pairs[:, 1]
-        aa = (j < na) & (rod_of[np.minimum(i, na - 1)] != rod_of[np.minimum(j, na - 1)]) if na else j < 0
-        if np.any(aa):
-            ia, ib = i[aa], j[aa]
-            rows.append(geometry.arc_arc(arcs, ia, ib, rr[ia], rr[ib]))
-            meta.append(np.column_stack([rod_of[ia], rod_of[ib], elem_of[ia], elem_of[ib]]))
-        ad = (i < na) & (j >= na)
-        if np.any(ad):
-            ia, kd = i[ad], j[ad] - na
+        if self.nr > 1:  # elements of different rods
+            pairs = geometry.broad_phase(ac, ar + rr, self.margin)
+            pairs = pairs[rod_of[pairs[:, 0]] != rod_of[pairs[:, 1]]]
+            if len(pairs):
+                ia, ib = pairs[:, 0], pairs[:, 1]
+                rows.append(geometry.arc_arc(arcs, ia, ib, rr[ia], rr[ib]))
+                meta.append(np.column_stack([rod_of[ia], rod_of[ib], elem_of[ia], elem_of[ib]]))
+        pairs = geometry.cross_pairs(ac, ar + rr, centres_d, radii_d, self.margin)
+        if len(pairs):
+            ia, kd = pairs[:, 0], pairs[:, 1]
             rows.append(geometry.arc_disk(arcs, ia, centres_d[kd], radii_d[kd], rr[ia]))
             meta.append(np.column_stack([rod_of[ia], d_owner[kd], elem_of[ia], d_feat[kd]]))
-        dd = i >= na
-        if np.any(dd):
-            ka, kb = i[dd] - na, j[dd] - na
-            dd[dd] = (d_owner[ka] != d_owner[kb]) & ((ka < len(dr)) | (kb < len(dr)))
-        if np.any(dd):
-            ka, kb = i[dd] - na, j[dd] - na
-            rows.append(_disk_disk(centres_d[ka], radii_d[ka], centres_d[kb], radii_d[kb]))
-            meta.append(np.column_stack([d_owner[ka], d_owner[kb], d_feat[ka], d_feat[kb]]))
+        if len(dr):  # rigid disks against other bodies' disks
+            pairs = geometry.broad_phase(centres_d, radii_d, self.margin)
+            ka, kb = pairs[:, 0], pairs[:, 1]
+            dd = (d_owner[ka] != d_owner[kb]) & ((ka < len(dr)) | (kb < len(dr)))
+            if np.any(dd):
+                ka, kb = ka[dd], kb[dd]
+                rows.append(_disk_disk(centres_d[ka], radii_d[ka], centres_d[kb], radii_d[kb]))
+                meta.append(np.column_stack([d_owner[ka], d_owner[kb], d_feat[ka], d_feat[kb]]))
         for p in self._planes:
             ob = self.obstacles[p]
             nrm = np.asarray(ob.normal, dtype=np.float64)
@@ -312,11 +341,12 @@ class RodSystem:
         lmin = np.array([f.model.length / f.model.n for f in self.rods] + [np.inf] * n_other)
         pair = meta[:, 0] * (self.nr + self.nb + len(self.obstacles)) + meta[:, 1]
         order = np.lexsort((geo[:, 8], pair))
-        start = 0
-        while start < len(order):
-            stop = start
-            while stop < len(order) and pair[order[stop]] == pair[order[start]]:
-                stop += 1
+        ps = pair[order]
+        starts = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
+        stops = np.r_[starts[1:], len(order)]
+        single = stops - starts == 1
+        keep[order[starts[single]]] = True
+        for start, stop in zip(starts[~single], stops[~single], strict=True):
             idx = order[start:stop]
             d = 0.5 * min(lmin[meta[idx[0], 0]], lmin[meta[idx[0], 1]])
             d = 0.0 if np.isinf(d) else d  # rigid-only pairs: distinct disks touch at distinct points
@@ -325,22 +355,9 @@ class RodSystem:
                 if all(np.hypot(*(geo[i, 2:4] - geo[j, 2:4])) >= d for j in kept):
                     kept.append(i)
             keep[kept] = True
-            start = stop
         return keep
 
     # ---- one step ----------------------------------------------------------------------------
-    def _side(self, state, body, feat, s, point, n, sign):
-        """Global cols and the 2 x k rows (n, t)^T J of the contact point on one side."""
-        if body < self.nr:
-            _, cols, J = self.rods[body].point_jacobian(state.rods[body].q, int(feat), float(s))
-            return np.asarray(cols) + self.offsets[body], np.asarray(J)
-        if body >= self.nr + self.nb:
-            return None, None
-        k = self._disk_body[feat]
-        R = self._disk_local[feat, 2]
-        _, cols, J = self._rigid_jacobian(k, point - sign * R * n, state.q)
-        return cols, J
-
     def step(self, state: SystemState, h: float, drives=None, forces=None) -> tuple[SystemState, StepInfo]:
         """Advance by h (s). ``drives`` {body id: (vx, vy, omega)} prescribes the velocity of a rigid
         body, or of a rod's start pose (its first three dofs, x0, y0, theta0, in both formulations;
@@ -348,93 +365,31 @@ class RodSystem:
         order. ``forces`` {rigid body id: (fx, fy, torque)} adds external loads (N, N m)."""
         if not (np.isfinite(h) and h > 0):
             raise JassyError(f"h: expected a time step > 0 s, got {h!r}")
+        drives, forces = dict(drives or {}), dict(forces or {})
+        for k in forces:
+            if not self.nr <= k < self.nr + self.nb:
+                raise JassyError(
+                    f"forces: expected rigid body ids in [{self.nr}, {self.nr + self.nb}), got {k}"
+                )
+        for k in drives:
+            if not 0 <= k < self.nr + self.nb:
+                raise JassyError(f"drives: expected body ids in [0, {self.nr + self.nb}), got {k}")
         t0 = time.perf_counter()
         det = self.detect(state)
         t1 = time.perf_counter()
-        # --- bilateral system
-        A_blocks, b_parts, C_rows, c_parts = [], [], [], []
-        for k, (f, st) in enumerate(zip(self.rods, state.rods, strict=True)):
-            A, b, C, c = f.linear_system(st, h)
-            A_blocks.append(sp.csr_matrix(A))
-            b_parts.append(np.asarray(b, dtype=np.float64))
-            C = sp.csr_matrix(C)
-            C_rows.append(
-                sp.csr_matrix((C.data, C.indices + self.offsets[k], C.indptr), shape=(C.shape[0], self.ndof))
-            )
-            c_parts.append(np.asarray(c, dtype=np.float64))
-        if self.nb:
-            A_blocks.append(sp.diags(self._M))
-            fb = np.zeros((self.nb, 3))
-            fb[:, 1] = -np.array([b.mass * b.gravity for b in self.bodies])
-            for k, f in (forces or {}).items():
-                if not self.nr <= k < self.nr + self.nb:
-                    raise JassyError(
-                        f"forces: expected rigid body ids in [{self.nr}, {self.nr + self.nb}), got {k}"
-                    )
-                fb[k - self.nr] += np.asarray(f, dtype=np.float64)
-            b_parts.append(self._M * state.v.reshape(-1) + h * fb.reshape(-1))
-        for jt in self.joints:
-            pa, ca, Ja = self.anchor_point(state, jt.a)
-            if jt.b is None:
-                pb, cb, Jb = np.asarray(jt.world, dtype=np.float64), np.zeros(0, np.int64), np.zeros((2, 0))
-            else:
-                pb, cb, Jb = self.anchor_point(state, jt.b)
-            M = sp.csr_matrix(
-                (
-                    np.concatenate([Ja, -Jb], axis=1).ravel(),
-                    (np.repeat([0, 1], len(ca) + len(cb)), np.tile(np.concatenate([ca, cb]), 2)),
-                ),
-                shape=(2, self.ndof),
-            )
-            C_rows.append(M)
-            c_parts.append(-jt.rate * (pa - pb) / h)
-        for k, vel in (drives or {}).items():
-            if not 0 <= k < self.nr + self.nb:
-                raise JassyError(f"drives: expected body ids in [0, {self.nr + self.nb}), got {k}")
-            cols = self.offsets[k] + np.arange(3)
-            C_rows.append(sp.csr_matrix((np.ones(3), (np.arange(3), cols)), shape=(3, self.ndof)))
-            c_parts.append(np.asarray(vel, dtype=np.float64))
-        A = sp.block_diag(A_blocks, format="csr")
-        C = sp.vstack(C_rows, format="csr") if C_rows else sp.csr_matrix((0, self.ndof))
-        b, c = np.concatenate(b_parts), np.concatenate(c_parts) if c_parts else np.zeros(0)
-        # --- contact rows
+        band, K, rhs = self._bilateral(state, h, drives, forces)
         meta, geo = det["meta"], det["geo"]
         nc = len(meta)
-        Hr, Hc, Hv = [], [], []
-        for i in range(nc):
-            n = geo[i, 6:8]
-            t = np.array([-n[1], n[0]])
-            for side, sign in ((0, 1.0), (1, -1.0)):
-                cols, J = self._side(
-                    state,
-                    meta[i, side],
-                    meta[i, 2 + side],
-                    geo[i, side],
-                    geo[i, 2 + 2 * side : 4 + 2 * side],
-                    n,
-                    sign,
-                )
-                if cols is None:
-                    continue
-                Hr.append(np.repeat([2 * i, 2 * i + 1], len(cols)))
-                Hc.append(np.tile(cols, 2))
-                Hv.append(sign * np.concatenate([n @ J, t @ J]))
-        H = (
-            sp.csr_matrix(
-                (np.concatenate(Hv), (np.concatenate(Hr), np.concatenate(Hc))), shape=(2 * nc, self.ndof)
-            )
-            if nc
-            else sp.csr_matrix((0, self.ndof))
-        )
+        H, G = self._contact_rows(state, meta, geo)
         t2 = time.perf_counter()
         solver = None
-        if nc and self.schur:
+        if nc and self.schur and band is not None:
             try:
-                solver = _SchurDelassus(A, C, H, b, c)
-            except RuntimeError:  # K_II singular (e.g. several joints on one body): direct path
+                solver = SchurDelassus(*band, self.ndof, H, rhs)
+            except RuntimeError:  # K_II or S singular (e.g. several joints on one body): direct path
                 solver = None
         if solver is None:
-            solver = _DirectDelassus(self._factor(A, C, bool(self.joints or drives)), H, b, c)
+            solver = DirectDelassus(self._kkt(band, K), self.ndof, H, rhs)
         x = solver.x_free
         t3 = time.perf_counter()
         if nc:
@@ -442,18 +397,18 @@ class RodSystem:
             w = H @ x[: self.ndof]
             u_free = w[0::2].copy()
             w[0::2] += np.where(gap >= 0, gap, self.stab * gap) / h
-            mu = np.array([self._mu(a, b) for a, b in meta[:, :2]])
-            keys = [tuple(k) for k in meta]
+            mu = self._mu_table[meta[:, 0], meta[:, 1]]
+            keys = [tuple(k) for k in meta.tolist()]
             r0 = np.array([state.cache.get(k, (0.0, 0.0)) for k in keys])
             res = solve_dfcp(solver.W, w, mu, r0=r0, tol=self.tol, max_iter=self.max_iter)
             try:
                 x = solver.solution(res.r.reshape(-1))
-            except RuntimeError:  # partitioned solve inaccurate: same W, direct KKT solves
-                x = _DirectDelassus(self._factor(A, C, bool(self.joints or drives)), H, b, c).solution(
-                    res.r.reshape(-1)
-                )
+            except RuntimeError:  # partitioned solve inaccurate: one direct KKT solve
+                full = rhs.copy()
+                full[: self.ndof] += H.T @ res.r.reshape(-1)
+                x = self._kkt(band, K).solve(full)
             r, u, its, resid = res.r, res.u, res.iterations, res.residual
-            cache = {k: tuple(ri) for k, ri in zip(keys, r, strict=True) if ri[0] > 0}
+            cache = {k: tuple(ri) for k, ri in zip(keys, r.tolist(), strict=True) if ri[0] > 0}
         else:
             r, u, u_free, its, resid, cache = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), 0, 0.0, {}
         t4 = time.perf_counter()
@@ -469,6 +424,7 @@ class RodSystem:
         vb = v[self.offsets[self.nr] :].reshape(self.nb, 3)
         new = SystemState(rods, state.q + h * vb, vb.copy(), state.time + h, cache)
         surface = geo[:, 2:4] - self._radius_of(meta[:, 0], meta[:, 2])[:, None] * geo[:, 6:8]
+        rolling = np.abs(G @ v)
         times = {"detect": t1 - t0, "assemble": t2 - t1, "delassus": t3 - t2, "solve": t4 - t3}
         info = StepInfo(
             state.time + h,
@@ -483,15 +439,133 @@ class RodSystem:
             its,
             resid,
             times,
+            rolling,
         )
         return new, info
 
-    def _factor(self, A, C, extra_rows: bool):
-        """KKT factorisation with ``.solve(b, c) -> (v, lam)``: the rod's own (banded for MixedRod)
-        when the system is one rod without extra rows, else SuperLU of the whole KKT matrix."""
-        if self.nr == 1 and self.nb == 0 and not extra_rows and hasattr(self.rods[0], "kkt_factor"):
-            return self.rods[0].kkt_factor(A, C)
-        return _SparseKKT(A, C)
+    def _bilateral(self, state, h, drives, forces):
+        """(band, K, rhs): K = [[A, C^T], [C, 0]] in band storage (ab, kl, ku, pos) or None if it is
+        not banded, K sparse (None on the rods-only path), rhs = (b, c). Rods only: the rods' own band
+        matrices one after the other, assembled directly. Else the entries of the rods'
+        linear_system, rigid bodies, joint and drive rows, in a reverse Cuthill-McKee order computed
+        once per set of driven bodies (the sparsity pattern does not change between steps)."""
+        if self._band is not None and not drives:
+            start, m_off, pos = self._band
+            ab = np.zeros((start[-1], 3 * BAND + 1))
+            rhs = np.empty(start[-1])
+            for k, (f, st) in enumerate(zip(self.rods, state.rods, strict=True)):
+                _, rk = f.kkt_band(st, h, out=ab[start[k] : start[k + 1]])
+                rhs[self.offsets[k] : self.offsets[k + 1]] = rk[: f.ndof]
+                rhs[m_off[k] : m_off[k + 1]] = rk[f.ndof :]
+            return (ab, BAND, BAND, pos), None, rhs
+        ent, b_parts, c_parts = [], [], []  # K entries (rows, cols, vals) in natural numbering
+        m = self.ndof  # next multiplier
+        for k, (f, st) in enumerate(zip(self.rods, state.rods, strict=True)):
+            A, b, C, c = f.linear_system(st, h)
+            A, C = sp.coo_matrix(A), sp.coo_matrix(C)
+            ent.append((A.row + self.offsets[k], A.col + self.offsets[k], A.data))
+            ent += [
+                (C.row + m, C.col + self.offsets[k], C.data),
+                (C.col + self.offsets[k], C.row + m, C.data),
+            ]
+            m += C.shape[0]
+            b_parts.append(np.asarray(b, dtype=np.float64))
+            c_parts.append(np.asarray(c, dtype=np.float64))
+        if self.nb:
+            dofs = np.arange(self.offsets[self.nr], self.ndof)
+            ent.append((dofs, dofs, self._M))
+            fb = np.zeros((self.nb, 3))
+            fb[:, 1] = -np.array([b.mass * b.gravity for b in self.bodies])
+            for k, f in forces.items():
+                fb[k - self.nr] += np.asarray(f, dtype=np.float64)
+            b_parts.append(self._M * state.v.reshape(-1) + h * fb.reshape(-1))
+        for jt in self.joints:
+            pa, ca, Ja = self.anchor_point(state, jt.a)
+            if jt.b is None:
+                pb, cb, Jb = np.asarray(jt.world, dtype=np.float64), np.zeros(0, np.int64), np.zeros((2, 0))
+            else:
+                pb, cb, Jb = self.anchor_point(state, jt.b)
+            rows = m + np.repeat([0, 1], len(ca) + len(cb))
+            cols = np.tile(np.concatenate([ca, cb]), 2)
+            vals = np.concatenate([Ja, -Jb], axis=1).ravel()
+            ent += [(rows, cols, vals), (cols, rows, vals)]
+            m += 2
+            c_parts.append(-jt.rate * (pa - pb) / h)
+        for k, vel in drives.items():
+            rows, cols = m + np.arange(3), self.offsets[k] + np.arange(3)
+            ent += [(rows, cols, np.ones(3)), (cols, rows, np.ones(3))]
+            m += 3
+            c_parts.append(np.asarray(vel, dtype=np.float64))
+        rows, cols, vals = (np.concatenate([e[i] for e in ent]) for i in range(3))
+        rhs = np.concatenate(b_parts + c_parts)
+        key = tuple(drives)
+        if key not in self._orders or not self._orders[key].fits(rows, cols):
+            self._orders[key] = BandOrder(rows, cols, m)
+        band = self._orders[key].band(rows, cols, vals)
+        K = sp.csc_matrix((vals, (rows, cols)), shape=(m, m)) if band is None else None
+        return band, K, rhs
+
+    def _kkt(self, band, K):
+        """One factorisation of K with ``.solve(rhs)``: band LU, else equilibrated SuperLU."""
+        if band is not None:
+            return BandKKT(*band)
+        return SparseKKT(K, self.ndof)
+
+    def _contact_rows(self, state, meta, geo):
+        """(H, G) sparse (2c, ndof) and (c, ndof): H rows n^T (J_a - J_b), t^T (J_a - J_b) of each
+        contact's surface points (t = e_z x n), G the rolling rows R_a omega_a + R_b omega_b."""
+        nc = len(meta)
+        if nc == 0:
+            return sp.csr_matrix((0, self.ndof)), sp.csr_matrix((0, self.ndof))
+        nrm = geo[:, 6:8]
+        tng = np.column_stack([-nrm[:, 1], nrm[:, 0]])
+        rows, cols, vals, grows, gcols, gvals = [], [], [], [], [], []
+        for side, sign in ((0, 1.0), (1, -1.0)):
+            body, feat, s = meta[:, side], meta[:, 2 + side], geo[:, side]
+            for k in np.unique(body[body < self.nr]):
+                f, sel = self.rods[k], np.nonzero(body == k)[0]
+                q = state.rods[k].q
+                _, c, J = f.point_jacobians(q, feat[sel], s[sel])
+                jn = sign * np.einsum("mi,miw->mw", nrm[sel], J)
+                jt = sign * np.einsum("mi,miw->mw", tng[sel], J)
+                if hasattr(f, "angle_jacobians"):  # surface point: u_T gets -r phi_dot
+                    ca, dphi = f.angle_jacobians(q, feat[sel], s[sel])
+                    ca = ca + self.offsets[k]
+                    rows.append(np.repeat(2 * sel + 1, ca.shape[1]))
+                    cols.append(ca.ravel())
+                    vals.append((-f.model.radius * dphi).ravel())
+                    grows.append(np.repeat(sel, ca.shape[1]))
+                    gcols.append(ca.ravel())
+                    gvals.append((f.model.radius * dphi).ravel())
+                for row, jac in ((2 * sel, jn), (2 * sel + 1, jt)):
+                    rows.append(np.repeat(row, c.shape[1]))
+                    cols.append((c + self.offsets[k]).ravel())
+                    vals.append(jac.ravel())
+            sel = np.nonzero((body >= self.nr) & (body < self.nr + self.nb))[0]
+            if sel.size:
+                disk = feat[sel]
+                kb = self._disk_body[disk]
+                radius = self._disk_local[disk, 2]
+                arm = geo[sel, 2 + 2 * side : 4 + 2 * side] - sign * radius[:, None] * nrm[sel]
+                arm -= state.q[kb, :2]
+                dofs = self.offsets[self.nr + kb]
+                for row, d in ((2 * sel, nrm[sel]), (2 * sel + 1, tng[sel])):
+                    rows.append(np.repeat(row, 3))
+                    cols.append((dofs[:, None] + np.arange(3)).ravel())
+                    moment = d[:, 1] * arm[:, 0] - d[:, 0] * arm[:, 1]
+                    vals.append(sign * np.column_stack([d, moment]).ravel())
+                grows.append(sel)
+                gcols.append(dofs + 2)
+                gvals.append(radius)
+        H = sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * nc, self.ndof)
+        )
+        if not grows:
+            return H, sp.csr_matrix((nc, self.ndof))
+        G = sp.csr_matrix(
+            (np.concatenate(gvals), (np.concatenate(grows), np.concatenate(gcols))), shape=(nc, self.ndof)
+        )
+        return H, G
 
     def _radius_of(self, body, feat):
         out = np.zeros(len(body))
@@ -500,191 +574,6 @@ class RodSystem:
         rig = (body >= self.nr) & (body < self.nr + self.nb)
         out[rig] = self._disk_local[feat[rig], 2]
         return out
-
-    def _mu(self, a, b) -> float:
-        return self.mu_pairs.get((int(a), int(b)), self.mu_pairs.get((int(b), int(a)), self.mu))
-
-
-@numba.njit(cache=True)
-def _greedy_colours(ncol, nblock, pj, pk):
-    """Greedy colouring of columns: columns sharing a block (pairs (pj, pk), sorted by pj) differ."""
-    start = np.zeros(nblock + 1, np.int64)
-    for k in pk:
-        start[k + 1] += 1
-    start = np.cumsum(start)
-    members = np.empty(pk.size, np.int64)
-    fill = start[:-1].copy()
-    for t in range(pk.size):
-        members[fill[pk[t]]] = pj[t]
-        fill[pk[t]] += 1
-    colour = np.full(ncol, -1, np.int64)
-    mark = np.full(ncol + 1, -1, np.int64)
-    t = 0
-    for j in range(ncol):
-        t0 = t
-        while t < pj.size and pj[t] == j:
-            k = pk[t]
-            for m in range(start[k], start[k + 1]):
-                if colour[members[m]] >= 0:
-                    mark[colour[members[m]]] = j
-            t += 1
-        col = 0
-        while mark[col] == j:
-            col += 1
-        colour[j] = col
-        t = max(t, t0)
-    return colour
-
-
-class _BandedLU:
-    """LU of a sparse matrix in reverse Cuthill-McKee order (LAPACK dgbtrf / dgbtrs); SuperLU if the
-    band is wide. ``solve(rhs)`` for one or several columns; RuntimeError if singular."""
-
-    def __init__(self, M, max_band: int = 64):
-        self.perm = csgraph.reverse_cuthill_mckee(sp.csr_matrix(abs(M) + abs(M).T), symmetric_mode=True)
-        P = sp.csr_matrix(M)[self.perm][:, self.perm].tocoo()
-        self.kl = int(max(0, np.max(P.row - P.col, initial=0)))
-        self.ku = int(max(0, np.max(P.col - P.row, initial=0)))
-        self.splu = None
-        if max(self.kl, self.ku) > max_band:
-            self.splu = spla.splu(sp.csc_matrix(M))
-            return
-        ab = np.zeros((2 * self.kl + self.ku + 1, M.shape[0]))
-        ab[self.kl + self.ku + P.row - P.col, P.col] = P.data
-        self.lu, self.piv, info = lapack.dgbtrf(ab, self.kl, self.ku, overwrite_ab=1)
-        if info != 0:
-            raise RuntimeError(f"singular matrix (pivot {info})")
-
-    def solve(self, rhs):
-        if self.splu is not None:
-            return self.splu.solve(rhs)
-        x, info = lapack.dgbtrs(self.lu, self.kl, self.ku, rhs[self.perm], self.piv)
-        out = np.empty_like(x)
-        out[self.perm] = x
-        return out
-
-
-class _DirectDelassus:
-    """W = H X_v with X = K^{-1}[H^T; 0]: 2c solves with the whole KKT factorisation."""
-
-    def __init__(self, kkt, H, b, c):
-        self.x_free = np.concatenate(kkt.solve(b, c))
-        self.W = np.zeros((0, 0))
-        if H.shape[0]:
-            self.X = np.concatenate(kkt.solve(H.T.toarray(), np.zeros((len(c), H.shape[0]))))
-            W = H @ self.X[: H.shape[1]]
-            self.W = 0.5 * (W + W.T)
-
-    def solution(self, r):
-        return self.x_free + self.X @ r
-
-
-class _SchurDelassus:
-    """Delassus operator by a partitioned Schur complement: B = the dofs touched by H (plus the
-    multipliers of constraints acting only on them), I = the rest. Removing B splits K_II into
-    independent blocks (rod segments between contacts, free bodies): K_II is factorised once, and
-    K_II^{-1} K_IB costs a few right-hand sides because columns whose blocks are disjoint share one
-    (greedy colouring). S = K_BB - K_BI K_II^{-1} K_IB (block-banded, small) gives
-    W = H_B S^{-1} H_B^T, and v from x_B and one more K_II solve: O(n) + O(c^2) instead of 2c full
-    KKT solves; the velocities are polished by iterative refinement. Raises RuntimeError if K_II or
-    S is singular, K_II is empty, or the refinement fails (the caller then solves directly)."""
-
-    def __init__(self, A, C, H, b, c):
-        ndof, m = A.shape[0], C.shape[0]
-        K = sp.bmat([[A, C.T], [C, None]], format="csc") if m else sp.csc_matrix(A)
-        N = K.shape[0]
-        is_b = np.zeros(N, dtype=bool)
-        is_b[np.unique(H.indices)] = True
-        if m:
-            Cc = sp.csr_matrix(C)
-            outside = np.asarray((abs(Cc) @ (~is_b[:ndof]).astype(float)) == 0).ravel()
-            is_b[ndof:] = outside & (np.diff(Cc.indptr) > 0)
-        bi, ii = np.nonzero(is_b)[0], np.nonzero(~is_b)[0]
-        if len(ii) == 0:
-            raise RuntimeError("no interior unknowns to condense")
-        Kc = K.tocsc()
-        K_II, K_IB = Kc[ii][:, ii].tocsc(), Kc[ii][:, bi].tocsc()
-        K_BI, K_BB = Kc[bi][:, ii].tocsr(), Kc[bi][:, bi].tocsc()
-        ncomp, comp = csgraph.connected_components(K_II, directed=False)
-        self.lu_ii = _BandedLU(K_II)
-        # colour the B columns so that columns sharing a block of K_II get different colours
-        key = np.unique(np.repeat(np.arange(len(bi)), np.diff(K_IB.indptr)) * ncomp + comp[K_IB.indices])
-        pj, pk = key // ncomp, key % ncomp  # (column, block) pairs
-        colour = _greedy_colours(len(bi), ncomp, pj, pk)
-        coo = K_IB.tocoo()
-        R = np.zeros((len(ii), int(colour.max(initial=0)) + 1))
-        np.add.at(R, (coo.row, colour[coo.col]), coo.data)
-        Zc = self.lu_ii.solve(R)
-        order = np.argsort(comp, kind="stable")
-        bounds = np.searchsorted(comp[order], np.arange(ncomp + 1))
-        size = bounds[pk + 1] - bounds[pk]
-        first = np.repeat(bounds[pk] - np.cumsum(size) + size, size)
-        rows = order[first + np.arange(size.sum())]
-        cols = np.repeat(pj, size)
-        Z = sp.csc_matrix((Zc[rows, colour[cols]], (rows, cols)), shape=(len(ii), len(bi)))
-        S = (K_BB - K_BI @ Z).tocsr()
-        self.lu_s = _BandedLU(S)
-        self.K, self.K_BI, self.K_IB, self.bi, self.ii, self.ndof = K, K_BI, K_IB, bi, ii, ndof
-        self.rhs = np.concatenate([b, c])
-        HB = H.tocsc()[:, bi[bi < ndof]]
-        HBt = np.zeros((len(bi), H.shape[0]))
-        HBt[: HB.shape[1]] = HB.T.toarray()
-        self.XB = self.lu_s.solve(HBt)
-        W = HB @ self.XB[: HB.shape[1]]
-        self.W = 0.5 * (W + W.T)
-        self.H = H
-        self.x_free = self._refined(self.rhs)
-
-    def _solve(self, rhs):
-        """K^{-1} rhs through the partition (exact up to round-off)."""
-        x = np.empty_like(rhs)
-        y_i = self.lu_ii.solve(rhs[self.ii])
-        x[self.bi] = xb = self.lu_s.solve(rhs[self.bi] - self.K_BI @ y_i)
-        x[self.ii] = self.lu_ii.solve(rhs[self.ii] - self.K_IB @ xb)
-        return x
-
-    def _refined(self, rhs, x=None):
-        """Solve with iterative refinement until the componentwise backward error is < 1e-10 (the
-        condensed multipliers lose digits on rods with tiny curvature masses); RuntimeError if not."""
-        x = self._solve(rhs) if x is None else x
-        absk = abs(self.K)
-        for _ in range(4):
-            res = rhs - self.K @ x
-            omega = np.max(np.abs(res) / (absk @ np.abs(x) + np.abs(rhs) + 1e-300))
-            if omega < 1e-10:
-                return x
-            x = x + self._solve(res)
-        raise RuntimeError(f"partitioned solve not accurate (backward error {omega:.1e})")
-
-    def solution(self, r):
-        rhs = self.rhs.copy()
-        rhs[: self.ndof] += self.H.T @ r
-        x = self.x_free.copy()
-        x[self.bi] += self.XB @ r
-        x[self.ii] = self.lu_ii.solve(rhs[self.ii] - self.K_IB @ x[self.bi])
-        return self._refined(rhs, x)
-
-
-class _SparseKKT:
-    """SuperLU of [[A, C^T], [C, 0]], symmetrically equilibrated (primal columns by 1/sqrt(A_ii),
-    multiplier rows by the inverse norm of the scaled C rows): element masses of short mixed-model
-    elements span many decades."""
-
-    def __init__(self, A, C):
-        self.ndof = A.shape[0]
-        d1 = 1.0 / np.sqrt(np.maximum(np.abs(A.diagonal()), 1e-300))
-        Cs = sp.csr_matrix(C) @ sp.diags(d1)
-        d2 = 1.0 / np.maximum(sp.linalg.norm(Cs, axis=1), 1e-300) if C.shape[0] else np.zeros(0)
-        self.d = np.concatenate([d1, d2])
-        D = sp.diags(self.d)
-        K = sp.bmat([[A, C.T], [C, None]], format="csc") if C.shape[0] else sp.csc_matrix(A)
-        self.lu = spla.splu((D @ K @ D).tocsc())
-
-    def solve(self, b, c):
-        rhs = np.concatenate([b, c])
-        d = self.d if rhs.ndim == 1 else self.d[:, None]
-        x = d * self.lu.solve(d * rhs)
-        return x[: self.ndof], x[self.ndof :]
 
 
 def _disk_disk(ca, ra, cb, rb) -> np.ndarray:
@@ -697,8 +586,8 @@ def _disk_disk(ca, ra, cb, rb) -> np.ndarray:
 def contact_events(infos: list[StepInfo], min_speed: float = 1e-3, min_impulse: float = 1e-9):
     """(impacts, tracks) from step infos: an Impact when a body pair starts touching (total normal
     impulse > min_impulse after none) approaching faster than min_speed (m/s); one ContactTrack per
-    body pair over all steps (normal force = sum r_N / h, slip speed = max |u_T| over the pair's
-    active contacts, rolling speed 0). Raises JassyError on NaN/Inf."""
+    body pair over all steps (normal force = sum r_N / h, slip speed = max |u_T| and rolling speed =
+    max rolling over the pair's active contacts). Raises JassyError on NaN/Inf."""
     if not infos:
         return [], []
     times = np.array([inf.time for inf in infos])
@@ -706,14 +595,18 @@ def contact_events(infos: list[StepInfo], min_speed: float = 1e-3, min_impulse: 
     pairs = sorted({tuple(sorted(map(int, p))) for inf in infos for p in inf.bodies})
     force = {p: np.zeros(len(infos)) for p in pairs}
     slip = {p: np.zeros(len(infos)) for p in pairs}
+    roll = {p: np.zeros(len(infos)) for p in pairs}
     impacts, touching = [], set()
     for k, inf in enumerate(infos):
         now = {}
-        for (a, b), r, u, uf in zip(inf.bodies.tolist(), inf.r, inf.u, inf.u_free, strict=True):
+        for (a, b), r, u, uf, w in zip(
+            inf.bodies.tolist(), inf.r, inf.u, inf.u_free, inf.rolling, strict=True
+        ):
             p = (min(a, b), max(a, b))
             if r[0] > min_impulse:
                 force[p][k] += r[0] / h[k]
                 slip[p][k] = max(slip[p][k], abs(u[1]))
+                roll[p][k] = max(roll[p][k], w)
                 imp, spd = now.get(p, (0.0, 0.0))
                 now[p] = (imp + r[0], max(spd, -uf))
         for p, (imp, spd) in now.items():
@@ -724,7 +617,7 @@ def contact_events(infos: list[StepInfo], min_speed: float = 1e-3, min_impulse: 
         touching = set(now)
     tracks = []
     for p in pairs:
-        if not (np.all(np.isfinite(force[p])) and np.all(np.isfinite(slip[p]))):
+        if not all(np.all(np.isfinite(x[p])) for x in (force, slip, roll)):
             raise JassyError(f"contact_events: non-finite contact track between bodies {p}")
-        tracks.append(ContactTrack(p, times, force[p], slip[p], np.zeros(len(infos))))
+        tracks.append(ContactTrack(p, times, force[p], slip[p], roll[p]))
     return impacts, tracks
