@@ -56,6 +56,7 @@ def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False
                 "case": f"pile of {n}",
                 "bodies": n,
                 "contacts_per_step": result.stats["contacts"] / max(result.stats["solves"], 1),
+                "sweeps_per_solve": result.stats["sweeps"] / max(result.stats["solves"], 1),
                 "steps_per_s": steps / wall,
                 "real_time_factor": seconds / wall,
             }
@@ -64,29 +65,54 @@ def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False
     return rows
 
 
-def _wok_rows(duration: float) -> list[dict]:
+def _wok_rows(duration: float, repeats: int = 2) -> list[dict]:
+    """The wok's physics alone and its full render (physics, events, sound, haptic and CSV
+    files) at the CLI's default block (64) and at 256 frames, the best of ``repeats`` runs,
+    pinned to one core."""
     import os
     import tempfile
 
     from patches.wok import render_wok, simulate_wok
 
-    simulate_wok(0.2)  # warm-up (JIT cache load)
-    t0 = time.perf_counter()
-    simulate_wok(duration)
-    physics = time.perf_counter() - t0
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        render_wok(os.path.join(tmp, "wok.wav"), duration=duration)
-        full = time.perf_counter() - t0
-    return [
-        {
-            "case": "wok physics",
-            "bodies": 15,
-            "steps_per_s": duration / physics * 1000,
-            "real_time_factor": duration / physics,
-        },
-        {"case": "wok render (physics + sound)", "bodies": 15, "real_time_factor": duration / full},
-    ]
+    cores = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cores)})
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            wav, force = os.path.join(tmp, "wok.wav"), os.path.join(tmp, "force.csv")
+            render_wok(wav, force, duration=0.3)  # warm-up (JIT cache load)
+            physics = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                simulate_wok(duration)
+                physics.append(time.perf_counter() - t0)
+            rows = [
+                {
+                    "case": "wok physics",
+                    "bodies": 15,
+                    "steps_per_s": duration / min(physics) * 1000,
+                    "real_time_factor": duration / min(physics),
+                }
+            ]
+            for block in (64, 256):
+                best = None
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    summary = render_wok(wav, force, duration=duration, block=block)
+                    wall = time.perf_counter() - t0
+                    if best is None or wall < best[0]:
+                        best = (wall, summary["physics_seconds"])
+                rows.append(
+                    {
+                        "case": f"wok render, block {block}",
+                        "bodies": 15,
+                        "real_time_factor": duration / best[0],
+                        "physics_s": best[1],
+                        "sound_s": best[0] - best[1],
+                    }
+                )
+    finally:
+        os.sched_setaffinity(0, cores)
+    return rows
 
 
 def print_rigid(rows: list[dict]) -> None:
@@ -94,4 +120,7 @@ def print_rigid(rows: list[dict]) -> None:
     for r in rows:
         contacts = f"{r['contacts_per_step']:.0f}" if "contacts_per_step" in r else "-"
         steps = f"{r['steps_per_s']:.0f}" if "steps_per_s" in r else "-"
-        print(f"{r['case']:32s} {contacts:>14s} {steps:>10s} {r['real_time_factor']:12.1f}")
+        split = f"  (physics {r['physics_s']:.2f} s, sound {r['sound_s']:.2f} s)" if "sound_s" in r else ""
+        if "sweeps_per_solve" in r:
+            split = f"  ({r['sweeps_per_solve']:.1f} PGS sweeps per solve)"
+        print(f"{r['case']:32s} {contacts:>14s} {steps:>10s} {r['real_time_factor']:12.1f}{split}")

@@ -50,6 +50,14 @@ def _push(buf, count, a, b, px, py, pz, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w
 
 
 @nb.njit(cache=True)
+def _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w=0.0):
+    """Append the contact of a's point (x, y, z) of radius r (m) at the middle of the overlap,
+    (x, y, z) - n (r + gap / 2)."""
+    off = r + 0.5 * gap
+    return _push(buf, count, a, b, x - nx * off, y - ny * off, z - nz * off, nx, ny, nz, gap, fa, fb, u, v, w)
+
+
+@nb.njit(cache=True)
 def to_world(i, pos, rot, x, y, z):
     """World coordinates of the point (x, y, z) of body i's frame."""
     r = rot[i]
@@ -222,10 +230,7 @@ def _spheres_polytope(a, b, pos, rot, geo, margin, buf, count):
         sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, pos, rot, geo)
         gap = sd - r
         if gap <= margin:
-            off = r + 0.5 * gap
-            count = _push(
-                buf, count, a, b, x - nx * off, y - ny * off, z - nz * off, nx, ny, nz, gap, -1, feature
-            )
+            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, -1, feature)
     return count
 
 
@@ -272,22 +277,7 @@ def _against_plane(a, b, pos, rot, geo, margin, buf, count):
         x, y, z, r = body_point(a, i, pos, rot, geo)
         gap = nx * x + ny * y + nz * z - d - r
         if gap <= margin:
-            off = r + 0.5 * gap
-            count = _push(
-                buf,
-                count,
-                a,
-                b,
-                x - nx * off,
-                y - ny * off,
-                z - nz * off,
-                nx,
-                ny,
-                nz,
-                gap,
-                _point_id(a, i, geo),
-                -1,
-            )
+            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, _point_id(a, i, geo), -1)
     return count
 
 
@@ -339,24 +329,8 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
             nx, ny, nz = _rotate(b, rot, tnx, tny, tnz)
         gap = sd - r - thick
         if gap <= margin:
-            off = r + 0.5 * gap
-            count = _push(
-                buf,
-                count,
-                a,
-                b,
-                x - nx * off,
-                y - ny * off,
-                z - nz * off,
-                nx,
-                ny,
-                nz,
-                gap,
-                _point_id(a, i, geo),
-                tri,
-                u,
-                v,
-                w,
+            count = _push_point(
+                buf, count, a, b, x, y, z, r, nx, ny, nz, gap, _point_id(a, i, geo), tri, u, v, w
             )
     return count
 
