@@ -702,8 +702,8 @@ def run_steps(
     quat, phi) (N, 13) if traj has room. Returns (steps done, records); stops before a step when
     ``rec`` may not hold its records (the caller grows it and calls again).
     stats: [sub-steps at impacts, impacts resolved late, contacts solved, solves, PGS sweeps,
-    pairs checked for an impact inside the step]; warm: the last
-    solve's contact impulses (new_warm_start), read and updated."""
+    pairs checked for an impact inside the step]; warm: the last solve's contact impulses
+    (new_warm_start), read and updated."""
     n = pos.shape[0]
     kin_v = np.zeros((n, 3))
     kin_w = np.zeros((n, 3))
