@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def triangle_weights(px, py, pz, tri, t):
     """Barycentric weights (u, v, w) of the point of triangle tri[t] (vertices a, b, c) closest
     to the point (px, py, pz); scalar arithmetic, no allocation."""
@@ -55,7 +55,7 @@ def triangle_weights(px, py, pz, tri, t):
     return 1.0 - v - w, v, w
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def triangle_point(tri, t, u, v, w):
     """The point u a + v b + w c of triangle tri[t]."""
     return (
@@ -110,7 +110,7 @@ def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = Non
     return TriangleGrid(tri, normals, spheres, lo, float(cell), dims, start, owners_a[order].astype(np.int64))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items):
     """Closest point of the surface within ``reach`` (m) of (px, py, pz): (triangle index or -1,
     squared distance, barycentric weights u, v, w); no allocation."""

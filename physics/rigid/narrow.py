@@ -34,7 +34,7 @@ from physics.rigid.shapes import CAPSULE, MESH, PLANE, SPHERE
 # contact or per vertex.
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _push(buf, count, a, b, px, py, pz, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w=0.0):
     """Append one contact to the buffers; returns the new count (drops when full)."""
     pts, nrm, gaps, pair, feat, bar, _ = buf
@@ -49,7 +49,7 @@ def _push(buf, count, a, b, px, py, pz, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w
     return count + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w=0.0):
     """Append the contact of a's point (x, y, z) of radius r (m) at the middle of the overlap,
     (x, y, z) - n (r + gap / 2)."""
@@ -57,7 +57,7 @@ def _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, fa, fb, u=0.0, v=
     return _push(buf, count, a, b, x - nx * off, y - ny * off, z - nz * off, nx, ny, nz, gap, fa, fb, u, v, w)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def to_world(i, pos, rot, x, y, z):
     """World coordinates of the point (x, y, z) of body i's frame."""
     r = rot[i]
@@ -68,7 +68,7 @@ def to_world(i, pos, rot, x, y, z):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def to_local(i, pos, rot, x, y, z):
     """Body i's frame coordinates of the world point (x, y, z)."""
     r = rot[i]
@@ -80,7 +80,7 @@ def to_local(i, pos, rot, x, y, z):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _rotate(i, rot, x, y, z):
     """The body-frame direction (x, y, z) of body i in world coordinates."""
     r = rot[i]
@@ -91,7 +91,7 @@ def _rotate(i, rot, x, y, z):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def point_count(a, geo):
     """How many points stand for body a against planes and meshes: 1 for a sphere, 3 for a
     capsule (its end and middle spheres), the vertices of a polytope."""
@@ -103,7 +103,7 @@ def point_count(a, geo):
     return geo[4][a + 1] - geo[4][a]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def body_point(a, i, pos, rot, geo):
     """World position of point i of body a (see point_count) and its radius (m)."""
     btype, param = geo[0], geo[2]
@@ -177,7 +177,7 @@ def _segment_segment(a, b, pos, rot, geo, margin, buf, count):
     return _push(buf, count, a, b, cbx + nx * off, cby + ny * off, cbz + nz * off, nx, ny, nz, gap, -1, -1)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _deepest_plane(lx, ly, lz, b, geo):
     """(largest signed distance of the body-frame point (lx, ly, lz) over polytope b's face
     planes, index of that plane): negative inside, an under-estimate of the distance outside."""
@@ -262,7 +262,7 @@ def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
     return count
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _point_id(a, i, geo):
     """Feature index of point i of body a: the vertex of a polytope, -1 for sphere centres."""
     return i if geo[0][a] > CAPSULE else -1
@@ -299,7 +299,8 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
         # that far (the result is the same; resting points search a cell or two)
         point = geo[21][a] + i
         near = hint[point] if hint[point] < t1 - t0 else 0
-        qx, qy, qz = triangle_point(mesh_tris, near, *triangle_weights(lx, ly, lz, mesh_tris, near))
+        hu, hv, hw = triangle_weights(lx, ly, lz, mesh_tris, near)
+        qx, qy, qz = triangle_point(mesh_tris, near, hu, hv, hw)
         bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
         tri, d2, u, v, w = grid_closest(
             lx,
