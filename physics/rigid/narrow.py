@@ -326,6 +326,8 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
             sd = dist
             nx, ny, nz = _rotate(b, rot, dx / dist, dy / dist, dz / dist)
         else:
+            if dist > r + thick + depth:
+                continue  # further behind the surface than depth: it has passed (any margin)
             sd = -dist
             nx, ny, nz = _rotate(b, rot, tnx, tny, tnz)
         gap = sd - r - thick

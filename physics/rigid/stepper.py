@@ -236,12 +236,18 @@ def _warm_impulses(buf, idx, impact, frame, mu, roll, dt, warm, n_bodies, r):
 
 @nb.njit(cache=True)
 def _keep_warm(buf, idx, impact, frame, r, dt, warm):
-    """Store the solved resting contacts (r_N > 0, not impacts) as the next solve's warm start."""
+    """Store the solved contacts pushing (r_N > 0) as the next solve's warm start, as forces
+    r / dt. Not after a solve with an impact: the impact's impulse spreads through resting
+    contacts, and over a short sub-step it would read as a huge force."""
     _, _, _, pair, feat, _, _ = buf
     keys, vals, size = warm
     m = 0
     for k in range(idx.shape[0]):
-        if r[k, 0] <= 0.0 or impact[k] or m >= keys.shape[0]:
+        if impact[k]:
+            size[0] = 0
+            return
+    for k in range(idx.shape[0]):
+        if r[k, 0] <= 0.0 or m >= keys.shape[0]:
             continue
         c = idx[k]
         keys[m, 0], keys[m, 1], keys[m, 2], keys[m, 3] = pair[c, 0], pair[c, 1], feat[c, 0], feat[c, 1]
@@ -568,9 +574,10 @@ def _motion(phi, kind, kin_v, kin_w, geo, prm, dt):
 
 
 @nb.njit(cache=True)
-def _speeds(phi, rot, kind, kin_v, kin_w, geo):
+def _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia):
     """(world velocity (N, 3) of each body's centre, m/s; bound on its points' speed about the
-    centre, bounding radius * |omega|, m/s)."""
+    centre, bounding radius * largest |omega| of the step, m/s). A free body's |omega| can grow
+    within a step (Euler's equations keep |L|, not |omega|): |L| / I_min bounds it."""
     bound = geo[3]
     n = phi.shape[0]
     vel = np.zeros((n, 3))
@@ -580,7 +587,9 @@ def _speeds(phi, rot, kind, kin_v, kin_w, geo):
             r = rot[i]
             for x in range(3):
                 vel[i, x] = r[x, 0] * phi[i, 3] + r[x, 1] * phi[i, 4] + r[x, 2] * phi[i, 5]
-            w = math.sqrt(phi[i, 0] ** 2 + phi[i, 1] ** 2 + phi[i, 2] ** 2)
+            i0, i1, i2 = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+            momentum = math.sqrt((i0 * phi[i, 0]) ** 2 + (i1 * phi[i, 1]) ** 2 + (i2 * phi[i, 2]) ** 2)
+            w = momentum / min(i0, i1, i2)
         elif kind[i] == KINEMATIC:
             vel[i] = kin_v[i]
             w = math.sqrt(kin_w[i, 0] ** 2 + kin_w[i, 1] ** 2 + kin_w[i, 2] ** 2)
@@ -743,7 +752,7 @@ def run_steps(
             lo, hi, movable = _boxes(pos, motion, kind, geo, slop)
             pairs = sweep_and_prune(lo, hi, movable)
             reach = np.zeros(pairs.shape[0])
-            vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo)
+            vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
             _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
             gap0 = np.empty(pairs.shape[0])
             touching = np.empty(pairs.shape[0], np.bool_)
@@ -784,7 +793,7 @@ def run_steps(
             first_hit = dt
             if subs < max_events:
                 new_rot = _rotations(new_quat)
-                vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo)  # after the solve
+                vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)  # after the solve
                 _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
                 for p in range(pairs.shape[0]):
                     a, b = pairs[p, 0], pairs[p, 1]
