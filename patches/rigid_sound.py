@@ -47,12 +47,8 @@ def contact_curves(tracks: list[ContactTrack]) -> tuple[np.ndarray, np.ndarray, 
         body = np.column_stack([t, tr.normal_force, tr.slip_speed, tr.rolling_speed])
         rows += [np.array([[t[0] - dt, 0.0, 0.0, 0.0]]), body, np.array([[t[-1] + dt, 0.0, 0.0, 0.0]])]
     table = np.concatenate(rows)
-    keep = np.ones(len(table), bool)
-    latest = -np.inf
-    for i, t in enumerate(table[:, 0]):  # where tracks touch or overlap, the earlier rows win
-        keep[i] = t > latest
-        latest = max(latest, t)
-    table = table[keep]
+    times = table[:, 0]  # where tracks touch or overlap, the earlier rows win
+    table = table[np.r_[True, times[1:] > np.maximum.accumulate(times)[:-1]]]
     return table[:, 0], table[:, 1], table[:, 2], table[:, 3]
 
 

@@ -93,14 +93,9 @@ def _rotate(i, rot, x, y, z):
 
 @nb.njit(cache=True, inline="always")
 def point_count(a, geo):
-    """How many points stand for body a against planes and meshes: 1 for a sphere, 3 for a
-    capsule (its end and middle spheres), the vertices of a polytope."""
-    btype = geo[0]
-    if btype[a] == SPHERE:
-        return 1
-    if btype[a] == CAPSULE:
-        return 3
-    return geo[4][a + 1] - geo[4][a]
+    """How many points stand for body a against planes and meshes (world._point_count: 1 for
+    a sphere, 3 for a capsule, the vertices of a polytope), from the point offsets geo[21]."""
+    return geo[21][a + 1] - geo[21][a]
 
 
 @nb.njit(cache=True, inline="always")

@@ -554,22 +554,14 @@ def _time_of_impact(a, b, dt, g0, g1, pos, quat, phi, rot, mover, geo, margin, s
 
 
 @nb.njit(cache=True)
-def _motion(phi, kind, kin_v, kin_w, geo, prm, dt):
-    """Per body, a bound (m) on how far any of its points moves in dt seconds of free motion."""
-    bound = geo[3]
-    n = phi.shape[0]
+def _motion(vel, spin, kind, g, dt):
+    """Per body, a bound (m) on how far any of its points moves in dt seconds of free motion,
+    from its centre's speed and spin bound (_speeds), plus g dt^2 if it falls."""
+    n = vel.shape[0]
     motion = np.zeros(n)
-    g = math.sqrt(prm[P_GX] ** 2 + prm[P_GY] ** 2 + prm[P_GZ] ** 2)
     for i in range(n):
-        if kind[i] == DYNAMIC:
-            speed = math.sqrt(dot3(phi[i, 3:], phi[i, 3:])) + bound[i] * math.sqrt(
-                dot3(phi[i, :3], phi[i, :3])
-            )
-            motion[i] = dt * speed + dt * dt * g
-        elif kind[i] == KINEMATIC:
-            motion[i] = dt * (
-                math.sqrt(dot3(kin_v[i], kin_v[i])) + bound[i] * math.sqrt(dot3(kin_w[i], kin_w[i]))
-            )
+        speed = math.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2)
+        motion[i] = dt * (speed + spin[i]) + (g * dt * dt if kind[i] == DYNAMIC else 0.0)
     return motion
 
 
@@ -748,11 +740,10 @@ def run_steps(
             if dt <= 1e-15:
                 break
             rot = _rotations(quat)
-            motion = _motion(phi, kind, kin_v, kin_w, geo, prm, dt)
-            lo, hi, movable = _boxes(pos, motion, kind, geo, slop)
+            vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
+            lo, hi, movable = _boxes(pos, _motion(vel, spin, kind, gravity_norm, dt), kind, geo, slop)
             pairs = sweep_and_prune(lo, hi, movable)
             reach = np.zeros(pairs.shape[0])
-            vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
             _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
             gap0 = np.empty(pairs.shape[0])
             touching = np.empty(pairs.shape[0], np.bool_)
