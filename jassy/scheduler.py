@@ -4,6 +4,11 @@ An event at fractional sample time ``t`` is applied before frame ``ceil(t)`` is 
 (the first frame at or after ``t``); the current block is split there, so no event is
 moved to a block boundary (Faust ``timed_dsp``, SuperCollider ``OffsetOut``). Ugens that
 need the fraction (impacts) receive ``t`` itself.
+
+Ugens with ``inline_events`` (ImpactForce, ModalBank) apply an event at its own frame
+inside a sub-block, so their events do not split it: they are handed over at the start
+of the sub-block that contains their frame (parameter changes through ``set_param_at``).
+A rigid scene's hundreds of impacts then cost no extra sub-blocks of the whole graph.
 """
 
 from __future__ import annotations
@@ -110,6 +115,7 @@ class Scheduler:
         self.events = [checked[i] for i in order]
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
         self.apply_frames = [math.ceil(t - _SAMPLE_SLACK) for t in self.sample_times]
+        self.inline = [self._is_inline(ev) for ev in self.events]
         self.next_event = 0
         self.frame = 0
         budget = graph.budget
@@ -126,6 +132,16 @@ class Scheduler:
         self.events.insert(i, event)
         self.sample_times.insert(i, sample_time)
         self.apply_frames.insert(i, frame)
+        self.inline.insert(i, self._is_inline(event))
+
+    def _is_inline(self, event: Event) -> bool:
+        """Whether the event's node (and every node its impact location moves) applies it at
+        its own frame inside a sub-block."""
+        if not self.graph.nodes[event.node].inline_events:
+            return False
+        if event.action == "set" or event.args.get("location") is None:
+            return True
+        return all(t.inline_events for t in self.graph.location_targets(event.node))
 
     def upcoming_impulses(self, start: int, end: int) -> list[tuple[list, float]]:
         """(ugens downstream, impulse N s) of the impact-like events applied in frames
@@ -142,26 +158,28 @@ class Scheduler:
     def _dispatch(self, index: int) -> None:
         ev = self.events[index]
         node = self.graph.nodes[ev.node]
+        frame = self.apply_frames[index]
         if ev.action == "set":
             ramp = ev.ramp
             if ramp is not None:  # end on the frame where time + ramp applies: tracks join exactly
                 end = math.ceil((ev.time + ramp) * self.sample_rate - _SAMPLE_SLACK)
-                ramp = (end - self.apply_frames[index]) / self.sample_rate
+                ramp = (end - frame) / self.sample_rate
             for key, value in ev.args.items():
-                node.set_param(key, value, jump=ev.jump, ramp=ramp)
+                _set(node, frame, key, value, ev.jump, ramp)
             return
         location = ev.args.get("location")
         if location is not None:
             for target in self.graph.location_targets(ev.node):
-                target.set_param("location", location, jump=True)
+                _set(target, frame, "location", location, True, None)
         node.act(ev.action, ev.args, self.sample_times[index])
 
     def run(self, n: int, out: np.ndarray) -> None:
         """Render the next ``n`` frames into ``out[:, :n]`` (rows: the graph's audio then
         haptic channels).
 
-        Sub-blocks end at block boundaries (multiples of ``block`` on the clock), at
-        event frames and at the graph's feedback limit.
+        Sub-blocks end at block boundaries (multiples of ``block`` on the clock), at the
+        frames of events that are not inline, and at the graph's feedback limit; inline
+        events inside a sub-block are dispatched before it.
         """
         process = self.graph.process
         steps = self.graph.steps
@@ -170,7 +188,7 @@ class Scheduler:
         copy = specialise(gather, bus, rows, out, 0, 0)
         block = self.block
         limit = min(block, self.graph.max_sub_block)
-        frames = self.apply_frames
+        frames, inline = self.apply_frames, self.inline
         count = len(frames)
         never = 1 << 62
         begin = pos = self.frame
@@ -182,19 +200,41 @@ class Scheduler:
                 self.next_event += 1
                 upcoming = frames[self.next_event] if self.next_event < count else never
             if limit == block and pos % block == 0 and (period is None or period % block == 0):
-                # fast path: whole blocks up to the next event or the end
-                whole = (min(end, upcoming) - pos) // block
-                for _ in range(whole):
+                # fast path: whole blocks up to the next event that splits one, or the end
+                while pos + block <= end:
+                    stop = pos + block
+                    while upcoming < stop and inline[self.next_event]:
+                        self._dispatch(self.next_event)
+                        self.next_event += 1
+                        upcoming = frames[self.next_event] if self.next_event < count else never
+                    if upcoming < stop:
+                        break
                     for step in steps:  # Graph.process, inlined on the hot path
                         step(pos, block)
                     copy(bus, rows, out, pos - begin, block)
-                    pos += block
-                if whole:
+                    pos = stop
+                if pos >= end:
+                    break
+                if upcoming <= pos:
                     continue
-            stop = min(end, (pos // block + 1) * block, pos + limit, upcoming)
+            stop = min(end, (pos // block + 1) * block, pos + limit)
             if period is not None:
                 stop = min(stop, (pos // period + 1) * period)
+            while upcoming < stop and inline[self.next_event]:
+                self._dispatch(self.next_event)
+                self.next_event += 1
+                upcoming = frames[self.next_event] if self.next_event < count else never
+            stop = min(stop, upcoming)
             process(pos, stop - pos)
             copy(bus, rows, out, pos - begin, stop - pos)
             pos = stop
         self.frame = end
+
+
+def _set(node, frame: int, key: str, value, jump: bool, ramp: float | None) -> None:
+    """Change a parameter at ``frame``: through set_param_at for an inline-event ugen (which
+    applies it at that frame), else now (the sub-block starts at that frame)."""
+    if node.inline_events:
+        node.set_param_at(frame, key, value, jump, ramp)
+    else:
+        node.set_param(key, value, jump=jump, ramp=ramp)

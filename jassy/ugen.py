@@ -48,6 +48,10 @@ class UGen:
     is_delay: ClassVar[bool] = False
     #: True if impact locations downstream of a force source apply to this ugen.
     accepts_location: ClassVar[bool] = False
+    #: True if the ugen applies events at their own frame inside a sub-block: parameter
+    #: changes through :meth:`set_param_at`, actions through :meth:`act` with their sample
+    #: time. The scheduler then hands them over ahead instead of splitting the sub-block.
+    inline_events: ClassVar[bool] = False
     #: Names of additional outputs (e.g. the contact force of a closed-loop interaction),
     #: written to ``self.extra[name][:n]`` and read by others through :meth:`tap`.
     outputs: ClassVar[tuple[str, ...]] = ()
@@ -234,6 +238,11 @@ class UGen:
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         """React to a validated parameter change during a render."""
+
+    def set_param_at(self, frame: int, key: str, value: Any, jump: bool, ramp: float | None) -> None:
+        """As :meth:`set_param`, taking effect at absolute ``frame`` (at or after the first
+        frame of the next :meth:`process`). Only ugens with ``inline_events`` implement it."""
+        raise PatchError(f"{self.type_name} {self.name!r}: parameters change only between sub-blocks")
 
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
         """Perform an event action (validated args) at fractional ``sample_time``."""

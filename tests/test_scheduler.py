@@ -109,6 +109,38 @@ def test_jump_applies_at_the_event_sample():
     assert np.all(y[:k] == 1.0) and np.all(y[k:] == 0.25)
 
 
+def test_inline_events_apply_at_their_frame_without_splitting_the_sub_block():
+    """Impacts and location jumps (inline events) land mid-block at their exact frame while
+    a continuous force drives the bank; only the event on a Gain (not inline) splits."""
+    model = ModalModel([300.0, 1700.0], [4.0, 9.0], [[1.0, 0.2], [0.1, 1.5]], ("a", "b"))
+    n = 4000
+    drive = ArraySource(np.sin(2 * np.pi * 50 * np.arange(n) / FS), name="drive")
+    hit = ImpactForce(name="hit", duration=0.001)
+    bank = ModalBank(model, name="bank")(Mixer(drive, hit, name="force"))
+    out = Gain(bank, name="g")
+    score = [
+        Event(1234.25 / FS, "bank", "set", {"location": "b"}, jump=True),
+        Event(1500.5 / FS, "hit", "impact", {"impulse": 0.1, "location": "a"}),
+        Event(2100.0 / FS, "bank", "set", {"gain": 0.5}),
+        Event(3333.7 / FS, "g", "set", {"gain": 0.5}, jump=True),
+    ]
+    calls = []
+    counted = out.process
+
+    def process(start, count):
+        calls.append((start, count))
+        counted(start, count)
+
+    out.process = process
+    whole = render(Graph(out), score, n / FS, FS, 1000, limiter=False).audio[0]
+    assert calls == [(0, 1000), (1000, 1000), (2000, 1000), (3000, 334), (3334, 666)]
+    calls.clear()
+    framewise = render(Graph(out), score, n / FS, FS, 1, limiter=False).audio[0]
+    assert len(calls) == n
+    assert np.max(np.abs(whole)) > 1e-4
+    assert max_abs_diff(whole, framewise) < 1e-12 * np.max(np.abs(whole))
+
+
 def test_rendering_twice_gives_the_same_result():
     graph, score = busy_graph_and_score(2, 0.5)
     a = render(graph, score, 0.5, FS, 64).audio

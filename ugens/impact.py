@@ -94,6 +94,15 @@ class ImpactForce(UGen):
         }
     }
 
+    #: Pulses are placed at their own sample time, and the parameters matter only when an
+    #: impact starts (in event order): events need not split a sub-block.
+    inline_events = True
+
+    def set_param_at(self, frame: int, key: str, value: Any, jump: bool, ramp: float | None) -> None:
+        """Change ``duration`` for the impacts from ``frame`` on: now, since every impact before
+        ``frame`` has already been handed over (events come in time order)."""
+        self.set_param(key, value, jump=jump, ramp=ramp)
+
     def _prepare(self) -> None:
         self.pulses = np.zeros((16, 3))
         self.count = np.zeros(1, dtype=np.int64)

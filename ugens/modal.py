@@ -25,6 +25,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numba as nb
@@ -217,8 +218,8 @@ class ModelParams:
             model = self.values.get("model")
             if model is not None:
                 model.check_location(loc, where)
-                gains = model.gains_at(loc)
-                if self.driving_point and np.any(gains < 0):
+                gains = model.gains_at(loc) if self.driving_point else None
+                if gains is not None and np.any(gains < 0):
                     k = int(np.argmax(gains < 0))
                     raise PatchError(
                         f"{where}: the model's gain of mode {k} here is {gains[k]:g} < 0; a contact needs "
@@ -238,6 +239,7 @@ class ModalBank(ModelParams, UGen):
     type_name = "ModalBank"
     inputs = ("input",)
     accepts_location = True
+    inline_events = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the ModalModel (name in a patch)"),
         "location": ParamSpec("location", 0, doc="contact location: vertex, point name or barycentric"),
@@ -262,6 +264,8 @@ class ModalBank(ModelParams, UGen):
         self.validate_model()
         model = self.model
         self.order = np.argsort(model.decays, kind="stable")
+        self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
+        self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
         k = model.n_modes
         self.bank = np.zeros((5, k))  # c1, c2, g (current coefficients), y1, y2 (state)
         self.coef, self.y = self.bank[:3], self.bank[3:]
@@ -279,16 +283,43 @@ class ModalBank(ModelParams, UGen):
         self._refresh_design_cache()
         self._step = specialise(bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor)
 
+    def _pole_design(self) -> tuple[np.ndarray, np.ndarray]:
+        """(c1, c2, R sin theta) and 1 / (R^2 sin^2 theta) (0 for silent modes) per mode in
+        internal order, for the current freq_scale and decay_scale; kept between calls, so
+        a location or gain change (every impact of a rigid scene) only recomputes gains."""
+        v = self.values
+        key = (v["freq_scale"], v["decay_scale"])
+        if self._poles is None or self._poles[0] != key:
+            o = self.order
+            freqs, decays = (
+                self.model.frequencies[o] * v["freq_scale"],
+                self.model.decays[o] * v["decay_scale"],
+            )
+            c1, c2, s = design(freqs, decays, self.sample_rate)
+            sounding = c2 > 0
+            sin2 = np.maximum(1.0 - c1 * c1 / (4 * np.where(sounding, c2, 1.0)), 1e-12)
+            inv = np.where(sounding, 1.0 / (np.where(sounding, c2, 1.0) * sin2), 0.0)
+            self._poles = (key, np.stack([c1, c2, s]), np.where(sounding, sin2, 1.0), inv)
+        return self._poles[1], self._poles[3]
+
     def _design(self) -> np.ndarray:
         """Target (c1, c2, g) from the current parameter values, in internal mode order."""
-        v, model, o = self.values, self.model, self.order
-        c1, c2, s = design(
-            model.frequencies[o] * v["freq_scale"], model.decays[o] * v["decay_scale"], self.sample_rate
-        )
-        gains = s * (v["gain"] / self.sample_rate) * model.gains_at(v["location"])[o]
-        return np.stack([c1, c2, gains])
+        poles, _ = self._pole_design()
+        v = self.values
+        key = (v["location"], v["gain"])
+        gains = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
+        if gains is None:
+            if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
+                self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
+            gains = poles[2] * (v["gain"] / self.sample_rate) * self.model.gains_at(v["location"])[self.order]
+            self._gain_rows[key] = gains
+        out = np.empty_like(poles)
+        out[:2] = poles[:2]
+        out[2] = gains
+        return out
 
     def _reset(self) -> None:
+        self._pending = deque()  # (frame, key, value, jump, ramp) of set_param_at
         self.y[:] = 0.0
         self.coef[:] = self.target
         self.meta[:] = (0, 0, self.model.n_modes)
@@ -302,10 +333,8 @@ class ModalBank(ModelParams, UGen):
         self._fresh = self._design()
         c1, c2, g = self._fresh
         self._fresh_c2 = c2.copy()  # R^2: energy decay per sample
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sin2 = np.maximum(np.where(c2 > 0, 1.0 - c1 * c1 / (4 * c2), 1.0), 1e-12)
-            self._sin2 = sin2
-            self._unit2 = np.where(c2 > 0, (g * self.sample_rate) ** 2 / (c2 * sin2), 0.0)
+        self._sin2 = self._poles[2]
+        self._unit2 = (g * self.sample_rate) ** 2 * self._poles[3]
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         self._refresh_design_cache()
@@ -319,29 +348,38 @@ class ModalBank(ModelParams, UGen):
             self.meta[1] = ramp
         self._ramping = self.meta[1] > 0
 
+    def set_param_at(self, frame: int, key: str, value: Any, jump: bool, ramp: float | None) -> None:
+        """Queue a parameter change for ``frame``: :meth:`process` applies it there (a location
+        jump at each impact of a rigid scene need not split the graph's sub-block)."""
+        self._pending.append((frame, key, value, jump, ramp))
+
     def process(self, start: int, n: int) -> None:
+        if not self._pending:
+            self._span(self._input.out, self.out, start, n)
+            return
+        inp, out, pending, done = self._input.out, self.out, self._pending, 0
+        while pending and pending[0][0] < start + n:
+            frame, key, value, jump, ramp = pending.popleft()
+            if frame - start > done:
+                self._span(inp[done:], out[done:], start + done, frame - start - done)
+                done = frame - start
+            self.set_param(key, value, jump=jump, ramp=ramp)
+        if done < n:
+            self._span(inp[done:], out[done:], start + done, n - done)
+
+    def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
+        """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""
         if self._ramping:
             c, y, meta = self.coef, self.y, self.meta
             meta[0] = meta[2]
             meta[1] = resonate_ramp(
-                self._input.out,
-                self.out,
-                n,
-                c[0],
-                c[1],
-                c[2],
-                y[0],
-                y[1],
-                self.delta,
-                self.target,
-                meta[1],
-                meta[0],
+                inp, out, n, c[0], c[1], c[2], y[0], y[1], self.delta, self.target, meta[1], meta[0]
             )
             self._ramping = meta[1] > 0
         else:
-            self._step(self._input.out, self.out, start, n, self.bank, self.meta, self._floor)
+            self._step(inp, out, start, n, self.bank, self.meta, self._floor)
         if self.budgeted:
-            self._impulse += float(np.abs(self._input.out[:n]).sum()) / self.sample_rate
+            self._impulse += float(np.abs(inp[:n]).sum()) / self.sample_rate
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
@@ -372,6 +410,7 @@ class ModalBank(ModelParams, UGen):
         for arr in (self.bank, self.delta, self.target):
             arr[:] = arr[:, perm]
         self.order = self.order[perm]
+        self._poles = None  # designed in the old order
         for name in ("_weights", "_fresh", "_fresh_c2", "_sin2", "_unit2"):
             setattr(self, name, getattr(self, name)[..., perm])
         cols = np.flatnonzero(restore[:n_keep]) if self._ramping else np.arange(n_keep)

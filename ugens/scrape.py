@@ -52,6 +52,10 @@ NYQUIST_FRACTION = 0.45
 _BUTTERWORTH_Q = 1.0 / math.sqrt(2.0)
 #: "No coefficients designed yet" (outside every valid speed), kept finite for NaN checks.
 UNDESIGNED = 1e300
+#: A speed-tracking low-pass is redesigned when its cutoff should move by more than this
+#: fraction: a 1% cutoff error changes a second-order Butterworth response by < 0.09 dB
+#: (d ln|H| / d ln fc <= 1), and a speed read from a curve changes every sample.
+CUTOFF_STEP = 0.01
 
 
 # ------------------------------------------------------------------------------ kernels
@@ -99,8 +103,9 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     """Needle on a looped profile, low-passed with cutoff kc |v|, times gain s(F, v).
 
     cfg = [1/(dx fs), kc (Hz per m/s; 0 = no filter), f_max (Hz), 1/fs, gain, law,
-    1/(f_ref v_ref), min_speed, cubic]; state = [pos (points), s1, s2, v of coef];
-    coef = RBJ low-pass [b0, b1, b2, a1, a2] for the speed state[3].
+    1/(f_ref v_ref), min_speed, cubic]; state = [pos (points), s1, s2, cutoff of coef (Hz)];
+    coef = RBJ low-pass [b0, b1, b2, a1, a2] for the cutoff state[3], redesigned when the
+    cutoff the speed asks for differs from it by more than CUTOFF_STEP (relative).
     """
     inv_dxfs = cfg[0]
     kc = cfg[1]
@@ -115,15 +120,15 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     pos = state[0]
     s1 = state[1]
     s2 = state[2]
-    v_coef = state[3]
+    fc_coef = state[3]
     for i in range(n):
         v = speeds[i]
         h = read_profile(prof, pos, cubic)
         if kc > 0.0:
-            if v != v_coef:
-                fc = min(max(kc * abs(v), F_MIN), f_max)
+            fc = min(max(kc * abs(v), F_MIN), f_max)
+            if abs(fc - fc_coef) > CUTOFF_STEP * fc_coef:
                 design_biquad(0, fc, _BUTTERWORTH_Q, inv_fs, coef)
-                v_coef = v
+                fc_coef = fc
             y = coef[0] * h + s1
             s1 = coef[1] * h - coef[3] * y + s2
             s2 = coef[2] * h - coef[4] * y
@@ -133,7 +138,7 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     state[0] = pos
     state[1] = s1
     state[2] = s2
-    state[3] = v_coef
+    state[3] = fc_coef
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -289,23 +294,37 @@ def profile_specs(
 
 
 @nb.njit(cache=True)
-def curve_fill(out, first, n, rate, times, values):
-    """out[i] = the piecewise-linear curve through (times s, values) at frame first + i of a
-    clock of ``rate`` Hz, held at the end values outside the times."""
+def curves_fill(out_a, out_b, first, n, rate, times, a, b):
+    """out_a[i], out_b[i] = the piecewise-linear curves through (times s, a) and (times s, b)
+    at frame first + i of a clock of ``rate`` Hz, held at the end values outside the times."""
     last = times.size - 1
     t = first / rate
     j = np.searchsorted(times, t, side="right")  # times[j - 1] <= t < times[j]
-    for i in range(n):
+    i = 0
+    while i < n:
         t = (first + i) / rate
         while j <= last and times[j] <= t:
             j += 1
-        if j == 0:
-            out[i] = values[0]
-        elif j > last:
-            out[i] = values[last]
-        else:
-            w = (t - times[j - 1]) / (times[j] - times[j - 1])
-            out[i] = values[j - 1] + w * (values[j] - values[j - 1])
+        if j == 0:  # before the first time: hold
+            out_a[i] = a[0]
+            out_b[i] = b[0]
+            i += 1
+            continue
+        if j > last:  # after the last time: hold to the end
+            for m in range(i, n):
+                out_a[m] = a[last]
+                out_b[m] = b[last]
+            return
+        t0, t1 = times[j - 1], times[j]
+        slope_a = (a[j] - a[j - 1]) / (t1 - t0)
+        slope_b = (b[j] - b[j - 1]) / (t1 - t0)
+        while i < n:  # the frames in [t0, t1)
+            t = (first + i) / rate
+            if t >= t1:
+                break
+            out_a[i] = a[j - 1] + (t - t0) * slope_a
+            out_b[i] = b[j - 1] + (t - t0) * slope_b
+            i += 1
 
 
 # ------------------------------------------------------------------------------ classes
@@ -341,7 +360,9 @@ class ContactControls(UGen):
         self._speed = self.smoothed("speed")
         self._forces = np.zeros(self.max_block)
         self._speeds = np.zeros(self.max_block)
-        self._curve_fill = specialise(curve_fill, self._forces, 0, 0, 1.0, self._forces, self._forces)
+        self._curves_fill = specialise(
+            curves_fill, self._forces, self._speeds, 0, 0, 1.0, self._forces, self._forces, self._forces
+        )
 
     def _reset(self) -> None:
         for ramp in (self._force, self._speed):
@@ -356,8 +377,7 @@ class ContactControls(UGen):
     def _controls(self, start: int, n: int) -> tuple[np.ndarray, np.ndarray]:
         if self._curves is not None:
             times, force, speed = self._curves
-            self._curve_fill(self._forces, start, n, self.sample_rate, times, force)
-            self._curve_fill(self._speeds, start, n, self.sample_rate, times, speed)
+            self._curves_fill(self._forces, self._speeds, start, n, self.sample_rate, times, force, speed)
             return self._forces[:n], self._speeds[:n]
         return self._force.fill(self._forces, n), self._speed.fill(self._speeds, n)
 
@@ -479,7 +499,7 @@ class NeedleContact(ProfileContact):
 
     def _reset(self) -> None:
         super()._reset()
-        self.state[:] = (0.0, 0.0, 0.0, UNDESIGNED)  # design the low-pass on the first sample
+        self.state[:] = (0.0, 0.0, 0.0, -UNDESIGNED)  # design the low-pass on the first sample
         self.coef[:] = 0.0
 
     def process(self, start: int, n: int) -> None:

@@ -91,40 +91,45 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     ``with_locations=False`` leaves the tracks' locations empty (faster)."""
     h = result.world.params.h
     rec = result.records
-    rows = rec[rec[:, st.REC_IMPACT] == 0]
+    rows = np.flatnonzero(rec[:, st.REC_IMPACT] == 0)
     if len(rows) == 0:
         return []
-    jn = np.maximum(_normal_impulse(rows), 0.0)
-    a, b, step = rows[:, st.REC_A], rows[:, st.REC_B], rows[:, st.REC_STEP]
-    order = np.lexsort((-jn, step, b, a))  # per (pair, step): strongest contact first
-    rows, jn, a, b, step = rows[order], jn[order], a[order], b[order], step[order]
-    new_group = np.r_[True, (a[1:] != a[:-1]) | (b[1:] != b[:-1]) | (step[1:] != step[:-1])]
-    first = np.flatnonzero(new_group)
+    n_bodies = len(result.world.bodies)
+    cols = rec[np.ix_(rows, [st.REC_A, st.REC_B, st.REC_STEP, st.REC_SLIP, st.REC_ROLL])]  # record order
+    jn = np.maximum(_normal_impulse(rec)[rows], 0.0)
+    pair = cols[:, 0].astype(np.int64) * n_bodies + cols[:, 1].astype(np.int64)
+    # records are in step order: a stable sort by pair keeps each pair's steps in order
+    order = np.argsort(pair, kind="stable")
+    rows, pair, jn, cols = rows[order], pair[order], jn[order], cols[order]
+    step = cols[:, 2].astype(np.int64)
+    new_group = np.r_[True, (pair[1:] != pair[:-1]) | (step[1:] != step[:-1])]
+    first = np.flatnonzero(new_group)  # one group per (pair, step)
     total = np.add.reduceat(jn, first)
     count = np.diff(np.r_[first, len(rows)])
     safe = np.where(total > 0, total, 1.0)
 
-    def weighted(col):
-        w_sum = np.add.reduceat(jn * rows[:, col], first) / safe
-        plain = np.add.reduceat(rows[:, col], first) / count
+    def weighted(values):
+        w_sum = np.add.reduceat(jn * values, first) / safe
+        plain = np.add.reduceat(values, first) / count
         return np.where(total > 0, w_sum, plain)
 
-    slip, roll = weighted(st.REC_SLIP), weighted(st.REC_ROLL)
-    ga, gb, gstep = a[first].astype(int), b[first].astype(int), step[first].astype(int)
-    breaks = np.flatnonzero((ga[1:] != ga[:-1]) | (gb[1:] != gb[:-1]) | (gstep[1:] != gstep[:-1] + 1)) + 1
+    slip, roll = weighted(cols[:, 3]), weighted(cols[:, 4])
+    gpair, gstep = pair[first], step[first]
+    breaks = np.flatnonzero((gpair[1:] != gpair[:-1]) | (gstep[1:] != gstep[:-1] + 1)) + 1
+    starts, stops = np.r_[0, breaks], np.r_[breaks, len(first)]
+    if with_locations:  # the strongest contact of each group (the first of equals)
+        group = np.repeat(np.arange(len(first)), count)
+        strongest = np.lexsort((-jn, group))[first]
     tracks = []
-    for run in np.split(np.arange(len(first)), breaks):
-        if len(run) < min_steps:
+    for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):
+        if hi - lo < min_steps:
             continue
-        locs = (
-            [_locations(result, rows[first[i] : first[i] + 1], jn[first[i] : first[i] + 1]) for i in run]
-            if with_locations
-            else []
-        )
+        locs = []
+        if with_locations:
+            locs = [_locations(result, rec[rows[k] : rows[k] + 1], jn[k : k + 1]) for k in strongest[lo:hi]]
+        a, b = divmod(int(gpair[lo]), n_bodies)
         tracks.append(
-            ContactTrack(
-                (int(ga[run[0]]), int(gb[run[0]])), gstep[run] * h, total[run] / h, slip[run], roll[run], locs
-            )
+            ContactTrack((a, b), gstep[lo:hi] * h, total[lo:hi] / h, slip[lo:hi], roll[lo:hi], locs)
         )
     return sorted(tracks, key=lambda t: t.times[0])
 
