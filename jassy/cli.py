@@ -12,6 +12,7 @@ import sys
 import time
 
 from jassy.errors import JassyError
+from jassy.offline import OFFLINE_BLOCK
 
 DEFAULT_RATE = 48000
 
@@ -320,7 +321,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="output file (.wav or .flac)")
     p.add_argument("--duration", type=float, help="seconds to render (default: the patch's)")
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
-    p.add_argument("--block", type=int, default=64, help="block size in frames (default 64)")
+    p.add_argument(
+        "--block",
+        type=int,
+        default=OFFLINE_BLOCK,
+        help=f"block size in frames (default {OFFLINE_BLOCK}; the output does not depend on it)",
+    )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument(
         "--format",

@@ -27,6 +27,7 @@ from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
+from jassy.offline import OFFLINE_BLOCK
 from patches.scene_io import render_normalised, write_csv
 
 PRE_ROLL = 0.2  # s of sound before the release
@@ -112,7 +113,7 @@ def render_archery(
     csv_path=None,
     tail: float = 1.5,
     sample_rate: int = 48000,
-    block: int = 64,
+    block: int = OFFLINE_BLOCK,
     draw: float = 0.4,
     limb_ei: float = 30.0,
     target: float = 3.0,

@@ -20,6 +20,7 @@ from jassy.errors import JassyError
 from jassy.events import Event, track_events
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
+from jassy.offline import OFFLINE_BLOCK
 from patches.scene_io import render_normalised, write_csv
 
 
@@ -81,8 +82,8 @@ def run_experiment(duration: float = 6.0, push: float = 2.0, rpm: float = 30000.
 
 
 def render_drill(out_wav, haptic_path=None, csv_path=None, duration: float = 6.0, sample_rate: int = 48000,
-                 block: int = 64, push: float = 2.0, rpm: float = 30000.0, n: int = 128, seed: int = 0,
-                 **options) -> dict:  # fmt: skip
+                 block: int = OFFLINE_BLOCK, push: float = 2.0, rpm: float = 30000.0, n: int = 128,
+                 seed: int = 0, **options) -> dict:  # fmt: skip
     """Render the reference experiment: sound to ``out_wav`` (WAV/FLAC, normalised to a
     -6 dBFS peak), the 1 kHz haptic force frames to ``haptic_path`` (.csv: frame, time_s,
     force_0, force_1, force_2 = x, y, z in N; .npz or .wav via jassy.files.write_signal at 1000 Hz),

@@ -19,6 +19,7 @@ import trimesh
 
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
+from jassy.offline import OFFLINE_BLOCK
 from patches.rigid_sound import IMPACT_HEADER, Voice, impact_rows, scene_graph
 from patches.scene_io import render_normalised, write_csv
 
@@ -165,7 +166,7 @@ def render_drop(
     csv_path=None,
     duration: float = 5.0,
     sample_rate: int = 48000,
-    block: int = 64,
+    block: int = OFFLINE_BLOCK,
     seed: int = 0,
 ) -> dict:
     """Render the drop scene to ``out_wav`` (-6 dBFS peak); ``haptic_path`` gets the contact force

@@ -28,6 +28,7 @@ from jassy.errors import JassyError
 from jassy.events import ContactTrack, track_events
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
+from jassy.offline import OFFLINE_BLOCK
 from patches.scene_io import render_normalised, write_csv
 
 
@@ -85,7 +86,7 @@ def run_experiment(duration: float = 4.0, radius: float = 0.05, probe_radius: fl
 
 
 def render_poke(out_wav, haptic_path=None, csv_path=None, duration: float = 4.0, sample_rate: int = 48000,
-                block: int = 64, seed: int = 0, **options) -> dict:  # fmt: skip
+                block: int = OFFLINE_BLOCK, seed: int = 0, **options) -> dict:  # fmt: skip
     """Render the demo: sound to ``out_wav`` (WAV/FLAC, normalised to a -6 dBFS peak), the
     1 kHz force on the probe to ``haptic_path`` (.csv: frame, time_s, force_0..2 = x, y, z in
     N; .npz or .wav via jassy.files.write_signal), and to ``csv_path`` a CSV with columns

@@ -18,6 +18,7 @@ import numpy as np
 
 from jassy.events import ContactTrack, Event, Impact
 from jassy.graph import Graph
+from jassy.modal_model import Location
 
 
 @dataclass(frozen=True)
@@ -78,10 +79,13 @@ def scene_graph(
         hits[i] = ImpactForce(name=f"hit_{names[i]}", duration=voices[i].hit_duration)
         inputs[i].append(hits[i])
     score: list[Event] = []
-    for ev in impacts:
+    where = {i: Location((0,), (1.0,)) for i in sounding}  # each bank's location (it starts at 0)
+    for ev in sorted(impacts, key=lambda e: e.time):
         for body, loc in zip(ev.bodies, ev.locations, strict=False):
             if body in hits:
-                score.append(Event(ev.time, f"bank_{names[body]}", "set", {"location": loc}, jump=True))
+                if loc != where[body]:  # a jump only where the location changes
+                    score.append(Event(ev.time, f"bank_{names[body]}", "set", {"location": loc}, jump=True))
+                    where[body] = loc
                 score.append(Event(ev.time, hits[body].name, "impact", {"impulse": ev.impulse}))
     by_pair: dict[tuple[int, int], list[ContactTrack]] = {}
     for tr in tracks:

@@ -21,6 +21,7 @@ import trimesh
 
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
+from jassy.offline import OFFLINE_BLOCK
 from patches.rigid_sound import IMPACT_HEADER, Voice, impact_rows, scene_graph
 from patches.scene_io import render_normalised, write_csv
 
@@ -148,7 +149,7 @@ def render_wok(
     csv_path=None,
     duration: float = 6.0,
     sample_rate: int = 48000,
-    block: int = 64,
+    block: int = OFFLINE_BLOCK,
     n_food: int = 14,
     seed: int = 0,
 ) -> dict:
