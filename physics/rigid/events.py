@@ -145,17 +145,30 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
     force = np.zeros((steps.size, 3))
     torque = np.zeros((steps.size, 3))
     for col, sign in ((st.REC_A, 1.0), (st.REC_B, -1.0)):
-        rows = rec[rec[:, col] == body]
+        rows = np.flatnonzero(rec[:, col] == body)
         if len(rows) == 0:
             continue
-        k = rows[:, st.REC_STEP].astype(int) - first
-        f = sign * rows[:, st.REC_IMPULSE : st.REC_IMPULSE + 3] / h
-        np.add.at(force, k, f)
+        k = rec[rows, st.REC_STEP].astype(np.int64) - first
+        f = rec[rows, st.REC_IMPULSE : st.REC_IMPULSE + 3] * (sign / h)
+        _add_rows(force, k, f)
         if point is not None:
-            times, which = np.unique(rows[:, st.REC_TIME], return_inverse=True)
-            centres = np.asarray(point(times), float)[which]
-            np.add.at(torque, k, np.cross(rows[:, st.REC_POINT : st.REC_POINT + 3] - centres, f))
+            times, which = np.unique(rec[rows, st.REC_TIME], return_inverse=True)
+            r = rec[rows, st.REC_POINT : st.REC_POINT + 3] - np.asarray(point(times), float)[which]
+            lever = np.column_stack(
+                [
+                    r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1],
+                    r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2],
+                    r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0],
+                ]
+            )
+            _add_rows(torque, k, lever)
     return steps * h, force, torque
+
+
+def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
+    """out[rows[i]] += values[i] for every i (repeated rows add up), column by column."""
+    for x in range(out.shape[1]):
+        out[:, x] += np.bincount(rows, values[:, x], minlength=out.shape[0])
 
 
 def haptic_frames(result: RunResult, body: int, point=None) -> list[HapticFrame]:
