@@ -67,11 +67,12 @@ def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False
 
 def _wok_rows(duration: float, repeats: int = 2) -> list[dict]:
     """The wok's physics alone and its full render (physics, events, sound, haptic and CSV
-    files) at the CLI's default block (64) and at 256 frames, the best of ``repeats`` runs,
-    pinned to one core."""
+    files) at the CLI's default block (OFFLINE_BLOCK) and at 64 frames, the best of
+    ``repeats`` runs, pinned to one core."""
     import os
     import tempfile
 
+    from jassy.offline import OFFLINE_BLOCK
     from patches.wok import render_wok, simulate_wok
 
     cores = os.sched_getaffinity(0)
@@ -93,7 +94,7 @@ def _wok_rows(duration: float, repeats: int = 2) -> list[dict]:
                     "real_time_factor": duration / min(physics),
                 }
             ]
-            for block in (64, 256):
+            for block in (OFFLINE_BLOCK, 64):
                 best = None
                 for _ in range(repeats):
                     t0 = time.perf_counter()
