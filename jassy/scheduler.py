@@ -173,6 +173,15 @@ class Scheduler:
                 _set(target, frame, "location", location, True, None)
         node.act(ev.action, ev.args, self.sample_times[index])
 
+    def _dispatch_inline(self, stop: int, never: int) -> int:
+        """Dispatch the inline events before frame ``stop`` up to the first event that is not
+        inline; return the frame of the next event left (``never`` if none)."""
+        frames, inline, count = self.apply_frames, self.inline, len(self.apply_frames)
+        while self.next_event < count and frames[self.next_event] < stop and inline[self.next_event]:
+            self._dispatch(self.next_event)
+            self.next_event += 1
+        return frames[self.next_event] if self.next_event < count else never
+
     def run(self, n: int, out: np.ndarray) -> None:
         """Render the next ``n`` frames into ``out[:, :n]`` (rows: the graph's audio then
         haptic channels).
@@ -188,7 +197,7 @@ class Scheduler:
         copy = specialise(gather, bus, rows, out, 0, 0)
         block = self.block
         limit = min(block, self.graph.max_sub_block)
-        frames, inline = self.apply_frames, self.inline
+        frames = self.apply_frames
         count = len(frames)
         never = 1 << 62
         begin = pos = self.frame
@@ -203,10 +212,7 @@ class Scheduler:
                 # fast path: whole blocks up to the next event that splits one, or the end
                 while pos + block <= end:
                     stop = pos + block
-                    while upcoming < stop and inline[self.next_event]:
-                        self._dispatch(self.next_event)
-                        self.next_event += 1
-                        upcoming = frames[self.next_event] if self.next_event < count else never
+                    upcoming = self._dispatch_inline(stop, never)
                     if upcoming < stop:
                         break
                     for step in steps:  # Graph.process, inlined on the hot path
@@ -220,10 +226,7 @@ class Scheduler:
             stop = min(end, (pos // block + 1) * block, pos + limit)
             if period is not None:
                 stop = min(stop, (pos // period + 1) * period)
-            while upcoming < stop and inline[self.next_event]:
-                self._dispatch(self.next_event)
-                self.next_event += 1
-                upcoming = frames[self.next_event] if self.next_event < count else never
+            upcoming = self._dispatch_inline(stop, never)
             stop = min(stop, upcoming)
             process(pos, stop - pos)
             copy(bus, rows, out, pos - begin, stop - pos)
