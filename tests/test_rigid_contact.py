@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from jassy.errors import JassyError
+from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
 from physics.rigid.meshgrid import build_grid, grid_closest
@@ -140,7 +141,7 @@ def test_linear_spring_damper_contact_matches_ode():
     v_out, t_c = _bounce_ode(k, c, m, 1.0)
     assert 0.779467 < v_out < 0.80 and 9.5e-3 < t_c < 9.96578e-3
     rows = result.records
-    t_contact = rows[-1, st.REC_TIME] - rows[0, st.REC_TIME] + 1e-5
+    t_contact = rows[-1, codes.REC_TIME] - rows[0, codes.REC_TIME] + 1e-5
     assert t_contact == pytest.approx(t_c, abs=3e-5)
     assert result.phi[-1, 1, 5] == pytest.approx(v_out, rel=2e-3)
 
@@ -175,7 +176,7 @@ def test_hunt_crossley_restitution_and_zero_force_at_touch(mass, exponent):
         lambda v: (-v - v_in) - np.log((1 - alpha * v) / (1 + alpha * v_in)) / alpha, 1e-9, 1 / alpha - 1e-9
     )
     assert result.state.phi[1, 5] == pytest.approx(v_out, rel=2e-3)
-    first = np.linalg.norm(result.records[0, st.REC_IMPULSE : st.REC_IMPULSE + 3]) / 2e-6
+    first = np.linalg.norm(result.records[0, codes.REC_IMPULSE : codes.REC_IMPULSE + 3]) / 2e-6
     assert first < 1e-3 * lam * v_in  # a linear damper would start at lambda-like c v_in
 
 
@@ -212,6 +213,28 @@ def test_impact_location_on_a_mesh_is_the_hit_triangle():
     assert np.allclose(point, [0.13, -0.21, 0.0], atol=1e-6)
 
 
+def test_second_mesh_carries_a_box_and_locates_its_contacts():
+    """Two mesh floors side by side (their grids end to end in the model tables): a box resting
+    on the second one stays up, and its contacts name the second mesh's triangles under it."""
+    floors = [trimesh.creation.box(extents=(0.5, 0.5, 0.1)) for _ in range(2)]
+    floors[0].apply_translation((-0.3, 0, -0.05))
+    floors[1].apply_translation((0.3, 0, -0.05))
+    w = World(StepParams(h=1e-3))
+    for k, floor in enumerate(floors):
+        w.add(Body(f"floor{k}", TriangleMesh(floor), Material("g", 1000, 0.5, 0.4), kind="static"))
+    w.add(
+        Body("box", Box((0.02, 0.02, 0.02)), Material("b", 500, 0.3, 0.4)), Placement(position=(0.3, 0, 0.05))
+    )
+    result = simulate(w, 0.5, sample_every=10)
+    assert np.max(np.abs(result.pos[-20:, 2, 2] - 0.02)) < 1e-4
+    rec = result.records[result.records[:, codes.REC_TIME] > 0.4]
+    assert len(rec) and np.all(rec[:, codes.REC_B] == 1)
+    tris = floors[1].triangles[rec[:, codes.REC_FEAT_B].astype(int)]
+    points = np.einsum("ij,ijk->ik", rec[:, codes.REC_BARY : codes.REC_BARY + 3], tris)
+    assert np.allclose(points[:, 2], 0.0, atol=1e-9)
+    assert np.all(np.abs(points[:, :2] - [0.3, 0.0]).max(axis=1) < 0.021)
+
+
 def test_grid_closest_point_matches_brute_force():
     """Against trimesh's vectorised point-triangle routine over every triangle."""
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
@@ -234,6 +257,7 @@ def test_grid_closest_point_matches_brute_force():
             grid.dims,
             grid.start,
             grid.items,
+            (0, 0, 0),
         )
         assert np.sqrt(d2) == pytest.approx(d.min(), abs=1e-9)
         assert np.allclose(np.array([u, v, w]) @ grid.triangles[tri], q, atol=1e-9)
@@ -365,6 +389,25 @@ def test_an_impact_late_in_a_step_does_not_launch_the_resting_body_it_hits():
     assert np.max(np.abs(result.pos[:, 1, 2] - 0.05)) < 2e-4
 
 
+def test_a_short_impact_sub_step_does_not_turn_a_penetration_into_a_launch():
+    """A ball pressed 1 mm into the ground (no gravity) is pushed out at beta * depth / h, the
+    outer step's recovery speed, also when another ball's impact at 0.999 of the step leaves a
+    sub-step of h / 1000 (recovering the depth within that sub-step would launch it at 160 m/s)."""
+    h, beta, depth, v = 1e-3, 0.2, 1e-3, 3.0
+    mat = Material("m", 7800, 0.5, 0.3)
+    w = World(StepParams(h=h, gravity=(0, 0, 0), beta=beta))
+    w.add(Body("ground", Plane((0, 0, 1), 0.0), mat, kind="static"))
+    w.add(Body("pressed", Sphere(0.02), mat), Placement(position=(0, 0, 0.02 - depth)))
+    w.add(
+        Body("striker", Sphere(0.02), mat),
+        Placement(position=(1, 0, 0.02 + v * 0.999 * h), velocity=(0, 0, -v)),
+    )
+    result = simulate(w, 0.02, sample_every=1)
+    assert result.stats["impact_substeps"] >= 1
+    rise = result.phi[:, 1, 5]
+    assert rise.max() == pytest.approx(beta * depth / h, rel=0.01)
+
+
 def test_spin_bound_covers_a_tumbling_body_over_a_step():
     """The detection's speed bound for a free asymmetric body (bounding radius * |L| / I_min)
     covers how far its points move in a step, though |omega| itself changes within it."""
@@ -375,7 +418,7 @@ def test_spin_bound_covers_a_tumbling_body_over_a_step():
     radius, h = 0.04, 1e-3
     rng = np.random.default_rng(11)
     geo = (None, None, None, np.array([radius]))
-    kind = np.array([st.DYNAMIC])
+    kind = np.array([codes.DYNAMIC])
     for _ in range(200):
         phi = np.r_[rng.normal(size=3) * 50.0, 0.0, 0.0, 0.0]
         q = rng.normal(size=4)

@@ -16,7 +16,7 @@ import numpy as np
 
 from jassy.events import ContactTrack, HapticFrame, Impact
 from jassy.modal_model import Location
-from physics.rigid import stepper as st
+from physics.rigid import codes
 from physics.rigid.shapes import MESH
 from physics.rigid.world import RunResult
 
@@ -40,7 +40,9 @@ def location_on(result: RunResult, body: int, local: np.ndarray, feature: int, b
 
 def _normal_impulse(rows: np.ndarray) -> np.ndarray:
     return np.einsum(
-        "ij,ij->i", rows[:, st.REC_IMPULSE : st.REC_IMPULSE + 3], rows[:, st.REC_NORMAL : st.REC_NORMAL + 3]
+        "ij,ij->i",
+        rows[:, codes.REC_IMPULSE : codes.REC_IMPULSE + 3],
+        rows[:, codes.REC_NORMAL : codes.REC_NORMAL + 3],
     )
 
 
@@ -57,28 +59,32 @@ def _groups(keys: np.ndarray) -> list[np.ndarray]:
 def _locations(result: RunResult, rows: np.ndarray, weights: np.ndarray) -> tuple[Location, Location]:
     k = int(np.argmax(weights))
     row = rows[k]
-    a, b = int(row[st.REC_A]), int(row[st.REC_B])
-    bary = row[st.REC_BARY : st.REC_BARY + 3]
-    loc_a = location_on(result, a, row[st.REC_LOCAL_A : st.REC_LOCAL_A + 3], int(row[st.REC_FEAT_A]), bary)
-    loc_b = location_on(result, b, row[st.REC_LOCAL_B : st.REC_LOCAL_B + 3], int(row[st.REC_FEAT_B]), bary)
+    a, b = int(row[codes.REC_A]), int(row[codes.REC_B])
+    bary = row[codes.REC_BARY : codes.REC_BARY + 3]
+    loc_a = location_on(
+        result, a, row[codes.REC_LOCAL_A : codes.REC_LOCAL_A + 3], int(row[codes.REC_FEAT_A]), bary
+    )
+    loc_b = location_on(
+        result, b, row[codes.REC_LOCAL_B : codes.REC_LOCAL_B + 3], int(row[codes.REC_FEAT_B]), bary
+    )
     return loc_a, loc_b
 
 
 def impacts(result: RunResult) -> list[Impact]:
     """Impact events in time order (see module doc)."""
     rec = result.records
-    rows = rec[rec[:, st.REC_IMPACT] > 0]
+    rows = rec[rec[:, codes.REC_IMPACT] > 0]
     out = []
-    for group in _groups(rows[:, [st.REC_TIME, st.REC_A, st.REC_B]]):
+    for group in _groups(rows[:, [codes.REC_TIME, codes.REC_A, codes.REC_B]]):
         g = rows[group]
         jn = _normal_impulse(g)
-        a, b = int(g[0, st.REC_A]), int(g[0, st.REC_B])
+        a, b = int(g[0, codes.REC_A]), int(g[0, codes.REC_B])
         out.append(
             Impact(
-                float(g[0, st.REC_TIME]),
+                float(g[0, codes.REC_TIME]),
                 (a, b),
                 float(jn.sum()),
-                float(g[:, st.REC_SPEED].max()),
+                float(g[:, codes.REC_SPEED].max()),
                 None,
                 _locations(result, g, jn),
             )
@@ -91,11 +97,13 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     ``with_locations=False`` leaves the tracks' locations empty (faster)."""
     h = result.world.params.h
     rec = result.records
-    rows = np.flatnonzero(rec[:, st.REC_IMPACT] == 0)
+    rows = np.flatnonzero(rec[:, codes.REC_IMPACT] == 0)
     if len(rows) == 0:
         return []
     n_bodies = len(result.world.bodies)
-    cols = rec[np.ix_(rows, [st.REC_A, st.REC_B, st.REC_STEP, st.REC_SLIP, st.REC_ROLL])]  # record order
+    cols = rec[
+        np.ix_(rows, [codes.REC_A, codes.REC_B, codes.REC_STEP, codes.REC_SLIP, codes.REC_ROLL])
+    ]  # record order
     jn = np.maximum(_normal_impulse(rec)[rows], 0.0)
     pair = cols[:, 0].astype(np.int64) * n_bodies + cols[:, 1].astype(np.int64)
     # records are in step order: a stable sort by pair keeps each pair's steps in order
@@ -144,16 +152,16 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
     steps = np.arange(first, int(round(result.state.time / h)))
     force = np.zeros((steps.size, 3))
     torque = np.zeros((steps.size, 3))
-    for col, sign in ((st.REC_A, 1.0), (st.REC_B, -1.0)):
+    for col, sign in ((codes.REC_A, 1.0), (codes.REC_B, -1.0)):
         rows = np.flatnonzero(rec[:, col] == body)
         if len(rows) == 0:
             continue
-        k = rec[rows, st.REC_STEP].astype(np.int64) - first
-        f = rec[rows, st.REC_IMPULSE : st.REC_IMPULSE + 3] * (sign / h)
+        k = rec[rows, codes.REC_STEP].astype(np.int64) - first
+        f = rec[rows, codes.REC_IMPULSE : codes.REC_IMPULSE + 3] * (sign / h)
         _add_rows(force, k, f)
         if point is not None:
-            times, which = np.unique(rec[rows, st.REC_TIME], return_inverse=True)
-            r = rec[rows, st.REC_POINT : st.REC_POINT + 3] - np.asarray(point(times), float)[which]
+            times, which = np.unique(rec[rows, codes.REC_TIME], return_inverse=True)
+            r = rec[rows, codes.REC_POINT : codes.REC_POINT + 3] - np.asarray(point(times), float)[which]
             lever = np.column_stack(
                 [
                     r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1],

@@ -61,7 +61,7 @@ def rk4_step(p, q, phi, inertia, mass, gravity, ext, h):
     return p1, q1, phi1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
     """Solution (x0, x1, x2) of a 3 x 3 linear system by Cramer's rule (scalars)."""
     c00, c01, c02 = j11 * j22 - j12 * j21, j12 * j20 - j10 * j22, j10 * j21 - j11 * j20
@@ -72,7 +72,7 @@ def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
     return x0 / det, x1 / det, x2 / det
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _implicit_midpoint_omega(w0, w1, w2, i0, i1, i2, t0, t1, t2, h):
     """w(t + h) of Euler's equations I dw/dt + w x I w = tau by the implicit midpoint rule,
     Newton's method on g(w') = I (w' - w)/h + wm x I wm - tau, wm = (w + w')/2 (scalars)."""
@@ -107,7 +107,7 @@ def _implicit_midpoint_omega(w0, w1, w2, i0, i1, i2, t0, t1, t2, h):
     return x0, x1, x2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _rotate(qw, qx, qy, qz, x, y, z):
     """The vector (x, y, z) rotated by the unit quaternion q: v + 2 w (u x v) + 2 u x (u x v)."""
     cx, cy, cz = qy * z - qz * y, qz * x - qx * z, qx * y - qy * x

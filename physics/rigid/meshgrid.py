@@ -111,34 +111,39 @@ def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = Non
 
 
 @nb.njit(cache=True, inline="always")
-def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items):
+def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items, offsets):
     """Closest point of the surface within ``reach`` (m) of (px, py, pz): (triangle index or -1,
-    squared distance, barycentric weights u, v, w); no allocation."""
+    squared distance, barycentric weights u, v, w); no allocation. origin, dims: arrays or
+    tuples. tri, spheres, start and items may hold several grids end to end: offsets = (first
+    triangle, first cell start, first item) of this one, (0, 0, 0) for a lone grid; items and
+    the index returned count from the grid's first triangle."""
+    t0, s0, i0 = offsets[0], offsets[1], offsets[2]
     best = -1
     best_d2 = reach * reach
+    best_d = math.sqrt(best_d2)
     bu = bv = bw = 0.0
-    i0 = max(0, int(math.floor((px - reach - origin[0]) / cell)))
-    i1 = min(dims[0] - 1, int(math.floor((px + reach - origin[0]) / cell)))
-    j0 = max(0, int(math.floor((py - reach - origin[1]) / cell)))
-    j1 = min(dims[1] - 1, int(math.floor((py + reach - origin[1]) / cell)))
-    k0 = max(0, int(math.floor((pz - reach - origin[2]) / cell)))
-    k1 = min(dims[2] - 1, int(math.floor((pz + reach - origin[2]) / cell)))
-    for i in range(i0, i1 + 1):
-        for j in range(j0, j1 + 1):
-            for k in range(k0, k1 + 1):
-                c = (i * dims[1] + j) * dims[2] + k
+    lo_i = max(0, int(math.floor((px - reach - origin[0]) / cell)))
+    hi_i = min(dims[0] - 1, int(math.floor((px + reach - origin[0]) / cell)))
+    lo_j = max(0, int(math.floor((py - reach - origin[1]) / cell)))
+    hi_j = min(dims[1] - 1, int(math.floor((py + reach - origin[1]) / cell)))
+    lo_k = max(0, int(math.floor((pz - reach - origin[2]) / cell)))
+    hi_k = min(dims[2] - 1, int(math.floor((pz + reach - origin[2]) / cell)))
+    for i in range(lo_i, hi_i + 1):
+        for j in range(lo_j, hi_j + 1):
+            for k in range(lo_k, hi_k + 1):
+                c = s0 + (i * dims[1] + j) * dims[2] + k
                 for s in range(start[c], start[c + 1]):
-                    t = items[s]
+                    t = t0 + items[i0 + s]
                     dx = px - spheres[t, 0]
                     dy = py - spheres[t, 1]
                     dz = pz - spheres[t, 2]
-                    lim = math.sqrt(best_d2) + spheres[t, 3]
+                    lim = best_d + spheres[t, 3]
                     if dx * dx + dy * dy + dz * dz > lim * lim:
                         continue  # the triangle's bounding sphere is beyond the best so far
                     u, v, w = triangle_weights(px, py, pz, tri, t)
                     qx, qy, qz = triangle_point(tri, t, u, v, w)
                     d2 = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
                     if d2 < best_d2:
-                        best_d2, best = d2, t
+                        best_d2, best_d, best = d2, math.sqrt(d2), t - t0
                         bu, bv, bw = u, v, w
     return best, best_d2, bu, bv, bw

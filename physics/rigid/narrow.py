@@ -17,7 +17,7 @@ mesh). Methods:
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
 
 ``geo`` is the tuple of flat model arrays built by physics.rigid.world._build_arrays; the
-contact buffers carry per-point hints (the mesh triangle each body point was last closest to).
+contact buffers carry what each body point last met of a mesh (_mesh_closest).
 """
 
 from __future__ import annotations
@@ -60,59 +60,44 @@ def _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, fa, fb, u=0.0, v=
 @nb.njit(cache=True, inline="always")
 def to_world(i, pos, rot, x, y, z):
     """World coordinates of the point (x, y, z) of body i's frame."""
-    r = rot[i]
     return (
-        pos[i, 0] + r[0, 0] * x + r[0, 1] * y + r[0, 2] * z,
-        pos[i, 1] + r[1, 0] * x + r[1, 1] * y + r[1, 2] * z,
-        pos[i, 2] + r[2, 0] * x + r[2, 1] * y + r[2, 2] * z,
+        pos[i, 0] + rot[i, 0, 0] * x + rot[i, 0, 1] * y + rot[i, 0, 2] * z,
+        pos[i, 1] + rot[i, 1, 0] * x + rot[i, 1, 1] * y + rot[i, 1, 2] * z,
+        pos[i, 2] + rot[i, 2, 0] * x + rot[i, 2, 1] * y + rot[i, 2, 2] * z,
     )
 
 
 @nb.njit(cache=True, inline="always")
 def to_local(i, pos, rot, x, y, z):
     """Body i's frame coordinates of the world point (x, y, z)."""
-    r = rot[i]
     dx, dy, dz = x - pos[i, 0], y - pos[i, 1], z - pos[i, 2]
     return (
-        r[0, 0] * dx + r[1, 0] * dy + r[2, 0] * dz,
-        r[0, 1] * dx + r[1, 1] * dy + r[2, 1] * dz,
-        r[0, 2] * dx + r[1, 2] * dy + r[2, 2] * dz,
+        rot[i, 0, 0] * dx + rot[i, 1, 0] * dy + rot[i, 2, 0] * dz,
+        rot[i, 0, 1] * dx + rot[i, 1, 1] * dy + rot[i, 2, 1] * dz,
+        rot[i, 0, 2] * dx + rot[i, 1, 2] * dy + rot[i, 2, 2] * dz,
     )
 
 
 @nb.njit(cache=True, inline="always")
 def _rotate(i, rot, x, y, z):
     """The body-frame direction (x, y, z) of body i in world coordinates."""
-    r = rot[i]
     return (
-        r[0, 0] * x + r[0, 1] * y + r[0, 2] * z,
-        r[1, 0] * x + r[1, 1] * y + r[1, 2] * z,
-        r[2, 0] * x + r[2, 1] * y + r[2, 2] * z,
+        rot[i, 0, 0] * x + rot[i, 0, 1] * y + rot[i, 0, 2] * z,
+        rot[i, 1, 0] * x + rot[i, 1, 1] * y + rot[i, 1, 2] * z,
+        rot[i, 2, 0] * x + rot[i, 2, 1] * y + rot[i, 2, 2] * z,
     )
 
 
 @nb.njit(cache=True, inline="always")
-def point_count(a, geo):
-    """How many points stand for body a against planes and meshes (world._point_count: 1 for
-    a sphere, 3 for a capsule, the vertices of a polytope), from the point offsets geo[21]."""
-    return geo[21][a + 1] - geo[21][a]
+def body_point(k, a, pos, rot, points):
+    """World position and radius (m) of body a's point k: row k of the point table geo[22]
+    (body-frame position and radius; body a's points are rows geo[21][a] to geo[21][a + 1]:
+    a sphere's centre, a capsule's axis ends and middle, a polytope's vertices)."""
+    x, y, z = to_world(a, pos, rot, points[k, 0], points[k, 1], points[k, 2])
+    return x, y, z, points[k, 3]
 
 
 @nb.njit(cache=True, inline="always")
-def body_point(a, i, pos, rot, geo):
-    """World position of point i of body a (see point_count) and its radius (m)."""
-    btype, param = geo[0], geo[2]
-    if btype[a] == SPHERE:
-        return pos[a, 0], pos[a, 1], pos[a, 2], param[a, 0]
-    if btype[a] == CAPSULE:
-        x, y, z = to_world(a, pos, rot, 0.0, 0.0, (i - 1) * param[a, 1])
-        return x, y, z, param[a, 0]
-    vert = geo[5][geo[4][a] + i]
-    x, y, z = to_world(a, pos, rot, vert[0], vert[1], vert[2])
-    return x, y, z, 0.0
-
-
-@nb.njit(cache=True)
 def segment_params(p1, q1, p2, q2):
     """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 - p1) and p2 + t (q2 - p2)
     of two segments given as float triples (Ericson 5.1.9)."""
@@ -141,7 +126,7 @@ def segment_params(p1, q1, p2, q2):
     return s, t
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _axis_ends(a, pos, rot, geo):
     """World end points of a sphere (a degenerate segment) or a capsule axis."""
     if geo[0][a] == SPHERE:
@@ -151,7 +136,7 @@ def _axis_ends(a, pos, rot, geo):
     return to_world(a, pos, rot, 0.0, 0.0, -half), to_world(a, pos, rot, 0.0, 0.0, half)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _segment_segment(a, b, pos, rot, geo, margin, buf, count):
     param = geo[2]
     pa, qa = _axis_ends(a, pos, rot, geo)
@@ -173,10 +158,10 @@ def _segment_segment(a, b, pos, rot, geo, margin, buf, count):
 
 
 @nb.njit(cache=True, inline="always")
-def _deepest_plane(lx, ly, lz, b, geo):
+def _deepest_plane(lx, ly, lz, b, pstart, planes):
     """(largest signed distance of the body-frame point (lx, ly, lz) over polytope b's face
-    planes, index of that plane): negative inside, an under-estimate of the distance outside."""
-    pstart, planes = geo[6], geo[7]
+    planes (geo[6], geo[7]), index of that plane): negative inside, an under-estimate of the
+    distance outside."""
     best = -math.inf
     face = -1
     for j in range(pstart[b], pstart[b + 1]):
@@ -187,13 +172,13 @@ def _deepest_plane(lx, ly, lz, b, geo):
     return best, face
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _polytope_distance(x, y, z, b, pos, rot, geo):
     """Signed distance from the world point (x, y, z) to polytope b, the outward world normal
     at the closest point, and the index of the face plane or hull triangle reached."""
     pstart, planes, hstart, htris = geo[6], geo[7], geo[8], geo[9]
     lx, ly, lz = to_local(b, pos, rot, x, y, z)
-    best, face = _deepest_plane(lx, ly, lz, b, geo)
+    best, face = _deepest_plane(lx, ly, lz, b, pstart, planes)
     if best <= 0.0:
         nx, ny, nz = _rotate(b, rot, planes[face, 0], planes[face, 1], planes[face, 2])
         return best, nx, ny, nz, face - pstart[b]
@@ -215,12 +200,13 @@ def _polytope_distance(x, y, z, b, pos, rot, geo):
     return dist, nx, ny, nz, tri - hstart[b]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _spheres_polytope(a, b, pos, rot, geo, margin, buf, count):
-    for i in range(point_count(a, geo)):
-        x, y, z, r = body_point(a, i, pos, rot, geo)
+    pstart, planes, offsets, points = geo[6], geo[7], geo[21], geo[22]
+    for k in range(offsets[a], offsets[a + 1]):
+        x, y, z, r = body_point(k, a, pos, rot, points)
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
-        if _deepest_plane(lx, ly, lz, b, geo)[0] > r + margin:
+        if _deepest_plane(lx, ly, lz, b, pstart, planes)[0] > r + margin:
             continue  # a face plane separates: the distance is larger still
         sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, pos, rot, geo)
         gap = sd - r
@@ -229,15 +215,15 @@ def _spheres_polytope(a, b, pos, rot, geo, margin, buf, count):
     return count
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _plane_separates(a, b, pos, rot, geo, margin):
     """Whether one of polytope b's face planes has all of a's bounding sphere more than
     ``margin`` beyond it (then the two are further apart than margin: no contact)."""
     lx, ly, lz = to_local(b, pos, rot, pos[a, 0], pos[a, 1], pos[a, 2])
-    return _deepest_plane(lx, ly, lz, b, geo)[0] > geo[3][a] + margin
+    return _deepest_plane(lx, ly, lz, b, geo[6], geo[7])[0] > geo[3][a] + margin
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
     """Vertices of polytope a against polytope b (normal from b to a; reversed if flip)."""
     vstart, verts = geo[4], geo[5]
@@ -245,7 +231,7 @@ def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
     for v in range(vstart[a], vstart[a + 1]):
         x, y, z = to_world(a, pos, rot, verts[v, 0], verts[v, 1], verts[v, 2])
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
-        best, face = _deepest_plane(lx, ly, lz, b, geo)
+        best, face = _deepest_plane(lx, ly, lz, b, pstart, planes)
         if best <= margin:
             nx, ny, nz = _rotate(b, rot, planes[face, 0], planes[face, 1], planes[face, 2])
             px, py, pz = x - 0.5 * best * nx, y - 0.5 * best * ny, z - 0.5 * best * nz
@@ -258,65 +244,38 @@ def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
 
 
 @nb.njit(cache=True, inline="always")
-def _point_id(a, i, geo):
-    """Feature index of point i of body a: the vertex of a polytope, -1 for sphere centres."""
-    return i if geo[0][a] > CAPSULE else -1
-
-
-@nb.njit(cache=True)
 def _against_plane(a, b, pos, rot, geo, margin, buf, count):
-    param = geo[2]
+    param, offsets, points = geo[2], geo[21], geo[22]
     nx, ny, nz = _rotate(b, rot, param[b, 0], param[b, 1], param[b, 2])
     d = param[b, 3] + nx * pos[b, 0] + ny * pos[b, 1] + nz * pos[b, 2]
-    for i in range(point_count(a, geo)):
-        x, y, z, r = body_point(a, i, pos, rot, geo)
+    vertices = geo[0][a] > CAPSULE
+    for k in range(offsets[a], offsets[a + 1]):
+        x, y, z, r = body_point(k, a, pos, rot, points)
         gap = nx * x + ny * y + nz * z - d - r
         if gap <= margin:
-            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, _point_id(a, i, geo), -1)
+            feature = k - offsets[a] if vertices else -1
+            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, feature, -1)
     return count
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
-    mesh_id, tri_off, tris, nrms, grid_f, grid_i, cell_off, starts, item_off, items = geo[10:20]
-    m = mesh_id[b]
+    tris, nrms, offsets, points = geo[12], geo[13], geo[21], geo[22]
+    m = geo[10][b]
+    t0 = geo[11][m]
     thick, depth = geo[2][b, 0], geo[2][b, 1]
-    t0, t1 = tri_off[m], tri_off[m + 1]
-    mesh_tris, mesh_nrms, mesh_spheres = tris[t0:t1], nrms[t0:t1], geo[20][t0:t1]
-    origin, cell, dims = grid_f[m, :3], grid_f[m, 3], grid_i[m]
-    cell_starts, cell_items = starts[cell_off[m] : cell_off[m + 1]], items[item_off[m] : item_off[m + 1]]
-    hint = buf[6]
-    for i in range(point_count(a, geo)):
-        x, y, z, r = body_point(a, i, pos, rot, geo)
+    vertices = geo[0][a] > CAPSULE
+    for k in range(offsets[a], offsets[a + 1]):
+        x, y, z, r = body_point(k, a, pos, rot, points)
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
         reach = r + thick + max(margin, 0.0) + depth
-        # the triangle this point was closest to last time bounds the distance: search only
-        # that far (the result is the same; resting points search a cell or two)
-        point = geo[21][a] + i
-        near = hint[point] if hint[point] < t1 - t0 else 0
-        hu, hv, hw = triangle_weights(lx, ly, lz, mesh_tris, near)
-        qx, qy, qz = triangle_point(mesh_tris, near, hu, hv, hw)
-        bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
-        tri, d2, u, v, w = grid_closest(
-            lx,
-            ly,
-            lz,
-            min(reach, bound),
-            mesh_tris,
-            mesh_spheres,
-            origin,
-            cell,
-            dims,
-            cell_starts,
-            cell_items,
-        )
+        tri, d2, u, v, w = _mesh_closest(k, m, lx, ly, lz, reach, geo, buf[6])
         if tri < 0:
             continue
-        hint[point] = tri
-        qx, qy, qz = triangle_point(mesh_tris, tri, u, v, w)
+        qx, qy, qz = triangle_point(tris, t0 + tri, u, v, w)
         dx, dy, dz = lx - qx, ly - qy, lz - qz
         dist = math.sqrt(d2)
-        tnx, tny, tnz = mesh_nrms[tri, 0], mesh_nrms[tri, 1], mesh_nrms[tri, 2]
+        tnx, tny, tnz = nrms[t0 + tri, 0], nrms[t0 + tri, 1], nrms[t0 + tri, 2]
         if dist > 1e-12 and dx * tnx + dy * tny + dz * tnz > 0.0:
             sd = dist
             nx, ny, nz = _rotate(b, rot, dx / dist, dy / dist, dz / dist)
@@ -327,15 +286,65 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
             nx, ny, nz = _rotate(b, rot, tnx, tny, tnz)
         gap = sd - r - thick
         if gap <= margin:
-            count = _push_point(
-                buf, count, a, b, x, y, z, r, nx, ny, nz, gap, _point_id(a, i, geo), tri, u, v, w
-            )
+            feature = k - offsets[a] if vertices else -1
+            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, feature, tri, u, v, w)
     return count
 
 
-@nb.njit(cache=True)
+FAR = 1.5  # a point with nothing within reach of a mesh searches this many times as far
+
+
+@nb.njit(cache=True, inline="always")
+def _mesh_closest(k, m, lx, ly, lz, reach, geo, near):
+    """Closest triangle of mesh m within ``reach`` (m) of body point k at (lx, ly, lz) in the
+    mesh's frame: (triangle of the mesh or -1, squared distance, barycentric weights).
+
+    near = (hint, clear) remembers per body point the triangle it was last closest to, whose
+    distance bounds the search (resting points search a cell or two), and where it was last
+    searched (mesh frame) with a lower bound of its distance to the mesh there (m) and the
+    mesh + 1. The mesh is rigid, so a point that has since moved less than that bound minus
+    reach has nothing within reach: it is not searched. A point finding nothing within reach
+    searches FAR times as far, so that its bound lasts."""
+    hint, clear = near
+    tri_off, tris, grid_f, grid_i, cell_off, starts, item_off, items = geo[11:13] + geo[14:20]
+    t0, n_tris = tri_off[m], tri_off[m + 1] - tri_off[m]
+    if clear[k, 4] == m + 1:
+        moved = math.sqrt((lx - clear[k, 0]) ** 2 + (ly - clear[k, 1]) ** 2 + (lz - clear[k, 2]) ** 2)
+        if clear[k, 3] - moved > reach + 1e-12:
+            return -1, 0.0, 0.0, 0.0, 0.0
+    last = t0 + (hint[k] if hint[k] < n_tris else 0)
+    hu, hv, hw = triangle_weights(lx, ly, lz, tris, last)
+    qx, qy, qz = triangle_point(tris, last, hu, hv, hw)
+    bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
+    radius = min(FAR * reach, bound)
+    tri, d2, u, v, w = grid_closest(
+        lx,
+        ly,
+        lz,
+        radius,
+        tris,
+        geo[20],
+        (grid_f[m, 0], grid_f[m, 1], grid_f[m, 2]),
+        grid_f[m, 3],
+        (grid_i[m, 0], grid_i[m, 1], grid_i[m, 2]),
+        starts,
+        items,
+        (t0, cell_off[m], item_off[m]),
+    )
+    clear[k, 0], clear[k, 1], clear[k, 2] = lx, ly, lz
+    clear[k, 3] = math.sqrt(d2) if tri >= 0 else radius
+    clear[k, 4] = m + 1
+    if tri < 0 or d2 >= reach * reach:  # nothing within reach (the nearest is further)
+        return -1, 0.0, 0.0, 0.0, 0.0
+    hint[k] = tri
+    return tri, d2, u, v, w
+
+
+@nb.njit(cache=True, _nrt=False)
 def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
-    """Append the contacts of bodies a and b (any order) within ``margin`` (m); returns count."""
+    """Append the contacts of bodies a and b (any order) within ``margin`` (m); returns count.
+    Compiled without reference counting (_nrt=False: it allocates nothing), which would
+    otherwise touch every array of geo and buf at each call."""
     btype = geo[0]
     if btype[a] > btype[b]:
         a, b = b, a

@@ -2,15 +2,9 @@
 
 One outer step of h seconds:
 
-1. contacts of the current configuration (gap <= slop) are resolved at the impulse level by
-   projected Gauss-Seidel on the bodies' velocities (sequential impulses; mathematically PGS
-   on W = J M^-1 J^T without forming W): normal rows with Newton restitution for approaching
-   contacts faster than ``bounce_threshold`` (u_N+ >= -e u_N-), else a resting target with
-   gravity's velocity increment over the step folded in; tangent rows projected onto the
-   Coulomb disk |r_T| <= mu r_N; rolling-resistance rows (a torque impulse bounded by
-   rolling * r_N, m). Resting contacts found in the previous solve (same bodies and
-   features) start from its force times dt (warm start); sweeps stop when no impulse
-   changes by more than ``tolerance`` times the largest normal impulse;
+1. contacts of the current configuration (gap <= slop) are resolved at the impulse level
+   (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
+   rolling resistance, penetration recovery and a warm start);
 2. every body moves freely to the end of the step (integrate.advance_body_into);
 3. a pair that was apart at the start (slop < gap <= how far the two can close in the step,
    from their relative velocity and spins) and penetrates at the end, having closed
@@ -23,7 +17,7 @@ One outer step of h seconds:
 Penalty models replace 1 by forces: linear f = k x + c xdot, Hunt-Crossley f = k x^p + c x^p
 xdot (zero at first touch), both clamped at f >= 0, with regularised Coulomb friction.
 
-Each resolved contact appends a record row (columns ``REC_*``): time, step, bodies, world
+Each resolved contact appends a record row (columns ``codes.REC_*``): time, step, bodies, world
 point, impulse on a (N s, world), approach speed, slip and rolling speed after the solve,
 impact flag, features, barycentric weights on b, and the contact point in each body's frame.
 """
@@ -35,62 +29,75 @@ import math
 import numba as nb
 import numpy as np
 
-from physics.rigid.integrate import advance_body_into
+from physics.rigid.codes import (
+    DYNAMIC,
+    IMPULSE,
+    KINEMATIC,
+    LINEAR,
+    P_ADAPT_TOL,
+    P_BOUNCE,
+    P_C,
+    P_EXP,
+    P_GX,
+    P_GY,
+    P_GZ,
+    P_K,
+    P_MAX_EVENTS,
+    P_METHOD,
+    P_MODEL,
+    P_SLOP,
+    P_VEPS,
+    REC_A,
+    REC_B,
+    REC_BARY,
+    REC_FEAT_A,
+    REC_FEAT_B,
+    REC_IMPULSE,
+    REC_LOCAL_A,
+    REC_LOCAL_B,
+    REC_NORMAL,
+    REC_POINT,
+    REC_SLIP,
+    REC_SPEED,
+    REC_STEP,
+    REC_TIME,
+)
+from physics.rigid.impulses import (
+    S_IDX,
+    inv_inertia_world,
+    new_solver,
+    resolve,
+    store_twists,
+    world_velocities,
+)
+from physics.rigid.integrate import SEMI_IMPLICIT, advance_body_into, semi_implicit_into
 from physics.rigid.narrow import pair_contacts, sweep_and_prune
 from physics.rigid.shapes import PLANE
-from physics.rigid.spatial import cross, dot3, mtv, mv, quat_exp, quat_log, quat_mul, quat_to_mat
+from physics.rigid.spatial import cross, dot3, mtv, mv, quat_log, quat_mul, quat_to_mat
 
-DYNAMIC, STATIC, KINEMATIC = 0, 1, 2
-IMPULSE, LINEAR, HUNT_CROSSLEY = 0, 1, 2
-REC_TIME, REC_STEP, REC_A, REC_B, REC_POINT, REC_IMPULSE, REC_SPEED, REC_SLIP = 0, 1, 2, 3, 4, 7, 10, 11
-REC_ROLL, REC_IMPACT, REC_FEAT_A, REC_FEAT_B, REC_BARY, REC_LOCAL_A, REC_LOCAL_B = 12, 13, 14, 15, 16, 19, 22
-REC_NORMAL = 25
-REC_WIDTH = 28
-# parameter vector layout
-P_GX, P_GY, P_GZ, P_SLOP, P_BOUNCE, P_BETA, P_ITER, P_TOL = range(8)
-P_METHOD, P_ADAPT_TOL, P_MODEL, P_K, P_C, P_EXP, P_MAX_EVENTS, P_VEPS = range(8, 16)
-N_PARAMS = 16
 MAX_CONTACTS = 1 << 16
 
 
 @nb.njit(cache=True)
-def _rotations(quat):
-    n = quat.shape[0]
-    rot = np.empty((n, 3, 3))
-    for i in range(n):
-        rot[i] = quat_to_mat(quat[i])
-    return rot
-
-
-@nb.njit(cache=True)
-def _world_velocities(kind, rot, phi, kin_v, kin_w):
-    n = kind.shape[0]
-    v = np.zeros((n, 3))
-    w = np.zeros((n, 3))
-    for i in range(n):
-        if kind[i] == DYNAMIC:
-            w[i] = mv(rot[i], phi[i, :3])
-            v[i] = mv(rot[i], phi[i, 3:])
-        elif kind[i] == KINEMATIC:
-            v[i] = kin_v[i]
-            w[i] = kin_w[i]
-    return v, w
-
-
-@nb.njit(cache=True)
-def _inv_inertia_world(kind, rot, inv_inertia):
-    n = kind.shape[0]
-    out = np.zeros((n, 3, 3))
-    for i in range(n):
-        if kind[i] == DYNAMIC:
-            r = rot[i]
-            d = inv_inertia[i]
-            for x in range(3):
-                for y in range(3):
-                    out[i, x, y] = (
-                        r[x, 0] * d[0] * r[y, 0] + r[x, 1] * d[1] * r[y, 1] + r[x, 2] * d[2] * r[y, 2]
-                    )
-    return out
+def _rotations(quat, rot):
+    """rot[i]: rotation matrix of the unit quaternion quat[i] (spatial.quat_to_mat, in place)."""
+    for i in range(quat.shape[0]):
+        w, x, y, z = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
+        rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2] = (
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+        )
+        rot[i, 1, 0], rot[i, 1, 1], rot[i, 1, 2] = (
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+        )
+        rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2] = (
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        )
 
 
 @nb.njit(cache=True)
@@ -105,320 +112,14 @@ def _rel_velocity(a, b, ra, rb, v, w):
 
 
 @nb.njit(cache=True)
-def new_warm_start(size):
-    """Contact impulses of the last solve for warm starting the next: keys (a, b, feature a,
-    feature b), world force (N) and rolling torque (N m), and the count in use."""
-    return np.empty((size, 4), np.int64), np.empty((size, 6)), np.zeros(1, np.int64)
-
-
-@nb.njit(cache=True)
-def _contact_frames(buf, idx, pos, iw, inv_mass, frame, ra, rb, ang_a, ang_b, res_a, res_b, kin):
-    """Per contact k: frame rows (n, t1, t2), lever arms, Jacobian rows (angular parts; rows
-    3, 4 roll about t1, t2), responses M^-1 J^T and effective inverse masses (scalar loops)."""
-    pts, nrm, _, pair, _, _, _ = buf
-    for k in range(idx.shape[0]):
-        c = idx[k]
-        a, b = pair[c, 0], pair[c, 1]
-        n0, n1, n2 = nrm[c, 0], nrm[c, 1], nrm[c, 2]
-        if abs(n0) < 0.57:
-            s0, s1, s2 = 0.0, -n2, n1
-        else:
-            s0, s1, s2 = -n1, n0, 0.0
-        inv = 1.0 / math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        s0, s1, s2 = s0 * inv, s1 * inv, s2 * inv
-        frame[k, 0, 0], frame[k, 0, 1], frame[k, 0, 2] = n0, n1, n2
-        frame[k, 1, 0], frame[k, 1, 1], frame[k, 1, 2] = s0, s1, s2
-        frame[k, 2, 0], frame[k, 2, 1], frame[k, 2, 2] = (
-            n1 * s2 - n2 * s1,
-            n2 * s0 - n0 * s2,
-            n0 * s1 - n1 * s0,
-        )
-        for x in range(3):
-            ra[k, x] = pts[c, x] - pos[a, x]
-            rb[k, x] = pts[c, x] - pos[b, x]
-        for j in range(5):
-            if j < 3:
-                d0, d1, d2 = frame[k, j, 0], frame[k, j, 1], frame[k, j, 2]
-                ang_a[k, j, 0] = ra[k, 1] * d2 - ra[k, 2] * d1
-                ang_a[k, j, 1] = ra[k, 2] * d0 - ra[k, 0] * d2
-                ang_a[k, j, 2] = ra[k, 0] * d1 - ra[k, 1] * d0
-                ang_b[k, j, 0] = rb[k, 1] * d2 - rb[k, 2] * d1
-                ang_b[k, j, 1] = rb[k, 2] * d0 - rb[k, 0] * d2
-                ang_b[k, j, 2] = rb[k, 0] * d1 - rb[k, 1] * d0
-                kin[k, j] = inv_mass[a] + inv_mass[b]
-            else:
-                for x in range(3):
-                    ang_a[k, j, x] = ang_b[k, j, x] = frame[k, j - 2, x]
-                kin[k, j] = 0.0
-            for x in range(3):
-                res_a[k, j, x] = (
-                    iw[a, x, 0] * ang_a[k, j, 0] + iw[a, x, 1] * ang_a[k, j, 1] + iw[a, x, 2] * ang_a[k, j, 2]
-                )
-                res_b[k, j, x] = (
-                    iw[b, x, 0] * ang_b[k, j, 0] + iw[b, x, 1] * ang_b[k, j, 1] + iw[b, x, 2] * ang_b[k, j, 2]
-                )
-                kin[k, j] += ang_a[k, j, x] * res_a[k, j, x] + ang_b[k, j, x] * res_b[k, j, x]
-
-
-@nb.njit(cache=True)
-def _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear):
-    """Relative velocity of contact k along Jacobian row j (scalar loops, no allocation)."""
-    u = 0.0
-    for x in range(3):
-        u += ang_a[k, j, x] * w[a, x] - ang_b[k, j, x] * w[b, x]
-        if linear:
-            u += frame[k, j, x] * (v[a, x] - v[b, x])
-    return u
-
-
-@nb.njit(cache=True)
-def _row_apply(k, j, a, b, impulse, frame, res_a, res_b, ima, imb, v, w, linear):
-    """Apply ``impulse`` along row j of contact k to both bodies (b gets the reaction)."""
-    for x in range(3):
-        w[a, x] += impulse * res_a[k, j, x]
-        w[b, x] -= impulse * res_b[k, j, x]
-        if linear:
-            v[a, x] += impulse * ima * frame[k, j, x]
-            v[b, x] -= impulse * imb * frame[k, j, x]
-
-
-@nb.njit(cache=True)
-def _disk(x1, x2, limit):
-    """(x1, x2) projected onto the disk of radius ``limit``."""
-    mag = math.sqrt(x1 * x1 + x2 * x2)
-    if mag > limit:
-        return x1 * limit / mag, x2 * limit / mag
-    return x1, x2
-
-
-@nb.njit(cache=True)
-def _warm_impulses(buf, idx, impact, frame, mu, roll, dt, warm, n_bodies, r):
-    """Initial impulses r from the last solve's contacts with the same (a, b, features): its
-    force and rolling torque times dt, projected on the new frame and cones."""
-    _, _, _, pair, feat, _, _ = buf
-    keys, vals, size = warm
-    m = size[0]
-    head = np.full(n_bodies, -1, np.int64)
-    nxt = np.empty(m, np.int64)
-    used = np.zeros(m, np.bool_)
-    for e in range(m - 1, -1, -1):  # lists keep the last solve's order
-        nxt[e] = head[keys[e, 0]]
-        head[keys[e, 0]] = e
-    for k in range(idx.shape[0]):
-        r[k, :] = 0.0
-        if impact[k]:
-            continue
-        c = idx[k]
-        e = head[pair[c, 0]]
-        while e >= 0:
-            if (
-                not used[e]
-                and keys[e, 1] == pair[c, 1]
-                and keys[e, 2] == feat[c, 0]
-                and keys[e, 3] == feat[c, 1]
-            ):
-                break
-            e = nxt[e]
-        if e < 0:
-            continue
-        used[e] = True
-        for j in range(3):
-            r[k, j] = dt * (
-                vals[e, 0] * frame[k, j, 0] + vals[e, 1] * frame[k, j, 1] + vals[e, 2] * frame[k, j, 2]
-            )
-        for j in range(2):
-            d = frame[k, 1 + j]
-            r[k, 3 + j] = dt * (vals[e, 3] * d[0] + vals[e, 4] * d[1] + vals[e, 5] * d[2])
-        r[k, 0] = max(r[k, 0], 0.0)
-        r[k, 1], r[k, 2] = _disk(r[k, 1], r[k, 2], mu[k] * r[k, 0])
-        r[k, 3], r[k, 4] = _disk(r[k, 3], r[k, 4], roll[k] * r[k, 0])
-
-
-@nb.njit(cache=True)
-def _keep_warm(buf, idx, impact, frame, r, dt, warm):
-    """Store the solved contacts pushing (r_N > 0) as the next solve's warm start, as forces
-    r / dt. Not after a solve with an impact: the impact's impulse spreads through resting
-    contacts, and over a short sub-step it would read as a huge force."""
-    _, _, _, pair, feat, _, _ = buf
-    keys, vals, size = warm
-    m = 0
-    for k in range(idx.shape[0]):
-        if impact[k]:
-            size[0] = 0
-            return
-    for k in range(idx.shape[0]):
-        if r[k, 0] <= 0.0 or m >= keys.shape[0]:
-            continue
-        c = idx[k]
-        keys[m, 0], keys[m, 1], keys[m, 2], keys[m, 3] = pair[c, 0], pair[c, 1], feat[c, 0], feat[c, 1]
-        for x in range(3):
-            vals[m, x] = (r[k, 0] * frame[k, 0, x] + r[k, 1] * frame[k, 1, x] + r[k, 2] * frame[k, 2, x]) / dt
-            vals[m, 3 + x] = (r[k, 3] * frame[k, 1, x] + r[k, 4] * frame[k, 2, x]) / dt
-        m += 1
-    size[0] = m
-
-
-@nb.njit(cache=True)
-def _resolve(
-    buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, gscale, time, step, rec, nrec, warm, stats
-):
-    """Impulse-level contact solve (see module doc), warm-started from ``warm`` (updated);
-    updates phi; appends records; adds the contacts and PGS sweeps to stats[2] and stats[4]."""
-    pts, nrm, gaps, pair, feat, bar, _ = buf
-    inv_mass, inv_inertia, restitution, friction, rolling = body
-    slop, thr, beta = prm[P_SLOP], prm[P_BOUNCE], prm[P_BETA]
-    nc = 0
-    for c in range(count):
-        if gaps[c] <= slop:
-            nc += 1
-    if nc == 0:
-        warm[2][0] = 0
-        return nrec
-    idx = np.empty(nc, np.int64)
-    k = 0
-    for c in range(count):
-        if gaps[c] <= slop:
-            idx[k] = c
-            k += 1
-    v, w = _world_velocities(kind, rot, phi, kin_v, kin_w)
-    iw = _inv_inertia_world(kind, rot, inv_inertia)
-    ra = np.empty((nc, 3))
-    rb = np.empty((nc, 3))
-    frame = np.empty((nc, 3, 3))
-    ang_a = np.empty((nc, 5, 3))
-    ang_b = np.empty((nc, 5, 3))
-    res_a = np.empty((nc, 5, 3))
-    res_b = np.empty((nc, 5, 3))
-    kin = np.empty((nc, 5))
-    _contact_frames(buf, idx, pos, iw, inv_mass, frame, ra, rb, ang_a, ang_b, res_a, res_b, kin)
-    target = np.zeros((nc, 3))
-    mu = np.empty(nc)
-    roll = np.empty(nc)
-    speed0 = np.empty(nc)
-    impact = np.zeros(nc, np.bool_)
-    gx, gy, gz = prm[P_GX] * gscale * dt, prm[P_GY] * gscale * dt, prm[P_GZ] * gscale * dt
-    for k in range(nc):
-        c = idx[k]
-        a, b = pair[c, 0], pair[c, 1]
-        mu[k] = math.sqrt(friction[a] * friction[b])
-        roll[k] = max(rolling[a], rolling[b])
-        un = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True)
-        speed0[k] = -un
-        if -un > thr:
-            impact[k] = True
-            target[k, 0] = -math.sqrt(restitution[a] * restitution[b]) * un
-        else:  # resting: gravity's velocity increment over dt is folded into the targets
-            dyn = (1.0 if kind[a] == DYNAMIC else 0.0) - (1.0 if kind[b] == DYNAMIC else 0.0)
-            pen = max(-gaps[c] - slop, 0.0)
-            target[k, 0] = (beta * pen - max(gaps[c], 0.0)) / dt
-            for j in range(3):
-                target[k, j] -= dyn * (gx * frame[k, j, 0] + gy * frame[k, j, 1] + gz * frame[k, j, 2])
-    r = np.empty((nc, 5))
-    _warm_impulses(buf, idx, impact, frame, mu, roll, dt, warm, kind.shape[0], r)
-    for k in range(nc):
-        c = idx[k]
-        a, b = pair[c, 0], pair[c, 1]
-        for j in range(5):
-            if r[k, j] != 0.0:
-                _row_apply(k, j, a, b, r[k, j], frame, res_a, res_b, inv_mass[a], inv_mass[b], v, w, j < 3)
-    iters = int(prm[P_ITER])
-    tol = prm[P_TOL]
-    stats[2] += nc
-    for _ in range(iters):
-        stats[4] += 1
-        change = 0.0
-        scale = 0.0
-        for k in range(nc):
-            c = idx[k]
-            a, b = pair[c, 0], pair[c, 1]
-            ima, imb = inv_mass[a], inv_mass[b]
-            # normal row
-            u = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True)
-            rn = max(0.0, r[k, 0] + (target[k, 0] - u) / kin[k, 0])
-            dn = rn - r[k, 0]
-            if dn != 0.0:
-                _row_apply(k, 0, a, b, dn, frame, res_a, res_b, ima, imb, v, w, True)
-                r[k, 0] = rn
-            biggest = abs(dn)
-            if mu[k] > 0.0:
-                u1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True)
-                u2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True)
-                x1, x2 = _disk(
-                    r[k, 1] + (target[k, 1] - u1) / kin[k, 1],
-                    r[k, 2] + (target[k, 2] - u2) / kin[k, 2],
-                    mu[k] * rn,
-                )
-                _row_apply(k, 1, a, b, x1 - r[k, 1], frame, res_a, res_b, ima, imb, v, w, True)
-                _row_apply(k, 2, a, b, x2 - r[k, 2], frame, res_a, res_b, ima, imb, v, w, True)
-                biggest = max(biggest, abs(x1 - r[k, 1]), abs(x2 - r[k, 2]))
-                r[k, 1] = x1
-                r[k, 2] = x2
-            if roll[k] > 0.0:
-                y1, y2 = _disk(
-                    r[k, 3] - _row_velocity(k, 3, a, b, frame, ang_a, ang_b, v, w, False) / kin[k, 3],
-                    r[k, 4] - _row_velocity(k, 4, a, b, frame, ang_a, ang_b, v, w, False) / kin[k, 4],
-                    roll[k] * rn,
-                )
-                _row_apply(k, 3, a, b, y1 - r[k, 3], frame, res_a, res_b, ima, imb, v, w, False)
-                _row_apply(k, 4, a, b, y2 - r[k, 4], frame, res_a, res_b, ima, imb, v, w, False)
-                r[k, 3] = y1
-                r[k, 4] = y2
-            change = max(change, biggest)
-            scale = max(scale, abs(r[k, 0]))
-        if change <= tol * max(scale, 1e-30):
-            break
-    _keep_warm(buf, idx, impact, frame, r, dt, warm)
-    for i in range(kind.shape[0]):
-        if kind[i] == DYNAMIC:
-            phi[i, :3] = mtv(rot[i], w[i])
-            phi[i, 3:] = mtv(rot[i], v[i])
-    for k in range(nc):
-        if r[k, 0] <= 0.0 and not impact[k]:
-            continue
-        if nrec >= rec.shape[0]:
-            return -1
-        c = idx[k]
-        a, b = pair[c, 0], pair[c, 1]
-        row = rec[nrec]
-        row[REC_TIME] = time
-        row[REC_STEP] = step
-        row[REC_A] = a
-        row[REC_B] = b
-        # slip: tangential relative velocity with gravity's increment (target) removed
-        s1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True) - target[k, 1]
-        s2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True) - target[k, 2]
-        wn = 0.0
-        for x in range(3):
-            wn += (w[a, x] - w[b, x]) * frame[k, 0, x]
-        wt2 = 0.0
-        for x in range(3):
-            wt2 += (w[a, x] - w[b, x] - wn * frame[k, 0, x]) ** 2
-        for x in range(3):
-            row[REC_POINT + x] = pts[c, x]
-            row[REC_IMPULSE + x] = (
-                r[k, 0] * frame[k, 0, x] + r[k, 1] * frame[k, 1, x] + r[k, 2] * frame[k, 2, x]
-            )
-            row[REC_BARY + x] = bar[c, x]
-            row[REC_NORMAL + x] = frame[k, 0, x]
-            row[REC_LOCAL_A + x] = rot[a, 0, x] * ra[k, 0] + rot[a, 1, x] * ra[k, 1] + rot[a, 2, x] * ra[k, 2]
-            row[REC_LOCAL_B + x] = rot[b, 0, x] * rb[k, 0] + rot[b, 1, x] * rb[k, 1] + rot[b, 2, x] * rb[k, 2]
-        row[REC_SPEED] = speed0[k]
-        row[REC_SLIP] = math.sqrt(s1 * s1 + s2 * s2)
-        row[REC_ROLL] = math.sqrt(wt2) * math.sqrt(ra[k, 0] ** 2 + ra[k, 1] ** 2 + ra[k, 2] ** 2)
-        row[REC_IMPACT] = 1.0 if impact[k] else 0.0
-        row[REC_FEAT_A] = feat[c, 0]
-        row[REC_FEAT_B] = feat[c, 1]
-        nrec += 1
-    return nrec
-
-
-@nb.njit(cache=True)
 def _penalty(buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, time, step, rec, nrec):
     """Penalty contact forces over dt (symplectic: velocities now, positions after)."""
     pts, nrm, gaps, pair, feat, bar, _ = buf
     inv_mass, inv_inertia, restitution, friction, rolling = body
-    v, w = _world_velocities(kind, rot, phi, kin_v, kin_w)
-    iw = _inv_inertia_world(kind, rot, inv_inertia)
+    n = kind.shape[0]
+    v, w, iw = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3))
+    world_velocities(kind, rot, phi, kin_v, kin_w, v, w)
+    inv_inertia_world(kind, rot, inv_inertia, iw)
     model, k_s, c_d, p_exp, veps = int(prm[P_MODEL]), prm[P_K], prm[P_C], prm[P_EXP], prm[P_VEPS]
     for c in range(count):
         x = -gaps[c]
@@ -462,10 +163,7 @@ def _penalty(buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, time,
         row[REC_LOCAL_B : REC_LOCAL_B + 3] = mtv(rot[b], rb)
         row[REC_NORMAL : REC_NORMAL + 3] = n
         nrec += 1
-    for i in range(kind.shape[0]):
-        if kind[i] == DYNAMIC:
-            phi[i, :3] = mtv(rot[i], w[i])
-            phi[i, 3:] = mtv(rot[i], v[i])
+    store_twists(kind, rot, v, w, phi)
     return nrec
 
 
@@ -475,7 +173,12 @@ def _move(i, tau, pos, quat, phi, mover, out_p, out_q, out_phi):
     out_phi. mover: (kind, kinematic v, kinematic w, mass, inertia, prm, gravity (3,), zero
     wrench (6,))."""
     kind, kin_v, kin_w, mass, inertia, prm, gravity, ext = mover
-    if kind[i] == DYNAMIC:
+    method = int(prm[P_METHOD])
+    if kind[i] == DYNAMIC and method == SEMI_IMPLICIT and tau > 0.0:
+        semi_implicit_into(
+            pos[i], quat[i], phi[i], inertia[i], mass[i], gravity, ext, tau, out_p[i], out_q[i], out_phi[i]
+        )
+    elif kind[i] == DYNAMIC:
         advance_body_into(
             pos[i],
             quat[i],
@@ -485,25 +188,46 @@ def _move(i, tau, pos, quat, phi, mover, out_p, out_q, out_phi):
             gravity,
             ext,
             tau,
-            int(prm[P_METHOD]),
+            method,
             prm[P_ADAPT_TOL],
             out_p[i],
             out_q[i],
             out_phi[i],
         )
-        return
-    out_phi[i] = phi[i]
-    if kind[i] == KINEMATIC:
-        q = quat_mul(quat_exp(kin_w[i] * tau), quat[i])
-        out_p[i] = pos[i] + kin_v[i] * tau
-        out_q[i] = q / math.sqrt(np.sum(q * q))
     else:
-        out_p[i] = pos[i]
-        out_q[i] = quat[i]
+        for x in range(6):
+            out_phi[i, x] = phi[i, x]
+        for x in range(3):
+            out_p[i, x] = pos[i, x] + kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
+        if kind[i] == KINEMATIC:
+            _turn(i, tau, quat, kin_w, out_q)
+        else:
+            for x in range(4):
+                out_q[i, x] = quat[i, x]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _turn(i, tau, quat, kin_w, out_q):
+    """out_q[i]: quat[i] turned by the angular velocity kin_w[i] (rad/s) for tau seconds,
+    exp(tau w) q normalised (spatial.quat_exp, quat_mul in scalars)."""
+    r0, r1, r2 = kin_w[i, 0] * tau, kin_w[i, 1] * tau, kin_w[i, 2] * tau
+    angle = math.sqrt(r0**2 + r1**2 + r2**2)
+    half = 0.5 * angle
+    s = math.sin(half) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0
+    a0, a1, a2, a3 = math.cos(half), s * r0, s * r1, s * r2
+    b0, b1, b2, b3 = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
+    q0 = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    q1 = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    q2 = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    q3 = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+    norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    out_q[i, 0], out_q[i, 1], out_q[i, 2], out_q[i, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+
+
+@nb.njit(cache=True, _nrt=False)
 def _pair_gap(a, b, pos, rot, geo, margin, scratch):
+    """Smallest gap (m) of pair (a, b), at most margin (no reference counting, like
+    narrow.pair_contacts)."""
     count = pair_contacts(a, b, pos, rot, geo, margin, scratch, 0)
     best = margin
     for c in range(count):
@@ -635,7 +359,7 @@ def _apart(a, b, pos, geo, margin):
     return d0 * d0 + d1 * d1 + d2 * d2 > reach * reach
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
     """Contacts of all pairs within margin = slop + reach[p] (m, how far the pair can close in
     the step). gap[p]: a lower bound of pair p's gap (its smallest contact gap, polytope face
@@ -658,9 +382,9 @@ def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
 
 
 @nb.njit(cache=True)
-def _new_buffers(size, hint):
+def _new_buffers(size, near):
     """Contact buffers of ``size`` rows (points, normals, gaps, pairs, features, barycentric
-    weights) and the shared per-point mesh-triangle hints (narrow.pair_contacts)."""
+    weights) and the shared memory of the body points near meshes (narrow._mesh_closest)."""
     return (
         np.empty((size, 3)),
         np.empty((size, 3)),
@@ -668,7 +392,7 @@ def _new_buffers(size, hint):
         np.empty((size, 2), np.int64),
         np.empty((size, 2), np.int64),
         np.empty((size, 3)),
-        hint,
+        near,
     )
 
 
@@ -708,13 +432,15 @@ def run_steps(
     n = pos.shape[0]
     kin_v = np.zeros((n, 3))
     kin_w = np.zeros((n, 3))
-    hint = np.zeros(geo[21][-1], np.int64)
-    buf = _new_buffers(MAX_CONTACTS, hint)
-    scratch = _new_buffers(256, hint)
+    near = (np.zeros(geo[21][-1], np.int64), np.zeros((geo[21][-1], 5)))
+    buf = _new_buffers(MAX_CONTACTS, near)
+    scratch = _new_buffers(256, near)
     gravity = np.array([prm[P_GX], prm[P_GY], prm[P_GZ]])
     gravity_norm = math.sqrt(dot3(gravity, gravity))
     mover = (kind, kin_v, kin_w, mass, inertia, prm, gravity, np.zeros(6))
     new_pos, new_quat, new_phi = np.empty_like(pos), np.empty_like(quat), np.empty_like(phi)
+    rot, new_rot = np.empty((n, 3, 3)), np.empty((n, 3, 3))
+    solver = new_solver(256, n, warm[0].shape[0])
     moved = (np.empty_like(pos), np.empty_like(quat), np.empty_like(phi))
     slop = prm[P_SLOP]
     model = int(prm[P_MODEL])
@@ -739,7 +465,7 @@ def run_steps(
             dt = h - t_local
             if dt <= 1e-15:
                 break
-            rot = _rotations(quat)
+            _rotations(quat, rot)
             vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
             lo, hi, movable = _boxes(pos, _motion(vel, spin, kind, gravity_norm, dt), kind, geo, slop)
             pairs = sweep_and_prune(lo, hi, movable)
@@ -749,9 +475,11 @@ def run_steps(
             touching = np.empty(pairs.shape[0], np.bool_)
             count = _detect(pairs, pos, rot, geo, slop, reach, buf, gap0, touching)
             last_count = max(last_count, count)
+            if count > solver[S_IDX].shape[0]:
+                solver = new_solver(2 * count, n, warm[0].shape[0])
             time = (first + s) * h + t_local
             if model == IMPULSE:
-                nrec = _resolve(
+                nrec = resolve(
                     buf,
                     count,
                     pos,
@@ -762,6 +490,7 @@ def run_steps(
                     kin_w,
                     body,
                     prm,
+                    h,
                     dt,
                     gscale,
                     time,
@@ -770,6 +499,7 @@ def run_steps(
                     nrec,
                     warm,
                     stats,
+                    solver,
                 )
             else:
                 stats[2] += count
@@ -783,7 +513,7 @@ def run_steps(
                 _move(i, dt, pos, quat, phi, mover, new_pos, new_quat, new_phi)
             first_hit = dt
             if subs < max_events:
-                new_rot = _rotations(new_quat)
+                _rotations(new_quat, new_rot)
                 vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)  # after the solve
                 _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
                 for p in range(pairs.shape[0]):

@@ -18,7 +18,9 @@ import numpy as np
 
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
+from physics.rigid import codes
 from physics.rigid import stepper as st
+from physics.rigid.impulses import new_warm_start
 from physics.rigid.integrate import METHODS
 from physics.rigid.meshgrid import build_grid
 from physics.rigid.shapes import (
@@ -131,23 +133,23 @@ class StepParams:
             raise JassyError(
                 f"StepParams.integrator: expected one of {sorted(METHODS)}, got {self.integrator!r}"
             )
-        models = {"impulse": st.IMPULSE, "linear": st.LINEAR, "hunt-crossley": st.HUNT_CROSSLEY}
+        models = {"impulse": codes.IMPULSE, "linear": codes.LINEAR, "hunt-crossley": codes.HUNT_CROSSLEY}
         if self.contact not in models:
             raise JassyError(f"StepParams.contact: expected one of {sorted(models)}, got {self.contact!r}")
         if not (self.h > 0 and np.isfinite(self.h)):
             raise JassyError(f"StepParams.h: expected a positive step in s, got {self.h!r}")
-        p = np.zeros(st.N_PARAMS)
-        p[st.P_GX : st.P_GZ + 1] = self.gravity
-        p[st.P_SLOP], p[st.P_BOUNCE], p[st.P_BETA] = self.slop, self.bounce_threshold, self.beta
-        p[st.P_ITER], p[st.P_TOL] = self.iterations, self.tolerance
-        p[st.P_METHOD], p[st.P_ADAPT_TOL] = METHODS[self.integrator], self.adaptive_tolerance
-        p[st.P_MODEL], p[st.P_K], p[st.P_C], p[st.P_EXP] = (
+        p = np.zeros(codes.N_PARAMS)
+        p[codes.P_GX : codes.P_GZ + 1] = self.gravity
+        p[codes.P_SLOP], p[codes.P_BOUNCE], p[codes.P_BETA] = self.slop, self.bounce_threshold, self.beta
+        p[codes.P_ITER], p[codes.P_TOL] = self.iterations, self.tolerance
+        p[codes.P_METHOD], p[codes.P_ADAPT_TOL] = METHODS[self.integrator], self.adaptive_tolerance
+        p[codes.P_MODEL], p[codes.P_K], p[codes.P_C], p[codes.P_EXP] = (
             models[self.contact],
             self.stiffness,
             self.damping,
             self.exponent,
         )
-        p[st.P_MAX_EVENTS], p[st.P_VEPS] = self.max_events, self.friction_speed
+        p[codes.P_MAX_EVENTS], p[codes.P_VEPS] = self.max_events, self.friction_speed
         return p
 
 
@@ -284,7 +286,7 @@ def _build_arrays(bodies: list[Body]):
     vstart, pstart, hstart = [0], [0], [0]
     mesh_id = np.full(n, -1, np.int64)
     grids = []
-    kinds = {"dynamic": st.DYNAMIC, "static": st.STATIC, "kinematic": st.KINEMATIC}
+    kinds = {"dynamic": codes.DYNAMIC, "static": codes.STATIC, "kinematic": codes.KINEMATIC}
     for i, body in enumerate(bodies):
         shape = body.shape
         btype[i] = shape.kind
@@ -336,19 +338,28 @@ def _build_arrays(bodies: list[Body]):
         np.concatenate(htris),
         mesh_id,
         *mesh_tables,
-        np.cumsum([0] + [_point_count(b.shape, len(v)) for b, v in zip(bodies, verts, strict=True)]),
+        *_point_table([b.shape for b in bodies], verts),
     )
     body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
     return geo, kind, mass, inertia, body_arrays, frames
 
 
-def _point_count(shape: Shape, vertices: int) -> int:
-    """How many points stand for a body against planes and meshes (narrow.point_count)."""
-    if shape.kind == SPHERE:
-        return 1
-    if shape.kind == CAPSULE:
-        return 3
-    return vertices if shape.kind in (BOX, CONVEX) else 0
+def _point_table(shapes: list[Shape], verts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The points standing for each body against planes and meshes (narrow.body_point): (offsets
+    (N + 1,): body i's rows are offsets[i] to offsets[i + 1]; rows (P, 4): body-frame position
+    and radius, m): a sphere's centre, a capsule's axis ends and middle, a polytope's vertices."""
+    rows = []
+    for shape, v in zip(shapes, verts, strict=True):
+        if shape.kind == SPHERE:
+            rows.append([[0.0, 0.0, 0.0, shape.radius]])
+        elif shape.kind == CAPSULE:
+            rows.append([[0.0, 0.0, (i - 1) * shape.half_length, shape.radius] for i in range(3)])
+        elif shape.kind in (BOX, CONVEX):
+            rows.append(np.c_[v, np.zeros(len(v))])
+        else:
+            rows.append(np.zeros((0, 4)))
+    offsets = np.cumsum([0] + [len(r) for r in rows]).astype(np.int64)
+    return offsets, np.concatenate([np.asarray(r, float).reshape(-1, 4) for r in rows])
 
 
 def _mesh_tables(grids):
@@ -387,7 +398,7 @@ def _mesh_tables(grids):
 
 @dataclass
 class RunResult:
-    """Contact records (rows, stepper.REC_* columns), sampled poses every ``sample_every``
+    """Contact records (rows, codes.REC_* columns), sampled poses every ``sample_every``
     steps (times (S,), pos (S, N, 3), quat (S, N, 4), phi (S, N, 6)), the start time (s), the
     final state, and stepper statistics (impact sub-steps, late impacts, contacts, solves)."""
 
@@ -421,10 +432,12 @@ def simulate(
     kin_index = np.array([i for i, b in enumerate(world.bodies) if b.kind == "kinematic"], np.int64)
     every = sample_every or n_steps + 1
     traj = np.zeros((n_steps // every, n, 13))
-    rec = np.empty((max(4096, 64 * n), st.REC_WIDTH))
+    # records: a few per body and step reserved up front (address space only: the memory of a
+    # row comes when the stepper writes it), so that the buffer seldom grows by copying
+    rec = np.empty((min(max(4096, 4 * n * n_steps), 1 << 20), codes.REC_WIDTH))
     nrec = 0
     stats = np.zeros(6, np.int64)
-    warm = st.new_warm_start(st.MAX_CONTACTS)
+    warm = new_warm_start(st.MAX_CONTACTS)
     done = 0
     while done < n_steps:
         todo = min(chunk, n_steps - done)
@@ -454,7 +467,7 @@ def simulate(
             warm,
         )
         if steps < todo:  # the record buffer might not hold the next step: grow it
-            grown = np.empty((2 * rec.shape[0], st.REC_WIDTH))  # the stepper writes whole rows
+            grown = np.empty((2 * rec.shape[0], codes.REC_WIDTH))  # the stepper writes whole rows
             grown[:nrec] = rec[:nrec]
             rec = grown
         done += steps
@@ -467,7 +480,7 @@ def simulate(
     return RunResult(
         world,
         first * h,
-        rec[:nrec].copy(),
+        rec[:nrec],  # no copy: the rows beyond were never written, so never given memory
         times,
         traj[:, :, :3].copy(),
         traj[:, :, 3:7].copy(),

@@ -1,0 +1,561 @@
+"""The impulse-level contact solve of one (sub-)step (numba; stepper module doc, step 1).
+
+Contacts touching (gap <= slop) are resolved by projected Gauss-Seidel on the bodies'
+velocities (sequential impulses; mathematically PGS on W = J M^-1 J^T without forming W):
+normal rows with Newton restitution for approaching contacts faster than ``bounce_threshold``
+(u_N+ >= -e u_N-), else a resting target (penetration beyond slop recovered at beta * depth / h,
+gravity's velocity increment over the sub-step folded in); tangent rows projected onto the
+Coulomb disk |r_T| <= mu r_N; rolling-resistance rows (a torque impulse bounded by
+rolling * r_N, m). Resting contacts found in the previous solve (same bodies and features)
+start from its force times dt (warm start); sweeps stop when no impulse changes by more than
+``tolerance`` times the largest normal impulse. The solve allocates nothing: its scratch
+(new_solver) lives for the whole run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from physics.rigid.codes import (
+    DYNAMIC,
+    KINEMATIC,
+    P_BETA,
+    P_BOUNCE,
+    P_GX,
+    P_GY,
+    P_GZ,
+    P_ITER,
+    P_SLOP,
+    P_TOL,
+    REC_A,
+    REC_B,
+    REC_BARY,
+    REC_FEAT_A,
+    REC_FEAT_B,
+    REC_IMPACT,
+    REC_IMPULSE,
+    REC_LOCAL_A,
+    REC_LOCAL_B,
+    REC_NORMAL,
+    REC_POINT,
+    REC_ROLL,
+    REC_SLIP,
+    REC_SPEED,
+    REC_STEP,
+    REC_TIME,
+)
+
+
+@nb.njit(cache=True)
+def world_velocities(kind, rot, phi, kin_v, kin_w, v, w):
+    """World linear and angular velocities (m/s, rad/s) of every body's centre into v, w."""
+    for i in range(kind.shape[0]):
+        for x in range(3):
+            if kind[i] == DYNAMIC:
+                w[i, x] = rot[i, x, 0] * phi[i, 0] + rot[i, x, 1] * phi[i, 1] + rot[i, x, 2] * phi[i, 2]
+                v[i, x] = rot[i, x, 0] * phi[i, 3] + rot[i, x, 1] * phi[i, 4] + rot[i, x, 2] * phi[i, 5]
+            elif kind[i] == KINEMATIC:
+                v[i, x], w[i, x] = kin_v[i, x], kin_w[i, x]
+            else:
+                v[i, x] = w[i, x] = 0.0
+
+
+@nb.njit(cache=True)
+def store_twists(kind, rot, v, w, phi):
+    """The dynamic bodies' twists phi (body frame) from their world velocities v, w."""
+    for i in range(kind.shape[0]):
+        if kind[i] == DYNAMIC:
+            for x in range(3):
+                phi[i, x] = rot[i, 0, x] * w[i, 0] + rot[i, 1, x] * w[i, 1] + rot[i, 2, x] * w[i, 2]
+                phi[i, 3 + x] = rot[i, 0, x] * v[i, 0] + rot[i, 1, x] * v[i, 1] + rot[i, 2, x] * v[i, 2]
+
+
+@nb.njit(cache=True)
+def inv_inertia_world(kind, rot, inv_inertia, out):
+    """World inverse inertia tensors (1/(kg m^2)) into out; zero for static and kinematic bodies."""
+    for i in range(kind.shape[0]):
+        dynamic = kind[i] == DYNAMIC
+        for x in range(3):
+            for y in range(3):
+                out[i, x, y] = (
+                    rot[i, x, 0] * inv_inertia[i, 0] * rot[i, y, 0]
+                    + rot[i, x, 1] * inv_inertia[i, 1] * rot[i, y, 1]
+                    + rot[i, x, 2] * inv_inertia[i, 2] * rot[i, y, 2]
+                    if dynamic
+                    else 0.0
+                )
+
+
+@nb.njit(cache=True)
+def new_warm_start(size):
+    """Contact impulses of the last solve for warm starting the next: keys (a, b, feature a,
+    feature b), world force (N) and rolling torque (N m), and the count in use."""
+    return np.empty((size, 4), np.int64), np.empty((size, 6)), np.zeros(1, np.int64)
+
+
+# The contact solve's scratch (new_solver): per contact (rows): its row in the contact buffers,
+# lever arms ra, rb (m), frame (n, t1, t2), angular Jacobian rows of a and b and their responses
+# I^-1 J^T (5 rows: n, t1, t2, then rolling about t1 and t2), effective masses 1 / (J M^-1 J^T),
+# targets (m/s: n, t1, t2) and the same with a fixed body b's velocity folded in (5 rows),
+# friction and rolling coefficients, approach speed (m/s), impact flag, impulses (N s; N m s).
+# Per body: world velocities v, w, inverse inertia, warm-start list head. Per warm-start entry:
+# list links, use marks.
+(S_IDX, S_RA, S_RB, S_FRAME, S_ANG_A, S_ANG_B, S_RES_A, S_RES_B, S_MASS, S_TARGET, S_BIAS) = range(11)
+(S_MU, S_ROLL, S_SPEED, S_IMPACT, S_R, S_V, S_W, S_IW, S_HEAD, S_NEXT, S_USED) = range(11, 22)
+
+
+@nb.njit(cache=True)
+def new_solver(rows, n_bodies, warm_rows):
+    """The contact solve's scratch (S_* above) for up to ``rows`` contacts, allocated once per
+    run and grown with the contacts."""
+    return (
+        np.empty(rows, np.int64),
+        np.empty((rows, 3)),
+        np.empty((rows, 3)),
+        np.empty((rows, 3, 3)),
+        np.empty((rows, 5, 3)),
+        np.empty((rows, 5, 3)),
+        np.empty((rows, 5, 3)),
+        np.empty((rows, 5, 3)),
+        np.empty((rows, 5)),
+        np.empty((rows, 3)),
+        np.empty((rows, 5)),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows, np.bool_),
+        np.empty((rows, 5)),
+        np.empty((n_bodies, 3)),
+        np.empty((n_bodies, 3)),
+        np.empty((n_bodies, 3, 3)),
+        np.empty(n_bodies, np.int64),
+        np.empty(warm_rows, np.int64),
+        np.empty(warm_rows, np.bool_),
+    )
+
+
+@nb.njit(cache=True)
+def _contact_frames(buf, nc, pos, inv_mass, solver):
+    """Per contact k < nc: frame rows (n, t1, t2), lever arms, Jacobian rows (angular parts;
+    rows 3, 4 roll about t1, t2), responses I^-1 J^T and effective masses."""
+    pts, nrm, _, pair, _, _, _ = buf
+    idx, ra, rb, frame = solver[S_IDX], solver[S_RA], solver[S_RB], solver[S_FRAME]
+    ang_a, ang_b = solver[S_ANG_A], solver[S_ANG_B]
+    for k in range(nc):
+        c = idx[k]
+        a, b = pair[c, 0], pair[c, 1]
+        n0, n1, n2 = nrm[c, 0], nrm[c, 1], nrm[c, 2]
+        if abs(n0) < 0.57:
+            s0, s1, s2 = 0.0, -n2, n1
+        else:
+            s0, s1, s2 = -n1, n0, 0.0
+        inv = 1.0 / math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        s0, s1, s2 = s0 * inv, s1 * inv, s2 * inv
+        frame[k, 0, 0], frame[k, 0, 1], frame[k, 0, 2] = n0, n1, n2
+        frame[k, 1, 0], frame[k, 1, 1], frame[k, 1, 2] = s0, s1, s2
+        frame[k, 2, 0], frame[k, 2, 1], frame[k, 2, 2] = (
+            n1 * s2 - n2 * s1,
+            n2 * s0 - n0 * s2,
+            n0 * s1 - n1 * s0,
+        )
+        for x in range(3):
+            ra[k, x] = pts[c, x] - pos[a, x]
+            rb[k, x] = pts[c, x] - pos[b, x]
+        for j in range(3):  # contact rows: linear along the frame row, angular r x d
+            d0, d1, d2 = frame[k, j, 0], frame[k, j, 1], frame[k, j, 2]
+            ang_a[k, j, 0] = ra[k, 1] * d2 - ra[k, 2] * d1
+            ang_a[k, j, 1] = ra[k, 2] * d0 - ra[k, 0] * d2
+            ang_a[k, j, 2] = ra[k, 0] * d1 - ra[k, 1] * d0
+            ang_b[k, j, 0] = rb[k, 1] * d2 - rb[k, 2] * d1
+            ang_b[k, j, 1] = rb[k, 2] * d0 - rb[k, 0] * d2
+            ang_b[k, j, 2] = rb[k, 0] * d1 - rb[k, 1] * d0
+            _response(k, j, a, b, inv_mass[a] + inv_mass[b], solver)
+        for j in range(3, 5):  # rolling rows: angular only, about t1 and t2
+            for x in range(3):
+                ang_a[k, j, x] = ang_b[k, j, x] = frame[k, j - 2, x]
+            _response(k, j, a, b, 0.0, solver)
+
+
+@nb.njit(cache=True, inline="always")
+def _response(k, j, a, b, linear, solver):
+    """Responses I^-1 J^T (angular) of row j of contact k on a and b, and the row's effective
+    mass: 1 / (``linear`` (1/m_a + 1/m_b, or 0 for a rolling row) + the angular terms)."""
+    ang_a, ang_b, res_a, res_b, iw = (
+        solver[S_ANG_A],
+        solver[S_ANG_B],
+        solver[S_RES_A],
+        solver[S_RES_B],
+        solver[S_IW],
+    )
+    inverse = linear
+    for x in range(3):
+        res_a[k, j, x] = (
+            iw[a, x, 0] * ang_a[k, j, 0] + iw[a, x, 1] * ang_a[k, j, 1] + iw[a, x, 2] * ang_a[k, j, 2]
+        )
+        res_b[k, j, x] = (
+            iw[b, x, 0] * ang_b[k, j, 0] + iw[b, x, 1] * ang_b[k, j, 1] + iw[b, x, 2] * ang_b[k, j, 2]
+        )
+        inverse += ang_a[k, j, x] * res_a[k, j, x] + ang_b[k, j, x] * res_b[k, j, x]
+    solver[S_MASS][k, j] = 1.0 / inverse
+
+
+@nb.njit(cache=True, inline="always")
+def _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both):
+    """Relative velocity of contact k along Jacobian row j (a's part, and b's if ``both``)."""
+    u = 0.0
+    for x in range(3):
+        u += ang_a[k, j, x] * w[a, x]
+        if linear:
+            u += frame[k, j, x] * v[a, x]
+    if both:
+        for x in range(3):
+            u -= ang_b[k, j, x] * w[b, x]
+            if linear:
+                u -= frame[k, j, x] * v[b, x]
+    return u
+
+
+@nb.njit(cache=True, inline="always")
+def _row_apply(k, j, a, b, impulse, frame, res_a, res_b, ima, imb, v, w, linear):
+    """Apply ``impulse`` along row j of contact k to both bodies (b gets the reaction). A body
+    of inverse mass 0 (static or kinematic) keeps its velocity and is not written: contacts
+    of different bodies on the same wall then do not wait on each other's stores."""
+    if ima > 0.0:
+        for x in range(3):
+            w[a, x] += impulse * res_a[k, j, x]
+            if linear:
+                v[a, x] += impulse * ima * frame[k, j, x]
+    if imb > 0.0:
+        for x in range(3):
+            w[b, x] -= impulse * res_b[k, j, x]
+            if linear:
+                v[b, x] -= impulse * imb * frame[k, j, x]
+
+
+@nb.njit(cache=True, inline="always")
+def _disk(x1, x2, limit):
+    """(x1, x2) projected onto the disk of radius ``limit``."""
+    mag = math.sqrt(x1 * x1 + x2 * x2)
+    if mag > limit:
+        f = limit / mag
+        return x1 * f, x2 * f
+    return x1, x2
+
+
+@nb.njit(cache=True)
+def _select(gaps, count, slop, idx):
+    """Rows of the contacts touching (gap <= slop) into idx; returns how many."""
+    nc = 0
+    for c in range(count):
+        if gaps[c] <= slop:
+            idx[nc] = c
+            nc += 1
+    return nc
+
+
+@nb.njit(cache=True)
+def _targets(buf, nc, kind, body, prm, h, dt, gscale, solver):
+    """Per contact: friction and rolling coefficients, approach speed, and the velocity targets:
+    Newton restitution for an impact (approach faster than the bounce threshold), else resting:
+    penetration recovery at beta * depth / h (the outer step: a short sub-step dt after an
+    impact must not turn a small penetration into a launch), a touching gap closed within dt,
+    gravity's velocity increment over dt folded in. The bias adds a
+    fixed body b's (constant) velocity along each row to the target, so sweeps need not read it."""
+    _, _, gaps, pair, _, _, _ = buf
+    inv_mass, _, restitution, friction, rolling = body
+    idx, frame, ang_a, ang_b = solver[S_IDX], solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
+    target, bias, v, w = solver[S_TARGET], solver[S_BIAS], solver[S_V], solver[S_W]
+    slop, thr, beta = prm[P_SLOP], prm[P_BOUNCE], prm[P_BETA]
+    gx, gy, gz = prm[P_GX] * gscale * dt, prm[P_GY] * gscale * dt, prm[P_GZ] * gscale * dt
+    for k in range(nc):
+        c = idx[k]
+        a, b = pair[c, 0], pair[c, 1]
+        solver[S_MU][k] = math.sqrt(friction[a] * friction[b])
+        solver[S_ROLL][k] = max(rolling[a], rolling[b])
+        un = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, True)
+        solver[S_SPEED][k] = -un
+        solver[S_IMPACT][k] = -un > thr
+        target[k, 0] = target[k, 1] = target[k, 2] = 0.0
+        if solver[S_IMPACT][k]:
+            target[k, 0] = -math.sqrt(restitution[a] * restitution[b]) * un
+        else:
+            dyn = (1.0 if kind[a] == DYNAMIC else 0.0) - (1.0 if kind[b] == DYNAMIC else 0.0)
+            pen = max(-gaps[c] - slop, 0.0)
+            target[k, 0] = beta * pen / h - max(gaps[c], 0.0) / dt
+            for j in range(3):
+                target[k, j] -= dyn * (gx * frame[k, j, 0] + gy * frame[k, j, 1] + gz * frame[k, j, 2])
+        fixed = inv_mass[b] == 0.0
+        for j in range(5):
+            bias[k, j] = target[k, j] if j < 3 else 0.0
+            if fixed:  # b's own velocity along row j (its part of the row, taken as "a")
+                bias[k, j] += _row_velocity(k, j, b, b, frame, ang_b, ang_b, v, w, j < 3, False)
+
+
+@nb.njit(cache=True)
+def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
+    """Initial impulses r from the last solve's contacts with the same (a, b, features): its
+    force and rolling torque times dt, projected on the new frame and cones, and applied."""
+    _, _, _, pair, feat, _, _ = buf
+    keys, vals, size = warm
+    idx, frame, impact, r = solver[S_IDX], solver[S_FRAME], solver[S_IMPACT], solver[S_R]
+    head, nxt, used = solver[S_HEAD], solver[S_NEXT], solver[S_USED]
+    m = size[0]
+    for i in range(head.shape[0]):
+        head[i] = -1
+    for e in range(m - 1, -1, -1):  # lists keep the last solve's order
+        nxt[e] = head[keys[e, 0]]
+        head[keys[e, 0]] = e
+        used[e] = False
+    for k in range(nc):
+        for j in range(5):
+            r[k, j] = 0.0
+        if impact[k]:
+            continue
+        c = idx[k]
+        e = head[pair[c, 0]]
+        while e >= 0:
+            if (
+                not used[e]
+                and keys[e, 1] == pair[c, 1]
+                and keys[e, 2] == feat[c, 0]
+                and keys[e, 3] == feat[c, 1]
+            ):
+                break
+            e = nxt[e]
+        if e < 0:
+            continue
+        used[e] = True
+        for j in range(3):
+            r[k, j] = dt * (
+                vals[e, 0] * frame[k, j, 0] + vals[e, 1] * frame[k, j, 1] + vals[e, 2] * frame[k, j, 2]
+            )
+        for j in range(2):
+            r[k, 3 + j] = dt * (
+                vals[e, 3] * frame[k, 1 + j, 0]
+                + vals[e, 4] * frame[k, 1 + j, 1]
+                + vals[e, 5] * frame[k, 1 + j, 2]
+            )
+        r[k, 0] = max(r[k, 0], 0.0)
+        r[k, 1], r[k, 2] = _disk(r[k, 1], r[k, 2], solver[S_MU][k] * r[k, 0])
+        r[k, 3], r[k, 4] = _disk(r[k, 3], r[k, 4], solver[S_ROLL][k] * r[k, 0])
+    _apply_impulses(pair, nc, inv_mass, solver)
+
+
+@nb.njit(cache=True)
+def _apply_impulses(pair, nc, inv_mass, solver):
+    """Apply every contact's impulses r to its bodies' velocities."""
+    idx, frame, res_a, res_b, r = (
+        solver[S_IDX],
+        solver[S_FRAME],
+        solver[S_RES_A],
+        solver[S_RES_B],
+        solver[S_R],
+    )
+    v, w = solver[S_V], solver[S_W]
+    for k in range(nc):
+        a, b = pair[idx[k], 0], pair[idx[k], 1]
+        ima, imb = inv_mass[a], inv_mass[b]
+        for j in range(3):
+            if r[k, j] != 0.0:
+                _row_apply(k, j, a, b, r[k, j], frame, res_a, res_b, ima, imb, v, w, True)
+        for j in range(3, 5):
+            if r[k, j] != 0.0:
+                _row_apply(k, j, a, b, r[k, j], frame, res_a, res_b, ima, imb, v, w, False)
+
+
+@nb.njit(cache=True)
+def _sweeps(pair, nc, inv_mass, iters, tol, solver):
+    """Projected Gauss-Seidel sweeps (normal row, friction disk, rolling disk of each contact)
+    until no impulse changes by more than tol times the largest normal impulse; returns the
+    sweeps done (at most iters)."""
+    idx, mu, roll, r = solver[S_IDX], solver[S_MU], solver[S_ROLL], solver[S_R]
+    for sweep in range(iters):
+        change = 0.0
+        scale = 0.0
+        for k in range(nc):
+            c = idx[k]
+            change = max(change, _contact_update(k, pair[c, 0], pair[c, 1], inv_mass, mu[k], roll[k], solver))
+            scale = max(scale, abs(r[k, 0]))
+        if change <= tol * max(scale, 1e-30):
+            return sweep + 1
+    return iters
+
+
+@nb.njit(cache=True, inline="always")
+def _contact_update(k, a, b, inv_mass, mu, roll, solver):
+    """One Gauss-Seidel update of contact k: normal row, then the friction disk |r_T| <= mu r_N
+    and the rolling disk (rolling r_N); returns the largest change of r_N, r_T (N s)."""
+    frame, ang_a, ang_b = solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
+    res_a, res_b, mass, bias, r = (
+        solver[S_RES_A],
+        solver[S_RES_B],
+        solver[S_MASS],
+        solver[S_BIAS],
+        solver[S_R],
+    )
+    v, w = solver[S_V], solver[S_W]
+    ima, imb = inv_mass[a], inv_mass[b]
+    both = imb > 0.0  # else b's velocity is fixed, and in the bias
+    u = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, both)
+    rn = max(0.0, r[k, 0] + (bias[k, 0] - u) * mass[k, 0])
+    dn = rn - r[k, 0]
+    if dn != 0.0:
+        _row_apply(k, 0, a, b, dn, frame, res_a, res_b, ima, imb, v, w, True)
+        r[k, 0] = rn
+    biggest = abs(dn)
+    if mu > 0.0:
+        u1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True, both)
+        u2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True, both)
+        x1, x2 = _disk(
+            r[k, 1] + (bias[k, 1] - u1) * mass[k, 1], r[k, 2] + (bias[k, 2] - u2) * mass[k, 2], mu * rn
+        )
+        _row_apply(k, 1, a, b, x1 - r[k, 1], frame, res_a, res_b, ima, imb, v, w, True)
+        _row_apply(k, 2, a, b, x2 - r[k, 2], frame, res_a, res_b, ima, imb, v, w, True)
+        biggest = max(biggest, abs(x1 - r[k, 1]), abs(x2 - r[k, 2]))
+        r[k, 1], r[k, 2] = x1, x2
+    if roll > 0.0:
+        u3 = _row_velocity(k, 3, a, b, frame, ang_a, ang_b, v, w, False, both)
+        u4 = _row_velocity(k, 4, a, b, frame, ang_a, ang_b, v, w, False, both)
+        y1, y2 = _disk(
+            r[k, 3] + (bias[k, 3] - u3) * mass[k, 3], r[k, 4] + (bias[k, 4] - u4) * mass[k, 4], roll * rn
+        )
+        _row_apply(k, 3, a, b, y1 - r[k, 3], frame, res_a, res_b, ima, imb, v, w, False)
+        _row_apply(k, 4, a, b, y2 - r[k, 4], frame, res_a, res_b, ima, imb, v, w, False)
+        r[k, 3], r[k, 4] = y1, y2
+    return biggest
+
+
+@nb.njit(cache=True)
+def _keep_warm(buf, nc, dt, warm, solver):
+    """Store the solved contacts pushing (r_N > 0) as the next solve's warm start, as forces
+    r / dt, in detection order. Not after a solve with an impact: the impact's impulse spreads
+    through resting contacts, and over a short sub-step it would read as a huge force."""
+    _, _, _, pair, feat, _, _ = buf
+    keys, vals, size = warm
+    idx, frame, impact, r = solver[S_IDX], solver[S_FRAME], solver[S_IMPACT], solver[S_R]
+    m = 0
+    for k in range(nc):
+        if impact[k]:
+            size[0] = 0
+            return
+    for k in range(nc):
+        if r[k, 0] <= 0.0 or m >= keys.shape[0]:
+            continue
+        c = idx[k]
+        keys[m, 0], keys[m, 1], keys[m, 2], keys[m, 3] = pair[c, 0], pair[c, 1], feat[c, 0], feat[c, 1]
+        for x in range(3):
+            vals[m, x] = (r[k, 0] * frame[k, 0, x] + r[k, 1] * frame[k, 1, x] + r[k, 2] * frame[k, 2, x]) / dt
+            vals[m, 3 + x] = (r[k, 3] * frame[k, 1, x] + r[k, 4] * frame[k, 2, x]) / dt
+        m += 1
+    size[0] = m
+
+
+@nb.njit(cache=True)
+def _records(buf, nc, rot, time, step, rec, nrec, solver):
+    """Append a record row per contact pushing (or impacting) after the solve, in detection
+    order; returns the record count, -1 when rec is full."""
+    pts, _, _, pair, feat, bar, _ = buf
+    idx, ra, rb, frame, ang_a, ang_b = (
+        solver[S_IDX],
+        solver[S_RA],
+        solver[S_RB],
+        solver[S_FRAME],
+        solver[S_ANG_A],
+        solver[S_ANG_B],
+    )
+    target, speed0, impact, r, v, w = (
+        solver[S_TARGET],
+        solver[S_SPEED],
+        solver[S_IMPACT],
+        solver[S_R],
+        solver[S_V],
+        solver[S_W],
+    )
+    for k in range(nc):
+        if r[k, 0] <= 0.0 and not impact[k]:
+            continue
+        if nrec >= rec.shape[0]:
+            return -1
+        c = idx[k]
+        a, b = pair[c, 0], pair[c, 1]
+        # slip: tangential relative velocity with gravity's increment (target) removed
+        s1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True, True) - target[k, 1]
+        s2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True, True) - target[k, 2]
+        wn = 0.0
+        for x in range(3):
+            wn += (w[a, x] - w[b, x]) * frame[k, 0, x]
+        wt2 = 0.0
+        for x in range(3):
+            wt2 += (w[a, x] - w[b, x] - wn * frame[k, 0, x]) ** 2
+        rec[nrec, REC_TIME] = time
+        rec[nrec, REC_STEP] = step
+        rec[nrec, REC_A] = a
+        rec[nrec, REC_B] = b
+        for x in range(3):
+            rec[nrec, REC_POINT + x] = pts[c, x]
+            rec[nrec, REC_IMPULSE + x] = (
+                r[k, 0] * frame[k, 0, x] + r[k, 1] * frame[k, 1, x] + r[k, 2] * frame[k, 2, x]
+            )
+            rec[nrec, REC_BARY + x] = bar[c, x]
+            rec[nrec, REC_NORMAL + x] = frame[k, 0, x]
+            rec[nrec, REC_LOCAL_A + x] = (
+                rot[a, 0, x] * ra[k, 0] + rot[a, 1, x] * ra[k, 1] + rot[a, 2, x] * ra[k, 2]
+            )
+            rec[nrec, REC_LOCAL_B + x] = (
+                rot[b, 0, x] * rb[k, 0] + rot[b, 1, x] * rb[k, 1] + rot[b, 2, x] * rb[k, 2]
+            )
+        rec[nrec, REC_SPEED] = speed0[k]
+        rec[nrec, REC_SLIP] = math.sqrt(s1 * s1 + s2 * s2)
+        rec[nrec, REC_ROLL] = math.sqrt(wt2) * math.sqrt(ra[k, 0] ** 2 + ra[k, 1] ** 2 + ra[k, 2] ** 2)
+        rec[nrec, REC_IMPACT] = 1.0 if impact[k] else 0.0
+        rec[nrec, REC_FEAT_A] = feat[c, 0]
+        rec[nrec, REC_FEAT_B] = feat[c, 1]
+        nrec += 1
+    return nrec
+
+
+@nb.njit(cache=True, _nrt=False)
+def resolve(
+    buf,
+    count,
+    pos,
+    rot,
+    phi,
+    kind,
+    kin_v,
+    kin_w,
+    body,
+    prm,
+    h,
+    dt,
+    gscale,
+    time,
+    step,
+    rec,
+    nrec,
+    warm,
+    stats,
+    solver,
+):
+    """Impulse-level contact solve (module doc) of the contacts buf[:count] in the scratch
+    ``solver`` (new_solver, rows >= count), warm-started from ``warm`` (updated); updates phi;
+    appends records; adds the contacts and PGS sweeps to stats[2] and stats[4]. It allocates
+    nothing and is compiled without reference counting, with all it calls."""
+    nc = _select(buf[2], count, prm[P_SLOP], solver[S_IDX])
+    if nc == 0:
+        warm[2][0] = 0
+        return nrec
+    inv_mass, inv_inertia = body[0], body[1]
+    world_velocities(kind, rot, phi, kin_v, kin_w, solver[S_V], solver[S_W])
+    inv_inertia_world(kind, rot, inv_inertia, solver[S_IW])
+    _contact_frames(buf, nc, pos, inv_mass, solver)
+    _targets(buf, nc, kind, body, prm, h, dt, gscale, solver)
+    _warm_impulses(buf, nc, dt, warm, inv_mass, solver)
+    stats[2] += nc
+    stats[4] += _sweeps(buf[3], nc, inv_mass, int(prm[P_ITER]), prm[P_TOL], solver)
+    _keep_warm(buf, nc, dt, warm, solver)
+    store_twists(kind, rot, solver[S_V], solver[S_W], phi)
+    return _records(buf, nc, rot, time, step, rec, nrec, solver)
