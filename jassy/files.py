@@ -188,13 +188,9 @@ def write_signal(
             if len(names) != data.shape[0]:
                 raise RenderError(f"{path}: {len(names)} column names for {data.shape[0]} channels")
             header = ",".join(["frame", "time_s", *names])
-            np.savetxt(
-                tmp,
-                np.column_stack(cols),
-                delimiter=",",
-                header=header,
-                comments="",
-                fmt=["%d", "%.9f"] + ["%.9g"] * data.shape[0],
-            )
+            row = ",".join(["%d", "%.9f"] + ["%.9g"] * data.shape[0]) + "\n"
+            values = [v for line in zip(*(c.tolist() for c in cols), strict=True) for v in line]
+            # one % over all rows: what np.savetxt writes, without its per-row Python loop
+            Path(tmp).write_text(header + "\n" + (row * len(frames)) % tuple(values))
         else:
             raise RenderError(f"{path}: expected a .wav, .npz or .csv file name")

@@ -191,6 +191,12 @@ def test_box_resting_on_four_corners_carries_its_weight():
     assert np.max(np.abs(result.pos[:, 1, 2] - 0.02)) < 1e-3
     frames = haptic_frames(result, 1)
     assert len(frames) == 500 and np.allclose(frames[-1].force, [0, 0, mass * G], rtol=1e-6)
+    # about a point moving along x at 0.1 m/s on the ground: the box is in equilibrium, so its
+    # contact forces act as its weight below its centre, (0, 0, 0.02) - point, crossed with it
+    times, _, torque = contact_wrench(result, 1, lambda t: np.c_[0.1 * t, 0 * t, 0 * t])
+    late = times > 0.1
+    assert np.allclose(torque[late, 1], 0.1 * times[late] * mass * G, rtol=1e-5)
+    assert np.allclose(torque[late][:, [0, 2]], 0.0, atol=1e-6 * mass * G)
 
 
 def test_impact_location_on_a_mesh_is_the_hit_triangle():

@@ -12,11 +12,22 @@
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from jassy.events import ContactTrack, HapticFrame, Impact
 from jassy.modal_model import Location
 from physics.rigid import codes
+from physics.rigid.codes import (
+    REC_A,
+    REC_B,
+    REC_IMPACT,
+    REC_IMPULSE,
+    REC_NORMAL,
+    REC_ROLL,
+    REC_SLIP,
+    REC_STEP,
+)
 from physics.rigid.shapes import MESH
 from physics.rigid.world import RunResult
 
@@ -97,49 +108,72 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     ``with_locations=False`` leaves the tracks' locations empty (faster)."""
     h = result.world.params.h
     rec = result.records
-    rows = np.flatnonzero(rec[:, codes.REC_IMPACT] == 0)
-    if len(rows) == 0:
-        return []
     n_bodies = len(result.world.bodies)
-    cols = rec[
-        np.ix_(rows, [codes.REC_A, codes.REC_B, codes.REC_STEP, codes.REC_SLIP, codes.REC_ROLL])
-    ]  # record order
-    jn = np.maximum(_normal_impulse(rec)[rows], 0.0)
-    pair = cols[:, 0].astype(np.int64) * n_bodies + cols[:, 1].astype(np.int64)
-    # records are in step order: a stable sort by pair keeps each pair's steps in order
-    order = np.argsort(pair, kind="stable")
-    rows, pair, jn, cols = rows[order], pair[order], jn[order], cols[order]
-    step = cols[:, 2].astype(np.int64)
-    new_group = np.r_[True, (pair[1:] != pair[:-1]) | (step[1:] != step[:-1])]
-    first = np.flatnonzero(new_group)  # one group per (pair, step)
-    total = np.add.reduceat(jn, first)
-    count = np.diff(np.r_[first, len(rows)])
-    safe = np.where(total > 0, total, 1.0)
-
-    def weighted(values):
-        w_sum = np.add.reduceat(jn * values, first) / safe
-        plain = np.add.reduceat(values, first) / count
-        return np.where(total > 0, w_sum, plain)
-
-    slip, roll = weighted(cols[:, 3]), weighted(cols[:, 4])
-    gpair, gstep = pair[first], step[first]
+    gpair, gstep, total, slip, roll, strongest = _step_groups(rec, n_bodies)
     breaks = np.flatnonzero((gpair[1:] != gpair[:-1]) | (gstep[1:] != gstep[:-1] + 1)) + 1
-    starts, stops = np.r_[0, breaks], np.r_[breaks, len(first)]
-    if with_locations:  # the strongest contact of each group (the first of equals)
-        group = np.repeat(np.arange(len(first)), count)
-        strongest = np.lexsort((-jn, group))[first]
+    starts, stops = np.r_[0, breaks], np.r_[breaks, len(gpair)]
     tracks = []
     for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):
         if hi - lo < min_steps:
             continue
         locs = []
         if with_locations:
-            locs = [_locations(result, rec[rows[k] : rows[k] + 1], jn[k : k + 1]) for k in strongest[lo:hi]]
+            locs = [_locations(result, rec[k : k + 1], np.ones(1)) for k in strongest[lo:hi]]
         a, b = divmod(int(gpair[lo]), n_bodies)
         tracks.append(
             ContactTrack((a, b), gstep[lo:hi] * h, total[lo:hi] / h, slip[lo:hi], roll[lo:hi], locs)
         )
     return sorted(tracks, key=lambda t: t.times[0])
+
+
+@nb.njit(cache=True)
+def _step_groups(rec, n_bodies):
+    """The non-impact records grouped per (pair, step), ordered by pair then step: (pair key
+    a * n_bodies + b, step, normal impulse summed over the group (N s, each record's clamped
+    at >= 0), slip and rolling speed weighted by it (m/s; plain means where it sums to 0),
+    record row of the strongest contact (the first of equals)). One pass after a stable
+    sort by pair: the records are in step order."""
+    m = rec.shape[0]
+    key = np.empty(m, np.int64)
+    row = np.empty(m, np.int64)
+    n = 0
+    for i in range(m):
+        if rec[i, REC_IMPACT] == 0.0:
+            key[n] = int(rec[i, REC_A]) * n_bodies + int(rec[i, REC_B])
+            row[n] = i
+            n += 1
+    order = np.argsort(key[:n], kind="mergesort")
+    pair, step, strongest = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
+    sums = np.zeros((n, 6))  # impulse, impulse * slip, impulse * roll, slip, roll, records
+    best = np.empty(n)
+    g = -1
+    for j in order:
+        i = row[j]
+        s = int(rec[i, REC_STEP])
+        if g < 0 or key[j] != pair[g] or s != step[g]:
+            g += 1
+            pair[g], step[g], best[g] = key[j], s, -1.0
+        jn = 0.0
+        for x in range(3):
+            jn += rec[i, REC_IMPULSE + x] * rec[i, REC_NORMAL + x]
+        jn = max(jn, 0.0)
+        slip, roll = rec[i, REC_SLIP], rec[i, REC_ROLL]
+        sums[g, 0] += jn
+        sums[g, 1] += jn * slip
+        sums[g, 2] += jn * roll
+        sums[g, 3] += slip
+        sums[g, 4] += roll
+        sums[g, 5] += 1.0
+        if jn > best[g]:
+            best[g], strongest[g] = jn, i
+    g += 1
+    total, slip_mean, roll_mean = sums[:g, 0].copy(), np.empty(g), np.empty(g)
+    for k in range(g):
+        if total[k] > 0.0:
+            slip_mean[k], roll_mean[k] = sums[k, 1] / total[k], sums[k, 2] / total[k]
+        else:
+            slip_mean[k], roll_mean[k] = sums[k, 3] / sums[k, 5], sums[k, 4] / sums[k, 5]
+    return pair[:g].copy(), step[:g].copy(), total, slip_mean, roll_mean, strongest[:g].copy()
 
 
 def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -160,8 +194,11 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
         f = rec[rows, codes.REC_IMPULSE : codes.REC_IMPULSE + 3] * (sign / h)
         _add_rows(force, k, f)
         if point is not None:
-            times, which = np.unique(rec[rows, codes.REC_TIME], return_inverse=True)
-            r = rec[rows, codes.REC_POINT : codes.REC_POINT + 3] - np.asarray(point(times), float)[which]
+            # the point once per run of equal record times (records are in time order)
+            times = rec[rows, codes.REC_TIME]
+            run = np.r_[True, times[1:] != times[:-1]]
+            which = np.cumsum(run) - 1
+            r = rec[rows, codes.REC_POINT : codes.REC_POINT + 3] - np.asarray(point(times[run]), float)[which]
             lever = np.column_stack(
                 [
                     r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1],
