@@ -65,7 +65,7 @@ def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False
     return rows
 
 
-def _wok_rows(duration: float, repeats: int = 2) -> list[dict]:
+def _wok_rows(duration: float, repeats: int = 3) -> list[dict]:
     """The wok's physics alone and its full render (physics, events, sound, haptic and CSV
     files) at the CLI's default block (OFFLINE_BLOCK) and at 64 frames, the best of
     ``repeats`` runs, pinned to one core."""

@@ -17,16 +17,23 @@ import numpy as np
 
 from jassy.events import ContactTrack, HapticFrame, Impact
 from jassy.modal_model import Location
-from physics.rigid import codes
 from physics.rigid.codes import (
     REC_A,
     REC_B,
+    REC_BARY,
+    REC_FEAT_A,
+    REC_FEAT_B,
     REC_IMPACT,
     REC_IMPULSE,
+    REC_LOCAL_A,
+    REC_LOCAL_B,
     REC_NORMAL,
+    REC_POINT,
     REC_ROLL,
     REC_SLIP,
+    REC_SPEED,
     REC_STEP,
+    REC_TIME,
 )
 from physics.rigid.shapes import MESH
 from physics.rigid.world import RunResult
@@ -52,8 +59,8 @@ def location_on(result: RunResult, body: int, local: np.ndarray, feature: int, b
 def _normal_impulse(rows: np.ndarray) -> np.ndarray:
     return np.einsum(
         "ij,ij->i",
-        rows[:, codes.REC_IMPULSE : codes.REC_IMPULSE + 3],
-        rows[:, codes.REC_NORMAL : codes.REC_NORMAL + 3],
+        rows[:, REC_IMPULSE : REC_IMPULSE + 3],
+        rows[:, REC_NORMAL : REC_NORMAL + 3],
     )
 
 
@@ -70,32 +77,28 @@ def _groups(keys: np.ndarray) -> list[np.ndarray]:
 def _locations(result: RunResult, rows: np.ndarray, weights: np.ndarray) -> tuple[Location, Location]:
     k = int(np.argmax(weights))
     row = rows[k]
-    a, b = int(row[codes.REC_A]), int(row[codes.REC_B])
-    bary = row[codes.REC_BARY : codes.REC_BARY + 3]
-    loc_a = location_on(
-        result, a, row[codes.REC_LOCAL_A : codes.REC_LOCAL_A + 3], int(row[codes.REC_FEAT_A]), bary
-    )
-    loc_b = location_on(
-        result, b, row[codes.REC_LOCAL_B : codes.REC_LOCAL_B + 3], int(row[codes.REC_FEAT_B]), bary
-    )
+    a, b = int(row[REC_A]), int(row[REC_B])
+    bary = row[REC_BARY : REC_BARY + 3]
+    loc_a = location_on(result, a, row[REC_LOCAL_A : REC_LOCAL_A + 3], int(row[REC_FEAT_A]), bary)
+    loc_b = location_on(result, b, row[REC_LOCAL_B : REC_LOCAL_B + 3], int(row[REC_FEAT_B]), bary)
     return loc_a, loc_b
 
 
 def impacts(result: RunResult) -> list[Impact]:
     """Impact events in time order (see module doc)."""
     rec = result.records
-    rows = rec[rec[:, codes.REC_IMPACT] > 0]
+    rows = rec[rec[:, REC_IMPACT] > 0]
     out = []
-    for group in _groups(rows[:, [codes.REC_TIME, codes.REC_A, codes.REC_B]]):
+    for group in _groups(rows[:, [REC_TIME, REC_A, REC_B]]):
         g = rows[group]
         jn = _normal_impulse(g)
-        a, b = int(g[0, codes.REC_A]), int(g[0, codes.REC_B])
+        a, b = int(g[0, REC_A]), int(g[0, REC_B])
         out.append(
             Impact(
-                float(g[0, codes.REC_TIME]),
+                float(g[0, REC_TIME]),
                 (a, b),
                 float(jn.sum()),
-                float(g[:, codes.REC_SPEED].max()),
+                float(g[:, REC_SPEED].max()),
                 None,
                 _locations(result, g, jn),
             )
@@ -109,13 +112,16 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     h = result.world.params.h
     rec = result.records
     n_bodies = len(result.world.bodies)
-    gpair, gstep, total, slip, roll, strongest = _step_groups(rec, n_bodies)
+    rows = np.flatnonzero(rec[:, REC_IMPACT] == 0)
+    pair = rec[rows, REC_A].astype(np.int64) * n_bodies + rec[rows, REC_B].astype(np.int64)
+    # records are in step order: a stable sort by pair leaves each pair's records in step order
+    order = np.argsort(pair, kind="stable")
+    gpair, gstep, total, slip, roll, strongest = _step_groups(rec, rows[order], pair[order])
     breaks = np.flatnonzero((gpair[1:] != gpair[:-1]) | (gstep[1:] != gstep[:-1] + 1)) + 1
     starts, stops = np.r_[0, breaks], np.r_[breaks, len(gpair)]
+    long_enough = stops - starts >= min_steps
     tracks = []
-    for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):
-        if hi - lo < min_steps:
-            continue
+    for lo, hi in zip(starts[long_enough].tolist(), stops[long_enough].tolist(), strict=True):
         locs = []
         if with_locations:
             locs = [_locations(result, rec[k : k + 1], np.ones(1)) for k in strongest[lo:hi]]
@@ -127,32 +133,23 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
 
 
 @nb.njit(cache=True)
-def _step_groups(rec, n_bodies):
-    """The non-impact records grouped per (pair, step), ordered by pair then step: (pair key
-    a * n_bodies + b, step, normal impulse summed over the group (N s, each record's clamped
-    at >= 0), slip and rolling speed weighted by it (m/s; plain means where it sums to 0),
-    record row of the strongest contact (the first of equals)). One pass after a stable
-    sort by pair: the records are in step order."""
-    m = rec.shape[0]
-    key = np.empty(m, np.int64)
-    row = np.empty(m, np.int64)
-    n = 0
-    for i in range(m):
-        if rec[i, REC_IMPACT] == 0.0:
-            key[n] = int(rec[i, REC_A]) * n_bodies + int(rec[i, REC_B])
-            row[n] = i
-            n += 1
-    order = np.argsort(key[:n], kind="mergesort")
+def _step_groups(rec, rows, pair_of):
+    """The records ``rows`` (non-impact, ordered by pair then step; pair_of: their pair keys
+    a * bodies + b) grouped per (pair, step): (pair key, step, normal impulse summed over the
+    group (N s, each record's clamped at >= 0), slip and rolling speed weighted by it (m/s;
+    plain means where it sums to 0), record row of the strongest contact (the first of
+    equals)), in one pass."""
+    n = rows.shape[0]
     pair, step, strongest = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
     sums = np.zeros((n, 6))  # impulse, impulse * slip, impulse * roll, slip, roll, records
     best = np.empty(n)
     g = -1
-    for j in order:
-        i = row[j]
+    for j in range(n):
+        i = rows[j]
         s = int(rec[i, REC_STEP])
-        if g < 0 or key[j] != pair[g] or s != step[g]:
+        if g < 0 or pair_of[j] != pair[g] or s != step[g]:
             g += 1
-            pair[g], step[g], best[g] = key[j], s, -1.0
+            pair[g], step[g], best[g] = pair_of[j], s, -1.0
         jn = 0.0
         for x in range(3):
             jn += rec[i, REC_IMPULSE + x] * rec[i, REC_NORMAL + x]
@@ -186,34 +183,54 @@ def contact_wrench(result: RunResult, body: int, point=None) -> tuple[np.ndarray
     steps = np.arange(first, int(round(result.state.time / h)))
     force = np.zeros((steps.size, 3))
     torque = np.zeros((steps.size, 3))
-    for col, sign in ((codes.REC_A, 1.0), (codes.REC_B, -1.0)):
-        rows = np.flatnonzero(rec[:, col] == body)
-        if len(rows) == 0:
-            continue
-        k = rec[rows, codes.REC_STEP].astype(np.int64) - first
-        f = rec[rows, codes.REC_IMPULSE : codes.REC_IMPULSE + 3] * (sign / h)
-        _add_rows(force, k, f)
-        if point is not None:
-            # the point once per run of equal record times (records are in time order)
-            times = rec[rows, codes.REC_TIME]
-            run = np.r_[True, times[1:] != times[:-1]]
-            which = np.cumsum(run) - 1
-            r = rec[rows, codes.REC_POINT : codes.REC_POINT + 3] - np.asarray(point(times[run]), float)[which]
-            lever = np.column_stack(
-                [
-                    r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1],
-                    r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2],
-                    r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0],
-                ]
-            )
-            _add_rows(torque, k, lever)
+    rows, sign = _rows_on(rec, body)
+    centres, run = np.zeros((0, 3)), np.zeros(len(rows), np.int64)
+    if point is not None and len(rows):
+        # the point once per run of equal record times (records are in time order)
+        times = rec[rows, REC_TIME]
+        starts = np.r_[True, times[1:] != times[:-1]]
+        run = np.cumsum(starts) - 1
+        centres = np.asarray(point(times[starts]), float).reshape(-1, 3)
+    _wrench_sums(rec, rows, sign, first, h, centres, run, force, torque)
     return steps * h, force, torque
 
 
-def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
-    """out[rows[i]] += values[i] for every i (repeated rows add up), column by column."""
-    for x in range(out.shape[1]):
-        out[:, x] += np.bincount(rows, values[:, x], minlength=out.shape[0])
+@nb.njit(cache=True)
+def _rows_on(rec, body):
+    """Rows of the records on ``body`` and the sign of their impulse on it (+1 as body a, -1
+    as body b)."""
+    rows, sign = np.empty(rec.shape[0], np.int64), np.empty(rec.shape[0])
+    n = 0
+    for i in range(rec.shape[0]):
+        if rec[i, REC_A] == body or rec[i, REC_B] == body:
+            rows[n], sign[n] = i, 1.0 if rec[i, REC_A] == body else -1.0
+            n += 1
+    return rows[:n], sign[:n]
+
+
+@nb.njit(cache=True)
+def _wrench_sums(rec, rows, sign, first, h, centres, run, force, torque):
+    """Add each record's force (impulse / h, N) to force[step - first] and, when centres
+    holds the torque point of each run of record times (run[j]: row j's), its moment about
+    that point (N m) to torque."""
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        k = int(rec[i, REC_STEP]) - first
+        scale = sign[j] / h
+        f0 = rec[i, REC_IMPULSE] * scale
+        f1 = rec[i, REC_IMPULSE + 1] * scale
+        f2 = rec[i, REC_IMPULSE + 2] * scale
+        force[k, 0] += f0
+        force[k, 1] += f1
+        force[k, 2] += f2
+        if centres.shape[0]:
+            c = run[j]
+            r0 = rec[i, REC_POINT] - centres[c, 0]
+            r1 = rec[i, REC_POINT + 1] - centres[c, 1]
+            r2 = rec[i, REC_POINT + 2] - centres[c, 2]
+            torque[k, 0] += r1 * f2 - r2 * f1
+            torque[k, 1] += r2 * f0 - r0 * f2
+            torque[k, 2] += r0 * f1 - r1 * f0
 
 
 def haptic_frames(result: RunResult, body: int, point=None) -> list[HapticFrame]:
