@@ -407,25 +407,35 @@ def _contact_update(k, a, b, inv_mass, mu, roll, solver):
         r[k, 0] = rn
     biggest = abs(dn)
     if mu > 0.0:
-        u1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True, both)
-        u2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True, both)
-        x1, x2 = _disk(
-            r[k, 1] + (bias[k, 1] - u1) * mass[k, 1], r[k, 2] + (bias[k, 2] - u2) * mass[k, 2], mu * rn
-        )
-        _row_apply(k, 1, a, b, x1 - r[k, 1], frame, res_a, res_b, ima, imb, v, w, True)
-        _row_apply(k, 2, a, b, x2 - r[k, 2], frame, res_a, res_b, ima, imb, v, w, True)
-        biggest = max(biggest, abs(x1 - r[k, 1]), abs(x2 - r[k, 2]))
-        r[k, 1], r[k, 2] = x1, x2
+        biggest = max(biggest, _disk_update(k, 1, a, b, ima, imb, mu * rn, True, both, solver))
     if roll > 0.0:
-        u3 = _row_velocity(k, 3, a, b, frame, ang_a, ang_b, v, w, False, both)
-        u4 = _row_velocity(k, 4, a, b, frame, ang_a, ang_b, v, w, False, both)
-        y1, y2 = _disk(
-            r[k, 3] + (bias[k, 3] - u3) * mass[k, 3], r[k, 4] + (bias[k, 4] - u4) * mass[k, 4], roll * rn
-        )
-        _row_apply(k, 3, a, b, y1 - r[k, 3], frame, res_a, res_b, ima, imb, v, w, False)
-        _row_apply(k, 4, a, b, y2 - r[k, 4], frame, res_a, res_b, ima, imb, v, w, False)
-        r[k, 3], r[k, 4] = y1, y2
+        _disk_update(k, 3, a, b, ima, imb, roll * rn, False, both, solver)
     return biggest
+
+
+@nb.njit(cache=True, inline="always")
+def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
+    """Gauss-Seidel update of rows j, j + 1 of contact k (friction: linear; rolling: angular
+    only) projected onto the disk of radius ``limit``; returns the larger change."""
+    frame, ang_a, ang_b = solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
+    res_a, res_b, mass, bias, r = (
+        solver[S_RES_A],
+        solver[S_RES_B],
+        solver[S_MASS],
+        solver[S_BIAS],
+        solver[S_R],
+    )
+    v, w = solver[S_V], solver[S_W]
+    u1 = _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both)
+    u2 = _row_velocity(k, j + 1, a, b, frame, ang_a, ang_b, v, w, linear, both)
+    x1, x2 = _disk(
+        r[k, j] + (bias[k, j] - u1) * mass[k, j], r[k, j + 1] + (bias[k, j + 1] - u2) * mass[k, j + 1], limit
+    )
+    _row_apply(k, j, a, b, x1 - r[k, j], frame, res_a, res_b, ima, imb, v, w, linear)
+    _row_apply(k, j + 1, a, b, x2 - r[k, j + 1], frame, res_a, res_b, ima, imb, v, w, linear)
+    change = max(abs(x1 - r[k, j]), abs(x2 - r[k, j + 1]))
+    r[k, j], r[k, j + 1] = x1, x2
+    return change
 
 
 @nb.njit(cache=True)
