@@ -518,8 +518,8 @@ def run_steps(
                 _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
                 for p in range(pairs.shape[0]):
                     a, b = pairs[p, 0], pairs[p, 1]
-                    if touching[p] or gap0[p] >= slop + reach[p] or reach[p] < prm[P_BOUNCE] * dt:
-                        continue  # touching (the solve handles it), out of reach, or too slow to bounce
+                    if touching[p] or gap0[p] - reach[p] >= -slop or reach[p] < prm[P_BOUNCE] * dt:
+                        continue  # touching (the solve handles it), cannot close past -slop, or too slow
                     if _apart(a, b, new_pos, geo, slop):
                         continue
                     stats[5] += 1
