@@ -26,7 +26,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
@@ -368,8 +368,24 @@ class LiveEngine:
                 portaudio.release()  # leave this process as it was: the next engine may fork
 
     def _warm_engine(self) -> OfflineEngine:
-        """Compile and warm every kernel on a scratch run, then the engine for real."""
-        warm = OfflineEngine(self.graph, [], self.sample_rate, self.block)
+        """Compile and warm every kernel on a scratch run, then the engine for real.
+
+        The scratch run also applies one event of each (node, action) kind in the score,
+        inside its second block: the first use of an action (and of a block split by an
+        event) loads kernels, which takes milliseconds, more than a few-ms ring holds."""
+        kinds = {}
+        for event in self.score:
+            kinds.setdefault((event.node, event.action, event.ramp is None), event)
+        split = 1.5 * self.block / self.sample_rate
+        rehearsal = [replace(event, time=split) for event in kinds.values()]
+        warm = OfflineEngine(
+            self.graph,
+            rehearsal,
+            self.sample_rate,
+            self.block,
+            haptic_safety=self.safety,
+            offsets_ms=self.offsets_ms,
+        )
         scratch = np.zeros((len(self.graph.bus_rows), self.block))
         for _ in range(4):
             warm.produce(scratch, self.block)

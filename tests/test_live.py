@@ -153,6 +153,44 @@ def test_udp_haptic_frames_follow_the_rendered_force(jack):
         assert force[0] == pytest.approx(ref[t : t + 48].mean(), rel=1e-5, abs=1e-6)
 
 
+WARM_CHECK = """
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+from jassy.live import LiveEngine
+from jassy.patchfile import load_patch
+
+patch = load_patch("wall_tap")
+live = LiveEngine(patch.graph, patch.score, 48000, 64, 2.5, offsets_ms={"audio": 2.0, "haptic": 0.0})
+engine = live._warm_engine()
+loaded = []
+original = Dispatcher.add_overload
+
+
+def add_overload(self, cres):
+    loaded.append(self.py_func.__qualname__)
+    original(self, cres)
+
+
+Dispatcher.add_overload = add_overload
+buf = np.zeros((len(patch.graph.bus_rows), 64))
+for _ in range(int(patch.duration * 48000 / 64)):
+    engine.produce(buf, 64)
+print(loaded)
+"""
+
+
+def test_warm_up_loads_every_kernel_the_score_needs_before_the_stream_starts():
+    """A kernel first loaded inside the callback clock (here the impact pulse, the haptic
+    limiter and the offset delay, at the stimulus onset) stalls the producer for
+    milliseconds: an underrun exactly when the stimulus plays. Checked in a fresh process
+    (this one has every kernel loaded already)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]", run.stdout
+
+
 def test_missing_portaudio_is_a_clear_error(monkeypatch):
     import ctypes
 

@@ -453,7 +453,7 @@ def test_live_presentation_measures_the_offset_the_device_received(jack, tmp_pat
     rows = read_rows(tmp_path / "live.csv")
     assert result.completed and len(rows) == 2
     clean = [row for row in rows if int(row["underruns"]) == 0]  # a dropout may move what was heard
-    assert clean
+    assert clean  # each trial had three chances of a clean presentation
     for row in clean:
         expected = -96 if float(row["requested_ms"]) < 0 else 96
         assert int(row["measured_samples"]) == int(row["requested_samples"]) == expected
@@ -462,6 +462,26 @@ def test_live_presentation_measures_the_offset_the_device_received(jack, tmp_pat
     assert header["sessions"][0]["presentation"]["mode"] == "live"
     assert header["sessions"][0]["device_stats"]["callbacks"] > 0
     assert 0 < header["sessions"][0]["presentation"]["latency_s"] < 0.05
+
+
+def test_a_live_presentation_with_an_underrun_is_played_again(monkeypatch):
+    from jassy.study.runner import LivePresenter, Presented
+
+    underruns = iter([2, 1, 0, 5, 4, 3])
+    played = []
+
+    def play(self, offset_ms):
+        played.append(offset_ms)
+        return Presented(100, 4, 96, next(underruns))
+
+    monkeypatch.setattr(LivePresenter, "_play", play)
+    presenter = LivePresenter(design(), max_presentations=3)
+    assert presenter.present(2.0).underruns == 0  # the third, clean presentation is answered
+    assert presenter.present(-2.0).underruns == 3  # three dropouts: the last one is logged
+    assert played == [2.0] * 3 + [-2.0] * 3
+    assert presenter.close()["repeated_presentations"] == 4
+    with pytest.raises(JassyError, match="max_presentations"):
+        LivePresenter(design(), max_presentations=0)
 
 
 # --------------------------------------------------------------------------- keyboard

@@ -159,15 +159,30 @@ class OfflinePresenter:
 
 class LivePresenter:
     """``present="live"``: play each trial on the device through a LiveEngine (audio and
-    haptic channels in one stream) and measure the offset on what the device received."""
+    haptic channels in one stream) and measure the offset on what the device received.
+
+    A presentation with an underrun (silence inserted by the device callback) may have
+    moved what was heard, so it is played again, up to ``max_presentations`` times in all;
+    the row logs the underruns of the presentation the observer answered, the sidecar the
+    total and the number of repeats."""
 
     mode = "live"
 
-    def __init__(self, design: Design, device: str | int | None = None, ring_blocks: float = 2.5):
+    def __init__(
+        self,
+        design: Design,
+        device: str | int | None = None,
+        ring_blocks: float = 2.5,
+        max_presentations: int = 3,
+    ):
+        if max_presentations < 1:
+            raise JassyError(f"max_presentations: expected at least 1, got {max_presentations}")
         self.design, self.device, self.ring_blocks = design, device, ring_blocks
+        self.max_presentations = max_presentations
         self.latency: float | None = None
         self.callbacks = 0
         self.underruns = 0
+        self.repeats = 0
 
     def info(self) -> dict[str, Any]:
         return {
@@ -175,9 +190,19 @@ class LivePresenter:
             "device": self.device,
             "latency_s": self.latency,
             "ring_blocks": self.ring_blocks,
+            "max_presentations": self.max_presentations,
         }
 
     def present(self, offset_ms: float) -> Presented:
+        shown = self._play(offset_ms)
+        for _ in range(self.max_presentations - 1):
+            if shown.underruns == 0:
+                break
+            self.repeats += 1
+            shown = self._play(offset_ms)
+        return shown
+
+    def _play(self, offset_ms: float) -> Presented:
         from jassy.live import LiveEngine
 
         d = self.design
@@ -205,7 +230,12 @@ class LivePresenter:
         return Presented(a, h, m, stats.underrun_callbacks)
 
     def close(self) -> dict[str, Any]:
-        return {"callbacks": self.callbacks, "underrun_callbacks": self.underruns, "latency_s": self.latency}
+        return {
+            "callbacks": self.callbacks,
+            "underrun_callbacks": self.underruns,
+            "repeated_presentations": self.repeats,
+            "latency_s": self.latency,
+        }
 
 
 # --------------------------------------------------------------------------- results
