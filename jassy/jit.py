@@ -3,8 +3,28 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numba as nb
+import numpy as np
+
+#: Entry points found by :func:`specialise`, by (kernel, type key of the arguments).
+_ENTRY_POINTS: dict[tuple, Callable] = {}
+
+
+def _type_key(value: Any) -> Any:
+    """A key that determines numba's type of ``value`` (arrays, small ints, floats, bools and
+    tuples of them), or None for anything else."""
+    kind = type(value)
+    if kind is np.ndarray:
+        f = value.flags
+        return (value.dtype, value.ndim, f.c_contiguous, f.f_contiguous, f.writeable, f.aligned)
+    if kind is float or kind is bool or (kind is int and -(2**62) < value < 2**62):
+        return kind
+    if kind is tuple:
+        keys = tuple(_type_key(v) for v in value)
+        return None if None in keys else (tuple, keys)
+    return None
 
 
 def specialise(kernel: Callable, *example_args) -> Callable:
@@ -15,11 +35,19 @@ def specialise(kernel: Callable, *example_args) -> Callable:
     A ugen whose kernel arguments are arrays it allocated itself (C-contiguous float64,
     as every ``UGen.out`` is) can call the typed entry point directly. The caller must
     pass arguments of exactly those types. Falls back to the dispatcher if numba does
-    not expose the entry point.
+    not expose the entry point. Entry points are remembered by a cheap key of the argument
+    types (numba's own typing of a handful of arrays takes tens of microseconds).
     """
+    key = _type_key(example_args)
+    found = _ENTRY_POINTS.get((kernel, key)) if key is not None else None
+    if found is not None:
+        return found
     signature = tuple(nb.typeof(a) for a in example_args)
     try:
         kernel.compile(signature)
-        return kernel.overloads[signature].entry_point
+        entry = kernel.overloads[signature].entry_point
     except (AttributeError, KeyError, TypeError):
         return kernel
+    if key is not None:
+        _ENTRY_POINTS[(kernel, key)] = entry
+    return entry

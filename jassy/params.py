@@ -71,42 +71,47 @@ class ParamSpec:
 
     def coerce(self, value: Any, where: str) -> Any:
         """Return ``value`` converted to this kind, or raise PatchError naming ``where``."""
-        bad = PatchError(f"{where}: expected {self.expected()}, got {value!r}")
+        try:
+            converted = self._converted(value)
+        except (TypeError, ValueError):
+            raise PatchError(f"{where}: expected {self.expected()}, got {value!r}") from None
+        return value if converted is None else converted
+
+    def _converted(self, value: Any) -> Any:
+        """``value`` converted to this kind (None: location and model, checked by their
+        owners); ValueError if it is not acceptable."""
         if self.kind == "float":
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
-                raise bad
+                raise ValueError
             value = float(value)
             if not math.isfinite(value):
-                raise bad
+                raise ValueError
         elif self.kind == "int":
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                if isinstance(value, float) and value.is_integer():
-                    value = int(value)
-                else:
-                    raise bad
+            integral = isinstance(value, (int, np.integer)) or (
+                isinstance(value, float) and value.is_integer()
+            )
+            if isinstance(value, bool) or not integral:
+                raise ValueError
             value = int(value)
         elif self.kind == "bool":
             if not isinstance(value, (bool, np.bool_)):
-                raise bad
+                raise ValueError
             return bool(value)
         elif self.kind == "str":
             if not isinstance(value, str) or (self.choices and value not in self.choices):
-                raise bad
+                raise ValueError
             return value
         elif self.kind == "floats":
-            try:
-                arr = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise bad from None
+            arr = np.asarray(value, dtype=np.float64)
             if arr.ndim != 1 or not np.all(np.isfinite(arr)):
-                raise bad
+                raise ValueError
             return arr
         else:
-            return value  # location and model are checked by their owners
+            return None
         if self.low is not None and (value < self.low or (self.low_open and value == self.low)):
-            raise bad
+            raise ValueError
         if self.high is not None and value > self.high:
-            raise bad
+            raise ValueError
         return value
 
 

@@ -77,15 +77,18 @@ def fractal_profile(
             f"fractal_profile: no spatial frequency of the grid lies in [k_low, k_high] = [{lo:g}, {hi:g}] "
             f"cycles/m (the grid has {k[1]:g} .. {k[-1]:g})"
         )
-    rng = np.random.default_rng(seed)
-    coef = rng.standard_normal(k.size) + 1j * rng.standard_normal(k.size)
-    amp = np.zeros(k.size)
+    m = k.size
+    noise = np.random.default_rng(seed).standard_normal(2 * m)  # real parts, then imaginary parts
+    amp = np.zeros(m)
     amp[band] = k[band] ** (-0.5 * beta)
-    spectrum = coef * amp
+    noise[:m] *= amp
+    noise[m:] *= amp
+    spectrum = np.empty(m, np.complex128)
+    spectrum.real, spectrum.imag = noise[:m], noise[m:]
     if n % 2 == 0:
         spectrum[-1] = spectrum[-1].real * math.sqrt(2.0)  # the Nyquist bin is real (same variance)
     profile = fftw.irfft(spectrum, n=n)
-    scale = math.sqrt(float(np.mean(profile * profile)))
+    scale = math.sqrt(float(profile @ profile) / n)
     return profile * (rms / scale) if scale > 0 else profile
 
 

@@ -2,7 +2,7 @@
 
 - Impact: the records flagged as impacts at one time between one pair of bodies, merged:
   normal impulse summed (N s), approach speed the largest (m/s), location on each body the
-  one nearest the impulse-weighted contact point (see :func:`location_on`).
+  one nearest the impulse-weighted contact point (see :func:`locations_on`).
 - ContactTrack: sustained (non-impact) contact of a pair, per outer step: normal force =
   normal impulse / h (N), slip and rolling speed weighted by impulse (m/s), location of the
   strongest contact; runs of at least ``min_steps`` consecutive steps.
@@ -39,71 +39,110 @@ from physics.rigid.shapes import MESH
 from physics.rigid.world import RunResult
 
 
-def location_on(result: RunResult, body: int, local: np.ndarray, feature: int, bary: np.ndarray) -> Location:
-    """Location of a contact on ``body``'s ModalModel: the triangle's vertices with barycentric
-    weights on a mesh whose model rows are its vertices (``sound_points="vertices"``), else
-    the model row whose ``sound_points`` entry is nearest the contact point, else row 0."""
-    spec = result.world.bodies[body]
-    points = spec.sound_points
-    if isinstance(points, str) and points == "vertices" and spec.shape.kind == MESH and feature >= 0:
-        face = spec.shape.surface.faces[int(feature)]
-        return Location(tuple(int(v) for v in face), tuple(float(w) for w in bary))
-    if points is None or isinstance(points, str):
-        return Location((0,), (1.0,))
-    com, rotation = result.world.arrays()[5][body]
-    shape_point = rotation @ local + com
-    nearest = int(np.argmin(np.linalg.norm(np.asarray(points) - shape_point, axis=1)))
-    return Location((nearest,), (1.0,))
+def locations_on(
+    result: RunResult, bodies: np.ndarray, local: np.ndarray, feature: np.ndarray, bary: np.ndarray
+) -> list[Location]:
+    """Location of each contact k on body bodies[k]'s ModalModel: the triangle's vertices with
+    barycentric weights bary[k] on a mesh whose model rows are its vertices
+    (``sound_points="vertices"``), else the model row whose ``sound_points`` entry is nearest
+    the contact point local[k] (m, body frame), else row 0. Vectorised per body."""
+    bodies = np.asarray(bodies, np.int64)
+    out: list[Location | None] = [None] * len(bodies)
+    frames = result.world.arrays()[5]
+    for body in np.unique(bodies).tolist():
+        at = np.flatnonzero(bodies == body)
+        spec = result.world.bodies[body]
+        points = spec.sound_points
+        if isinstance(points, str) and points == "vertices" and spec.shape.kind == MESH:
+            on_face = feature[at] >= 0
+            faces = spec.shape.surface.faces[feature[at[on_face]]].tolist()
+            for k, face, weights in zip(at[on_face].tolist(), faces, bary[at[on_face]].tolist(), strict=True):
+                out[k] = Location(tuple(face), tuple(weights))
+            at = at[~on_face]
+            points = None
+        if points is None or isinstance(points, str):
+            for k in at.tolist():
+                out[k] = Location((0,), (1.0,))
+            continue
+        com, rotation = frames[body]
+        shape_points = local[at] @ rotation.T + com
+        candidates = np.asarray(points, float)
+        d2 = ((shape_points[:, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
+        for k, nearest in zip(at.tolist(), np.argmin(d2, axis=1).tolist(), strict=True):
+            out[k] = Location((nearest,), (1.0,))
+    return out
 
 
-def _normal_impulse(rows: np.ndarray) -> np.ndarray:
-    return np.einsum(
-        "ij,ij->i",
-        rows[:, REC_IMPULSE : REC_IMPULSE + 3],
-        rows[:, REC_NORMAL : REC_NORMAL + 3],
-    )
-
-
-def _groups(keys: np.ndarray) -> list[np.ndarray]:
-    """Row indices grouped by identical key rows (in order of first appearance)."""
-    if len(keys) == 0:
-        return []
-    _, inverse = np.unique(keys, axis=0, return_inverse=True)
-    order = np.argsort(inverse, kind="stable")
-    splits = np.flatnonzero(np.diff(inverse[order])) + 1
-    return np.split(order, splits)
-
-
-def _locations(result: RunResult, rows: np.ndarray, weights: np.ndarray) -> tuple[Location, Location]:
-    k = int(np.argmax(weights))
-    row = rows[k]
-    a, b = int(row[REC_A]), int(row[REC_B])
-    bary = row[REC_BARY : REC_BARY + 3]
-    loc_a = location_on(result, a, row[REC_LOCAL_A : REC_LOCAL_A + 3], int(row[REC_FEAT_A]), bary)
-    loc_b = location_on(result, b, row[REC_LOCAL_B : REC_LOCAL_B + 3], int(row[REC_FEAT_B]), bary)
-    return loc_a, loc_b
+def _contact_locations(result: RunResult, rows: np.ndarray) -> list[tuple[Location, Location]]:
+    """(location on body a, location on body b) of each record row."""
+    bary = rows[:, REC_BARY : REC_BARY + 3]
+    sides = [
+        locations_on(
+            result,
+            rows[:, col].astype(np.int64),
+            rows[:, local : local + 3],
+            rows[:, feat].astype(np.int64),
+            bary,
+        )
+        for col, local, feat in ((REC_A, REC_LOCAL_A, REC_FEAT_A), (REC_B, REC_LOCAL_B, REC_FEAT_B))
+    ]
+    return list(zip(*sides, strict=True))
 
 
 def impacts(result: RunResult) -> list[Impact]:
     """Impact events in time order (see module doc)."""
     rec = result.records
-    rows = rec[rec[:, REC_IMPACT] > 0]
-    out = []
-    for group in _groups(rows[:, [REC_TIME, REC_A, REC_B]]):
-        g = rows[group]
-        jn = _normal_impulse(g)
-        a, b = int(g[0, REC_A]), int(g[0, REC_B])
-        out.append(
-            Impact(
-                float(g[0, REC_TIME]),
-                (a, b),
-                float(jn.sum()),
-                float(g[:, REC_SPEED].max()),
-                None,
-                _locations(result, g, jn),
-            )
+    rows = np.flatnonzero(rec[:, REC_IMPACT] > 0)
+    if rows.size == 0:
+        return []
+    # groups of equal (time, a, b), in that order
+    order = rows[np.lexsort((rec[rows, REC_B], rec[rows, REC_A], rec[rows, REC_TIME]))]
+    first, impulse, speed, strongest = _impact_groups(rec, order)
+    heads = order[first]  # each group's first record row
+    locations = _contact_locations(result, rec[strongest])
+    return [
+        Impact(time, (int(a), int(b)), jn, vn, None, where)
+        for time, a, b, jn, vn, where in zip(
+            rec[heads, REC_TIME].tolist(),
+            rec[heads, REC_A].tolist(),
+            rec[heads, REC_B].tolist(),
+            impulse.tolist(),
+            speed.tolist(),
+            locations,
+            strict=True,
         )
-    return sorted(out, key=lambda e: e.time)
+    ]
+
+
+@nb.njit(cache=True)
+def _impact_groups(rec, order):
+    """The impact records ``order`` (sorted on time, a, b) grouped per (time, a, b), in one
+    pass: (position in ``order`` of each group's first row, normal impulse summed (N s),
+    approach speed the largest (m/s), record row of the largest normal impulse (the first
+    of equals))."""
+    n = order.shape[0]
+    first, strongest = np.empty(n, np.int64), np.empty(n, np.int64)
+    impulse, speed, best = np.zeros(n), np.empty(n), np.empty(n)
+    g = -1
+    for j in range(n):
+        i = order[j]
+        if (
+            g < 0
+            or rec[i, REC_TIME] != rec[order[j - 1], REC_TIME]
+            or rec[i, REC_A] != rec[order[j - 1], REC_A]
+            or rec[i, REC_B] != rec[order[j - 1], REC_B]
+        ):
+            g += 1
+            first[g], speed[g], best[g] = j, -np.inf, -np.inf
+        jn = 0.0
+        for x in range(3):
+            jn += rec[i, REC_IMPULSE + x] * rec[i, REC_NORMAL + x]
+        impulse[g] += jn
+        speed[g] = max(speed[g], rec[i, REC_SPEED])
+        if jn > best[g]:
+            best[g], strongest[g] = jn, i
+    g += 1
+    return first[:g].copy(), impulse[:g].copy(), speed[:g].copy(), strongest[:g].copy()
 
 
 def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool = True) -> list[ContactTrack]:
@@ -112,49 +151,63 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     h = result.world.params.h
     rec = result.records
     n_bodies = len(result.world.bodies)
-    rows = np.flatnonzero(rec[:, REC_IMPACT] == 0)
-    pair = rec[rows, REC_A].astype(np.int64) * n_bodies + rec[rows, REC_B].astype(np.int64)
+    rows, pair, step, jn, slip, roll = _sustained_columns(rec, n_bodies)
     # records are in step order: a stable sort by pair leaves each pair's records in step order
     order = np.argsort(pair, kind="stable")
-    gpair, gstep, total, slip, roll, strongest = _step_groups(rec, rows[order], pair[order])
+    gpair, gstep, total, slip, roll, strongest = _step_groups(order, rows, pair, step, jn, slip, roll)
     breaks = np.flatnonzero((gpair[1:] != gpair[:-1]) | (gstep[1:] != gstep[:-1] + 1)) + 1
     starts, stops = np.r_[0, breaks], np.r_[breaks, len(gpair)]
     long_enough = stops - starts >= min_steps
+    times, force = gstep * h, total / h
     tracks = []
     for lo, hi in zip(starts[long_enough].tolist(), stops[long_enough].tolist(), strict=True):
-        locs = []
-        if with_locations:
-            locs = [_locations(result, rec[k : k + 1], np.ones(1)) for k in strongest[lo:hi]]
+        locs = _contact_locations(result, rec[strongest[lo:hi]]) if with_locations else []
         a, b = divmod(int(gpair[lo]), n_bodies)
-        tracks.append(
-            ContactTrack((a, b), gstep[lo:hi] * h, total[lo:hi] / h, slip[lo:hi], roll[lo:hi], locs)
-        )
+        tracks.append(ContactTrack((a, b), times[lo:hi], force[lo:hi], slip[lo:hi], roll[lo:hi], locs))
     return sorted(tracks, key=lambda t: t.times[0])
 
 
 @nb.njit(cache=True)
-def _step_groups(rec, rows, pair_of):
-    """The records ``rows`` (non-impact, ordered by pair then step; pair_of: their pair keys
-    a * bodies + b) grouped per (pair, step): (pair key, step, normal impulse summed over the
-    group (N s, each record's clamped at >= 0), slip and rolling speed weighted by it (m/s;
-    plain means where it sums to 0), record row of the strongest contact (the first of
-    equals)), in one pass."""
-    n = rows.shape[0]
+def _sustained_columns(rec, n_bodies):
+    """The non-impact records in one pass over ``rec`` (memory order): (record row, pair key
+    a * n_bodies + b, step, normal impulse clamped at >= 0 (N s), slip speed, rolling speed
+    (m/s))."""
+    n = rec.shape[0]
+    rows, pair, step = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
+    jn, slip, roll = np.empty(n), np.empty(n), np.empty(n)
+    m = 0
+    for i in range(n):
+        if rec[i, REC_IMPACT] != 0:
+            continue
+        rows[m] = i
+        pair[m] = int(rec[i, REC_A]) * n_bodies + int(rec[i, REC_B])
+        step[m] = int(rec[i, REC_STEP])
+        normal = 0.0
+        for x in range(3):
+            normal += rec[i, REC_IMPULSE + x] * rec[i, REC_NORMAL + x]
+        jn[m] = max(normal, 0.0)
+        slip[m], roll[m] = rec[i, REC_SLIP], rec[i, REC_ROLL]
+        m += 1
+    return rows[:m], pair[:m], step[:m], jn[:m], slip[:m], roll[:m]
+
+
+@nb.njit(cache=True)
+def _step_groups(order, rows, pair_of, step_of, jn_of, slip_of, roll_of):
+    """The sustained records taken in ``order`` (by pair, then step) grouped per (pair, step):
+    (pair key, step, normal impulse summed over the group (N s), slip and rolling speed
+    weighted by it (m/s; plain means where it sums to 0), record row of the strongest
+    contact (the first of equals)), in one pass."""
+    n = order.shape[0]
     pair, step, strongest = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
     sums = np.zeros((n, 6))  # impulse, impulse * slip, impulse * roll, slip, roll, records
     best = np.empty(n)
     g = -1
     for j in range(n):
-        i = rows[j]
-        s = int(rec[i, REC_STEP])
-        if g < 0 or pair_of[j] != pair[g] or s != step[g]:
+        o = order[j]
+        if g < 0 or pair_of[o] != pair[g] or step_of[o] != step[g]:
             g += 1
-            pair[g], step[g], best[g] = pair_of[j], s, -1.0
-        jn = 0.0
-        for x in range(3):
-            jn += rec[i, REC_IMPULSE + x] * rec[i, REC_NORMAL + x]
-        jn = max(jn, 0.0)
-        slip, roll = rec[i, REC_SLIP], rec[i, REC_ROLL]
+            pair[g], step[g], best[g] = pair_of[o], step_of[o], -1.0
+        jn, slip, roll = jn_of[o], slip_of[o], roll_of[o]
         sums[g, 0] += jn
         sums[g, 1] += jn * slip
         sums[g, 2] += jn * roll
@@ -162,7 +215,7 @@ def _step_groups(rec, rows, pair_of):
         sums[g, 4] += roll
         sums[g, 5] += 1.0
         if jn > best[g]:
-            best[g], strongest[g] = jn, i
+            best[g], strongest[g] = jn, rows[o]
     g += 1
     total, slip_mean, roll_mean = sums[:g, 0].copy(), np.empty(g), np.empty(g)
     for k in range(g):
