@@ -36,7 +36,8 @@ def wok_surface() -> trimesh.Trimesh:
     bottom cap of an icosphere (even triangles, edges about 1.4 cm)."""
     sphere = trimesh.creation.icosphere(subdivisions=5, radius=WOK_CURVATURE)
     rim_z = -math.sqrt(WOK_CURVATURE**2 - WOK_RIM**2)
-    cap = sphere.submesh([np.flatnonzero(sphere.triangles_center[:, 2] < rim_z)], append=True)
+    centre_z = sphere.vertices[sphere.faces, 2].mean(axis=1)  # not triangles_center: no cache hashing
+    cap = sphere.submesh([np.flatnonzero(centre_z < rim_z)], append=True)
     cap.apply_translation([0.0, 0.0, WOK_CURVATURE])
     cap.invert()
     return cap
