@@ -385,18 +385,29 @@ def _sweeps(pair, nc, inv_mass, iters, tol, solver):
 
 
 @nb.njit(cache=True, inline="always")
-def _contact_update(k, a, b, inv_mass, mu, roll, solver):
-    """One Gauss-Seidel update of contact k: normal row, then the friction disk |r_T| <= mu r_N
-    and the rolling disk (rolling r_N); returns the largest change of r_N, r_T (N s)."""
-    frame, ang_a, ang_b = solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
-    res_a, res_b, mass, bias, r = (
+def _row_arrays(solver):
+    """The solver arrays a Gauss-Seidel row update reads and writes: contact frames, angular
+    Jacobian rows of a and b, their inverse-inertia responses, effective masses, targets,
+    impulses, and the body velocities being solved."""
+    return (
+        solver[S_FRAME],
+        solver[S_ANG_A],
+        solver[S_ANG_B],
         solver[S_RES_A],
         solver[S_RES_B],
         solver[S_MASS],
         solver[S_BIAS],
         solver[S_R],
+        solver[S_V],
+        solver[S_W],
     )
-    v, w = solver[S_V], solver[S_W]
+
+
+@nb.njit(cache=True, inline="always")
+def _contact_update(k, a, b, inv_mass, mu, roll, solver):
+    """One Gauss-Seidel update of contact k: normal row, then the friction disk |r_T| <= mu r_N
+    and the rolling disk (rolling r_N); returns the largest change of r_N, r_T (N s)."""
+    frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
     ima, imb = inv_mass[a], inv_mass[b]
     both = imb > 0.0  # else b's velocity is fixed, and in the bias
     u = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, both)
@@ -417,15 +428,7 @@ def _contact_update(k, a, b, inv_mass, mu, roll, solver):
 def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
     """Gauss-Seidel update of rows j, j + 1 of contact k (friction: linear; rolling: angular
     only) projected onto the disk of radius ``limit``; returns the larger change."""
-    frame, ang_a, ang_b = solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
-    res_a, res_b, mass, bias, r = (
-        solver[S_RES_A],
-        solver[S_RES_B],
-        solver[S_MASS],
-        solver[S_BIAS],
-        solver[S_R],
-    )
-    v, w = solver[S_V], solver[S_W]
+    frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
     u1 = _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both)
     u2 = _row_velocity(k, j + 1, a, b, frame, ang_a, ang_b, v, w, linear, both)
     x1, x2 = _disk(
