@@ -10,8 +10,8 @@ from jassy.errors import JassyError
 from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
-from physics.rigid.meshgrid import build_grid, grid_closest
-from physics.rigid.narrow import segment_params, sweep_and_prune
+from physics.rigid.meshgrid import build_grid, grid_closest, grid_within
+from physics.rigid.narrow import _mesh_closest, new_mesh_memory, segment_params, sweep_and_prune
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
@@ -267,6 +267,106 @@ def test_grid_closest_point_matches_brute_force():
         )
         assert np.sqrt(d2) == pytest.approx(d.min(), abs=1e-9)
         assert np.allclose(np.array([u, v, w]) @ grid.triangles[tri], q, atol=1e-9)
+
+
+def _bumpy_bowl():
+    """A sphere of radius 0.3 m with its vertices moved in and out by up to 3 %: the nearest
+    triangle of a point moving near it changes often, and not only to a neighbour."""
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
+    scale = 1.0 + 0.03 * np.random.default_rng(8).uniform(-1.0, 1.0, len(mesh.vertices))
+    return trimesh.Trimesh(mesh.vertices * scale[:, None], mesh.faces)
+
+
+def _distances(tris, p):
+    """Distance (m) from p to every triangle, by trimesh's vectorised routine."""
+    return np.linalg.norm(trimesh.triangles.closest_point(tris, np.tile(p, (len(tris), 1))) - p, axis=1)
+
+
+def test_grid_within_lists_every_triangle_within_the_radius_nearest_first():
+    mesh = _bumpy_bowl()
+    grid = build_grid(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    args = (
+        grid.triangles,
+        grid.spheres,
+        grid.origin,
+        grid.cell,
+        grid.dims,
+        grid.start,
+        grid.items,
+        (0, 0, 0),
+    )
+    out, dist = np.full((2, 64), -1, np.int64), np.zeros((2, 64))
+    rng = np.random.default_rng(9)
+    pts = rng.normal(size=(40, 3))
+    pts *= (rng.uniform(0.27, 0.33, 40) / np.linalg.norm(pts, axis=1))[:, None]
+    for p in pts:
+        d = _distances(grid.triangles, p)
+        ds = np.sort(d)  # a radius between two distances, beyond ten triangles (ties: a shared vertex)
+        count = 10 + np.flatnonzero(np.diff(ds[9:]) > 1e-6)[0]
+        radius = ds[count - 1 : count + 1].mean()
+        n = grid_within(*p, radius, *args, out, dist, 1)
+        assert n == count
+        assert set(out[1, :n]) == set(np.flatnonzero(d < radius))
+        assert np.allclose(dist[1, :n], d[out[1, :n]], atol=1e-12)
+        assert np.all(np.diff(dist[1, :n]) >= 0.0)
+        assert np.all(out[0] == -1)  # only the row asked for is written
+        assert (
+            grid_within(*p, radius, *args, out[:, : n - 1], dist[:, : n - 1], 1) == -1
+        )  # more than a row holds
+
+
+def test_remembered_mesh_queries_equal_a_search_of_every_triangle():
+    """A body point's memory of a mesh (bound on its distance where last searched; Verlet list of
+    the triangles that can be nearest) gives what a search of every triangle gives, along a path
+    of small steps (the list is reused) and jumps (it is rebuilt)."""
+    w = World(StepParams(h=1e-3))
+    w.add(Body("bowl", TriangleMesh(_bumpy_bowl()), Material("g", 1000, 0.5, 0), kind="static"))
+    w.add(Body("ball", Sphere(0.01), Material("b", 1000, 0.5, 0)))
+    geo = w.arrays()[0]
+    m, k = geo[10][0], geo[21][1]
+    tris = geo[12][geo[11][m] : geo[11][m + 1]]
+    near = new_mesh_memory(geo[21][-1])
+    reach = 0.02
+    rng = np.random.default_rng(10)
+    p = np.array([0.0, 0.0, -0.28])
+    reused = within = 0
+    for step in range(600):
+        p = p + (rng.normal(size=3) * (0.03 if step % 50 == 0 else 0.001))
+        p *= (0.3 + 0.03 * math.sin(step / 30)) / np.linalg.norm(p)  # in and out of reach
+        listed_before = near[4][k].copy()
+        tri, d2, u, v, w_ = _mesh_closest(k, m, *p, reach, geo, near)
+        d = _distances(tris, p)
+        if d.min() < reach - 1e-9:
+            within += 1
+            assert tri >= 0 and math.sqrt(d2) == pytest.approx(d.min(), abs=1e-12)
+            assert np.linalg.norm(np.array([u, v, w_]) @ tris[tri] - p) == pytest.approx(d.min(), abs=1e-12)
+        elif d.min() > reach + 1e-9:
+            assert tri == -1
+        reused += listed_before[4] == m + 1 and np.array_equal(near[4][k], listed_before)
+    assert 200 < within < 500 and reused > 200  # lists, searches and clearances were exercised
+
+
+def test_each_island_of_a_solve_converges_on_its_own():
+    """A column of four balls (many sweeps) and five lone boxes (few) resting on the ground,
+    from a cold start: after one step every body is at rest, to the solver's tolerance.
+    Contacts whose bodies have settled are skipped while the column is still sweeping;
+    skipping too much (or too early) would leave a body moving."""
+    h, r = 1e-3, 0.01
+    w = World(StepParams(h=h, tolerance=1e-9, iterations=500))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, 0.5), kind="static"))
+    for level in range(4):
+        w.add(
+            Body(f"ball{level}", Sphere(r), Material("b", 800 + 400 * level, 0, 0.5)),
+            Placement(position=(0, 0, (2 * level + 1) * r)),
+        )
+    for j in range(5):
+        w.add(
+            Body(f"box{j}", Box((r, r, r)), Material("b", 800 + 100 * j, 0, 0.5)),
+            Placement(position=(0.1 + 0.05 * j, 0, r)),
+        )
+    result = simulate(w, h, sample_every=1)
+    assert result.stats["sweeps"] > 20  # the column needs many
+    assert np.max(np.abs(result.phi[-1, 1:])) < 1e-6 * G * h
 
 
 def test_closest_segments_against_dense_sampling():

@@ -101,10 +101,10 @@ def new_warm_start(size):
 # I^-1 J^T (5 rows: n, t1, t2, then rolling about t1 and t2), effective masses 1 / (J M^-1 J^T),
 # targets (m/s: n, t1, t2) and the same with a fixed body b's velocity folded in (5 rows),
 # friction and rolling coefficients, approach speed (m/s), impact flag, impulses (N s; N m s).
-# Per body: world velocities v, w, inverse inertia, warm-start list head. Per warm-start entry:
-# list links, use marks.
+# Per body: world velocities v, w, inverse inertia, warm-start list head, the last sweep that
+# changed it. Per warm-start entry: list links, use marks.
 (S_IDX, S_RA, S_RB, S_FRAME, S_ANG_A, S_ANG_B, S_RES_A, S_RES_B, S_MASS, S_TARGET, S_BIAS) = range(11)
-(S_MU, S_ROLL, S_SPEED, S_IMPACT, S_R, S_V, S_W, S_IW, S_HEAD, S_NEXT, S_USED) = range(11, 22)
+(S_MU, S_ROLL, S_SPEED, S_IMPACT, S_R, S_V, S_W, S_IW, S_HEAD, S_NEXT, S_USED, S_SWEPT) = range(11, 23)
 
 
 @nb.njit(cache=True)
@@ -134,6 +134,7 @@ def new_solver(rows, n_bodies, warm_rows):
         np.empty(n_bodies, np.int64),
         np.empty(warm_rows, np.int64),
         np.empty(warm_rows, np.bool_),
+        np.empty(n_bodies, np.int64),
     )
 
 
@@ -369,17 +370,31 @@ def _apply_impulses(pair, nc, inv_mass, solver):
 @nb.njit(cache=True)
 def _sweeps(pair, nc, inv_mass, iters, tol, solver):
     """Projected Gauss-Seidel sweeps (normal row, friction disk, rolling disk of each contact)
-    until no impulse changes by more than tol times the largest normal impulse; returns the
-    sweeps done (at most iters)."""
-    idx, mu, roll, r = solver[S_IDX], solver[S_MU], solver[S_ROLL], solver[S_R]
+    until no impulse changes by more than tol times the largest normal impulse so far; returns
+    the sweeps done (at most iters). A contact is updated only while one of its bodies moves:
+    it is skipped when neither body got such a change since the contact's last update (then
+    its update would change nothing beyond tol). So a settled island (food on a fixed wok)
+    stops sweeping while a busier one goes on."""
+    idx, mu, roll, r, changed = solver[S_IDX], solver[S_MU], solver[S_ROLL], solver[S_R], solver[S_SWEPT]
+    for i in range(changed.size):
+        changed[i] = -1  # as if every body had just changed: the first sweep visits all
+    scale = 1e-30
+    for k in range(nc):
+        scale = max(scale, abs(r[k, 0]))
     for sweep in range(iters):
-        change = 0.0
-        scale = 0.0
+        settled = True
         for k in range(nc):
-            c = idx[k]
-            change = max(change, _contact_update(k, pair[c, 0], pair[c, 1], inv_mass, mu[k], roll[k], solver))
+            a, b = pair[idx[k], 0], pair[idx[k], 1]
+            if changed[a] < sweep - 1 and changed[b] < sweep - 1:
+                continue
+            change = _contact_update(k, a, b, inv_mass, mu[k], roll[k], solver)
             scale = max(scale, abs(r[k, 0]))
-        if change <= tol * max(scale, 1e-30):
+            if change > tol * scale:
+                settled = False
+                for body in (a, b):
+                    if inv_mass[body] > 0.0:  # a fixed body's velocity never changes
+                        changed[body] = sweep
+        if settled:
             return sweep + 1
     return iters
 

@@ -147,3 +147,51 @@ def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, ite
                         best_d2, best_d, best = d2, math.sqrt(d2), t - t0
                         bu, bv, bw = u, v, w
     return best, best_d2, bu, bv, bw
+
+
+@nb.njit(cache=True, inline="always")
+def grid_within(px, py, pz, radius, tri, spheres, origin, cell, dims, start, items, offsets, out, dist, row):
+    """The triangles of the surface within ``radius`` (m) of (px, py, pz), nearest first: their
+    indices (from the grid's first triangle, as grid_closest) into out[row] and distances (m)
+    into dist[row]; returns how many, or -1 when there are more than a row holds. Other
+    arguments as grid_closest."""
+    t0, s0, i0 = offsets[0], offsets[1], offsets[2]
+    n = 0
+    lo_i = max(0, int(math.floor((px - radius - origin[0]) / cell)))
+    hi_i = min(dims[0] - 1, int(math.floor((px + radius - origin[0]) / cell)))
+    lo_j = max(0, int(math.floor((py - radius - origin[1]) / cell)))
+    hi_j = min(dims[1] - 1, int(math.floor((py + radius - origin[1]) / cell)))
+    lo_k = max(0, int(math.floor((pz - radius - origin[2]) / cell)))
+    hi_k = min(dims[2] - 1, int(math.floor((pz + radius - origin[2]) / cell)))
+    for i in range(lo_i, hi_i + 1):
+        for j in range(lo_j, hi_j + 1):
+            for k in range(lo_k, hi_k + 1):
+                c = s0 + (i * dims[1] + j) * dims[2] + k
+                for s in range(start[c], start[c + 1]):
+                    t = t0 + items[i0 + s]
+                    dx = px - spheres[t, 0]
+                    dy = py - spheres[t, 1]
+                    dz = pz - spheres[t, 2]
+                    lim = radius + spheres[t, 3]
+                    if dx * dx + dy * dy + dz * dz > lim * lim:
+                        continue
+                    u, v, w = triangle_weights(px, py, pz, tri, t)
+                    qx, qy, qz = triangle_point(tri, t, u, v, w)
+                    d = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
+                    if d > radius:
+                        continue
+                    at = n  # insertion point, keeping out sorted by distance; skip repeats
+                    for e in range(n):
+                        if out[row, e] == t - t0:
+                            at = -1
+                            break
+                    if at < 0:
+                        continue
+                    if n == out.shape[1]:
+                        return -1
+                    while at > 0 and dist[row, at - 1] > d:
+                        out[row, at], dist[row, at] = out[row, at - 1], dist[row, at - 1]
+                        at -= 1
+                    out[row, at], dist[row, at] = t - t0, d
+                    n += 1
+    return n

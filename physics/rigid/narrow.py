@@ -27,7 +27,7 @@ import math
 import numba as nb
 import numpy as np
 
-from physics.rigid.meshgrid import grid_closest, triangle_point, triangle_weights
+from physics.rigid.meshgrid import grid_closest, grid_within, triangle_point, triangle_weights
 from physics.rigid.shapes import CAPSULE, MESH, PLANE, SPHERE
 
 # All kernels below use scalar arithmetic (3-vectors as float triples): no allocation per
@@ -292,6 +292,44 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
 
 
 FAR = 1.5  # a point with nothing within reach of a mesh searches this many times as far
+SKIN = 0.25  # a point's list of triangles holds those up to this many grid cells beyond its nearest
+LISTED = 32  # at most this many triangles in a point's list (more: no list, the grid is searched)
+
+
+@nb.njit(cache=True)
+def new_mesh_memory(n_points):
+    """What each body point remembers of the meshes it was near (_mesh_closest): the triangle
+    it was nearest, where it was last searched with a lower bound of its distance there, and
+    its list of the triangles that can be nearest around where the list was made."""
+    return (
+        np.zeros(n_points, np.int64),
+        np.zeros((n_points, 5)),
+        np.zeros((n_points, LISTED), np.int64),
+        np.zeros((n_points, LISTED)),
+        np.zeros((n_points, 5)),
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _closest_listed(k, n, lx, ly, lz, t0, tris, spheres, listed):
+    """Closest of the first n triangles of point k's list (mesh triangles from t0) to (lx, ly,
+    lz): (triangle of the mesh, squared distance, barycentric weights)."""
+    best = -1
+    best_d2 = best_d = math.inf
+    bu = bv = bw = 0.0
+    for e in range(n):
+        t = t0 + listed[k, e]
+        dx, dy, dz = lx - spheres[t, 0], ly - spheres[t, 1], lz - spheres[t, 2]
+        lim = best_d + spheres[t, 3]
+        if dx * dx + dy * dy + dz * dz > lim * lim:
+            continue  # the triangle's bounding sphere is beyond the best so far
+        u, v, w = triangle_weights(lx, ly, lz, tris, t)
+        qx, qy, qz = triangle_point(tris, t, u, v, w)
+        d2 = (lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2
+        if d2 < best_d2:
+            best_d2, best_d, best = d2, math.sqrt(d2), t - t0
+            bu, bv, bw = u, v, w
+    return best, best_d2, bu, bv, bw
 
 
 @nb.njit(cache=True, inline="always")
@@ -299,38 +337,63 @@ def _mesh_closest(k, m, lx, ly, lz, reach, geo, near):
     """Closest triangle of mesh m within ``reach`` (m) of body point k at (lx, ly, lz) in the
     mesh's frame: (triangle of the mesh or -1, squared distance, barycentric weights).
 
-    near = (hint, clear) remembers per body point the triangle it was last closest to, whose
-    distance bounds the search (resting points search a cell or two), and where it was last
-    searched (mesh frame) with a lower bound of its distance to the mesh there (m) and the
-    mesh + 1. The mesh is rigid, so a point that has since moved less than that bound minus
-    reach has nothing within reach: it is not searched. A point finding nothing within reach
-    searches FAR times as far, so that its bound lasts."""
-    hint, clear = near
+    ``near`` (new_mesh_memory) makes repeated queries of a point cheap; the mesh is rigid:
+
+    - where the point was last searched, with a lower bound of its distance to the mesh there:
+      a point that has since moved less than that bound minus reach has nothing within reach
+      and is not searched. A point finding nothing within reach searches FAR times as far (or
+      as far as the triangle it was last nearest), so that its bound lasts;
+    - a point found within reach lists the triangles within its distance d0 + s (s = SKIN
+      grid cells): while it stays within s / 2 of where the list was made, its nearest
+      triangle is on the list (any other is further than d0 + s / 2 from it, its old nearest
+      nearer), so only the list is searched (a Verlet list)."""
+    hint, clear, listed, listed_dist, anchor = near
     tri_off, tris, grid_f, grid_i, cell_off, starts, item_off, items = geo[11:13] + geo[14:20]
+    spheres = geo[20]
     t0, n_tris = tri_off[m], tri_off[m + 1] - tri_off[m]
     if clear[k, 4] == m + 1:
         moved = math.sqrt((lx - clear[k, 0]) ** 2 + (ly - clear[k, 1]) ** 2 + (lz - clear[k, 2]) ** 2)
         if clear[k, 3] - moved > reach + 1e-12:
             return -1, 0.0, 0.0, 0.0, 0.0
-    last = t0 + (hint[k] if hint[k] < n_tris else 0)
-    hu, hv, hw = triangle_weights(lx, ly, lz, tris, last)
-    qx, qy, qz = triangle_point(tris, last, hu, hv, hw)
-    bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
-    radius = min(FAR * reach, bound)
-    tri, d2, u, v, w = grid_closest(
-        lx,
-        ly,
-        lz,
-        radius,
-        tris,
-        geo[20],
-        (grid_f[m, 0], grid_f[m, 1], grid_f[m, 2]),
-        grid_f[m, 3],
-        (grid_i[m, 0], grid_i[m, 1], grid_i[m, 2]),
-        starts,
-        items,
-        (t0, cell_off[m], item_off[m]),
-    )
+    skin = SKIN * grid_f[m, 3]
+    dx, dy, dz = lx - anchor[k, 0], ly - anchor[k, 1], lz - anchor[k, 2]
+    if anchor[k, 4] == m + 1 and dx * dx + dy * dy + dz * dz < 0.25 * skin * skin:
+        tri, d2, u, v, w = _closest_listed(k, int(anchor[k, 3]), lx, ly, lz, t0, tris, spheres, listed)
+        radius = 0.0  # the lower bound if the list is empty (it is not: it holds the old nearest)
+    else:
+        origin = (grid_f[m, 0], grid_f[m, 1], grid_f[m, 2])
+        dims = (grid_i[m, 0], grid_i[m, 1], grid_i[m, 2])
+        offsets = (t0, cell_off[m], item_off[m])
+        last = t0 + (hint[k] if hint[k] < n_tris else 0)
+        hu, hv, hw = triangle_weights(lx, ly, lz, tris, last)
+        qx, qy, qz = triangle_point(tris, last, hu, hv, hw)
+        bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
+        radius = min(FAR * reach, bound)
+        tri, d2, u, v, w = grid_closest(
+            lx, ly, lz, radius, tris, spheres, origin, grid_f[m, 3], dims, starts, items, offsets
+        )
+        anchor[k, 4] = 0.0
+        if tri >= 0 and d2 < reach * reach:  # it will be asked again: list its candidates
+            within = (math.sqrt(d2) + skin) * (1.0 + 1e-9)
+            n = grid_within(
+                lx,
+                ly,
+                lz,
+                within,
+                tris,
+                spheres,
+                origin,
+                grid_f[m, 3],
+                dims,
+                starts,
+                items,
+                offsets,
+                listed,
+                listed_dist,
+                k,
+            )
+            if n > 0:
+                anchor[k, 0], anchor[k, 1], anchor[k, 2], anchor[k, 3], anchor[k, 4] = lx, ly, lz, n, m + 1
     clear[k, 0], clear[k, 1], clear[k, 2] = lx, ly, lz
     clear[k, 3] = math.sqrt(d2) if tri >= 0 else radius
     clear[k, 4] = m + 1

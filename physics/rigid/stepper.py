@@ -71,7 +71,7 @@ from physics.rigid.impulses import (
     world_velocities,
 )
 from physics.rigid.integrate import SEMI_IMPLICIT, advance_body_into, semi_implicit_into
-from physics.rigid.narrow import pair_contacts, sweep_and_prune
+from physics.rigid.narrow import new_mesh_memory, pair_contacts, sweep_and_prune
 from physics.rigid.shapes import PLANE
 from physics.rigid.spatial import cross, dot3, mtv, mv, quat_log, quat_mul, quat_to_mat
 
@@ -432,7 +432,7 @@ def run_steps(
     n = pos.shape[0]
     kin_v = np.zeros((n, 3))
     kin_w = np.zeros((n, 3))
-    near = (np.zeros(geo[21][-1], np.int64), np.zeros((geo[21][-1], 5)))
+    near = new_mesh_memory(geo[21][-1])
     buf = _new_buffers(MAX_CONTACTS, near)
     scratch = _new_buffers(256, near)
     gravity = np.array([prm[P_GX], prm[P_GY], prm[P_GZ]])
