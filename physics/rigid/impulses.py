@@ -8,7 +8,8 @@ gravity's velocity increment over the sub-step folded in); tangent rows projecte
 Coulomb disk |r_T| <= mu r_N; rolling-resistance rows (a torque impulse bounded by
 rolling * r_N, m). Resting contacts found in the previous solve (same bodies and features)
 start from its force times dt (warm start); sweeps stop when no impulse changes by more than
-``tolerance`` times the largest normal impulse. The solve allocates nothing: its scratch
+``tolerance`` times the largest normal impulse, and a contact whose bodies have settled is
+skipped meanwhile (_sweeps). The solve allocates nothing: its scratch
 (new_solver) lives for the whole run.
 """
 
