@@ -241,6 +241,11 @@ def test_second_mesh_carries_a_box_and_locates_its_contacts():
     assert np.all(np.abs(points[:, :2] - [0.3, 0.0]).max(axis=1) < 0.021)
 
 
+def _grid_args(grid):
+    """A lone grid's arrays in the argument order of grid_closest and grid_within."""
+    return grid.triangles, grid.spheres, grid.origin, grid.cell, grid.dims, grid.start, grid.items, (0, 0, 0)
+
+
 def test_grid_closest_point_matches_brute_force():
     """Against trimesh's vectorised point-triangle routine over every triangle."""
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
@@ -253,18 +258,7 @@ def test_grid_closest_point_matches_brute_force():
         cand = trimesh.triangles.closest_point(tris, np.tile(p, (len(tris), 1)))
         d = np.linalg.norm(cand - p, axis=1)
         q = cand[np.argmin(d)]
-        tri, d2, u, v, w = grid_closest(
-            *p,
-            0.2,
-            grid.triangles,
-            grid.spheres,
-            grid.origin,
-            grid.cell,
-            grid.dims,
-            grid.start,
-            grid.items,
-            (0, 0, 0),
-        )
+        tri, d2, u, v, w = grid_closest(*p, 0.2, *_grid_args(grid))
         assert np.sqrt(d2) == pytest.approx(d.min(), abs=1e-9)
         assert np.allclose(np.array([u, v, w]) @ grid.triangles[tri], q, atol=1e-9)
 
@@ -285,16 +279,7 @@ def _distances(tris, p):
 def test_grid_within_lists_every_triangle_within_the_radius_nearest_first():
     mesh = _bumpy_bowl()
     grid = build_grid(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    args = (
-        grid.triangles,
-        grid.spheres,
-        grid.origin,
-        grid.cell,
-        grid.dims,
-        grid.start,
-        grid.items,
-        (0, 0, 0),
-    )
+    args = _grid_args(grid)
     out, dist = np.full((2, 64), -1, np.int64), np.zeros((2, 64))
     rng = np.random.default_rng(9)
     pts = rng.normal(size=(40, 3))

@@ -111,6 +111,34 @@ def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = Non
 
 
 @nb.njit(cache=True, inline="always")
+def triangle_distance2(px, py, pz, tri, spheres, t, within):
+    """Squared distance (m^2) from (px, py, pz) to triangle tri[t] and the barycentric weights
+    of its nearest point, or (inf, 0, 0, 0) without computing it when the triangle's bounding
+    sphere spheres[t] is further than ``within`` (m)."""
+    dx, dy, dz = px - spheres[t, 0], py - spheres[t, 1], pz - spheres[t, 2]
+    lim = within + spheres[t, 3]
+    if dx * dx + dy * dy + dz * dz > lim * lim:
+        return math.inf, 0.0, 0.0, 0.0
+    u, v, w = triangle_weights(px, py, pz, tri, t)
+    qx, qy, qz = triangle_point(tri, t, u, v, w)
+    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2, u, v, w
+
+
+@nb.njit(cache=True, inline="always")
+def _cell_range(px, py, pz, radius, origin, cell, dims):
+    """Index ranges (lo_i, hi_i, lo_j, hi_j, lo_k, hi_k) of the cells that the box around the
+    ball of ``radius`` (m) about (px, py, pz) overlaps."""
+    return (
+        max(0, int(math.floor((px - radius - origin[0]) / cell))),
+        min(dims[0] - 1, int(math.floor((px + radius - origin[0]) / cell))),
+        max(0, int(math.floor((py - radius - origin[1]) / cell))),
+        min(dims[1] - 1, int(math.floor((py + radius - origin[1]) / cell))),
+        max(0, int(math.floor((pz - radius - origin[2]) / cell))),
+        min(dims[2] - 1, int(math.floor((pz + radius - origin[2]) / cell))),
+    )
+
+
+@nb.njit(cache=True, inline="always")
 def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items, offsets):
     """Closest point of the surface within ``reach`` (m) of (px, py, pz): (triangle index or -1,
     squared distance, barycentric weights u, v, w); no allocation. origin, dims: arrays or
@@ -122,27 +150,14 @@ def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, ite
     best_d2 = reach * reach
     best_d = math.sqrt(best_d2)
     bu = bv = bw = 0.0
-    lo_i = max(0, int(math.floor((px - reach - origin[0]) / cell)))
-    hi_i = min(dims[0] - 1, int(math.floor((px + reach - origin[0]) / cell)))
-    lo_j = max(0, int(math.floor((py - reach - origin[1]) / cell)))
-    hi_j = min(dims[1] - 1, int(math.floor((py + reach - origin[1]) / cell)))
-    lo_k = max(0, int(math.floor((pz - reach - origin[2]) / cell)))
-    hi_k = min(dims[2] - 1, int(math.floor((pz + reach - origin[2]) / cell)))
+    lo_i, hi_i, lo_j, hi_j, lo_k, hi_k = _cell_range(px, py, pz, reach, origin, cell, dims)
     for i in range(lo_i, hi_i + 1):
         for j in range(lo_j, hi_j + 1):
             for k in range(lo_k, hi_k + 1):
                 c = s0 + (i * dims[1] + j) * dims[2] + k
                 for s in range(start[c], start[c + 1]):
                     t = t0 + items[i0 + s]
-                    dx = px - spheres[t, 0]
-                    dy = py - spheres[t, 1]
-                    dz = pz - spheres[t, 2]
-                    lim = best_d + spheres[t, 3]
-                    if dx * dx + dy * dy + dz * dz > lim * lim:
-                        continue  # the triangle's bounding sphere is beyond the best so far
-                    u, v, w = triangle_weights(px, py, pz, tri, t)
-                    qx, qy, qz = triangle_point(tri, t, u, v, w)
-                    d2 = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+                    d2, u, v, w = triangle_distance2(px, py, pz, tri, spheres, t, best_d)
                     if d2 < best_d2:
                         best_d2, best_d, best = d2, math.sqrt(d2), t - t0
                         bu, bv, bw = u, v, w
@@ -157,29 +172,17 @@ def grid_within(px, py, pz, radius, tri, spheres, origin, cell, dims, start, ite
     arguments as grid_closest."""
     t0, s0, i0 = offsets[0], offsets[1], offsets[2]
     n = 0
-    lo_i = max(0, int(math.floor((px - radius - origin[0]) / cell)))
-    hi_i = min(dims[0] - 1, int(math.floor((px + radius - origin[0]) / cell)))
-    lo_j = max(0, int(math.floor((py - radius - origin[1]) / cell)))
-    hi_j = min(dims[1] - 1, int(math.floor((py + radius - origin[1]) / cell)))
-    lo_k = max(0, int(math.floor((pz - radius - origin[2]) / cell)))
-    hi_k = min(dims[2] - 1, int(math.floor((pz + radius - origin[2]) / cell)))
+    lo_i, hi_i, lo_j, hi_j, lo_k, hi_k = _cell_range(px, py, pz, radius, origin, cell, dims)
     for i in range(lo_i, hi_i + 1):
         for j in range(lo_j, hi_j + 1):
             for k in range(lo_k, hi_k + 1):
                 c = s0 + (i * dims[1] + j) * dims[2] + k
                 for s in range(start[c], start[c + 1]):
                     t = t0 + items[i0 + s]
-                    dx = px - spheres[t, 0]
-                    dy = py - spheres[t, 1]
-                    dz = pz - spheres[t, 2]
-                    lim = radius + spheres[t, 3]
-                    if dx * dx + dy * dy + dz * dz > lim * lim:
+                    d2 = triangle_distance2(px, py, pz, tri, spheres, t, radius)[0]
+                    if d2 > radius * radius:
                         continue
-                    u, v, w = triangle_weights(px, py, pz, tri, t)
-                    qx, qy, qz = triangle_point(tri, t, u, v, w)
-                    d = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
-                    if d > radius:
-                        continue
+                    d = math.sqrt(d2)
                     at = n  # insertion point, keeping out sorted by distance; skip repeats
                     for e in range(n):
                         if out[row, e] == t - t0:

@@ -27,7 +27,13 @@ import math
 import numba as nb
 import numpy as np
 
-from physics.rigid.meshgrid import grid_closest, grid_within, triangle_point, triangle_weights
+from physics.rigid.meshgrid import (
+    grid_closest,
+    grid_within,
+    triangle_distance2,
+    triangle_point,
+    triangle_weights,
+)
 from physics.rigid.shapes import CAPSULE, MESH, PLANE, SPHERE
 
 # All kernels below use scalar arithmetic (3-vectors as float triples): no allocation per
@@ -319,13 +325,7 @@ def _closest_listed(k, n, lx, ly, lz, t0, tris, spheres, listed):
     bu = bv = bw = 0.0
     for e in range(n):
         t = t0 + listed[k, e]
-        dx, dy, dz = lx - spheres[t, 0], ly - spheres[t, 1], lz - spheres[t, 2]
-        lim = best_d + spheres[t, 3]
-        if dx * dx + dy * dy + dz * dz > lim * lim:
-            continue  # the triangle's bounding sphere is beyond the best so far
-        u, v, w = triangle_weights(lx, ly, lz, tris, t)
-        qx, qy, qz = triangle_point(tris, t, u, v, w)
-        d2 = (lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2
+        d2, u, v, w = triangle_distance2(lx, ly, lz, tris, spheres, t, best_d)
         if d2 < best_d2:
             best_d2, best_d, best = d2, math.sqrt(d2), t - t0
             bu, bv, bw = u, v, w
