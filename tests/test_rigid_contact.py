@@ -199,6 +199,35 @@ def test_box_resting_on_four_corners_carries_its_weight():
     assert np.allclose(torque[late][:, [0, 2]], 0.0, atol=1e-6 * mass * G)
 
 
+@pytest.mark.parametrize(
+    "turn, shift",
+    [(0.0, 0.0), (0.2, 0.0), (0.0, 0.003), (0.05, 0.001)],
+    ids=["aligned", "turned", "shifted", "turned-and-shifted"],
+)
+def test_a_tower_of_cubes_stands(turn, shift):
+    """Four equal 2 cm cubes stacked, each turned by ``turn`` (rad) about the vertical and
+    shifted by ``shift`` (m) from the one below: aligned, their corners lie on the edges
+    below; turned, every corner overhangs, and only edges cross faces. The tower must stand
+    (static equilibrium: no level moves, the ground carries the whole weight)."""
+    w = World(StepParams(h=1e-3))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, 0.5), kind="static"))
+    half = 0.01
+    for level in range(4):
+        angle = turn * level
+        w.add(
+            Body(f"cube{level}", Box((half, half, half)), Material("b", 800, 0, 0.5)),
+            Placement(
+                position=(shift * level, 0, (2 * level + 1) * half),
+                quaternion=(math.cos(angle / 2), 0, 0, math.sin(angle / 2)),
+            ),
+        )
+    result = simulate(w, 1.0, sample_every=100)
+    assert np.max(np.abs(result.pos[:, 1:] - w.initial_state().pos[1:])) < 1e-5
+    times, force, _ = contact_wrench(result, 0)
+    weight = 4 * 800 * (2 * half) ** 3 * G
+    assert np.allclose(force[times > 0.5, 2], -weight, rtol=1e-4)
+
+
 def test_impact_location_on_a_mesh_is_the_hit_triangle():
     """A sphere dropped on a mesh floor whose model rows are its vertices strikes the triangle
     under it, with barycentric weights of the contact point."""

@@ -9,9 +9,11 @@ mesh). Methods:
 - sphere vs polytope (box, convex): inside by the face planes (deepest face), outside by the
   closest point on the hull triangles; a capsule is tested as its two end spheres and its
   middle sphere;
-- polytope vs polytope: each vertex of one against the other's face planes (vertex-face
-  contacts; edge-edge contacts are not generated), unless a face plane of one has the
-  other's bounding sphere beyond it;
+- polytope vs polytope: each against the other's reference face (the face plane, found by
+  separating axes over face normals, that the other's vertices reach least deep behind): its
+  vertices over that face, and the points where its hull edges cross the face's side planes
+  (a face-face manifold: a cube on a cube turned or aligned gets the corners of the overlap);
+  no contact if a face plane of one has the other beyond it (edge-edge axes are not tested);
 - anything vs plane: the sphere centres or vertices against the plane;
 - anything vs triangle mesh: the same points against the mesh's triangle grid, keeping the
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
@@ -230,22 +232,96 @@ def _plane_separates(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, flip):
-    """Vertices of polytope a against polytope b (normal from b to a; reversed if flip)."""
-    vstart, verts = geo[4], geo[5]
-    pstart, planes = geo[6], geo[7]
+def _reference_face(a, b, pos, rot, geo):
+    """Polytope b's face plane that polytope a's vertices reach least deep behind (separating
+    axes over b's face normals): (plane index, separation = the smallest signed distance of
+    a's vertices beyond it, m; above 0 the plane separates the two)."""
+    vstart, verts, pstart, planes = geo[4], geo[5], geo[6], geo[7]
+    best, face = -math.inf, pstart[b]
+    for j in range(pstart[b], pstart[b + 1]):
+        sep = math.inf
+        for v in range(vstart[a], vstart[a + 1]):
+            x, y, z = to_world(a, pos, rot, verts[v, 0], verts[v, 1], verts[v, 2])
+            lx, ly, lz = to_local(b, pos, rot, x, y, z)
+            sep = min(sep, planes[j, 0] * lx + planes[j, 1] * ly + planes[j, 2] * lz - planes[j, 3])
+        if sep > best:
+            best, face = sep, j
+    return face, best
+
+
+@nb.njit(cache=True, inline="always")
+def _beyond_sides(lx, ly, lz, b, face, pstart, planes):
+    """How far (m) the body-frame point is beyond the face planes of b other than ``face``."""
+    out = -math.inf
+    for k in range(pstart[b], pstart[b + 1]):
+        if k != face:
+            out = max(out, planes[k, 0] * lx + planes[k, 1] * ly + planes[k, 2] * lz - planes[k, 3])
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip):
+    """Append a's point (x, y, z) lying ``sd`` (m) beyond b's face of world normal n: the
+    contact at the middle of the overlap, normal from b to a (reversed if flip)."""
+    px, py, pz = x - 0.5 * sd * nx, y - 0.5 * sd * ny, z - 0.5 * sd * nz
+    if flip:
+        return _push(buf, count, b, a, px, py, pz, -nx, -ny, -nz, sd, fb, fa)
+    return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sd, fa, fb)
+
+
+@nb.njit(cache=True, inline="always")
+def _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, flip):
+    """Contacts of polytope a on polytope b's reference face (_reference_face; normal from b to
+    a, reversed if flip): a's vertices within margin of the face plane and over the face
+    (within margin of b's other face planes), and the points where a's hull edges cross b's
+    other face planes while within margin of the face plane (the corners of the overlap of
+    two faces, where no vertex of either lies over the other)."""
+    vstart, verts, pstart, planes, hstart, htris = geo[4], geo[5], geo[6], geo[7], geo[8], geo[9]
+    face, sep = _reference_face(a, b, pos, rot, geo)
+    if sep > margin:
+        return count
+    fnx, fny, fnz, fd = planes[face, 0], planes[face, 1], planes[face, 2], planes[face, 3]
+    nx, ny, nz = _rotate(b, rot, fnx, fny, fnz)
+    fb = face - pstart[b]
     for v in range(vstart[a], vstart[a + 1]):
         x, y, z = to_world(a, pos, rot, verts[v, 0], verts[v, 1], verts[v, 2])
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
-        best, face = _deepest_plane(lx, ly, lz, b, pstart, planes)
-        if best <= margin:
-            nx, ny, nz = _rotate(b, rot, planes[face, 0], planes[face, 1], planes[face, 2])
-            px, py, pz = x - 0.5 * best * nx, y - 0.5 * best * ny, z - 0.5 * best * nz
-            fa, fb = v - vstart[a], face - pstart[b]
-            if flip:
-                count = _push(buf, count, b, a, px, py, pz, -nx, -ny, -nz, best, fb, fa)
-            else:
-                count = _push(buf, count, a, b, px, py, pz, nx, ny, nz, best, fa, fb)
+        sd = fnx * lx + fny * ly + fnz * lz - fd
+        if sd <= margin and _beyond_sides(lx, ly, lz, b, face, pstart, planes) <= margin:
+            count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, v - vstart[a], fb, flip)
+    for t in range(hstart[a], hstart[a + 1]):
+        for e in range(3):
+            f = (e + 1) % 3
+            if (htris[t, e, 0], htris[t, e, 1], htris[t, e, 2]) >= (
+                htris[t, f, 0],
+                htris[t, f, 1],
+                htris[t, f, 2],
+            ):
+                continue  # each edge once (its two triangles run it in opposite directions)
+            x, y, z = to_world(a, pos, rot, htris[t, e, 0], htris[t, e, 1], htris[t, e, 2])
+            px, py, pz = to_local(b, pos, rot, x, y, z)
+            x, y, z = to_world(a, pos, rot, htris[t, f, 0], htris[t, f, 1], htris[t, f, 2])
+            qx, qy, qz = to_local(b, pos, rot, x, y, z)
+            lo, hi = 0.0, 1.0  # clip p + s (q - p) to b's side half-spaces and the face's margin
+            for k in range(pstart[b], pstart[b + 1]):
+                limit = margin if k == face else 0.0
+                d1 = planes[k, 0] * px + planes[k, 1] * py + planes[k, 2] * pz - planes[k, 3] - limit
+                d2 = planes[k, 0] * qx + planes[k, 1] * qy + planes[k, 2] * qz - planes[k, 3] - limit
+                if d1 > 0.0 and d2 > 0.0:
+                    lo, hi = 1.0, 0.0
+                    break
+                if d1 > 0.0:
+                    lo = max(lo, d1 / (d1 - d2))
+                elif d2 > 0.0:
+                    hi = min(hi, d1 / (d1 - d2))
+            for end, s in ((0, lo), (1, hi)):
+                if lo > hi or s <= 1e-9 or s >= 1.0 - 1e-9:
+                    continue  # nothing inside, or an end vertex (its contact is above)
+                lx, ly, lz = px + s * (qx - px), py + s * (qy - py), pz + s * (qz - pz)
+                sd = fnx * lx + fny * ly + fnz * lz - fd
+                x, y, z = to_world(b, pos, rot, lx, ly, lz)
+                fa = 1000 + 6 * (t - hstart[a]) + 2 * e + end
+                count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip)
     return count
 
 
@@ -424,8 +500,8 @@ def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
         return _spheres_polytope(a, b, pos, rot, geo, margin, buf, count)
     if _plane_separates(a, b, pos, rot, geo, margin) or _plane_separates(b, a, pos, rot, geo, margin):
         return count
-    count = _vertices_polytope(a, b, pos, rot, geo, margin, buf, count, False)
-    return _vertices_polytope(b, a, pos, rot, geo, margin, buf, count, True)
+    count = _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, False)
+    return _polytope_on_face(b, a, pos, rot, geo, margin, buf, count, True)
 
 
 @nb.njit(cache=True)
