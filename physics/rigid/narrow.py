@@ -239,11 +239,18 @@ def _reference_face(a, b, pos, rot, geo):
     vstart, verts, pstart, planes = geo[4], geo[5], geo[6], geo[7]
     best, face = -math.inf, pstart[b]
     for j in range(pstart[b], pstart[b + 1]):
+        # plane j in a's frame (one transform per plane, not per plane and vertex)
+        wx, wy, wz = _rotate(b, rot, planes[j, 0], planes[j, 1], planes[j, 2])
+        offset = (
+            planes[j, 3]
+            + wx * (pos[b, 0] - pos[a, 0])
+            + wy * (pos[b, 1] - pos[a, 1])
+            + wz * (pos[b, 2] - pos[a, 2])
+        )
+        nx, ny, nz = to_local(a, pos, rot, pos[a, 0] + wx, pos[a, 1] + wy, pos[a, 2] + wz)
         sep = math.inf
         for v in range(vstart[a], vstart[a + 1]):
-            x, y, z = to_world(a, pos, rot, verts[v, 0], verts[v, 1], verts[v, 2])
-            lx, ly, lz = to_local(b, pos, rot, x, y, z)
-            sep = min(sep, planes[j, 0] * lx + planes[j, 1] * ly + planes[j, 2] * lz - planes[j, 3])
+            sep = min(sep, nx * verts[v, 0] + ny * verts[v, 1] + nz * verts[v, 2] - offset)
         if sep > best:
             best, face = sep, j
     return face, best
