@@ -12,12 +12,15 @@ from jassy.errors import JassyError
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from jassy.files import check_output
     from jassy.study.design import load_design, parse_observer
     from jassy.study.observer import KeyboardResponder, SimulatedObserver, WindowResponder
-    from jassy.study.runner import read_rows, run_study
+    from jassy.study.runner import check_participant, read_rows, run_study
 
+    check_participant(args.participant)  # it becomes part of the file name
     design = load_design(args.design)
     output = Path(args.output or f"{Path(args.design).stem}_{args.participant}.csv")
+    check_output(output, "-o/--output", (".csv",))
     if args.restart and output.exists():
         raise JassyError(f"{output}: exists; --restart refuses to overwrite results, choose another -o")
     if args.responses == "simulated":
@@ -59,8 +62,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from jassy.study.analysis import analyze, format_report, plot_report
 
-    if args.bootstrap < 0:
-        raise JassyError(f"--bootstrap: expected an integer >= 0, got {args.bootstrap}")
+    if not 0 <= args.bootstrap <= 100_000:
+        raise JassyError(f"--bootstrap: expected an integer in [0, 100000], got {args.bootstrap}")
+    if args.plot:
+        from jassy.cli_checks import require_extra
+        from jassy.files import check_output
+
+        require_extra("matplotlib", "plot", "--plot")
+        check_output(args.plot, "--plot")
     report = analyze(args.results, args.function, args.bootstrap, args.seed, args.bootstrap_method, args.use)
     if args.plot:
         plot_report(report, args.plot)

@@ -47,7 +47,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -457,8 +456,10 @@ def load_design(path: str | Path) -> Design:
     p = Path(path)
     if not p.is_file():
         raise DesignError(f"{path}: no such design file")
+    from jassy.inputs import load_toml
+
     try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise DesignError(f"{path}: not valid TOML: {exc}") from None
+        data = load_toml(p, "design file")
+    except JassyError as exc:
+        raise DesignError(str(exc)) from None
     return parse_design(data, str(path), p.resolve().parent)

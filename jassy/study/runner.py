@@ -26,6 +26,7 @@ import io
 import json
 import os
 import platform
+import re
 import time
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -272,8 +273,15 @@ def software_versions() -> dict[str, str]:
 def read_rows(path: str | os.PathLike, repair: bool = False) -> list[dict[str, str]]:
     """Rows of a results CSV. A last line without its newline (a write cut short) is
     ignored, and removed from the file if ``repair``."""
+    from jassy.errors import JassyError
+    from jassy.inputs import decode, read_bytes
+
     p = Path(path)
-    data = p.read_bytes()
+    try:
+        data = read_bytes(p, "results file")
+        decode(data, str(p))  # the whole file is UTF-8, so is any prefix cut at a newline
+    except JassyError as exc:
+        raise ResultsError(str(exc)) from None
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
         data = data[:cut]
@@ -293,8 +301,8 @@ def read_header(path: str | os.PathLike) -> dict[str, Any]:
     if not side.is_file():
         return {}
     try:
-        return json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
+        return json.loads(side.read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise ResultsError(f"{side}: damaged JSON header: {exc}") from None
 
 
@@ -310,14 +318,26 @@ class SessionResult:
     staircases: dict[str, Any] = field(default_factory=dict)
 
 
+#: A participant id: letters, digits, '_', '.', '-' (not first), at most 64 characters. It
+#: becomes part of file names, so it can hold no path separator and cannot be "." or "..".
+PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
+
+
+def check_participant(participant: str) -> str:
+    """``participant`` if it is a safe id (see PARTICIPANT_ID), else a JassyError."""
+    if not isinstance(participant, str) or not PARTICIPANT_ID.match(participant):
+        raise JassyError(
+            "participant: expected an id of letters, digits, '_', '.' or '-' (at most 64, not starting "
+            f"with '.' or '-'), got {participant!r}"
+        )
+    return participant
+
+
 class Session:
     """One participant's run of a design into one results file (resumable)."""
 
     def __init__(self, design: Design, results: str | os.PathLike, participant: str, responder, presenter):
-        if not participant or any(c in participant for c in ',\n\r"'):
-            raise JassyError(
-                f"participant: expected a non-empty id without commas or quotes, got {participant!r}"
-            )
+        check_participant(participant)
         self.design, self.results = design, Path(results)
         if self.results.suffix != ".csv":
             raise JassyError(f"{results}: results file name must end in .csv")
