@@ -245,7 +245,9 @@ class LiveEngine:
         """Start the producer (warm-up, prefill, open and start the stream) and wait
         until the device is running."""
         from jassy import portaudio
+        from jassy.devices import find_device
 
+        self._device_index = None if self.device is None else find_device(self.device)
         use_process = self.isolation == "process" or (
             self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
         )
@@ -340,7 +342,7 @@ class LiveEngine:
             while self._fill_once(engine, buf, out, udp):
                 pass
             stream = portaudio.OutputStream(
-                portaudio.find_device(self.device),
+                portaudio.default_output_device() if self._device_index is None else self._device_index,
                 self.channels,
                 self.sample_rate,
                 self.block,

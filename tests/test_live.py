@@ -3,7 +3,6 @@
 Skipped, with the reason, where jackd or libportaudio2 is missing.
 """
 
-import os
 import time
 
 import numpy as np
@@ -17,21 +16,6 @@ from jassy.portaudio import LiveError
 from ugens import Gain, ImpactForce, ModalBank
 
 FS = 48000
-
-
-@pytest.fixture(scope="module")
-def jack():
-    import ctypes.util
-
-    from jassy.jackserver import dummy_jack
-
-    if ctypes.util.find_library("portaudio") is None:
-        pytest.skip("libportaudio2 is not installed (apt-get install libportaudio2)")
-    try:
-        with dummy_jack(f"jassy-test-{os.getpid()}", FS, 64, channels=4) as name:
-            yield name
-    except LiveError as exc:
-        pytest.skip(f"no JACK dummy server: {exc}")
 
 
 def tap_graph():
