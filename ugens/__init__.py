@@ -6,6 +6,7 @@ from ugens.drill import DrillSource
 from ugens.dynamics import Limiter
 from ugens.engine import Engine
 from ugens.envelope import Envelope
+from ugens.explosion import Explosion
 from ugens.filters import Biquad, OnePole
 from ugens.friction import Friction
 from ugens.impact import ImpactForce
@@ -18,6 +19,7 @@ from ugens.oscillators import Sine
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
 from ugens.stochastic import Bounce, Break, Crumple
+from ugens.wind import CavityTone, KarmanWhistle, Wind
 
 __all__ = [
     "Biquad",
@@ -25,17 +27,20 @@ __all__ = [
     "Break",
     "Bubble",
     "BubbleStream",
+    "CavityTone",
     "Crumple",
     "Delay",
     "DrillSource",
     "Engine",
     "Envelope",
+    "Explosion",
     "FractalNoise",
     "Friction",
     "Gain",
     "HuntCrossleyImpact",
     "ImpactForce",
     "ImpactTrain",
+    "KarmanWhistle",
     "Limiter",
     "Mixer",
     "ModalBank",
@@ -47,4 +52,5 @@ __all__ = [
     "Scrape",
     "Sine",
     "WhiteNoise",
+    "Wind",
 ]
