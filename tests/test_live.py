@@ -140,7 +140,9 @@ def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack):
     assert 0.4 * FS / 48 < len(body) <= stats.frames_played / 48
     # the device time of a frame is when its first sample plays: frames 1 ms apart on it
     device = np.array([f.device_time for f in body])
-    np.testing.assert_allclose(np.diff(device), 1e-3, atol=2e-5)
+    # (a smoothed estimate: the callbacks' own DAC times jitter by a fraction of a block)
+    np.testing.assert_allclose(np.diff(device), 1e-3, atol=1e-4)
+    assert (device[-1] - device[0]) / (device.size - 1) == pytest.approx(1e-3, rel=0.01)
     # each frame's force is the mean of what the device played over its 48 samples
     played = heard[1]
     for f in body[: played.size // 48]:
