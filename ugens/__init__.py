@@ -1,6 +1,7 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
 from ugens.bubbles import Bubble, BubbleStream
+from ugens.dcmotor import DCMotor
 from ugens.delay import Delay
 from ugens.drill import DrillSource
 from ugens.dynamics import Limiter
@@ -29,6 +30,7 @@ __all__ = [
     "BubbleStream",
     "CavityTone",
     "Crumple",
+    "DCMotor",
     "Delay",
     "DrillSource",
     "Engine",
