@@ -17,6 +17,7 @@ from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
+from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
 from ugens.stochastic import Bounce, Break, Crumple
@@ -50,6 +51,7 @@ __all__ = [
     "OnePole",
     "RathRoll",
     "ResonantScrape",
+    "Reverb",
     "Roll",
     "Scrape",
     "Sine",
