@@ -103,6 +103,8 @@ def library() -> ctypes.CDLL:
     lib.Pa_GetDeviceInfo.restype = ctypes.POINTER(DeviceInfo)
     lib.Pa_GetStreamInfo.restype = ctypes.POINTER(StreamInfo)
     lib.Pa_GetStreamInfo.argtypes = [ctypes.c_void_p]
+    lib.Pa_GetStreamTime.restype = ctypes.c_double
+    lib.Pa_GetStreamTime.argtypes = [ctypes.c_void_p]
     lib.Pa_OpenStream.argtypes = [
         ctypes.POINTER(ctypes.c_void_p),
         ctypes.POINTER(StreamParameters),
@@ -192,6 +194,19 @@ class OutputStream:
     def output_latency(self) -> float:
         """Device output latency reported by PortAudio (s)."""
         return float(self._lib.Pa_GetStreamInfo(self._stream).contents.output_latency)
+
+    def clock_offset(self, tries: int = 5) -> float:
+        """Local monotonic time minus the stream clock (s), the clock of the callback's
+        ``outputBufferDacTime``: from the tightest of a few paired readings."""
+        import time
+
+        best = (float("inf"), 0.0)
+        for _ in range(tries):
+            before = time.monotonic()
+            stream_time = self._lib.Pa_GetStreamTime(self._stream)
+            after = time.monotonic()
+            best = min(best, (after - before, (before + after) / 2 - stream_time))
+        return best[1]
 
     def start(self) -> None:
         check(self._lib, self._lib.Pa_StartStream(self._stream), "start the stream")
