@@ -1,6 +1,7 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
 from ugens.bubbles import Bubble, BubbleStream
+from ugens.dcmotor import DCMotor
 from ugens.delay import Delay
 from ugens.drill import DrillSource
 from ugens.dynamics import Limiter
@@ -16,6 +17,7 @@ from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
+from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
 from ugens.stochastic import Bounce, Break, Crumple
@@ -29,6 +31,7 @@ __all__ = [
     "BubbleStream",
     "CavityTone",
     "Crumple",
+    "DCMotor",
     "Delay",
     "DrillSource",
     "Engine",
@@ -48,6 +51,7 @@ __all__ = [
     "OnePole",
     "RathRoll",
     "ResonantScrape",
+    "Reverb",
     "Roll",
     "Scrape",
     "Sine",
