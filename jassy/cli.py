@@ -166,16 +166,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_devices(args: argparse.Namespace) -> int:
-    from jassy import portaudio
+    from jassy.devices import describe, list_devices
 
-    found = portaudio.devices()
-    portaudio.release()  # a later live engine in this process may then fork its producer
-    for d in found:
-        mark = "*" if d["default"] else " "
-        print(
-            f"{mark}{d['index']:>3}  {d['name']} ({d['host_api']}): {d['max_output_channels']} out, "
-            f"{d['default_sample_rate']:g} Hz, low latency {d['default_low_output_latency'] * 1e3:.1f} ms"
-        )
+    print(describe(list_devices()))
     return 0
 
 
