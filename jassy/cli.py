@@ -118,7 +118,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     patch = load_patch(args.patch, args.set or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
-    duration = args.duration or patch.duration
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    duration = args.duration or None  # none or 0: until stopped
     safety, offsets = _haptic_options(args)
     engine = LiveEngine(
         patch.graph,
@@ -133,21 +135,21 @@ def _cmd_play(args: argparse.Namespace) -> int:
         offsets_ms=offsets,
     )
     engine.start()
-    print(
-        f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
-        f"{engine.stats().latency * 1e3:.2f} ms; Ctrl-C stops",
-        flush=True,
-    )
     try:
+        print(
+            f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
+            f"{engine.stats().latency * 1e3:.2f} ms; "
+            + (f"{duration:g} s" if duration else "until stopped (Ctrl-C)"),
+            flush=True,
+        )
         end = time.monotonic() + duration if duration else None
         while end is None or time.monotonic() < end:
-            time.sleep(0.5)
+            time.sleep(max(0.0, min(0.5, end - time.monotonic())) if end else 0.5)
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
-    except KeyboardInterrupt:
-        pass
-    stats = engine.stop()
-    print(f"\n{stats.summary()}")
+    finally:
+        stats = engine.stop()
+        print(f"\n{stats.summary()}", flush=True)
     return 0
 
 
@@ -344,7 +346,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("play", help="play a patch live (audio + haptic channels on one clock)")
     p.add_argument("patch", help="patch file (.toml) or built-in patch name")
     p.add_argument("--device", help="output device index or name substring (see 'jassy devices')")
-    p.add_argument("--duration", type=float, help="seconds to play (default: the patch's; 0 = until Ctrl-C)")
+    p.add_argument(
+        "--duration", type=float, help="seconds to play (default or 0: until stopped by Ctrl-C or a signal)"
+    )
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
@@ -427,10 +431,23 @@ def _cmd_rod(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Commands that play live: SIGINT, SIGTERM and SIGHUP end them in order (exit 128 + signal).
+LIVE_COMMANDS = ("play", "demo", "study", "haptic-bridge")
+
+
 def main(argv: list[str] | None = None) -> int:
+    import contextlib
+
+    from jassy.signals import Stopped, stop_on_signals
+
     args = build_parser().parse_args(argv)
+    live = args.command in LIVE_COMMANDS
     try:
-        return args.func(args)
+        with stop_on_signals() if live else contextlib.nullcontext():
+            return args.func(args)
+    except Stopped as exc:
+        print(f"jassy: stopped by {exc}", file=sys.stderr)
+        return exc.exit_code
     except JassyError as exc:
         print(f"jassy: error: {exc}", file=sys.stderr)
         return 2

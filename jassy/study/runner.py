@@ -266,9 +266,11 @@ class LivePresenter:
             monitor_seconds=d.trial_duration + 1.0,
         )
         engine.start()
-        latency = engine.stats().latency
-        time.sleep(d.trial_duration + latency + 2 * d.block / d.sample_rate)
-        stats = engine.stop()
+        try:
+            latency = engine.stats().latency
+            time.sleep(d.trial_duration + latency + 2 * d.block / d.sample_rate)
+        finally:  # also on a signal: forces fade out, the stream stops, no child outlives us
+            stats = engine.stop()
         self.latency = stats.latency
         self.callbacks += stats.callbacks
         self.underruns += stats.underrun_callbacks
