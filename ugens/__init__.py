@@ -17,6 +17,7 @@ from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
+from ugens.pitchshift import PitchShift
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
@@ -49,6 +50,7 @@ __all__ = [
     "ModalBank",
     "Multiply",
     "OnePole",
+    "PitchShift",
     "RathRoll",
     "ResonantScrape",
     "Reverb",
