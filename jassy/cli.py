@@ -138,7 +138,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     patch = load_patch(args.patch, args.set or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
-    duration = args.duration or patch.duration
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    duration = args.duration or None  # none or 0: until stopped
     safety, offsets = _haptic_options(args)
     engine = LiveEngine(
         patch.graph,
@@ -153,21 +155,21 @@ def _cmd_play(args: argparse.Namespace) -> int:
         offsets_ms=offsets,
     )
     engine.start()
-    print(
-        f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
-        f"{engine.stats().latency * 1e3:.2f} ms; Ctrl-C stops",
-        flush=True,
-    )
     try:
+        print(
+            f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
+            f"{engine.stats().latency * 1e3:.2f} ms; "
+            + (f"{duration:g} s" if duration else "until stopped (Ctrl-C)"),
+            flush=True,
+        )
         end = time.monotonic() + duration if duration else None
         while end is None or time.monotonic() < end:
-            time.sleep(0.5)
+            time.sleep(max(0.0, min(0.5, end - time.monotonic())) if end else 0.5)
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
-    except KeyboardInterrupt:
-        pass
-    stats = engine.stop()
-    print(f"\n{stats.summary()}")
+    finally:
+        stats = engine.stop()
+        print(f"\n{stats.summary()}", flush=True)
     return 0
 
 
@@ -181,21 +183,45 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         write_signal(args.script, rendering.audio, rendering.sample_rate)
         print(f"wrote {args.script}: a scripted tap and {args.mode} stroke (2 s)")
         return 0
-    demo.run_window(args.mode, block=args.block, ring_blocks=args.ring, device=args.device)
+    run = demo.run_headless if args.headless else demo.run_window
+    run(
+        args.mode,
+        args.probe_udp,
+        block=args.block,
+        ring_blocks=args.ring,
+        device=args.device,
+        haptic_udp=args.haptic_udp,
+    )
+    return 0
+
+
+def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
+    from jassy.bridge import run_bridge, scripted_path, write_log
+
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    ticks = []
+    print(f"haptic bridge: poses to {args.engine}, frames on {args.listen}; Ctrl-C stops", flush=True)
+    try:
+        counts = run_bridge(
+            args.engine,
+            args.listen,
+            scripted_path(),
+            duration=args.duration or None,
+            rate=args.rate,
+            on_tick=ticks.append if args.log else None,
+        )
+        print(f"{counts['ticks']} ticks, {counts['frames']} frames, {counts['finals']} final", flush=True)
+    finally:
+        if args.log:
+            write_log(args.log, ticks)
     return 0
 
 
 def _cmd_devices(args: argparse.Namespace) -> int:
-    from jassy import portaudio
+    from jassy.devices import describe, list_devices
 
-    found = portaudio.devices()
-    portaudio.release()  # a later live engine in this process may then fork its producer
-    for d in found:
-        mark = "*" if d["default"] else " "
-        print(
-            f"{mark}{d['index']:>3}  {d['name']} ({d['host_api']}): {d['max_output_channels']} out, "
-            f"{d['default_sample_rate']:g} Hz, low latency {d['default_low_output_latency'] * 1e3:.1f} ms"
-        )
+    print(describe(list_devices()))
     return 0
 
 
@@ -371,7 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("play", help="play a patch live (audio + haptic channels on one clock)")
     p.add_argument("patch", help="patch file (.toml) or built-in patch name")
     p.add_argument("--device", help="output device index or name substring (see 'jassy devices')")
-    p.add_argument("--duration", type=float, help="seconds to play (default: the patch's; 0 = until Ctrl-C)")
+    p.add_argument(
+        "--duration", type=float, help="seconds to play (default or 0: until stopped by Ctrl-C or a signal)"
+    )
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
@@ -390,7 +418,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (default 2.5)")
+    p.add_argument("--probe-udp", metavar="HOST:PORT", help="also take the probe's pose from a UDP device")
+    p.add_argument("--haptic-udp", metavar="HOST:PORT", help="send 1 kHz haptic frames to a UDP device")
+    p.add_argument("--headless", action="store_true", help="no window: play until stopped (UDP probe input)")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser(
+        "haptic-bridge",
+        help="reference UDP haptic device: sends probe poses, receives forces, lets go safely",
+    )
+    p.add_argument(
+        "--engine", required=True, metavar="HOST:PORT", help="the engine's probe input (demo --probe-udp)"
+    )
+    p.add_argument(
+        "--listen", default="127.0.0.1:9021", metavar="HOST:PORT", help="where the engine sends haptic frames"
+    )
+    p.add_argument("--rate", type=float, default=1000.0, help="servo loop rate, Hz (default 1000)")
+    p.add_argument("--duration", type=float, help="seconds (default or 0: until stopped)")
+    p.add_argument("--log", metavar="FILE.csv", help="write every tick: time, position, force, frame age")
+    p.set_defaults(func=_cmd_haptic_bridge)
 
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
@@ -463,17 +509,27 @@ def _cmd_rod(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Commands that play live: SIGINT, SIGTERM and SIGHUP end them in order (exit 128 + signal).
+LIVE_COMMANDS = ("play", "demo", "study", "haptic-bridge")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit code (see the module docstring)."""
+    from jassy.signals import Stopped, stop_on_signals
+
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
-    with signals_stop() as stopped:
+    live = args.command in LIVE_COMMANDS
+    with stop_on_signals() if live else signals_stop() as stopped:
         try:
             check_arguments(args, parser)
             return args.func(args)
+        except Stopped as exc:
+            print(f"jassy: stopped by {exc}", file=sys.stderr)
+            return exc.exit_code
         except JassyError as exc:
             print(f"jassy: error: {_one_line(exc)}", file=sys.stderr)
             return 2
@@ -488,7 +544,7 @@ def main(argv: list[str] | None = None) -> int:
             print("jassy: error: input nested too deeply", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
-            code = 128 + stopped.signal
+            code = 128 + (stopped.signal if stopped is not None else 2)
             names = {130: "interrupted", 143: "terminated (SIGTERM)", 129: "hung up (SIGHUP)"}
             print(f"jassy: {names.get(code, 'stopped')}", file=sys.stderr)
             return code
