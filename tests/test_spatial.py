@@ -112,8 +112,8 @@ def test_position_inputs_override_the_parameters():
     xs = ArraySource(np.full(n, 2.0))
     ys = ArraySource(np.zeros(n))
     node = Spatialiser(Sine(freq=300.0, name="s"), name="p", x=-4.0, y=1.0, mode="stereo")
-    node.connect(xs, "x")
-    node.connect(ys, "y")
+    node.connect(xs, "track_x")
+    node.connect(ys, "track_y")
     left, right = ears(node, duration=0.2)
     assert np.max(np.abs(left[FS // 20 :])) < 1e-9  # hard right at x = 2, y = 0
     assert abs(np.max(np.abs(right[FS // 20 :])) - 0.5) < 1e-3

@@ -1,8 +1,9 @@
 """Spatialiser: a mono source placed around a listener, for loudspeakers or headphones.
 
 Position. The source sits at (x, y, z) m from the centre of the listener's head (x to the
-right, y ahead, z up): the smoothed parameters ``x``, ``y``, ``z``, or audio-rate inputs
-of the same names (a physics scene's trajectory) that override them when connected.
+right, y ahead, z up): the smoothed parameters ``x``, ``y``, ``z``, or the audio-rate inputs
+``track_x``, ``track_y``, ``track_z`` (a physics scene's trajectory), which override them
+when connected.
 Distance r = |(x, y, z)| (at least ``min_distance``), lateral angle theta = asin(x / r).
 
 Distance (both modes). Spherical spreading: gain ``reference_distance`` / r. Propagation:
@@ -161,12 +162,13 @@ class Spatialiser(UGen):
     absorption, then equal-power stereo or a spherical-head binaural model (Woodworth ITD,
     Brown-Duda head shadow). Output: left; extra output ``right``.
 
-    The position inputs x, y, z (audio rate, m) override the parameters when connected.
+    The position inputs track_x, track_y, track_z (audio rate, m) override the parameters
+    x, y, z when connected.
     Model and sources in the module docstring; JASS ``SpatialMixer``."""
 
     type_name = "Spatialiser"
-    inputs = ("input", "x", "y", "z")
-    optional_inputs = ("x", "y", "z")
+    inputs = ("input", "track_x", "track_y", "track_z")
+    optional_inputs = ("track_x", "track_y", "track_z")
     outputs = ("right",)
     param_specs = {
         "x": _coordinate("x", 0.0, "to the right"),
@@ -211,7 +213,7 @@ class Spatialiser(UGen):
         self._run = specialise(spatialise, *self._arguments(0, self.controls["x"].buffer))
 
     def _position(self, key: str, n: int) -> np.ndarray:
-        source = self.sources.get(key)
+        source = self.sources.get(f"track_{key}")
         return source.out if source is not None else self.controls[key].values(n)
 
     def _arguments(self, n: int, *positions: np.ndarray) -> tuple:
