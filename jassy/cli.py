@@ -163,7 +163,38 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         write_signal(args.script, rendering.audio, rendering.sample_rate)
         print(f"wrote {args.script}: a scripted tap and {args.mode} stroke (2 s)")
         return 0
-    demo.run_window(args.mode, block=args.block, ring_blocks=args.ring, device=args.device)
+    run = demo.run_headless if args.headless else demo.run_window
+    run(
+        args.mode,
+        args.probe_udp,
+        block=args.block,
+        ring_blocks=args.ring,
+        device=args.device,
+        haptic_udp=args.haptic_udp,
+    )
+    return 0
+
+
+def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
+    from jassy.bridge import run_bridge, scripted_path, write_log
+
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    ticks = []
+    print(f"haptic bridge: poses to {args.engine}, frames on {args.listen}; Ctrl-C stops", flush=True)
+    try:
+        counts = run_bridge(
+            args.engine,
+            args.listen,
+            scripted_path(),
+            duration=args.duration or None,
+            rate=args.rate,
+            on_tick=ticks.append if args.log else None,
+        )
+        print(f"{counts['ticks']} ticks, {counts['frames']} frames, {counts['finals']} final", flush=True)
+    finally:
+        if args.log:
+            write_log(args.log, ticks)
     return 0
 
 
@@ -275,12 +306,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.modal._blas import single_threaded
         from physics.rod.bench import bench_rod, print_rod
         from physics.rod.contact_bench import bench_rod_contact, print_rod_contact
+        from physics.rod.dfcp_bench import bench_dfcp, print_dfcp
 
         with single_threaded():
             rows = bench_rod(quick=args.quick)
             contact = bench_rod_contact(quick=args.quick)
-        print(json.dumps({"models": rows, "contact": contact}, indent=2)) if args.json else (
-            print_rod(rows), print_rod_contact(contact))  # fmt: skip
+            dfcp = bench_dfcp()
+        print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
+            print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -367,7 +400,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (default 2.5)")
+    p.add_argument("--probe-udp", metavar="HOST:PORT", help="also take the probe's pose from a UDP device")
+    p.add_argument("--haptic-udp", metavar="HOST:PORT", help="send 1 kHz haptic frames to a UDP device")
+    p.add_argument("--headless", action="store_true", help="no window: play until stopped (UDP probe input)")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser(
+        "haptic-bridge",
+        help="reference UDP haptic device: sends probe poses, receives forces, lets go safely",
+    )
+    p.add_argument(
+        "--engine", required=True, metavar="HOST:PORT", help="the engine's probe input (demo --probe-udp)"
+    )
+    p.add_argument(
+        "--listen", default="127.0.0.1:9021", metavar="HOST:PORT", help="where the engine sends haptic frames"
+    )
+    p.add_argument("--rate", type=float, default=1000.0, help="servo loop rate, Hz (default 1000)")
+    p.add_argument("--duration", type=float, help="seconds (default or 0: until stopped)")
+    p.add_argument("--log", metavar="FILE.csv", help="write every tick: time, position, force, frame age")
+    p.set_defaults(func=_cmd_haptic_bridge)
 
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)

@@ -408,6 +408,12 @@ class LiveEngine:
             bool(h[REALTIME]),
         )
 
+    def haptic_now(self) -> np.ndarray:
+        """The haptic sample (per channel) the callback handed to the device last."""
+        played = int(self.header[PLAYED])
+        rows = self.tap.played.shape[0]
+        return self.tap.played[(played - 1) % rows].copy() if played else np.zeros(self.tap.played.shape[1])
+
     def monitor(self) -> tuple[np.ndarray, np.ndarray]:
         """What the device received last: (channels, frames) signals in playing order, and
         per frame the rendered frame it came from (-1 for silence inserted on an underrun)."""
