@@ -326,12 +326,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.modal._blas import single_threaded
         from physics.rod.bench import bench_rod, print_rod
         from physics.rod.contact_bench import bench_rod_contact, print_rod_contact
+        from physics.rod.dfcp_bench import bench_dfcp, print_dfcp
 
         with single_threaded():
             rows = bench_rod(quick=args.quick)
             contact = bench_rod_contact(quick=args.quick)
-        print(json.dumps({"models": rows, "contact": contact}, indent=2)) if args.json else (
-            print_rod(rows), print_rod_contact(contact))  # fmt: skip
+            dfcp = bench_dfcp()
+        print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
+            print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
