@@ -129,9 +129,12 @@ def check_memory(estimate: float, what: str) -> None:
         )
 
 
-def check_seconds(seconds: float, what: str) -> None:
-    """Refuse rendering or analysing more than the limit of seconds of audio."""
+def check_seconds(seconds: float, what: str, default: float | None = None) -> None:
+    """Refuse rendering or analysing more than the limit of seconds of audio (``default``,
+    if given, replaces DEFAULT_SECONDS when no limit was set: for slower work)."""
     limit = current().seconds
+    if default is not None and not os.environ.get("JASSY_MAX_SECONDS"):
+        limit = default
     if not seconds <= limit:
         raise JassyError(
             f"{what}: {seconds:g} s of audio is more than the limit of {limit:g} s; "
