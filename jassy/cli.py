@@ -68,10 +68,17 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     audio_format(args.output, args.format)  # bad output names fail before any work
+    if args.plot:
+        from jassy.preview import check_png, require_matplotlib
+
+        require_matplotlib("--plot")
+        check_png(args.plot, "--plot")
     if args.block < 1:
         raise JassyError(f"--block: expected an integer >= 1, got {args.block}")
     if args.patch in SCENES:
-        return _render_scene(args)
+        status = _render_scene(args)
+        _plot_render(args)
+        return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
     patch = load_patch(args.patch, args.set or ())
@@ -101,7 +108,18 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
         )
+    _plot_render(args)
     return 0
+
+
+def _plot_render(args: argparse.Namespace) -> None:
+    """``--plot``: a preview PNG of the file just written."""
+    if args.plot:
+        from jassy.preview import plot_file
+
+        plot_file(args.output, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
 
 
 def _haptic_options(args: argparse.Namespace):
@@ -373,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="anytime synthesis: compute at most N modes across all modal banks",
     )
     _add_haptic_arguments(p)
+    p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -423,11 +442,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import batch
+    from jassy import batch, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    preview.add_command(sub)
     add_study(sub)
     add_modal(sub)
 
