@@ -21,6 +21,7 @@ from ugens.pitchshift import PitchShift
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
+from ugens.spatial import Spatialiser
 from ugens.stochastic import Bounce, Break, Crumple
 from ugens.wind import CavityTone, KarmanWhistle, Wind
 
@@ -57,6 +58,7 @@ __all__ = [
     "Roll",
     "Scrape",
     "Sine",
+    "Spatialiser",
     "WhiteNoise",
     "Wind",
 ]
