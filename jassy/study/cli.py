@@ -100,6 +100,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from jassy.study.analysis import analyze, export_fits, format_report, plot_report
 
+    if args.plot:
+        from jassy.cli_checks import require_extra
+        from jassy.files import check_output
+
+        require_extra("matplotlib", "plot", "--plot")
+        check_output(args.plot, "--plot")
     report = analyze(args.results, args.function, args.use)
     if args.plot:
         plot_report(report, args.plot)
