@@ -252,7 +252,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         rows = bench_burr(n=128 if args.quick else 256)
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
-        result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
+        result = bench.live_bench(seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring)
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
             bench.print_live(result)
@@ -405,6 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
+    p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
