@@ -283,10 +283,13 @@ def _busy_python(seconds: float) -> int:
     return count
 
 
-def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5) -> dict:
+def live_bench(
+    seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5, mode: str = "auto"
+) -> dict:
     """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
-    the main thread does heavy Python work; underruns, latency and audio-haptic skew
-    (measured on the frames the callback sent to the device)."""
+    the main thread does heavy Python work; the mode (callback or ring), underruns,
+    latency and audio-haptic skew at a tap's onset (measured on the frames the callback
+    handed to the device)."""
     from jassy.jackserver import dummy_jack
     from jassy.live import LiveEngine
     from ugens.impact import ImpactForce
@@ -317,7 +320,7 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
-        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0)
+        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0, mode=mode)
         live.start()
         _busy_python(seconds)
         stats = live.stop()
@@ -328,6 +331,8 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
         "seconds": seconds,
         "modes": n_modes,
         "block": block,
+        "mode": stats.mode,
+        "mode_reason": live.mode_reason,
         "callbacks": stats.callbacks,
         "underrun_callbacks": stats.underrun_callbacks,
         "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
@@ -355,7 +360,8 @@ def tap_onsets(heard: np.ndarray, rendered: np.ndarray, silent_from: int) -> tup
 
 def print_live(r: dict) -> None:
     print(
-        f"live, JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, block {r['block']}, "
+        f"live ({r['mode']} mode), JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, "
+        f"block {r['block']}, "
         f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
         f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
         f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
