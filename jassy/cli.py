@@ -375,11 +375,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import batch
+    from jassy import audiocheck, batch
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    audiocheck.add_command(sub)
     add_study(sub)
     add_modal(sub)
 

@@ -15,6 +15,7 @@ from ugens.modal import ModalBank
 from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
+from ugens.radiation import Radiation
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
 from ugens.stochastic import Bounce, Break, Crumple
@@ -41,6 +42,7 @@ __all__ = [
     "ModalBank",
     "Multiply",
     "OnePole",
+    "Radiation",
     "RathRoll",
     "ResonantScrape",
     "Roll",
