@@ -54,7 +54,7 @@ def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float =
     from ugens.scrape import Scrape
 
     squish = Scrape(
-        roughness=2e-5, patch=5e-3, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
+        roughness=2e-5, patch=2e-4, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
     )
     press = Sine(freq=0.0, amp=0.0, phase=math.pi / 2, name="press")
     thump = Biquad(press, mode="highpass", freq=40.0, q=0.7, name="thump")
