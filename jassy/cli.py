@@ -277,28 +277,18 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(describe_model(args.patch))
         return 0
 
+    from jassy.doc import describe_patch
+
     patch = load_patch(args.patch, args.set or ())
-    print(f"patch {patch.name}: {patch.description}")
-    print(f"source: {patch.source}")
-    print(f"duration: {patch.duration} s, sample rate: {patch.sample_rate or DEFAULT_RATE} Hz")
-    print("nodes (in processing order):")
-    print(patch.graph.summary())
+    print(describe_patch(patch))
     for node in patch.graph.order:
         model = node.values.get("model")
         if model is not None:
             print(
-                f"  model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
+                f"model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
                 f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
                 + (f" ({', '.join(model.points)})" if model.points else "")
             )
-    actions: dict[str, int] = {}
-    for ev in patch.score:
-        actions[ev.action] = actions.get(ev.action, 0) + 1
-    last = max((ev.time for ev in patch.score), default=0.0)
-    print(
-        f"score: {len(patch.score)} events ({', '.join(f'{k} x{v}' for k, v in actions.items()) or 'none'}), "
-        f"last at {last:g} s"
-    )
     return 0
 
 
@@ -462,13 +452,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import audiocheck, batch, preview
+    from jassy import audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
     audiocheck.add_command(sub)
     preview.add_command(sub)
+    doc.add_command(sub)
     add_study(sub)
     add_modal(sub)
 
