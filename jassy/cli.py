@@ -87,8 +87,15 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if args.plot:
+        from jassy.preview import check_png, require_matplotlib
+
+        require_matplotlib("--plot")
+        check_png(args.plot, "--plot")
     if args.patch in SCENES:
-        return _render_scene(args)
+        status = _render_scene(args)
+        _plot_render(args)
+        return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
     patch = load_patch(args.patch, args.set or ())
@@ -121,7 +128,18 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
         )
+    _plot_render(args)
     return 0
+
+
+def _plot_render(args: argparse.Namespace) -> None:
+    """``--plot``: a preview PNG of the file just written."""
+    if args.plot:
+        from jassy.preview import plot_file
+
+        plot_file(args.output, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
 
 
 def _haptic_options(args: argparse.Namespace):
@@ -262,28 +280,18 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(describe_model(args.patch))
         return 0
 
+    from jassy.doc import describe_patch
+
     patch = load_patch(args.patch, args.set or ())
-    print(f"patch {patch.name}: {patch.description}")
-    print(f"source: {patch.source}")
-    print(f"duration: {patch.duration} s, sample rate: {patch.sample_rate or DEFAULT_RATE} Hz")
-    print("nodes (in processing order):")
-    print(patch.graph.summary())
+    print(describe_patch(patch))
     for node in patch.graph.order:
         model = node.values.get("model")
         if model is not None:
             print(
-                f"  model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
+                f"model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
                 f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
                 + (f" ({', '.join(model.points)})" if model.points else "")
             )
-    actions: dict[str, int] = {}
-    for ev in patch.score:
-        actions[ev.action] = actions.get(ev.action, 0) + 1
-    last = max((ev.time for ev in patch.score), default=0.0)
-    print(
-        f"score: {len(patch.score)} events ({', '.join(f'{k} x{v}' for k, v in actions.items()) or 'none'}), "
-        f"last at {last:g} s"
-    )
     return 0
 
 
@@ -398,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="anytime synthesis: compute at most N modes across all modal banks",
     )
     _add_haptic_arguments(p)
+    p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -455,11 +464,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import batch
+    from jassy import audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    audiocheck.add_command(sub)
+    preview.add_command(sub)
+    doc.add_command(sub)
     add_study(sub)
     add_modal(sub)
 

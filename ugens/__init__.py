@@ -18,6 +18,7 @@ from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
 from ugens.pitchshift import PitchShift
+from ugens.radiation import Radiation
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.scrape import ResonantScrape, Scrape
@@ -52,6 +53,7 @@ __all__ = [
     "Multiply",
     "OnePole",
     "PitchShift",
+    "Radiation",
     "RathRoll",
     "ResonantScrape",
     "Reverb",
