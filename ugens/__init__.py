@@ -19,6 +19,7 @@ from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
 from ugens.pitchshift import PitchShift
+from ugens.radiation import Radiation
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
 from ugens.sampler import Sampler
@@ -57,6 +58,7 @@ __all__ = [
     "OnePole",
     "Pitch",
     "PitchShift",
+    "Radiation",
     "RathRoll",
     "ResonantScrape",
     "Reverb",
