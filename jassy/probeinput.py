@@ -115,8 +115,8 @@ class PoseReceiver:
 
 class PoseDriver:
     """Feeds poses to a demo probe exactly as pointer events: contact begins -> press,
-    moves while touching -> move, contact ends -> release. x (m) maps to the probe's
-    0..1 track position over ``length`` metres."""
+    moves while touching -> move, contact ends -> release, hovering -> only its drawn
+    position. x (m) maps to the probe's 0..1 track position over ``length`` metres."""
 
     def __init__(self, probe, length: float = 0.5):
         self.probe, self.length = probe, length
@@ -131,4 +131,6 @@ class PoseDriver:
             self.probe.move(x, t)
         elif self.touching:
             self.probe.release(t)
+        if not pose.touching:
+            self.probe.x = x  # hovering: only where it is drawn
         self.touching = pose.touching

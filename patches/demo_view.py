@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 
-#: Canvas size (px), plate rectangle (px), force arrow scale (px per N).
+#: Canvas size (px), plate rectangle (px), force arrow scale (px per N) and longest arrow.
 WIDTH, HEIGHT = 640, 440
 PLATE = (80, 20, 560, 380)
-ARROW_PX_PER_N = 40.0
+ARROW_PX_PER_N, ARROW_MAX_PX = 40.0, 120.0
 PLATE_SIZE = (0.6, 0.45)  # m, as patches.models_surface.steel_plate_model
 TRACK = ((0.12, 0.3), (0.88, 0.62))  # its track, in fractions of the plate's sides
 REFRESH_MS = 33
@@ -154,6 +154,7 @@ class DemoView:
         self.items.clear()
         force = self.engine.haptic_now()
         magnitude = float(np.linalg.norm(force)) if force.size else 0.0
+        arrow = min(magnitude * ARROW_PX_PER_N, ARROW_MAX_PX)
         c = self.canvas
         if self.mode == "drill":
             self._update_bone()
@@ -163,9 +164,7 @@ class DemoView:
                 tip = y + r
                 self.items.append(c.create_oval(x - 4, tip - 4, x + 4, tip + 4, fill="#ff4040", outline=""))
                 self.items.append(
-                    c.create_line(
-                        x, tip, x, tip - magnitude * ARROW_PX_PER_N, fill="#40ff80", width=3, arrow="last"
-                    )
+                    c.create_line(x, tip, x, tip - arrow, fill="#40ff80", width=3, arrow="last")
                 )
         else:
             x, y = self.track_point(self.probe.x)
@@ -175,11 +174,7 @@ class DemoView:
             )
             if self.probe.touching:
                 self.items.append(c.create_oval(x - 4, y - 4, x + 4, y + 4, fill="#ff4040", outline=""))
-                self.items.append(
-                    c.create_line(
-                        x, y, x, y + magnitude * ARROW_PX_PER_N, fill="#40ff80", width=3, arrow="last"
-                    )
-                )
+                self.items.append(c.create_line(x, y, x, y + arrow, fill="#40ff80", width=3, arrow="last"))
         stats = self.engine.stats()
         c.itemconfigure(
             self.meters,
@@ -194,3 +189,9 @@ class DemoView:
         c.bind("<ButtonPress-1>", lambda e: probe.press(self.fraction(e.x, e.y), e.time / 1000.0))
         c.bind("<B1-Motion>", lambda e: probe.move(self.fraction(e.x, e.y), e.time / 1000.0))
         c.bind("<ButtonRelease-1>", lambda e: probe.release(e.time / 1000.0))
+
+        def hover(e) -> None:
+            if not probe.touching:
+                probe.x = self.fraction(e.x, e.y)
+
+        c.bind("<Motion>", hover)
