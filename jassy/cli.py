@@ -556,7 +556,9 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
     live = args.command in LIVE_COMMANDS
-    with stop_on_signals() if live else signals_stop() as stopped:
+    from jassy.limits import scoped
+
+    with scoped(), stop_on_signals() if live else signals_stop() as stopped:
         try:
             check_arguments(args, parser)
             return args.func(args)

@@ -19,8 +19,10 @@ held in memory, modes x locations of a model, voxel elements and subdivision lev
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+from collections.abc import Iterator
 from typing import NamedTuple
 
 from jassy.errors import JassyError
@@ -110,6 +112,21 @@ def configure(memory: str | None = None, seconds: str | None = None, variants: s
         os.environ["JASSY_MAX_SECONDS"] = repr(_positive(seconds, "--max-seconds", False))
     if variants is not None:
         os.environ["JASSY_MAX_VARIANTS"] = str(int(_positive(variants, "--max-variants", True)))
+
+
+@contextlib.contextmanager
+def scoped() -> Iterator[None]:
+    """Limits set by :func:`configure` inside hold only until the block ends (one command)."""
+    names = ("JASSY_MAX_MEMORY", "JASSY_MAX_SECONDS", "JASSY_MAX_VARIANTS")
+    saved = {name: os.environ.get(name) for name in names}
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def _size(n: float) -> str:
