@@ -312,11 +312,27 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    from jassy.bench_haptic import frame_stats, loop_latency
+    from jassy.hapticframes import FrameRecorder
+
+    recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
-        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0)
+        live = LiveEngine(
+            graph,
+            score,
+            SAMPLE_RATE,
+            block,
+            ring_blocks,
+            monitor_seconds=6.0,
+            haptic_udp=recorder.address,
+            send_log_frames=int(seconds * 1000) + 1000,
+        )
         live.start()
         _busy_python(seconds)
         stats = live.stop()
+        recorder.wait_final()
+        haptic = frame_stats(live, recorder.stop())
+        haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
     heard, _ = live.monitor()  # the last 6 s the device received: silence, then the tap
     audio_on = int(np.flatnonzero(heard[0])[-1] if not np.any(heard[0]) else np.flatnonzero(heard[0])[0])
     haptic_on = int(np.flatnonzero(heard[1])[0]) if np.any(heard[1]) else -1
@@ -331,6 +347,7 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
         "ring_ms": stats.ring_latency * 1e3,
         "device_ms": stats.device_latency * 1e3,
         "skew_samples": audio_on - haptic_on,
+        **haptic,
     }
 
 
@@ -340,5 +357,13 @@ def print_live(r: dict) -> None:
         f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
         f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
         f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
-        f"audio-haptic skew {r['skew_samples']} samples"
+        f"audio-haptic skew {r['skew_samples']} samples\n"
+        f"  UDP haptic frames: {r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
+        f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
+        f"(max {r['frame_interval_max_ms']:.3f}); final frame "
+        f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"
+        f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
+        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses; ring + device "
+        f"{r['loop_ring_and_device_samples']:.0f})"
     )

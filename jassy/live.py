@@ -60,8 +60,9 @@ MAX_HAPTIC = 32
 CALLBACK_LOG_ROWS, HAPTIC_RING_ROWS = 1024, 4096
 #: GIL switch interval while live (s): short enough for the producer to keep the ring full.
 SWITCH_INTERVAL = 0.0002
-#: Seconds between measurements of the stream clock against the monotonic clock.
-CLOCK_CHECK = 0.1
+#: Seconds between measurements of the stream clock against the monotonic clock, and the
+#: weight of each in their running average (the stream clock jitters with the callbacks).
+CLOCK_CHECK, CLOCK_WEIGHT = 0.02, 0.05
 #: SCHED_FIFO priority of the producer thread where the OS grants it (JACK uses 70-95).
 REALTIME_PRIORITY = 40
 
@@ -468,7 +469,8 @@ class LiveEngine:
                 if self.header[PAUSED] or not self._fill_once(engine, buf, out):
                     time.sleep(pause)
                 if time.monotonic() > calibrate_at:
-                    self.tap.control[CLOCK_OFFSET] = stream.clock_offset()
+                    offset = self.tap.control[CLOCK_OFFSET]
+                    self.tap.control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
                     calibrate_at += CLOCK_CHECK
         except BaseException as exc:  # reported to the caller; the callback keeps the device safe
             self._errors_tx.send(f"{type(exc).__name__}: {exc}")

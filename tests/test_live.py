@@ -177,7 +177,8 @@ def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
     flags = np.array([f.flags for f in frames])
     force = np.array([f.force[0] for f in frames])
     assert np.all(force <= 1.0 + 1e-6) and np.any(flags & FLAG_CLAMPED)
-    assert np.all(force[(flags & FLAG_CLAMPED) > 0] > 0.5)
+    clamped = force[flags == FLAG_CLAMPED]  # (callbacks flag all the frames they touch)
+    assert clamped.size >= 100 and np.median(clamped) == pytest.approx(1.0)
     stalled = np.flatnonzero(flags & FLAG_STALLED)
     assert stalled.size >= 40  # the 50 ms pause
     fading = np.flatnonzero(flags & FLAG_WATCHDOG)
