@@ -87,8 +87,15 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if args.plot:
+        from jassy.preview import check_png, require_matplotlib
+
+        require_matplotlib("--plot")
+        check_png(args.plot, "--plot")
     if args.patch in SCENES:
-        return _render_scene(args)
+        status = _render_scene(args)
+        _plot_render(args)
+        return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
     patch = load_patch(args.patch, args.set or ())
@@ -121,7 +128,18 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
         )
+    _plot_render(args)
     return 0
+
+
+def _plot_render(args: argparse.Namespace) -> None:
+    """``--plot``: a preview PNG of the file just written."""
+    if args.plot:
+        from jassy.preview import plot_file
+
+        plot_file(args.output, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
 
 
 def _haptic_options(args: argparse.Namespace):
@@ -153,7 +171,10 @@ def _cmd_play(args: argparse.Namespace) -> int:
         haptic_udp=args.haptic_udp,
         haptic_safety=safety,
         offsets_ms=offsets,
+        mode=args.mode,
     )
+    why = f" ({engine.mode_reason})" if engine.mode_reason else ""
+    print(f"mode: {engine.mode}{why}", flush=True)
     engine.start()
     try:
         print(
@@ -259,28 +280,18 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(describe_model(args.patch))
         return 0
 
+    from jassy.doc import describe_patch
+
     patch = load_patch(args.patch, args.set or ())
-    print(f"patch {patch.name}: {patch.description}")
-    print(f"source: {patch.source}")
-    print(f"duration: {patch.duration} s, sample rate: {patch.sample_rate or DEFAULT_RATE} Hz")
-    print("nodes (in processing order):")
-    print(patch.graph.summary())
+    print(describe_patch(patch))
     for node in patch.graph.order:
         model = node.values.get("model")
         if model is not None:
             print(
-                f"  model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
+                f"model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
                 f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
                 + (f" ({', '.join(model.points)})" if model.points else "")
             )
-    actions: dict[str, int] = {}
-    for ev in patch.score:
-        actions[ev.action] = actions.get(ev.action, 0) + 1
-    last = max((ev.time for ev in patch.score), default=0.0)
-    print(
-        f"score: {len(patch.score)} events ({', '.join(f'{k} x{v}' for k, v in actions.items()) or 'none'}), "
-        f"last at {last:g} s"
-    )
     return 0
 
 
@@ -298,7 +309,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         rows = bench_burr(n=128 if args.quick else 256)
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
-        result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
+        result = bench.live_bench(
+            seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring, mode=args.mode
+        )
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
             bench.print_live(result)
@@ -393,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="anytime synthesis: compute at most N modes across all modal banks",
     )
     _add_haptic_arguments(p)
+    p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -405,6 +419,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="callback: the graph rendered in the device callback (latency = the device's); "
+        "ring: a producer renders ahead; auto (default): callback where the patch allows it",
+    )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
@@ -443,11 +464,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import batch
+    from jassy import audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    audiocheck.add_command(sub)
+    preview.add_command(sub)
+    doc.add_command(sub)
     add_study(sub)
     add_modal(sub)
 
@@ -473,6 +497,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
+    p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="live: engine mode (default auto)",
+    )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from jassy.anytime import ModeBudget
-from jassy.errors import JassyError, ModelError, PatchError
+from jassy.errors import JassyError, ModelError, PatchError, suggest
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.inputs import load_toml, number, parse_toml, seconds
@@ -200,7 +200,8 @@ def build_patch(
         for pkey in params:
             if pkey not in allowed:
                 raise PatchError(
-                    f"{key}: unknown parameter {pkey!r}; expected one of {', '.join(sorted(allowed))}"
+                    f"{key}: unknown parameter {pkey!r}{suggest(pkey, allowed)}; "
+                    f"expected one of {', '.join(sorted(allowed))}"
                 )
         connect = {}
         if cls.variadic:
