@@ -141,12 +141,16 @@ def frames_of(recorder):
     return recorder.stop()
 
 
-def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack):
+@pytest.mark.parametrize("mode", ["ring", "callback"])
+def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mode):
     from jassy.live import LiveEngine
 
     rx = FrameRecorder()
     score = [Event(0.05, "hit", "impact", {"impulse": 0.01})]
-    live = LiveEngine(tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address, monitor_seconds=2.0)
+    live = LiveEngine(
+        tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address, monitor_seconds=2.0, mode=mode
+    )
+    assert live.mode == mode
     live.start()
     time.sleep(0.5)
     stats = live.stop()
