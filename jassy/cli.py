@@ -98,7 +98,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
-    patch = load_patch(args.patch, args.set or ())
+    patch = load_patch(args.patch, args.set or (), args.event or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration if args.duration is not None else patch.duration
     if duration is None:
@@ -389,6 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"block size in frames (default {OFFLINE_BLOCK}; the output does not depend on it)",
     )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
+    p.add_argument(
+        "--event",
+        action="append",
+        metavar="time=S,node=N,action=A,ARG=V,...",
+        help="add a score event, e.g. 'time=1.0,node=hit,action=impact,impulse=0.02' (action default: set)",
+    )
     p.add_argument(
         "--format",
         default="float32",
