@@ -171,7 +171,10 @@ def _cmd_play(args: argparse.Namespace) -> int:
         haptic_udp=args.haptic_udp,
         haptic_safety=safety,
         offsets_ms=offsets,
+        mode=args.mode,
     )
+    why = f" ({engine.mode_reason})" if engine.mode_reason else ""
+    print(f"mode: {engine.mode}{why}", flush=True)
     engine.start()
     try:
         print(
@@ -306,7 +309,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         rows = bench_burr(n=128 if args.quick else 256)
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
-        result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
+        result = bench.live_bench(
+            seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring, mode=args.mode
+        )
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
             bench.print_live(result)
@@ -414,6 +419,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="callback: the graph rendered in the device callback (latency = the device's); "
+        "ring: a producer renders ahead; auto (default): callback where the patch allows it",
+    )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
@@ -452,11 +464,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import audiocheck, batch, doc, preview
+    from jassy import analyze, audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    analyze.add_command(sub)
     audiocheck.add_command(sub)
     preview.add_command(sub)
     doc.add_command(sub)
@@ -485,6 +498,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
+    p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="live: engine mode (default auto)",
+    )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)

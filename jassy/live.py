@@ -32,6 +32,7 @@ import numba as nb
 import numpy as np
 from numba import types
 
+from jassy.callback import CallbackPlayer, CallbackRenderer, choose_mode
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
@@ -197,6 +198,8 @@ class LiveStats:
     device_latency: float
     late_events: int
     realtime: bool
+    #: "callback" (the graph rendered in the device callback) or "ring" (a producer ahead).
+    mode: str = "ring"
 
     @property
     def latency(self) -> float:
@@ -206,7 +209,8 @@ class LiveStats:
     def summary(self) -> str:
         pct = 100.0 * self.underrun_callbacks / max(self.callbacks, 1)
         return (
-            f"{self.callbacks} callbacks, {self.underrun_callbacks} underruns ({pct:.3f} %), "
+            f"{self.mode} mode: {self.callbacks} callbacks, "
+            f"{self.underrun_callbacks} underruns ({pct:.3f} %), "
             f"latency {self.latency * 1e3:.2f} ms (ring {self.ring_latency * 1e3:.2f} ms + device "
             f"{self.device_latency * 1e3:.2f} ms)"
         )
@@ -225,6 +229,10 @@ class LiveEngine:
     for a few-ms ring; "thread" runs it in a thread of this process (shares the GIL;
     the switch interval is shortened while playing); "auto" picks "process" where fork
     is available and PortAudio is not yet loaded in this process.
+
+    mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
+    latency = the device's); "ring" uses the producer above; "auto" takes the callback
+    where the graph, score and options allow it (``mode_reason`` says why not otherwise).
     """
 
     def __init__(
@@ -243,6 +251,7 @@ class LiveEngine:
         isolation: str = "auto",
         haptic_torque: int = 0,
         send_log_frames: int = 0,
+        mode: str = "ring",
     ):
         if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
@@ -308,6 +317,8 @@ class LiveEngine:
         self._events_rx, self._events_tx = multiprocessing.Pipe(duplex=False)
         self._errors_rx, self._errors_tx = multiprocessing.Pipe(duplex=False)
         self._worker = None
+        self.mode, self.mode_reason = choose_mode(mode, graph, self.score, offsets_ms, haptic_udp)
+        self._callback: CallbackPlayer | None = None
 
     # ------------------------------------------------------------------ control
     def start(self, timeout: float = 60.0) -> None:
@@ -317,6 +328,19 @@ class LiveEngine:
         from jassy.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
+        if self.mode == "callback":
+            renderer = CallbackRenderer(
+                self.graph,
+                self.score,
+                self.sample_rate,
+                self.block,
+                self.haptic_to_card,
+                self.safety,
+                self.monitor_capacity / self.sample_rate,
+            )
+            self._callback = CallbackPlayer(renderer)
+            self._callback.start(self._device_index)
+            return
         use_process = self.isolation == "process" or (
             self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
         )
@@ -348,6 +372,9 @@ class LiveEngine:
         """Schedule ``event`` from any thread: at its time if still ahead, else at the
         next frame to be rendered (``time = 0`` means as soon as possible; a later time
         already rendered counts as a late event)."""
+        if self._callback is not None:
+            self._callback.renderer.post(event)
+            return
         self._events_tx.send(event)
 
     def pause_producer(self, paused: bool) -> None:
@@ -358,6 +385,9 @@ class LiveEngine:
         """End the run in order: fade the forces to zero within the watchdog time, send the
         UDP frames through the last sample played and then the final frame, stop the
         stream, end the child processes; return the counters."""
+        if self._callback is not None:
+            self._callback.stop()
+            return self.stats()
         h = self.header
         if h[RUNNING] and not h[ENDING]:
             h[ENDING] = 1
@@ -394,6 +424,21 @@ class LiveEngine:
             raise JassyError(f"live engine: {message}")
 
     def stats(self) -> LiveStats:
+        if self._callback is not None:
+            c = self._callback.renderer.stats(self._callback.device_latency)
+            return LiveStats(
+                c.callbacks,
+                c.xruns,
+                c.xruns * self.block,
+                c.frames_played,
+                c.max_callback_frames,
+                c.status_flags,
+                0.0,
+                c.device_latency,
+                self._callback.renderer.late,
+                False,
+                "callback",
+            )
         h = self.header
         return LiveStats(
             int(h[CALLBACKS]),
@@ -406,10 +451,13 @@ class LiveEngine:
             float(self.state[DEVICE_LATENCY]),
             int(h[LATE]),
             bool(h[REALTIME]),
+            "ring",
         )
 
     def haptic_now(self) -> np.ndarray:
         """The haptic sample (per channel) the callback handed to the device last."""
+        if self._callback is not None:
+            return self._callback.renderer.haptic_last[: len(self.graph.haptic)].copy()
         played = int(self.header[PLAYED])
         rows = self.tap.played.shape[0]
         return self.tap.played[(played - 1) % rows].copy() if played else np.zeros(self.tap.played.shape[1])
@@ -417,6 +465,8 @@ class LiveEngine:
     def monitor(self) -> tuple[np.ndarray, np.ndarray]:
         """What the device received last: (channels, frames) signals in playing order, and
         per frame the rendered frame it came from (-1 for silence inserted on an underrun)."""
+        if self._callback is not None:
+            return self._callback.renderer.monitor()
         if not self.monitor_capacity:
             raise JassyError("no monitor: create the engine with monitor_seconds > 0")
         played = int(self.header[PLAYED])

@@ -174,12 +174,13 @@ class ModalModel:
         return ModalModel(self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name)
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
-        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = (i + 1)/sample_rate.
+        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
 
-        This is the continuous response sampled one sample after the impulse, which the
-        impulse-invariant resonator reproduces exactly (reference for tests).
+        The continuous response to a unit impulse at t = 0, which the impulse-invariant
+        resonators of a ModalBank reproduce exactly from the sample after the impulse on
+        (reference for tests).
         """
-        t = (np.arange(int(round(duration * sample_rate))) + 1) / sample_rate
+        t = np.arange(int(round(duration * sample_rate))) / sample_rate
         a = self.gains_at(location)
         out = np.zeros_like(t)
         for k in range(self.n_modes):

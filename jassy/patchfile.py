@@ -200,8 +200,8 @@ def build_patch(
         for pkey in params:
             if pkey not in allowed:
                 raise PatchError(
-                    f"{key}: unknown parameter {pkey!r}{suggest(pkey, allowed)}; "
-                    f"expected one of {', '.join(sorted(allowed))}"
+                    f"{key}: unknown parameter {pkey!r}; "
+                    f"expected one of {', '.join(sorted(allowed))}{suggest(pkey, allowed)}"
                 )
         connect = {}
         if cls.variadic:

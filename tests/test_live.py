@@ -52,6 +52,26 @@ def test_live_output_is_the_offline_rendering_sample_for_sample(jack, isolation)
     np.testing.assert_array_equal(heard[1, ok], ref.haptic[0, rendered[ok]].astype(np.float32))
 
 
+def test_callback_mode_plays_the_offline_rendering_with_the_devices_latency_only(jack):
+    from jassy.live import LiveEngine
+
+    patch = load_patch("bell")
+    live = LiveEngine(patch.graph, patch.score, FS, 64, monitor_seconds=3.0, mode="auto")
+    assert live.mode == "callback" and live.mode_reason is None
+    live.start()
+    time.sleep(1.2)
+    stats = live.stop()
+    heard, rendered = live.monitor()
+    assert stats.mode == "callback" and stats.ring_latency == 0.0
+    assert stats.latency == stats.device_latency <= 0.0015  # one 64-frame buffer at 48 kHz
+    assert stats.callbacks == pytest.approx(1.2 * FS / 64, rel=0.15)
+    assert np.all(np.diff(rendered) == 1) and rendered[0] >= 0  # every frame rendered as played
+    ref = OfflineEngine(load_patch("bell").graph, load_patch("bell").score, FS, 64).render(1.2)
+    ok = rendered < ref.audio.shape[1]
+    np.testing.assert_array_equal(heard[0, ok], ref.audio[0, rendered[ok]].astype(np.float32))
+    np.testing.assert_array_equal(heard[1, ok], ref.haptic[0, rendered[ok]].astype(np.float32))
+
+
 def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
     from jassy.live import LiveEngine
 
