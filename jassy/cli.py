@@ -470,11 +470,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import audiocheck, batch, doc, preview
+    from jassy import analyze, audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    analyze.add_command(sub)
     audiocheck.add_command(sub)
     preview.add_command(sub)
     doc.add_command(sub)
