@@ -98,7 +98,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
-    patch = load_patch(args.patch, args.set or ())
+    patch = load_patch(args.patch, args.set or (), args.event or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration if args.duration is not None else patch.duration
     if duration is None:
@@ -390,6 +390,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument(
+        "--event",
+        action="append",
+        metavar="time=S,node=N,action=A,ARG=V,...",
+        help="add a score event, e.g. 'time=1.0,node=hit,action=impact,impulse=0.02' (action default: set)",
+    )
+    p.add_argument(
         "--format",
         default="float32",
         choices=["float32", "pcm16", "pcm24"],
@@ -464,11 +470,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import audiocheck, batch, doc, preview
+    from jassy import analyze, audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    analyze.add_command(sub)
     audiocheck.add_command(sub)
     preview.add_command(sub)
     doc.add_command(sub)

@@ -37,4 +37,4 @@ def ugen_class(type_name: str, where: str = "type") -> type:
     except KeyError:
         known = ", ".join(sorted(_REGISTRY))
         hint = suggest(type_name, _REGISTRY)
-        raise PatchError(f"{where}: unknown ugen type {type_name!r}{hint}; expected one of {known}") from None
+        raise PatchError(f"{where}: unknown ugen type {type_name!r}; expected one of {known}{hint}") from None

@@ -23,7 +23,7 @@ value of the frame ending before sample t is output from t on, held until the ne
   d(tau) = sum_{j<W} (x_j - x_{j+tau})^2 (W = size / 2, by FFT), cumulative mean
   normalised d'(tau) = d(tau) tau / sum_{k<=tau} d(k), the first dip below ``threshold``
   (its local minimum, refined by a parabola), f0 = fs / tau; 0 Hz when no dip is found
-  (unvoiced). Extra output ``clarity`` 1 - d'(tau).
+  (unvoiced) or the frame is silent. Extra output ``clarity`` 1 - d'(tau) (0 unvoiced).
 * ``Onset``: positive spectral flux sum max(0, |X| - |X_prev|) / sum |X|; an onset is
   reported (output 1 for one sample, else 0) when it exceeds ``threshold`` and the mean
   of the previous 8 frames' flux by the factor ``ratio``, at most once per
@@ -330,6 +330,9 @@ class Pitch(_Framed):
 
     def _analyse(self, samples: np.ndarray, t: int) -> None:
         half = self.size // 2
+        if not np.any(samples[: half + half]):  # silence: nothing to measure
+            self.held[:] = 0.0
+            return
         # cross term r(tau) = sum_{j<W} x_j x_{j+tau} by FFT correlation (zero padded)
         self.padded[:] = 0.0
         self.padded[: self.size] = samples
