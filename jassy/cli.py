@@ -325,7 +325,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.rigid.bench import bench_rigid, print_rigid
         from physics.rigid.solver_bench import bench_solvers, print_solvers
 
-        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        def say(message: str) -> None:
+            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
+
+        rows = bench_rigid(quick=args.quick, progress=say)
+        say("solvers: ABA, Lemke, PGS")
+        solvers = bench_solvers(quick=args.quick)
         print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
             print_rigid(rows), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
