@@ -98,7 +98,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
-    patch = load_patch(args.patch, args.set or ())
+    patch = load_patch(args.patch, args.set or (), args.event or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration if args.duration is not None else patch.duration
     if duration is None:
@@ -402,6 +402,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument(
+        "--event",
+        action="append",
+        metavar="time=S,node=N,action=A,ARG=V,...",
+        help="add a score event, e.g. 'time=1.0,node=hit,action=impact,impulse=0.02' (action default: set)",
+    )
+    p.add_argument(
         "--format",
         default="float32",
         choices=["float32", "pcm16", "pcm24"],
@@ -570,7 +576,9 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
     live = args.command in LIVE_COMMANDS
-    with stop_on_signals() if live else signals_stop() as stopped:
+    from jassy.limits import scoped
+
+    with scoped(), stop_on_signals() if live else signals_stop() as stopped:
         try:
             check_arguments(args, parser)
             return args.func(args)
