@@ -205,7 +205,9 @@ class OfflineEngine:
                     haptic[:, pos : pos + a.shape[1]] = h
                 pos += a.shape[1]
             if haptic is not None:
-                write_signal(haptic_path, haptic, self.sample_rate)
+                clipped = write_signal(haptic_path, haptic, self.sample_rate)
+                if clipped:
+                    self.warnings.append(clipped)
         return {
             "frames": frames,
             "duration": frames / self.sample_rate,
