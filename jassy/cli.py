@@ -198,7 +198,17 @@ def _cmd_play(args: argparse.Namespace) -> int:
     )
     why = f" ({engine.mode_reason})" if engine.mode_reason else ""
     print(f"mode: {engine.mode}{why}", flush=True)
+    osc = None
+    if args.osc:
+        from jassy.osc import OscControl, parse_address
+
+        host, port = parse_address(args.osc)
+        osc = OscControl(patch.graph, engine.post, origin=0.0, host=host, port=port)
     engine.start()
+    if osc is not None:
+        osc.origin = time.time()  # the stream's frame 0, as near as the wall clock tells
+        osc.start()
+        print(f"OSC on {host}:{osc.address[1]}: /NODE/PARAM, /NODE/ACTION, /event", flush=True)
     try:
         print(
             f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
@@ -212,6 +222,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
     finally:
+        if osc is not None:
+            osc.stop()
         stats = engine.stop()
         print(f"\n{stats.summary()}", flush=True)
     return 0
@@ -348,7 +360,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.rigid.bench import bench_rigid, print_rigid
         from physics.rigid.solver_bench import bench_solvers, print_solvers
 
-        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        def say(message: str) -> None:
+            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
+
+        rows = bench_rigid(quick=args.quick, progress=say)
+        say("solvers: ABA, Lemke, PGS")
+        solvers = bench_solvers(quick=args.quick)
         print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
             print_rigid(rows), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
@@ -464,6 +481,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
+    p.add_argument("--osc", metavar="HOST:PORT", help="take parameter changes and events over OSC (UDP)")
     _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
