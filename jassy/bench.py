@@ -420,6 +420,7 @@ def print_live(r: dict) -> None:
         f"(max {r['frame_interval_max_ms']:.3f}); final frame "
         f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"
         f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
-        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses; ring + device "
-        f"{r['loop_ring_and_device_samples']:.0f})"
+        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses, {r['loop_missed']} missed, "
+        f"{r['loop_mode']} mode; "
+        f"engine latency {r['loop_engine_latency_samples']:.0f})"
     )

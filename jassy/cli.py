@@ -87,6 +87,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if args.normalise and args.patch in SCENES:
+        raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
+    if args.target is not None and not args.normalise:
+        raise JassyError("--target: needs --normalise peak|lufs")
+    if args.target is not None and not (math.isfinite(args.target) and -70.0 <= args.target <= 0.0):
+        raise JassyError(f"--target: expected dB between -70 and 0, got {args.target}")
     if args.plot:
         from jassy.preview import check_png, require_matplotlib
 
@@ -115,9 +121,20 @@ def _cmd_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
     engine = OfflineEngine(
-        patch.graph, patch.score, rate, args.block, haptic_safety=safety, offsets_ms=offsets
-    )
-    summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
+        patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
+        offsets_ms=offsets,
+    )  # fmt: skip
+    if args.normalise:
+        from jassy.loudness import TARGETS, render_normalised
+
+        target = TARGETS[args.normalise] if args.target is None else args.target
+        summary = render_normalised(
+            engine, args.output, duration, args.format, args.haptic, args.normalise, target, not args.quiet
+        )
+    else:
+        summary = engine.render_to_file(
+            args.output, duration, args.format, args.haptic, progress=not args.quiet
+        )
     elapsed = time.perf_counter() - t0
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
@@ -127,6 +144,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
+            + (
+                f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
+                + ("LUFS" if args.normalise == "lufs" else "dBFS peak")
+                if args.normalise
+                else ""
+            )
         )
     _plot_render(args)
     return 0
@@ -430,6 +453,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_haptic_arguments(p)
     p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
+    p.add_argument(
+        "--normalise",
+        choices=["peak", "lufs"],
+        help="scale to a peak level (default -1 dBFS) or integrated loudness (default -16 LUFS)",
+    )
+    p.add_argument("--target", type=float, metavar="DB", help="--normalise target: dBFS (peak) or LUFS")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
