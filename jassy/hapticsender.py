@@ -71,11 +71,11 @@ def _die_with_parent_and_ignore_terminal_signals() -> None:
     libc.prctl(pr_set_timerslack, 1, 0, 0, 0)  # 1 ns timer slack: sleeps end on time
 
 
-def _request_realtime_priority() -> bool:
-    """SCHED_FIFO for the calling process where the OS grants it (root, CAP_SYS_NICE or
+def request_realtime_priority(priority: int = REALTIME_PRIORITY) -> bool:
+    """SCHED_FIFO for the calling thread where the OS grants it (root, CAP_SYS_NICE or
     an rtprio limit); True if granted."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (AttributeError, OSError):
         return False
     return True
@@ -149,7 +149,7 @@ def run_sender(
     n_force = channels - n_torque
     per_frame = int(round(sample_rate / frame_rate))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    control[REALTIME] = _request_realtime_priority()
+    control[REALTIME] = request_realtime_priority()
     callbacks = _Callbacks(tap, sample_rate)
     sequence = 0
     dac = 0.0

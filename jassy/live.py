@@ -32,6 +32,16 @@ import numba as nb
 import numpy as np
 from numba import types
 
+from jassy.callback import PLAYED as CALLBACK_PLAYED
+from jassy.callback import (
+    TAP_HAPTIC_ROWS,
+    TAP_LOG,
+    TAP_LOG_ROWS,
+    TAP_LOGGED,
+    CallbackPlayer,
+    CallbackRenderer,
+    choose_mode,
+)
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
@@ -60,8 +70,9 @@ MAX_HAPTIC = 32
 CALLBACK_LOG_ROWS, HAPTIC_RING_ROWS = 1024, 4096
 #: GIL switch interval while live (s): short enough for the producer to keep the ring full.
 SWITCH_INTERVAL = 0.0002
-#: Seconds between measurements of the stream clock against the monotonic clock.
-CLOCK_CHECK = 0.1
+#: Seconds between measurements of the stream clock against the monotonic clock, and the
+#: weight of each in their running average (the stream clock jitters with the callbacks).
+CLOCK_CHECK, CLOCK_WEIGHT = 0.02, 0.05
 #: SCHED_FIFO priority of the producer thread where the OS grants it (JACK uses 70-95).
 REALTIME_PRIORITY = 40
 
@@ -197,6 +208,8 @@ class LiveStats:
     device_latency: float
     late_events: int
     realtime: bool
+    #: "callback" (the graph rendered in the device callback) or "ring" (a producer ahead).
+    mode: str = "ring"
 
     @property
     def latency(self) -> float:
@@ -206,7 +219,8 @@ class LiveStats:
     def summary(self) -> str:
         pct = 100.0 * self.underrun_callbacks / max(self.callbacks, 1)
         return (
-            f"{self.callbacks} callbacks, {self.underrun_callbacks} underruns ({pct:.3f} %), "
+            f"{self.mode} mode: {self.callbacks} callbacks, "
+            f"{self.underrun_callbacks} underruns ({pct:.3f} %), "
             f"latency {self.latency * 1e3:.2f} ms (ring {self.ring_latency * 1e3:.2f} ms + device "
             f"{self.device_latency * 1e3:.2f} ms)"
         )
@@ -225,6 +239,10 @@ class LiveEngine:
     for a few-ms ring; "thread" runs it in a thread of this process (shares the GIL;
     the switch interval is shortened while playing); "auto" picks "process" where fork
     is available and PortAudio is not yet loaded in this process.
+
+    mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
+    latency = the device's); "ring" uses the producer above; "auto" takes the callback
+    where the graph, score and options allow it (``mode_reason`` says why not otherwise).
     """
 
     def __init__(
@@ -243,6 +261,7 @@ class LiveEngine:
         isolation: str = "auto",
         haptic_torque: int = 0,
         send_log_frames: int = 0,
+        mode: str = "ring",
     ):
         if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
@@ -308,6 +327,11 @@ class LiveEngine:
         self._events_rx, self._events_tx = multiprocessing.Pipe(duplex=False)
         self._errors_rx, self._errors_tx = multiprocessing.Pipe(duplex=False)
         self._worker = None
+        udp_off_card = bool(self._haptic_udp) and not self.haptic_to_card  # only the ring sends those
+        self.mode, self.mode_reason = choose_mode(mode, graph, self.score, offsets_ms, udp_off_card)
+        self._callback: CallbackPlayer | None = None
+        self._clock: threading.Thread | None = None
+        self._clock_stop = threading.Event()
 
     # ------------------------------------------------------------------ control
     def start(self, timeout: float = 60.0) -> None:
@@ -317,6 +341,29 @@ class LiveEngine:
         from jassy.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
+        if self._haptic_udp is not None:  # forked first: before PortAudio runs in this process
+            self._sender = multiprocessing.get_context("fork").Process(
+                target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
+            )
+            self._sender.start()
+        if self.mode == "callback":
+            renderer = CallbackRenderer(
+                self.graph,
+                self.score,
+                self.sample_rate,
+                self.block,
+                self.haptic_to_card,
+                self.safety,
+                self.monitor_capacity / self.sample_rate,
+            )
+            if self._sender is not None:
+                self._tap_into(renderer.control)
+            self._callback = CallbackPlayer(renderer)
+            self._callback.start(self._device_index)
+            if self._sender is not None:
+                self._clock = threading.Thread(target=self._track_clock, name="jassy-clock", daemon=True)
+                self._clock.start()
+            return
         use_process = self.isolation == "process" or (
             self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
         )
@@ -330,11 +377,6 @@ class LiveEngine:
             self._switch_interval = sys.getswitchinterval()
             sys.setswitchinterval(SWITCH_INTERVAL)
             self._worker = threading.Thread(target=self._producer_main, name="jassy-producer", daemon=True)
-        if self._haptic_udp is not None:
-            self._sender = multiprocessing.get_context("fork").Process(
-                target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
-            )
-            self._sender.start()
         self._worker.start()
         deadline = time.monotonic() + timeout
         while self.header[RUNNING] == 0:
@@ -348,6 +390,9 @@ class LiveEngine:
         """Schedule ``event`` from any thread: at its time if still ahead, else at the
         next frame to be rendered (``time = 0`` means as soon as possible; a later time
         already rendered counts as a late event)."""
+        if self._callback is not None:
+            self._callback.renderer.post(event)
+            return
         self._events_tx.send(event)
 
     def pause_producer(self, paused: bool) -> None:
@@ -358,6 +403,19 @@ class LiveEngine:
         """End the run in order: fade the forces to zero within the watchdog time, send the
         UDP frames through the last sample played and then the final frame, stop the
         stream, end the child processes; return the counters."""
+        if self._callback is not None:
+            renderer = self._callback.renderer
+            if self._callback.stream is not None:
+                renderer.end()
+                deadline = time.monotonic() + 0.5  # a dead device never plays the fade
+                while not renderer.faded() and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            self._finish_sender(int(renderer.control[CALLBACK_PLAYED]), self._callback.device_latency)
+            self._clock_stop.set()
+            if self._clock is not None:
+                self._clock.join()
+            self._callback.stop()
+            return self.stats()
         h = self.header
         if h[RUNNING] and not h[ENDING]:
             h[ENDING] = 1
@@ -365,16 +423,7 @@ class LiveEngine:
             deadline = time.monotonic() + 0.5  # a dead device never plays the fade
             while h[PLAYED] < faded_at and time.monotonic() < deadline:
                 time.sleep(0.001)
-        if self._sender is not None:
-            self.tap.control[STOP_AT] = h[PLAYED]
-            deadline = time.monotonic() + float(self.state[DEVICE_LATENCY]) + 1.0
-            while not self.tap.control[DONE] and time.monotonic() < deadline:
-                time.sleep(0.001)
-            self._sender.join(timeout=1.0)
-            if self._sender.is_alive():
-                self._sender.kill()
-                self._sender.join()
-            self._sender = None
+        self._finish_sender(int(h[PLAYED]), float(self.state[DEVICE_LATENCY]))
         h[STOP] = 1
         if self._worker is not None:
             self._worker.join(timeout=5.0)
@@ -388,12 +437,58 @@ class LiveEngine:
         self._raise_producer_error()
         return self.stats()
 
+    def _finish_sender(self, played: int, device_latency: float) -> None:
+        """Let the UDP sender send the frames through stream frame ``played``, then the
+        final frame, and end its process."""
+        if self._sender is None:
+            return
+        self.tap.control[STOP_AT] = played
+        deadline = time.monotonic() + device_latency + 1.0
+        while not self.tap.control[DONE] and time.monotonic() < deadline:
+            time.sleep(0.001)
+        self._sender.join(timeout=1.0)
+        if self._sender.is_alive():
+            self._sender.kill()
+            self._sender.join()
+        self._sender = None
+
+    def _tap_into(self, control: np.ndarray) -> None:
+        """Point the callback renderer's tap slots at this engine's stream tap (shared
+        memory the sender process reads)."""
+        control[TAP_LOG] = self.tap.log.ctypes.data
+        control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS] = self.tap.log.shape[0], self.tap.played.shape[0]
+        control[TAP_LOGGED] = self.header.ctypes.data + LOGGED * self.header.itemsize
+
+    def _track_clock(self) -> None:
+        """Callback mode: keep the stream-clock offset for the sender up to date."""
+        stream = self._callback.stream
+        control = self.tap.control
+        control[CLOCK_OFFSET] = stream.clock_offset()
+        while not self._clock_stop.wait(CLOCK_CHECK):
+            offset = control[CLOCK_OFFSET]
+            control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
+
     def _raise_producer_error(self) -> None:
         if self._errors_rx.poll():
             message = self._errors_rx.recv()
             raise JassyError(f"live engine: {message}")
 
     def stats(self) -> LiveStats:
+        if self._callback is not None:
+            c = self._callback.renderer.stats(self._callback.device_latency)
+            return LiveStats(
+                c.callbacks,
+                c.xruns,
+                c.xruns * self.block,
+                c.frames_played,
+                c.max_callback_frames,
+                c.status_flags,
+                0.0,
+                c.device_latency,
+                self._callback.renderer.late,
+                False,
+                "callback",
+            )
         h = self.header
         return LiveStats(
             int(h[CALLBACKS]),
@@ -406,11 +501,22 @@ class LiveEngine:
             float(self.state[DEVICE_LATENCY]),
             int(h[LATE]),
             bool(h[REALTIME]),
+            "ring",
         )
+
+    def haptic_now(self) -> np.ndarray:
+        """The haptic sample (per channel) the callback handed to the device last."""
+        if self._callback is not None:
+            return self._callback.renderer.haptic_last[: len(self.graph.haptic)].copy()
+        played = int(self.header[PLAYED])
+        rows = self.tap.played.shape[0]
+        return self.tap.played[(played - 1) % rows].copy() if played else np.zeros(self.tap.played.shape[1])
 
     def monitor(self) -> tuple[np.ndarray, np.ndarray]:
         """What the device received last: (channels, frames) signals in playing order, and
         per frame the rendered frame it came from (-1 for silence inserted on an underrun)."""
+        if self._callback is not None:
+            return self._callback.renderer.monitor()
         if not self.monitor_capacity:
             raise JassyError("no monitor: create the engine with monitor_seconds > 0")
         played = int(self.header[PLAYED])
@@ -462,7 +568,8 @@ class LiveEngine:
                 if self.header[PAUSED] or not self._fill_once(engine, buf, out):
                     time.sleep(pause)
                 if time.monotonic() > calibrate_at:
-                    self.tap.control[CLOCK_OFFSET] = stream.clock_offset()
+                    offset = self.tap.control[CLOCK_OFFSET]
+                    self.tap.control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
                     calibrate_at += CLOCK_CHECK
         except BaseException as exc:  # reported to the caller; the callback keeps the device safe
             self._errors_tx.send(f"{type(exc).__name__}: {exc}")

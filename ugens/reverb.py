@@ -95,20 +95,19 @@ def _section(x, coef, state):
 @nb.njit(fastmath=FASTMATH, cache=True)
 def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, gains, signs, par, band_in, y):
     """n samples. pre: pre-delay ring; split (crossovers, 2 h, 5): h low-pass then
-    h high-pass biquads per crossover; ring (lines, size, bands); ist = [pre-delay write, ring write];
-    gains (lines, bands); signs: input weights of the lines; par = [pre-delay samples, dry,
-    wet]; band_in (bands) and y (lines, bands): scratch."""
+    h high-pass biquads per crossover; ring: the lines' samples, flat (line, slot in the
+    line, band); ist = [pre-delay write, ring write]; gains: flat (line, band); signs: the
+    input weights of the lines; par = [pre-delay samples, dry, wet]; band_in (bands) and
+    y (lines * bands): scratch."""
     pre_len = int(par[0])
     dry = par[1]
     wet = par[2]
     pre_size = pre.size
-    size = ring.shape[1]
+    size = ring.size // (LINES * SLOTS)
     mask = size - 1
-    n_bands = ring.shape[2]
-    n_lines = ring.shape[0]
     n_cross = split.shape[0]
     half = split.shape[1] // 2
-    norm = 1.0 / math.sqrt(n_lines)
+    norm = 1.0 / math.sqrt(LINES)
     pw = ist[0]
     w = ist[1]
     for i in range(n):
@@ -130,28 +129,30 @@ def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, ga
         band_in[n_cross] = v
         left_sum = 0.0
         right_sum = 0.0
-        for j in range(n_lines):
-            rj = (w - lengths[j]) & mask
+        # LINES and SLOTS are compile-time constants: the loops over slots unroll and vectorise
+        for j in range(LINES):
+            base = (j * size + ((w - lengths[j]) & mask)) * SLOTS
             sign = 1.0 if j % 2 == 0 else -1.0
-            for b in range(n_bands):
-                yj = ring[j, rj, b]
+            for b in range(SLOTS):
+                yj = ring[base + b]
                 left_sum += yj
                 right_sum += sign * yj
-                y[j, b] = gains[j, b] * yj
+                y[j * SLOTS + b] = gains[j * SLOTS + b] * yj
         # fast Walsh-Hadamard transform across the lines (in place, every band at once)
         h = 1
-        while h < n_lines:
-            for j0 in range(0, n_lines, 2 * h):
+        while h < LINES:
+            for j0 in range(0, LINES, 2 * h):
                 for j in range(j0, j0 + h):
-                    for b in range(n_bands):
-                        a = y[j, b]
-                        c2 = y[j + h, b]
-                        y[j, b] = a + c2
-                        y[j + h, b] = a - c2
+                    for b in range(SLOTS):
+                        a = y[j * SLOTS + b]
+                        c2 = y[(j + h) * SLOTS + b]
+                        y[j * SLOTS + b] = a + c2
+                        y[(j + h) * SLOTS + b] = a - c2
             h *= 2
-        for j in range(n_lines):
-            for b in range(n_bands):
-                ring[j, w, b] = norm * (y[j, b] + signs[j] * band_in[b])
+        for j in range(LINES):
+            base = (j * size + w) * SLOTS
+            for b in range(SLOTS):
+                ring[base + b] = norm * (y[j * SLOTS + b] + signs[j] * band_in[b])
         w = (w + 1) & mask
         out[i] = dry * x[i] + wet * norm * left_sum
         right[i] = dry * x[i] + wet * norm * right_sum
@@ -207,10 +208,11 @@ class Reverb(UGen):
         v, fs = self.values, self.sample_rate
         self.lengths = line_lengths(v["room_size"], v["c"], fs)
         size = 1 << int(math.ceil(math.log2(int(self.lengths.max()) + 1)))
-        self.ring = np.zeros((LINES, size, SLOTS))
+        self.ring = np.zeros(LINES * size * SLOTS)
         t60 = np.asarray(v["t60"], dtype=np.float64)
-        self.gains = np.zeros((LINES, SLOTS))
-        self.gains[:, : len(BANDS)] = 10.0 ** (-3.0 * self.lengths[:, None] / (t60[None, :] * fs))
+        gains = np.zeros((LINES, SLOTS))
+        gains[:, : len(BANDS)] = 10.0 ** (-3.0 * self.lengths[:, None] / (t60[None, :] * fs))
+        self.gains = gains.ravel()
         pre_len = int(round(v["pre_delay"] * fs))
         self.pre = np.zeros(pre_len + 1)
         self.par = np.array([pre_len, v["dry"], v["wet"]], dtype=np.float64)
@@ -225,7 +227,7 @@ class Reverb(UGen):
         self.split_state = np.zeros((edges.size, 2 * half, 2))
         self.ist = np.zeros(2, dtype=np.int64)
         self.band_in = np.zeros(SLOTS)
-        self.scratch = np.zeros((LINES, SLOTS))
+        self.scratch = np.zeros(LINES * SLOTS)
         self._run = specialise(reverb_run, *self._arguments(0))
 
     def _arguments(self, n: int) -> tuple:

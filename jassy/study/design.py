@@ -76,7 +76,6 @@ import itertools
 import json
 import math
 import re
-import tomllib
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -687,10 +686,12 @@ def _read_conditions_file(path: Path, where: str) -> list[dict[str, Any]]:
     if not path.is_file():
         raise DesignError(f"{where}: conditions: no such file {path}")
     if path.suffix == ".toml":
+        from jassy.inputs import load_toml
+
         try:
-            rows = tomllib.loads(path.read_text()).get("condition")
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise DesignError(f"{path}: not valid TOML: {exc}") from None
+            rows = load_toml(path, "conditions file").get("condition")
+        except JassyError as exc:
+            raise DesignError(str(exc)) from None
         if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
             raise DesignError(f"{path}: condition: expected [[condition]] tables")
         return rows
@@ -849,8 +850,10 @@ def load_design(path: str | Path) -> Design:
     p = Path(path)
     if not p.is_file():
         raise DesignError(f"{path}: no such design file")
+    from jassy.inputs import load_toml
+
     try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise DesignError(f"{path}: not valid TOML: {exc}") from None
+        data = load_toml(p, "design file")
+    except JassyError as exc:
+        raise DesignError(str(exc)) from None
     return parse_design(data, str(path), p.resolve().parent)

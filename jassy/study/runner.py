@@ -322,8 +322,14 @@ def software_versions() -> dict[str, str]:
 def read_rows(path: str | os.PathLike, repair: bool = False) -> list[dict[str, str]]:
     """Rows of a results CSV. A last line without its newline (a write cut short) is
     ignored, and removed from the file if ``repair``."""
+    from jassy.inputs import decode, read_bytes
+
     p = Path(path)
-    data = p.read_bytes()
+    try:
+        data = read_bytes(p, "results file")
+        decode(data, str(p))  # all of it is UTF-8, so is any prefix cut at a newline
+    except JassyError as exc:
+        raise ResultsError(str(exc)) from None
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
         data = data[:cut]
@@ -344,8 +350,8 @@ def read_header(path: str | os.PathLike) -> dict[str, Any]:
     if not side.is_file():
         return {}
     try:
-        return json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
+        return json.loads(side.read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise ResultsError(f"{side}: damaged JSON header: {exc}") from None
 
 
