@@ -489,7 +489,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
-    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill"])
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill", "poke"])
     p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
