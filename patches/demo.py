@@ -253,7 +253,7 @@ def start_live(mode: str, probe_udp: str | None = None, **live_options):
     from jassy.live import LiveEngine
     from jassy.probeinput import PoseDriver, PoseReceiver
 
-    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, **live_options)
+    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, mode="auto", **live_options)
     engine.start()
     probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
     if mode == "drill":

@@ -42,8 +42,11 @@ pulse train.
 
 Output: sound pressure (unitless), scaled so that throttle 1 at 3000 rpm with no
 irregularity peaks at 0.5 (the scale is measured at prepare time by running the kernel).
-Extra output ``pulses``: the port pressure pulse train on the same scale. Not modelled:
-intake, cylinder waveguides, mufflers, engine-block vibration, backfire (SDT ``motor~``).
+Extra output ``pulses``: the port pressure pulse train on the same scale. Intake and
+engine-block (mechanical) noise are added from that pulse train (``intake_level``,
+``mechanical_level``; extra outputs ``intake`` and ``mechanical``; model in
+:mod:`ugens.engine_noise`). Not modelled: cylinder waveguides, mufflers, backfire
+(SDT ``motor~``).
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import engine_noise
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -71,6 +75,10 @@ REFERENCE_RPM = 3000.0
 PEAK = 0.5
 #: Capacity of the queue of firings waiting for their (jittered) onset.
 QUEUE = 16
+#: XORed into the seed for the intake and mechanical noise (a stream of its own).
+NOISE_STREAM = 0x5DEECE66D
+#: Noise level parameters -> slots of the levels vector of ugens.engine_noise.
+_NOISE_LEVELS = {"intake_level": 0, "hiss": 1, "mechanical_level": 2}
 #: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
 #: the sample rate), Kaiser window beta, sub-sample positions tabulated.
 BLAMP_HALF = 32
@@ -226,7 +234,7 @@ class Engine(UGen):
     EngineApplet). Output: sound pressure, throttle 1 at 3000 rpm peaks at ~0.5."""
 
     type_name = "Engine"
-    outputs = ("pulses",)
+    outputs = ("pulses", "intake", "mechanical")
     param_specs = {
         "rpm": ParamSpec(
             "float", 800.0, low=0.0, high=20000.0, unit="1/min", smooth=True, doc="crankshaft speed"
@@ -275,6 +283,7 @@ class Engine(UGen):
         "port_reflection": ParamSpec(
             "float", 0.7, low=0.0, high=0.99, doc="reflection coefficient at the port (engine) end"
         ),
+        **engine_noise.NOISE_SPECS,
     }
 
     def check_param(self, key: str, value: Any, where: str) -> Any:
@@ -298,6 +307,12 @@ class Engine(UGen):
         self.ring = np.zeros(int(math.ceil(2.0 * delay)) + 2)
         self.lead = np.zeros(2 * BLAMP_HALF + 2)
         self.par = np.zeros(10)
+        self.noise_coef = engine_noise.design(v, fs)
+        self.noise_state = np.zeros((3, 2))
+        self.noise_rng = np.zeros(1, dtype=np.uint64)
+        self.noise_levels = np.zeros(3)
+        for key in ("intake_level", "hiss", "mechanical_level"):
+            self._param_changed(key, v[key], True)
         self.rpm = self.smoothed("rpm")
         self.throttle = self.smoothed("throttle")
         self._rpms = Control(self.rpm, self.max_block)
@@ -368,6 +383,8 @@ class Engine(UGen):
         self.rng[0] = self.values["seed"]
         self.ring[:] = 0.0
         self.lead[:] = 0.0
+        self.noise_state[:] = 0.0
+        self.noise_rng[0] = self.values["seed"] ^ NOISE_STREAM
         for ramp in (self.rpm, self.throttle):
             ramp.set(ramp.target, 0, jump=True)
 
@@ -380,6 +397,8 @@ class Engine(UGen):
             self.par[_MIS] = value
         elif key == "port_reflection":
             self.par[_PORT] = value
+        elif key in _NOISE_LEVELS:
+            self.noise_levels[_NOISE_LEVELS[key]] = value
 
     def process(self, start: int, n: int) -> None:
         self._run(
@@ -398,6 +417,23 @@ class Engine(UGen):
             _BLAMP,
             self.lead,
         )
+        if self.noise_levels[0] > 0.0 or self.noise_levels[2] > 0.0:
+            engine_noise.engine_noise(
+                self.extra["pulses"],
+                self.out,
+                self.extra["intake"],
+                self.extra["mechanical"],
+                n,
+                self._rpms.buffer,
+                self._throttles.buffer,
+                self.noise_levels,
+                self.noise_coef,
+                self.noise_state,
+                self.noise_rng,
+            )
+        else:
+            self.extra["intake"][:n] = 0.0
+            self.extra["mechanical"][:n] = 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -408,6 +444,9 @@ class Engine(UGen):
             "ring": self.ring,
             "lead": self.lead,
             "par": self.par,
+            "noise_state": self.noise_state,
+            "noise_rng": self.noise_rng,
+            "noise_levels": self.noise_levels,
             "rpm": self.rpm.ramp,
             "throttle": self.throttle.ramp,
         }
