@@ -253,7 +253,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
     from jassy.bridge import run_bridge, scripted_path, write_log
+    from jassy.hapticframes import parse_address
 
+    parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
+    parse_address(args.listen, "--listen")
     if args.duration is not None and not args.duration >= 0:
         raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
     ticks = []
@@ -489,7 +492,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
-    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill"])
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill", "poke"])
     p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
