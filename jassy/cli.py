@@ -253,7 +253,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
     from jassy.bridge import run_bridge, scripted_path, write_log
+    from jassy.hapticframes import parse_address
 
+    parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
+    parse_address(args.listen, "--listen")
     if args.duration is not None and not args.duration >= 0:
         raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
     ticks = []
