@@ -475,6 +475,7 @@ def command_options(command: str) -> list[tuple[str, bool]]:
 def test_random_options_of_every_command_end_in_exit_0_or_one_line(workdir, monkeypatch, data):
     monkeypatch.setenv("JASSY_MAX_MEMORY", "300M")  # FEM and fits stay small
     folder = fresh(workdir, "opts")
+    monkeypatch.chdir(folder)  # relative names drawn for -o and others land here
     (folder / "p.toml").write_text((ROOT / "patches" / "wall_tap.toml").read_text())
     (folder / "m.toml").write_text(MODEL_FILES[0].read_text())
     (folder / "x.npz").write_bytes(b"PK\x03\x04 not a zip")
