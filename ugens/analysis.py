@@ -227,7 +227,7 @@ class _Framed(UGen):
 
 
 _SIZE = ParamSpec("int", 1024, low=64, high=65536, fixed=True, doc="frame length in samples (power of two)")
-_HOP = ParamSpec("int", 256, low=1, high=65536, fixed=True, doc="samples between frames")
+_HOP = ParamSpec("int", 512, low=1, high=65536, fixed=True, doc="samples between frames")
 
 
 @register
