@@ -260,7 +260,36 @@ def contact_bench(names: list[str] | None = None, block: int = 64) -> list[dict]
                 "realtime_factor": duration / elapsed,
             }
         )
+    if names is None:
+        rows.append(hunt_crossley_bench(block))
     return rows
+
+
+def hunt_crossley_bench(block: int = 64, modes: int = 200, seconds: float = 3.0) -> dict:
+    """Real-time factor of a Hunt-Crossley contact on a bank of ``modes`` random modes
+    (60 Hz-12 kHz), struck 12 times, with silence skipping off (floor 0): the nonlinear
+    contact is integrated on every sample."""
+    from ugens.nonlinear_impact import HuntCrossleyImpact
+
+    rng = np.random.default_rng(2)
+    f = np.sort(rng.uniform(60, 12000, modes))
+    model = ModalModel(f, rng.uniform(0, 40, modes), rng.uniform(0, 1, modes) / (0.2 * 2 * np.pi * f))
+    hc = HuntCrossleyImpact(model, name="hc", mass=0.02, stiffness=1e8, floor=0.0)
+    graph = Graph(hc, haptic=hc.tap("force"))
+    events = [Event(0.01 + 0.25 * i, "hc", "strike", {"speed": 1.0}) for i in range(12)]
+
+    def run():
+        OfflineEngine(graph, events, SAMPLE_RATE, block).render(seconds)
+
+    (elapsed,) = _best_times([run], repeats=3)
+    name = f"hc-{modes}-modes"  # Hunt-Crossley, no silence skipping
+    return {
+        "patch": name,
+        "modes": modes,
+        "seconds": seconds,
+        "render_s": elapsed,
+        "realtime_factor": seconds / elapsed,
+    }
 
 
 def print_contact(rows: list[dict]) -> None:
@@ -320,12 +349,29 @@ def live_bench(
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    from jassy.bench_haptic import frame_stats, loop_latency
+    from jassy.hapticframes import FrameRecorder
+
+    recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
-        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0, mode=mode)
+        live = LiveEngine(
+            graph,
+            score,
+            SAMPLE_RATE,
+            block,
+            ring_blocks,
+            monitor_seconds=6.0,
+            mode=mode,
+            haptic_udp=recorder.address,
+            send_log_frames=int(seconds * 1000) + 1000,
+        )
         live.start()
         _busy_python(seconds)
         stats = live.stop()
         busy = live.callback_stats() if stats.mode == "callback" else None
+        recorder.wait_final()
+        haptic = frame_stats(live, recorder.stop())
+        haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
     heard, rendered = live.monitor()  # the last 6 s the device received: silence, then the tap
     audio_on, haptic_on = tap_onsets(heard, rendered, int((quiet_at + 1.5) * SAMPLE_RATE))
     tap_frame = int(np.floor(tap_at * SAMPLE_RATE)) + 1  # an impact's first non-zero frame
@@ -350,6 +396,7 @@ def live_bench(
         "tap_haptic_device_frame": haptic_on,
         "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,
         "tap_onset_vs_score_samples": int(rendered[haptic_on]) - tap_frame if haptic_on >= 0 else None,
+        **haptic,
     }
 
 
@@ -382,4 +429,14 @@ def print_live(r: dict) -> None:
             if r.get("callback_busy_max_ms") is not None
             else ""
         )
+        + "\n"
+        f"  UDP haptic frames: {r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
+        f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
+        f"(max {r['frame_interval_max_ms']:.3f}); final frame "
+        f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"
+        f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
+        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses, {r['loop_missed']} missed, "
+        f"{r['loop_mode']} mode; "
+        f"engine latency {r['loop_engine_latency_samples']:.0f})"
     )

@@ -40,6 +40,7 @@ from numba import types
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
+from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
 from jassy.program import (
     RECORD,
@@ -88,6 +89,10 @@ from ugens.scrape import ResonantScrape, Scrape
     LEVELS,
     WATCHDOG,
     FADE_LEFT,
+    TAP_LOG,
+    TAP_LOG_ROWS,
+    TAP_HAPTIC_ROWS,
+    TAP_LOGGED,
     PRIORITY,
     REALTIME,
     CLOCK,
@@ -95,7 +100,7 @@ from ugens.scrape import ResonantScrape, Scrape
     BUSY_TOTAL_NS,
     BUFFER_NS,
     BUSY_OVER,
-) = range(34)
+) = range(38)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
 QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_OVER + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
@@ -290,6 +295,29 @@ def _now_ns(control):
     return ts[0] * 1_000_000_000 + ts[1]
 
 
+@nb.njit(cache=True, nogil=True)
+def tap_callback(control, out, frames, dac, flags):
+    """Log the haptic channels of ``out`` and this callback (first stream frame, frames,
+    DAC time, flags) into the stream tap of :mod:`jassy.hapticsender` (addresses in the
+    TAP_* slots: the log rows, then the haptic ring)."""
+    ch, na = control[CHANNELS], control[N_AUDIO]
+    nh = ch - na
+    lrows, hrows = control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS]
+    log = _f64_rows(control[TAP_LOG], lrows, 4)
+    ring = _f64_rows(control[TAP_LOG] + lrows * 4 * 8, hrows, max(nh, 1))
+    logged = _i64(control[TAP_LOGGED], 1)
+    p = control[PLAYED]
+    for i in range(frames):
+        for c in range(nh):
+            ring[(p + i) % hrows, c] = out[i * ch + na + c]
+    row = logged[0] % lrows
+    log[row, 0] = p
+    log[row, 1] = frames
+    log[row, 2] = dac
+    log[row, 3] = flags
+    logged[0] += 1
+
+
 @nb.cfunc(
     types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr),
     cache=True,
@@ -306,6 +334,8 @@ def program_callback(inp, out, frames, time_info, status, user):
     if frames > control[MAX_FRAMES]:
         control[MAX_FRAMES] = frames
     o = nb.carray(out, (frames * control[CHANNELS],), np.float32)
+    flags_before, fading = control[HAPTIC_FLAGS], control[FADE_LEFT] > 0
+    control[HAPTIC_FLAGS] = 0
     began = _now_ns(control)
     render_into(control, o, frames)
     busy = _now_ns(control) - began
@@ -314,6 +344,10 @@ def program_callback(inp, out, frames, time_info, status, user):
         control[BUSY_MAX_NS] = busy
     if busy > control[BUFFER_NS]:
         control[BUSY_OVER] += 1
+    if control[TAP_LOG] != 0:  # the haptic samples and this buffer's DAC time, for the UDP sender
+        dac = nb.carray(time_info, (3,), np.float64)[2]
+        tap_callback(control, o, frames, dac, control[HAPTIC_FLAGS] | (FLAG_WATCHDOG if fading else 0))
+    control[HAPTIC_FLAGS] |= flags_before
     control[PLAYED] += frames
     return 0
 
@@ -345,7 +379,7 @@ def why_not_callback(graph: Graph, score: Sequence[Event], offsets_ms: dict | No
     if offsets_ms and any(offsets_ms.values()):
         return "per-channel offsets are applied by the ring producer"
     if haptic_udp:
-        return "UDP haptic frames are sent by the ring producer"
+        return "UDP haptic frames without haptic channels on the device are sent by the ring producer"
     for i, event in enumerate(score):
         reason = _event_not_supported(graph, event)
         if reason is not None:

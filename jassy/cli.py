@@ -87,6 +87,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if args.normalise and args.patch in SCENES:
+        raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
+    if args.target is not None and not args.normalise:
+        raise JassyError("--target: needs --normalise peak|lufs")
+    if args.target is not None and not (math.isfinite(args.target) and -70.0 <= args.target <= 0.0):
+        raise JassyError(f"--target: expected dB between -70 and 0, got {args.target}")
     if args.plot:
         from jassy.preview import check_png, require_matplotlib
 
@@ -98,7 +104,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
-    patch = load_patch(args.patch, args.set or ())
+    patch = load_patch(args.patch, args.set or (), args.event or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
     duration = args.duration if args.duration is not None else patch.duration
     if duration is None:
@@ -115,9 +121,20 @@ def _cmd_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
     engine = OfflineEngine(
-        patch.graph, patch.score, rate, args.block, haptic_safety=safety, offsets_ms=offsets
-    )
-    summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
+        patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
+        offsets_ms=offsets,
+    )  # fmt: skip
+    if args.normalise:
+        from jassy.loudness import TARGETS, render_normalised
+
+        target = TARGETS[args.normalise] if args.target is None else args.target
+        summary = render_normalised(
+            engine, args.output, duration, args.format, args.haptic, args.normalise, target, not args.quiet
+        )
+    else:
+        summary = engine.render_to_file(
+            args.output, duration, args.format, args.haptic, progress=not args.quiet
+        )
     elapsed = time.perf_counter() - t0
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
@@ -127,6 +144,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
+            + (
+                f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
+                + ("LUFS" if args.normalise == "lufs" else "dBFS peak")
+                if args.normalise
+                else ""
+            )
         )
     _plot_render(args)
     return 0
@@ -175,7 +198,17 @@ def _cmd_play(args: argparse.Namespace) -> int:
     )
     why = f" ({engine.mode_reason})" if engine.mode_reason else ""
     print(f"mode: {engine.mode}{why}", flush=True)
+    osc = None
+    if args.osc:
+        from jassy.osc import OscControl, parse_address
+
+        host, port = parse_address(args.osc)
+        osc = OscControl(patch.graph, engine.post, origin=0.0, host=host, port=port)
     engine.start()
+    if osc is not None:
+        osc.origin = time.time()  # the stream's frame 0, as near as the wall clock tells
+        osc.start()
+        print(f"OSC on {host}:{osc.address[1]}: /NODE/PARAM, /NODE/ACTION, /event", flush=True)
     try:
         print(
             f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
@@ -189,6 +222,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
     finally:
+        if osc is not None:
+            osc.stop()
         stats = engine.stop()
         print(f"\n{stats.summary()}", flush=True)
     return 0
@@ -325,7 +360,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.rigid.bench import bench_rigid, print_rigid
         from physics.rigid.solver_bench import bench_solvers, print_solvers
 
-        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        def say(message: str) -> None:
+            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
+
+        rows = bench_rigid(quick=args.quick, progress=say)
+        say("solvers: ABA, Lemke, PGS")
+        solvers = bench_solvers(quick=args.quick)
         print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
             print_rigid(rows), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
@@ -390,6 +430,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument(
+        "--event",
+        action="append",
+        metavar="time=S,node=N,action=A,ARG=V,...",
+        help="add a score event, e.g. 'time=1.0,node=hit,action=impact,impulse=0.02' (action default: set)",
+    )
+    p.add_argument(
         "--format",
         default="float32",
         choices=["float32", "pcm16", "pcm24"],
@@ -407,6 +453,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_haptic_arguments(p)
     p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
+    p.add_argument(
+        "--normalise",
+        choices=["peak", "lufs"],
+        help="scale to a peak level (default -1 dBFS) or integrated loudness (default -16 LUFS)",
+    )
+    p.add_argument("--target", type=float, metavar="DB", help="--normalise target: dBFS (peak) or LUFS")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -429,6 +481,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
+    p.add_argument("--osc", metavar="HOST:PORT", help="take parameter changes and events over OSC (UDP)")
     _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
@@ -436,7 +489,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
-    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill"])
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill", "poke"])
     p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
@@ -464,11 +517,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import audiocheck, batch, doc, preview
+    from jassy import analyze, audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    analyze.add_command(sub)
     audiocheck.add_command(sub)
     preview.add_command(sub)
     doc.add_command(sub)
@@ -556,7 +610,9 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
     live = args.command in LIVE_COMMANDS
-    with stop_on_signals() if live else signals_stop() as stopped:
+    from jassy.limits import scoped
+
+    with scoped(), stop_on_signals() if live else signals_stop() as stopped:
         try:
             check_arguments(args, parser)
             return args.func(args)

@@ -102,6 +102,13 @@ def check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -
     rate = getattr(args, "sr", None)
     if rate is not None:
         number(rate, "--sr", MIN_RATE, MAX_RATE, integer=True)
+    if getattr(args, "plot", None):
+        from jassy.files import check_output
+
+        require_extra("matplotlib", "plot", "--plot")
+        check_output(args.plot, "--plot")
+    if getattr(args, "parquet", None) is True:
+        require_extra("pyarrow", "parquet", "--parquet")
 
 
 def check_render_arguments(args: argparse.Namespace) -> None:

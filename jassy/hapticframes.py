@@ -69,9 +69,12 @@ def encode(
     torque: np.ndarray,
     sample_rate: float,
 ) -> bytes:
-    """One datagram; non-finite channel values are sent as 0."""
-    values = np.concatenate([force, torque]).astype("<f4")
+    """One datagram; non-finite channel values are sent as 0, finite values beyond the
+    float32 range as the largest float32 of their sign."""
+    values = np.concatenate([force, torque]).astype(np.float64)
     values[~np.isfinite(values)] = 0.0
+    limit = float(np.finfo(np.float32).max)
+    values = np.clip(values, -limit, limit).astype("<f4")
     header = HEADER.pack(
         MAGIC, VERSION, flags, sequence, sample_time, device_time, force.size, torque.size, sample_rate
     )
@@ -123,21 +126,30 @@ class FrameReceiver:
 
 
 class FrameRecorder:
-    """Receives frames in a background thread into ``frames`` until the final frame
-    arrives or :meth:`stop` is called (tests and the bench)."""
+    """Receives frames in the background into a list until the final frame arrives or
+    :meth:`stop` is called (tests and the bench). ``process=True`` receives in a forked
+    process of its own, so a busy interpreter in this one cannot make the socket
+    overflow (the bench keeps its main thread busy on purpose)."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0):
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, process: bool = False):
+        import multiprocessing
         import threading
 
         self.receiver = FrameReceiver(host, port, timeout=0.05)
         self.address = self.receiver.address
         self.frames: list[HapticFrame] = []
-        self._stop = threading.Event()
-        self._final = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="haptic-frame-recorder", daemon=True)
-        self._thread.start()
+        if process:
+            context = multiprocessing.get_context("fork")
+            self._stop, self._final = context.Event(), context.Event()
+            self._results, sender = context.Pipe(duplex=False)
+            self._worker = context.Process(target=self._run, args=(sender,), daemon=True)
+        else:
+            self._stop, self._final = threading.Event(), threading.Event()
+            self._results = None
+            self._worker = threading.Thread(target=self._run, daemon=True)
+        self._worker.start()
 
-    def _run(self) -> None:
+    def _run(self, results=None) -> None:
         while not self._stop.is_set():
             frame = self.receiver.receive()
             if frame is not None:
@@ -145,6 +157,8 @@ class FrameRecorder:
                 if frame.flags & FLAG_FINAL:
                     self._final.set()
                     break
+        if results is not None:
+            results.send(self.frames)
 
     def wait_final(self, timeout: float = 2.0) -> bool:
         """True once the final frame has arrived (waits at most ``timeout`` s)."""
@@ -152,6 +166,8 @@ class FrameRecorder:
 
     def stop(self) -> list[HapticFrame]:
         self._stop.set()
-        self._thread.join()
+        if self._results is not None:
+            self.frames = self._results.recv()
+        self._worker.join()
         self.receiver.close()
         return self.frames

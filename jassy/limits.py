@@ -19,8 +19,10 @@ held in memory, modes x locations of a model, voxel elements and subdivision lev
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+from collections.abc import Iterator
 from typing import NamedTuple
 
 from jassy.errors import JassyError
@@ -112,6 +114,21 @@ def configure(memory: str | None = None, seconds: str | None = None, variants: s
         os.environ["JASSY_MAX_VARIANTS"] = str(int(_positive(variants, "--max-variants", True)))
 
 
+@contextlib.contextmanager
+def scoped() -> Iterator[None]:
+    """Limits set by :func:`configure` inside hold only until the block ends (one command)."""
+    names = ("JASSY_MAX_MEMORY", "JASSY_MAX_SECONDS", "JASSY_MAX_VARIANTS")
+    saved = {name: os.environ.get(name) for name in names}
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 def _size(n: float) -> str:
     for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= scale:
@@ -129,9 +146,12 @@ def check_memory(estimate: float, what: str) -> None:
         )
 
 
-def check_seconds(seconds: float, what: str) -> None:
-    """Refuse rendering or analysing more than the limit of seconds of audio."""
+def check_seconds(seconds: float, what: str, default: float | None = None) -> None:
+    """Refuse rendering or analysing more than the limit of seconds of audio (``default``,
+    if given, replaces DEFAULT_SECONDS when no limit was set: for slower work)."""
     limit = current().seconds
+    if default is not None and not os.environ.get("JASSY_MAX_SECONDS"):
+        limit = default
     if not seconds <= limit:
         raise JassyError(
             f"{what}: {seconds:g} s of audio is more than the limit of {limit:g} s; "

@@ -32,7 +32,16 @@ import numba as nb
 import numpy as np
 from numba import types
 
-from jassy.callback import CallbackPlayer, CallbackRenderer, choose_mode
+from jassy.callback import PLAYED as CALLBACK_PLAYED
+from jassy.callback import (
+    TAP_HAPTIC_ROWS,
+    TAP_LOG,
+    TAP_LOG_ROWS,
+    TAP_LOGGED,
+    CallbackPlayer,
+    CallbackRenderer,
+    choose_mode,
+)
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
@@ -62,8 +71,9 @@ MAX_HAPTIC = 32
 CALLBACK_LOG_ROWS, HAPTIC_RING_ROWS = 1024, 4096
 #: GIL switch interval while live (s): short enough for the producer to keep the ring full.
 SWITCH_INTERVAL = 0.0002
-#: Seconds between measurements of the stream clock against the monotonic clock.
-CLOCK_CHECK = 0.1
+#: Seconds between measurements of the stream clock against the monotonic clock, and the
+#: weight of each in their running average (the stream clock jitters with the callbacks).
+CLOCK_CHECK, CLOCK_WEIGHT = 0.02, 0.05
 #: SCHED_FIFO priority of the producer thread where the OS grants it (JACK uses 70-95).
 REALTIME_PRIORITY = 40
 
@@ -323,8 +333,11 @@ class LiveEngine:
         self._events_rx, self._events_tx = multiprocessing.Pipe(duplex=False)
         self._errors_rx, self._errors_tx = multiprocessing.Pipe(duplex=False)
         self._worker = None
-        self.mode, self.mode_reason = choose_mode(mode, graph, self.score, offsets_ms, haptic_udp)
+        udp_off_card = bool(self._haptic_udp) and not self.haptic_to_card  # only the ring sends those
+        self.mode, self.mode_reason = choose_mode(mode, graph, self.score, offsets_ms, udp_off_card)
         self._callback: CallbackPlayer | None = None
+        self._clock: threading.Thread | None = None
+        self._clock_stop = threading.Event()
 
     # ------------------------------------------------------------------ control
     def start(self, timeout: float = 60.0) -> None:
@@ -334,6 +347,11 @@ class LiveEngine:
         from jassy.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
+        if self._haptic_udp is not None:  # forked first: before PortAudio runs in this process
+            self._sender = multiprocessing.get_context("fork").Process(
+                target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
+            )
+            self._sender.start()
         if self.mode == "callback":
             renderer = CallbackRenderer(
                 self.graph,
@@ -344,8 +362,13 @@ class LiveEngine:
                 self.safety,
                 self.monitor_capacity / self.sample_rate,
             )
+            if self._sender is not None:
+                self._tap_into(renderer.control)
             self._callback = CallbackPlayer(renderer)
             self._callback.start(self._device_index)
+            if self._sender is not None:
+                self._clock = threading.Thread(target=self._track_clock, name="jassy-clock", daemon=True)
+                self._clock.start()
             return
         use_process = self.isolation == "process" or (
             self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
@@ -360,11 +383,6 @@ class LiveEngine:
             self._switch_interval = sys.getswitchinterval()
             sys.setswitchinterval(SWITCH_INTERVAL)
             self._worker = threading.Thread(target=self._producer_main, name="jassy-producer", daemon=True)
-        if self._haptic_udp is not None:
-            self._sender = multiprocessing.get_context("fork").Process(
-                target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
-            )
-            self._sender.start()
         self._worker.start()
         deadline = time.monotonic() + timeout
         while self.header[RUNNING] == 0:
@@ -392,6 +410,16 @@ class LiveEngine:
         UDP frames through the last sample played and then the final frame, stop the
         stream, end the child processes; return the counters."""
         if self._callback is not None:
+            renderer = self._callback.renderer
+            if self._callback.stream is not None:
+                renderer.end()
+                deadline = time.monotonic() + 0.5  # a dead device never plays the fade
+                while not renderer.faded() and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            self._finish_sender(int(renderer.control[CALLBACK_PLAYED]), self._callback.device_latency)
+            self._clock_stop.set()
+            if self._clock is not None:
+                self._clock.join()
             self._callback.stop()
             return self.stats()
         h = self.header
@@ -401,16 +429,7 @@ class LiveEngine:
             deadline = time.monotonic() + 0.5  # a dead device never plays the fade
             while h[PLAYED] < faded_at and time.monotonic() < deadline:
                 time.sleep(0.001)
-        if self._sender is not None:
-            self.tap.control[STOP_AT] = h[PLAYED]
-            deadline = time.monotonic() + float(self.state[DEVICE_LATENCY]) + 1.0
-            while not self.tap.control[DONE] and time.monotonic() < deadline:
-                time.sleep(0.001)
-            self._sender.join(timeout=1.0)
-            if self._sender.is_alive():
-                self._sender.kill()
-                self._sender.join()
-            self._sender = None
+        self._finish_sender(int(h[PLAYED]), float(self.state[DEVICE_LATENCY]))
         h[STOP] = 1
         if self._worker is not None:
             self._worker.join(timeout=5.0)
@@ -423,6 +442,37 @@ class LiveEngine:
         self._worker = None
         self._raise_producer_error()
         return self.stats()
+
+    def _finish_sender(self, played: int, device_latency: float) -> None:
+        """Let the UDP sender send the frames through stream frame ``played``, then the
+        final frame, and end its process."""
+        if self._sender is None:
+            return
+        self.tap.control[STOP_AT] = played
+        deadline = time.monotonic() + device_latency + 1.0
+        while not self.tap.control[DONE] and time.monotonic() < deadline:
+            time.sleep(0.001)
+        self._sender.join(timeout=1.0)
+        if self._sender.is_alive():
+            self._sender.kill()
+            self._sender.join()
+        self._sender = None
+
+    def _tap_into(self, control: np.ndarray) -> None:
+        """Point the callback renderer's tap slots at this engine's stream tap (shared
+        memory the sender process reads)."""
+        control[TAP_LOG] = self.tap.log.ctypes.data
+        control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS] = self.tap.log.shape[0], self.tap.played.shape[0]
+        control[TAP_LOGGED] = self.header.ctypes.data + LOGGED * self.header.itemsize
+
+    def _track_clock(self) -> None:
+        """Callback mode: keep the stream-clock offset for the sender up to date."""
+        stream = self._callback.stream
+        control = self.tap.control
+        control[CLOCK_OFFSET] = stream.clock_offset()
+        while not self._clock_stop.wait(CLOCK_CHECK):
+            offset = control[CLOCK_OFFSET]
+            control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
 
     def _raise_producer_error(self) -> None:
         if self._errors_rx.poll():
@@ -532,7 +582,8 @@ class LiveEngine:
                 if self.header[PAUSED] or not self._fill_once(engine, buf, out):
                     time.sleep(pause)
                 if time.monotonic() > calibrate_at:
-                    self.tap.control[CLOCK_OFFSET] = stream.clock_offset()
+                    offset = self.tap.control[CLOCK_OFFSET]
+                    self.tap.control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
                     calibrate_at += CLOCK_CHECK
         except BaseException as exc:  # reported to the caller; the callback keeps the device safe
             self._errors_tx.send(f"{type(exc).__name__}: {exc}")

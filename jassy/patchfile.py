@@ -13,6 +13,7 @@ Layout::
     [outputs]          audio = "node" or ["left", "right"]; haptic = "node" or [...]
     [[score]]          time (s), node, then one action: set = {param = value}, jump = true|false,
                        or an action of the node type, e.g. impact = {impulse = 0.01, location = 2}
+    [[generate]]       events at regular or Poisson times with random arguments (jassy/generators.py)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Any
 from jassy.anytime import ModeBudget
 from jassy.errors import JassyError, ModelError, PatchError, suggest
 from jassy.events import Event
+from jassy.generators import expand
 from jassy.graph import Graph
 from jassy.inputs import load_toml, number, parse_toml, seconds
 from jassy.modal_model import ModalModel
@@ -33,7 +35,7 @@ from jassy.registry import ugen_class
 from jassy.scheduler import validate_event
 from jassy.ugen import UGen
 
-TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
+TOP_KEYS = {"patch", "models", "nodes", "outputs", "score", "generate"}
 PATCH_KEYS = {"name", "description", "duration", "sample_rate", "mode_budget", "cpu_budget"}
 
 
@@ -101,14 +103,73 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     return node, param.strip(), value
 
 
-def load_patch(spec: str | os.PathLike, overrides: list[str] | tuple[str, ...] = ()) -> Patch:
-    """Load and validate a patch file (or built-in name), applying ``node.param=value`` overrides."""
+def _split_top_level(text: str) -> list[str]:
+    """``text`` split at commas outside brackets, braces and quotes."""
+    parts, depth, quote, start = [], 0, "", 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
+def parse_event_option(text: str) -> dict:
+    """A score entry from ``--event 'time=1.0,node=hit,action=impact,impulse=0.02'``: ``time``,
+    ``node``, ``action`` (default ``set``), optional ``jump`` and ``ramp``, and the action's
+    arguments; values in TOML syntax (numbers, true/false, "strings", [lists], {tables}) or bare
+    strings."""
+    where = f"--event {text!r}"
+    fields: dict[str, Any] = {}
+    for item in _split_top_level(text):
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise PatchError(f"{where}: expected key=value items separated by commas, got {item!r}")
+        if key in fields:
+            raise PatchError(f"{where}: {key} given twice")
+        try:
+            fields[key] = parse_toml(f"v = {raw.strip()}", "--event")["v"]
+        except JassyError:
+            fields[key] = raw.strip()
+    for required in ("time", "node"):
+        if required not in fields:
+            raise PatchError(f"{where}: {required}: missing")
+    action = fields.pop("action", "set")
+    if not isinstance(action, str) or action in ("time", "node", "jump", "ramp"):
+        raise PatchError(f"{where}: action: expected the name of an action, got {action!r}")
+    entry = {key: fields.pop(key) for key in ("time", "node", "jump", "ramp") if key in fields}
+    entry[action] = fields
+    return entry
+
+
+def load_patch(
+    spec: str | os.PathLike,
+    overrides: list[str] | tuple[str, ...] = (),
+    events: list[str] | tuple[str, ...] = (),
+) -> Patch:
+    """Load and validate a patch file (or built-in name), applying ``node.param=value`` overrides
+    and adding ``--event`` score entries (see :func:`parse_event_option`)."""
     path = resolve_patch(str(spec))
     try:
         data = load_toml(path, "patch file")
     except JassyError as exc:
         raise PatchError(str(exc)) from None
-    return build_patch(data, str(path), path.parent, overrides)
+    patch = build_patch(data, str(path), path.parent, overrides)
+    if events:
+        entries = [parse_event_option(text) for text in events]
+        names = [f"--event {text!r}" for text in events]
+        patch.score.extend(_parse_score(entries, patch.graph, str(path), names))
+        patch.score.sort(key=lambda event: event.time)
+    return patch
 
 
 def _table(data: dict, key: str, where: str) -> dict:
@@ -200,8 +261,8 @@ def build_patch(
         for pkey in params:
             if pkey not in allowed:
                 raise PatchError(
-                    f"{key}: unknown parameter {pkey!r}{suggest(pkey, allowed)}; "
-                    f"expected one of {', '.join(sorted(allowed))}"
+                    f"{key}: unknown parameter {pkey!r}; "
+                    f"expected one of {', '.join(sorted(allowed))}{suggest(pkey, allowed)}"
                 )
         connect = {}
         if cls.variadic:
@@ -256,7 +317,6 @@ def build_patch(
     if unused:
         raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")
 
-    score = _parse_score(data.get("score", []), graph, where)
     duration = meta.get("duration")
     rate = meta.get("sample_rate")
     try:
@@ -264,8 +324,14 @@ def build_patch(
             duration = seconds(duration, f"{where}: patch.duration")
         if rate is not None:
             rate = number(rate, f"{where}: patch.sample_rate", 1000, 768000, integer=True)
+        generated = expand(data.get("generate", []), models, duration, where)
     except JassyError as exc:
         raise PatchError(str(exc)) from None
+    score = _parse_score(data.get("score", []), graph, where)
+    if generated:
+        names, entries = zip(*generated, strict=True)
+        score += _parse_score(list(entries), graph, where, list(names))
+        score.sort(key=lambda event: event.time)
     for key in ("name", "description"):
         if not isinstance(meta.get(key, ""), str):
             raise PatchError(f"{where}: patch.{key}: expected a string, got {meta[key]!r}")
@@ -280,12 +346,13 @@ def build_patch(
     )
 
 
-def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
+def _parse_score(entries: Any, graph: Graph, where: str, names: list[str] | None = None) -> list[Event]:
+    """Validated events of a score; ``names`` name the entries in errors (default score[i])."""
     if not isinstance(entries, list):
         raise PatchError(f"{where}: score: expected an array of tables ([[score]])")
     events = []
     for i, entry in enumerate(entries):
-        key = f"{where}: score[{i}]"
+        key = names[i] if names else f"{where}: score[{i}]"
         if not isinstance(entry, dict):
             raise PatchError(f"{key}: expected a table")
         for req in ("time", "node"):

@@ -70,7 +70,7 @@ class UGen:
             if key not in specs:
                 hint = suggest(key, specs)
                 raise PatchError(
-                    f"{where}: unknown parameter {key!r}{hint}; expected one of {', '.join(specs)}"
+                    f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}{hint}"
                 )
         for key, spec in specs.items():
             if key in params:

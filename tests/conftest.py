@@ -1,3 +1,4 @@
+import itertools
 import os
 import sys
 from pathlib import Path
@@ -7,6 +8,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 FS = 48000
+_servers = itertools.count()
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +28,7 @@ def jack():
     from jassy.portaudio import LiveError
 
     try:
-        server = dummy_jack(f"jassy-test-{os.getpid()}", FS, 64, channels=4)
+        server = dummy_jack(f"jassy-test-{os.getpid()}-{next(_servers)}", FS, 64, channels=4)
         started = server.__enter__()
     except LiveError as exc:
         pytest.fail(f"JACK dummy server: {exc}", pytrace=False)

@@ -141,12 +141,16 @@ def frames_of(recorder):
     return recorder.stop()
 
 
-def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack):
+@pytest.mark.parametrize("mode", ["ring", "callback"])
+def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mode):
     from jassy.live import LiveEngine
 
     rx = FrameRecorder()
     score = [Event(0.05, "hit", "impact", {"impulse": 0.01})]
-    live = LiveEngine(tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address, monitor_seconds=2.0)
+    live = LiveEngine(
+        tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address, monitor_seconds=2.0, mode=mode
+    )
+    assert live.mode == mode
     live.start()
     time.sleep(0.5)
     stats = live.stop()
@@ -197,7 +201,8 @@ def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
     flags = np.array([f.flags for f in frames])
     force = np.array([f.force[0] for f in frames])
     assert np.all(force <= 1.0 + 1e-6) and np.any(flags & FLAG_CLAMPED)
-    assert np.all(force[(flags & FLAG_CLAMPED) > 0] > 0.5)
+    clamped = force[flags == FLAG_CLAMPED]  # (callbacks flag all the frames they touch)
+    assert clamped.size >= 100 and np.median(clamped) == pytest.approx(1.0)
     stalled = np.flatnonzero(flags & FLAG_STALLED)
     assert stalled.size >= 40  # the 50 ms pause
     fading = np.flatnonzero(flags & FLAG_WATCHDOG)

@@ -1,5 +1,6 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
+from ugens.analysis import EnvelopeFollower, Onset, Pitch, SpectralFeatures, ZeroCrossings
 from ugens.bubbles import Bubble, BubbleStream
 from ugens.dcmotor import DCMotor
 from ugens.delay import Delay
@@ -21,6 +22,7 @@ from ugens.pitchshift import PitchShift
 from ugens.radiation import Radiation
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
+from ugens.sampler import Sampler
 from ugens.scrape import ResonantScrape, Scrape
 from ugens.spatial import Spatialiser
 from ugens.stochastic import Bounce, Break, Crumple
@@ -38,6 +40,7 @@ __all__ = [
     "Delay",
     "DrillSource",
     "Engine",
+    "EnvelopeFollower",
     "Envelope",
     "Explosion",
     "FractalNoise",
@@ -51,16 +54,21 @@ __all__ = [
     "Mixer",
     "ModalBank",
     "Multiply",
+    "Onset",
     "OnePole",
+    "Pitch",
     "PitchShift",
     "Radiation",
     "RathRoll",
     "ResonantScrape",
     "Reverb",
     "Roll",
+    "Sampler",
     "Scrape",
     "Sine",
     "Spatialiser",
+    "SpectralFeatures",
     "WhiteNoise",
     "Wind",
+    "ZeroCrossings",
 ]

@@ -94,47 +94,56 @@ def spatialise(x, left, right, n, xs, ys, zs, ring, ist, st, par):
     hy_l = st[_HY_L]
     hx_r = st[_HX_R]
     hy_r = st[_HY_R]
+    last_x = math.nan  # no geometry yet: the first sample computes it
+    last_y = math.nan
+    last_z = math.nan
+    g_l = g_r = d_l = d_r = k = 0.0
+    bl0 = bl1 = al1 = br0 = br1 = ar1 = 0.0
     for i in range(n):
         w = (w + 1) & mask
         ring[w] = x[i]
         px = xs[i]
         py = ys[i]
         pz = zs[i]
-        r = max(math.sqrt(px * px + py * py + pz * pz), min_r)
-        s = min(max(px / r, -1.0), 1.0)
-        gain = ref / r
-        delay = r / c * fs
-        if binaural:
-            theta = math.asin(s)
-            near = -a / c * math.sin(abs(theta)) * fs
-            far = a / c * abs(theta) * fs
-            d_r = delay + (near if theta >= 0.0 else far)
-            d_l = delay + (far if theta >= 0.0 else near)
-            g_l = gain
-            g_r = gain
-        else:
-            d_l = delay
-            d_r = delay
-            angle = 0.25 * math.pi * (1.0 + s)
-            g_l = gain * math.cos(angle)
-            g_r = gain * math.sin(angle)
-        d_l = min(max(d_l, MIN_DELAY), max_delay)
-        d_r = min(max(d_r, MIN_DELAY), max_delay)
+        if px != last_x or py != last_y or pz != last_z:  # new geometry (else reuse it)
+            last_x = px
+            last_y = py
+            last_z = pz
+            r = max(math.sqrt(px * px + py * py + pz * pz), min_r)
+            s = min(max(px / r, -1.0), 1.0)
+            gain = ref / r
+            delay = r / c * fs
+            if binaural:
+                theta = math.asin(s)
+                near = -a / c * math.sin(abs(theta)) * fs
+                far = a / c * abs(theta) * fs
+                d_r = delay + (near if theta >= 0.0 else far)
+                d_l = delay + (far if theta >= 0.0 else near)
+                g_l = gain
+                g_r = gain
+                bl0, bl1, al1 = shadow_coefficients(shadow_alpha(math.acos(-s)), w0, fs)
+                br0, br1, ar1 = shadow_coefficients(shadow_alpha(math.acos(s)), w0, fs)
+            else:
+                d_l = delay
+                d_r = delay
+                angle = 0.25 * math.pi * (1.0 + s)
+                g_l = gain * math.cos(angle)
+                g_r = gain * math.sin(angle)
+            d_l = min(max(d_l, MIN_DELAY), max_delay)
+            d_r = min(max(d_r, MIN_DELAY), max_delay)
+            k = -math.expm1(-2.0 * math.pi * ABSORPTION_CUTOFF / math.sqrt(r) / fs)
         yl = g_l * hermite_read(ring, w, d_l)
         yr = g_r * hermite_read(ring, w, d_r)
         if absorb:
-            k = -math.expm1(-2.0 * math.pi * ABSORPTION_CUTOFF / math.sqrt(r) / fs)
             lp_l += k * (yl - lp_l)
             lp_r += k * (yr - lp_r)
             yl = lp_l
             yr = lp_r
         if binaural:
-            b0, b1, a1 = shadow_coefficients(shadow_alpha(math.acos(-s)), w0, fs)
-            out_l = b0 * yl + b1 * hx_l - a1 * hy_l
+            out_l = bl0 * yl + bl1 * hx_l - al1 * hy_l
             hx_l = yl
             hy_l = out_l
-            b0, b1, a1 = shadow_coefficients(shadow_alpha(math.acos(s)), w0, fs)
-            out_r = b0 * yr + b1 * hx_r - a1 * hy_r
+            out_r = br0 * yr + br1 * hx_r - ar1 * hy_r
             hx_r = yr
             hy_r = out_r
             yl = out_l

@@ -5,6 +5,7 @@ input raises a JassyError (one line on stderr, exit code 2)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -20,6 +21,45 @@ def _ask(label: str, value: str | None, default: str, human: bool) -> str:
         answer = input(f"{label} [{default}]: ").strip()
         return answer or default
     return default
+
+
+def _rehearse(design) -> None:
+    """Before any file is written: render every condition's stimulus at the largest offsets
+    the design can ask for (both signs), so a stimulus that does not fit the trial is an
+    input error now, not after the first trials were logged."""
+    from jassy.study.runner import OfflinePresenter
+
+    offsets = [0.0]
+    for table in (design.method, design.practice or {}):
+        for key, value in table.items():
+            if key.endswith("_ms"):
+                values = value if isinstance(value, (list, tuple)) else [value]
+                offsets += [
+                    abs(float(v)) for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)
+                ]
+    largest = max(offsets)
+    presenter = OfflinePresenter(design)
+    for condition in design.conditions:
+        for offset in {largest, -largest}:
+            presenter.present(offset, condition)
+
+
+@contextlib.contextmanager
+def _no_files_without_trials(output: Path):
+    """If a new session fails before its first trial is logged (a device that does not open,
+    a stimulus that does not fit the trial), remove the files it created: no empty logs."""
+    from jassy.study.runner import read_rows, sidecar_path, summary_path
+
+    files = [output, sidecar_path(output), summary_path(output)]
+    created = [p for p in files if not p.exists()]
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(JassyError, OSError):
+            if output in created and (not output.exists() or not read_rows(output)):
+                for path in created:
+                    path.unlink(missing_ok=True)
+        raise
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -67,17 +107,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
     before = len(read_rows(output)) if output.exists() else 0
     if before and not args.quiet:
         print(f"resuming {output}: {before} trials already done")
-    result = run_study(
-        design,
-        output,
-        participant,
-        responder,
-        args.present,
-        args.device,
-        args.max_trials,
-        session=session,
-        participant_number=args.participant_number,
-    )
+    _rehearse(design)
+    with _no_files_without_trials(output):
+        result = run_study(
+            design,
+            output,
+            participant,
+            responder,
+            args.present,
+            args.device,
+            args.max_trials,
+            session=session,
+            participant_number=args.participant_number,
+        )
     if not args.quiet:
         state = "complete" if result.completed else "stopped (run the same command to resume)"
         print(f"{output}: {result.new_trials} trials run now, {result.total_trials} in total; {state}")
