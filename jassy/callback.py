@@ -37,12 +37,15 @@ import numba as nb
 import numpy as np
 from numba import types
 
+from jassy import hapticframes, haptics, program, safety
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
+from jassy.jit import drop_stale_cache
 from jassy.program import (
+    KERNEL_MODULES,
     RECORD,
     Program,
     _f64,
@@ -59,6 +62,8 @@ from ugens.impact import ImpactForce, pulse_sum
 from ugens.mix import Gain
 from ugens.modal import ModalBank
 from ugens.scrape import ResonantScrape, Scrape
+
+drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODULES])
 
 # control slots (int64)
 (
