@@ -292,6 +292,15 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from jassy.patchfile import builtin_patches, load_patch
     from jassy.registry import ugen_types
 
+    if args.objects:
+        from patches.objects import OBJECTS
+
+        print("objects (model files beside the built-in patches; 'jassy doc FILE' for modes and points):")
+        for name, info in OBJECTS.items():
+            print(f"  {name:<13} {info.file:<24} {info.size}")
+            print(f"  {'':<13} {info.description}; points: {', '.join(info.points)}")
+        return 0
+
     print("patches:")
     for name in sorted(builtin_patches()):
         print(f"  {name:<12} {load_patch(name).description}")
@@ -532,7 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_study(sub)
     add_modal(sub)
 
-    p = sub.add_parser("list", help="list built-in patches and ugen types")
+    p = sub.add_parser("list", help="list built-in patches and ugen types (or --objects)")
+    p.add_argument("--objects", action="store_true", help="the object library: models of everyday objects")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")

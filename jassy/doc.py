@@ -163,11 +163,15 @@ def describe_patch(patch) -> str:
 
 
 def describe_model_points(model) -> str:
-    """The named points of a model (its strike locations) with their description, if any."""
+    """The named points of a model (its strike locations), described where the model is one
+    of the object library's (``patches.objects``)."""
+    from patches.objects import object_for_model
+
     if not model.points:
-        return f"{model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"
-    described = getattr(model, "point_notes", None) or {}
-    return "\n".join(f"  {name}: {described.get(name, '')}".rstrip() for name in model.points)
+        return f"  {model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"
+    info = object_for_model(model.name)
+    described = info.points if info is not None else {}
+    return "\n".join(f"  {name}: {described.get(name, '')}".rstrip().rstrip(":") for name in model.points)
 
 
 def reference_markdown() -> str:

@@ -69,3 +69,27 @@ def test_rain_patch_generates_drops_over_the_whole_sheet():
     assert [e.time for e in patch.score] == sorted(e.time for e in patch.score)
     locations = {e.args["location"].vertices[0] for e in impacts}
     assert len(locations) == patch.graph.nodes["sheet"].model.n_points
+
+
+def test_door_knock_example_knocks_when_it_says():
+    from pathlib import Path
+
+    from jassy.offline import render
+
+    patch = load_patch(Path(__file__).parent.parent / "examples" / "door_knock.toml")
+    out = render(patch.graph, patch.score, patch.duration)
+    force = out.haptic[0] > 0  # the knuckle's contact force, on the audio clock
+    onsets = np.flatnonzero(force[1:] & ~force[:-1]) + 1
+    np.testing.assert_allclose(onsets / out.sample_rate, [0.1, 0.27, 0.44, 1.3, 1.52], atol=1e-4)
+    assert 10 ** (-30 / 20) < np.abs(out.audio).max() < 10 ** (-6 / 20)
+
+
+def test_object_library_points_are_the_models_points():
+    import os
+
+    import patches
+    from patches.objects import OBJECTS
+
+    for name, info in OBJECTS.items():
+        model = ModalModel.load(os.path.join(os.path.dirname(patches.__file__), info.file))
+        assert list(model.points) == list(info.points), name

