@@ -269,6 +269,7 @@ class ModalBank(ModelParams, UGen):
     inputs = ("input",)
     accepts_location = True
     inline_events = True
+    supports_budget = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the ModalModel (name in a patch)"),
         "location": ParamSpec("location", 0, doc="contact location: vertex, point name or barycentric"),
