@@ -45,6 +45,7 @@ import numpy as np
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
+from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
@@ -263,12 +264,16 @@ class ModalBank(ModelParams, UGen):
     """Modal resonator bank (JASS ModalObjectWithOneContact) driven by a force input.
 
     Output for a unit impulse of force at location p: sum_k a[p,k] e^{-d_k t} sin(2 pi f_k t).
+    Input: force in N. Output: the model's gain units times N s (m for the finite-element
+    models, whose gains are m per N s) with ``level = "raw"``; full scale (1 = 0 dBFS) with
+    ``level = "calibrated"``, where the default impact peaks at -18 dBFS (jassy.levels).
     """
 
     type_name = "ModalBank"
     inputs = ("input",)
     accepts_location = True
     inline_events = True
+    supports_budget = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the ModalModel (name in a patch)"),
         "location": ParamSpec("location", 0, doc="contact location: vertex, point name or barycentric"),
@@ -279,6 +284,14 @@ class ModalBank(ModelParams, UGen):
             "float", 1.0, low=0.0, high=1e6, smooth=True, doc="multiplies every decay rate"
         ),
         "gain": ParamSpec("float", 1.0, smooth=True, doc="multiplies every input gain"),
+        "level": ParamSpec(
+            "str",
+            "raw",
+            choices=("raw", "calibrated"),
+            fixed=True,
+            doc="'raw': the model's gains as they are; 'calibrated': times the model's reference gain, "
+            "so the default impact (1e-3 N s, 1 ms) peaks at -18 dBFS at its loudest point (jassy.levels)",
+        ),
         "floor": ParamSpec(
             "float",
             1e-10,
@@ -292,6 +305,9 @@ class ModalBank(ModelParams, UGen):
     def _prepare(self) -> None:
         self.validate_model()
         model = self.model
+        self._level_gain = (
+            reference_gain(model, self.sample_rate) if self.values["level"] == "calibrated" else 1.0
+        )
         self.order = np.argsort(model.decays, kind="stable")
         self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
         self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
@@ -347,7 +363,8 @@ class ModalBank(ModelParams, UGen):
         if gains is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
-            gains = poles[2] * (v["gain"] / self.sample_rate) * self.model.gains_at(v["location"])[self.order]
+            scale = v["gain"] * self._level_gain / self.sample_rate
+            gains = poles[2] * scale * self.model.gains_at(v["location"])[self.order]
             self._gain_rows[key] = gains
         out = np.empty_like(poles)
         out[:2] = poles[:2]
