@@ -45,6 +45,7 @@ import numpy as np
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
 from jassy.jit import specialise
+from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
@@ -270,6 +271,10 @@ class ModalBank(ModelParams, UGen):
     scale by 1/sqrt(s) and the displacement per unit impulse, a / (m w), by 1/sqrt(s). The
     bank retunes at the frame where s changes, keeping each ringing mode's amplitude and
     phase (its energy, as SDT); s <= 0 (no event yet) means s = 1.
+
+    Input: force in N. Output: the model's gain units times N s (m for the finite-element
+    models, whose gains are m per N s) with ``level = "raw"``; full scale (1 = 0 dBFS) with
+    ``level = "calibrated"``, where the default impact peaks at -18 dBFS (jassy.levels).
     """
 
     type_name = "ModalBank"
@@ -288,6 +293,14 @@ class ModalBank(ModelParams, UGen):
             "float", 1.0, low=0.0, high=1e6, smooth=True, doc="multiplies every decay rate"
         ),
         "gain": ParamSpec("float", 1.0, smooth=True, doc="multiplies every input gain"),
+        "level": ParamSpec(
+            "str",
+            "raw",
+            choices=("raw", "calibrated"),
+            fixed=True,
+            doc="'raw': the model's gains as they are; 'calibrated': times the model's reference gain, "
+            "so the default impact (1e-3 N s, 1 ms) peaks at -18 dBFS at its loudest point (jassy.levels)",
+        ),
         "floor": ParamSpec(
             "float",
             1e-10,
@@ -303,6 +316,9 @@ class ModalBank(ModelParams, UGen):
         self._size_input = self.sources.get("size")
         self._size = 1.0  # the fragment size of the current design
         model = self.model
+        self._level_gain = (
+            reference_gain(model, self.sample_rate) if self.values["level"] == "calibrated" else 1.0
+        )
         self.order = np.argsort(model.decays, kind="stable")
         self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
         self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
@@ -359,7 +375,7 @@ class ModalBank(ModelParams, UGen):
         if gains is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
-            scale = v["gain"] / (self.sample_rate * np.sqrt(self._size))
+            scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self.model.gains_at(v["location"])[self.order]
             self._gain_rows[key] = gains
         out = np.empty_like(poles)
