@@ -168,20 +168,24 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     force = result["rendering"].haptic[0].copy()
     bank = graph.nodes["bell"]
     frames = force.size
-    state = bank.bank.copy()  # the bank's own layout: rows c1, c2, g, y1, y2
+    state = bank.bank.copy()  # the bank's own layout: rows c1, c2, g, d, y1, y2
+    last = np.zeros(1)
     out = np.zeros(frames)
 
     def run_kernel():
-        state[3:] = 0.0
-        resonate(force, out, frames, state[0], state[1], state[2], state[3], state[4], state.shape[1])
+        state[4:] = 0.0
+        last[0] = 0.0
+        c1, c2, g, d, y1, y2 = state
+        resonate(force, out, frames, c1, c2, g, d, y1, y2, state.shape[1], last)
 
     pieces = [(force[i : i + block], out[i : i + block]) for i in range(0, frames, block)]
 
     def run_kernel_blocks():
-        state[3:] = 0.0
-        c1, c2, g, y1, y2 = state
+        state[4:] = 0.0
+        last[0] = 0.0
+        c1, c2, g, d, y1, y2 = state
         for f, o in pieces:
-            resonate(f, o, f.size, c1, c2, g, y1, y2, state.shape[1])
+            resonate(f, o, f.size, c1, c2, g, d, y1, y2, state.shape[1], last)
 
     rounds = []
     for _ in range(3):  # this VM's speed drifts by tens of % over seconds: median of 3 rounds
@@ -279,10 +283,13 @@ def _busy_python(seconds: float) -> int:
     return count
 
 
-def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5) -> dict:
+def live_bench(
+    seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5, mode: str = "auto"
+) -> dict:
     """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
-    the main thread does heavy Python work; underruns, latency and audio-haptic skew
-    (measured on the frames the callback sent to the device)."""
+    the main thread does heavy Python work; the mode (callback or ring), underruns,
+    latency and audio-haptic skew at a tap's onset (measured on the frames the callback
+    handed to the device)."""
     from jassy.jackserver import dummy_jack
     from jassy.live import LiveEngine
     from ugens.impact import ImpactForce
@@ -312,33 +319,78 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    from jassy.bench_haptic import frame_stats, loop_latency
+    from jassy.hapticframes import FrameRecorder
+
+    recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
-        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0)
+        live = LiveEngine(
+            graph,
+            score,
+            SAMPLE_RATE,
+            block,
+            ring_blocks,
+            monitor_seconds=6.0,
+            mode=mode,
+            haptic_udp=recorder.address,
+            send_log_frames=int(seconds * 1000) + 1000,
+        )
         live.start()
         _busy_python(seconds)
         stats = live.stop()
-    heard, _ = live.monitor()  # the last 6 s the device received: silence, then the tap
-    audio_on = int(np.flatnonzero(heard[0])[-1] if not np.any(heard[0]) else np.flatnonzero(heard[0])[0])
-    haptic_on = int(np.flatnonzero(heard[1])[0]) if np.any(heard[1]) else -1
+        recorder.wait_final()
+        haptic = frame_stats(live, recorder.stop())
+        haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
+    heard, rendered = live.monitor()  # the last 6 s the device received: silence, then the tap
+    audio_on, haptic_on = tap_onsets(heard, rendered, int((quiet_at + 1.5) * SAMPLE_RATE))
+    tap_frame = int(np.floor(tap_at * SAMPLE_RATE)) + 1  # an impact's first non-zero frame
     return {
         "seconds": seconds,
         "modes": n_modes,
         "block": block,
+        "mode": stats.mode,
+        "mode_reason": live.mode_reason,
         "callbacks": stats.callbacks,
         "underrun_callbacks": stats.underrun_callbacks,
         "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
         "latency_ms": stats.latency * 1e3,
         "ring_ms": stats.ring_latency * 1e3,
         "device_ms": stats.device_latency * 1e3,
-        "skew_samples": audio_on - haptic_on,
+        "tap_audio_device_frame": audio_on,
+        "tap_haptic_device_frame": haptic_on,
+        "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,
+        "tap_onset_vs_score_samples": int(rendered[haptic_on]) - tap_frame if haptic_on >= 0 else None,
+        **haptic,
     }
+
+
+def tap_onsets(heard: np.ndarray, rendered: np.ndarray, silent_from: int) -> tuple[int, int]:
+    """Device frames (indices into the monitor) of the first non-zero audio and haptic frame
+    played after rendered frame ``silent_from`` (a span known to be silent in both); -1 if
+    none. Frames of silence inserted on an underrun (rendered = -1) are skipped."""
+    after = rendered >= silent_from
+    onsets = []
+    for channel in (heard[0], heard[-1]):
+        hits = np.flatnonzero(after & (channel != 0))
+        onsets.append(int(hits[0]) if hits.size else -1)
+    return onsets[0], onsets[1]
 
 
 def print_live(r: dict) -> None:
     print(
-        f"live, JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, block {r['block']}, "
+        f"live ({r['mode']} mode), JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, "
+        f"block {r['block']}, "
         f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
         f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
         f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
-        f"audio-haptic skew {r['skew_samples']} samples"
+        f"tap skew audio - haptic {r['skew_samples']} samples on the device frames, "
+        f"tap onset {r['tap_onset_vs_score_samples']} samples after its scheduled frame\n"
+        f"  UDP haptic frames: {r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
+        f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
+        f"(max {r['frame_interval_max_ms']:.3f}); final frame "
+        f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"
+        f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
+        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses; ring + device "
+        f"{r['loop_ring_and_device_samples']:.0f})"
     )

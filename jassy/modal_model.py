@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -82,7 +81,7 @@ class ModalModel:
             self.frequencies = np.asarray(self.frequencies, dtype=np.float64).reshape(-1)
             self.decays = np.asarray(self.decays, dtype=np.float64).reshape(-1)
             gains = np.asarray(self.gains, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ModelError(
                 f"{where}: frequencies, decays and gains must be numeric arrays ({exc})"
             ) from None
@@ -175,12 +174,13 @@ class ModalModel:
         return ModalModel(self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name)
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
-        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = (i + 1)/sample_rate.
+        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
 
-        This is the continuous response sampled one sample after the impulse, which the
-        impulse-invariant resonator reproduces exactly (reference for tests).
+        The continuous response to a unit impulse at t = 0, which the impulse-invariant
+        resonators of a ModalBank reproduce exactly from the sample after the impulse on
+        (reference for tests).
         """
-        t = (np.arange(int(round(duration * sample_rate))) + 1) / sample_rate
+        t = np.arange(int(round(duration * sample_rate))) / sample_rate
         a = self.gains_at(location)
         out = np.zeros_like(t)
         for k in range(self.n_modes):
@@ -191,24 +191,27 @@ class ModalModel:
     @classmethod
     def load(cls, path: str | os.PathLike) -> ModalModel:
         """Read a model from .toml, .npz or JASS .sy (by extension)."""
+        from jassy.errors import JassyError
+        from jassy.inputs import decode, parse_toml, read_bytes
+
+        if not isinstance(path, (str, os.PathLike)):
+            raise ModelError(f"model file: expected a file name, got {path!r}")
         path = Path(path)
         ext = path.suffix.lower()
-        if not path.is_file():
-            raise ModelError(f"{path}: no such model file")
+        if ext not in (".toml", ".npz", ".sy"):
+            raise ModelError(f"{path}: unknown model format {ext!r}; expected .toml, .npz or .sy")
         try:
-            if ext == ".toml":
-                with open(path, "rb") as fh:
-                    return cls.from_dict(tomllib.load(fh), str(path))
+            data = read_bytes(path, "model file")
             if ext == ".npz":
-                with np.load(path, allow_pickle=False) as data:
-                    return cls.from_dict({k: data[k] for k in data.files}, str(path))
-            if ext == ".sy":
-                return cls.from_sy(path.read_text(), str(path))
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelError(f"{path}: not valid TOML ({exc})") from None
-        except (OSError, ValueError) as exc:
-            raise ModelError(f"{path}: cannot read model ({exc})") from None
-        raise ModelError(f"{path}: unknown model format {ext!r}; expected .toml, .npz or .sy")
+                return cls.from_dict(read_npz(data, str(path)), str(path))
+            text = decode(data, str(path))
+            if ext == ".toml":
+                return cls.from_dict(parse_toml(text, str(path)), str(path))
+            return cls.from_sy(text, str(path))
+        except ModelError:
+            raise
+        except JassyError as exc:
+            raise ModelError(str(exc)) from None
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
@@ -221,9 +224,16 @@ class ModalModel:
             if key not in data:
                 raise ModelError(f"{source}: missing key {key!r}")
         points = data.get("points", ())
-        points = tuple(str(p) for p in np.asarray(points).reshape(-1)) if len(points) else ()
-        name = str(np.asarray(data.get("name", "")))
-        return cls(data["frequencies"], data["decays"], data["gains"], points, name, source)
+        if isinstance(points, np.ndarray):
+            points = points.reshape(-1).tolist()
+        if not isinstance(points, (list, tuple)) or not all(isinstance(p, str) for p in points):
+            raise ModelError(f"{source}: points: expected a list of point names")
+        name = data.get("name", "")
+        if isinstance(name, np.ndarray) and name.ndim == 0:
+            name = name.item()
+        if not isinstance(name, str):
+            raise ModelError(f"{source}: name: expected a string, got {name!r}")
+        return cls(data["frequencies"], data["decays"], data["gains"], tuple(points), name, source)
 
     @classmethod
     def from_sy(cls, text: str, source: str = "model.sy") -> ModalModel:
@@ -288,6 +298,39 @@ class ModalModel:
         lines.extend(f"  {arr(row)}," for row in self.gains)
         lines.append("]")
         return "\n".join(lines) + "\n"
+
+
+def read_npz(data: bytes, where: str) -> dict[str, np.ndarray]:
+    """The arrays of an .npz file's bytes, checked before anything is decompressed: a zip of
+    .npy members of numeric or string dtype (no pickles) whose declared sizes fit in memory."""
+    import io
+    import zipfile
+
+    from jassy.limits import check_memory
+
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+        total = 0
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                raise ModelError(f"{where}: cannot read model ({info.filename}: not a .npy array)")
+            with archive.open(info) as fh:
+                major, _ = np.lib.format.read_magic(fh)
+                read_header = (
+                    np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+                )
+                shape, _, dtype = read_header(fh)
+            if dtype.hasobject or dtype.kind not in "biufcUS":
+                raise ModelError(
+                    f"{where}: cannot read model ({info.filename}: dtype {dtype}; expected numbers or "
+                    "strings, objects and pickles are not loaded)"
+                )
+            total += math.prod(shape) * dtype.itemsize
+        check_memory(total, where)
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, ValueError, EOFError, OSError, KeyError) as exc:
+        raise ModelError(f"{where}: cannot read model (not a valid .npz file: {exc})") from None
 
 
 def t60_to_decay(t60: float) -> float:

@@ -21,6 +21,7 @@ from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
+from jassy.program import Program, why_not_compiled
 from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, zero_nonfinite
 from jassy.scheduler import Scheduler
 
@@ -65,8 +66,13 @@ class OfflineEngine:
         release: float = 0.05,
         haptic_safety: HapticSafety | None = None,
         offsets_ms: dict[str, float] | None = None,
+        program: bool = True,
     ):
         """Render ``graph`` through ``score`` at ``sample_rate`` Hz in blocks of ``block``.
+
+        With ``program``, a graph whose every node has a kernel in jassy.program runs as one
+        numba function (same output as node by node; ``self.program`` is None otherwise and
+        ``self.why_not_program`` says why).
 
         The output stage, in order: NaN/Inf quarantine, the audio limiter, the haptic
         safety limits (if given) and per-kind offsets in ms applied exactly in samples
@@ -79,7 +85,9 @@ class OfflineEngine:
         self.graph = graph
         self.sample_rate = float(sample_rate)
         graph.prepare(self.sample_rate, block)
-        self.scheduler = Scheduler(graph, score, self.sample_rate, block)
+        self.why_not_program = why_not_compiled(graph) if program else "not asked for"
+        self.program = Program(graph) if self.why_not_program is None else None
+        self.scheduler = Scheduler(graph, score, self.sample_rate, block, self.program)
         self.limiter = limiter
         self._limiter_state = np.ones(1)
         self._release = release_coefficient(release, self.sample_rate)
@@ -197,7 +205,9 @@ class OfflineEngine:
                     haptic[:, pos : pos + a.shape[1]] = h
                 pos += a.shape[1]
             if haptic is not None:
-                write_signal(haptic_path, haptic, self.sample_rate)
+                clipped = write_signal(haptic_path, haptic, self.sample_rate)
+                if clipped:
+                    self.warnings.append(clipped)
         return {
             "frames": frames,
             "duration": frames / self.sample_rate,

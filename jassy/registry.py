@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 
 _REGISTRY: dict[str, type] = {}
 
@@ -36,4 +36,5 @@ def ugen_class(type_name: str, where: str = "type") -> type:
         return _REGISTRY[type_name]
     except KeyError:
         known = ", ".join(sorted(_REGISTRY))
-        raise PatchError(f"{where}: unknown ugen type {type_name!r}; expected one of {known}") from None
+        hint = suggest(type_name, _REGISTRY)
+        raise PatchError(f"{where}: unknown ugen type {type_name!r}; expected one of {known}{hint}") from None

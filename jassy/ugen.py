@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 from jassy.params import ParamSpec, Smoothed
 
 SMOOTH_SPEC = ParamSpec(
@@ -68,7 +68,10 @@ class UGen:
         specs = self.all_specs()
         for key in params:
             if key not in specs:
-                raise PatchError(f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}")
+                hint = suggest(key, specs)
+                raise PatchError(
+                    f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}{hint}"
+                )
         for key, spec in specs.items():
             if key in params:
                 self.values[key] = self.check_param(key, params[key], f"{where}.{key}")

@@ -93,6 +93,12 @@ class DrillProbe:
         self.controller = None
         self.depth = 0.0
         self.removed = 0.0
+        self.x = 0.5
+        self.force = 0.0
+
+    @property
+    def touching(self) -> bool:
+        return self.controller is not None
 
     def _world(self, x: float) -> np.ndarray:
         v = self.volume
@@ -102,8 +108,15 @@ class DrillProbe:
         return centre
 
     def press(self, x: float, t: float) -> None:
+        self.x = x
         self.controller = self._descent(self._world(x), push=self.push, rpm=self.rpm, v_max=0.05)
         self.send(Event(0.0 if self.live else t, "drill", "set", {"rpm": self.rpm}, ramp=0.05))
+
+    def move(self, x: float, t: float) -> None:
+        """Slide the burr sideways to the pointer's x while it drills."""
+        self.x = x
+        if self.controller is not None:
+            self.controller.pos[0] = self._world(x)[0]
 
     def release(self, t: float) -> None:
         self.controller = None
@@ -119,7 +132,8 @@ class DrillProbe:
         self._state = state
         self.removed += state.removed
         removal = state.removed * 1e9 / self.volume.rho_full * self.rate  # mm^3/s
-        args = {"force": float(np.linalg.norm(state.elastic)), "removal": removal}
+        self.force = float(np.linalg.norm(state.elastic))
+        args = {"force": self.force, "removal": removal}
         self.send(Event(0.0 if self.live else t, "drill", "set", args, ramp=1.0 / self.rate))
 
 
@@ -132,7 +146,12 @@ class Probe:
     width: float = 0.5
     points: int = 9
     live: bool = False
+    x: float = 0.5  # where the probe is (0..1 along the track), pressed or not
     _last: tuple[float, float] | None = None
+
+    @property
+    def touching(self) -> bool:
+        return self._last is not None
 
     def _time(self, t: float) -> float:
         return 0.0 if self.live else t  # live events play as soon as possible
@@ -146,6 +165,7 @@ class Probe:
 
     def press(self, x: float, t: float) -> None:
         self._last = (x, t)
+        self.x = x
         self.send(Event(self._time(t), "plate", "set", {"location": self.location(x)}, jump=True))
         self.send(Event(self._time(t), "tap", "impact", {"impulse": TAP_IMPULSE}))
         self.send(Event(self._time(t), "contact", "set", {"force": PRESS_FORCE, "speed": 0.0}, jump=True))
@@ -158,6 +178,7 @@ class Probe:
             return
         speed = abs(x - x0) * self.width / (t - t0)
         self._last = (x, t)
+        self.x = x
         args = {"speed": min(speed, 5.0)}
         self.send(Event(self._time(t), "contact", "set", args, ramp=MOVE_RAMP))
         self.send(Event(self._time(t), "plate", "set", {"location": self.location(x)}, ramp=MOVE_RAMP))
@@ -224,51 +245,86 @@ def stroke(start: float = 0.2, end: float = 1.2, x0: float = 0.1, x1: float = 0.
     return path
 
 
-def run_window(mode: str = "scrape", **live_options) -> None:
-    """Open the demo window (tkinter) and play live until it is closed."""
+def start_live(mode: str, probe_udp: str | None = None, **live_options):
+    """Start the live engine on ``mode``'s scene with its probe (and the drill's physics
+    thread) and, with ``probe_udp`` = HOST:PORT, a UDP probe input driving the probe
+    exactly as the pointer does. Returns (engine, probe, pose receiver or None)."""
+    from jassy.hapticframes import parse_address
+    from jassy.live import LiveEngine
+    from jassy.probeinput import PoseDriver, PoseReceiver
+
+    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, **live_options)
+    engine.start()
+    probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
+    if mode == "drill":
+        _start_physics(probe)
+    receiver = None
+    if probe_udp:
+        host, port = parse_address(probe_udp, "--probe-udp")
+        receiver = PoseReceiver(PoseDriver(probe), host, port)
+    return engine, probe, receiver
+
+
+def stop_live(engine, probe, receiver) -> None:
+    """Stop the input, the physics thread and the engine (fade, final frame, children)."""
+    if receiver is not None:
+        receiver.close()
+    probe.running = False
+    engine.stop()
+
+
+def run_headless(mode: str = "scrape", probe_udp: str | None = None, **live_options) -> None:
+    """The live scene without a window, driven by the UDP probe input, until stopped."""
+    import time
+
+    engine, probe, receiver = start_live(mode, probe_udp, **live_options)
+    try:
+        where = f"; probe input on {receiver.address}" if receiver else ""
+        print(f"demo {mode} running headless{where}; Ctrl-C stops", flush=True)
+        while True:
+            time.sleep(0.5)
+    finally:
+        stop_live(engine, probe, receiver)
+
+
+def run_window(mode: str = "scrape", probe_udp: str | None = None, **live_options) -> None:
+    """Open the demo window (tkinter) and play live until it is closed or stopped."""
     try:
         import tkinter as tk
     except ImportError:
         raise JassyError(
             "the demo window needs tkinter (Debian/Ubuntu: apt-get install python3-tk)"
         ) from None
-    from jassy.live import LiveEngine
+    from patches.demo_view import DemoView
 
     try:
         root = tk.Tk()
     except tk.TclError as exc:
-        raise JassyError(f"cannot open a window ({exc}); use --script to run headless") from None
-    engine = LiveEngine(build_scene(mode), [], **live_options)
-    engine.start()
-    probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
-    if mode == "drill":
-        _start_physics(probe)
-    width, height = 600, 300
-    what = "hold to drill into a bone phantom" if mode == "drill" else f"click to tap, drag to {mode}"
-    root.title(f"jassy demo, {mode} mode: {what}")
-    canvas = tk.Canvas(root, width=width, height=height, background="#8a9199")
-    canvas.pack()
-    status = tk.Label(root, anchor="w")
-    status.pack(fill="x")
+        raise JassyError(f"cannot open a window ({exc}); use --script or --headless") from None
+    engine, probe, receiver = start_live(mode, probe_udp, **live_options)
+    stopped: list[BaseException] = []
 
-    def position(event) -> float:
-        return event.x / width
+    def report(exc_type, exc, tb):  # a signal's Stopped, raised inside a Tk callback
+        if isinstance(exc, (KeyboardInterrupt, SystemExit)) or not isinstance(exc, Exception):
+            stopped.append(exc)
+            root.quit()
+        else:
+            raise exc
 
-    canvas.bind("<ButtonPress-1>", lambda e: probe.press(position(e), e.time / 1000.0))
-    if mode != "drill":
-        canvas.bind("<B1-Motion>", lambda e: probe.move(position(e), e.time / 1000.0))
-    canvas.bind("<ButtonRelease-1>", lambda e: probe.release(e.time / 1000.0))
-
-    def refresh() -> None:
-        status.config(text=engine.stats().summary())
-        root.after(500, refresh)
-
-    refresh()
+    root.report_callback_exception = report
     try:
+        view = DemoView(root, mode, engine, probe)
+        view.bind_pointer()
+        print(
+            f"demo {mode} window open" + (f"; probe input on {receiver.address}" if receiver else ""),
+            flush=True,
+        )
         root.mainloop()
     finally:
-        probe.running = False
-        engine.stop()
+        stop_live(engine, probe, receiver)
+        root.destroy()
+    if stopped:
+        raise stopped[0]
 
 
 def _start_physics(probe: DrillProbe) -> None:

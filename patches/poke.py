@@ -54,7 +54,7 @@ def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float =
     from ugens.scrape import Scrape
 
     squish = Scrape(
-        roughness=2e-5, patch=5e-3, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
+        roughness=2e-5, patch=2e-4, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
     )
     press = Sine(freq=0.0, amp=0.0, phase=math.pi / 2, name="press")
     thump = Biquad(press, mode="highpass", freq=40.0, q=0.7, name="thump")
@@ -106,7 +106,9 @@ def render_poke(out_wav, haptic_path=None, csv_path=None, duration: float = 4.0,
     press_speed = np.abs(np.sum(velocity * unit, axis=1))
     rub = np.where(res.counts > 0, res.track.slip_speed + press_speed, 0.0)
     graph, score = build_scene(res.track, rub, seed=seed)
-    audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block)
+    audio, warnings = render_normalised(
+        graph, score, duration, out_wav, sample_rate, block, radius=options.get("radius", 0.05)
+    )
     peak = float(np.max(np.abs(audio))) if audio.size else 0.0
     if haptic_path:
         write_signal(haptic_path, res.forces.T.copy(), 1.0 / (res.times[1] - res.times[0]), label="force_")

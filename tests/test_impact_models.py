@@ -369,13 +369,15 @@ def test_sound_is_the_resonator_driven_by_the_contact_force():
     peak = np.max(np.abs(y))
     # exact: the same modes discretised by scipy (zero-order hold), driven by the recorded force
     np.testing.assert_allclose(y, zoh_reference(model, force), rtol=0, atol=1e-9 * peak)
-    # ModalBank (force as impulses) differs only by the hold: sinc(f/fs) e^{-i pi f/fs}
+    # ModalBank (the response at t_n to the smooth force through the samples) differs only
+    # by the hold and the output time t_{n+1}: sinc(f/fs) e^{-i pi f/fs} e^{2 i pi f/fs}
     bank = ModalBank(model, name="mb")(ArraySource(force))
-    yb = render(Graph(bank), [], 0.2, FS, 64, limiter=False).audio[0]
-    spectrum = np.fft.rfft(yb, 2 * yb.size)
-    freqs = np.fft.rfftfreq(2 * yb.size, 1 / FS)
-    held = np.fft.irfft(spectrum * np.sinc(freqs / FS) * np.exp(-1j * np.pi * freqs / FS))[: yb.size]
-    assert max_abs_diff(y, held) < 0.01 * peak
+    longer = render(Graph(bank), [], 0.25, FS, 64, limiter=False).audio[0]  # the shift wraps its end
+    yb = longer[: y.size]
+    spectrum = np.fft.rfft(longer, 2 * longer.size)
+    freqs = np.fft.rfftfreq(2 * longer.size, 1 / FS)
+    held = np.fft.irfft(spectrum * np.sinc(freqs / FS) * np.exp(1j * np.pi * freqs / FS))[: y.size]
+    assert max_abs_diff(y, held) < 1e-3 * peak
     assert max_abs_diff(y, yb) < 0.1 * peak  # uncorrected: within the half-sample shift
 
 

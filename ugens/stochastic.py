@@ -55,7 +55,9 @@ MIN_PULSE_SAMPLES = 2.0
 _ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
 # layout of the int state cnt[]: pulses in the table, micro-impacts so far, logged rows
 _PULSES, _EVENTS, _LOGGED = range(3)
-_CRUMPLE, _BREAK = 0, 1
+_CRUMPLE, _BREAK, _BREAK_SDT = 0, 1, 2
+#: Break's energy scalings: SDT's (events shrink with the energy left) or full-size events.
+BREAK_SCALINGS = ("sdt", "full")
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -147,7 +149,9 @@ def micro_impacts(
     Per frame idx: output the pulses and the held size, then fire the Poisson events of
     the interval [idx, idx + 1): their pulses start at the next frame. density, crush,
     frag: per-sample density (1/s), crushing energy (J) and fragment scale. mode 0:
-    rate = density; mode 1 (break): rate = density * energy left / budget.
+    rate = density; mode 1 (break): rate = density * energy left / budget; mode 2 (break
+    as SDT): that rate, each event's energy and size also times energy left / budget,
+    and the run ends once the energy left is below one crushing energy.
     """
     count = cnt[_PULSES]
     for i in range(n):
@@ -157,8 +161,11 @@ def micro_impacts(
         size_out[i] = st[_SIZE]
         pos = 0.0  # position inside [idx, idx + 1) already accounted for
         while st[_RUNNING] != 0.0:
+            if mode == _BREAK_SDT and st[_LEFT] <= crush[i]:
+                st[_RUNNING] = 0.0
+                break
             rate = density[i] / fs
-            if mode == _BREAK:
+            if mode != _CRUMPLE:
                 rate *= st[_LEFT] / st[_BUDGET]
             if rate <= 0.0:
                 break
@@ -168,6 +175,9 @@ def micro_impacts(
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
             energy = crush[i] * min(max(x, ENERGY_CLIP[0]), ENERGY_CLIP[1])
             size = frag[i] * (0.5 + 0.5 * u01(rng))
+            if mode == _BREAK_SDT:
+                energy *= st[_LEFT] / st[_BUDGET]
+                size *= st[_LEFT] / st[_BUDGET]
             if st[_BUDGET] > 0.0:
                 if energy >= st[_LEFT]:
                     energy = st[_LEFT]
@@ -443,11 +453,16 @@ class Break(_Granular):
     """Breaking (SDT breaking~): micro-impacts that draw down a stored energy budget.
 
     ``break`` {energy} stores ``energy`` J; micro-impacts then occur at the rate
-    ``density`` * (energy left / energy stored), so the cascade thins out as it goes, each
-    taking E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), the last one what is
-    left, until the budget is spent. Impulse sqrt(2 ``mass`` energy) N s per pulse, so the
-    energies of all pulses sum to the budget. Extra output ``size``. Source: SDT
-    (Baldan et al. 2017).
+    ``density`` * R, R = energy left / energy stored, so the cascade thins out as it goes.
+    Impulse sqrt(2 ``mass`` energy) N s per pulse. Extra output ``size``.
+
+    ``scaling = "sdt"`` (default, SDT's ``breaking~``): each micro-impact takes
+    E R clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``) and has the size
+    ``fragment`` R U(0.5, 1), so the fragments get smaller and weaker as the energy runs
+    out and the cascade fades; it ends once the energy left is below E (the rest is not
+    emitted). ``scaling = "full"``: full-size events E clip(Exp(1.45), 0.1, 10) and sizes
+    ``fragment`` U(0.5, 1) throughout, the last one taking what is left, so the energies
+    of all pulses sum to the budget. Source: SDT ``SDTBreaking_dsp`` (Baldan et al. 2017).
     """
 
     type_name = "Break"
@@ -467,6 +482,13 @@ class Break(_Granular):
         "mass": _MASS,
         "duration": _DURATION,
         "seed": _SEED,
+        "scaling": ParamSpec(
+            "str",
+            "sdt",
+            choices=BREAK_SCALINGS,
+            fixed=True,
+            doc="sdt: events shrink with the energy left and fade out; full: full-size events",
+        ),
     }
     actions = {
         "break": {
@@ -476,6 +498,10 @@ class Break(_Granular):
         },
         "stop": {},
     }
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self._mode = _BREAK_SDT if self.values["scaling"] == "sdt" else _BREAK
 
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
         """``break`` {energy}: store the budget and start; ``stop``: abandon what is left."""
