@@ -3,17 +3,23 @@
 Every contact is (point, normal, gap, feature of a, feature of b, barycentric weights on b)
 with the normal pointing from b to a (pushing a along +n) and gap < 0 meaning penetration.
 Pairs are ordered so that type(a) <= type(b) (sphere < capsule < box < convex < plane <
-mesh). Methods:
+mesh < compound). Methods:
 
 - sphere/capsule vs sphere/capsule: closest points of two segments (Ericson 5.1.9);
 - sphere vs polytope (box, convex): inside by the face planes (deepest face), outside by the
   closest point on the hull triangles; a capsule is tested as its two end spheres and its
   middle sphere;
-- polytope vs polytope: each against the other's reference face (the face plane, found by
-  separating axes over face normals, that the other's vertices reach least deep behind): its
-  vertices over that face, and the points where its hull edges cross the face's side planes
-  (a face-face manifold: a cube on a cube turned or aligned gets the corners of the overlap);
-  no contact if a face plane of one has the other beyond it (edge-edge axes are not tested);
+- polytope vs polytope: separating axes over both bodies' face normals and the cross
+  products of their edge directions (Gottschalk, Lin, Manocha, "OBBTree", SIGGRAPH 1996;
+  Ericson 5.2.1); no contact if one separates them by more than the margin. If an edge axis
+  beats every face axis (by EDGE_PREFERENCE), one contact between the two nearest edges with
+  that axis's separation as gap (the true distance of two edges passing each other);
+  otherwise each body against the other's reference face (the face plane that the other's
+  vertices reach least deep behind): its vertices over that face, and the points where its
+  hull edges cross the face's side planes (a face-face manifold: a cube on a cube turned or
+  aligned gets the corners of the overlap);
+- compound (concave) bodies: each of their convex pieces as a polytope, against planes and
+  meshes their surface vertices;
 - anything vs plane: the sphere centres or vertices against the plane;
 - anything vs triangle mesh: the same points against the mesh's triangle grid, keeping the
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
