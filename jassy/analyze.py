@@ -3,7 +3,8 @@
 The file plays through a Sampler at its own sample rate into the analysis ugens
 (``ugens.analysis``); their outputs are read every ``hop`` samples (the onset column
 holds 1 where an onset fell within the hop) and written as CSV (time in s, one column per
-feature), optionally plotted under the waveform.
+feature), optionally plotted under the waveform. :func:`feature_events` turns a curve into
+parameter events, so a recording can drive any parameter of a patch.
 """
 
 from __future__ import annotations
@@ -90,6 +91,23 @@ def analyze(path: str, features: Sequence[str], size: int = 2048, hop: int = 512
         else:
             values[name] = curve[frames]
     return Features(frames / rate, values, signal, rate)
+
+
+def feature_events(
+    features: Features, feature: str, node: str, param: str, scale: float = 1.0, offset: float = 0.0
+) -> list:
+    """Score events making ``node.param`` follow a feature curve: ``offset + scale * value``
+    set at every hop time, ramped linearly to the next (so the parameter is the curve's
+    piecewise-linear interpolation, one hop late). E.g. a voice's ``rms`` driving a scrape's
+    ``force``: ``render(graph, feature_events(f, "rms", "scrape", "force", 40.0), ...)``."""
+    from jassy.events import Event
+
+    times, values = features.times, features.values[feature]
+    hop = float(times[1] - times[0]) if times.size > 1 else 0.0
+    return [
+        Event(float(t), node, "set", {param: float(offset + scale * v)}, ramp=hop)
+        for t, v in zip(times, values, strict=True)
+    ]
 
 
 def write_csv(features: Features, path: str) -> None:

@@ -46,12 +46,13 @@ def loop_latency(
     """Position in -> force out, in samples: a UDP pose touching the plate of the demo's
     scrape scene (a tap), from the moment it is sent to the first sample of the tap's
     force the device plays (monitor), mapped onto the stream clock by the UDP frames'
-    device times. Needs a running (JACK) device; the caller provides it."""
-    from jassy.live import DEVICE_LATENCY, PLAYED, LiveEngine
+    device times; in the mode the live scenes use (callback where the graph allows).
+    Needs a running (JACK) device; the caller provides it."""
+    from jassy.live import LiveEngine
     from jassy.probeinput import PoseDriver, PoseReceiver, encode_pose
     from patches.demo import Probe, build_scene
 
-    recorder = FrameRecorder()
+    recorder = FrameRecorder(process=True)  # receiving here would hold this interpreter
     seconds = presses * 0.4 + 1.0
     live = LiveEngine(
         build_scene("scrape"),
@@ -61,6 +62,7 @@ def loop_latency(
         ring_blocks,
         monitor_seconds=seconds,
         haptic_udp=recorder.address,
+        mode="auto",
     )
     live.start()
     probe = Probe(live.post, live=True)
@@ -80,22 +82,26 @@ def loop_latency(
     finally:
         sock.close()
         receiver.close()
-        live.stop()
+        stats = live.stop()
     frames = [f for f in recorder.stop() if not f.flags & FLAG_FINAL]
     heard, _ = live.monitor()
     force = heard[-1]
-    first = int(live.header[PLAYED]) - force.size  # stream frame of force[0]
+    first = stats.frames_played - force.size  # stream frame of force[0]
     offset = float(live.tap.control[CLOCK_OFFSET])
-    latencies = []
+    latencies, missed = [], 0
     for t in sent:
         s = _sample_at(frames, t, offset, sample_rate)
         after = np.flatnonzero((np.arange(force.size) + first >= s) & (force != 0))
-        if after.size:
+        if after.size and first + after[0] - s < 0.1 * sample_rate:
             latencies.append(first + after[0] - s)
+        else:  # no force within 100 ms of the touch: the tap never played
+            missed += 1
     lat = np.array(latencies)
     return {
-        "loop_presses": len(latencies),
+        "loop_presses": len(sent),
+        "loop_missed": missed,
         "position_to_force_p50_samples": float(np.median(lat)) if lat.size else float("nan"),
         "position_to_force_max_samples": float(lat.max()) if lat.size else float("nan"),
-        "loop_ring_and_device_samples": (live.capacity + float(live.state[DEVICE_LATENCY]) * sample_rate),
+        "loop_mode": stats.mode,
+        "loop_engine_latency_samples": stats.latency * sample_rate,
     }

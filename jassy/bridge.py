@@ -5,7 +5,7 @@ pose (from a scripted path or the mouse) to the engine (:mod:`jassy.probeinput`)
 takes the newest haptic frame the engine sent (:mod:`jassy.hapticframes`) as its output
 force. It lets go on its own: when the final frame arrives, or when no frame has
 arrived for ``GAP`` seconds, the output force fades linearly to zero within ``FADE``
-seconds, so it is zero at most GAP + FADE = 6.5 ms after the last frame, whatever
+seconds, so it is zero at most GAP + FADE = 5 ms after the last frame, whatever
 happened to the engine (a kill -9 included).
 """
 
@@ -25,7 +25,7 @@ from jassy.hapticsender import request_realtime_priority
 from jassy.probeinput import BUTTON_MAIN, encode_pose
 
 #: Silence after which the bridge stops trusting the last frame (s), and the fade (s).
-GAP, FADE = 0.0025, 0.004
+GAP, FADE = 0.002, 0.003
 
 
 class BridgeTick(NamedTuple):
@@ -75,8 +75,8 @@ class ForceOutput:
         fade_from = self.last_arrival + GAP if self.final_at is None else self.final_at
         if now < fade_from:
             return self.force, False
-        scale = max(0.0, 1.0 - (now - fade_from) / FADE)
-        return self.force * scale, True
+        faded = now - fade_from
+        return (self.force * (1.0 - faded / FADE) if faded < FADE else np.zeros_like(self.force)), True
 
 
 def run_bridge(

@@ -87,6 +87,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if args.normalise and args.patch in SCENES:
+        raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
+    if args.target is not None and not args.normalise:
+        raise JassyError("--target: needs --normalise peak|lufs")
+    if args.target is not None and not (math.isfinite(args.target) and -70.0 <= args.target <= 0.0):
+        raise JassyError(f"--target: expected dB between -70 and 0, got {args.target}")
     if args.plot:
         from jassy.preview import check_png, require_matplotlib
 
@@ -115,9 +121,20 @@ def _cmd_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
     engine = OfflineEngine(
-        patch.graph, patch.score, rate, args.block, haptic_safety=safety, offsets_ms=offsets
-    )
-    summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
+        patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
+        offsets_ms=offsets,
+    )  # fmt: skip
+    if args.normalise:
+        from jassy.loudness import TARGETS, render_normalised
+
+        target = TARGETS[args.normalise] if args.target is None else args.target
+        summary = render_normalised(
+            engine, args.output, duration, args.format, args.haptic, args.normalise, target, not args.quiet
+        )
+    else:
+        summary = engine.render_to_file(
+            args.output, duration, args.format, args.haptic, progress=not args.quiet
+        )
     elapsed = time.perf_counter() - t0
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
@@ -127,6 +144,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
+            + (
+                f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
+                + ("LUFS" if args.normalise == "lufs" else "dBFS peak")
+                if args.normalise
+                else ""
+            )
         )
     _plot_render(args)
     return 0
@@ -175,7 +198,17 @@ def _cmd_play(args: argparse.Namespace) -> int:
     )
     why = f" ({engine.mode_reason})" if engine.mode_reason else ""
     print(f"mode: {engine.mode}{why}", flush=True)
+    osc = None
+    if args.osc:
+        from jassy.osc import OscControl, parse_address
+
+        host, port = parse_address(args.osc)
+        osc = OscControl(patch.graph, engine.post, origin=0.0, host=host, port=port)
     engine.start()
+    if osc is not None:
+        osc.origin = time.time()  # the stream's frame 0, as near as the wall clock tells
+        osc.start()
+        print(f"OSC on {host}:{osc.address[1]}: /NODE/PARAM, /NODE/ACTION, /event", flush=True)
     try:
         print(
             f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
@@ -189,6 +222,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
     finally:
+        if osc is not None:
+            osc.stop()
         stats = engine.stop()
         print(f"\n{stats.summary()}", flush=True)
     return 0
@@ -218,7 +253,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
     from jassy.bridge import run_bridge, scripted_path, write_log
+    from jassy.hapticframes import parse_address
 
+    parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
+    parse_address(args.listen, "--listen")
     if args.duration is not None and not args.duration >= 0:
         raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
     ticks = []
@@ -253,6 +291,15 @@ def _first_line(text: str | None) -> str:
 def _cmd_list(args: argparse.Namespace) -> int:
     from jassy.patchfile import builtin_patches, load_patch
     from jassy.registry import ugen_types
+
+    if args.objects:
+        from patches.objects import OBJECTS
+
+        print("objects (model files beside the built-in patches; 'jassy doc FILE' for modes and points):")
+        for name, info in OBJECTS.items():
+            print(f"  {name:<13} {info.file:<24} {info.size}")
+            print(f"  {'':<13} {info.description}; points: {', '.join(info.points)}")
+        return 0
 
     print("patches:")
     for name in sorted(builtin_patches()):
@@ -325,7 +372,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.rigid.bench import bench_rigid, print_rigid
         from physics.rigid.solver_bench import bench_solvers, print_solvers
 
-        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        def say(message: str) -> None:
+            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
+
+        rows = bench_rigid(quick=args.quick, progress=say)
+        say("solvers: ABA, Lemke, PGS")
+        solvers = bench_solvers(quick=args.quick)
         print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
             print_rigid(rows), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
@@ -413,6 +465,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_haptic_arguments(p)
     p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
+    p.add_argument(
+        "--normalise",
+        choices=["peak", "lufs"],
+        help="scale to a peak level (default -1 dBFS) or integrated loudness (default -16 LUFS)",
+    )
+    p.add_argument("--target", type=float, metavar="DB", help="--normalise target: dBFS (peak) or LUFS")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
@@ -435,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
+    p.add_argument("--osc", metavar="HOST:PORT", help="take parameter changes and events over OSC (UDP)")
     _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
@@ -442,7 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
-    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill"])
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill", "poke"])
     p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
@@ -482,7 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_study(sub)
     add_modal(sub)
 
-    p = sub.add_parser("list", help="list built-in patches and ugen types")
+    p = sub.add_parser("list", help="list built-in patches and ugen types (or --objects)")
+    p.add_argument("--objects", action="store_true", help="the object library: models of everyday objects")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")

@@ -110,6 +110,35 @@ def describe_ugen(cls, markdown: bool = False) -> str:
     return "\n".join(lines)
 
 
+_ANNOTATIONS = {"float": "float", "int": "int", "bool": "bool", "str": "str", "location": "int | str | dict",
+                "model": "ModalModel | str", "floats": "list[float]"}  # fmt: skip
+
+
+def document_class(cls) -> None:
+    """Give a ugen class the constructor signature ``(*sources, name=None, where=None,
+    <every parameter with its default>)`` and append its parameter table to its docstring."""
+    P = inspect.Parameter
+    params = [
+        P("sources", P.VAR_POSITIONAL, annotation="UGen"),
+        P("name", P.KEYWORD_ONLY, default=None, annotation="str | None"),
+        P("where", P.KEYWORD_ONLY, default=None, annotation="str | None"),
+    ]
+    for key, spec in cls.all_specs().items():
+        default = P.empty if spec.required else spec.default
+        params.append(P(key, P.KEYWORD_ONLY, default=default, annotation=_ANNOTATIONS[spec.kind]))
+    cls.__signature__ = inspect.Signature(params)
+    lines = ["", "Parameters (keyword arguments, patch keys and `set` events):"]
+    for name, kind, unit, accepted, default, what in _spec_rows(cls.all_specs()):
+        lines.append(
+            f"    {name} ({kind}{', ' + unit if unit != '-' else ''}; {accepted}; default {default}): {what}"
+        )
+    for action, specs in cls.actions.items():
+        lines.append(
+            f"Action ``{action}``: " + ", ".join(f"{k} ({s.unit or s.kind})" for k, s in specs.items())
+        )
+    cls.__doc__ = inspect.cleandoc(cls.__doc__ or cls.type_name) + "\n" + "\n".join(lines)
+
+
 def describe_patch(patch) -> str:
     """A patch's nodes with their parameter values, its models and its event timeline."""
     from jassy.cli import DEFAULT_RATE
@@ -134,11 +163,15 @@ def describe_patch(patch) -> str:
 
 
 def describe_model_points(model) -> str:
-    """The named points of a model (its strike locations) with their description, if any."""
+    """The named points of a model (its strike locations), described where the model is one
+    of the object library's (``patches.objects``)."""
+    from patches.objects import object_for_model
+
     if not model.points:
-        return f"{model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"
-    described = getattr(model, "point_notes", None) or {}
-    return "\n".join(f"  {name}: {described.get(name, '')}".rstrip() for name in model.points)
+        return f"  {model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"
+    info = object_for_model(model.name)
+    described = info.points if info is not None else {}
+    return "\n".join(f"  {name}: {described.get(name, '')}".rstrip().rstrip(":") for name in model.points)
 
 
 def reference_markdown() -> str:

@@ -69,9 +69,12 @@ def encode(
     torque: np.ndarray,
     sample_rate: float,
 ) -> bytes:
-    """One datagram; non-finite channel values are sent as 0."""
-    values = np.concatenate([force, torque]).astype("<f4")
+    """One datagram; non-finite channel values are sent as 0, finite values beyond the
+    float32 range as the largest float32 of their sign."""
+    values = np.concatenate([force, torque]).astype(np.float64)
     values[~np.isfinite(values)] = 0.0
+    limit = float(np.finfo(np.float32).max)
+    values = np.clip(values, -limit, limit).astype("<f4")
     header = HEADER.pack(
         MAGIC, VERSION, flags, sequence, sample_time, device_time, force.size, torque.size, sample_rate
     )

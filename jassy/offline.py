@@ -21,8 +21,7 @@ from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
-from jassy.program import Program, why_not_compiled
-from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, zero_nonfinite
+from jassy.safety import CEILING, LimiterMeter, count_nonfinite, limit, release_coefficient, zero_nonfinite
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
@@ -85,11 +84,14 @@ class OfflineEngine:
         self.graph = graph
         self.sample_rate = float(sample_rate)
         graph.prepare(self.sample_rate, block)
+        from jassy.program import Program, why_not_compiled  # imports the ugens: not at import time
+
         self.why_not_program = why_not_compiled(graph) if program else "not asked for"
         self.program = Program(graph) if self.why_not_program is None else None
         self.scheduler = Scheduler(graph, score, self.sample_rate, block, self.program)
         self.limiter = limiter
         self._limiter_state = np.ones(1)
+        self.limiter_meter = LimiterMeter(CEILING)
         self._release = release_coefficient(release, self.sample_rate)
         self.haptic_safety = haptic_safety
         self._haptic_last = np.zeros(len(graph.haptic))
@@ -146,7 +148,9 @@ class OfflineEngine:
         if count_nonfinite(a) or count_nonfinite(h):
             self._quarantine(a, h)
         if self.limiter:
+            self.limiter_meter.before(a)
             limit(a, n, self._limiter_state, CEILING, self._release)
+            self.limiter_meter.after(a, n)
         if self.haptic_safety is not None and h.shape[0]:
             s = self.haptic_safety
             self.haptic_flags |= limit_force(h, n, self._haptic_last, s.max_force, s.step(self.sample_rate))
@@ -176,7 +180,12 @@ class OfflineEngine:
             audio[:, pos : pos + n] = a
             haptic[:, pos : pos + n] = h
             pos += n
-        return Rendering(audio, haptic, self.sample_rate, list(self.warnings))
+        return Rendering(audio, haptic, self.sample_rate, self._final_warnings())
+
+    def _final_warnings(self) -> list[str]:
+        """The render's warnings, with the limiter's report if it cut peaks."""
+        limited = self.limiter_meter.warning(self.sample_rate) if self.limiter else None
+        return list(self.warnings) + ([limited] if limited else [])
 
     def render_to_file(
         self,
@@ -213,7 +222,8 @@ class OfflineEngine:
             "duration": frames / self.sample_rate,
             "peak": peak,
             "haptic_peak": float(np.max(np.abs(haptic))) if haptic is not None and haptic.size else None,
-            "warnings": list(self.warnings),
+            "warnings": self._final_warnings(),
+            "limiter": self.limiter_meter.report(self.sample_rate),
         }
 
 

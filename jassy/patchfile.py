@@ -13,6 +13,7 @@ Layout::
     [outputs]          audio = "node" or ["left", "right"]; haptic = "node" or [...]
     [[score]]          time (s), node, then one action: set = {param = value}, jump = true|false,
                        or an action of the node type, e.g. impact = {impulse = 0.01, location = 2}
+    [[generate]]       events at regular or Poisson times with random arguments (jassy/generators.py)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Any
 from jassy.anytime import ModeBudget
 from jassy.errors import JassyError, ModelError, PatchError, suggest
 from jassy.events import Event
+from jassy.generators import expand
 from jassy.graph import Graph
 from jassy.inputs import load_toml, number, parse_toml, seconds
 from jassy.modal_model import ModalModel
@@ -33,7 +35,7 @@ from jassy.registry import ugen_class
 from jassy.scheduler import validate_event
 from jassy.ugen import UGen
 
-TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
+TOP_KEYS = {"patch", "models", "nodes", "outputs", "score", "generate"}
 PATCH_KEYS = {"name", "description", "duration", "sample_rate", "mode_budget", "cpu_budget"}
 
 
@@ -315,7 +317,6 @@ def build_patch(
     if unused:
         raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")
 
-    score = _parse_score(data.get("score", []), graph, where)
     duration = meta.get("duration")
     rate = meta.get("sample_rate")
     try:
@@ -323,8 +324,14 @@ def build_patch(
             duration = seconds(duration, f"{where}: patch.duration")
         if rate is not None:
             rate = number(rate, f"{where}: patch.sample_rate", 1000, 768000, integer=True)
+        generated = expand(data.get("generate", []), models, duration, where)
     except JassyError as exc:
         raise PatchError(str(exc)) from None
+    score = _parse_score(data.get("score", []), graph, where)
+    if generated:
+        names, entries = zip(*generated, strict=True)
+        score += _parse_score(list(entries), graph, where, list(names))
+        score.sort(key=lambda event: event.time)
     for key in ("name", "description"):
         if not isinstance(meta.get(key, ""), str):
             raise PatchError(f"{where}: patch.{key}: expected a string, got {meta[key]!r}")

@@ -14,8 +14,13 @@ _REGISTRY: dict[str, type] = {}
 
 
 def register(cls):
-    """Class decorator: make ``cls`` available under ``cls.type_name``."""
+    """Class decorator: make ``cls`` available under ``cls.type_name``, with a constructor
+    signature and a parameter section in its docstring generated from its ParamSpecs (what
+    ``help()`` and ``inspect.signature`` show)."""
+    from jassy.doc import document_class
+
     _REGISTRY[cls.type_name] = cls
+    document_class(cls)
     return cls
 
 

@@ -26,7 +26,7 @@ from jassy.events import Event
 from jassy.graph import Graph
 from jassy.offline import OfflineEngine, Rendering
 
-MODES = ("scrape", "roll", "drill")
+MODES = ("scrape", "roll", "drill", "poke")
 PRESS_FORCE = 2.0  # N, normal force while the button is held
 TAP_IMPULSE = 0.02  # N s, of the tap when the button goes down
 MOVE_RAMP = 0.02  # s, parameters glide between pointer samples
@@ -45,6 +45,8 @@ def build_scene(mode: str = "scrape") -> Graph:
         raise JassyError(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
     if mode == "drill":
         return build_drill_scene()
+    if mode == "poke":
+        return build_poke_scene()
     tap = ImpactForce(name="tap", duration=0.0008)
     contact = (Scrape if mode == "scrape" else Roll)(name="contact", force=0.0, speed=0.0, seed=1)
     force = Mixer(tap, contact, name="force")
@@ -63,6 +65,75 @@ def build_drill_scene() -> Graph:
     bone = ModalBank(bone_model(), name="bone")(drill)
     out = Mixer(Gain(bone, gain=0.3), Gain(drill.tap("motor"), gain=1.5), name="out")
     return Graph(out, haptic=drill)
+
+
+def build_poke_scene() -> Graph:
+    """The soft ball's squish and press sounds (patches.poke); haptic = the normal force."""
+    from patches.poke import ball_nodes
+    from ugens.mix import Gain
+
+    out, press = ball_nodes()
+    return Graph(Gain(out, gain=0.5, name="out"), haptic=press)
+
+
+class PokeProbe:
+    """A probe sphere pressed into a soft rubber ball (patches.poke's ball: BEM Green's
+    functions and capacitance-matrix contact, physics.deform), stepped at ``rate`` Hz.
+
+    The pointer's x (0..1) is the probe's polar angle over the ball (-45..45 degrees);
+    while pressed it sinks into the ball at ``speed`` m/s down to ``depth`` m, and rises
+    when released. Each step sends the normal force and the sliding speed to the squish
+    and the force to the press node (the haptic channel)."""
+
+    def __init__(self, send: Callable[[Event], None], live: bool = False, rate: float = 1000.0,
+                 depth: float = 0.008, speed: float = 0.05, gap: float = 0.004):  # fmt: skip
+        from physics.deform.bem import Material
+        from physics.deform.greens import reference_greens
+        from physics.deform.haptic import PokeSim, soft_ball
+
+        self.send, self.live, self.rate = send, live, rate
+        self.radius, self.probe_radius = 0.05, 0.015
+        V, F, fixed = soft_ball(self.radius, 3)
+        self.sim = PokeSim(reference_greens(V, F, Material(2e5, 0.45), fixed), self.probe_radius)
+        self.depth, self.speed, self.gap = depth, speed, gap
+        self.x = 0.5
+        self.indent = -gap
+        self.pressed = False
+        self.force = np.zeros(3)
+        self.centre = self._centre()
+
+    @property
+    def touching(self) -> bool:
+        return bool(np.any(self.force))
+
+    def _centre(self) -> np.ndarray:
+        angle = math.radians(90.0 * (self.x - 0.5))
+        reach = self.radius + self.probe_radius - self.indent
+        return reach * np.array([math.sin(angle), 0.0, math.cos(angle)])
+
+    def press(self, x: float, t: float) -> None:
+        self.x, self.pressed = x, True
+
+    def move(self, x: float, t: float) -> None:
+        self.x = x
+
+    def release(self, t: float) -> None:
+        self.pressed = False
+
+    def step(self, t: float) -> None:
+        """One haptic update at time t (s)."""
+        dt = 1.0 / self.rate
+        target = self.depth if self.pressed else -self.gap
+        self.indent += min(max(target - self.indent, -self.speed * dt), self.speed * dt)
+        centre = self._centre()
+        sliding = float(np.linalg.norm(centre - self.centre)) / dt
+        self.centre = centre
+        self.force = self.sim.step(centre).force
+        normal = float(np.linalg.norm(self.force))
+        when = 0.0 if self.live else t
+        rub = {"force": normal, "speed": sliding if normal else 0.0}
+        self.send(Event(when, "squish", "set", rub, ramp=dt))
+        self.send(Event(when, "press", "set", {"amp": normal}, ramp=dt))
 
 
 class DrillProbe:
@@ -222,6 +293,8 @@ def render_script(
     """Render a scripted probe path offline: (time s, "press" | "move" | "release", x)."""
     if mode == "drill":
         return render_drill_script(path, duration, sample_rate, block)[0]
+    if mode == "poke":
+        raise JassyError("--script: poke mode plays live only; its scripted gesture is 'jassy render poke'")
     events: list[Event] = []
     probe = Probe(events.append)
     for t, kind, x in path:
@@ -253,10 +326,11 @@ def start_live(mode: str, probe_udp: str | None = None, **live_options):
     from jassy.live import LiveEngine
     from jassy.probeinput import PoseDriver, PoseReceiver
 
-    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, **live_options)
+    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, mode="auto", **live_options)
     engine.start()
-    probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
-    if mode == "drill":
+    physics = {"drill": DrillProbe, "poke": PokeProbe}.get(mode)
+    probe = physics(engine.post, live=True) if physics else Probe(engine.post, live=True)
+    if physics:
         _start_physics(probe)
     receiver = None
     if probe_udp:
@@ -327,8 +401,9 @@ def run_window(mode: str = "scrape", probe_udp: str | None = None, **live_option
         raise stopped[0]
 
 
-def _start_physics(probe: DrillProbe) -> None:
-    """Step the drill simulation at its rate in a thread (the sound runs in its own process)."""
+def _start_physics(probe) -> None:
+    """Step the drill or poke simulation at its rate in a thread (the sound runs on the
+    device clock; events go to it as they are computed)."""
     import threading
     import time
 

@@ -5,7 +5,8 @@ modal texture (the summed |mode shape| of its 12 lowest modes, sin(m pi x / a)
 sin(n pi y / b), over the plate) with the probe's track across it coloured by how
 strongly each point excites the plate (the model's gains there); drill mode: a slice of
 the bone phantom's voxels through the burr (grey = density, updated as bone is
-removed). Over that: the probe, the contact point while touching, the force vector
+removed); poke mode: the soft ball in side view, its outline pushed in where the probe
+sphere presses. Over that: the probe, the contact point while touching, the force vector
 (length proportional to the haptic force the device is playing), and meters: audio
 level, underruns, latency and mode.
 """
@@ -23,6 +24,8 @@ ARROW_PX_PER_N, ARROW_MAX_PX = 40.0, 120.0
 PLATE_SIZE = (0.6, 0.45)  # m, as patches.models_surface.steel_plate_model
 TRACK = ((0.12, 0.3), (0.88, 0.62))  # its track, in fractions of the plate's sides
 REFRESH_MS = 33
+#: Poke mode: the ball's centre on the canvas (px) and the scale (px per m).
+BALL_CENTRE, BALL_SCALE = (320, 250), 2800.0
 
 
 def plate_texture(width: int, height: int, modes: int = 12) -> np.ndarray:
@@ -71,7 +74,10 @@ class DemoView:
         import tkinter as tk
 
         self.tk, self.root, self.mode, self.engine, self.probe = tk, root, mode, engine, probe
-        what = "hold to drill into a bone phantom" if mode == "drill" else f"click to tap, drag to {mode}"
+        what = {
+            "drill": "hold to drill into a bone phantom",
+            "poke": "hold to press into a soft ball, drag to slide over it",
+        }.get(mode, f"click to tap, drag to {mode}")
         root.title(f"jassy demo, {mode} mode: {what}")
         root.geometry("+0+0")
         self.canvas = tk.Canvas(root, width=WIDTH, height=HEIGHT, background="#20262e", highlightthickness=0)
@@ -80,6 +86,10 @@ class DemoView:
         if mode == "drill":
             self._voxel_scale = 4
             self._draw_bone()
+        elif mode == "poke":
+            cx, cy = BALL_CENTRE
+            base = cy + 0.8 * self.probe.radius * BALL_SCALE  # the rigid base under the ball
+            self.canvas.create_rectangle(cx - 200, base, cx + 200, base + 12, fill="#5a6068", outline="")
         else:
             self._draw_plate()
         self.meters = self.canvas.create_text(
@@ -102,6 +112,9 @@ class DemoView:
         if self.mode == "drill":
             nx = self.probe.volume.density.shape[0] * self._voxel_scale
             return min(max((px - self._bone_left) / nx, 0.0), 1.0)
+        if self.mode == "poke":  # the polar angle of the pointer over the ball, -45..45 degrees
+            angle = math.degrees(math.atan2(px - BALL_CENTRE[0], BALL_CENTRE[1] - py))
+            return min(max(angle / 90.0 + 0.5, 0.0), 1.0)
         (x0, y0), (x1, y1) = self.track_point(0.0), self.track_point(1.0)
         dx, dy = x1 - x0, y1 - y0
         return min(max(((px - x0) * dx + (py - y0) * dy) / (dx * dx + dy * dy), 0.0), 1.0)
@@ -148,6 +161,35 @@ class DemoView:
         radius = self.probe.sim.params.radius / volume.voxel * s
         return self._bone_left + i * s, self._bone_top + (nz - 1 - k) * s, radius
 
+    def _ball_outline(self) -> list[float]:
+        """Canvas points of the ball's outline (y = 0 section), pushed onto the probe
+        sphere's surface where they would lie inside it."""
+        probe, (cx, cy) = self.probe, BALL_CENTRE
+        centre = np.array([probe.centre[0], probe.centre[2]])
+        points = []
+        for phi in np.linspace(0.0, 2 * np.pi, 181):
+            p = probe.radius * np.array([math.sin(phi), math.cos(phi)])
+            d = p - centre
+            gap = float(np.hypot(*d))
+            if gap < probe.probe_radius:
+                p = centre + d / max(gap, 1e-12) * probe.probe_radius
+            points += [cx + p[0] * BALL_SCALE, cy - p[1] * BALL_SCALE]
+        return points
+
+    def _refresh_poke(self, magnitude: float) -> None:
+        c, probe, (cx, cy) = self.canvas, self.probe, BALL_CENTRE
+        self.items.append(c.create_polygon(self._ball_outline(), fill="#c0504d", outline="#f0d0c8", width=2))
+        x, y = cx + probe.centre[0] * BALL_SCALE, cy - probe.centre[2] * BALL_SCALE
+        r = probe.probe_radius * BALL_SCALE
+        self.items.append(c.create_oval(x - r, y - r, x + r, y + r, outline="#ffd040", width=3))
+        if probe.touching:
+            n = probe.force / max(float(np.linalg.norm(probe.force)), 1e-12)  # on the probe, outwards
+            tip = (x - n[0] * r, y + n[2] * r)
+            self.items.append(c.create_oval(tip[0] - 4, tip[1] - 4, tip[0] + 4, tip[1] + 4, fill="#ff4040"))
+            arrow = min(magnitude * ARROW_PX_PER_N / 4, ARROW_MAX_PX)
+            end = (tip[0] + n[0] * arrow, tip[1] - n[2] * arrow)
+            self.items.append(c.create_line(*tip, *end, fill="#40ff80", width=3, arrow="last"))
+
     def refresh(self) -> None:
         for item in self.items:
             self.canvas.delete(item)
@@ -156,7 +198,9 @@ class DemoView:
         magnitude = float(np.linalg.norm(force)) if force.size else 0.0
         arrow = min(magnitude * ARROW_PX_PER_N, ARROW_MAX_PX)
         c = self.canvas
-        if self.mode == "drill":
+        if self.mode == "poke":
+            self._refresh_poke(magnitude)
+        elif self.mode == "drill":
             self._update_bone()
             x, y, r = self._burr_position()
             self.items.append(c.create_oval(x - r, y - r, x + r, y + r, outline="#ffd040", width=3))

@@ -42,11 +42,10 @@ def soft_model(n_modes: int = 16, seed: int = 3) -> ModalModel:
     return ModalModel(f, math.pi * f / q, a[None, :], name="soft_ball")
 
 
-def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float = 1.0, press_gain: float = 1.0,
-                seed: int = 0, control_step: int = 4):  # fmt: skip
-    """(Graph, score): Scrape ("squish") + high-passed force ("press") -> ModalBank(soft ball),
-    following ``track`` (normal force) and ``rub_speed`` (m/s per track sample), both taken
-    every ``control_step``-th sample (4 ms at 1 kHz: the sound needs no finer control)."""
+def ball_nodes(squish_gain: float = 1.0, press_gain: float = 1.0, seed: int = 0):
+    """(output node, press node): Scrape ("squish", force N and speed m/s) + high-passed
+    normal force ("press": a Sine at 0 Hz whose amplitude is the force, N) -> ModalBank
+    ("ball"). The press node's output is the normal force itself (a haptic channel)."""
     from ugens.filters import Biquad
     from ugens.mix import Gain, Mixer
     from ugens.modal import ModalBank
@@ -60,7 +59,15 @@ def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float =
     thump = Biquad(press, mode="highpass", freq=40.0, q=0.7, name="thump")
     drive = Mixer(Gain(squish, gain=squish_gain, name="squish_gain"), Gain(thump, gain=press_gain,
                   name="press_gain"), name="drive")  # fmt: skip
-    out = ModalBank(soft_model(), name="ball")(drive)
+    return ModalBank(soft_model(), name="ball")(drive), press
+
+
+def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float = 1.0, press_gain: float = 1.0,
+                seed: int = 0, control_step: int = 4):  # fmt: skip
+    """(Graph, score): Scrape ("squish") + high-passed force ("press") -> ModalBank(soft ball),
+    following ``track`` (normal force) and ``rub_speed`` (m/s per track sample), both taken
+    every ``control_step``-th sample (4 ms at 1 kHz: the sound needs no finer control)."""
+    out, _ = ball_nodes(squish_gain, press_gain, seed)
     k = slice(None, None, max(1, int(control_step)))
     rub = ContactTrack(
         track.bodies, track.times[k], track.normal_force[k], rub_speed[k], track.rolling_speed[k]

@@ -45,3 +45,26 @@ def test_analyze_bad_arguments_exit_2(tmp_path, capsys):
     assert main(["analyze", str(tmp_path / "none.wav")]) == 2
     assert "no such file" in capsys.readouterr().err
     assert main(["analyze", str(path), "-o", str(tmp_path / "f.txt")]) == 2
+
+
+def test_a_recordings_envelope_drives_a_parameter(tmp_path):
+    """The RMS envelope of an amplitude-modulated tone, as events, makes a Gain's gain
+    follow the modulation (read on a constant input)."""
+    from helpers import ArraySource
+
+    from jassy import Graph, render
+    from jassy.analyze import analyze, feature_events
+    from ugens import Gain
+
+    t = np.arange(2 * FS) / FS
+    envelope = 0.5 + 0.4 * np.sin(2 * np.pi * 1.5 * t)
+    path = tmp_path / "am.wav"
+    sf.write(path, envelope * np.sin(2 * np.pi * 1000.0 * t), FS)
+    features = analyze(str(path), ["rms"], size=1024, hop=256)
+    events = feature_events(features, "rms", "g", "gain", scale=np.sqrt(2))  # RMS of a sine: amp / sqrt 2
+    gain = render(Graph(Gain(ArraySource(np.ones(2 * FS)), name="g", gain=0.0)), events, 2.0, FS, 64,
+                  limiter=False).audio[0]  # fmt: skip
+    inside = slice(int(0.2 * FS), int(1.9 * FS))
+    # the one-pole RMS follower (time constant one hop) and the ramps lag by about two hops
+    lagged = np.interp(t - 2 * 256 / FS, t, envelope)
+    assert np.max(np.abs(gain[inside] - lagged[inside])) < 0.03

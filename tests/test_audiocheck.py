@@ -90,3 +90,12 @@ def test_shipped_patch_within_targets(name):
     """Every shipped patch, rendered in full: subsonic share < 5 %, |DC| < 1e-4, no clipping."""
     report = ac.check(name, aliasing=False)
     assert ac.failures(report) == []
+
+
+def test_check_audio_cli_rejects_unknown_names_and_bad_durations(capsys):
+    from jassy.cli import main
+
+    assert main(["check-audio", "nosuch"]) == 2
+    assert "unknown patch 'nosuch'" in capsys.readouterr().err
+    assert main(["check-audio", "bell", "--duration", "0"]) == 2
+    assert "--duration" in capsys.readouterr().err

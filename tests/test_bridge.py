@@ -62,11 +62,11 @@ def test_the_device_side_fades_to_zero_after_silence_or_the_final_frame():
     assert out(1.0 + GAP - 1e-6) == (pytest.approx([2.0]), False)
     force, letting_go = out(1.0 + GAP + FADE / 2)
     assert letting_go and force[0] == pytest.approx(1.0)
-    assert out(1.0 + GAP + FADE)[0][0] == 0.0
+    assert out(1.0 + GAP + FADE + 1e-9)[0][0] == 0.0
     out.take(np.array([3.0]), 0, now=2.0)  # frames again: force follows them
     assert out(2.0005)[0][0] == 3.0
     out.take(np.array([0.0]), FLAG_FINAL, now=2.001)
-    assert out(2.001 + FADE)[0][0] == 0.0 and GAP + FADE < 0.010
+    assert out(2.001 + FADE + 1e-9)[0][0] == 0.0 and GAP + FADE < 0.010
 
 
 def test_kill_9_of_the_engine_bridge_force_reaches_zero_within_10_ms(jack, tmp_path):

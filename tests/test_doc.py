@@ -53,3 +53,17 @@ def test_names_get_a_did_you_mean(capsys):
         ugen_class("ModalBank")(name="b", model=None, fre_scale=2.0)
     with pytest.raises(PatchError, match="did you mean 'ModalBank'"):
         ugen_class("ModalBnak")
+
+
+def test_constructors_show_their_parameters_to_help_and_editors():
+    import inspect
+
+    for name, cls in ugen_types().items():
+        sig = inspect.signature(cls)
+        for key, spec in cls.all_specs().items():
+            p = sig.parameters[key]
+            assert p.kind is inspect.Parameter.KEYWORD_ONLY, f"{name}.{key}"
+            assert (p.default is inspect.Parameter.empty) if spec.required else (p.default == spec.default)
+            assert f"    {key} (" in cls.__doc__
+    bank = inspect.signature(ugen_class("ModalBank"))
+    assert list(bank.parameters)[:3] == ["sources", "name", "where"]

@@ -39,12 +39,14 @@ GRID_FILES = [ROOT / "examples" / "impact_dataset.toml"]
 STUDY_FILES = sorted((ROOT / "examples").glob("*study*.toml"))
 #: Seconds one command may take (the slowest valid case renders 0.05 s of a patch).
 TIME_LIMIT = 60
-EXAMPLES = int(os.environ.get("JASSY_FUZZ_EXAMPLES", "12"))
+EXAMPLES = int(os.environ.get("JASSY_FUZZ_EXAMPLES", "30"))
 FUZZ = settings(
     max_examples=EXAMPLES,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
+#: Fewer examples where one example may compute modes or fit a recording.
+FUZZ_SLOW = settings(FUZZ, max_examples=max(1, EXAMPLES // 3))
 
 DEEP: list = [1.0]
 for _ in range(40):
@@ -434,3 +436,93 @@ def test_signals_stop_a_render_cleanly(tmp_path, signum, code):
         proc.kill()
     assert proc.returncode == code, err
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------- every command's options
+
+#: Commands fuzzed with random option values (not the live ones, benchmarks or long experiments).
+COMMANDS = {
+    "info": ["bell", "{dir}/p.toml", "{dir}/m.toml", "{dir}/x.npz", "nosuch"],
+    "render": ["wall_tap", "{dir}/p.toml", "nosuch"],
+    "modes": ["bar", "{dir}/x.stl", "nosuch.stl"],
+    "fit": ["{dir}/r.wav", "{dir}/p.toml"],
+    "batch": ["{dir}/g.toml"],
+    "analyze": ["{dir}/r.wav", "{dir}/p.toml"],
+    "check-audio": ["{dir}/r.wav", "{dir}/p.toml"],
+}
+VALUES = st.sampled_from(
+    ["0", "-1", "1", "3", "nan", "inf", "1e308", "12345678901234567890", "1e9", "0.5", "abc", "", "-",
+     "{dir}", "{dir}/o.wav", "{dir}/o.toml", "{dir}/o.csv", "{dir}/o.png", "/dev/null", "x=1", "a.b=nan"]
+)  # fmt: skip
+
+
+def command_options(command: str) -> list[tuple[str, bool]]:
+    """(option string, takes a value) of a command's optional arguments."""
+    import argparse
+
+    from jassy.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    out = []
+    for action in sub.choices[command]._actions:
+        if action.option_strings and action.dest != "help":
+            out.append((action.option_strings[-1], action.nargs != 0))
+    return out
+
+
+@FUZZ_SLOW
+@given(st.data())
+def test_random_options_of_every_command_end_in_exit_0_or_one_line(workdir, monkeypatch, data):
+    monkeypatch.setenv("JASSY_MAX_MEMORY", "300M")  # FEM and fits stay small
+    folder = fresh(workdir, "opts")
+    monkeypatch.chdir(folder)  # relative names drawn for -o and others land here
+    (folder / "p.toml").write_text((ROOT / "patches" / "wall_tap.toml").read_text())
+    (folder / "m.toml").write_text(MODEL_FILES[0].read_text())
+    (folder / "x.npz").write_bytes(b"PK\x03\x04 not a zip")
+    (folder / "x.stl").write_bytes(b"solid x\nendsolid x\n")
+    (folder / "g.toml").write_text(
+        'patch = "wall_tap"\n[render]\nduration = 0.05\n[grid]\n"out.gain" = [0.1, 0.2]\n'
+    )
+    t = np.arange(4800) / 48000
+    soundfile.write(folder / "r.wav", np.exp(-30 * t) * np.sin(2 * np.pi * 880 * t), 48000)
+    command = data.draw(st.sampled_from(sorted(COMMANDS)), label="command")
+    argv = [command, data.draw(st.sampled_from(COMMANDS[command])).format(dir=folder)]
+    if command in ("modes", "fit", "batch", "render"):
+        argv += [
+            "-o",
+            str(folder / {"modes": "o.toml", "fit": "o.toml", "batch": "out", "render": "o.wav"}[command]),
+        ]
+    options = command_options(command)
+    for option, takes_value in data.draw(
+        st.lists(st.sampled_from(options), max_size=3, unique=True), label="opts"
+    ):
+        argv.append(option)
+        if takes_value:
+            argv.append(data.draw(VALUES).format(dir=folder))
+    if command == "modes":
+        argv += ["--elements", "300", "--modes", "4", "--subdivide", "0"]  # small unless overridden above
+    code, err = run(argv)
+    check_outcome(argv, code, err, [], folder)
+
+
+def test_missing_mesh_is_reported_before_heavy_imports(tmp_path):
+    code = (
+        "import sys\nfrom jassy.cli import main\n"
+        f"assert main(['modes', {str(tmp_path / 'part.stl')!r}, '-o', {str(tmp_path / 'p.toml')!r}]) == 2\n"
+        "print(sorted(m for m in ('trimesh', 'physics.modal.fem', 'physics.modal.meshes') if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]" and "part.stl: no such mesh file" in out.stderr
+
+
+def test_scene_summary_is_readable_lines():
+    from jassy.cli import _summary_lines
+
+    text = _summary_lines({"frames": 48000, "peak": 0.123456, "stats": {"steps": 10}, "warnings": ["w"]})
+    assert text.splitlines() == ["  frames: 48000", "  peak: 0.1235", "  stats:", "    steps: 10"]

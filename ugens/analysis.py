@@ -41,7 +41,6 @@ from typing import Any, ClassVar
 
 import numba as nb
 import numpy as np
-import pyfftw
 
 from jassy.errors import PatchError
 from jassy.params import ParamSpec
@@ -183,6 +182,8 @@ class _Framed(UGen):
         self.history = np.zeros(size + self.max_block)
         self.held = np.zeros(len(self.values_of))
         self.window = np.hanning(size + 1)[:size]
+        import pyfftw  # imported on use: pyfftw's interfaces slow every start of jassy
+
         self.frame = pyfftw.empty_aligned(size, dtype="float64")
         self.fft = pyfftw.builders.rfft(self.frame, threads=1)
         self.freqs = np.fft.rfftfreq(size, 1.0 / self.sample_rate)
@@ -226,7 +227,7 @@ class _Framed(UGen):
 
 
 _SIZE = ParamSpec("int", 1024, low=64, high=65536, fixed=True, doc="frame length in samples (power of two)")
-_HOP = ParamSpec("int", 256, low=1, high=65536, fixed=True, doc="samples between frames")
+_HOP = ParamSpec("int", 512, low=1, high=65536, fixed=True, doc="samples between frames")
 
 
 @register
@@ -325,6 +326,8 @@ class Pitch(_Framed):
                 f"nodes.{self.name}: min_freq {v['min_freq']:g} Hz needs a frame of more than "
                 f"2 fs / min_freq samples and below max_freq; got size {self.size}"
             )
+        import pyfftw
+
         self.padded = pyfftw.empty_aligned(2 * self.size, dtype="float64")
         self.forward = pyfftw.builders.rfft(self.padded, threads=1)
 

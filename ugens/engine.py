@@ -42,8 +42,11 @@ pulse train.
 
 Output: sound pressure (unitless), scaled so that throttle 1 at 3000 rpm with no
 irregularity peaks at 0.5 (the scale is measured at prepare time by running the kernel).
-Extra output ``pulses``: the port pressure pulse train on the same scale. Not modelled:
-intake, cylinder waveguides, mufflers, engine-block vibration, backfire (SDT ``motor~``).
+Extra output ``pulses``: the port pressure pulse train on the same scale. Intake and
+engine-block (mechanical) noise are added from that pulse train (``intake_level``,
+``mechanical_level``; extra outputs ``intake`` and ``mechanical``; model in
+:mod:`ugens.engine_noise`). Not modelled: cylinder waveguides, mufflers, backfire
+(SDT ``motor~``).
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import engine_noise
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -71,6 +75,12 @@ REFERENCE_RPM = 3000.0
 PEAK = 0.5
 #: Capacity of the queue of firings waiting for their (jittered) onset.
 QUEUE = 16
+#: XORed into the seed for the intake and mechanical noise (a stream of its own).
+NOISE_STREAM = 0x5DEECE66D
+#: Noise level parameters -> slots of the levels vector of ugens.engine_noise.
+_NOISE_LEVELS = {"intake_level": 0, "hiss": 1, "mechanical_level": 2}
+#: Rate (Hz) at which the noise levels are as set; other rates keep the spectral density.
+NOISE_RATE = 48000.0
 #: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
 #: the sample rate), Kaiser window beta, sub-sample positions tabulated.
 BLAMP_HALF = 32
@@ -226,7 +236,7 @@ class Engine(UGen):
     EngineApplet). Output: sound pressure, throttle 1 at 3000 rpm peaks at ~0.5."""
 
     type_name = "Engine"
-    outputs = ("pulses",)
+    outputs = ("pulses", "intake", "mechanical")
     param_specs = {
         "rpm": ParamSpec(
             "float", 800.0, low=0.0, high=20000.0, unit="1/min", smooth=True, doc="crankshaft speed"
@@ -275,6 +285,7 @@ class Engine(UGen):
         "port_reflection": ParamSpec(
             "float", 0.7, low=0.0, high=0.99, doc="reflection coefficient at the port (engine) end"
         ),
+        **engine_noise.NOISE_SPECS,
     }
 
     def check_param(self, key: str, value: Any, where: str) -> Any:
@@ -298,23 +309,17 @@ class Engine(UGen):
         self.ring = np.zeros(int(math.ceil(2.0 * delay)) + 2)
         self.lead = np.zeros(2 * BLAMP_HALF + 2)
         self.par = np.zeros(10)
+        self.noise_coef = engine_noise.design(v, fs)
+        self.noise_state = np.zeros((3, 2))
+        self.noise_rng = np.zeros(1, dtype=np.uint64)
+        self.noise_levels = np.zeros(3)
+        for key in ("intake_level", "hiss", "mechanical_level"):
+            self._param_changed(key, v[key], True)
         self.rpm = self.smoothed("rpm")
         self.throttle = self.smoothed("throttle")
         self._rpms = Control(self.rpm, self.max_block)
         self._throttles = Control(self.throttle, self.max_block)
-        tau = v["pulse"] * fs
-        self.par[:] = (
-            fs,
-            v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
-            v["irregularity"],
-            v["misfire"],
-            math.exp(-1.0 / tau),
-            math.e / tau,
-            delay,
-            v["port_reflection"],
-            math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
-            1.0,
-        )
+        self.par[:] = self._kernel_parameters(fs)
         self.par[_GAIN] = PEAK / self._reference_peak()
         self._run = specialise(
             engine_run,
@@ -334,10 +339,35 @@ class Engine(UGen):
             self.lead,
         )
 
+    def _kernel_parameters(self, fs: float) -> np.ndarray:
+        """The kernel's parameter vector at rate fs (gain 1)."""
+        v = self.values
+        tau = v["pulse"] * fs
+        return np.array(
+            [
+                fs,
+                v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
+                v["irregularity"],
+                v["misfire"],
+                math.exp(-1.0 / tau),
+                math.e / tau,
+                v["exhaust_length"] / v["c"] * fs,
+                v["port_reflection"],
+                math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
+                1.0,
+            ]
+        )
+
     def _reference_peak(self) -> float:
-        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity."""
-        fs = self.sample_rate
-        par = self.par.copy()
+        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity,
+        rendered at NOISE_RATE (so the scale does not change with the rate: a band-limited
+        peak grows with it) unless the pipe is shorter than a sample there."""
+        fs = (
+            NOISE_RATE
+            if self.values["exhaust_length"] / self.values["c"] * NOISE_RATE >= 1.0
+            else self.sample_rate
+        )
+        par = self._kernel_parameters(fs)
         par[_IRR] = 0.0
         par[_MIS] = 0.0
         n = int(0.6 * fs)
@@ -353,7 +383,7 @@ class Engine(UGen):
             np.zeros((QUEUE, 2)),
             np.zeros(2, dtype=np.int64),
             np.zeros(1, dtype=np.uint64),
-            np.zeros_like(self.ring),
+            np.zeros(int(math.ceil(2.0 * par[_DELAY])) + 2),
             par,
             _BLAMP,
             np.zeros_like(self.lead),
@@ -368,6 +398,8 @@ class Engine(UGen):
         self.rng[0] = self.values["seed"]
         self.ring[:] = 0.0
         self.lead[:] = 0.0
+        self.noise_state[:] = 0.0
+        self.noise_rng[0] = self.values["seed"] ^ NOISE_STREAM
         for ramp in (self.rpm, self.throttle):
             ramp.set(ramp.target, 0, jump=True)
 
@@ -380,6 +412,11 @@ class Engine(UGen):
             self.par[_MIS] = value
         elif key == "port_reflection":
             self.par[_PORT] = value
+        elif key in _NOISE_LEVELS:
+            # white noise of a fixed variance spreads over fs / 2: the noise terms (hiss,
+            # block) scale by sqrt(fs / NOISE_RATE) to keep their spectral density at any rate
+            density = 1.0 if key == "intake_level" else math.sqrt(self.sample_rate / NOISE_RATE)
+            self.noise_levels[_NOISE_LEVELS[key]] = value * density
 
     def process(self, start: int, n: int) -> None:
         self._run(
@@ -398,6 +435,23 @@ class Engine(UGen):
             _BLAMP,
             self.lead,
         )
+        if self.noise_levels[0] > 0.0 or self.noise_levels[2] > 0.0:
+            engine_noise.engine_noise(
+                self.extra["pulses"],
+                self.out,
+                self.extra["intake"],
+                self.extra["mechanical"],
+                n,
+                self._rpms.buffer,
+                self._throttles.buffer,
+                self.noise_levels,
+                self.noise_coef,
+                self.noise_state,
+                self.noise_rng,
+            )
+        else:
+            self.extra["intake"][:n] = 0.0
+            self.extra["mechanical"][:n] = 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -408,6 +462,9 @@ class Engine(UGen):
             "ring": self.ring,
             "lead": self.lead,
             "par": self.par,
+            "noise_state": self.noise_state,
+            "noise_rng": self.noise_rng,
+            "noise_levels": self.noise_levels,
             "rpm": self.rpm.ramp,
             "throttle": self.throttle.ramp,
         }

@@ -37,7 +37,6 @@ from typing import Any
 
 import numba as nb
 import numpy as np
-from scipy import signal
 
 from jassy.jit import specialise
 from jassy.params import ParamSpec
@@ -195,6 +194,8 @@ class Explosion(UGen):
         # uniform draws (variance 1/3) through the low-pass: scale to unit output variance
         impulse = np.zeros(int(20 * fs / min(v["rumble"], 0.45 * fs)) + 64)
         impulse[0] = 1.0
+        from scipy import signal  # imported here: scipy.signal adds about a second to every start
+
         h = signal.lfilter(self.rumble[:3], [1.0, *self.rumble[3:]], impulse)
         self.par[_TAIL_GAIN] = math.sqrt(3.0 / float(np.dot(h, h)))
         self.st = np.zeros(7)

@@ -42,9 +42,8 @@ from ugens.kernels import FASTMATH
 BANDS = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0)
 #: Delay lines per band.
 LINES = 8
-#: Bands padded to a power of two (the last slot stays silent), so that the per-band
-#: loops of the kernel vectorise.
-SLOTS = 8
+#: Bands stored per line and delay slot (the kernel keeps a band's 8 lines in registers).
+SLOTS = len(BANDS)
 #: Order of the Butterworth crossovers and the quality factors of their biquads.
 CROSSOVER_ORDER = 8
 BUTTERWORTH_Q = tuple(
@@ -93,18 +92,19 @@ def _section(x, coef, state):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, gains, signs, par, band_in, y):
+def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, gains, signs, par, band_in):
     """n samples. pre: pre-delay ring; split (crossovers, 2 h, 5): h low-pass then
     h high-pass biquads per crossover; ring: the lines' samples, flat (line, slot in the
-    line, band); ist = [pre-delay write, ring write]; gains: flat (line, band); signs: the
-    input weights of the lines; par = [pre-delay samples, dry, wet]; band_in (bands) and
-    y (lines * bands): scratch."""
+    line, band); ist = [pre-delay write, ring write]; gains: flat (band, line); signs: the
+    input weights of the lines; par = [pre-delay samples, dry, wet]; band_in (bands):
+    scratch. The network is written out for LINES = 8."""
     pre_len = int(par[0])
     dry = par[1]
     wet = par[2]
     pre_size = pre.size
     size = ring.size // (LINES * SLOTS)
     mask = size - 1
+    n_bands = band_in.size
     n_cross = split.shape[0]
     half = split.shape[1] // 2
     norm = 1.0 / math.sqrt(LINES)
@@ -129,30 +129,50 @@ def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, ga
         band_in[n_cross] = v
         left_sum = 0.0
         right_sum = 0.0
-        # LINES and SLOTS are compile-time constants: the loops over slots unroll and vectorise
-        for j in range(LINES):
-            base = (j * size + ((w - lengths[j]) & mask)) * SLOTS
-            sign = 1.0 if j % 2 == 0 else -1.0
-            for b in range(SLOTS):
-                yj = ring[base + b]
-                left_sum += yj
-                right_sum += sign * yj
-                y[j * SLOTS + b] = gains[j * SLOTS + b] * yj
-        # fast Walsh-Hadamard transform across the lines (in place, every band at once)
-        h = 1
-        while h < LINES:
-            for j0 in range(0, LINES, 2 * h):
-                for j in range(j0, j0 + h):
-                    for b in range(SLOTS):
-                        a = y[j * SLOTS + b]
-                        c2 = y[(j + h) * SLOTS + b]
-                        y[j * SLOTS + b] = a + c2
-                        y[(j + h) * SLOTS + b] = a - c2
-            h *= 2
-        for j in range(LINES):
-            base = (j * size + w) * SLOTS
-            for b in range(SLOTS):
-                ring[base + b] = norm * (y[j * SLOTS + b] + signs[j] * band_in[b])
+        r0 = ((w - lengths[0]) & mask) * SLOTS
+        r1 = (size + ((w - lengths[1]) & mask)) * SLOTS
+        r2 = (2 * size + ((w - lengths[2]) & mask)) * SLOTS
+        r3 = (3 * size + ((w - lengths[3]) & mask)) * SLOTS
+        r4 = (4 * size + ((w - lengths[4]) & mask)) * SLOTS
+        r5 = (5 * size + ((w - lengths[5]) & mask)) * SLOTS
+        r6 = (6 * size + ((w - lengths[6]) & mask)) * SLOTS
+        r7 = (7 * size + ((w - lengths[7]) & mask)) * SLOTS
+        wb = w * SLOTS
+        for b in range(n_bands):
+            # the 8 lines of band b in registers: read, sum to the outputs, attenuate
+            y0 = ring[r0 + b]
+            y1 = ring[r1 + b]
+            y2 = ring[r2 + b]
+            y3 = ring[r3 + b]
+            y4 = ring[r4 + b]
+            y5 = ring[r5 + b]
+            y6 = ring[r6 + b]
+            y7 = ring[r7 + b]
+            left_sum += ((y0 + y1) + (y2 + y3)) + ((y4 + y5) + (y6 + y7))
+            right_sum += ((y0 - y1) + (y2 - y3)) + ((y4 - y5) + (y6 - y7))
+            g = b * LINES
+            y0 *= gains[g]
+            y1 *= gains[g + 1]
+            y2 *= gains[g + 2]
+            y3 *= gains[g + 3]
+            y4 *= gains[g + 4]
+            y5 *= gains[g + 5]
+            y6 *= gains[g + 6]
+            y7 *= gains[g + 7]
+            # 8-point fast Walsh-Hadamard transform
+            a0, a1, a2, a3 = y0 + y1, y0 - y1, y2 + y3, y2 - y3
+            a4, a5, a6, a7 = y4 + y5, y4 - y5, y6 + y7, y6 - y7
+            c0, c1, c2, c3 = a0 + a2, a1 + a3, a0 - a2, a1 - a3
+            c4, c5, c6, c7 = a4 + a6, a5 + a7, a4 - a6, a5 - a7
+            x_b = band_in[b]
+            ring[wb + b] = norm * (c0 + c4 + signs[0] * x_b)
+            ring[size * SLOTS + wb + b] = norm * (c1 + c5 + signs[1] * x_b)
+            ring[2 * size * SLOTS + wb + b] = norm * (c2 + c6 + signs[2] * x_b)
+            ring[3 * size * SLOTS + wb + b] = norm * (c3 + c7 + signs[3] * x_b)
+            ring[4 * size * SLOTS + wb + b] = norm * (c0 - c4 + signs[4] * x_b)
+            ring[5 * size * SLOTS + wb + b] = norm * (c1 - c5 + signs[5] * x_b)
+            ring[6 * size * SLOTS + wb + b] = norm * (c2 - c6 + signs[6] * x_b)
+            ring[7 * size * SLOTS + wb + b] = norm * (c3 - c7 + signs[7] * x_b)
         w = (w + 1) & mask
         out[i] = dry * x[i] + wet * norm * left_sum
         right[i] = dry * x[i] + wet * norm * right_sum
@@ -210,9 +230,8 @@ class Reverb(UGen):
         size = 1 << int(math.ceil(math.log2(int(self.lengths.max()) + 1)))
         self.ring = np.zeros(LINES * size * SLOTS)
         t60 = np.asarray(v["t60"], dtype=np.float64)
-        gains = np.zeros((LINES, SLOTS))
-        gains[:, : len(BANDS)] = 10.0 ** (-3.0 * self.lengths[:, None] / (t60[None, :] * fs))
-        self.gains = gains.ravel()
+        # Jot's gains, flat (band, line)
+        self.gains = (10.0 ** (-3.0 * self.lengths[None, :] / (t60[:, None] * fs))).ravel()
         pre_len = int(round(v["pre_delay"] * fs))
         self.pre = np.zeros(pre_len + 1)
         self.par = np.array([pre_len, v["dry"], v["wet"]], dtype=np.float64)
@@ -227,7 +246,6 @@ class Reverb(UGen):
         self.split_state = np.zeros((edges.size, 2 * half, 2))
         self.ist = np.zeros(2, dtype=np.int64)
         self.band_in = np.zeros(SLOTS)
-        self.scratch = np.zeros(LINES * SLOTS)
         self._run = specialise(reverb_run, *self._arguments(0))
 
     def _arguments(self, n: int) -> tuple:
@@ -246,7 +264,6 @@ class Reverb(UGen):
             INPUT_SIGNS,
             self.par,
             self.band_in,
-            self.scratch,
         )
 
     def _reset(self) -> None:

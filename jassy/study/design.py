@@ -501,7 +501,6 @@ class Schedule:
             interval,
         )
         self.count += 1
-        self._current = track
         return spec
 
     def update(self, trial: TrialSpec, positive: bool, correct: bool | None) -> None:

@@ -94,11 +94,15 @@ def wide_ranges(model: Model, levels: np.ndarray) -> dict[str, tuple[float, floa
     return out
 
 
-def _axes(model: Model, ranges: dict[str, tuple[float, float]], points: int) -> list[np.ndarray]:
+def _axes(
+    model: Model, ranges: dict[str, tuple[float, float]], points: int, fine: bool = False
+) -> list[np.ndarray]:
+    """Grid axes: ``points`` per parameter over ``ranges`` (log spaced for scales); the
+    lapse rate on LAPSE_GRID, or every 0.01 in [0, MAX_LAPSE] when ``fine``."""
     axes = []
     for p in model.params:
         if p.name == "lapse":
-            axes.append(np.asarray(LAPSE_GRID))
+            axes.append(np.linspace(0.0, MAX_LAPSE, 11) if fine else np.asarray(LAPSE_GRID))
         elif p.scale:
             lo, hi = ranges[p.name]
             axes.append(np.geomspace(lo, hi, points))
@@ -119,6 +123,7 @@ def loglik_grid(model: Model, axes: list[np.ndarray], levels, k, n) -> np.ndarra
 
 
 def _profile(ll: np.ndarray, i: int) -> np.ndarray:
+    """The profile log likelihood along axis i: the maximum over the other axes."""
     return np.max(ll, axis=tuple(j for j in range(ll.ndim) if j != i))
 
 
@@ -153,34 +158,85 @@ def _nll_factory(model: Model, levels, k, n):
     return nll, unpack
 
 
-def fit(model: Model, x, y, points: int = 41) -> FitResult:
+def _polish(model: Model, levels, k, n, axes, ll, ranges) -> tuple[dict[str, float], float]:
+    """The likelihood maximum: Nelder-Mead from the best grid point, kept only if it stays
+    within ``ranges`` and beats the grid."""
+    best = np.unravel_index(np.argmax(ll), ll.shape)
+    grid_theta = {p.name: float(a[j]) for p, a, j in zip(model.params, axes, best, strict=True)}
+    start = [math.log(grid_theta[p.name]) if p.scale else grid_theta[p.name] for p in model.params]
+    nll, unpack = _nll_factory(model, levels, k, n)
+    res = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-5, "fatol": 1e-8, "maxiter": 2000})
+    polished = unpack(res.x)
+    inside = all(ranges[name][0] <= polished[name] <= ranges[name][1] for name in ranges)
+    if inside and -res.fun >= ll.max():
+        return polished, float(-res.fun)
+    return grid_theta, float(ll.max())
+
+
+def fit(model: Model, x, y, points: int = 31) -> FitResult:
     """Fit ``model`` to offsets ``x`` (ms) and binary answers ``y`` (1 = positive)."""
     levels, k, n = aggregate(x, y)
     ranges = wide_ranges(model, levels)
     axes = _axes(model, ranges, points)
     ll = loglik_grid(model, axes, levels, k, n)
-    cut = ll.max() - CHI2_95 / 2.0
-    identifiable, fine = {}, dict(ranges)
+    theta, top = _polish(model, levels, k, n, axes, ll, ranges)
+    cut = top - CHI2_95 / 2.0
+    identifiable, box = {}, dict(ranges)
     for i, p in enumerate(model.params):
         if p.name == "lapse":
             continue
-        inside = np.flatnonzero(_profile(ll, i) >= cut)
-        identifiable[p.name] = bool(inside[0] > 0 and inside[-1] < axes[i].size - 1)
-        fine[p.name] = (axes[i][max(inside[0] - 1, 0)], axes[i][min(inside[-1] + 1, axes[i].size - 1)])
-    axes = _axes(model, fine, points)
-    ll = loglik_grid(model, axes, levels, k, n)
-    best = np.unravel_index(np.argmax(ll), ll.shape)
-    start = [math.log(a[j]) if p.scale else a[j] for p, a, j in zip(model.params, axes, best, strict=True)]
-    nll, unpack = _nll_factory(model, levels, k, n)
-    res = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 4000})
-    polished = unpack(res.x)
-    inside = all(fine[name][0] <= polished[name] <= fine[name][1] for name in fine)
-    if inside and -res.fun >= ll.max():
-        top, theta = -res.fun, polished
-    else:
-        top = float(ll.max())
-        theta = {p.name: float(a[j]) for p, a, j in zip(model.params, axes, best, strict=True)}
-    cut = top - CHI2_95 / 2.0
+        prof = _profile(ll, i)
+        identifiable[p.name] = bool(prof[0] < cut and prof[-1] < cut)
+        if identifiable[p.name]:  # the cells within the cut and the optimum's, one step to spare
+            cells = [*np.flatnonzero(prof >= cut), int(np.searchsorted(axes[i], theta[p.name]))]
+            lo, hi = max(min(cells) - 1, 0), min(max(cells) + 1, axes[i].size - 1)
+            box[p.name] = (axes[i][lo], axes[i][hi])
+    fine_points = 31 if len(model.params) <= 3 else 21  # 4 parameters: 21^3 x 11 points
+    for _ in range(6):  # refine; widen a box whose interval reaches its side
+        axes = _axes(model, box, fine_points, fine=True)
+        ll = loglik_grid(model, axes, levels, k, n)
+        if ll.max() > top:
+            theta, top = _polish(model, levels, k, n, axes, ll, box)
+        cut = top - CHI2_95 / 2.0
+        grown = False
+        for i, p in enumerate(model.params):
+            if not identifiable.get(p.name):
+                continue
+            prof = _profile(ll, i)
+            lo, hi = box[p.name]
+            wide_lo, wide_hi = ranges[p.name]
+            step = (math.log(hi / lo) if p.scale else hi - lo) / 2.0
+            if prof[0] >= cut and lo > wide_lo:
+                lo = max(lo * math.exp(-step) if p.scale else lo - step, wide_lo)
+                grown = True
+            if prof[-1] >= cut and hi < wide_hi:
+                hi = min(hi * math.exp(step) if p.scale else hi + step, wide_hi)
+                grown = True
+            box[p.name] = (lo, hi)
+        if not grown:
+            tight = {}  # then once more on boxes just around the intervals: finer steps
+            for i, p in enumerate(model.params):
+                if identifiable.get(p.name) and _profile(ll, i).max() >= cut:
+                    low, high = _crossing(axes[i], _profile(ll, i), cut, p.scale)
+                    lo, hi = (math.log(low), math.log(high)) if p.scale else (low, high)
+                    pad = 0.15 * (hi - lo) + 1e-9
+                    lo, hi = (math.exp(lo - pad), math.exp(hi + pad)) if p.scale else (lo - pad, hi + pad)
+                    tight[p.name] = (max(lo, ranges[p.name][0]), min(hi, ranges[p.name][1]))
+            if tight and tight != box:
+                box.update(tight)
+                axes = _axes(model, box, fine_points, fine=True)
+                ll = loglik_grid(model, axes, levels, k, n)
+                if ll.max() > top:
+                    theta, top = _polish(model, levels, k, n, axes, ll, box)
+                cut = top - CHI2_95 / 2.0
+            break
+    for i, p in enumerate(model.params):  # an interval still open at the wide range's edge
+        if identifiable.get(p.name):
+            prof = _profile(ll, i)
+            at_edge = (prof[0] >= cut and box[p.name][0] <= ranges[p.name][0]) or (
+                prof[-1] >= cut and box[p.name][1] >= ranges[p.name][1]
+            )
+            identifiable[p.name] = not at_edge
     estimates: dict[str, Estimate] = {}
     for i, p in enumerate(model.params):
         value = float(theta[p.name])
@@ -188,7 +244,10 @@ def fit(model: Model, x, y, points: int = 41) -> FitResult:
             estimates[p.name] = Estimate(value, None, None, True)
             continue
         ok = identifiable[p.name]
-        low, high = _crossing(axes[i], _profile(ll, i), cut, p.scale) if ok else (None, None)
+        prof = _profile(ll, i)
+        # a grid too coarse in a partner parameter may stay below the cut: use its own peak
+        level = cut if prof.max() >= cut else prof.max() - CHI2_95 / 2.0
+        low, high = _crossing(axes[i], prof, level, p.scale) if ok else (None, None)
         if ok:  # the polished optimum lies inside its own interval
             low, high = min(low, value), max(high, value)
         estimates[p.name] = Estimate(value, low, high, ok)

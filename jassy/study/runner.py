@@ -582,7 +582,7 @@ class Session:
         side = sidecar_path(self.results)
         _write_json_atomic(side, header)
         done, new, completed, underruns = len(rows), 0, False, 0
-        block = rows and int(rows[-1]["block"])
+        block = int(rows[-1]["block"]) if rows else None  # resuming inside a block: no new message
         in_block = 0
         self.responder.begin(d)
         try:
@@ -594,16 +594,15 @@ class Session:
                     if spec is None:
                         completed = True
                         break
-                    if spec.block != block or not new:
-                        if spec.block != block:
-                            in_block = 0
-                        text = schedule.blocks[spec.block].instructions
-                        title = "Practice" if spec.practice else f"Block {spec.block_name}"
-                        if (spec.block != block or done) and not self.responder.rest(
-                            f"{title}. {text.strip()}".strip()
+                    if spec.block != block:  # a new block: its instructions (if any) first
+                        in_block, block = 0, spec.block
+                        current = schedule.blocks[spec.block]
+                        title = "Practice" if current.practice else f"Block {current.name}"
+                        shown_text = current.instructions.strip()
+                        if (shown_text or len(schedule.blocks) > 1) and not self.responder.rest(
+                            f"{title}. {shown_text}".strip()
                         ):
                             break
-                        block = spec.block
                     elif (
                         d.breaks_every
                         and in_block
