@@ -42,16 +42,17 @@ def random_model(n_modes: int, seed: int = 0) -> ModalModel:
 
 
 def _best_times(fns: list[Callable[[], None]], repeats: int = 3) -> list[float]:
-    """Best wall time of each function; runs are interleaved so drifts in machine speed
-    hit every function alike (the ratios are what to read)."""
+    """Best CPU time (s) of each function: the machine is shared, and CPU time does not
+    count the time other processes hold the cores. Runs are interleaved so drifts in
+    machine speed hit every function alike (the ratios are what to read)."""
     for fn in fns:
         fn()  # warm-up (JIT, caches)
     best = [np.inf] * len(fns)
     for _ in range(repeats):
         for i, fn in enumerate(fns):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fn()
-            best[i] = min(best[i], time.perf_counter() - t0)
+            best[i] = min(best[i], time.process_time() - t0)
     return best
 
 
@@ -367,12 +368,17 @@ def live_bench(
         live.start()
         _busy_python(seconds)
         stats = live.stop()
+        busy = live.callback_stats() if stats.mode == "callback" else None
         recorder.wait_final()
-        haptic = frame_stats(live, recorder.stop())
+        frames = recorder.stop()
+        haptic = frame_stats(live, frames)
         haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
     heard, rendered = live.monitor()  # the last 6 s the device received: silence, then the tap
     audio_on, haptic_on = tap_onsets(heard, rendered, int((quiet_at + 1.5) * SAMPLE_RATE))
     tap_frame = int(np.floor(tap_at * SAMPLE_RATE)) + 1  # an impact's first non-zero frame
+    first_played = stats.frames_played - heard.shape[1]  # the stream frame of heard[:, 0]
+    silent_from = first_played + int(np.argmax(rendered >= int((quiet_at + 1.5) * SAMPLE_RATE)))
+    haptic.update(udp_tap(frames, heard, first_played, silent_from, first_played + audio_on))
     return {
         "seconds": seconds,
         "modes": n_modes,
@@ -382,6 +388,11 @@ def live_bench(
         "callbacks": stats.callbacks,
         "underrun_callbacks": stats.underrun_callbacks,
         "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
+        "device_underflows": stats.device_underflows,
+        "callback_busy_max_ms": busy.busy_max * 1e3 if busy else None,
+        "callback_busy_mean_ms": busy.busy_mean * 1e3 if busy else None,
+        "callbacks_longer_than_a_buffer": busy.busy_over if busy else None,
+        "realtime": stats.realtime,
         "latency_ms": stats.latency * 1e3,
         "ring_ms": stats.ring_latency * 1e3,
         "device_ms": stats.device_latency * 1e3,
@@ -390,6 +401,33 @@ def live_bench(
         "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,
         "tap_onset_vs_score_samples": int(rendered[haptic_on]) - tap_frame if haptic_on >= 0 else None,
         **haptic,
+    }
+
+
+def udp_tap(frames: list, heard: np.ndarray, first_played: int, silent_from: int, audio_on: int) -> dict:
+    """The tap on the UDP stamps: the first frame from stream frame ``silent_from`` on (a
+    silent span before the tap) that carries force; its stamp (the stream frame of its
+    first sample) minus the stream frame of the audio onset, and whether its force is the
+    mean of what the device played over its samples. ``first_played``: the stream frame
+    of heard[:, 0]."""
+    from jassy.hapticframes import FLAG_FINAL
+
+    carrying = [
+        f
+        for f in frames
+        if f.sample_time >= silent_from and not f.flags & FLAG_FINAL and np.any(f.force != 0)
+    ]
+    if not carrying or audio_on < first_played:
+        return {"udp_tap_stamp_minus_audio_onset": None, "udp_tap_force_matches_device": None}
+    first = carrying[0]
+    per_frame = int(round(first.sample_rate / 1000.0))
+    at = first.sample_time - first_played
+    window = heard[-1][at : at + per_frame]
+    played = float(np.float32(window.mean())) if window.size == per_frame else float("nan")
+    return {
+        "udp_tap_stamp_minus_audio_onset": int(first.sample_time - audio_on),
+        "udp_frame_samples": per_frame,
+        "udp_tap_force_matches_device": bool(abs(played - float(first.force[0])) <= 1e-6 * abs(played)),
     }
 
 
@@ -411,10 +449,21 @@ def print_live(r: dict) -> None:
         f"block {r['block']}, "
         f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
         f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
-        f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
-        f"tap skew audio - haptic {r['skew_samples']} samples on the device frames, "
-        f"tap onset {r['tap_onset_vs_score_samples']} samples after its scheduled frame\n"
-        f"  UDP haptic frames: {r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['device_underflows']} flagged late by the host; "
+        f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f});\n"
+        f"  tap skew audio - haptic {r['skew_samples']} samples on the device frames, "
+        f"tap onset {r['tap_onset_vs_score_samples']} samples after its scheduled frame"
+        + (
+            f";\n  callback busy {r['callback_busy_mean_ms']:.3f} ms mean, "
+            f"{r['callback_busy_max_ms']:.3f} ms max, "
+            f"{r['callbacks_longer_than_a_buffer']} longer than a buffer"
+            if r.get("callback_busy_max_ms") is not None
+            else ""
+        )
+        + "\n"
+        f"  UDP haptic frames: tap stamp - audio onset {r['udp_tap_stamp_minus_audio_onset']} samples "
+        f"(frames of {r.get('udp_frame_samples')}), force as played: {r['udp_tap_force_matches_device']}; "
+        f"{r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
         f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
         f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
         f"(max {r['frame_interval_max_ms']:.3f}); final frame "

@@ -37,18 +37,22 @@ import numba as nb
 import numpy as np
 from numba import types
 
+from jassy import hapticframes, haptics, program, safety
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
+from jassy.jit import drop_stale_cache
 from jassy.program import (
+    KERNEL_MODULES,
     RECORD,
     Program,
     _f64,
     _f64_rows,
     _i64,
     run_program,
+    void_pointer,
     why_not_compiled,
 )
 from jassy.safety import CEILING, limit, release_coefficient
@@ -58,6 +62,8 @@ from ugens.impact import ImpactForce, pulse_sum
 from ugens.mix import Gain
 from ugens.modal import ModalBank
 from ugens.scrape import ResonantScrape, Scrape
+
+drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODULES])
 
 # control slots (int64)
 (
@@ -92,9 +98,16 @@ from ugens.scrape import ResonantScrape, Scrape
     TAP_LOG_ROWS,
     TAP_HAPTIC_ROWS,
     TAP_LOGGED,
-) = range(31)
+    PRIORITY,
+    REALTIME,
+    CLOCK,
+    BUSY_MAX_NS,
+    BUSY_TOTAL_NS,
+    BUFFER_NS,
+    BUSY_OVER,
+) = range(38)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = 32, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_OVER + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -257,6 +270,36 @@ def render_into(control, out, frames):
     control[FRAME] = end
 
 
+# libc's scheduler calls, by symbol (so the callback stays cacheable); pid 0 = this thread
+_sched_getscheduler = types.ExternalFunction("sched_getscheduler", types.int32(types.int32))
+_sched_setscheduler = types.ExternalFunction(
+    "sched_setscheduler", types.int32(types.int32, types.int32, types.voidptr)
+)
+_clock_gettime = types.ExternalFunction("clock_gettime", types.int32(types.int32, types.voidptr))
+SCHED_OTHER, SCHED_FIFO, CLOCK_MONOTONIC = 0, 1, 1
+#: SCHED_FIFO priority asked for a callback thread the host left at normal priority (a
+#: JACK server started without -R); JACK's own real-time clients use 70-95.
+CALLBACK_PRIORITY = 40
+
+
+@nb.njit(cache=True, nogil=True)
+def _make_realtime(control):
+    """On the first callback: if the host runs it at normal priority, ask for SCHED_FIFO
+    (granted with root, CAP_SYS_NICE or an rtprio limit); REALTIME = 1 if it runs real-time."""
+    granted = _sched_getscheduler(0) != SCHED_OTHER
+    if not granted:
+        granted = _sched_setscheduler(0, SCHED_FIFO, void_pointer(control[PRIORITY])) == 0
+    control[REALTIME] = 1 if granted else 0
+
+
+@nb.njit(cache=True, nogil=True)
+def _now_ns(control):
+    """CLOCK_MONOTONIC in ns (through the timespec at control[CLOCK])."""
+    _clock_gettime(CLOCK_MONOTONIC, void_pointer(control[CLOCK]))
+    ts = _i64(control[CLOCK], 2)
+    return ts[0] * 1_000_000_000 + ts[1]
+
+
 @nb.njit(cache=True, nogil=True)
 def tap_callback(control, out, frames, dac, flags):
     """Log the haptic channels of ``out`` and this callback (first stream frame, frames,
@@ -287,6 +330,8 @@ def tap_callback(control, out, frames, dac, flags):
 def program_callback(inp, out, frames, time_info, status, user):
     """PortAudio callback: render the graph's program for this buffer, count."""
     control = nb.carray(user, (CONTROL,), np.int64)
+    if control[CALLBACKS] == 0:
+        _make_realtime(control)
     control[CALLBACKS] += 1
     control[FLAGS] |= status
     if status & OUTPUT_UNDERFLOW:
@@ -296,7 +341,14 @@ def program_callback(inp, out, frames, time_info, status, user):
     o = nb.carray(out, (frames * control[CHANNELS],), np.float32)
     flags_before, fading = control[HAPTIC_FLAGS], control[FADE_LEFT] > 0
     control[HAPTIC_FLAGS] = 0
+    began = _now_ns(control)
     render_into(control, o, frames)
+    busy = _now_ns(control) - began
+    control[BUSY_TOTAL_NS] += busy
+    if busy > control[BUSY_MAX_NS]:
+        control[BUSY_MAX_NS] = busy
+    if busy > control[BUFFER_NS]:
+        control[BUSY_OVER] += 1
     if control[TAP_LOG] != 0:  # the haptic samples and this buffer's DAC time, for the UDP sender
         dac = nb.carray(time_info, (3,), np.float64)[2]
         tap_callback(control, o, frames, dac, control[HAPTIC_FLAGS] | (FLAG_WATCHDOG if fading else 0))
@@ -380,6 +432,10 @@ class CallbackStats(NamedTuple):
     device_latency: float
     dropped: int
     nonfinite: int
+    realtime: bool
+    busy_max: float  # s: the longest callback (rendering included)
+    busy_mean: float  # s
+    busy_over: int  # callbacks that took longer than a buffer lasts
 
 
 class EventQueue:
@@ -478,6 +534,12 @@ class CallbackRenderer:
         control[BLOCK] = self.block
         control[MONITOR_CAP] = mcap
         control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
+        self.priority = np.array([CALLBACK_PRIORITY, 0], dtype=np.int32)  # struct sched_param
+        control[PRIORITY] = self.priority.ctypes.data
+        control[REALTIME] = -1
+        self.timespec = np.zeros(2, dtype=np.int64)
+        control[CLOCK] = self.timespec.ctypes.data
+        control[BUFFER_NS] = int(self.block / self.sample_rate * 1e9)
         control[FADE_LEFT] = -1
         self.score_queue = EventQueue(control, 0, queue_capacity)
         self.now_queue = EventQueue(control, 1, queue_capacity)
@@ -597,6 +659,10 @@ class CallbackRenderer:
             device_latency,
             int(c[DROPPED]),
             int(c[NONFINITE]),
+            bool(c[REALTIME] == 1),
+            c[BUSY_MAX_NS] * 1e-9,
+            c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
+            int(c[BUSY_OVER]),
         )
 
     def levels_now(self) -> np.ndarray:

@@ -64,6 +64,7 @@ CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, F
 WATCHDOG, FADE_LEFT, PLAYED, MONITOR_CAP, MAX_FRAMES, STALLED = range(9, 15)
 RUNNING, STOP, PAUSED, LATE, REALTIME, TAKEN_AT = range(15, 21)
 DEVICE_CH, TAIL_OFFSET, LOG_ROWS, HAPTIC_ROWS, LOGGED, ENDING, HAPTIC_CH = range(21, 28)
+UNDERFLOWS = 28  # callbacks PortAudio flagged with paOutputUnderflow (the device ran late)
 MAX_FORCE, MAX_STEP, DEVICE_LATENCY, LAST, FADE_FROM = 32, 33, 34, 40, 72  # float64 slots
 MAX_HAPTIC = 32
 #: Callbacks logged and haptic frames kept for the UDP sender (about 1.4 s and 85 ms).
@@ -95,6 +96,8 @@ def ring_callback(inp, out, frames, time_info, status, user):
     o = nb.carray(out, (frames * dch,), np.float32)
     hdr[CALLBACKS] += 1
     hdr[FLAGS] |= status
+    if status & 4:  # paOutputUnderflow
+        hdr[UNDERFLOWS] += 1
     if frames > hdr[MAX_FRAMES]:
         hdr[MAX_FRAMES] = frames
     r = hdr[READ]
@@ -210,6 +213,9 @@ class LiveStats:
     realtime: bool
     #: "callback" (the graph rendered in the device callback) or "ring" (a producer ahead).
     mode: str = "ring"
+    #: Callbacks the host flagged as late (output underflow), in either mode; in callback
+    #: mode these are the underruns.
+    device_underflows: int = 0
 
     @property
     def latency(self) -> float:
@@ -486,8 +492,9 @@ class LiveEngine:
                 0.0,
                 c.device_latency,
                 self._callback.renderer.late,
-                False,
+                c.realtime,
                 "callback",
+                c.xruns,
             )
         h = self.header
         return LiveStats(
@@ -502,6 +509,13 @@ class LiveEngine:
             int(h[LATE]),
             bool(h[REALTIME]),
             "ring",
+            int(h[UNDERFLOWS]),
+        )
+
+    def callback_stats(self):
+        """Callback mode: the renderer's counters (jassy.callback.CallbackStats), else None."""
+        return (
+            None if self._callback is None else self._callback.renderer.stats(self._callback.device_latency)
         )
 
     def haptic_now(self) -> np.ndarray:

@@ -4,8 +4,10 @@ One impulse of unit strength at location p sounds as sum_k a[p, k] e^{-d_k t} si
 Gains between locations are interpolated barycentrically (the sound texture map): a
 location is a vertex index, a point name, or up to three vertices with weights.
 
-Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``),
-NPZ (same keys) and JASS ``.sy`` text files (read only).
+Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
+``name`` and ``reference_gain``), NPZ (same keys) and JASS ``.sy`` text files (read only).
+``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
+jassy.levels); without it the bank computes it from the model by the same rule.
 """
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ class ModalModel:
     points: tuple[str, ...] = ()
     name: str = ""
     source: str = field(default="", compare=False)
+    reference_gain: float | None = None  # for level = "calibrated" (jassy.levels)
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -129,6 +132,12 @@ class ModalModel:
                 f"({sample_rate / 2:g} Hz at {sample_rate:g} Hz); raise the sample rate or drop the mode "
                 "(ModalModel.below)"
             )
+        if self.reference_gain is not None and not (
+            isinstance(self.reference_gain, (int, float))
+            and math.isfinite(self.reference_gain)
+            and self.reference_gain > 0
+        ):
+            raise ModelError(f"{where}: reference_gain: expected a number > 0, got {self.reference_gain!r}")
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -166,12 +175,16 @@ class ModalModel:
         """The modes with frequency below ``f_max`` Hz."""
         keep = self.frequencies < f_max
         return ModalModel(
-            self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name
-        )
+            self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
+            reference_gain=self.reference_gain,
+        )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
         """The first n modes."""
-        return ModalModel(self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name)
+        return ModalModel(
+            self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
+            reference_gain=self.reference_gain,
+        )  # fmt: skip
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
         """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
@@ -216,7 +229,7 @@ class ModalModel:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain"}
         for key in data:
             if key not in allowed:
                 raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
@@ -233,7 +246,13 @@ class ModalModel:
             name = name.item()
         if not isinstance(name, str):
             raise ModelError(f"{source}: name: expected a string, got {name!r}")
-        return cls(data["frequencies"], data["decays"], data["gains"], tuple(points), name, source)
+        reference = data.get("reference_gain")
+        if isinstance(reference, np.ndarray) and reference.ndim == 0:
+            reference = reference.item()
+        if reference is not None and (isinstance(reference, bool) or not isinstance(reference, (int, float))):
+            raise ModelError(f"{source}: reference_gain: expected a number > 0, got {reference!r}")
+        reference = None if reference is None else float(reference)
+        return cls(data["frequencies"], data["decays"], data["gains"], tuple(points), name, source, reference)
 
     @classmethod
     def from_sy(cls, text: str, source: str = "model.sy") -> ModalModel:
@@ -272,6 +291,8 @@ class ModalModel:
         with atomic_path(path) as tmp:
             if ext == ".npz":
                 with open(tmp, "wb") as fh:
+                    ref = self.reference_gain
+                    extra = {} if ref is None else {"reference_gain": np.array(ref)}
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -279,6 +300,7 @@ class ModalModel:
                         gains=self.gains,
                         points=np.array(self.points, dtype=str),
                         name=np.array(self.name),
+                        **extra,
                     )
             else:
                 Path(tmp).write_text(self.to_toml())
@@ -292,6 +314,8 @@ class ModalModel:
             lines.append(f"name = {self.name!r}".replace("'", '"'))
         if self.points:
             lines.append("points = [" + ", ".join(f'"{p}"' for p in self.points) + "]")
+        if self.reference_gain is not None:
+            lines.append(f"reference_gain = {float(self.reference_gain)!r}")
         lines.append(f"frequencies = {arr(self.frequencies)}")
         lines.append(f"decays = {arr(self.decays)}")
         lines.append("gains = [")

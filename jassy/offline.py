@@ -21,7 +21,6 @@ from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
-from jassy.program import Program, why_not_compiled
 from jassy.safety import CEILING, LimiterMeter, count_nonfinite, limit, release_coefficient, zero_nonfinite
 from jassy.scheduler import Scheduler
 
@@ -85,6 +84,8 @@ class OfflineEngine:
         self.graph = graph
         self.sample_rate = float(sample_rate)
         graph.prepare(self.sample_rate, block)
+        from jassy.program import Program, why_not_compiled  # imports the ugens: not at import time
+
         self.why_not_program = why_not_compiled(graph) if program else "not asked for"
         self.program = Program(graph) if self.why_not_program is None else None
         self.scheduler = Scheduler(graph, score, self.sample_rate, block, self.program)

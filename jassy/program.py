@@ -23,17 +23,25 @@ import numpy as np
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from jassy import params
 from jassy.graph import Graph
+from jassy.jit import drop_stale_cache
 from jassy.params import ramp_fill
+from ugens import filters, impact, mix, modal, noise, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
 from ugens.modal import ModalBank, bank_step, resonate_ramp
+from ugens.radiation import Radiation, radiate
 from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
+
+#: The modules whose kernels the program calls (a change there drops its numba cache).
+KERNEL_MODULES = [params, filters, impact, mix, modal, noise, radiation, scrape]
+drop_stale_cache(__file__, KERNEL_MODULES)
 
 #: int64 slots per node record.
 RECORD = 16
-GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD = range(1, 9)
+GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD, RADIATION = range(1, 10)
 #: Ugen classes with a kernel in the program, by kind.
 PROGRAM_UGENS = {
     Gain: GAIN,
@@ -44,6 +52,7 @@ PROGRAM_UGENS = {
     Scrape: SCRAPE,
     ResonantScrape: RESONANT_SCRAPE,
     Biquad: BIQUAD,
+    Radiation: RADIATION,
 }
 
 
@@ -162,6 +171,8 @@ def run_node(prog, base, start, n):
             biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
             if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
                 design_biquad(mode, freq[0], q[0], setup[1], coef)
+    elif kind == RADIATION:  # [input, coef, state]
+        radiate(_f64(prog[base + 3], size), out, n, _f64(prog[base + 4], 4), _f64(prog[base + 5], 3))
 
 
 @nb.njit(cache=True, nogil=True)
@@ -265,6 +276,8 @@ class Program:
                 node.coef,
                 node.cfg,
             ]
+        if isinstance(node, Radiation):
+            return [node.out, node.sources["input"].out, node.coef, node.state]
         if isinstance(node, Biquad):
             setup = np.array([float(node.mode), 1.0 / node.sample_rate])
             ramps = [node.freq.ramp, node.q.ramp, node._freqs, node._qs]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numba as nb
 import numpy as np
@@ -25,7 +25,9 @@ from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.jit import specialise
-from jassy.program import Program, run_blocks, run_program
+
+if TYPE_CHECKING:  # the program imports the ugens: not at import time of the core
+    from jassy.program import Program
 
 # Times are converted as t * sample_rate; this slack keeps 0.01 s * 48000 on frame 480.
 _SAMPLE_SLACK = 1e-6
@@ -251,6 +253,8 @@ class Scheduler:
         """:meth:`run` through the graph's program: the same sub-blocks (a program graph has
         no feedback limit or budget period), every run of whole blocks without an event in
         one call."""
+        from jassy.program import run_blocks, run_program
+
         program = self.program
         table = program.table
         bus, rows = self.graph.bus, self.graph.bus_rows

@@ -272,5 +272,6 @@ def test_cli_devices_and_play(jack, capsys):
     assert main(["play", "bar", "--duration", "0.3", "-q"]) == 0
     out = capsys.readouterr().out
     assert "playing bar" in out and "underruns" in out
+    assert "mode: callback" in out  # the bar patch renders in the device callback
     assert main(["play", "bar", "--duration", "0.3", "--ring", "0.5"]) == 2
     assert "--ring: expected at least 1 block" in capsys.readouterr().err

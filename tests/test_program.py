@@ -9,6 +9,7 @@ from jassy.offline import OfflineEngine
 from jassy.program import why_not_compiled
 from ugens import Gain, ImpactForce, Mixer, ModalBank
 from ugens.filters import Biquad
+from ugens.radiation import Radiation
 from ugens.scrape import ResonantScrape, Scrape
 
 FS = 48000
@@ -28,7 +29,8 @@ def contact_graph():
     force = Mixer(tap, scrape, stick, name="force", gains=[1.0, 0.5, 0.2])
     plate = ModalBank(plate_model(), name="plate")(force)
     high = Biquad(plate, name="high", mode="highpass", freq=60.0)
-    out = Gain(high, gain=0.05, name="out")
+    radiated = Radiation(high, name="radiated", radius=0.2)
+    out = Gain(radiated, gain=0.05, name="out")
     return Graph(out, haptic=force)
 
 

@@ -815,3 +815,19 @@ def test_bad_design_files_exit_2_with_one_line_naming_file_and_key(tmp_path, cap
         lines = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(lines) == 1, (key, lines)
         assert str(path) in lines[0] and key in lines[0], (key, lines[0])
+
+
+@pytest.mark.parametrize("name", ["pilot", "toj", "sj", "force", "afc"])
+def test_every_example_design_runs_and_is_analysed_from_the_cli(tmp_path, capsys, name):
+    design_file = ROOT / "examples" / f"{name}_study.toml"
+    d = load_design(design_file)
+    common = ["--responses", "simulated", "--present", "none", "--data-dir", str(tmp_path), "-q"]
+    for who in ("SIM01", "SIM02"):
+        assert _cli(["study", "run", str(design_file), "-p", who, "--max-trials", "30", *common]) == 0
+    results = sorted(str(p) for p in tmp_path.glob("SIM0*[0-9].csv"))
+    assert len(results) == 2
+    assert _cli(["study", "analyze", *results, "--export", str(tmp_path / "fit")]) == 0
+    text = capsys.readouterr().out
+    assert f"task {d.task}" in text
+    fits = list(csv.DictReader(io.StringIO((tmp_path / "fit_fits.csv").read_text())))
+    assert {row["who"] for row in fits} >= {"SIM01", "SIM02"}  # force: each in its first block

@@ -21,7 +21,6 @@ import numpy as np
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.kernels import FASTMATH
 
 #: Speed of sound in air at 20 C (m/s).
 SPEED_OF_SOUND = 343.0
@@ -42,9 +41,11 @@ def radiation_response(freqs, radius: float, c: float = SPEED_OF_SOUND) -> np.nd
     return ka / np.sqrt(1.0 + ka * ka)
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
+@nb.njit(cache=True)
 def radiate(x, out, n, coef, state):
-    """The two first-order sections over x[:n]; state = [x1, y1, z1]."""
+    """The two first-order sections over x[:n]; state = [x1, y1, z1]. No fastmath: a
+    recurrence has nothing to vectorise, and reassociation across unrolled iterations
+    would make the output depend on where a block is cut."""
     b0, p, g, r = coef[0], coef[1], coef[2], coef[3]
     x1, y1, z1 = state[0], state[1], state[2]
     for i in range(n):

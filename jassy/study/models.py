@@ -97,7 +97,8 @@ class Model(NamedTuple):
             return 0.5 * lapse + (1.0 - lapse) * core
         guess = 1.0 / self.alternatives
         a = np.abs(x) / theta["threshold"]
-        core = -np.expm1(-math.log(2.0) * a ** theta["slope"])
+        with np.errstate(over="ignore"):  # a ** slope = inf far above threshold: F = 1 exactly
+            core = -np.expm1(-math.log(2.0) * a ** theta["slope"])
         return guess + (1.0 - guess) * (1.0 - lapse) * core
 
     def derived(self, theta: dict[str, float]) -> dict[str, float]:
