@@ -264,13 +264,22 @@ class ModalBank(ModelParams, UGen):
     """Modal resonator bank (JASS ModalObjectWithOneContact) driven by a force input.
 
     Output for a unit impulse of force at location p: sum_k a[p,k] e^{-d_k t} sin(2 pi f_k t).
+
+    Optional input ``size``: a fragment size s in (0, 1] held per event (e.g. the ``size``
+    output of Crumple), SDT's resonator fragment size (``SDTResonator_setFragmentSize``):
+    the modal masses scale by s at unchanged stiffness, so frequencies and decay rates
+    scale by 1/sqrt(s) and the displacement per unit impulse, a / (m w), by 1/sqrt(s). The
+    bank retunes at the frame where s changes, keeping each ringing mode's amplitude and
+    phase (its energy, as SDT); s <= 0 (no event yet) means s = 1.
+
     Input: force in N. Output: the model's gain units times N s (m for the finite-element
     models, whose gains are m per N s) with ``level = "raw"``; full scale (1 = 0 dBFS) with
     ``level = "calibrated"``, where the default impact peaks at -18 dBFS (jassy.levels).
     """
 
     type_name = "ModalBank"
-    inputs = ("input",)
+    inputs = ("input", "size")
+    optional_inputs = ("size",)
     accepts_location = True
     inline_events = True
     supports_budget = True
@@ -304,6 +313,8 @@ class ModalBank(ModelParams, UGen):
 
     def _prepare(self) -> None:
         self.validate_model()
+        self._size_input = self.sources.get("size")
+        self._size = 1.0  # the fragment size of the current design
         model = self.model
         self._level_gain = (
             reference_gain(model, self.sample_rate) if self.values["level"] == "calibrated" else 1.0
@@ -337,12 +348,13 @@ class ModalBank(ModelParams, UGen):
         internal order, for the current freq_scale and decay_scale; kept between calls, so
         a location or gain change (every impact of a rigid scene) only recomputes gains."""
         v = self.values
-        key = (v["freq_scale"], v["decay_scale"])
+        key = (v["freq_scale"], v["decay_scale"], self._size)
         if self._poles is None or self._poles[0] != key:
             o = self.order
+            retune = 1.0 / np.sqrt(self._size)
             freqs, decays = (
-                self.model.frequencies[o] * v["freq_scale"],
-                self.model.decays[o] * v["decay_scale"],
+                self.model.frequencies[o] * (v["freq_scale"] * retune),
+                self.model.decays[o] * (v["decay_scale"] * retune),
             )
             c1, c2, s = design(freqs, decays, self.sample_rate)
             sounding = c2 > 0
@@ -363,7 +375,7 @@ class ModalBank(ModelParams, UGen):
         if gains is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
-            scale = v["gain"] * self._level_gain / self.sample_rate
+            scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self.model.gains_at(v["location"])[self.order]
             self._gain_rows[key] = gains
         out = np.empty_like(poles)
@@ -374,6 +386,10 @@ class ModalBank(ModelParams, UGen):
 
     def _reset(self) -> None:
         self._pending = deque()  # (frame, key, value, jump, ramp) of set_param_at
+        if self._size != 1.0:
+            self._size = 1.0
+            self._refresh_design_cache()
+            self.target[:] = self._fresh
         self.y[:] = 0.0
         self.last[0] = 0.0
         self.coef[:] = self.target
@@ -409,18 +425,63 @@ class ModalBank(ModelParams, UGen):
         self._pending.append((frame, key, value, jump, ramp))
 
     def process(self, start: int, n: int) -> None:
-        if not self._pending:
+        sizes = self._size_changes(n) if self._size_input is not None else ()
+        if not self._pending and not len(sizes):
             self._span(self._input.out, self.out, start, n)
             return
-        inp, out, pending, done = self._input.out, self.out, self._pending, 0
-        while pending and pending[0][0] < start + n:
-            frame, key, value, jump, ramp = pending.popleft()
-            if frame - start > done:
-                self._span(inp[done:], out[done:], start + done, frame - start - done)
-                done = frame - start
-            self.set_param(key, value, jump=jump, ramp=ramp)
+        inp, out, pending, done, k = self._input.out, self.out, self._pending, 0, 0
+        while True:
+            at_event = pending[0][0] - start if pending and pending[0][0] < start + n else n
+            at_size = sizes[k] if k < len(sizes) else n
+            at = min(at_event, at_size)
+            if at >= n:
+                break
+            if at > done:
+                self._span(inp[done:], out[done:], start + done, at - done)
+                done = at
+            if at_size <= at_event:
+                self._retune(float(self._size_input.out[at_size]))
+                k += 1
+            else:
+                frame, key, value, jump, ramp = pending.popleft()
+                self.set_param(key, value, jump=jump, ramp=ramp)
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
+
+    def _size_changes(self, n: int) -> np.ndarray:
+        """Offsets in this block where the size input differs from the size before it."""
+        s = self._size_input.out[:n]
+        prev = np.empty(n)
+        prev[0] = self._size if s[0] > 0.0 else s[0]
+        prev[1:] = s[:-1]
+        return np.flatnonzero((s != prev) & (s > 0.0))
+
+    def _retune(self, size: float) -> None:
+        """Jump to the design for fragment size ``size``, keeping every ringing mode's
+        amplitude and phase: y[n] = A R^n sin(n theta + phi) continues with the new
+        R and theta from the same (A, phi) at the last output sample."""
+        if size == self._size:
+            return
+        c1, c2 = self.coef[0].copy(), self.coef[1].copy()
+        self._size = size
+        self._refresh_design_cache()
+        self.target[:] = self._fresh
+        self.coef[:] = self._fresh
+        self.meta[1] = 0
+        self._ramping = False
+        y1, y2 = self.y
+        old, new = c2 > 0.0, self.coef[1] > 0.0
+        r = np.sqrt(np.where(old, c2, 1.0))
+        cos_t = np.where(old, c1 / (2.0 * r), 1.0)
+        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 1e-24))
+        a_sin = y1  # A sin(phi) at the last sample
+        a_cos = (y1 * cos_t - r * y2) / sin_t  # A cos(phi)
+        r_new = np.sqrt(np.where(new, self.coef[1], 1.0))
+        cos_n = np.where(new, self.coef[0] / (2.0 * r_new), 1.0)
+        sin_n = np.sqrt(np.maximum(1.0 - cos_n * cos_n, 0.0))
+        keep = old & new
+        y2[:] = np.where(keep, (a_sin * cos_n - a_cos * sin_n) / r_new, 0.0)
+        y1[:] = np.where(keep, y1, 0.0)
 
     def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""
