@@ -10,8 +10,10 @@ mesh < compound). Methods:
   closest point on the hull triangles; a capsule is tested as its two end spheres and its
   middle sphere;
 - polytope vs polytope: separating axes over both bodies' face normals and the cross
-  products of their edge directions (Gottschalk, Lin, Manocha, "OBBTree", SIGGRAPH 1996;
-  Ericson 5.2.1); no contact if one separates them by more than the margin. If an edge axis
+  products of their edges (Gottschalk, Lin, Manocha, "OBBTree", SIGGRAPH 1996; Ericson
+  5.2.1), the edge pairs pruned on the Gauss map (Gregorius, GDC 2013: only pairs forming a
+  face of the Minkowski difference) and tested only when no face axis separates the two by
+  more than the margin; no contact if one separates them by more than the margin. If an edge axis
   beats every face axis (by EDGE_PREFERENCE), one contact between the two nearest edges with
   that axis's separation as gap (the true distance of two edges passing each other);
   otherwise each body against the other's reference face (the face plane that the other's
@@ -346,81 +348,87 @@ def _polytope_on_face(a, sa, b, sb, face, pieces, pos, rot, geo, margin, buf, co
 
 
 @nb.njit(cache=True, inline="always")
+def _b_in_a(a, b, pos, rot, x, y, z):
+    """a's frame coordinates of the point (x, y, z) of b's frame."""
+    wx, wy, wz = to_world(b, pos, rot, x, y, z)
+    return to_local(a, pos, rot, wx, wy, wz)
+
+
+@nb.njit(cache=True, inline="always")
+def _b_dir_in_a(a, b, rot, x, y, z):
+    """a's frame components of the direction (x, y, z) of b's frame."""
+    wx, wy, wz = _rotate(b, rot, x, y, z)
+    return (
+        rot[a, 0, 0] * wx + rot[a, 1, 0] * wy + rot[a, 2, 0] * wz,
+        rot[a, 0, 1] * wx + rot[a, 1, 1] * wy + rot[a, 2, 1] * wz,
+        rot[a, 0, 2] * wx + rot[a, 1, 2] * wy + rot[a, 2, 2] * wz,
+    )
+
+
+@nb.njit(cache=True, inline="always")
 def _edge_separation(a, sa, b, sb, pos, rot, geo):
-    """The best separating axis among the cross products of the edge directions of polytopes
-    a and b (geometry slots sa, sb): (separation, m: a's vertices' smallest projection minus
-    b's largest, the distance of the two when their nearest features are two edges; world
-    axis from b to a; a's and b's direction rows in geo[27]); -inf if all are parallel."""
-    vstart, verts, dstart, dirs = geo[4], geo[5], geo[26], geo[27]
+    """The best separating axis among the cross products of an edge of polytope a and an
+    edge of polytope b (geometry slots sa, sb): (separation, m: b's smallest projection minus
+    a's largest, the distance of the two edges when they are the nearest features; world
+    axis from b to a; the two edge rows in geo[24]); -inf if no pair qualifies.
+
+    Only edge pairs that form a face of the Minkowski difference A - B are tested: the arc
+    between an edge's two face normals on the Gauss map of a crosses the arc between the
+    negated face normals of b's edge (Gregorius, "The Separating Axis Test between Convex
+    Polyhedra", GDC 2013). Any other edge axis separates less than some face axis, and a
+    qualifying pair's edges are the support features along its axis, so its separation is
+    the difference of the edges' projections (O(1) per pair, no vertex loop). Computed in
+    a's frame."""
+    estart, edges = geo[23], geo[24]
     best, bnx, bny, bnz, best_a, best_b = -math.inf, 0.0, 0.0, 1.0, -1, -1
-    for da in range(dstart[sa], dstart[sa + 1]):
-        ex, ey, ez = _rotate(a, rot, dirs[da, 0], dirs[da, 1], dirs[da, 2])
-        for db in range(dstart[sb], dstart[sb + 1]):
-            fx, fy, fz = _rotate(b, rot, dirs[db, 0], dirs[db, 1], dirs[db, 2])
+    for eb in range(estart[sb], estart[sb + 1]):
+        px, py, pz = _b_in_a(a, b, pos, rot, edges[eb, 0], edges[eb, 1], edges[eb, 2])
+        qx, qy, qz = _b_in_a(a, b, pos, rot, edges[eb, 3], edges[eb, 4], edges[eb, 5])
+        # b's negated face normals c, d (A - B's Gauss map), a's frame
+        cx, cy, cz = _b_dir_in_a(a, b, rot, -edges[eb, 6], -edges[eb, 7], -edges[eb, 8])
+        dx, dy, dz = _b_dir_in_a(a, b, rot, -edges[eb, 9], -edges[eb, 10], -edges[eb, 11])
+        dcx, dcy, dcz = dy * cz - dz * cy, dz * cx - dx * cz, dx * cy - dy * cx  # d x c
+        fx, fy, fz = qx - px, qy - py, qz - pz
+        f2 = fx * fx + fy * fy + fz * fz
+        for ea in range(estart[sa], estart[sa + 1]):
+            a1x, a1y, a1z = edges[ea, 6], edges[ea, 7], edges[ea, 8]
+            a2x, a2y, a2z = edges[ea, 9], edges[ea, 10], edges[ea, 11]
+            bax, bay, baz = a2y * a1z - a2z * a1y, a2z * a1x - a2x * a1z, a2x * a1y - a2y * a1x  # a2 x a1
+            cba = cx * bax + cy * bay + cz * baz
+            dba = dx * bax + dy * bay + dz * baz
+            adc = a1x * dcx + a1y * dcy + a1z * dcz
+            bdc = a2x * dcx + a2y * dcy + a2z * dcz
+            if cba * dba >= 0.0 or adc * bdc >= 0.0 or cba * bdc <= 0.0:
+                continue  # the arcs do not cross: not a face of A - B
+            ex, ey, ez = edges[ea, 3] - edges[ea, 0], edges[ea, 4] - edges[ea, 1], edges[ea, 5] - edges[ea, 2]
             nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
             length = math.sqrt(nx * nx + ny * ny + nz * nz)
-            if length < 1e-6:
+            if length < 1e-6 * math.sqrt((ex * ex + ey * ey + ez * ez) * f2):
                 continue  # parallel edges: a face axis covers them
+            if nx * (a1x + a2x) + ny * (a1y + a2y) + nz * (a1z + a2z) < 0.0:
+                length = -length  # outward from a
             nx, ny, nz = nx / length, ny / length, nz / length
-            lo_a, hi_a = _projection(a, sa, nx, ny, nz, pos, rot, vstart, verts)
-            lo_b, hi_b = _projection(b, sb, nx, ny, nz, pos, rot, vstart, verts)
-            if lo_a - hi_b > best:
-                best, bnx, bny, bnz, best_a, best_b = lo_a - hi_b, nx, ny, nz, da, db
-            if lo_b - hi_a > best:
-                best, bnx, bny, bnz, best_a, best_b = lo_b - hi_a, -nx, -ny, -nz, da, db
-    return best, bnx, bny, bnz, best_a, best_b
+            sep = nx * (px - edges[ea, 0]) + ny * (py - edges[ea, 1]) + nz * (pz - edges[ea, 2])
+            if sep > best:
+                best, bnx, bny, bnz, best_a, best_b = sep, nx, ny, nz, ea, eb
+    wx, wy, wz = _rotate(a, rot, bnx, bny, bnz)
+    return best, -wx, -wy, -wz, best_a, best_b
 
 
 @nb.njit(cache=True, inline="always")
-def _projection(a, sa, nx, ny, nz, pos, rot, vstart, verts):
-    """(smallest, largest) projection (m) on the world axis n of the vertices of body a's
-    geometry slot sa."""
-    lx, ly, lz = to_local(a, pos, rot, pos[a, 0] + nx, pos[a, 1] + ny, pos[a, 2] + nz)
-    centre = nx * pos[a, 0] + ny * pos[a, 1] + nz * pos[a, 2]
-    lo, hi = math.inf, -math.inf
-    for v in range(vstart[sa], vstart[sa + 1]):
-        d = lx * verts[v, 0] + ly * verts[v, 1] + lz * verts[v, 2]
-        lo, hi = min(lo, d), max(hi, d)
-    return centre + lo, centre + hi
-
-
-@nb.njit(cache=True, inline="always")
-def _support_edge(a, sa, direction, sign, nx, ny, nz, pos, rot, geo):
-    """Body a's edge (geometry slot sa) along direction row ``direction`` that lies furthest
-    along sign * n: (edge row in geo[24], its world end points)."""
-    estart, edges, edge_dir = geo[23], geo[24], geo[25]
-    best, edge = -math.inf, -1
-    for e in range(estart[sa], estart[sa + 1]):
-        if edge_dir[e] != direction:
-            continue
-        mx, my, mz = to_world(
-            a,
-            pos,
-            rot,
-            0.5 * (edges[e, 0] + edges[e, 3]),
-            0.5 * (edges[e, 1] + edges[e, 4]),
-            0.5 * (edges[e, 2] + edges[e, 5]),
-        )
-        along = sign * (nx * mx + ny * my + nz * mz)
-        if along > best:
-            best, edge = along, e
-    p = to_world(a, pos, rot, edges[edge, 0], edges[edge, 1], edges[edge, 2])
-    q = to_world(a, pos, rot, edges[edge, 3], edges[edge, 4], edges[edge, 5])
-    return edge, p, q
-
-
-@nb.njit(cache=True, inline="always")
-def _edge_contact(a, sa, b, sb, sep, nx, ny, nz, da, db, pieces, pos, rot, geo, buf, count):
-    """One contact where the edges of a and b along directions da, db that face each other
-    across the axis n (from b to a) come closest: the middle of their closest points, gap
+def _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, buf, count):
+    """One contact where a's edge row ea and b's edge row eb (_edge_separation, facing each
+    other across the axis n from b to a) come closest: the middle of their closest points, gap
     ``sep``, features EDGE + the edge rows (offset by PIECE times the piece numbers)."""
-    ea, pa, qa = _support_edge(a, sa, da, -1.0, nx, ny, nz, pos, rot, geo)
-    eb, pb, qb = _support_edge(b, sb, db, 1.0, nx, ny, nz, pos, rot, geo)
+    estart, edges = geo[23], geo[24]
+    pa = to_world(a, pos, rot, edges[ea, 0], edges[ea, 1], edges[ea, 2])
+    qa = to_world(a, pos, rot, edges[ea, 3], edges[ea, 4], edges[ea, 5])
+    pb = to_world(b, pos, rot, edges[eb, 0], edges[eb, 1], edges[eb, 2])
+    qb = to_world(b, pos, rot, edges[eb, 3], edges[eb, 4], edges[eb, 5])
     s, t = segment_params(pa, qa, pb, qb)
     px = 0.5 * (pa[0] + s * (qa[0] - pa[0]) + pb[0] + t * (qb[0] - pb[0]))
     py = 0.5 * (pa[1] + s * (qa[1] - pa[1]) + pb[1] + t * (qb[1] - pb[1]))
     pz = 0.5 * (pa[2] + s * (qa[2] - pa[2]) + pb[2] + t * (qb[2] - pb[2]))
-    estart = geo[23]
     fa = EDGE + ea - estart[sa] + PIECE * pieces[0]
     fb = EDGE + eb - estart[sb] + PIECE * pieces[1]
     return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sep, fa, fb)
@@ -438,11 +446,11 @@ def _polytopes(a, sa, b, sb, pieces, pos, rot, geo, margin, buf, count):
     face_sep = max(sep_ab, sep_ba)
     if face_sep > margin:
         return count
-    sep, nx, ny, nz, da, db = _edge_separation(a, sa, b, sb, pos, rot, geo)
+    sep, nx, ny, nz, ea, eb = _edge_separation(a, sa, b, sb, pos, rot, geo)
     if sep > margin:
         return count
     if sep > face_sep + EDGE_PREFERENCE:
-        return _edge_contact(a, sa, b, sb, sep, nx, ny, nz, da, db, pieces, pos, rot, geo, buf, count)
+        return _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, buf, count)
     count = _polytope_on_face(a, sa, b, sb, face_ab, pieces, pos, rot, geo, margin, buf, count, False)
     flipped = (pieces[1], pieces[0])
     return _polytope_on_face(b, sb, a, sa, face_ba, flipped, pos, rot, geo, margin, buf, count, True)
@@ -633,9 +641,9 @@ def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
 @nb.njit(cache=True, _nrt=False)
 def _with_compound(a, b, pos, rot, geo, margin, buf, count):
     """Contacts of body a (a sphere, capsule, polytope or compound) with compound b: with each
-    convex piece of b (geometry slots geo[29][geo[28][b]:geo[28][b + 1]]), piece by piece for
+    convex piece of b (geometry slots geo[26][geo[25][b]:geo[25][b + 1]]), piece by piece for
     a compound a too."""
-    ta, first, slots = geo[0][a], geo[28], geo[29]
+    ta, first, slots = geo[0][a], geo[25], geo[26]
     for j in range(first[b], first[b + 1]):
         sb, pb = slots[j], j - first[b]
         if _plane_separates(a, b, sb, pos, rot, geo, margin):

@@ -256,22 +256,19 @@ def _principal_pose(position, quaternion, com, rotation):
 
 def _polytope(mesh, com, rotation):
     """Polytope tables of a convex trimesh (shape frame) in the principal frame: (vertices,
-    face planes (n, d), hull triangles, edges (E, 6): the end points of the hull's edges
-    between faces that are not coplanar, each edge's row among the directions, and the
-    directions (D, 3): the edges' distinct directions up to sign)."""
+    face planes (n, d), hull triangles, edges (E, 12): for each edge of the hull between two
+    faces that are not coplanar, its end points and the outward unit normals of those two
+    faces (the edge's arc on the Gauss map, for narrow._edge_separation))."""
     verts = (np.asarray(mesh.vertices) - com) @ rotation
     tris = verts[np.asarray(mesh.faces)]
     normals = np.asarray(mesh.face_normals) @ rotation
     offsets = np.einsum("ij,ij->i", normals, tris[:, 0])
     planes = np.unique(np.round(np.c_[normals, offsets], 12), axis=0)  # coplanar triangles share a plane
-    ends = np.asarray(mesh.face_adjacency_edges)[np.asarray(mesh.face_adjacency_angles) > 1e-9]
-    edges = np.c_[verts[ends[:, 0]], verts[ends[:, 1]]]
-    units = edges[:, 3:] - edges[:, :3]
-    units /= np.linalg.norm(units, axis=1)[:, None]
-    first = np.argmax(np.abs(units) > 1e-9, axis=1)  # sign: the first non-zero component positive
-    units *= np.sign(units[np.arange(len(units)), first])[:, None]
-    dirs, edge_dir = np.unique(np.round(units, 9), axis=0, return_inverse=True)
-    return verts, planes, tris, edges, edge_dir.reshape(-1), dirs
+    folded = np.asarray(mesh.face_adjacency_angles) > 1e-9
+    ends = np.asarray(mesh.face_adjacency_edges)[folded]
+    faces = np.asarray(mesh.face_adjacency)[folded]
+    edges = np.c_[verts[ends[:, 0]], verts[ends[:, 1]], normals[faces[:, 0]], normals[faces[:, 1]]]
+    return verts, planes, tris, edges
 
 
 def _shape_polytopes(shape, com, rotation):
@@ -344,7 +341,7 @@ def _build_arrays(bodies: list[Body]):
                 build_grid(np.asarray(shape.surface.vertices, float), np.asarray(shape.surface.faces))
             )
     mesh_tables = _mesh_tables(grids)
-    tables = [_slot_table(slots, k) for k in range(6)]
+    tables = [_slot_table(slots, k) for k in range(4)]
     vstart, verts = tables[0]
     geo = (
         btype,
@@ -359,8 +356,6 @@ def _build_arrays(bodies: list[Body]):
         *mesh_tables,
         *_point_table(bodies, frames, slots),
         *tables[3],
-        tables[4][1][:, 0].astype(np.int64),
-        *tables[5],
         *_slot_table([np.asarray(p, np.int64) for p in pieces], None),
     )
     body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
@@ -369,10 +364,9 @@ def _build_arrays(bodies: list[Body]):
 
 def _slot_table(slots, k):
     """(starts (S + 1,), rows concatenated) of table k of each geometry slot's polytope
-    (_polytope; k = None: slots holds the tables themselves); an empty slot has no rows.
-    Edge directions (k = 4) are offset to rows of the concatenated directions (k = 5)."""
-    shapes = ((0, 3), (0, 4), (0, 3, 3), (0, 6), (0, 1), (0, 3))
-    rows, shift = [], 0
+    (_polytope; k = None: slots holds the tables themselves); an empty slot has no rows."""
+    shapes = ((0, 3), (0, 4), (0, 3, 3), (0, 12))
+    rows = []
     for slot in slots:
         if k is None:
             rows.append(slot)
@@ -380,9 +374,6 @@ def _slot_table(slots, k):
         table = (
             np.zeros(shapes[k]) if slot is None else np.asarray(slot[k], float).reshape((-1, *shapes[k][1:]))
         )
-        if k == 4 and slot is not None:
-            table = table + shift
-            shift += len(slot[5])
         rows.append(table)
     starts = np.cumsum([0] + [len(r) for r in rows]).astype(np.int64)
     empty = np.zeros(0, np.int64) if k is None else np.zeros(shapes[k])
