@@ -5,7 +5,10 @@ Gains between locations are interpolated barycentrically (the sound texture map)
 location is a vertex index, a point name, or up to three vertices with weights.
 
 Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``),
-NPZ (same keys) and JASS ``.sy`` text files (read only).
+NPZ (same keys) and JASS ``.sy`` text files (read only). A model fitted to a recording may
+carry an ``attack``: the strike's first milliseconds that no mode explains (contact, mallet,
+unresolved high modes), samples at ``attack_rate`` Hz per unit impulse, played with each
+strike (ugens.AttackSample).
 """
 
 from __future__ import annotations
@@ -75,6 +78,8 @@ class ModalModel:
     points: tuple[str, ...] = ()
     name: str = ""
     source: str = field(default="", compare=False)
+    attack: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False)
+    attack_rate: float = 0.0
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -90,6 +95,8 @@ class ModalModel:
             gains = gains[None, :]
         self.gains = gains
         self.points = tuple(self.points)
+        self.attack = np.asarray(self.attack, dtype=np.float64).reshape(-1)
+        self.attack_rate = float(self.attack_rate)
         self.validate()
 
     @property
@@ -130,6 +137,8 @@ class ModalModel:
                 f"({sample_rate / 2:g} Hz at {sample_rate:g} Hz); raise the sample rate or drop the mode "
                 "(ModalModel.below)"
             )
+        if self.attack.size and not (np.all(np.isfinite(self.attack)) and self.attack_rate > 0):
+            raise ModelError(f"{where}: attack: expected finite samples and attack_rate > 0 Hz")
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -213,7 +222,7 @@ class ModalModel:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "attack", "attack_rate"}
         for key in data:
             if key not in allowed:
                 raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
@@ -223,7 +232,9 @@ class ModalModel:
         points = data.get("points", ())
         points = tuple(str(p) for p in np.asarray(points).reshape(-1)) if len(points) else ()
         name = str(np.asarray(data.get("name", "")))
-        return cls(data["frequencies"], data["decays"], data["gains"], points, name, source)
+        attack = np.asarray(data.get("attack", np.zeros(0)), dtype=np.float64)
+        rate = float(np.asarray(data.get("attack_rate", 0.0)))
+        return cls(data["frequencies"], data["decays"], data["gains"], points, name, source, attack, rate)
 
     @classmethod
     def from_sy(cls, text: str, source: str = "model.sy") -> ModalModel:
@@ -269,6 +280,11 @@ class ModalModel:
                         gains=self.gains,
                         points=np.array(self.points, dtype=str),
                         name=np.array(self.name),
+                        **(
+                            {"attack": self.attack, "attack_rate": np.array(self.attack_rate)}
+                            if self.attack.size
+                            else {}
+                        ),
                     )
             else:
                 Path(tmp).write_text(self.to_toml())
@@ -287,6 +303,9 @@ class ModalModel:
         lines.append("gains = [")
         lines.extend(f"  {arr(row)}," for row in self.gains)
         lines.append("]")
+        if self.attack.size:
+            lines.append(f"attack_rate = {self.attack_rate!r}")
+            lines.append(f"attack = {arr(self.attack)}")
         return "\n".join(lines) + "\n"
 
 
