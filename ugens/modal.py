@@ -385,6 +385,12 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         self._mixed = self.values["precision"] == "mixed"
         self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
+        if self._mixed:
+            example = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            self._delta_step = specialise(
+                delta_step, self.out, self.out, 0, 0, example.narrow_coef, example.narrow_state,
+                example.narrow_meta, self._floor, self.last, FLUSH_PERIOD,
+            )  # fmt: skip
         self.budgeted = False
         self._faded = np.zeros(k, dtype=bool)
         self._weights = a_weighting_power(self.model.frequencies[self.order])
@@ -575,19 +581,15 @@ class ModalBank(ModelParams, UGen):
         if split is None:
             split = self._split = split_by_precision(self.bank, self.sample_rate)
         split.narrow_last[0] = self.last[0]
-        self._step(inp, out, start, n, split.wide_bank, split.wide_meta, self._floor, self.last)
-        delta_step(
-            inp,
-            out,
-            start,
-            n,
-            split.narrow_coef,
-            split.narrow_state,
-            split.narrow_meta,
-            self._floor,
-            split.narrow_last,
-            FLUSH_PERIOD,
-        )
+        if split.wide.size:
+            self._step(inp, out, start, n, split.wide_bank, split.wide_meta, self._floor, self.last)
+        else:
+            out[:n] = 0.0
+        self._delta_step(
+            inp, out, start, n, split.narrow_coef, split.narrow_state, split.narrow_meta,
+            self._floor, split.narrow_last, FLUSH_PERIOD,
+        )  # fmt: skip
+        self.last[0] = inp[n - 1]
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
