@@ -89,10 +89,14 @@ def render_noise(model, precision, score=(), seconds=0.5, block=64):
 
 
 @pytest.mark.parametrize("block", [1, 64, 1000])
-def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block):
+@pytest.mark.parametrize("all_float32", [False, True])
+def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, all_float32):
     """Broadband force, a ramped freq_scale change (run in float64, then back to mixed) and a
-    location jump: within -60 dB of the float64 bank at any block size."""
+    location jump: within -60 dB of the float64 bank at any block size, with and without
+    float64 modes in the split."""
     model = spread_model()
+    if all_float32:
+        model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
     score = [
         Event(0.1, "bank", "set", {"freq_scale": 1.2}, ramp=0.01),
         Event(0.2, "bank", "set", {"location": 1}, jump=True),
