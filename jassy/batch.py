@@ -254,8 +254,9 @@ def run_batch(
     grid = grid if isinstance(grid, Grid) else load_grid(grid)
     outdir = Path(outdir)
     workers = local_cores() if workers is None else workers
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise JassyError(f"--workers: expected an integer >= 1, got {workers!r}")
+    most = max(64, 8 * local_cores())  # local processes: more only thrash the machine
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= most:
+        raise JassyError(f"--workers: expected an integer in [1, {most}], got {workers!r}")
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
         raise JassyError(f"--chunk: expected an integer >= 1, got {chunk!r}")
     backend = _choose_backend(scheduler, workers, client)

@@ -64,8 +64,12 @@ def add_limit_options(subparsers) -> None:
 
 def require_extra(module: str, extra: str, option: str) -> None:
     """Fail before any work if the optional ``module`` is missing, naming the extra to install."""
-    if importlib.util.find_spec(module) is None:
-        raise JassyError(f"{option}: needs {module}; install it with pip install 'jassy[{extra}]'")
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise JassyError(f"{option}: {module} is not installed; install it with pip install 'jassy[{extra}]'")
 
 
 def _infinite_defaults(parser: argparse.ArgumentParser) -> set[str]:
@@ -102,6 +106,11 @@ def check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -
     rate = getattr(args, "sr", None)
     if rate is not None:
         number(rate, "--sr", MIN_RATE, MAX_RATE, integer=True)
+    for key, option in (("audio_offset", "--audio-offset"), ("haptic_offset", "--haptic-offset")):
+        if getattr(args, key, None) is not None:
+            number(getattr(args, key), option, -MAX_OFFSET_MS, MAX_OFFSET_MS)
+    if isinstance(getattr(args, "block", None), int):
+        number(args.block, "--block", 1, MAX_BLOCK, integer=True)
     if getattr(args, "plot", None):
         from jassy.files import check_output
 

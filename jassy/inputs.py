@@ -29,6 +29,8 @@ from jassy.errors import JassyError
 
 #: Largest input file read (bytes): patches, grids, designs and models are far smaller.
 MAX_FILE_BYTES = 256 * 2**20
+#: Largest text file parsed (bytes): TOML parses at a few MB/s, so this bounds the time too.
+MAX_TEXT_BYTES = 64 * 2**20
 #: Deepest nesting of tables/arrays accepted in a TOML file.
 MAX_DEPTH = 32
 #: Largest time in seconds an event, ramp or duration may name (1e7 s, 116 days): at
@@ -82,8 +84,11 @@ def decode(data: bytes, where: str) -> str:
 
 
 def read_text(path: str | os.PathLike, what: str = "file") -> str:
-    """The UTF-8 text of a regular file (see :func:`read_bytes`, :func:`decode`)."""
-    return decode(read_bytes(path, what), str(path))
+    """The UTF-8 text of a regular file of at most MAX_TEXT_BYTES (see :func:`decode`)."""
+    data = read_bytes(path, what)
+    if len(data) > MAX_TEXT_BYTES:
+        raise JassyError(f"{path}: {len(data) / 2**20:.0f} MiB, larger than text {what}s may be (64 MiB)")
+    return decode(data, str(path))
 
 
 def depth(value: Any) -> int:
@@ -106,7 +111,10 @@ def depth(value: Any) -> int:
 
 
 def parse_toml(text: str, where: str) -> dict:
-    """Parse TOML text; JassyError for bad syntax or nesting deeper than MAX_DEPTH."""
+    """Parse TOML text; JassyError for bad syntax, nesting deeper than MAX_DEPTH or more
+    than MAX_TEXT_BYTES of text."""
+    if len(text) > MAX_TEXT_BYTES:
+        raise JassyError(f"{where}: larger than TOML files may be (64 MiB)")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -25,7 +25,8 @@ Scattering. Reflections off ground, buildings and terrain spread the blast's ene
 a diffuse tail (the rumble). Its energy envelope E is the blast's p^2 through a one-pole
 leaky integrator whose energy decays 60 dB in ``scatter_time`` s (sum of the integrator's
 impulse response = 1, so the tail carries the blast's energy); the tail is unit-variance
-noise times sqrt(E), low-passed at ``rumble`` Hz with its noise gain normalised. The
+noise times sqrt(E), low-passed at ``rumble`` Hz with its noise gain normalised (a fixed
+variance in a band fixed in Hz: the same spectral density at any sample rate). The
 output is (1 - dispersion) blast + dispersion tail (SDT's mix of direct and scattered
 wave). Output: pressure in Pa. SDT ``explosion~`` (Baldan et al., 2017).
 """

@@ -22,6 +22,8 @@ sound start on the force's first non-zero frame, as the exact response does.
 
 Coefficients are designed in float64 and the state is float64: float32 state fails the
 -60 dB accuracy bound for low, lightly damped modes (tests/test_modal_bank.py shows both).
+With ``precision = "mixed"`` the modes whose float32 error bound allows it run in float32
+in the delta form of ugens.modal_f32 (twice the SIMD lanes), the rest in float64.
 
 Parameter changes ramp the coefficients (c1, c2, g, d) linearly, as SuperCollider's Ringz
 does; along a ``freq_scale`` ramp it is therefore cos(theta), i.e. about f^2, that moves
@@ -37,7 +39,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 from __future__ import annotations
 
 from collections import deque
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -51,6 +53,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
+from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -199,6 +202,24 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
 
 
+@nb.njit(fastmath=FASTMATH, cache=True)
+def mixed_step(
+    force, out, start, n, wide_bank, wide_meta, coef, state, narrow_meta, floor, last, narrow_last
+):
+    """One sub-block of a bank split by precision (MixedSplit): the float64 modes by
+    :func:`bank_step` (rows c1, c2, g, d, y1, y2) write out[:n], the float32 delta-form
+    modes (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
+    fp = last[0]
+    if wide_meta[2] > 0:
+        bank_step(force, out, start, n, wide_bank, wide_meta, floor, last)
+    else:
+        for i in range(n):
+            out[i] = 0.0
+    narrow_last[0] = fp
+    delta_step(force, out, start, n, coef, state, narrow_meta, floor, narrow_last, FLUSH_PERIOD)
+    last[0] = force[n - 1]
+
+
 def design(frequencies, decays, sample_rate):
     """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64.
 
@@ -211,6 +232,44 @@ def design(frequencies, decays, sample_rate):
     c2 = np.where(ok, R * R, 0.0)
     s = np.where(ok, R * np.sin(theta), 0.0)
     return c1, c2, s
+
+
+class MixedSplit(NamedTuple):
+    """A ModalBank's modes split by precision (``precision = "mixed"``): internal indices
+    of the float64 modes (``wide``) with their own bank rows (c1, c2, g, d, y1, y2) and
+    meta, and of the float32 modes (``narrow``) with delta-form rows (c0, b2, g, d) and
+    state (y, Delta), their meta [active, all] and the force sample before the block."""
+
+    wide: np.ndarray
+    wide_bank: np.ndarray
+    wide_meta: np.ndarray
+    narrow: np.ndarray
+    narrow_coef: np.ndarray
+    narrow_state: np.ndarray
+    narrow_meta: np.ndarray
+    narrow_last: np.ndarray
+
+
+def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
+    """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
+    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance."""
+    c1, c2, g, d, y1, y2 = bank
+    fits = float32_error(c1, c2, sample_rate) <= tolerance
+    wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
+    c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
+    coef = np.ascontiguousarray(np.stack([c0, b2, g[narrow], d[narrow]]), dtype=np.float32)
+    state = np.ascontiguousarray(np.stack([y1[narrow], y1[narrow] - y2[narrow]]), dtype=np.float32)
+    nw, nn = wide.size, narrow.size
+    return MixedSplit(
+        wide,
+        np.ascontiguousarray(bank[:, wide]),
+        np.array([nw, 0, nw], dtype=np.int64),
+        narrow,
+        coef,
+        state,
+        np.array([nn, nn], dtype=np.int64),
+        np.zeros(1),
+    )
 
 
 class ModelParams:
@@ -264,13 +323,22 @@ class ModalBank(ModelParams, UGen):
     """Modal resonator bank (JASS ModalObjectWithOneContact) driven by a force input.
 
     Output for a unit impulse of force at location p: sum_k a[p,k] e^{-d_k t} sin(2 pi f_k t).
+
+    Optional input ``size``: a fragment size s in (0, 1] held per event (e.g. the ``size``
+    output of Crumple), SDT's resonator fragment size (``SDTResonator_setFragmentSize``):
+    the modal masses scale by s at unchanged stiffness, so frequencies and decay rates
+    scale by 1/sqrt(s) and the displacement per unit impulse, a / (m w), by 1/sqrt(s). The
+    bank retunes at the frame where s changes, keeping each ringing mode's amplitude and
+    phase (its energy, as SDT); s <= 0 (no event yet) means s = 1.
+
     Input: force in N. Output: the model's gain units times N s (m for the finite-element
     models, whose gains are m per N s) with ``level = "raw"``; full scale (1 = 0 dBFS) with
     ``level = "calibrated"``, where the default impact peaks at -18 dBFS (jassy.levels).
     """
 
     type_name = "ModalBank"
-    inputs = ("input",)
+    inputs = ("input", "size")
+    optional_inputs = ("size",)
     accepts_location = True
     inline_events = True
     supports_budget = True
@@ -300,10 +368,20 @@ class ModalBank(ModelParams, UGen):
             fixed=True,
             doc="state magnitude below which a silent mode is zeroed and skipped",
         ),
+        "precision": ParamSpec(
+            "str",
+            "float64",
+            choices=("float64", "mixed"),
+            fixed=True,
+            doc="'float64': every mode in float64; 'mixed': float32 (delta form) for the modes whose "
+            "error bound stays 10 dB inside -60 dB of their peak, float64 for the rest (very high Q)",
+        ),
     }
 
     def _prepare(self) -> None:
         self.validate_model()
+        self._size_input = self.sources.get("size")
+        self._size = 1.0  # the fragment size of the current design
         model = self.model
         self._level_gain = (
             reference_gain(model, self.sample_rate) if self.values["level"] == "calibrated" else 1.0
@@ -323,6 +401,14 @@ class ModalBank(ModelParams, UGen):
         self._floor = float(self.values["floor"])
         self._input = self.sources["input"]
         self._ramping = False
+        self._mixed = self.values["precision"] == "mixed"
+        self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
+        if self._mixed:
+            e = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            self._mixed_step = specialise(
+                mixed_step, self.out, self.out, 0, 0, e.wide_bank, e.wide_meta, e.narrow_coef, e.narrow_state,
+                e.narrow_meta, self._floor, self.last, e.narrow_last,
+            )  # fmt: skip
         self.budgeted = False
         self._faded = np.zeros(k, dtype=bool)
         self._weights = a_weighting_power(self.model.frequencies[self.order])
@@ -337,12 +423,13 @@ class ModalBank(ModelParams, UGen):
         internal order, for the current freq_scale and decay_scale; kept between calls, so
         a location or gain change (every impact of a rigid scene) only recomputes gains."""
         v = self.values
-        key = (v["freq_scale"], v["decay_scale"])
+        key = (v["freq_scale"], v["decay_scale"], self._size)
         if self._poles is None or self._poles[0] != key:
             o = self.order
+            retune = 1.0 / np.sqrt(self._size)
             freqs, decays = (
-                self.model.frequencies[o] * v["freq_scale"],
-                self.model.decays[o] * v["decay_scale"],
+                self.model.frequencies[o] * (v["freq_scale"] * retune),
+                self.model.decays[o] * (v["decay_scale"] * retune),
             )
             c1, c2, s = design(freqs, decays, self.sample_rate)
             sounding = c2 > 0
@@ -363,7 +450,7 @@ class ModalBank(ModelParams, UGen):
         if gains is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
-            scale = v["gain"] * self._level_gain / self.sample_rate
+            scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self.model.gains_at(v["location"])[self.order]
             self._gain_rows[key] = gains
         out = np.empty_like(poles)
@@ -372,8 +459,26 @@ class ModalBank(ModelParams, UGen):
         out[3] = gains * poles[3]
         return out
 
+    def _settle(self) -> None:
+        """Mixed precision: move the split's state back into ``self.bank`` (float64), before
+        anything reads or changes the bank's coefficients or state."""
+        split = self._split
+        if split is None:
+            return
+        self._split = None
+        y, dy = split.narrow_state.astype(np.float64)
+        self.y[:, split.wide] = split.wide_bank[4:]
+        self.y[0, split.narrow] = y
+        self.y[1, split.narrow] = y - dy
+        self.meta[0] = self.meta[2]
+
     def _reset(self) -> None:
+        self._split = None
         self._pending = deque()  # (frame, key, value, jump, ramp) of set_param_at
+        if self._size != 1.0:
+            self._size = 1.0
+            self._refresh_design_cache()
+            self.target[:] = self._fresh
         self.y[:] = 0.0
         self.last[0] = 0.0
         self.coef[:] = self.target
@@ -392,6 +497,7 @@ class ModalBank(ModelParams, UGen):
         self._unit2 = (g * self.sample_rate) ** 2 * self._poles[3]
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        self._settle()
         self._refresh_design_cache()
         self.target[:] = self._fresh
         ramp = self.ramp_samples()
@@ -409,22 +515,71 @@ class ModalBank(ModelParams, UGen):
         self._pending.append((frame, key, value, jump, ramp))
 
     def process(self, start: int, n: int) -> None:
-        if not self._pending:
+        sizes = self._size_changes(n) if self._size_input is not None else ()
+        if not self._pending and not len(sizes):
             self._span(self._input.out, self.out, start, n)
             return
-        inp, out, pending, done = self._input.out, self.out, self._pending, 0
-        while pending and pending[0][0] < start + n:
-            frame, key, value, jump, ramp = pending.popleft()
-            if frame - start > done:
-                self._span(inp[done:], out[done:], start + done, frame - start - done)
-                done = frame - start
-            self.set_param(key, value, jump=jump, ramp=ramp)
+        inp, out, pending, done, k = self._input.out, self.out, self._pending, 0, 0
+        while True:
+            at_event = pending[0][0] - start if pending and pending[0][0] < start + n else n
+            at_size = sizes[k] if k < len(sizes) else n
+            at = min(at_event, at_size)
+            if at >= n:
+                break
+            if at > done:
+                self._span(inp[done:], out[done:], start + done, at - done)
+                done = at
+            if at_size <= at_event:
+                self._retune(float(self._size_input.out[at_size]))
+                k += 1
+            else:
+                frame, key, value, jump, ramp = pending.popleft()
+                self.set_param(key, value, jump=jump, ramp=ramp)
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
 
+    def _size_changes(self, n: int) -> np.ndarray:
+        """Offsets in this block where the size input differs from the size before it."""
+        s = self._size_input.out[:n]
+        prev = np.empty(n)
+        prev[0] = self._size if s[0] > 0.0 else s[0]
+        prev[1:] = s[:-1]
+        return np.flatnonzero((s != prev) & (s > 0.0))
+
+    def _retune(self, size: float) -> None:
+        """Jump to the design for fragment size ``size``, keeping every ringing mode's
+        amplitude and phase: y[n] = A R^n sin(n theta + phi) continues with the new
+        R and theta from the same (A, phi) at the last output sample."""
+        if size == self._size:
+            return
+        self._settle()
+        c1, c2 = self.coef[0].copy(), self.coef[1].copy()
+        self._size = size
+        self._refresh_design_cache()
+        self.target[:] = self._fresh
+        self.coef[:] = self._fresh
+        self.meta[1] = 0
+        self._ramping = False
+        y1, y2 = self.y
+        old, new = c2 > 0.0, self.coef[1] > 0.0
+        r = np.sqrt(np.where(old, c2, 1.0))
+        cos_t = np.where(old, c1 / (2.0 * r), 1.0)
+        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 1e-24))
+        a_sin = y1  # A sin(phi) at the last sample
+        a_cos = (y1 * cos_t - r * y2) / sin_t  # A cos(phi)
+        r_new = np.sqrt(np.where(new, self.coef[1], 1.0))
+        cos_n = np.where(new, self.coef[0] / (2.0 * r_new), 1.0)
+        sin_n = np.sqrt(np.maximum(1.0 - cos_n * cos_n, 0.0))
+        keep = old & new
+        y2[:] = np.where(keep, (a_sin * cos_n - a_cos * sin_n) / r_new, 0.0)
+        y1[:] = np.where(keep, y1, 0.0)
+
     def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""
-        if self._ramping:
+        if self._mixed and not self._ramping and not self.budgeted:
+            self._span_mixed(inp, out, start, n)
+        elif self._ramping:
+            self._settle()
             y, meta = self.y, self.meta
             meta[0] = meta[2]
             meta[1] = resonate_ramp(
@@ -432,15 +587,28 @@ class ModalBank(ModelParams, UGen):
             )
             self._ramping = meta[1] > 0
         else:
+            self._settle()
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
         if self.budgeted:
             self._impulse += float(np.abs(inp[:n]).sum()) / self.sample_rate
+
+    def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
+        """As :meth:`_span` with the modes split by precision: float64 modes write out,
+        float32 modes add to it."""
+        split = self._split
+        if split is None:
+            split = self._split = split_by_precision(self.bank, self.sample_rate)
+        self._mixed_step(
+            inp, out, start, n, split.wide_bank, split.wide_meta, split.narrow_coef, split.narrow_state,
+            split.narrow_meta, self._floor, self.last, split.narrow_last,
+        )  # fmt: skip
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
         """Per mode, in internal order: importance for this period, importance for the
         next one (amplitude decayed by a period, the impulses scheduled then), and whether
         it sounds now. See jassy.anytime."""
+        self._settle()
         impulse = max(self._impulse, impulse_now)
         self._impulse = 0.0
         y1, y2 = self.y
@@ -455,6 +623,7 @@ class ModalBank(ModelParams, UGen):
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
         rest; the computed modes are moved to the front. Returns how many are computed."""
+        self._settle()
         old_active = int(self.meta[0])
         n_keep, n_fade = int(keep.sum()), int(fade.sum())
         if not n_fade and not self._faded.any() and n_keep == old_active and keep[:old_active].all():
@@ -488,6 +657,7 @@ class ModalBank(ModelParams, UGen):
         return n_keep + n_fade
 
     def state_arrays(self) -> dict[str, np.ndarray]:
+        self._settle()
         return {
             "bank": self.bank,
             "delta": self.delta,
@@ -497,4 +667,5 @@ class ModalBank(ModelParams, UGen):
         }
 
     def _state_restored(self) -> None:
+        self._split = None
         self._ramping = self.meta[1] > 0

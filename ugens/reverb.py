@@ -3,23 +3,24 @@
 Feedback delay network (Jot & Chaigne, "Digital delay networks for designing artificial
 reverberators", AES 90th Convention, 1991). N = 8 delay lines of lengths m_j (mutually
 prime, spread around the mean free path ``room_size`` / c) are fed back through the
-orthogonal (lossless) Hadamard matrix H / sqrt(N). Jot's rule gives line j the gain
+orthogonal (lossless) Hadamard matrix H / sqrt(N). Jot's rule: a line whose delay is m_j
+samples attenuates by
 
-    g_j = 10^(-3 m_j / (T60 fs)),
+    A_j(f) = -60 m_j / (T60(f) fs)  dB,
 
-which multiplies every pole of the lossless network by the same radius, so that every
-mode decays 60 dB in exactly T60 s, whatever the delays.
+which multiplies every pole of the lossless network near f by the same radius, so every
+mode at f decays 60 dB in T60(f) s, whatever the delays.
 
-Frequency-dependent T60. The input, after ``pre_delay``, is split into seven octave
-bands centred on 125 Hz ... 8 kHz by a tree of 8th-order Butterworth crossovers at the
-band edges 125 sqrt(2) 2^k Hz (a Butterworth low-pass and high-pass of one cut-off are
-power complementary, |LP|^2 + |HP|^2 = 1, so the bands' energies add up to the input's).
-Each band drives its own set of N lines with the gains of its ``t60`` value; the sets
-share delay lengths (as one network whose absorption depends on frequency, Jot's
-design) and are computed side by side. Outputs: ``dry`` x + ``wet`` (sum of the lines
-with weights 1/sqrt(N)), and on the extra output ``right`` the same with alternating
-signs (a decorrelated second channel for stereo). JASS counterpart: ``CombReverb``;
-SDT: ``reverb~``.
+Frequency-dependent T60 (Jot's absorption filters). Each line carries a cascade of
+second-order sections (RBJ cookbook: a low shelf at the 125/250 Hz band edge, peaking
+filters at 250 Hz ... 4 kHz, one octave wide, a high shelf at the 4k/8k edge, and a flat
+gain) whose dB response is fitted by least squares to A_j(f) at three frequencies per
+octave band, the sections' responses superposing in dB (the graphic equaliser design of
+Valimaki & Liski, "Accurate reverberation time control in feedback delay networks",
+DAFx 2017, one fit repeated with the fitted gains). Outputs: ``dry`` x + ``wet`` (sum
+of the lines with weights 1/sqrt(N)), and on the extra output ``right`` the same with
+alternating signs (a decorrelated second channel for stereo). JASS counterpart:
+``CombReverb``; SDT: ``reverb~``.
 """
 
 from __future__ import annotations
@@ -35,25 +36,23 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 
 #: Octave-band centres (Hz) of the ``t60`` values.
 BANDS = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0)
-#: Delay lines per band.
+#: Delay lines.
 LINES = 8
-#: Bands stored per line and delay slot (the kernel keeps a band's 8 lines in registers).
-SLOTS = len(BANDS)
-#: Order of the Butterworth crossovers and the quality factors of their biquads.
-CROSSOVER_ORDER = 8
-BUTTERWORTH_Q = tuple(
-    1.0 / (2.0 * math.cos((2 * k + 1) * math.pi / (2 * CROSSOVER_ORDER))) for k in range(CROSSOVER_ORDER // 2)
-)
+#: Absorption filter sections per line: low shelf, five peaks, high shelf.
+SECTIONS = len(BANDS)
+#: Quality factor of the peaking sections (one octave between the -3 dB points of the
+#: gain in dB) and of the shelves (slope S = 1).
+PEAK_Q = math.sqrt(2.0)
+SHELF_Q = 1.0 / math.sqrt(2.0)
 #: Line lengths relative to the mean free path (spread 0.6 .. 1.5, irregular).
 SPREAD = (0.61, 0.73, 0.82, 0.95, 1.04, 1.17, 1.31, 1.49)
 #: Signs with which the input enters the lines (irregular, so no line pair cancels).
 INPUT_SIGNS = np.array([1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0])
-_LOWPASS, _HIGHPASS = 0, 1
+_LOW_SHELF, _PEAK, _HIGH_SHELF = 0, 1, 2
 
 
 def crossover_frequencies() -> np.ndarray:
@@ -82,31 +81,79 @@ def line_lengths(room_size: float, c: float, fs: float) -> np.ndarray:
     return np.array(lengths, dtype=np.int64)
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def _section(x, coef, state):
-    """One DF2T biquad sample; coef [b0, b1, b2, a1, a2], state [s1, s2]."""
-    y = coef[0] * x + state[0]
-    state[0] = coef[1] * x - coef[3] * y + state[1]
-    state[1] = coef[2] * x - coef[4] * y
-    return y
+def rbj_section(kind: int, freq: float, gain_db: float, fs: float) -> np.ndarray:
+    """RBJ audio-EQ cookbook low shelf, peaking or high shelf: [b0, b1, b2, a1, a2]."""
+    a = 10.0 ** (gain_db / 40.0)
+    w0 = 2.0 * math.pi * freq / fs
+    cw, sw = math.cos(w0), math.sin(w0)
+    if kind == _PEAK:
+        alpha = sw / (2.0 * PEAK_Q)
+        b = [1.0 + alpha * a, -2.0 * cw, 1.0 - alpha * a]
+        den = [1.0 + alpha / a, -2.0 * cw, 1.0 - alpha / a]
+    else:
+        alpha = sw / (2.0 * SHELF_Q)
+        k = 2.0 * math.sqrt(a) * alpha
+        s = 1.0 if kind == _LOW_SHELF else -1.0
+        b = [
+            a * ((a + 1) - s * (a - 1) * cw + k),
+            s * 2 * a * ((a - 1) - s * (a + 1) * cw),
+            a * ((a + 1) - s * (a - 1) * cw - k),
+        ]
+        den = [
+            (a + 1) + s * (a - 1) * cw + k,
+            -s * 2 * ((a - 1) + s * (a + 1) * cw),
+            (a + 1) + s * (a - 1) * cw - k,
+        ]
+    return np.array([b[0], b[1], b[2], den[1], den[2]]) / den[0]
+
+
+def _response_db(coef: np.ndarray, freqs: np.ndarray, fs: float) -> np.ndarray:
+    z = np.exp(-2j * np.pi * freqs / fs)
+    h = (coef[0] + coef[1] * z + coef[2] * z * z) / (1.0 + coef[3] * z + coef[4] * z * z)
+    return 20.0 * np.log10(np.abs(h))
+
+
+def _section_layout(fs: float) -> list[tuple[int, float]]:
+    """(kind, frequency) of the sections, frequencies kept below 0.45 fs."""
+    edges = crossover_frequencies()
+    layout = [(_LOW_SHELF, edges[0])] + [(_PEAK, f) for f in BANDS[1:-1]] + [(_HIGH_SHELF, edges[-1])]
+    return [(kind, min(f, 0.45 * fs)) for kind, f in layout]
+
+
+def absorption_filter(attenuation_db: np.ndarray, fs: float) -> np.ndarray:
+    """Sections (SECTIONS, 5) whose cascade attenuates by ``attenuation_db`` (one value
+    per octave band, dB, negative) at three points per band; the flat gain is folded into
+    the first section's numerator."""
+    grid = np.array([c * 2.0**k for c in BANDS for k in (-1 / 3, 0.0, 1 / 3)])
+    keep = grid < 0.45 * fs
+    grid, target = grid[keep], np.repeat(attenuation_db, 3)[keep]
+    layout = _section_layout(fs)
+    gains = np.full(len(layout), float(np.mean(attenuation_db)) or -1.0)
+    for _ in range(2):  # design at the fitted gains, refit
+        per_db = [
+            _response_db(rbj_section(kind, f, g if abs(g) > 1e-6 else -1e-3, fs), grid, fs)
+            / (g if abs(g) > 1e-6 else -1e-3)
+            for (kind, f), g in zip(layout, gains, strict=True)
+        ]
+        basis = np.column_stack([np.ones_like(grid), *per_db])
+        solution = np.linalg.lstsq(basis, target, rcond=None)[0]
+        flat, gains = solution[0], solution[1:]
+    sections = np.array([rbj_section(kind, f, g, fs) for (kind, f), g in zip(layout, gains, strict=True)])
+    sections[0, :3] *= 10.0 ** (flat / 20.0)
+    return sections
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, gains, signs, par, band_in):
-    """n samples. pre: pre-delay ring; split (crossovers, 2 h, 5): h low-pass then
-    h high-pass biquads per crossover; ring: the lines' samples, flat (line, slot in the
-    line, band); ist = [pre-delay write, ring write]; gains: flat (band, line); signs: the
-    input weights of the lines; par = [pre-delay samples, dry, wet]; band_in (bands):
-    scratch. The network is written out for LINES = 8."""
+def reverb_run(x, out, right, n, pre, ring, ist, lengths, sections, filter_state, signs, par, line):
+    """n samples. pre: pre-delay ring; ring (LINES, size): the lines; ist = [pre-delay
+    write, ring write]; sections (SECTIONS, 5, LINES): each line's absorption filter
+    [b0, b1, b2, a1, a2]; filter_state (SECTIONS, 2, LINES); signs: the input weights of
+    the lines; par = [pre-delay samples, dry, wet]; line (LINES): scratch."""
     pre_len = int(par[0])
     dry = par[1]
     wet = par[2]
     pre_size = pre.size
-    size = ring.size // (LINES * SLOTS)
-    mask = size - 1
-    n_bands = band_in.size
-    n_cross = split.shape[0]
-    half = split.shape[1] // 2
+    mask = ring.shape[1] - 1
     norm = 1.0 / math.sqrt(LINES)
     pw = ist[0]
     w = ist[1]
@@ -115,64 +162,38 @@ def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, ga
         r = pw - pre_len
         if r < 0:
             r += pre_size
-        v = pre[r]
+        v = norm * pre[r]
         pw += 1
         if pw == pre_size:
             pw = 0
-        # octave bands: low-pass off the bottom band, pass the rest up the tree
-        for c in range(n_cross):
-            low = v
-            for k in range(half):
-                low = _section(low, split[c, k], split_state[c, k])
-                v = _section(v, split[c, half + k], split_state[c, half + k])
-            band_in[c] = low
-        band_in[n_cross] = v
         left_sum = 0.0
         right_sum = 0.0
-        r0 = ((w - lengths[0]) & mask) * SLOTS
-        r1 = (size + ((w - lengths[1]) & mask)) * SLOTS
-        r2 = (2 * size + ((w - lengths[2]) & mask)) * SLOTS
-        r3 = (3 * size + ((w - lengths[3]) & mask)) * SLOTS
-        r4 = (4 * size + ((w - lengths[4]) & mask)) * SLOTS
-        r5 = (5 * size + ((w - lengths[5]) & mask)) * SLOTS
-        r6 = (6 * size + ((w - lengths[6]) & mask)) * SLOTS
-        r7 = (7 * size + ((w - lengths[7]) & mask)) * SLOTS
-        wb = w * SLOTS
-        for b in range(n_bands):
-            # the 8 lines of band b in registers: read, sum to the outputs, attenuate
-            y0 = ring[r0 + b]
-            y1 = ring[r1 + b]
-            y2 = ring[r2 + b]
-            y3 = ring[r3 + b]
-            y4 = ring[r4 + b]
-            y5 = ring[r5 + b]
-            y6 = ring[r6 + b]
-            y7 = ring[r7 + b]
-            left_sum += ((y0 + y1) + (y2 + y3)) + ((y4 + y5) + (y6 + y7))
-            right_sum += ((y0 - y1) + (y2 - y3)) + ((y4 - y5) + (y6 - y7))
-            g = b * LINES
-            y0 *= gains[g]
-            y1 *= gains[g + 1]
-            y2 *= gains[g + 2]
-            y3 *= gains[g + 3]
-            y4 *= gains[g + 4]
-            y5 *= gains[g + 5]
-            y6 *= gains[g + 6]
-            y7 *= gains[g + 7]
-            # 8-point fast Walsh-Hadamard transform
-            a0, a1, a2, a3 = y0 + y1, y0 - y1, y2 + y3, y2 - y3
-            a4, a5, a6, a7 = y4 + y5, y4 - y5, y6 + y7, y6 - y7
-            c0, c1, c2, c3 = a0 + a2, a1 + a3, a0 - a2, a1 - a3
-            c4, c5, c6, c7 = a4 + a6, a5 + a7, a4 - a6, a5 - a7
-            x_b = band_in[b]
-            ring[wb + b] = norm * (c0 + c4 + signs[0] * x_b)
-            ring[size * SLOTS + wb + b] = norm * (c1 + c5 + signs[1] * x_b)
-            ring[2 * size * SLOTS + wb + b] = norm * (c2 + c6 + signs[2] * x_b)
-            ring[3 * size * SLOTS + wb + b] = norm * (c3 + c7 + signs[3] * x_b)
-            ring[4 * size * SLOTS + wb + b] = norm * (c0 - c4 + signs[4] * x_b)
-            ring[5 * size * SLOTS + wb + b] = norm * (c1 - c5 + signs[5] * x_b)
-            ring[6 * size * SLOTS + wb + b] = norm * (c2 - c6 + signs[6] * x_b)
-            ring[7 * size * SLOTS + wb + b] = norm * (c3 - c7 + signs[7] * x_b)
+        for j in range(LINES):
+            y = ring[j, (w - lengths[j]) & mask]
+            left_sum += y
+            right_sum += y if j % 2 == 0 else -y
+            line[j] = y
+        # absorption filters, all lines side by side (direct form II transposed)
+        for k in range(SECTIONS):
+            for j in range(LINES):
+                u = line[j]
+                y = sections[k, 0, j] * u + filter_state[k, 0, j]
+                filter_state[k, 0, j] = sections[k, 1, j] * u - sections[k, 3, j] * y + filter_state[k, 1, j]
+                filter_state[k, 1, j] = sections[k, 2, j] * u - sections[k, 4, j] * y
+                line[j] = y
+        # 8-point fast Walsh-Hadamard transform
+        a0, a1, a2, a3 = line[0] + line[1], line[0] - line[1], line[2] + line[3], line[2] - line[3]
+        a4, a5, a6, a7 = line[4] + line[5], line[4] - line[5], line[6] + line[7], line[6] - line[7]
+        c0, c1, c2, c3 = a0 + a2, a1 + a3, a0 - a2, a1 - a3
+        c4, c5, c6, c7 = a4 + a6, a5 + a7, a4 - a6, a5 - a7
+        ring[0, w] = norm * (c0 + c4) + signs[0] * v
+        ring[1, w] = norm * (c1 + c5) + signs[1] * v
+        ring[2, w] = norm * (c2 + c6) + signs[2] * v
+        ring[3, w] = norm * (c3 + c7) + signs[3] * v
+        ring[4, w] = norm * (c0 - c4) + signs[4] * v
+        ring[5, w] = norm * (c1 - c5) + signs[5] * v
+        ring[6, w] = norm * (c2 - c6) + signs[6] * v
+        ring[7, w] = norm * (c3 - c7) + signs[7] * v
         w = (w + 1) & mask
         out[i] = dry * x[i] + wet * norm * left_sum
         right[i] = dry * x[i] + wet * norm * right_sum
@@ -182,8 +203,9 @@ def reverb_run(x, out, right, n, pre, split, split_state, ring, ist, lengths, ga
 
 @register
 class Reverb(UGen):
-    """Room reverb: Jot feedback delay network (8 lines, Hadamard feedback) with a T60 per
-    octave band (125 Hz - 8 kHz) and a pre-delay; extra output ``right`` for stereo.
+    """Room reverb: Jot feedback delay network (8 lines, Hadamard feedback, an absorption
+    filter per line) with a T60 per octave band (125 Hz - 8 kHz) and a pre-delay; extra
+    output ``right`` for stereo.
 
     Model and sources in the module docstring; JASS ``CombReverb``, SDT ``reverb~``."""
 
@@ -228,24 +250,17 @@ class Reverb(UGen):
         v, fs = self.values, self.sample_rate
         self.lengths = line_lengths(v["room_size"], v["c"], fs)
         size = 1 << int(math.ceil(math.log2(int(self.lengths.max()) + 1)))
-        self.ring = np.zeros(LINES * size * SLOTS)
+        self.ring = np.zeros((LINES, size))
         t60 = np.asarray(v["t60"], dtype=np.float64)
-        # Jot's gains, flat (band, line)
-        self.gains = (10.0 ** (-3.0 * self.lengths[None, :] / (t60[:, None] * fs))).ravel()
+        # Jot's attenuation per line and band (dB), realised by each line's filter
+        filters = [absorption_filter(-60.0 * m / (t60 * fs), fs) for m in self.lengths]
+        self.sections = np.ascontiguousarray(np.stack(filters, axis=-1))
+        self.filter_state = np.zeros((SECTIONS, 2, LINES))
         pre_len = int(round(v["pre_delay"] * fs))
         self.pre = np.zeros(pre_len + 1)
         self.par = np.array([pre_len, v["dry"], v["wet"]], dtype=np.float64)
-        edges = crossover_frequencies()
-        half = len(BUTTERWORTH_Q)
-        self.split = np.zeros((edges.size, 2 * half, 5))
-        for c, f in enumerate(edges):
-            f = min(f, 0.45 * fs)
-            for k, q in enumerate(BUTTERWORTH_Q):
-                design_biquad(_LOWPASS, f, q, 1.0 / fs, self.split[c, k])
-                design_biquad(_HIGHPASS, f, q, 1.0 / fs, self.split[c, half + k])
-        self.split_state = np.zeros((edges.size, 2 * half, 2))
         self.ist = np.zeros(2, dtype=np.int64)
-        self.band_in = np.zeros(SLOTS)
+        self.line = np.zeros(LINES)
         self._run = specialise(reverb_run, *self._arguments(0))
 
     def _arguments(self, n: int) -> tuple:
@@ -255,21 +270,20 @@ class Reverb(UGen):
             self.extra["right"],
             n,
             self.pre,
-            self.split,
-            self.split_state,
             self.ring,
             self.ist,
             self.lengths,
-            self.gains,
+            self.sections,
+            self.filter_state,
             INPUT_SIGNS,
             self.par,
-            self.band_in,
+            self.line,
         )
 
     def _reset(self) -> None:
         self.ring[:] = 0.0
         self.pre[:] = 0.0
-        self.split_state[:] = 0.0
+        self.filter_state[:] = 0.0
         self.ist[:] = 0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
@@ -285,7 +299,7 @@ class Reverb(UGen):
         return {
             "ring": self.ring,
             "pre": self.pre,
-            "split_state": self.split_state,
+            "filter_state": self.filter_state,
             "ist": self.ist,
             "par": self.par,
         }

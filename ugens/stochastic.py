@@ -142,13 +142,14 @@ def log_event(log, cnt, t0, energy, size, impulse):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def micro_impacts(
-    out, size_out, start, n, fs, density, crush, frag, mass, T, mode, st, cnt, rng, pulses, log
+    out, size_out, start, n, fs, density, crush, frag, spread, mass, T, mode, st, cnt, rng, pulses, log
 ):
     """Crumple / Break kernel for frames start .. start + n - 1; returns the pulse table.
 
     Per frame idx: output the pulses and the held size, then fire the Poisson events of
     the interval [idx, idx + 1): their pulses start at the next frame. density, crush,
-    frag: per-sample density (1/s), crushing energy (J) and fragment scale. mode 0:
+    frag: per-sample density (1/s), crushing energy (J) and fragment scale; spread: SDT's
+    fragmentation f, each size times 1 - f + f U (drawn only for f > 0). mode 0:
     rate = density; mode 1 (break): rate = density * energy left / budget; mode 2 (break
     as SDT): that rate, each event's energy and size also times energy left / budget,
     and the run ends once the energy left is below one crushing energy.
@@ -174,7 +175,10 @@ def micro_impacts(
                 break
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
             energy = crush[i] * min(max(x, ENERGY_CLIP[0]), ENERGY_CLIP[1])
-            size = frag[i] * (0.5 + 0.5 * u01(rng))
+            size = frag[i]
+            if spread > 0.0:
+                size *= 1.0 - spread + spread * u01(rng)
+            size *= 0.5 + 0.5 * u01(rng)
             if mode == _BREAK_SDT:
                 energy *= st[_LEFT] / st[_BUDGET]
                 size *= st[_LEFT] / st[_BUDGET]
@@ -351,6 +355,7 @@ class _Granular(_MicroImpacts):
             x,
             1.0,
             1.0,
+            1.0,
             0,
             self.st,
             self.cnt,
@@ -388,6 +393,7 @@ class _Granular(_MicroImpacts):
             self._per_sample(r["density"], b["density"], n),
             self._per_sample(r["crushing_energy"], b["crushing_energy"], n),
             self._per_sample(r["fragment"], b["fragment"], n),
+            v.get("fragmentation", 0.0),
             v["mass"],
             self._pulse_samples(),
             self._mode,
@@ -408,9 +414,13 @@ class Crumple(_Granular):
 
     Between ``start`` and ``stop`` micro-impacts occur at ``density`` per second, each of
     energy E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), fragment size
-    ``fragment`` * U(0.5, 1), impulse sqrt(2 ``mass`` energy) N s, as a 1 - cos pulse of
-    ``duration``. ``start`` with ``energy`` (J) crumples a finite budget: the last
-    micro-impact takes what is left and the crumpling stops. Source: SDT (Baldan et al.
+    ``fragment`` * (1 - f + f U) * U(0.5, 1) (f = ``fragmentation``, SDT's
+    ``SDTCrumpling_dsp``), impulse sqrt(2 ``mass`` energy) N s, as a 1 - cos pulse of
+    ``duration``. Connect ``size`` to a ModalBank's ``size`` input for SDT's crumpling
+    model: each event retunes the resonator to its fragment size (frequencies and decay
+    rates times 1/sqrt(size), displacement per unit impulse times 1/sqrt(size)).
+    ``start`` with ``energy`` (J) crumples a finite budget: the last micro-impact takes
+    what is left and the crumpling stops. Source: SDT (Baldan et al.
     2017), Rocchesso & Fontana, "The Sounding Object" (2003) ch. 8.
     """
 
@@ -419,6 +429,14 @@ class Crumple(_Granular):
         "density": _DENSITY,
         "crushing_energy": _CRUSH,
         "fragment": _FRAGMENT,
+        "fragmentation": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=1.0,
+            fixed=True,
+            doc="fragmentation spread f: size times 1 - f + f U (SDT crumpling; 0: none)",
+        ),
         "mass": _MASS,
         "duration": _DURATION,
         "seed": _SEED,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import time
 
 from jassy.errors import JassyError
@@ -214,6 +215,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
     names = tuple(os.path.splitext(os.path.basename(p))[0] for p in args.recordings)
     if len(set(names)) != len(names):
         names = tuple(f"r{i}" for i in range(len(names)))
+    if not args.quiet and sys.stderr.isatty():  # a progress note on a terminal, as renders show
+        seconds = sum(len(x) for x in sigs) / rates[0]
+        print(
+            f"fitting {len(sigs)} recording(s), {seconds:.1f} s of audio (Ctrl-C stops) ...", file=sys.stderr
+        )
     t0 = time.perf_counter()
     result = fit_recordings(
         sigs,
