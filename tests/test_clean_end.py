@@ -90,11 +90,22 @@ def test_play_ends_cleanly_on_sigterm_with_no_process_left(jack, short_patch):
     sig = signal.SIGTERM
     recorder = FrameRecorder()
     proc, lines = start_command(
-        ["play", str(short_patch), "--duration", "0", "-q", "--haptic-udp", recorder.address]
+        # the ring mode has child processes (producer, UDP sender) whose end this checks
+        [
+            "play",
+            str(short_patch),
+            "--duration",
+            "0",
+            "-q",
+            "--mode",
+            "ring",
+            "--haptic-udp",
+            recorder.address,
+        ]
     )
     try:
         wait_for(lines, "until stopped", proc)
-        time.sleep(1.0)  # beyond the patch's 0.5 s: --duration 0 plays until stopped
+        time.sleep(1.5)  # beyond the patch's 0.5 s: --duration 0 plays until stopped
         assert proc.poll() is None, "".join(lines)
         family = session_processes(proc.pid)
         assert len(family) >= 3  # the command, its producer and its UDP sender
@@ -108,7 +119,7 @@ def test_play_ends_cleanly_on_sigterm_with_no_process_left(jack, short_patch):
     assert recorder.wait_final(2.0), "no final frame"
     frames = recorder.stop()
     assert frames[-1].flags & FLAG_FINAL and np.all(frames[-1].force == 0)
-    assert frames[-1].sample_time >= 0.9 * 48000  # it played on for 1 s, past the 0.5 s
+    assert frames[-1].sample_time >= 0.6 * 48000  # it played on past the patch's 0.5 s
     # before the final frame: the fade (flagged) down to zero force
     fade = [f for f in frames if f.flags & FLAG_WATCHDOG]
     assert fade and frames[-2].force[0] == 0.0

@@ -509,7 +509,8 @@ def test_missing_mesh_is_reported_before_heavy_imports(tmp_path):
     code = (
         "import sys\nfrom jassy.cli import main\n"
         f"assert main(['modes', {str(tmp_path / 'part.stl')!r}, '-o', {str(tmp_path / 'p.toml')!r}]) == 2\n"
-        "print(sorted(m for m in ('trimesh', 'physics.modal.fem', 'physics.modal.meshes') if m in sys.modules))"
+        "heavy = ('trimesh', 'physics.modal.fem', 'physics.modal.meshes')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))"
     )
     out = subprocess.run(
         [sys.executable, "-c", code],

@@ -22,6 +22,8 @@ sound start on the force's first non-zero frame, as the exact response does.
 
 Coefficients are designed in float64 and the state is float64: float32 state fails the
 -60 dB accuracy bound for low, lightly damped modes (tests/test_modal_bank.py shows both).
+With ``precision = "mixed"`` the modes whose float32 error bound allows it run in float32
+in the delta form of ugens.modal_f32 (twice the SIMD lanes), the rest in float64.
 
 Parameter changes ramp the coefficients (c1, c2, g, d) linearly, as SuperCollider's Ringz
 does; along a ``freq_scale`` ramp it is therefore cos(theta), i.e. about f^2, that moves
@@ -37,7 +39,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 from __future__ import annotations
 
 from collections import deque
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -51,6 +53,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
+from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -199,6 +202,24 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
 
 
+@nb.njit(fastmath=FASTMATH, cache=True)
+def mixed_step(
+    force, out, start, n, wide_bank, wide_meta, coef, state, narrow_meta, floor, last, narrow_last
+):
+    """One sub-block of a bank split by precision (MixedSplit): the float64 modes by
+    :func:`bank_step` (rows c1, c2, g, d, y1, y2) write out[:n], the float32 delta-form
+    modes (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
+    fp = last[0]
+    if wide_meta[2] > 0:
+        bank_step(force, out, start, n, wide_bank, wide_meta, floor, last)
+    else:
+        for i in range(n):
+            out[i] = 0.0
+    narrow_last[0] = fp
+    delta_step(force, out, start, n, coef, state, narrow_meta, floor, narrow_last, FLUSH_PERIOD)
+    last[0] = force[n - 1]
+
+
 def design(frequencies, decays, sample_rate):
     """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64.
 
@@ -211,6 +232,44 @@ def design(frequencies, decays, sample_rate):
     c2 = np.where(ok, R * R, 0.0)
     s = np.where(ok, R * np.sin(theta), 0.0)
     return c1, c2, s
+
+
+class MixedSplit(NamedTuple):
+    """A ModalBank's modes split by precision (``precision = "mixed"``): internal indices
+    of the float64 modes (``wide``) with their own bank rows (c1, c2, g, d, y1, y2) and
+    meta, and of the float32 modes (``narrow``) with delta-form rows (c0, b2, g, d) and
+    state (y, Delta), their meta [active, all] and the force sample before the block."""
+
+    wide: np.ndarray
+    wide_bank: np.ndarray
+    wide_meta: np.ndarray
+    narrow: np.ndarray
+    narrow_coef: np.ndarray
+    narrow_state: np.ndarray
+    narrow_meta: np.ndarray
+    narrow_last: np.ndarray
+
+
+def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
+    """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
+    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance."""
+    c1, c2, g, d, y1, y2 = bank
+    fits = float32_error(c1, c2, sample_rate) <= tolerance
+    wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
+    c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
+    coef = np.ascontiguousarray(np.stack([c0, b2, g[narrow], d[narrow]]), dtype=np.float32)
+    state = np.ascontiguousarray(np.stack([y1[narrow], y1[narrow] - y2[narrow]]), dtype=np.float32)
+    nw, nn = wide.size, narrow.size
+    return MixedSplit(
+        wide,
+        np.ascontiguousarray(bank[:, wide]),
+        np.array([nw, 0, nw], dtype=np.int64),
+        narrow,
+        coef,
+        state,
+        np.array([nn, nn], dtype=np.int64),
+        np.zeros(1),
+    )
 
 
 class ModelParams:
@@ -310,6 +369,14 @@ class ModalBank(ModelParams, UGen):
             fixed=True,
             doc="state magnitude below which a silent mode is zeroed and skipped",
         ),
+        "precision": ParamSpec(
+            "str",
+            "float64",
+            choices=("float64", "mixed"),
+            fixed=True,
+            doc="'float64': every mode in float64; 'mixed': float32 (delta form) for the modes whose "
+            "error bound stays 10 dB inside -60 dB of their peak, float64 for the rest (very high Q)",
+        ),
     }
 
     def _prepare(self) -> None:
@@ -335,6 +402,14 @@ class ModalBank(ModelParams, UGen):
         self._floor = float(self.values["floor"])
         self._input = self.sources["input"]
         self._ramping = False
+        self._mixed = self.values["precision"] == "mixed"
+        self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
+        if self._mixed:
+            e = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            self._mixed_step = specialise(
+                mixed_step, self.out, self.out, 0, 0, e.wide_bank, e.wide_meta, e.narrow_coef, e.narrow_state,
+                e.narrow_meta, self._floor, self.last, e.narrow_last,
+            )  # fmt: skip
         self.budgeted = False
         self._faded = np.zeros(k, dtype=bool)
         self._weights = a_weighting_power(self.model.frequencies[self.order])
@@ -385,7 +460,21 @@ class ModalBank(ModelParams, UGen):
         out[3] = gains * poles[3]
         return out
 
+    def _settle(self) -> None:
+        """Mixed precision: move the split's state back into ``self.bank`` (float64), before
+        anything reads or changes the bank's coefficients or state."""
+        split = self._split
+        if split is None:
+            return
+        self._split = None
+        y, dy = split.narrow_state.astype(np.float64)
+        self.y[:, split.wide] = split.wide_bank[4:]
+        self.y[0, split.narrow] = y
+        self.y[1, split.narrow] = y - dy
+        self.meta[0] = self.meta[2]
+
     def _reset(self) -> None:
+        self._split = None
         self._pending = deque()  # (frame, key, value, jump, ramp) of set_param_at
         if self._size != 1.0:
             self._size = 1.0
@@ -409,6 +498,7 @@ class ModalBank(ModelParams, UGen):
         self._unit2 = (g * self.sample_rate) ** 2 * self._poles[3]
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        self._settle()
         self._refresh_design_cache()
         self.target[:] = self._fresh
         ramp = self.ramp_samples()
@@ -463,6 +553,7 @@ class ModalBank(ModelParams, UGen):
         R and theta from the same (A, phi) at the last output sample."""
         if size == self._size:
             return
+        self._settle()
         c1, c2 = self.coef[0].copy(), self.coef[1].copy()
         self._size = size
         self._refresh_design_cache()
@@ -486,7 +577,10 @@ class ModalBank(ModelParams, UGen):
 
     def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""
-        if self._ramping:
+        if self._mixed and not self._ramping and not self.budgeted:
+            self._span_mixed(inp, out, start, n)
+        elif self._ramping:
+            self._settle()
             y, meta = self.y, self.meta
             meta[0] = meta[2]
             meta[1] = resonate_ramp(
@@ -494,15 +588,28 @@ class ModalBank(ModelParams, UGen):
             )
             self._ramping = meta[1] > 0
         else:
+            self._settle()
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
         if self.budgeted:
             self._impulse += float(np.abs(inp[:n]).sum()) / self.sample_rate
+
+    def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
+        """As :meth:`_span` with the modes split by precision: float64 modes write out,
+        float32 modes add to it."""
+        split = self._split
+        if split is None:
+            split = self._split = split_by_precision(self.bank, self.sample_rate)
+        self._mixed_step(
+            inp, out, start, n, split.wide_bank, split.wide_meta, split.narrow_coef, split.narrow_state,
+            split.narrow_meta, self._floor, self.last, split.narrow_last,
+        )  # fmt: skip
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
         """Per mode, in internal order: importance for this period, importance for the
         next one (amplitude decayed by a period, the impulses scheduled then), and whether
         it sounds now. See jassy.anytime."""
+        self._settle()
         impulse = max(self._impulse, impulse_now)
         self._impulse = 0.0
         y1, y2 = self.y
@@ -517,6 +624,7 @@ class ModalBank(ModelParams, UGen):
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
         rest; the computed modes are moved to the front. Returns how many are computed."""
+        self._settle()
         old_active = int(self.meta[0])
         n_keep, n_fade = int(keep.sum()), int(fade.sum())
         if not n_fade and not self._faded.any() and n_keep == old_active and keep[:old_active].all():
@@ -550,6 +658,7 @@ class ModalBank(ModelParams, UGen):
         return n_keep + n_fade
 
     def state_arrays(self) -> dict[str, np.ndarray]:
+        self._settle()
         return {
             "bank": self.bank,
             "delta": self.delta,
@@ -559,4 +668,5 @@ class ModalBank(ModelParams, UGen):
         }
 
     def _state_restored(self) -> None:
+        self._split = None
         self._ramping = self.meta[1] > 0
