@@ -5,6 +5,7 @@ the bow lifts, the strike's response adds to the ringing bowed motion (superposi
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from jassy import Event, Graph, ModalModel, render
 from ugens import Friction, ImpactForce
@@ -13,9 +14,15 @@ FS = 48000
 MODEL = ModalModel([420.0, 1130.0, 2290.0], [3.0, 6.0, 11.0], [[2e-3, 1e-3, 5e-4]])
 
 
-def run(bow: bool, strike: bool, strike_time: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
+#: The same modes heard at a pickup with signed gains (the loop uses the driving-point rows).
+SIGNED = ModalModel(MODEL.frequencies, MODEL.decays, [[2e-3, -1e-3, 5e-4]], driving=[[2e-3, 1e-3, 5e-4]])
+
+
+def run(
+    bow: bool, strike: bool, strike_time: float = 0.4, model: ModalModel = MODEL
+) -> tuple[np.ndarray, np.ndarray]:
     hit = ImpactForce(name="hit")
-    rub = Friction(MODEL, name="rub", speed=0.1)
+    rub = Friction(model, name="rub", speed=0.1)
     rub(strike=hit)
     score = []
     if bow:  # press, then lift the bow at 0.3 s
@@ -27,10 +34,11 @@ def run(bow: bool, strike: bool, strike_time: float = 0.4) -> tuple[np.ndarray, 
     return result.audio[0], result.haptic[0]
 
 
-def test_a_strike_without_contact_is_the_closed_form_modal_response():
-    x, force = run(bow=False, strike=True)
+@pytest.mark.parametrize("model", [MODEL, SIGNED], ids=["driving-point", "signed-pickup"])
+def test_a_strike_without_contact_is_the_closed_form_modal_response(model):
+    x, force = run(bow=False, strike=True, model=model)
     # x[n] = sum_m F[m] / fs * h((n - m + 1) / fs): the resonator hears F[n] at sample n
-    h = MODEL.impulse_response((len(x) + 1) / FS, FS)[1:]
+    h = model.impulse_response((len(x) + 1) / FS, FS)[1:]
     expected = np.convolve(force, h)[: len(x)] / FS
     assert np.max(np.abs(x)) > 1e-7
     np.testing.assert_allclose(x, expected, atol=1e-9 * np.max(np.abs(expected)))
