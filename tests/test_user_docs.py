@@ -120,3 +120,12 @@ def test_named_points_lie_on_the_surface_and_are_described(name, mesh, points):
     assert set(info.points) == set(where)
     model = ModalModel.load(ROOT / "patches" / info.file)
     assert model.points == tuple(where) and model.reference_gain is not None
+
+
+def test_the_wine_glass_example_strikes_the_resonator_it_rubs():
+    from jassy.patchfile import load_patch
+
+    patch = load_patch(ROOT / "examples" / "wine_glass.toml")
+    finger = patch.graph.nodes["finger"]
+    assert finger.sources["strike"] is patch.graph.nodes["spoon"]
+    assert {e.node for e in patch.score} == {"finger", "spoon"}
