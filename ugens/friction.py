@@ -25,7 +25,10 @@ x_c = sum_k q_k (the main output, in m) and its modes are stepped with ModalBank
 impulse-invariant recursion q_k[n] = c1 q_k[n-1] - c2 q_k[n-2] + g_k f[n] with
 g_k = a_k R_k sin(theta_k) / fs, so for the same force the output equals a ModalBank's.
 The gains a[p, k] at the contact are a driving-point response (force applied and motion
-observed at the same point): they must be >= 0, or the loop would create energy.
+observed at the same point; ModalModel.driving_at): they must be >= 0, or the loop would
+create energy. The main output is what the model's pickup hears: the same modes under the
+same force with the model's signed gains (:mod:`ugens.heard`, the same recursion); it is
+x_c (output ``contact``) when the model has no separate driving-point gains.
 
 Discretisation (per sample, no delay in the loop). The contact velocity is the mean
 velocity over the last sample, v_c[n] = (x_c[n] - x_c[n-1]) fs; with the resonator
@@ -72,6 +75,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams, design
 from ugens.noise import uniform
@@ -248,16 +252,17 @@ class Friction(ModelParams, UGen):
     finger on a glass, a squeaking hinge). Dupont et al., IEEE TAC 2002; Avanzini, Serafin
     & Rocchesso, IEEE TSAP 2005; SDT ``friction~``.
 
-    Output: the resonator's contact displacement (m). Extra output ``force``: the friction
-    force on the resonator (N, positive along +speed).
+    Output: the resonator's displacement at the model's pickup (m, signed gains). Extra
+    outputs ``contact``: the contact displacement (m, driving-point gains); ``force``: the
+    friction force on the resonator (N, positive along +speed).
     """
 
     type_name = "Friction"
     driving_point = True
-    outputs = ("force",)
+    outputs = ("force", "contact")
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
-        "location": ParamSpec("location", 0, doc="contact location on the model (gains >= 0)"),
+        "location": ParamSpec("location", 0, doc="contact location on the model"),
         "force": ParamSpec(
             "float", 0.0, low=0.0, high=1e4, unit="N", smooth=True, doc="normal force F_N (0: no contact)"
         ),
@@ -285,6 +290,9 @@ class Friction(ModelParams, UGen):
         self.state = np.zeros(3)  # z, x_prev, v_prev
         self.rng = np.zeros(1, dtype=np.uint64)
         self.par = np.zeros(10)
+        self.signed = self.model.driving is not None  # heard through the signed gains
+        self.heard_coef = np.zeros((6, self.model.n_modes))
+        self.heard_state = np.zeros((2, self.model.n_modes))
         self.speed = self.smoothed("speed")
         self.force = self.smoothed("force")
         self._speeds = Control(self.speed, self.max_block)
@@ -310,7 +318,9 @@ class Friction(ModelParams, UGen):
         c1, c2, s = design(self.model.frequencies, self.model.decays, fs)
         self.modes[0] = c1
         self.modes[1] = c2
-        self.modes[2] = s / fs * self.model.gains_at(v["location"])
+        self.modes[2] = s / fs * self.model.driving_at(v["location"])
+        if self.signed:
+            self.heard_coef[:] = impulse_invariant(c1, c2, s / fs * self.model.gains_at(v["location"]))
         self.par[:] = (
             fs,
             v["sigma0"],
@@ -325,6 +335,7 @@ class Friction(ModelParams, UGen):
         )
 
     def _reset(self) -> None:
+        self.heard_state[:] = 0.0
         self.modes[3:] = 0.0
         self.state[:] = 0.0
         self.rng[0] = self.values["seed"]
@@ -339,7 +350,7 @@ class Friction(ModelParams, UGen):
 
     def process(self, start: int, n: int) -> None:
         self._run(
-            self.out,
+            self.extra["contact"],
             self.extra["force"],
             n,
             self._speeds.values(n),
@@ -350,6 +361,10 @@ class Friction(ModelParams, UGen):
             self.rng,
             self.par,
         )
+        if self.signed:
+            heard_run(self.extra["force"], self.out, n, self.heard_coef, self.heard_state)
+        else:
+            self.out[:n] = self.extra["contact"][:n]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -359,4 +374,5 @@ class Friction(ModelParams, UGen):
             "speed": self.speed.ramp,
             "force": self.force.ramp,
             "par": self.par,
+            "heard_state": self.heard_state,
         }
