@@ -24,6 +24,9 @@ q_k'' + 2 d_k q_k' + (w_k^2 + d_k^2) q_k = a_k w_k f, the contact displacement i
 x_c = sum_k q_k (the main output, in m) and its modes are stepped with ModalBank's exact
 impulse-invariant recursion q_k[n] = c1 q_k[n-1] - c2 q_k[n-2] + g_k f[n] with
 g_k = a_k R_k sin(theta_k) / fs, so for the same force the output equals a ModalBank's.
+An external force f_e on the same point (input ``strike``) enters as g_k (f + f_e), and the
+pickup hears f + f_e: with no contact (F_N = 0) the output is the resonator's linear
+response to f_e alone.
 The gains a[p, k] at the contact are a driving-point response (force applied and motion
 observed at the same point; ModalModel.driving_at): they must be >= 0, or the loop would
 create energy. The main output is what the model's pickup hears: the same modes under the
@@ -182,9 +185,10 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def friction_run(out, fout, n, speeds, normals, modes, h, state, rng, par):
-    """n samples of the closed loop. modes rows: c1, c2, g, y1, y2; h: scratch per mode;
-    state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
+def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, par):
+    """n samples of the closed loop. strikes: an external force (N) on the contact point,
+    added to the resonator's free motion before the bristle is solved; modes rows: c1, c2,
+    g, y1, y2; h: scratch per mode; state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
     fs = par[_FS]
     T = 1.0 / fs
     s0 = par[_S0]
@@ -205,8 +209,9 @@ def friction_run(out, fout, n, speeds, normals, modes, h, state, rng, par):
     s = rng[0]
     for i in range(n):
         xh = 0.0
+        fe = strikes[i]
         for k in range(nm):
-            hk = c1[k] * y1[k] - c2[k] * y2[k]
+            hk = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fe
             h[k] = hk
             xh += hk
         s, u = uniform(s)
@@ -252,6 +257,8 @@ class Friction(ModelParams, UGen):
     finger on a glass, a squeaking hinge). Dupont et al., IEEE TAC 2002; Avanzini, Serafin
     & Rocchesso, IEEE TSAP 2005; SDT ``friction~``.
 
+    Input ``strike`` (optional): a force in N on the same point of the same resonator (an
+    ImpactForce: a glass struck while it is rubbed); the friction loop feels its motion.
     Output: the resonator's displacement at the model's pickup (m, signed gains). Extra
     outputs ``contact``: the contact displacement (m, driving-point gains); ``force``: the
     friction force on the resonator (N, positive along +speed).
@@ -260,6 +267,8 @@ class Friction(ModelParams, UGen):
     type_name = "Friction"
     driving_point = True
     outputs = ("force", "contact")
+    inputs = ("strike",)
+    optional_inputs = ("strike",)
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
         "location": ParamSpec("location", 0, doc="contact location on the model"),
@@ -293,6 +302,7 @@ class Friction(ModelParams, UGen):
         self.signed = self.model.driving is not None  # heard through the signed gains
         self.heard_coef = np.zeros((6, self.model.n_modes))
         self.heard_state = np.zeros((2, self.model.n_modes))
+        self._drive = np.zeros(self.max_block)  # friction + strike force heard at the pickup
         self.speed = self.smoothed("speed")
         self.force = self.smoothed("force")
         self._speeds = Control(self.speed, self.max_block)
@@ -305,6 +315,7 @@ class Friction(ModelParams, UGen):
             0,
             self._speeds.buffer,
             self._forces.buffer,
+            self.input_buffer("strike"),
             self.modes,
             self.scratch,
             self.state,
@@ -355,6 +366,7 @@ class Friction(ModelParams, UGen):
             n,
             self._speeds.values(n),
             self._forces.values(n),
+            self.input_buffer("strike"),
             self.modes,
             self.scratch,
             self.state,
@@ -362,7 +374,11 @@ class Friction(ModelParams, UGen):
             self.par,
         )
         if self.signed:
-            heard_run(self.extra["force"], self.out, n, self.heard_coef, self.heard_state)
+            drive = self.extra["force"]
+            if "strike" in self.sources:  # the pickup hears the strike's force too
+                drive = self._drive
+                np.add(self.extra["force"][:n], self.sources["strike"].out[:n], out=drive[:n])
+            heard_run(drive, self.out, n, self.heard_coef, self.heard_state)
         else:
             self.out[:n] = self.extra["contact"][:n]
 
