@@ -227,7 +227,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
 
 def print_modal(rows: list[dict], graph: dict) -> None:
     big = rows[0]["big_block"]
-    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 3; references timed in the same run)")
+    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 5; references timed in the same run)")
     small = rows[0]["block"]
     print(
         f"{'modes':>6} {f'jassy b{small}':>10} {f'jassy b{big}':>11} {'plain numba':>12} "

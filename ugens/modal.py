@@ -275,7 +275,8 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
 class ModelParams:
     """Validation of a ``model`` param (a ModalModel) and a ``location`` param (checked
     against the model), for ugens that own a modal resonator. With ``driving_point``,
-    the gains at the location must be >= 0 (a contact's driving-point response)."""
+    the model must give driving-point gains (ModalModel.driving_at: its ``driving`` rows,
+    or gains that are all >= 0)."""
 
     driving_point = False
 
@@ -307,12 +308,12 @@ class ModelParams:
             model = self.values.get("model")
             if model is not None:
                 model.check_location(loc, where)
-                gains = model.gains_at(loc) if self.driving_point else None
-                if gains is not None and np.any(gains < 0):
-                    k = int(np.argmax(gains < 0))
+                if self.driving_point and model.driving_at(loc) is None:
+                    k = int(np.argmin(model.gains.min(axis=0)))  # the most negative gain's mode
                     raise PatchError(
-                        f"{where}: the model's gain of mode {k} here is {gains[k]:g} < 0; a contact needs "
-                        "the driving-point response (gains >= 0, e.g. squared mode shapes / (M w))"
+                        f"{where}: model {model.name or model.source or '(unnamed)'} has signed gains "
+                        f"(mode {k}: {model.gains[:, k].min():g}) and no driving-point gains; a contact "
+                        "needs the model's `driving` rows (phi(c)^2 / M >= 0) or gains >= 0"
                     )
             return loc
         return super().check_value(spec, value, where)
