@@ -36,7 +36,6 @@ import json
 import math
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +44,8 @@ import numpy as np
 
 from jassy.errors import JassyError, PatchError
 from jassy.files import AUDIO_SUBTYPES
+from jassy.inputs import decode, load_toml, parse_toml, read_bytes, regular_file, seconds
+from jassy.limits import check_seconds, check_variants
 
 #: Bumped when the identity scheme or the rendering of a variant changes meaning.
 ID_VERSION = 1
@@ -163,13 +164,30 @@ def _quoted(section: str, key: str) -> str:
 
 
 def _check_value_type(value: Any, where: str) -> None:
-    """Only TOML data that JSON can hold (no dates) can be a parameter value."""
+    """Only TOML data that JSON can hold (no dates, no NaN or Inf) can be a parameter value."""
     try:
         canonical(value)
     except (TypeError, ValueError):
+        key, bad = _unstorable(value, where)
         raise GridError(
-            f"{where}: expected a number, string, boolean, array or table, got {value!r}"
+            f"{key}: expected a finite number, string, boolean, array or table, got {bad!r}"
         ) from None
+
+
+def _unstorable(value: Any, where: str) -> tuple[str, Any]:
+    """(key, value) of the first item JSON cannot hold (NaN, Inf, a date) in ``value``."""
+    stack = [(value, where)]
+    while stack:
+        item, key = stack.pop()
+        if isinstance(item, dict):
+            stack.extend((v, f"{key}.{k}") for k, v in item.items())
+        elif isinstance(item, list):
+            stack.extend((v, f"{key}[{i}]") for i, v in enumerate(item))
+        elif not isinstance(item, (str, int, float, bool)) or (
+            isinstance(item, float) and not math.isfinite(item)
+        ):
+            return key, item
+    return where, value
 
 
 def _render_options(table: Any, where: str, base: RenderOptions | None = None) -> RenderOptions:
@@ -186,17 +204,17 @@ def _render_options(table: Any, where: str, base: RenderOptions | None = None) -
 
 
 def _check_render(opts: RenderOptions, where: str) -> None:
-    d = opts.duration
-    if d is not None and (
-        isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d) or d <= 0
-    ):
-        raise GridError(f"{where}.duration: expected seconds > 0, got {d!r}")
+    if opts.duration is not None:
+        try:
+            check_seconds(seconds(opts.duration, f"{where}.duration"), f"{where}.duration")
+        except JassyError as exc:
+            raise GridError(str(exc)) from None
     r = opts.sample_rate
     if r is not None and (isinstance(r, bool) or not isinstance(r, int) or not 1000 <= r <= 768000):
         raise GridError(f"{where}.sample_rate: expected an integer rate in [1000, 768000] Hz, got {r!r}")
     b = opts.block
-    if isinstance(b, bool) or not isinstance(b, int) or b < 1:
-        raise GridError(f"{where}.block: expected an integer >= 1, got {b!r}")
+    if isinstance(b, bool) or not isinstance(b, int) or not 1 <= b <= 2**20:
+        raise GridError(f"{where}.block: expected an integer in [1, {2**20}], got {b!r}")
     if opts.format not in AUDIO_SUBTYPES:
         raise GridError(f"{where}.format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {opts.format!r}")
     if opts.container not in ("wav", "flac"):
@@ -217,6 +235,7 @@ def _load_patch_source(spec: Any, inline: dict, grid_path: Path, where: str) -> 
         table = inline[spec]
         if not isinstance(table, dict):
             raise GridError(f"{grid_path}: patches.{spec}: expected a table (the layout of a patch file)")
+        _check_value_type(table, f"{grid_path}: patches.{spec}")
         digest = sha256_bytes(canonical(table).encode())
         return PatchSource(spec, f"{grid_path}: patches.{spec}", table, grid_path.parent, digest)
     path = Path(spec)
@@ -233,11 +252,11 @@ def _load_patch_source(spec: Any, inline: dict, grid_path: Path, where: str) -> 
                 f"patch; known: {', '.join(names)}"
             )
         path = builtins[spec]
-    raw = path.read_bytes()
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise GridError(f"{path}: not valid TOML ({exc})") from None
+        raw = read_bytes(path, "patch file")
+        data = parse_toml(decode(raw, str(path)), str(path))
+    except JassyError as exc:
+        raise GridError(str(exc)) from None
     return PatchSource(path.stem, str(path), data, path.parent, sha256_bytes(raw))
 
 
@@ -312,6 +331,43 @@ def check_key(key: str, patch: PatchSource, where: str) -> None:
     specs = node.all_specs()
     if param not in specs:
         raise GridError(f"{at}: {node.type_name} has no parameter {param!r}; expected {', '.join(specs)}")
+
+
+def check_value(key: str, value: Any, patch: PatchSource, where: str) -> None:
+    """Raise GridError unless ``value`` is acceptable for ``key`` (already checked by
+    :func:`check_key`) in ``patch``: the parameter's type and range, a time in seconds, a
+    boolean jump, a model file name. Checked for every variant before anything renders."""
+    at = f"{where} (patch {patch.name})"
+    try:
+        if key.startswith("render."):
+            return
+        if key.startswith("models."):
+            if not isinstance(value, str) or not value.strip():
+                raise GridError(f"{at}: expected a model file name, got {value!r}")
+            return
+        match = _SCORE_KEY.match(key)
+        if match:
+            index, rest = int(match.group(1)), match.group(2)
+            entry = patch.data["score"][index]
+            if rest in ("time", "ramp"):
+                seconds(value, at, allow_zero=True)
+            elif rest == "jump":
+                if not isinstance(value, bool):
+                    raise GridError(f"{at}: expected true or false, got {value!r}")
+            else:
+                node = patch.param_nodes[entry["node"]]
+                act, _, arg = rest.partition(".")
+                if act == "set":
+                    node.check_param(arg, value, at)
+                else:
+                    node.check_value(node.actions[act][arg], value, at)
+            return
+        node_name, _, param = key.partition(".")
+        patch.param_nodes[node_name].check_param(param, value, at)
+    except GridError:
+        raise
+    except JassyError as exc:
+        raise GridError(str(exc)) from None
 
 
 def apply_overrides(data: dict, overrides: dict[str, Any], grid_dir: Path) -> dict:
@@ -492,6 +548,13 @@ def _parse_sweep(table: dict, where: str, grid_path: Path, inline: dict, render:
                 raise GridError(
                     f"{where}: render.duration: patch {patch.name} sets no duration; give one in [render]"
                 )
+            try:
+                check_seconds(
+                    seconds(meta["duration"], f"{patch.source}: patch.duration"),
+                    f"{where}: patch {patch.name}",
+                )
+            except JassyError as exc:
+                raise GridError(str(exc)) from None
     return _Sweep(where, patches, dict(fixed), factors, dists, n_random, seed, render)
 
 
@@ -528,6 +591,10 @@ class _Digests:
         if key not in self.cache:
             if not key.is_file():
                 raise GridError(f"{where}: model file {path} does not exist")
+            try:
+                regular_file(key, "model file")
+            except JassyError as exc:
+                raise GridError(f"{where}: {exc}") from None
             self.cache[key] = sha256_file(key)
         return self.cache[key]
 
@@ -549,13 +616,9 @@ def load_grid(path: str | os.PathLike) -> Grid:
     """Parse and check a grid file; expand it into variants (duplicates merged)."""
     grid_path = Path(path)
     try:
-        data = tomllib.loads(grid_path.read_text("utf-8"))
-    except FileNotFoundError:
-        raise GridError(f"{grid_path}: no such grid file") from None
-    except OSError as exc:
-        raise GridError(f"{grid_path}: cannot read ({exc.strerror})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise GridError(f"{grid_path}: not valid TOML ({exc})") from None
+        data = load_toml(grid_path, "grid file")
+    except JassyError as exc:
+        raise GridError(str(exc)) from None
     where = str(grid_path)
     for key in data:
         if key not in GRID_KEYS:
@@ -594,6 +657,13 @@ def load_grid(path: str | os.PathLike) -> Grid:
     else:
         sweeps = [_parse_sweep(data, where, grid_path, inline, render)]
 
+    planned = sum(
+        len(sw.patches) * math.prod(len(f.levels) for f in sw.factors) * max(sw.n_random, 1) for sw in sweeps
+    )
+    try:
+        check_variants(planned, where)
+    except JassyError as exc:
+        raise GridError(str(exc)) from None
     digests = _Digests()
     variants: list[Variant] = []
     seen_ids: set[str] = set()
@@ -627,6 +697,8 @@ def load_grid(path: str | os.PathLike) -> Grid:
                     overrides = dict(cell)
                     for key, (kind, arg) in sweep.random.items():
                         overrides[key] = draw(kind, arg, [sweep.seed, patch.name, cell, j, key])
+                    for key, value in overrides.items():
+                        check_value(key, value, patch, f'{sweep.where}: "{key}" = {value!r}')
                     opts = _apply_render(sweep.render, overrides, sweep.where)
                     variant = Variant(len(variants), patch, overrides, {**labels, **overrides}, opts)
                     model_data = apply_overrides(

@@ -54,7 +54,9 @@ def text(value: Any) -> str:
 
 
 def peak_dbfs(peak: float) -> str:
-    return f"{20 * math.log10(peak):.2f}" if peak > 0 else "-inf"
+    """Peak level in dBFS; empty for silence (no -inf in a manifest: CSV and Parquet hold
+    only finite numbers)."""
+    return f"{20 * math.log10(peak):.2f}" if peak > 0 else ""
 
 
 def read_rows(outdir: Path) -> dict[str, Row]:
@@ -105,9 +107,10 @@ def _number(value: str, kind: type) -> Any:
     if value == "":
         return None
     try:
-        return kind(value)
+        number = kind(value)
     except ValueError:
         return None
+    return number if kind is not float or math.isfinite(number) else None
 
 
 def write_parquet(outdir: Path, rows: list[Row], cols: list[str]) -> Path:

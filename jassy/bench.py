@@ -42,16 +42,17 @@ def random_model(n_modes: int, seed: int = 0) -> ModalModel:
 
 
 def _best_times(fns: list[Callable[[], None]], repeats: int = 3) -> list[float]:
-    """Best wall time of each function; runs are interleaved so drifts in machine speed
-    hit every function alike (the ratios are what to read)."""
+    """Best CPU time (s) of each function: the machine is shared, and CPU time does not
+    count the time other processes hold the cores. Runs are interleaved so drifts in
+    machine speed hit every function alike (the ratios are what to read)."""
     for fn in fns:
         fn()  # warm-up (JIT, caches)
     best = [np.inf] * len(fns)
     for _ in range(repeats):
         for i, fn in enumerate(fns):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fn()
-            best[i] = min(best[i], time.perf_counter() - t0)
+            best[i] = min(best[i], time.process_time() - t0)
     return best
 
 
@@ -62,11 +63,13 @@ class _Source:
         self.out = data
 
 
-def _bank_runner(model: ModalModel, force: np.ndarray, block: int) -> Callable[[], None]:
+def _bank_runner(
+    model: ModalModel, force: np.ndarray, block: int, precision: str = "float64"
+) -> Callable[[], None]:
     """A function that runs ``ModalBank.process`` over ``force`` in calls of ``block`` frames."""
     from ugens.modal import ModalBank
 
-    bank = ModalBank(model)
+    bank = ModalBank(model, precision=precision)
     src = _Source(np.zeros(block))
     bank.sources["input"] = src
     bank.prepare(SAMPLE_RATE, block)
@@ -80,10 +83,12 @@ def _bank_runner(model: ModalModel, force: np.ndarray, block: int) -> Callable[[
     return run
 
 
-def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dict:
+def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024, c_loop=None) -> dict:
     from scipy.signal import lfilter
 
+    from jassy.bench_c import c_runner
     from ugens.modal import design
+    from ugens.modal_f32 import TOLERANCE, float32_error
 
     model = random_model(k)
     frames = int(seconds * SAMPLE_RATE * min(1.0, 1024 / k) * 4) // big_block * big_block
@@ -106,8 +111,15 @@ def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dic
             acc += lfilter([g[i]], [1.0, -c1[i], c2[i]], force[:scipy_frames])
 
     runs = [_bank_runner(model, force, block), _bank_runner(model, force, big_block), run_plain, run_scipy]
-    t_bank, t_big, t_plain, t_scipy = _best_times(runs)
+    runs += [_bank_runner(model, force, block, "mixed"), _bank_runner(model, force, big_block, "mixed")]
+    if c_loop is not None:
+        runs.append(c_runner(c_loop, force, c1, c2, g))
+    t_bank, t_big, t_plain, t_scipy, t_mixed, t_mixed_big, *t_c = _best_times(runs, repeats=5)
     return {
+        "mixed": k * frames / t_mixed,
+        "mixed_big_block": k * frames / t_mixed_big,
+        "mixed_float32_share": float(np.mean(float32_error(c1, c2, SAMPLE_RATE) <= TOLERANCE)),
+        "c_float32": k * frames / t_c[0] if t_c else None,
         "modes": k,
         "block": block,
         "jassy": k * frames / t_bank,
@@ -119,14 +131,22 @@ def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dic
 
 
 def modal_bench(mode_counts=(64, 1024, 16384), seconds: float = 1.0, block: int = 64) -> list[dict]:
-    """Mode-samples per second of ModalBank vs a plain numba loop and a scipy lfilter loop.
+    """Mode-samples per second of ModalBank vs a plain numba loop, a scipy lfilter loop and
+    a C float32 loop compiled now (jassy.bench_c; skipped with a message without ``cc``).
 
-    jassy (through ``ModalBank.process``, so its per-call overhead counts) and the plain
-    loop run on the same random force in calls of ``block`` frames; jassy is also timed in
-    calls of 1024 frames; scipy's lfilter filters 1/16 of the frames in one call per mode
-    (its cost is linear in frames).
+    jassy (through ``ModalBank.process``, so its per-call overhead counts; float64 and
+    ``precision = "mixed"``) and the plain loop run on the same random force in calls of
+    ``block`` frames; jassy is also timed in calls of 1024 frames; the C loop runs over the
+    whole force in one call; scipy's lfilter filters 1/16 of the frames in one call per
+    mode (its cost is linear in frames).
     """
-    return [_modal_row(k, seconds, block) for k in mode_counts]
+    from jassy.bench_c import compile_modal_f32
+
+    c_loop, note = compile_modal_f32()
+    rows = [_modal_row(k, seconds, block, c_loop=c_loop) for k in mode_counts]
+    for r in rows:
+        r["c_note"] = note
+    return rows
 
 
 def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> dict:
@@ -168,20 +188,24 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     force = result["rendering"].haptic[0].copy()
     bank = graph.nodes["bell"]
     frames = force.size
-    state = bank.bank.copy()  # the bank's own layout: rows c1, c2, g, y1, y2
+    state = bank.bank.copy()  # the bank's own layout: rows c1, c2, g, d, y1, y2
+    last = np.zeros(1)
     out = np.zeros(frames)
 
     def run_kernel():
-        state[3:] = 0.0
-        resonate(force, out, frames, state[0], state[1], state[2], state[3], state[4], state.shape[1])
+        state[4:] = 0.0
+        last[0] = 0.0
+        c1, c2, g, d, y1, y2 = state
+        resonate(force, out, frames, c1, c2, g, d, y1, y2, state.shape[1], last)
 
     pieces = [(force[i : i + block], out[i : i + block]) for i in range(0, frames, block)]
 
     def run_kernel_blocks():
-        state[3:] = 0.0
-        c1, c2, g, y1, y2 = state
+        state[4:] = 0.0
+        last[0] = 0.0
+        c1, c2, g, d, y1, y2 = state
         for f, o in pieces:
-            resonate(f, o, f.size, c1, c2, g, y1, y2, state.shape[1])
+            resonate(f, o, f.size, c1, c2, g, d, y1, y2, state.shape[1], last)
 
     rounds = []
     for _ in range(3):  # this VM's speed drifts by tens of % over seconds: median of 3 rounds
@@ -203,7 +227,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
 
 def print_modal(rows: list[dict], graph: dict) -> None:
     big = rows[0]["big_block"]
-    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 3; references timed in the same run)")
+    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 5; references timed in the same run)")
     small = rows[0]["block"]
     print(
         f"{'modes':>6} {f'jassy b{small}':>10} {f'jassy b{big}':>11} {'plain numba':>12} "
@@ -214,6 +238,22 @@ def print_modal(rows: list[dict], graph: dict) -> None:
             f"{r['modes']:>6} {r['jassy']:>10.3g} {r['jassy_big_block']:>11.3g} {r['plain_numba']:>12.3g} "
             f"{r['scipy_lfilter']:>11.3g} {r['jassy'] / r['plain_numba']:>8.2f}x "
             f"{r['jassy'] / r['scipy_lfilter']:>8.0f}x {r['jassy_big_block'] / r['scipy_lfilter']:>13.0f}x"
+        )
+    print(
+        f'precision="mixed" (float32 delta form where the -60 dB bound allows) vs C float32 '
+        f"({rows[0]['c_note']})"
+    )
+    print(
+        f"{'modes':>6} {'float32 %':>9} {f'mixed b{small}':>10} {f'mixed b{big}':>11} {'C float32':>10} "
+        f"{f'b{small}/C':>8} {f'b{big}/C':>9} {f'vs f64 b{big}':>12}"
+    )
+    for r in rows:
+        c = r["c_float32"]
+        ratios = f"{r['mixed'] / c:>7.2f}x {r['mixed_big_block'] / c:>8.2f}x" if c else f"{'-':>8} {'-':>9}"
+        print(
+            f"{r['modes']:>6} {100 * r['mixed_float32_share']:>8.0f}% {r['mixed']:>10.3g} "
+            f"{r['mixed_big_block']:>11.3g} {c or float('nan'):>10.3g} {ratios} "
+            f"{r['mixed_big_block'] / r['jassy_big_block']:>11.2f}x"
         )
     print(
         f"bell patch, {graph['modes']} modes, {graph['seconds']:g} s, block {graph['block']}: graph "
@@ -255,7 +295,36 @@ def contact_bench(names: list[str] | None = None, block: int = 64) -> list[dict]
                 "realtime_factor": duration / elapsed,
             }
         )
+    if names is None:
+        rows.append(hunt_crossley_bench(block))
     return rows
+
+
+def hunt_crossley_bench(block: int = 64, modes: int = 200, seconds: float = 3.0) -> dict:
+    """Real-time factor of a Hunt-Crossley contact on a bank of ``modes`` random modes
+    (60 Hz-12 kHz), struck 12 times, with silence skipping off (floor 0): the nonlinear
+    contact is integrated on every sample."""
+    from ugens.nonlinear_impact import HuntCrossleyImpact
+
+    rng = np.random.default_rng(2)
+    f = np.sort(rng.uniform(60, 12000, modes))
+    model = ModalModel(f, rng.uniform(0, 40, modes), rng.uniform(0, 1, modes) / (0.2 * 2 * np.pi * f))
+    hc = HuntCrossleyImpact(model, name="hc", mass=0.02, stiffness=1e8, floor=0.0)
+    graph = Graph(hc, haptic=hc.tap("force"))
+    events = [Event(0.01 + 0.25 * i, "hc", "strike", {"speed": 1.0}) for i in range(12)]
+
+    def run():
+        OfflineEngine(graph, events, SAMPLE_RATE, block).render(seconds)
+
+    (elapsed,) = _best_times([run], repeats=3)
+    name = f"hc-{modes}-modes"  # Hunt-Crossley, no silence skipping
+    return {
+        "patch": name,
+        "modes": modes,
+        "seconds": seconds,
+        "render_s": elapsed,
+        "realtime_factor": seconds / elapsed,
+    }
 
 
 def print_contact(rows: list[dict]) -> None:
@@ -279,10 +348,13 @@ def _busy_python(seconds: float) -> int:
     return count
 
 
-def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5) -> dict:
+def live_bench(
+    seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5, mode: str = "auto"
+) -> dict:
     """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
-    the main thread does heavy Python work; underruns, latency and audio-haptic skew
-    (measured on the frames the callback sent to the device)."""
+    the main thread does heavy Python work; the mode (callback or ring), underruns,
+    latency and audio-haptic skew at a tap's onset (measured on the frames the callback
+    handed to the device)."""
     from jassy.jackserver import dummy_jack
     from jassy.live import LiveEngine
     from ugens.impact import ImpactForce
@@ -312,33 +384,127 @@ def live_bench(seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    from jassy.bench_haptic import frame_stats, loop_latency
+    from jassy.hapticframes import FrameRecorder
+
+    recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
-        live = LiveEngine(graph, score, SAMPLE_RATE, block, ring_blocks, monitor_seconds=6.0)
+        live = LiveEngine(
+            graph,
+            score,
+            SAMPLE_RATE,
+            block,
+            ring_blocks,
+            monitor_seconds=6.0,
+            mode=mode,
+            haptic_udp=recorder.address,
+            send_log_frames=int(seconds * 1000) + 1000,
+        )
         live.start()
         _busy_python(seconds)
         stats = live.stop()
-    heard, _ = live.monitor()  # the last 6 s the device received: silence, then the tap
-    audio_on = int(np.flatnonzero(heard[0])[-1] if not np.any(heard[0]) else np.flatnonzero(heard[0])[0])
-    haptic_on = int(np.flatnonzero(heard[1])[0]) if np.any(heard[1]) else -1
+        busy = live.callback_stats() if stats.mode == "callback" else None
+        recorder.wait_final()
+        frames = recorder.stop()
+        haptic = frame_stats(live, frames)
+        haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
+    heard, rendered = live.monitor()  # the last 6 s the device received: silence, then the tap
+    audio_on, haptic_on = tap_onsets(heard, rendered, int((quiet_at + 1.5) * SAMPLE_RATE))
+    tap_frame = int(np.floor(tap_at * SAMPLE_RATE)) + 1  # an impact's first non-zero frame
+    first_played = stats.frames_played - heard.shape[1]  # the stream frame of heard[:, 0]
+    silent_from = first_played + int(np.argmax(rendered >= int((quiet_at + 1.5) * SAMPLE_RATE)))
+    haptic.update(udp_tap(frames, heard, first_played, silent_from, first_played + audio_on))
     return {
         "seconds": seconds,
         "modes": n_modes,
         "block": block,
+        "mode": stats.mode,
+        "mode_reason": live.mode_reason,
         "callbacks": stats.callbacks,
         "underrun_callbacks": stats.underrun_callbacks,
         "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
+        "device_underflows": stats.device_underflows,
+        "callback_busy_max_ms": busy.busy_max * 1e3 if busy else None,
+        "callback_busy_mean_ms": busy.busy_mean * 1e3 if busy else None,
+        "callbacks_longer_than_a_buffer": busy.busy_over if busy else None,
+        "realtime": stats.realtime,
         "latency_ms": stats.latency * 1e3,
         "ring_ms": stats.ring_latency * 1e3,
         "device_ms": stats.device_latency * 1e3,
-        "skew_samples": audio_on - haptic_on,
+        "tap_audio_device_frame": audio_on,
+        "tap_haptic_device_frame": haptic_on,
+        "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,
+        "tap_onset_vs_score_samples": int(rendered[haptic_on]) - tap_frame if haptic_on >= 0 else None,
+        **haptic,
     }
+
+
+def udp_tap(frames: list, heard: np.ndarray, first_played: int, silent_from: int, audio_on: int) -> dict:
+    """The tap on the UDP stamps: the first frame from stream frame ``silent_from`` on (a
+    silent span before the tap) that carries force; its stamp (the stream frame of its
+    first sample) minus the stream frame of the audio onset, and whether its force is the
+    mean of what the device played over its samples. ``first_played``: the stream frame
+    of heard[:, 0]."""
+    from jassy.hapticframes import FLAG_FINAL
+
+    carrying = [
+        f
+        for f in frames
+        if f.sample_time >= silent_from and not f.flags & FLAG_FINAL and np.any(f.force != 0)
+    ]
+    if not carrying or audio_on < first_played:
+        return {"udp_tap_stamp_minus_audio_onset": None, "udp_tap_force_matches_device": None}
+    first = carrying[0]
+    per_frame = int(round(first.sample_rate / 1000.0))
+    at = first.sample_time - first_played
+    window = heard[-1][at : at + per_frame]
+    played = float(np.float32(window.mean())) if window.size == per_frame else float("nan")
+    return {
+        "udp_tap_stamp_minus_audio_onset": int(first.sample_time - audio_on),
+        "udp_frame_samples": per_frame,
+        "udp_tap_force_matches_device": bool(abs(played - float(first.force[0])) <= 1e-6 * abs(played)),
+    }
+
+
+def tap_onsets(heard: np.ndarray, rendered: np.ndarray, silent_from: int) -> tuple[int, int]:
+    """Device frames (indices into the monitor) of the first non-zero audio and haptic frame
+    played after rendered frame ``silent_from`` (a span known to be silent in both); -1 if
+    none. Frames of silence inserted on an underrun (rendered = -1) are skipped."""
+    after = rendered >= silent_from
+    onsets = []
+    for channel in (heard[0], heard[-1]):
+        hits = np.flatnonzero(after & (channel != 0))
+        onsets.append(int(hits[0]) if hits.size else -1)
+    return onsets[0], onsets[1]
 
 
 def print_live(r: dict) -> None:
     print(
-        f"live, JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, block {r['block']}, "
+        f"live ({r['mode']} mode), JACK dummy driver, {r['seconds']:g} s at {SAMPLE_RATE} Hz, "
+        f"block {r['block']}, "
         f"{r['modes']} modes + scraping contact, main thread busy in Python:\n"
         f"  {r['callbacks']} callbacks, {r['underrun_callbacks']} underruns ({r['underrun_percent']:.3f} %), "
-        f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f}), "
-        f"audio-haptic skew {r['skew_samples']} samples"
+        f"{r['device_underflows']} flagged late by the host; "
+        f"latency {r['latency_ms']:.2f} ms (ring {r['ring_ms']:.2f} + device {r['device_ms']:.2f});\n"
+        f"  tap skew audio - haptic {r['skew_samples']} samples on the device frames, "
+        f"tap onset {r['tap_onset_vs_score_samples']} samples after its scheduled frame"
+        + (
+            f";\n  callback busy {r['callback_busy_mean_ms']:.3f} ms mean, "
+            f"{r['callback_busy_max_ms']:.3f} ms max, "
+            f"{r['callbacks_longer_than_a_buffer']} longer than a buffer"
+            if r.get("callback_busy_max_ms") is not None
+            else ""
+        )
+        + "\n"
+        f"  UDP haptic frames: tap stamp - audio onset {r['udp_tap_stamp_minus_audio_onset']} samples "
+        f"(frames of {r.get('udp_frame_samples')}), force as played: {r['udp_tap_force_matches_device']}; "
+        f"{r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
+        f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
+        f"(max {r['frame_interval_max_ms']:.3f}); final frame "
+        f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"
+        f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
+        f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses, {r['loop_missed']} missed, "
+        f"{r['loop_mode']} mode; "
+        f"engine latency {r['loop_engine_latency_samples']:.0f})"
     )

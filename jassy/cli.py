@@ -1,16 +1,24 @@
 """The ``jassy`` command line: render, list, info, bench.
 
 Exit codes: 0 success, 2 bad input (one line on stderr, no output file created or
-overwritten), 130 interrupted.
+overwritten), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 129 hung up (SIGHUP).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 
+from jassy.cli_checks import (
+    LineParser,
+    check_arguments,
+    check_render_arguments,
+    scene_options,
+    signals_stop,
+)
 from jassy.errors import JassyError
 from jassy.offline import OFFLINE_BLOCK
 
@@ -31,18 +39,11 @@ SCENES = {
 def _render_scene(args: argparse.Namespace) -> int:
     import importlib
 
-    module, function = SCENES[args.patch]
-    render = getattr(importlib.import_module(module), function)
-    options = {}
-    for text in args.set or ():
-        key, sep, raw = text.partition("=")
-        if not sep or not key.strip():
-            raise JassyError(f"--set {text!r}: expected name=value for scene {args.patch!r}")
-        try:
-            options[key.strip()] = float(raw) if "." in raw or "e" in raw.lower() else int(raw)
-        except ValueError:
-            raise JassyError(f"--set {text!r}: expected a number") from None
-    kwargs = {"duration": args.duration} if args.duration else {}
+    module_name, function = SCENES[args.patch]
+    module = importlib.import_module(module_name)
+    render = getattr(module, function)
+    options = scene_options(args.patch, args.set or (), render, getattr(module, "run_experiment", None))
+    kwargs = {"duration": args.duration} if args.duration is not None else {}
     summary = render(
         args.output,
         args.haptic,
@@ -52,35 +53,67 @@ def _render_scene(args: argparse.Namespace) -> int:
         **kwargs,
         **options,
     )
+    for warning in summary.get("warnings", ()) if isinstance(summary, dict) else ():
+        print(f"jassy: warning: {warning}", file=sys.stderr)
     if not args.quiet:
-        print(
-            f"wrote {args.output}"
-            + (f", {args.haptic}" if args.haptic else "")
-            + (f", {args.csv}" if args.csv else "")
-            + f": {summary}"
-        )
+        written = ", ".join(p for p in (args.output, args.haptic, args.csv) if p)
+        print(f"wrote {written}")
+        print(_summary_lines(summary))
     return 0
 
 
+def _summary_lines(summary, indent: str = "  ") -> str:
+    """A scene's summary dict as aligned ``name: value`` lines (numbers to 4 digits)."""
+    if not isinstance(summary, dict):
+        return f"{indent}{summary}"
+    lines = []
+    for key, value in summary.items():
+        if key == "warnings":
+            continue
+        if isinstance(value, dict):
+            lines.append(f"{indent}{key.replace('_', ' ')}:")
+            lines.append(_summary_lines(value, indent + "  "))
+            continue
+        if isinstance(value, float):
+            value = f"{value:.4g}"
+        elif isinstance(value, (list, tuple)):
+            value = ", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in value) or "-"
+        lines.append(f"{indent}{key.replace('_', ' ')}: {value}")
+    return "\n".join(lines)
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
-    from jassy.files import audio_format
     from jassy.offline import OfflineEngine
     from jassy.patchfile import load_patch
 
-    audio_format(args.output, args.format)  # bad output names fail before any work
-    if args.block < 1:
-        raise JassyError(f"--block: expected an integer >= 1, got {args.block}")
+    check_render_arguments(args)  # bad values and output names fail before any work
+    if args.normalise and args.patch in SCENES:
+        raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
+    if args.target is not None and not args.normalise:
+        raise JassyError("--target: needs --normalise peak|lufs")
+    if args.target is not None and not (math.isfinite(args.target) and -70.0 <= args.target <= 0.0):
+        raise JassyError(f"--target: expected dB between -70 and 0, got {args.target}")
+    if args.plot:
+        from jassy.preview import check_png, require_matplotlib
+
+        require_matplotlib("--plot")
+        check_png(args.plot, "--plot")
     if args.patch in SCENES:
-        return _render_scene(args)
+        status = _render_scene(args)
+        _plot_render(args)
+        return status
     if args.csv:
         raise JassyError(f"--csv: only physics scenes ({', '.join(SCENES)}) write a CSV")
-    patch = load_patch(args.patch, args.set or ())
+    patch = load_patch(args.patch, args.set or (), args.event or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
-    duration = args.duration or patch.duration
+    duration = args.duration if args.duration is not None else patch.duration
     if duration is None:
         raise JassyError("--duration: the patch sets no duration; give one in seconds")
     if args.haptic and not patch.graph.haptic:
         raise JassyError(f"--haptic: patch {patch.name!r} has no haptic output ([outputs] haptic = ...)")
+    from jassy.cli_checks import check_render_size
+
+    check_render_size(args, patch.graph, duration, rate)
     if args.mode_budget is not None:
         from jassy.anytime import ModeBudget
 
@@ -88,20 +121,48 @@ def _cmd_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
     engine = OfflineEngine(
-        patch.graph, patch.score, rate, args.block, haptic_safety=safety, offsets_ms=offsets
-    )
-    summary = engine.render_to_file(args.output, duration, args.format, args.haptic, progress=not args.quiet)
+        patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
+        offsets_ms=offsets,
+    )  # fmt: skip
+    if args.normalise:
+        from jassy.loudness import TARGETS, render_normalised
+
+        target = TARGETS[args.normalise] if args.target is None else args.target
+        summary = render_normalised(
+            engine, args.output, duration, args.format, args.haptic, args.normalise, target, not args.quiet
+        )
+    else:
+        summary = engine.render_to_file(
+            args.output, duration, args.format, args.haptic, progress=not args.quiet
+        )
     elapsed = time.perf_counter() - t0
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
     if not args.quiet:
-        peak_db = 20 * __import__("math").log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
+        peak_db = 20 * math.log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
         print(
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
             f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
+            + (
+                f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
+                + ("LUFS" if args.normalise == "lufs" else "dBFS peak")
+                if args.normalise
+                else ""
+            )
         )
+    _plot_render(args)
     return 0
+
+
+def _plot_render(args: argparse.Namespace) -> None:
+    """``--plot``: a preview PNG of the file just written."""
+    if args.plot:
+        from jassy.preview import plot_file
+
+        plot_file(args.output, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
 
 
 def _haptic_options(args: argparse.Namespace):
@@ -118,7 +179,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     patch = load_patch(args.patch, args.set or ())
     rate = args.sr or patch.sample_rate or DEFAULT_RATE
-    duration = args.duration or patch.duration
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    duration = args.duration or None  # none or 0: until stopped
     safety, offsets = _haptic_options(args)
     engine = LiveEngine(
         patch.graph,
@@ -131,23 +194,38 @@ def _cmd_play(args: argparse.Namespace) -> int:
         haptic_udp=args.haptic_udp,
         haptic_safety=safety,
         offsets_ms=offsets,
+        mode=args.mode,
     )
+    why = f" ({engine.mode_reason})" if engine.mode_reason else ""
+    print(f"mode: {engine.mode}{why}", flush=True)
+    osc = None
+    if args.osc:
+        from jassy.osc import OscControl, parse_address
+
+        host, port = parse_address(args.osc)
+        osc = OscControl(patch.graph, engine.post, origin=0.0, host=host, port=port)
     engine.start()
-    print(
-        f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
-        f"{engine.stats().latency * 1e3:.2f} ms; Ctrl-C stops",
-        flush=True,
-    )
+    if osc is not None:
+        osc.origin = time.time()  # the stream's frame 0, as near as the wall clock tells
+        osc.start()
+        print(f"OSC on {host}:{osc.address[1]}: /NODE/PARAM, /NODE/ACTION, /event", flush=True)
     try:
+        print(
+            f"playing {patch.name} at {rate:g} Hz, block {args.block}: latency "
+            f"{engine.stats().latency * 1e3:.2f} ms; "
+            + (f"{duration:g} s" if duration else "until stopped (Ctrl-C)"),
+            flush=True,
+        )
         end = time.monotonic() + duration if duration else None
         while end is None or time.monotonic() < end:
-            time.sleep(0.5)
+            time.sleep(max(0.0, min(0.5, end - time.monotonic())) if end else 0.5)
             if not args.quiet:
                 print(f"\r{engine.stats().summary()}", end="", flush=True)
-    except KeyboardInterrupt:
-        pass
-    stats = engine.stop()
-    print(f"\n{stats.summary()}")
+    finally:
+        if osc is not None:
+            osc.stop()
+        stats = engine.stop()
+        print(f"\n{stats.summary()}", flush=True)
     return 0
 
 
@@ -161,21 +239,48 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         write_signal(args.script, rendering.audio, rendering.sample_rate)
         print(f"wrote {args.script}: a scripted tap and {args.mode} stroke (2 s)")
         return 0
-    demo.run_window(args.mode, block=args.block, ring_blocks=args.ring, device=args.device)
+    run = demo.run_headless if args.headless else demo.run_window
+    run(
+        args.mode,
+        args.probe_udp,
+        block=args.block,
+        ring_blocks=args.ring,
+        device=args.device,
+        haptic_udp=args.haptic_udp,
+    )
+    return 0
+
+
+def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
+    from jassy.bridge import run_bridge, scripted_path, write_log
+    from jassy.hapticframes import parse_address
+
+    parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
+    parse_address(args.listen, "--listen")
+    if args.duration is not None and not args.duration >= 0:
+        raise JassyError(f"--duration: expected seconds >= 0 (0 = until stopped), got {args.duration}")
+    ticks = []
+    print(f"haptic bridge: poses to {args.engine}, frames on {args.listen}; Ctrl-C stops", flush=True)
+    try:
+        counts = run_bridge(
+            args.engine,
+            args.listen,
+            scripted_path(),
+            duration=args.duration or None,
+            rate=args.rate,
+            on_tick=ticks.append if args.log else None,
+        )
+        print(f"{counts['ticks']} ticks, {counts['frames']} frames, {counts['finals']} final", flush=True)
+    finally:
+        if args.log:
+            write_log(args.log, ticks)
     return 0
 
 
 def _cmd_devices(args: argparse.Namespace) -> int:
-    from jassy import portaudio
+    from jassy.devices import describe, list_devices
 
-    found = portaudio.devices()
-    portaudio.release()  # a later live engine in this process may then fork its producer
-    for d in found:
-        mark = "*" if d["default"] else " "
-        print(
-            f"{mark}{d['index']:>3}  {d['name']} ({d['host_api']}): {d['max_output_channels']} out, "
-            f"{d['default_sample_rate']:g} Hz, low latency {d['default_low_output_latency'] * 1e3:.1f} ms"
-        )
+    print(describe(list_devices()))
     return 0
 
 
@@ -186,6 +291,15 @@ def _first_line(text: str | None) -> str:
 def _cmd_list(args: argparse.Namespace) -> int:
     from jassy.patchfile import builtin_patches, load_patch
     from jassy.registry import ugen_types
+
+    if args.objects:
+        from patches.objects import OBJECTS
+
+        print("objects (model files beside the built-in patches; 'jassy doc FILE' for modes and points):")
+        for name, info in OBJECTS.items():
+            print(f"  {name:<13} {info.file:<24} {info.size}")
+            print(f"  {'':<13} {info.description}; points: {', '.join(info.points)}")
+        return 0
 
     print("patches:")
     for name in sorted(builtin_patches()):
@@ -213,28 +327,18 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(describe_model(args.patch))
         return 0
 
+    from jassy.doc import describe_patch
+
     patch = load_patch(args.patch, args.set or ())
-    print(f"patch {patch.name}: {patch.description}")
-    print(f"source: {patch.source}")
-    print(f"duration: {patch.duration} s, sample rate: {patch.sample_rate or DEFAULT_RATE} Hz")
-    print("nodes (in processing order):")
-    print(patch.graph.summary())
+    print(describe_patch(patch))
     for node in patch.graph.order:
         model = node.values.get("model")
         if model is not None:
             print(
-                f"  model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
+                f"model of {node.name}: {model.n_modes} modes, {model.frequencies.min():.1f}-"
                 f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
                 + (f" ({', '.join(model.points)})" if model.points else "")
             )
-    actions: dict[str, int] = {}
-    for ev in patch.score:
-        actions[ev.action] = actions.get(ev.action, 0) + 1
-    last = max((ev.time for ev in patch.score), default=0.0)
-    print(
-        f"score: {len(patch.score)} events ({', '.join(f'{k} x{v}' for k, v in actions.items()) or 'none'}), "
-        f"last at {last:g} s"
-    )
     return 0
 
 
@@ -252,7 +356,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         rows = bench_burr(n=128 if args.quick else 256)
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
-        result = bench.live_bench(seconds=args.seconds or 60.0, ring_blocks=args.ring)
+        result = bench.live_bench(
+            seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring, mode=args.mode
+        )
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
             bench.print_live(result)
@@ -266,7 +372,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.rigid.bench import bench_rigid, print_rigid
         from physics.rigid.solver_bench import bench_solvers, print_solvers
 
-        rows, solvers = bench_rigid(quick=args.quick), bench_solvers(quick=args.quick)
+        def say(message: str) -> None:
+            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
+
+        rows = bench_rigid(quick=args.quick, progress=say)
+        say("solvers: ABA, Lemke, PGS")
+        solvers = bench_solvers(quick=args.quick)
         print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
             print_rigid(rows), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
@@ -280,12 +391,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from physics.modal._blas import single_threaded
         from physics.rod.bench import bench_rod, print_rod
         from physics.rod.contact_bench import bench_rod_contact, print_rod_contact
+        from physics.rod.dfcp_bench import bench_dfcp, print_dfcp
 
         with single_threaded():
             rows = bench_rod(quick=args.quick)
             contact = bench_rod_contact(quick=args.quick)
-        print(json.dumps({"models": rows, "contact": contact}, indent=2)) if args.json else (
-            print_rod(rows), print_rod_contact(contact))  # fmt: skip
+            dfcp = bench_dfcp()
+        print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
+            print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -313,7 +426,7 @@ def _add_haptic_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="jassy", description="Physically based sound synthesis.")
+    parser = LineParser(prog="jassy", description="Physically based sound synthesis.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("render", help="render a patch to a WAV/FLAC file")
@@ -328,6 +441,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"block size in frames (default {OFFLINE_BLOCK}; the output does not depend on it)",
     )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
+    p.add_argument(
+        "--event",
+        action="append",
+        metavar="time=S,node=N,action=A,ARG=V,...",
+        help="add a score event, e.g. 'time=1.0,node=hit,action=impact,impulse=0.02' (action default: set)",
+    )
     p.add_argument(
         "--format",
         default="float32",
@@ -345,19 +464,36 @@ def build_parser() -> argparse.ArgumentParser:
         help="anytime synthesis: compute at most N modes across all modal banks",
     )
     _add_haptic_arguments(p)
+    p.add_argument("--plot", metavar="PNG", help="also draw waveform, spectrogram and level meter")
+    p.add_argument(
+        "--normalise",
+        choices=["peak", "lufs"],
+        help="scale to a peak level (default -1 dBFS) or integrated loudness (default -16 LUFS)",
+    )
+    p.add_argument("--target", type=float, metavar="DB", help="--normalise target: dBFS (peak) or LUFS")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("play", help="play a patch live (audio + haptic channels on one clock)")
     p.add_argument("patch", help="patch file (.toml) or built-in patch name")
     p.add_argument("--device", help="output device index or name substring (see 'jassy devices')")
-    p.add_argument("--duration", type=float, help="seconds to play (default: the patch's; 0 = until Ctrl-C)")
+    p.add_argument(
+        "--duration", type=float, help="seconds to play (default or 0: until stopped by Ctrl-C or a signal)"
+    )
     p.add_argument("--sr", type=int, help=f"sample rate in Hz (default: the patch's or {DEFAULT_RATE})")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (latency; default 2.5)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="callback: the graph rendered in the device callback (latency = the device's); "
+        "ring: a producer renders ahead; auto (default): callback where the patch allows it",
+    )
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node parameter")
     p.add_argument("--no-haptic-card", action="store_true", help="do not send haptic channels to the device")
     p.add_argument("--haptic-udp", metavar="HOST:PORT", help="also stream 1 kHz haptic frames over UDP")
+    p.add_argument("--osc", metavar="HOST:PORT", help="take parameter changes and events over OSC (UDP)")
     _add_haptic_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
@@ -365,25 +501,48 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
-    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill"])
+    p.add_argument("--mode", default="scrape", choices=["scrape", "roll", "drill", "poke"])
     p.add_argument("--script", metavar="OUT.wav", help="no window: render a scripted probe stroke to a file")
     p.add_argument("--device", help="output device index or name substring")
     p.add_argument("--block", type=int, default=64, help="frames per device callback (default 64)")
     p.add_argument("--ring", type=float, default=2.5, help="blocks rendered ahead (default 2.5)")
+    p.add_argument("--probe-udp", metavar="HOST:PORT", help="also take the probe's pose from a UDP device")
+    p.add_argument("--haptic-udp", metavar="HOST:PORT", help="send 1 kHz haptic frames to a UDP device")
+    p.add_argument("--headless", action="store_true", help="no window: play until stopped (UDP probe input)")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser(
+        "haptic-bridge",
+        help="reference UDP haptic device: sends probe poses, receives forces, lets go safely",
+    )
+    p.add_argument(
+        "--engine", required=True, metavar="HOST:PORT", help="the engine's probe input (demo --probe-udp)"
+    )
+    p.add_argument(
+        "--listen", default="127.0.0.1:9021", metavar="HOST:PORT", help="where the engine sends haptic frames"
+    )
+    p.add_argument("--rate", type=float, default=1000.0, help="servo loop rate, Hz (default 1000)")
+    p.add_argument("--duration", type=float, help="seconds (default or 0: until stopped)")
+    p.add_argument("--log", metavar="FILE.csv", help="write every tick: time, position, force, frame age")
+    p.set_defaults(func=_cmd_haptic_bridge)
 
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import batch
+    from jassy import analyze, audiocheck, batch, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
     batch.add_command(sub)
+    analyze.add_command(sub)
+    audiocheck.add_command(sub)
+    preview.add_command(sub)
+    doc.add_command(sub)
     add_study(sub)
     add_modal(sub)
 
-    p = sub.add_parser("list", help="list built-in patches and ugen types")
+    p = sub.add_parser("list", help="list built-in patches and ugen types (or --objects)")
+    p.add_argument("--objects", action="store_true", help="the object library: models of everyday objects")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")
@@ -405,6 +564,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
+    p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")
+    p.add_argument(
+        "--mode",
+        choices=["auto", "callback", "ring"],
+        default="auto",
+        help="live: engine mode (default auto)",
+    )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
@@ -414,6 +580,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="PNG", help="also write a plot")
     p.add_argument("--quick", action="store_true", help="smaller sizes")
     p.set_defaults(func=_cmd_rod)
+    from jassy.cli_checks import add_limit_options
+
+    add_limit_options(sub)
     return parser
 
 
@@ -429,21 +598,62 @@ def _cmd_rod(args: argparse.Namespace) -> int:
         )
     if args.plot and not args.plot.lower().endswith(".png"):
         raise JassyError(f"--plot: expected a .png file name, got {args.plot!r}")
+    if args.plot:
+        from jassy.cli_checks import require_extra
+        from jassy.files import check_output
+
+        require_extra("matplotlib", "plot", "--plot")
+        check_output(args.plot, "--plot", (".png",))
     result = EXPERIMENTS[args.name](plot=args.plot, quick=args.quick)
     print(json.dumps(result, indent=2))
     return 0
 
 
+#: Commands that play live: SIGINT, SIGTERM and SIGHUP end them in order (exit 128 + signal).
+LIVE_COMMANDS = ("play", "demo", "study", "haptic-bridge")
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; return its exit code (see the module docstring)."""
+    from jassy.signals import Stopped, stop_on_signals
+
+    parser = build_parser()
     try:
-        return args.func(args)
-    except JassyError as exc:
-        print(f"jassy: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("jassy: interrupted", file=sys.stderr)
-        return 130
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, or a usage error already printed as one line
+        return exc.code if isinstance(exc.code, int) else 2
+    live = args.command in LIVE_COMMANDS
+    from jassy.limits import scoped
+
+    with scoped(), stop_on_signals() if live else signals_stop() as stopped:
+        try:
+            check_arguments(args, parser)
+            return args.func(args)
+        except Stopped as exc:
+            print(f"jassy: stopped by {exc}", file=sys.stderr)
+            return exc.exit_code
+        except JassyError as exc:
+            print(f"jassy: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        except MemoryError:
+            print(
+                "jassy: error: out of memory; ask for less work, or lower --max-memory so the "
+                "estimate refuses it up front",
+                file=sys.stderr,
+            )
+            return 2
+        except RecursionError:
+            print("jassy: error: input nested too deeply", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            code = 128 + (stopped.signal if stopped is not None else 2)
+            names = {130: "interrupted", 143: "terminated (SIGTERM)", 129: "hung up (SIGHUP)"}
+            print(f"jassy: {names.get(code, 'stopped')}", file=sys.stderr)
+            return code
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -1,14 +1,20 @@
 """Atomic output files: write to a hidden temporary beside the target, then rename.
 
 A failure or Ctrl-C (KeyboardInterrupt) removes the temporary, so nothing ever appears
-under the requested name unless the whole file was written and flushed.
+under the requested name unless the whole file was written and flushed. A temporary
+names the process that writes it (``.NAME.pPID.XXXX.partial``); one left by a process
+that no longer runs (killed with SIGKILL, or a power cut) is removed by the next write
+into the same folder. A full disk or any other write error is a RenderError naming the
+file, and the old file, if any, stays as it was.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import os
+import re
 import struct
 import tempfile
 import zipfile
@@ -29,6 +35,79 @@ def _umask() -> int:
     return mask
 
 
+#: A temporary written by :func:`atomic_path`: ``.NAME.pPID.RANDOM.partial`` (older
+#: versions wrote ``.NAME.RANDOM.partial``, without the process id).
+_PARTIAL = re.compile(r"^\..+?(?:\.p(\d+))?\.[A-Za-z0-9_]+\.partial$")
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return pid < 2**22  # a process of another user holds it (or a nonsense number)
+    return True
+
+
+def remove_stale_partials(directory: str | os.PathLike) -> list[str]:
+    """Delete temporaries of :func:`atomic_path` in ``directory`` whose writer no longer
+    runs (or, without a process id in the name, that are older than an hour); return their names."""
+    import time
+
+    removed = []
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _PARTIAL.match(entry.name)
+        if not match or not entry.is_file(follow_symlinks=False):
+            continue
+        pid = match.group(1)
+        try:
+            stale = not _running(int(pid)) if pid else time.time() - entry.stat().st_mtime > 3600
+            if stale:
+                os.unlink(entry.path)
+                removed.append(entry.name)
+        except OSError:
+            continue
+    return removed
+
+
+def check_output(path: str | os.PathLike, option: str, extensions: tuple[str, ...] = ()) -> Path:
+    """Fail before any work unless ``path`` can be written: a file name (not a directory)
+    with one of ``extensions``, in an existing folder this process may write to."""
+    text = os.fspath(path)
+    if not isinstance(text, str) or not text.strip() or "\0" in text:
+        raise RenderError(f"{option}: expected a file name, got {text!r}")
+    p = Path(text)
+    if text.endswith(os.sep) or p.is_dir():
+        raise RenderError(f"{option}: {p} is a directory; expected a file name")
+    if extensions and p.suffix.lower() not in extensions:
+        raise RenderError(f"{option}: {p}: expected a {' or '.join(extensions)} file name")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise RenderError(f"{option}: {p}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise RenderError(f"{option}: {p}: the folder {folder} is not writable")
+    if p.exists() and not p.is_file():
+        raise RenderError(f"{option}: {p} exists and is not a regular file")
+    return p
+
+
+def check_distinct(outputs: dict[str, str | os.PathLike | None]) -> None:
+    """Refuse two options naming the same output file (one would overwrite the other)."""
+    seen: dict[str, str] = {}
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        key = os.path.realpath(os.fspath(path))
+        if key in seen:
+            raise RenderError(f"{option}: {path} is also the {seen[key]} output; name different files")
+        seen[key] = option
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[str]:
     """Yield a temporary path; on success rename it to ``path``, else delete it."""
@@ -36,21 +115,53 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise RenderError(f"{path}: directory {directory} does not exist")
+    if path.is_dir():
+        raise RenderError(f"{path}: is a directory; expected a file name")
+    remove_stale_partials(directory)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.p{os.getpid()}.", suffix=".partial", dir=directory)
     except OSError as exc:
         raise RenderError(f"{path}: cannot create a file there ({exc.strerror})") from None
     os.close(fd)
     try:
-        yield tmp
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
+        try:
+            yield tmp
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.chmod(tmp, 0o666 & ~_umask())
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise RenderError(f"{path}: cannot write ({_reason(exc)})") from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def _reason(exc: BaseException) -> str:
+    """A short reason for a failed write (a full disk is named as such)."""
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    text = str(exc).strip().splitlines()
+    return text[-1] if text else type(exc).__name__
+
+
+#: Largest magnitude of a float32 sample; larger finite values would be stored as Inf.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def clip_to_float32(data: np.ndarray, path: str | os.PathLike) -> tuple[np.ndarray, str | None]:
+    """``data`` with values beyond the float32 range clipped to it, and a warning if any were."""
+    over = np.abs(data) > FLOAT32_MAX
+    if not np.any(over):
+        return data, None
+    peak = float(np.max(np.abs(data)))
+    return np.clip(data, -FLOAT32_MAX, FLOAT32_MAX), (
+        f"{path}: {int(over.sum())} sample(s) up to {peak:.3g} beyond the float32 range clipped to "
+        f"+-{FLOAT32_MAX:.3g} (set a clamp, e.g. --max-force)"
+    )
 
 
 def _peak_time_offset(fh) -> int | None:
@@ -141,13 +252,23 @@ class AtomicAudioWriter:
     def write(self, block: np.ndarray) -> None:
         if not np.all(np.isfinite(block)):
             raise RenderError(f"{self.path}: refusing to write non-finite samples")
-        self._file.write(np.ascontiguousarray(block.T, dtype=np.float32))
+        try:
+            self._file.write(np.ascontiguousarray(block.T, dtype=np.float32))
+        except (RuntimeError, OSError) as exc:  # soundfile.LibsndfileError is a RuntimeError
+            raise RenderError(f"{self.path}: cannot write ({_reason(exc)})") from None
 
     def __enter__(self) -> AtomicAudioWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        self._file.close()
+        try:
+            self._file.close()
+        except (RuntimeError, OSError) as error:
+            failure = RenderError(f"{self.path}: cannot write ({_reason(error)})")
+            self._ctx.__exit__(RenderError, failure, None)
+            if exc_type is None:
+                raise failure from None
+            return False
         if exc_type is None and self.format == "WAV":
             with open(self._tmp, "r+b") as fh:  # the same render gives the same bytes
                 offset = _peak_time_offset(fh)
@@ -159,17 +280,21 @@ class AtomicAudioWriter:
 
 def write_signal(
     path: str | os.PathLike, data: np.ndarray, sample_rate: float, label: str | list[str] = "force"
-) -> None:
+) -> str | None:
     """Write a (channels, frames) signal atomically as .wav (float32), .npz or .csv.
 
     NPZ holds ``data``, ``sample_rate`` and ``frames`` (sample index of each column);
     CSV has columns frame, time_s and one per channel, named ``label`` + index, or by the
-    list of names ``label``.
+    list of names ``label``. Values beyond the float32 range of a .wav are clipped to it;
+    the warning saying so is returned (else None).
     """
     path = Path(path)
     if not np.all(np.isfinite(data)):
         raise RenderError(f"{path}: refusing to write non-finite samples")
     ext = path.suffix.lower()
+    warning = None
+    if ext == ".wav":
+        data, warning = clip_to_float32(data, path)
     frames = np.arange(data.shape[1])
     with atomic_path(path) as tmp:
         if ext == ".wav":
@@ -194,3 +319,4 @@ def write_signal(
             Path(tmp).write_text(header + "\n" + (row * len(frames)) % tuple(values))
         else:
             raise RenderError(f"{path}: expected a .wav, .npz or .csv file name")
+    return warning

@@ -75,7 +75,7 @@ class Graph:
                 if node.name in self.nodes and self.nodes[node.name] is not node:
                     raise PatchError(f"node name {node.name!r} is used by two different ugens")
                 self.nodes[node.name] = node
-        is_tap = [node.type_name == "Tap" for node in seen]
+        is_tap = [node.is_tap for node in seen]
         for node, tap in zip(seen, is_tap, strict=True):
             if node.name is None and not tap:
                 base = node.type_name.lower()
@@ -174,7 +174,7 @@ class Graph:
         #: What one sub-block runs, in order: every node's process, then delay commits; with
         #: a budget, its decision runs just before the first ModalBank.
         self.steps = [node.process for node in self.order] + [node.commit for node in self.delays]
-        self.budgeted = [node for node in self.order if hasattr(node, "anytime_importance")]
+        self.budgeted = [node for node in self.order if node.supports_budget]
         if self.budget is not None and self.budgeted:
             for node in self.budgeted:
                 node.budgeted = True

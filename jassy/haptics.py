@@ -1,31 +1,16 @@
-"""The haptic channel: safety (force clamp, slew-rate limit, stall watchdog), per-channel
-offsets in exact samples, and the UDP frame stream for kinesthetic device bridges.
-
-UDP frame format (little-endian), one datagram per frame, at ``frame_rate`` (1 kHz):
-
-    int64   sample time of the frame's first sample on the engine clock (frames)
-    uint32  flags: bit 0 = watchdog fade active, bit 1 = clamped, bit 2 = slew-limited
-    uint32  number of force channels C
-    float32 x C   force per channel (N), the mean over the frame's samples
-
-The receiver (:class:`HapticReceiver`) parses the same format; a device bridge aligns the
-frames with audio through the sample time.
-"""
+"""The haptic channel: safety (force clamp, slew-rate limit, stall watchdog) and
+per-channel offsets in exact samples. The UDP frames for kinesthetic devices:
+:mod:`jassy.hapticframes` (format) and :mod:`jassy.hapticsender` (pacing)."""
 
 from __future__ import annotations
 
 import math
-import socket
-import struct
 from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
 from jassy.errors import JassyError
-
-FRAME_HEADER = struct.Struct("<qII")
-FLAG_WATCHDOG, FLAG_CLAMPED, FLAG_SLEW = 1, 2, 4
 
 
 @dataclass(frozen=True)
@@ -132,68 +117,3 @@ class ChannelDelay:
     def __call__(self, buf: np.ndarray, n: int) -> None:
         if self.active:
             delay_channels(buf, n, self.history, self.delays, self.pos)
-
-
-class UdpHapticSink:
-    """Sends haptic frames (format above) to ``host:port`` at ``frame_rate`` frames/s."""
-
-    def __init__(self, address: str, sample_rate: float, channels: int, frame_rate: float = 1000.0):
-        host, _, port = address.rpartition(":")
-        if not host or not port.isdigit():
-            raise JassyError(f"--haptic-udp {address!r}: expected HOST:PORT")
-        self.target = (host, int(port))
-        self.samples_per_frame = int(round(sample_rate / frame_rate))
-        if self.samples_per_frame < 1:
-            raise JassyError(f"haptic frame rate {frame_rate} Hz exceeds the sample rate")
-        self.channels = channels
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._pending = np.zeros((channels, 0))
-        self._start = 0
-        self.frames_sent = 0
-
-    def send(self, block: np.ndarray, start_frame: int, flags: int = 0) -> None:
-        """Queue rendered haptic samples (channels, n) that start at ``start_frame``."""
-        if self._pending.shape[1] == 0:
-            self._start = start_frame
-        self._pending = np.concatenate([self._pending, block], axis=1)
-        m = self.samples_per_frame
-        while self._pending.shape[1] >= m:
-            force = self._pending[:, :m].mean(axis=1).astype("<f4")
-            header = FRAME_HEADER.pack(self._start, flags, self.channels)
-            self.sock.sendto(header + force.tobytes(), self.target)
-            self.frames_sent += 1
-            self._pending = self._pending[:, m:]
-            self._start += m
-
-    def close(self) -> None:
-        self.sock.close()
-
-
-class HapticReceiver:
-    """Receives and parses haptic frames on a UDP port (for tests and device bridges)."""
-
-    def __init__(self, host: str = "127.0.0.1", port: int = 0):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind((host, port))
-        self.sock.settimeout(0.5)
-        self.address = f"{host}:{self.sock.getsockname()[1]}"
-
-    def receive(self) -> tuple[int, int, np.ndarray] | None:
-        """(sample time, flags, force per channel) of the next frame, or None on timeout."""
-        try:
-            data, _ = self.sock.recvfrom(65536)
-        except TimeoutError:
-            return None
-        return parse_frame(data)
-
-    def close(self) -> None:
-        self.sock.close()
-
-
-def parse_frame(data: bytes) -> tuple[int, int, np.ndarray]:
-    """Decode one UDP haptic frame."""
-    if len(data) < FRAME_HEADER.size:
-        raise JassyError(f"haptic frame: {len(data)} bytes, expected at least {FRAME_HEADER.size}")
-    frame, flags, channels = FRAME_HEADER.unpack_from(data)
-    force = np.frombuffer(data, dtype="<f4", count=channels, offset=FRAME_HEADER.size)
-    return frame, flags, force.astype(np.float64)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from types import ModuleType
 from typing import Any
 
 import numba as nb
@@ -51,3 +53,34 @@ def specialise(kernel: Callable, *example_args) -> Callable:
     if key is not None:
         _ENTRY_POINTS[(kernel, key)] = entry
     return entry
+
+
+def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
+    """Delete numba's cache of ``module_file`` if a module whose kernels it calls changed.
+
+    numba caches a function together with copies of the kernels it calls but checks only
+    its own file's time stamp, so after an edit of a callee the cached copy would run the
+    old kernel. Call at the top of a module whose functions call kernels of ``callees``
+    (before any of them is compiled or loaded)."""
+    folder = os.path.join(os.path.dirname(module_file), "__pycache__")
+    stem = os.path.splitext(os.path.basename(module_file))[0]
+    stamps = []
+    for module in callees:
+        info = os.stat(module.__file__)
+        stamps.append(f"{module.__name__} {info.st_mtime_ns} {info.st_size}")
+    stamp = "\n".join(stamps)
+    marker = os.path.join(folder, f"{stem}.callees")
+    try:
+        with open(marker) as fh:
+            if fh.read() == stamp:
+                return
+    except OSError:
+        pass
+    try:
+        for name in os.listdir(folder):
+            if name.startswith(stem + ".") and (name.endswith(".nbi") or name.endswith(".nbc")):
+                os.remove(os.path.join(folder, name))
+        with open(marker, "w") as fh:
+            fh.write(stamp)
+    except OSError:
+        return  # no cache folder (or not writable): numba does not cache there either

@@ -32,10 +32,30 @@ import numba as nb
 import numpy as np
 from numba import types
 
+from jassy.callback import PLAYED as CALLBACK_PLAYED
+from jassy.callback import (
+    TAP_HAPTIC_ROWS,
+    TAP_LOG,
+    TAP_LOG_ROWS,
+    TAP_LOGGED,
+    CallbackPlayer,
+    CallbackRenderer,
+    choose_mode,
+)
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
-from jassy.haptics import HapticSafety, UdpHapticSink
+from jassy.hapticframes import FLAG_CLAMPED, FLAG_SLEW, FLAG_STALLED, FLAG_WATCHDOG, parse_address
+from jassy.haptics import HapticSafety
+from jassy.hapticsender import (
+    CLOCK_OFFSET,
+    CONTROL_SLOTS,
+    DONE,
+    STOP_AT,
+    StreamTap,
+    child_setup,
+    run_sender,
+)
 from jassy.offline import OfflineEngine
 from jassy.scheduler import validate_event
 
@@ -43,10 +63,17 @@ HEADER, STATE, DATA_OFFSET_F32 = 32, 128, 256  # int64 slots, float64 slots, fir
 CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, FLAGS = range(9)
 WATCHDOG, FADE_LEFT, PLAYED, MONITOR_CAP, MAX_FRAMES, STALLED = range(9, 15)
 RUNNING, STOP, PAUSED, LATE, REALTIME, TAKEN_AT = range(15, 21)
+DEVICE_CH, TAIL_OFFSET, LOG_ROWS, HAPTIC_ROWS, LOGGED, ENDING, HAPTIC_CH = range(21, 28)
+UNDERFLOWS = 28  # callbacks PortAudio flagged with paOutputUnderflow (the device ran late)
 MAX_FORCE, MAX_STEP, DEVICE_LATENCY, LAST, FADE_FROM = 32, 33, 34, 40, 72  # float64 slots
 MAX_HAPTIC = 32
+#: Callbacks logged and haptic frames kept for the UDP sender (about 1.4 s and 85 ms).
+CALLBACK_LOG_ROWS, HAPTIC_RING_ROWS = 1024, 4096
 #: GIL switch interval while live (s): short enough for the producer to keep the ring full.
 SWITCH_INTERVAL = 0.0002
+#: Seconds between measurements of the stream clock against the monotonic clock, and the
+#: weight of each in their running average (the stream clock jitters with the callbacks).
+CLOCK_CHECK, CLOCK_WEIGHT = 0.02, 0.05
 #: SCHED_FIFO priority of the producer thread where the OS grants it (JACK uses 70-95).
 REALTIME_PRIORITY = 40
 
@@ -56,66 +83,95 @@ REALTIME_PRIORITY = 40
     cache=True,
 )
 def ring_callback(inp, out, frames, time_info, status, user):
-    """PortAudio callback: copy ring frames to the device, make haptics safe, count."""
+    """PortAudio callback: copy ring frames to the device, make haptics safe, log the
+    haptic samples and this callback's device time for the UDP sender, count."""
     hdr = nb.carray(user, (HEADER,), np.int64)
     f64 = nb.carray(user, (STATE,), np.float64)
-    cap, ch, na, mcap = hdr[CAP], hdr[CHANNELS], hdr[N_AUDIO], hdr[MONITOR_CAP]
-    f32 = nb.carray(user, (DATA_OFFSET_F32 + (cap + mcap) * ch,), np.float32)
-    o = nb.carray(out, (frames * ch,), np.float32)
+    cap, ch, na, dch, mcap = hdr[CAP], hdr[CHANNELS], hdr[N_AUDIO], hdr[DEVICE_CH], hdr[MONITOR_CAP]
+    nh = hdr[HAPTIC_CH]  # then, if nh > 0, one channel of the producer's limiter flags
+    f32 = nb.carray(user, (DATA_OFFSET_F32 + cap * ch + mcap * dch,), np.float32)
+    toff, lrows, hrows = hdr[TAIL_OFFSET], hdr[LOG_ROWS], hdr[HAPTIC_ROWS]
+    tail = nb.carray(user, (toff + lrows * 4 + hrows * nh,), np.float64)
+    dac = nb.carray(time_info, (3,), np.float64)[2]  # outputBufferDacTime (s, stream clock)
+    o = nb.carray(out, (frames * dch,), np.float32)
     hdr[CALLBACKS] += 1
     hdr[FLAGS] |= status
+    if status & 4:  # paOutputUnderflow
+        hdr[UNDERFLOWS] += 1
     if frames > hdr[MAX_FRAMES]:
         hdr[MAX_FRAMES] = frames
     r = hdr[READ]
+    p = hdr[PLAYED]
     avail = hdr[WRITE] - r
     n = frames if avail >= frames else avail
     max_force, max_step, window = f64[MAX_FORCE], f64[MAX_STEP], hdr[WATCHDOG]
+    ending = hdr[ENDING] != 0
+    flags = 0
     for i in range(frames):
         base = DATA_OFFSET_F32 + ((r + i) % cap) * ch
         have = i < n
-        if have:
+        feed = have and not ending  # at the end, forces fade to zero as on a stall
+        if feed:
             hdr[STALLED] = 0
-        elif hdr[STALLED] == 0:  # the ring just ran dry: start the watchdog fade
+        elif hdr[STALLED] == 0:  # the ring just ran dry (or the run ends): start the fade
             hdr[STALLED] = 1
             hdr[FADE_LEFT] = window
-            for c in range(ch - na):
+            for c in range(nh):
                 f64[FADE_FROM + c] = f64[LAST + c]
+        if not have and not ending:
+            flags |= FLAG_STALLED
+        if feed and nh > 0:
+            flags |= int(f32[base + na + nh])  # clamped / slew-limited while rendering
         for c in range(na):
             x = f32[base + c] if have else 0.0
             if x != x:  # NaN
                 x = 0.0
-            o[i * ch + c] = min(max(x, -1.0), 1.0)
+            o[i * dch + c] = min(max(x, -1.0), 1.0)
         left = hdr[FADE_LEFT]
-        for c in range(ch - na):
+        hbase = toff + lrows * 4 + ((p + i) % hrows) * nh
+        for c in range(nh):
             y = f64[LAST + c]
-            if have:
+            if feed:
                 x = f32[base + na + c]
                 if x != x:  # NaN
                     x = 0.0
-                x = min(max(x, -max_force), max_force)
-                x = min(max(x, y - max_step), y + max_step)
+                if x > max_force or x < -max_force:
+                    flags |= FLAG_CLAMPED
+                    x = min(max(x, -max_force), max_force)
+                if x > y + max_step or x < y - max_step:
+                    flags |= FLAG_SLEW
+                    x = min(max(x, y - max_step), y + max_step)
             else:
                 x = f64[FADE_FROM + c] * (left - 1) / window if left > 0 else 0.0
+                if left > 0:
+                    flags |= FLAG_WATCHDOG
             f64[LAST + c] = x
-            o[i * ch + na + c] = x
-        if not have and left > 0:
+            if dch > na:
+                o[i * dch + na + c] = x
+            tail[hbase + c] = x
+        if not feed and left > 0:
             hdr[FADE_LEFT] = left - 1
-    if n < frames and hdr[STOP] == 0:  # the ring running dry while stopping is no glitch
+    if n < frames and hdr[STOP] == 0 and not ending:  # running dry while stopping is no glitch
         hdr[UNDER_FRAMES] += frames - n
         hdr[UNDER_CALLBACKS] += 1
     hdr[READ] = r + n
+    row = toff + (hdr[LOGGED] % lrows) * 4
+    tail[row] = p
+    tail[row + 1] = frames
+    tail[row + 2] = dac
+    tail[row + 3] = flags
+    hdr[LOGGED] += 1
     if mcap > 0:
-        p = hdr[PLAYED]
         mbase = DATA_OFFSET_F32 + cap * ch
-        ibase = (DATA_OFFSET_F32 + (cap + mcap) * ch + 1) // 2  # int64 slot after the float32 data
+        ibase = (DATA_OFFSET_F32 + cap * ch + mcap * dch + 1) // 2  # int64 slot after the float32 data
         index = nb.carray(user, (ibase + mcap,), np.int64)
         for i in range(frames):
             slot = (p + i) % mcap
-            k = mbase + slot * ch
-            for c in range(ch):
-                f32[k + c] = o[i * ch + c]
+            k = mbase + slot * dch
+            for c in range(dch):
+                f32[k + c] = o[i * dch + c]
             index[ibase + slot] = r + i if i < n else -1
-    hdr[PLAYED] += frames
+    hdr[PLAYED] = p + frames
     return 0
 
 
@@ -155,6 +211,11 @@ class LiveStats:
     device_latency: float
     late_events: int
     realtime: bool
+    #: "callback" (the graph rendered in the device callback) or "ring" (a producer ahead).
+    mode: str = "ring"
+    #: Callbacks the host flagged as late (output underflow), in either mode; in callback
+    #: mode these are the underruns.
+    device_underflows: int = 0
 
     @property
     def latency(self) -> float:
@@ -164,7 +225,8 @@ class LiveStats:
     def summary(self) -> str:
         pct = 100.0 * self.underrun_callbacks / max(self.callbacks, 1)
         return (
-            f"{self.callbacks} callbacks, {self.underrun_callbacks} underruns ({pct:.3f} %), "
+            f"{self.mode} mode: {self.callbacks} callbacks, "
+            f"{self.underrun_callbacks} underruns ({pct:.3f} %), "
             f"latency {self.latency * 1e3:.2f} ms (ring {self.ring_latency * 1e3:.2f} ms + device "
             f"{self.device_latency * 1e3:.2f} ms)"
         )
@@ -183,6 +245,10 @@ class LiveEngine:
     for a few-ms ring; "thread" runs it in a thread of this process (shares the GIL;
     the switch interval is shortened while playing); "auto" picks "process" where fork
     is available and PortAudio is not yet loaded in this process.
+
+    mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
+    latency = the device's); "ring" uses the producer above; "auto" takes the callback
+    where the graph, score and options allow it (``mode_reason`` says why not otherwise).
     """
 
     def __init__(
@@ -199,6 +265,9 @@ class LiveEngine:
         offsets_ms: dict[str, float] | None = None,
         monitor_seconds: float = 0.0,
         isolation: str = "auto",
+        haptic_torque: int = 0,
+        send_log_frames: int = 0,
+        mode: str = "ring",
     ):
         if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
@@ -214,13 +283,21 @@ class LiveEngine:
         self.isolation = isolation
         self.haptic_to_card = haptic_to_card and bool(graph.haptic)
         self.n_audio = len(graph.audio)
-        self.channels = self.n_audio + (len(graph.haptic) if self.haptic_to_card else 0)
+        n_haptic = len(graph.haptic)
+        if not 0 <= haptic_torque <= n_haptic:
+            raise JassyError(f"haptic_torque: expected 0..{n_haptic} torque channels, got {haptic_torque}")
+        # the ring always carries the haptics and the flags of their limiter
+        self.ring_channels = self.n_audio + n_haptic + (1 if n_haptic else 0)
+        self.channels = self.n_audio + (n_haptic if self.haptic_to_card else 0)  # to the device
         self.capacity = int(round(ring_blocks * self.block))  # frames; refilled a block at a time
         self.monitor_capacity = int(round(monitor_seconds * self.sample_rate))
-        floats = DATA_OFFSET_F32 + (self.capacity + self.monitor_capacity) * self.channels
+        floats = DATA_OFFSET_F32 + self.capacity * self.ring_channels + self.monitor_capacity * self.channels
         self._index_start = (floats + 1) // 2  # int64 slot of the monitor's frame index
-        # anonymous shared memory: seen by a forked producer process at the same address
-        self._mmap = mmap.mmap(-1, (self._index_start + self.monitor_capacity + 16) * 8)
+        tail = self._index_start + self.monitor_capacity  # float64 slot: callback log, haptic ring
+        control = tail + CALLBACK_LOG_ROWS * 4 + HAPTIC_RING_ROWS * n_haptic
+        sends = control + CONTROL_SLOTS
+        # anonymous shared memory: seen by forked producer and sender processes at the same address
+        self._mmap = mmap.mmap(-1, (sends + send_log_frames + 16) * 8)
         raw = np.frombuffer(self._mmap, dtype=np.float64)
         self._memory = raw
         self.header = raw.view(np.int64)[:HEADER]
@@ -228,24 +305,71 @@ class LiveEngine:
         self.f32 = raw.view(np.float32)[:floats]
         self.header[CAP], self.header[CHANNELS], self.header[N_AUDIO] = (
             self.capacity,
-            self.channels,
+            self.ring_channels,
             self.n_audio,
         )
+        self.header[DEVICE_CH], self.header[HAPTIC_CH] = self.channels, n_haptic
         self.header[MONITOR_CAP] = self.monitor_capacity
+        self.header[TAIL_OFFSET], self.header[LOG_ROWS], self.header[HAPTIC_ROWS] = (
+            tail,
+            CALLBACK_LOG_ROWS,
+            HAPTIC_RING_ROWS,
+        )
+        self.tap = StreamTap(
+            self.header,
+            LOGGED,
+            raw[tail : tail + CALLBACK_LOG_ROWS * 4].reshape(CALLBACK_LOG_ROWS, 4),
+            raw[tail + CALLBACK_LOG_ROWS * 4 : control].reshape(HAPTIC_RING_ROWS, n_haptic),
+            raw[control:sends],
+            raw[sends : sends + send_log_frames],
+        )
+        self.tap.control[STOP_AT] = -1
+        self.haptic_torque = haptic_torque
         self.header[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
         self.state[MAX_FORCE] = self.safety.max_force
         self.state[MAX_STEP] = self.safety.step(self.sample_rate)
-        self._haptic_udp = haptic_udp if graph.haptic else None
+        self._haptic_udp = parse_address(haptic_udp) if haptic_udp and graph.haptic else None
+        self._sender = None
         self._events_rx, self._events_tx = multiprocessing.Pipe(duplex=False)
         self._errors_rx, self._errors_tx = multiprocessing.Pipe(duplex=False)
         self._worker = None
+        udp_off_card = bool(self._haptic_udp) and not self.haptic_to_card  # only the ring sends those
+        self.mode, self.mode_reason = choose_mode(mode, graph, self.score, offsets_ms, udp_off_card)
+        self._callback: CallbackPlayer | None = None
+        self._clock: threading.Thread | None = None
+        self._clock_stop = threading.Event()
 
     # ------------------------------------------------------------------ control
     def start(self, timeout: float = 60.0) -> None:
         """Start the producer (warm-up, prefill, open and start the stream) and wait
         until the device is running."""
         from jassy import portaudio
+        from jassy.devices import find_device
 
+        self._device_index = None if self.device is None else find_device(self.device)
+        if self._haptic_udp is not None:  # forked first: before PortAudio runs in this process
+            self._sender = multiprocessing.get_context("fork").Process(
+                target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
+            )
+            self._sender.start()
+        if self.mode == "callback":
+            renderer = CallbackRenderer(
+                self.graph,
+                self.score,
+                self.sample_rate,
+                self.block,
+                self.haptic_to_card,
+                self.safety,
+                self.monitor_capacity / self.sample_rate,
+            )
+            if self._sender is not None:
+                self._tap_into(renderer.control)
+            self._callback = CallbackPlayer(renderer)
+            self._callback.start(self._device_index)
+            if self._sender is not None:
+                self._clock = threading.Thread(target=self._track_clock, name="jassy-clock", daemon=True)
+                self._clock.start()
+            return
         use_process = self.isolation == "process" or (
             self.isolation == "auto" and hasattr(os, "fork") and not portaudio.loaded()
         )
@@ -253,7 +377,7 @@ class LiveEngine:
             if portaudio.loaded():
                 raise JassyError("isolation='process' needs PortAudio not yet loaded in this process")
             self._worker = multiprocessing.get_context("fork").Process(
-                target=self._producer_main, name="jassy-producer", daemon=True
+                target=self._producer_main, args=(os.getpid(),), name="jassy-producer", daemon=True
             )
         else:
             self._switch_interval = sys.getswitchinterval()
@@ -272,6 +396,9 @@ class LiveEngine:
         """Schedule ``event`` from any thread: at its time if still ahead, else at the
         next frame to be rendered (``time = 0`` means as soon as possible; a later time
         already rendered counts as a late event)."""
+        if self._callback is not None:
+            self._callback.renderer.post(event)
+            return
         self._events_tx.send(event)
 
     def pause_producer(self, paused: bool) -> None:
@@ -279,16 +406,73 @@ class LiveEngine:
         self.header[PAUSED] = int(paused)
 
     def stop(self) -> LiveStats:
-        """Stop the stream and the producer; return the counters."""
-        self.header[STOP] = 1
+        """End the run in order: fade the forces to zero within the watchdog time, send the
+        UDP frames through the last sample played and then the final frame, stop the
+        stream, end the child processes; return the counters."""
+        if self._callback is not None:
+            renderer = self._callback.renderer
+            if self._callback.stream is not None:
+                renderer.end()
+                deadline = time.monotonic() + 0.5  # a dead device never plays the fade
+                while not renderer.faded() and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            self._finish_sender(int(renderer.control[CALLBACK_PLAYED]), self._callback.device_latency)
+            self._clock_stop.set()
+            if self._clock is not None:
+                self._clock.join()
+            self._callback.stop()
+            return self.stats()
+        h = self.header
+        if h[RUNNING] and not h[ENDING]:
+            h[ENDING] = 1
+            faded_at = h[PLAYED] + h[WATCHDOG] + 2 * self.block
+            deadline = time.monotonic() + 0.5  # a dead device never plays the fade
+            while h[PLAYED] < faded_at and time.monotonic() < deadline:
+                time.sleep(0.001)
+        self._finish_sender(int(h[PLAYED]), float(self.state[DEVICE_LATENCY]))
+        h[STOP] = 1
         if self._worker is not None:
             self._worker.join(timeout=5.0)
             if isinstance(self._worker, threading.Thread):
                 sys.setswitchinterval(self._switch_interval)
-            elif self._worker.is_alive():
-                self._worker.kill()
+            else:
+                if self._worker.is_alive():
+                    self._worker.kill()
+                self._worker.join()
+        self._worker = None
         self._raise_producer_error()
         return self.stats()
+
+    def _finish_sender(self, played: int, device_latency: float) -> None:
+        """Let the UDP sender send the frames through stream frame ``played``, then the
+        final frame, and end its process."""
+        if self._sender is None:
+            return
+        self.tap.control[STOP_AT] = played
+        deadline = time.monotonic() + device_latency + 1.0
+        while not self.tap.control[DONE] and time.monotonic() < deadline:
+            time.sleep(0.001)
+        self._sender.join(timeout=1.0)
+        if self._sender.is_alive():
+            self._sender.kill()
+            self._sender.join()
+        self._sender = None
+
+    def _tap_into(self, control: np.ndarray) -> None:
+        """Point the callback renderer's tap slots at this engine's stream tap (shared
+        memory the sender process reads)."""
+        control[TAP_LOG] = self.tap.log.ctypes.data
+        control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS] = self.tap.log.shape[0], self.tap.played.shape[0]
+        control[TAP_LOGGED] = self.header.ctypes.data + LOGGED * self.header.itemsize
+
+    def _track_clock(self) -> None:
+        """Callback mode: keep the stream-clock offset for the sender up to date."""
+        stream = self._callback.stream
+        control = self.tap.control
+        control[CLOCK_OFFSET] = stream.clock_offset()
+        while not self._clock_stop.wait(CLOCK_CHECK):
+            offset = control[CLOCK_OFFSET]
+            control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
 
     def _raise_producer_error(self) -> None:
         if self._errors_rx.poll():
@@ -296,6 +480,22 @@ class LiveEngine:
             raise JassyError(f"live engine: {message}")
 
     def stats(self) -> LiveStats:
+        if self._callback is not None:
+            c = self._callback.renderer.stats(self._callback.device_latency)
+            return LiveStats(
+                c.callbacks,
+                c.xruns,
+                c.xruns * self.block,
+                c.frames_played,
+                c.max_callback_frames,
+                c.status_flags,
+                0.0,
+                c.device_latency,
+                self._callback.renderer.late,
+                c.realtime,
+                "callback",
+                c.xruns,
+            )
         h = self.header
         return LiveStats(
             int(h[CALLBACKS]),
@@ -308,39 +508,61 @@ class LiveEngine:
             float(self.state[DEVICE_LATENCY]),
             int(h[LATE]),
             bool(h[REALTIME]),
+            "ring",
+            int(h[UNDERFLOWS]),
         )
+
+    def callback_stats(self):
+        """Callback mode: the renderer's counters (jassy.callback.CallbackStats), else None."""
+        return (
+            None if self._callback is None else self._callback.renderer.stats(self._callback.device_latency)
+        )
+
+    def haptic_now(self) -> np.ndarray:
+        """The haptic sample (per channel) the callback handed to the device last."""
+        if self._callback is not None:
+            return self._callback.renderer.haptic_last[: len(self.graph.haptic)].copy()
+        played = int(self.header[PLAYED])
+        rows = self.tap.played.shape[0]
+        return self.tap.played[(played - 1) % rows].copy() if played else np.zeros(self.tap.played.shape[1])
 
     def monitor(self) -> tuple[np.ndarray, np.ndarray]:
         """What the device received last: (channels, frames) signals in playing order, and
         per frame the rendered frame it came from (-1 for silence inserted on an underrun)."""
+        if self._callback is not None:
+            return self._callback.renderer.monitor()
         if not self.monitor_capacity:
             raise JassyError("no monitor: create the engine with monitor_seconds > 0")
         played = int(self.header[PLAYED])
         size = min(played, self.monitor_capacity)
-        ring = self.f32[DATA_OFFSET_F32 + self.capacity * self.channels :].reshape(-1, self.channels)
+        ring = self.f32[DATA_OFFSET_F32 + self.capacity * self.ring_channels :].reshape(-1, self.channels)
         order = (np.arange(played - size, played)) % self.monitor_capacity
         index = self._memory.view(np.int64)[self._index_start : self._index_start + self.monitor_capacity]
         return ring[order].T.astype(np.float64), index[order].copy()
 
     # ----------------------------------------------------------------- producer
-    def _producer_main(self) -> None:
-        """Producer: runs in the child process or thread until ``stop``."""
+    def _sender_main(self, parent: int) -> None:
+        """The UDP haptic sender's process (see :mod:`jassy.hapticsender`)."""
+        child_setup(parent)
+        run_sender(self.tap, self._haptic_udp, self.sample_rate, self.haptic_torque)
+
+    def _producer_main(self, parent: int | None = None) -> None:
+        """Producer: runs in the child process (``parent`` = the caller's pid) or a thread
+        until ``stop``."""
         stream = None
+        if parent is not None:
+            child_setup(parent)
         try:
             from jassy import portaudio
 
             engine = self._warm_engine()
-            udp = (
-                UdpHapticSink(self._haptic_udp, self.sample_rate, len(self.graph.haptic))
-                if self._haptic_udp
-                else None
-            )
             buf = np.zeros((len(self.graph.bus_rows), self.block))
-            out = np.zeros((self.channels, self.block))
-            while self._fill_once(engine, buf, out, udp):
+            out = np.zeros((self.ring_channels, self.block))
+            self._haptic_rows = self.n_audio + len(self.graph.haptic)
+            while self._fill_once(engine, buf, out):
                 pass
             stream = portaudio.OutputStream(
-                portaudio.find_device(self.device),
+                portaudio.default_output_device() if self._device_index is None else self._device_index,
                 self.channels,
                 self.sample_rate,
                 self.block,
@@ -350,12 +572,19 @@ class LiveEngine:
             self.state[DEVICE_LATENCY] = stream.output_latency
             self.header[REALTIME] = int(_request_realtime_priority())
             gc.freeze()  # objects alive now are never scanned by the collector during the run
+            self.tap.control[CLOCK_OFFSET] = stream.clock_offset()
             stream.start()
+            self.tap.control[CLOCK_OFFSET] = stream.clock_offset()
             self.header[RUNNING] = 1
             pause = self.block / self.sample_rate / 4
+            calibrate_at = time.monotonic() + CLOCK_CHECK
             while not self.header[STOP]:
-                if self.header[PAUSED] or not self._fill_once(engine, buf, out, udp):
+                if self.header[PAUSED] or not self._fill_once(engine, buf, out):
                     time.sleep(pause)
+                if time.monotonic() > calibrate_at:
+                    offset = self.tap.control[CLOCK_OFFSET]
+                    self.tap.control[CLOCK_OFFSET] = offset + CLOCK_WEIGHT * (stream.clock_offset() - offset)
+                    calibrate_at += CLOCK_CHECK
         except BaseException as exc:  # reported to the caller; the callback keeps the device safe
             self._errors_tx.send(f"{type(exc).__name__}: {exc}")
         finally:
@@ -407,16 +636,16 @@ class LiveEngine:
             scheduler.insert(validate_event(self.graph, event, "posted event"))
             self.header[TAKEN_AT] = scheduler.frame  # the first frame it can affect
 
-    def _fill_once(self, engine: OfflineEngine, buf: np.ndarray, out: np.ndarray, udp) -> bool:
+    def _fill_once(self, engine: OfflineEngine, buf: np.ndarray, out: np.ndarray) -> bool:
         """Render one block into the ring if there is room; False if full."""
         h = self.header
         if self.capacity - (h[WRITE] - h[READ]) < self.block:
             return False
         self._take_posted(engine)
-        start = engine.frame
+        engine.haptic_flags = 0
         engine.produce(buf, self.block)
-        out[:] = buf[: self.channels]
+        rows = self._haptic_rows
+        out[:rows] = buf[:rows]
+        out[rows:] = engine.haptic_flags
         _ring_write(h, self.f32, out, self.block)
-        if udp is not None:
-            udp.send(buf[self.n_audio :], start)
         return True

@@ -4,18 +4,23 @@ One impulse of unit strength at location p sounds as sum_k a[p, k] e^{-d_k t} si
 Gains between locations are interpolated barycentrically (the sound texture map): a
 location is a vertex index, a point name, or up to three vertices with weights.
 
-Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``),
-NPZ (same keys) and JASS ``.sy`` text files (read only). A model fitted to a recording may
-carry an ``attack``: the strike's first milliseconds that no mode explains (contact, mallet,
-unresolved high modes), samples at ``attack_rate`` Hz per unit impulse, played with each
-strike (ugens.AttackSample).
+Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
+``name``, ``reference_gain`` and ``driving``), NPZ (same keys) and JASS ``.sy`` text files
+(read only).
+``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
+jassy.levels); without it the bank computes it from the model by the same rule.
+
+Signed gains. ``gains`` are strike-to-pickup gains phi_k(c) phi_k(p) / M_k (mass-normalised
+mode shapes phi_k at the contact c and the pickup p), which have signs. A contact in a
+closed loop (HuntCrossleyImpact, Friction) needs the driving-point gains phi_k(c)^2 / M_k
+(>= 0) at the same locations: the optional ``driving`` rows. Without them the gains must
+be >= 0 and serve as both (a pickup at the contact).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,8 +83,8 @@ class ModalModel:
     points: tuple[str, ...] = ()
     name: str = ""
     source: str = field(default="", compare=False)
-    attack: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False)
-    attack_rate: float = 0.0
+    reference_gain: float | None = None  # for level = "calibrated" (jassy.levels)
+    driving: np.ndarray | None = field(default=None, compare=False)  # driving-point gains [p, k]
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -87,16 +92,21 @@ class ModalModel:
             self.frequencies = np.asarray(self.frequencies, dtype=np.float64).reshape(-1)
             self.decays = np.asarray(self.decays, dtype=np.float64).reshape(-1)
             gains = np.asarray(self.gains, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ModelError(
                 f"{where}: frequencies, decays and gains must be numeric arrays ({exc})"
             ) from None
         if gains.ndim == 1:
             gains = gains[None, :]
         self.gains = gains
+        if self.driving is not None:
+            try:
+                self.driving = np.asarray(self.driving, dtype=np.float64).reshape(gains.shape)
+            except (TypeError, ValueError, OverflowError):
+                raise ModelError(
+                    f"{where}: driving: expected numeric rows shaped like gains {gains.shape}"
+                ) from None
         self.points = tuple(self.points)
-        self.attack = np.asarray(self.attack, dtype=np.float64).reshape(-1)
-        self.attack_rate = float(self.attack_rate)
         self.validate()
 
     @property
@@ -137,8 +147,14 @@ class ModalModel:
                 f"({sample_rate / 2:g} Hz at {sample_rate:g} Hz); raise the sample rate or drop the mode "
                 "(ModalModel.below)"
             )
-        if self.attack.size and not (np.all(np.isfinite(self.attack)) and self.attack_rate > 0):
-            raise ModelError(f"{where}: attack: expected finite samples and attack_rate > 0 Hz")
+        if self.reference_gain is not None and not (
+            isinstance(self.reference_gain, (int, float))
+            and math.isfinite(self.reference_gain)
+            and self.reference_gain > 0
+        ):
+            raise ModelError(f"{where}: reference_gain: expected a number > 0, got {self.reference_gain!r}")
+        if self.driving is not None and (not np.all(np.isfinite(self.driving)) or np.any(self.driving < 0)):
+            raise ModelError(f"{where}: driving: expected finite driving-point gains >= 0")
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -163,33 +179,51 @@ class ModalModel:
 
     def gains_at(self, location: Location | int | str | None = None) -> np.ndarray:
         """Per-mode gains at a location (barycentric blend of its vertices' rows)."""
+        return self._blend(self.gains, location)
+
+    def _blend(self, rows: np.ndarray, location: Location | int | str | None) -> np.ndarray:
         if location is None:
-            return self.gains[0].copy()
+            return rows[0].copy()
         loc = parse_location(location, "location")
         out = np.zeros(self.n_modes)
         for v, w in zip(loc.vertices, loc.weights, strict=True):
-            out += w * self.gains[self.point_index(v, "location")]
+            out += w * rows[self.point_index(v, "location")]
         return out
 
+    def driving_at(self, location: Location | int | str | None = None) -> np.ndarray | None:
+        """Driving-point gains at a location (blended as gains_at): the ``driving`` rows, or
+        the gains themselves if they are all >= 0; None for signed gains without them."""
+        if self.driving is not None:
+            return self._blend(self.driving, location)
+        return self.gains_at(location) if not np.any(self.gains < 0) else None
+
     # ------------------------------------------------------------- derived models
+    def _driving_columns(self, modes: Any) -> np.ndarray | None:
+        return None if self.driving is None else self.driving[:, modes]
+
     def below(self, f_max: float) -> ModalModel:
         """The modes with frequency below ``f_max`` Hz."""
         keep = self.frequencies < f_max
         return ModalModel(
-            self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name
-        )
+            self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
+            reference_gain=self.reference_gain, driving=self._driving_columns(keep),
+        )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
         """The first n modes."""
-        return ModalModel(self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name)
+        return ModalModel(
+            self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
+            reference_gain=self.reference_gain, driving=self._driving_columns(slice(0, n)),
+        )  # fmt: skip
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
-        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = (i + 1)/sample_rate.
+        """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
 
-        This is the continuous response sampled one sample after the impulse, which the
-        impulse-invariant resonator reproduces exactly (reference for tests).
+        The continuous response to a unit impulse at t = 0, which the impulse-invariant
+        resonators of a ModalBank reproduce exactly from the sample after the impulse on
+        (reference for tests).
         """
-        t = (np.arange(int(round(duration * sample_rate))) + 1) / sample_rate
+        t = np.arange(int(round(duration * sample_rate))) / sample_rate
         a = self.gains_at(location)
         out = np.zeros_like(t)
         for k in range(self.n_modes):
@@ -200,29 +234,32 @@ class ModalModel:
     @classmethod
     def load(cls, path: str | os.PathLike) -> ModalModel:
         """Read a model from .toml, .npz or JASS .sy (by extension)."""
+        from jassy.errors import JassyError
+        from jassy.inputs import decode, parse_toml, read_bytes
+
+        if not isinstance(path, (str, os.PathLike)):
+            raise ModelError(f"model file: expected a file name, got {path!r}")
         path = Path(path)
         ext = path.suffix.lower()
-        if not path.is_file():
-            raise ModelError(f"{path}: no such model file")
+        if ext not in (".toml", ".npz", ".sy"):
+            raise ModelError(f"{path}: unknown model format {ext!r}; expected .toml, .npz or .sy")
         try:
-            if ext == ".toml":
-                with open(path, "rb") as fh:
-                    return cls.from_dict(tomllib.load(fh), str(path))
+            data = read_bytes(path, "model file")
             if ext == ".npz":
-                with np.load(path, allow_pickle=False) as data:
-                    return cls.from_dict({k: data[k] for k in data.files}, str(path))
-            if ext == ".sy":
-                return cls.from_sy(path.read_text(), str(path))
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelError(f"{path}: not valid TOML ({exc})") from None
-        except (OSError, ValueError) as exc:
-            raise ModelError(f"{path}: cannot read model ({exc})") from None
-        raise ModelError(f"{path}: unknown model format {ext!r}; expected .toml, .npz or .sy")
+                return cls.from_dict(read_npz(data, str(path)), str(path))
+            text = decode(data, str(path))
+            if ext == ".toml":
+                return cls.from_dict(parse_toml(text, str(path)), str(path))
+            return cls.from_sy(text, str(path))
+        except ModelError:
+            raise
+        except JassyError as exc:
+            raise ModelError(str(exc)) from None
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name", "attack", "attack_rate"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving"}
         for key in data:
             if key not in allowed:
                 raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
@@ -230,11 +267,32 @@ class ModalModel:
             if key not in data:
                 raise ModelError(f"{source}: missing key {key!r}")
         points = data.get("points", ())
-        points = tuple(str(p) for p in np.asarray(points).reshape(-1)) if len(points) else ()
-        name = str(np.asarray(data.get("name", "")))
-        attack = np.asarray(data.get("attack", np.zeros(0)), dtype=np.float64)
-        rate = float(np.asarray(data.get("attack_rate", 0.0)))
-        return cls(data["frequencies"], data["decays"], data["gains"], points, name, source, attack, rate)
+        if isinstance(points, np.ndarray):
+            points = points.reshape(-1).tolist()
+        if not isinstance(points, (list, tuple)) or not all(isinstance(p, str) for p in points):
+            raise ModelError(f"{source}: points: expected a list of point names")
+        name = data.get("name", "")
+        if isinstance(name, np.ndarray) and name.ndim == 0:
+            name = name.item()
+        if not isinstance(name, str):
+            raise ModelError(f"{source}: name: expected a string, got {name!r}")
+        reference = data.get("reference_gain")
+        if isinstance(reference, np.ndarray) and reference.ndim == 0:
+            reference = reference.item()
+        if reference is not None and (isinstance(reference, bool) or not isinstance(reference, (int, float))):
+            raise ModelError(f"{source}: reference_gain: expected a number > 0, got {reference!r}")
+        reference = None if reference is None else float(reference)
+        driving = data.get("driving")
+        return cls(
+            data["frequencies"],
+            data["decays"],
+            data["gains"],
+            tuple(points),
+            name,
+            source,
+            reference,
+            driving,
+        )
 
     @classmethod
     def from_sy(cls, text: str, source: str = "model.sy") -> ModalModel:
@@ -273,6 +331,10 @@ class ModalModel:
         with atomic_path(path) as tmp:
             if ext == ".npz":
                 with open(tmp, "wb") as fh:
+                    ref = self.reference_gain
+                    extra = {} if ref is None else {"reference_gain": np.array(ref)}
+                    if self.driving is not None:
+                        extra["driving"] = self.driving
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -280,11 +342,7 @@ class ModalModel:
                         gains=self.gains,
                         points=np.array(self.points, dtype=str),
                         name=np.array(self.name),
-                        **(
-                            {"attack": self.attack, "attack_rate": np.array(self.attack_rate)}
-                            if self.attack.size
-                            else {}
-                        ),
+                        **extra,
                     )
             else:
                 Path(tmp).write_text(self.to_toml())
@@ -298,15 +356,51 @@ class ModalModel:
             lines.append(f"name = {self.name!r}".replace("'", '"'))
         if self.points:
             lines.append("points = [" + ", ".join(f'"{p}"' for p in self.points) + "]")
+        if self.reference_gain is not None:
+            lines.append(f"reference_gain = {float(self.reference_gain)!r}")
         lines.append(f"frequencies = {arr(self.frequencies)}")
         lines.append(f"decays = {arr(self.decays)}")
         lines.append("gains = [")
         lines.extend(f"  {arr(row)}," for row in self.gains)
         lines.append("]")
-        if self.attack.size:
-            lines.append(f"attack_rate = {self.attack_rate!r}")
-            lines.append(f"attack = {arr(self.attack)}")
+        if self.driving is not None:
+            lines.append("driving = [")
+            lines.extend(f"  {arr(row)}," for row in self.driving)
+            lines.append("]")
         return "\n".join(lines) + "\n"
+
+
+def read_npz(data: bytes, where: str) -> dict[str, np.ndarray]:
+    """The arrays of an .npz file's bytes, checked before anything is decompressed: a zip of
+    .npy members of numeric or string dtype (no pickles) whose declared sizes fit in memory."""
+    import io
+    import zipfile
+
+    from jassy.limits import check_memory
+
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+        total = 0
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                raise ModelError(f"{where}: cannot read model ({info.filename}: not a .npy array)")
+            with archive.open(info) as fh:
+                major, _ = np.lib.format.read_magic(fh)
+                read_header = (
+                    np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+                )
+                shape, _, dtype = read_header(fh)
+            if dtype.hasobject or dtype.kind not in "biufcUS":
+                raise ModelError(
+                    f"{where}: cannot read model ({info.filename}: dtype {dtype}; expected numbers or "
+                    "strings, objects and pickles are not loaded)"
+                )
+            total += math.prod(shape) * dtype.itemsize
+        check_memory(total, where)
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, ValueError, EOFError, OSError, KeyError) as exc:
+        raise ModelError(f"{where}: cannot read model (not a valid .npz file: {exc})") from None
 
 
 def t60_to_decay(t60: float) -> float:

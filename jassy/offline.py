@@ -21,7 +21,7 @@ from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
-from jassy.safety import CEILING, count_nonfinite, limit, release_coefficient, zero_nonfinite
+from jassy.safety import CEILING, LimiterMeter, count_nonfinite, limit, release_coefficient, zero_nonfinite
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
@@ -65,8 +65,13 @@ class OfflineEngine:
         release: float = 0.05,
         haptic_safety: HapticSafety | None = None,
         offsets_ms: dict[str, float] | None = None,
+        program: bool = True,
     ):
         """Render ``graph`` through ``score`` at ``sample_rate`` Hz in blocks of ``block``.
+
+        With ``program``, a graph whose every node has a kernel in jassy.program runs as one
+        numba function (same output as node by node; ``self.program`` is None otherwise and
+        ``self.why_not_program`` says why).
 
         The output stage, in order: NaN/Inf quarantine, the audio limiter, the haptic
         safety limits (if given) and per-kind offsets in ms applied exactly in samples
@@ -79,9 +84,14 @@ class OfflineEngine:
         self.graph = graph
         self.sample_rate = float(sample_rate)
         graph.prepare(self.sample_rate, block)
-        self.scheduler = Scheduler(graph, score, self.sample_rate, block)
+        from jassy.program import Program, why_not_compiled  # imports the ugens: not at import time
+
+        self.why_not_program = why_not_compiled(graph) if program else "not asked for"
+        self.program = Program(graph) if self.why_not_program is None else None
+        self.scheduler = Scheduler(graph, score, self.sample_rate, block, self.program)
         self.limiter = limiter
         self._limiter_state = np.ones(1)
+        self.limiter_meter = LimiterMeter(CEILING)
         self._release = release_coefficient(release, self.sample_rate)
         self.haptic_safety = haptic_safety
         self._haptic_last = np.zeros(len(graph.haptic))
@@ -138,7 +148,9 @@ class OfflineEngine:
         if count_nonfinite(a) or count_nonfinite(h):
             self._quarantine(a, h)
         if self.limiter:
+            self.limiter_meter.before(a)
             limit(a, n, self._limiter_state, CEILING, self._release)
+            self.limiter_meter.after(a, n)
         if self.haptic_safety is not None and h.shape[0]:
             s = self.haptic_safety
             self.haptic_flags |= limit_force(h, n, self._haptic_last, s.max_force, s.step(self.sample_rate))
@@ -168,7 +180,12 @@ class OfflineEngine:
             audio[:, pos : pos + n] = a
             haptic[:, pos : pos + n] = h
             pos += n
-        return Rendering(audio, haptic, self.sample_rate, list(self.warnings))
+        return Rendering(audio, haptic, self.sample_rate, self._final_warnings())
+
+    def _final_warnings(self) -> list[str]:
+        """The render's warnings, with the limiter's report if it cut peaks."""
+        limited = self.limiter_meter.warning(self.sample_rate) if self.limiter else None
+        return list(self.warnings) + ([limited] if limited else [])
 
     def render_to_file(
         self,
@@ -197,13 +214,16 @@ class OfflineEngine:
                     haptic[:, pos : pos + a.shape[1]] = h
                 pos += a.shape[1]
             if haptic is not None:
-                write_signal(haptic_path, haptic, self.sample_rate)
+                clipped = write_signal(haptic_path, haptic, self.sample_rate)
+                if clipped:
+                    self.warnings.append(clipped)
         return {
             "frames": frames,
             "duration": frames / self.sample_rate,
             "peak": peak,
             "haptic_peak": float(np.max(np.abs(haptic))) if haptic is not None and haptic.size else None,
-            "warnings": list(self.warnings),
+            "warnings": self._final_warnings(),
+            "limiter": self.limiter_meter.report(self.sample_rate),
         }
 
 
@@ -224,9 +244,26 @@ def render(
     progress: bool = False,
     haptic_safety: HapticSafety | None = None,
     offsets_ms: dict[str, float] | None = None,
+    path: str | os.PathLike | None = None,
+    haptic_path: str | os.PathLike | None = None,
+    sample_format: str = "float32",
 ) -> Rendering:
-    """Render a graph and score offline into arrays (see :class:`OfflineEngine`)."""
+    """Render a graph and score offline into arrays (see :class:`OfflineEngine`). With
+    ``path`` (.wav or .flac, ``sample_format`` float32, pcm24 or pcm16) the audio is also
+    written there atomically, and the haptic track to ``haptic_path`` (.wav, .npz or .csv)."""
     engine = OfflineEngine(
         graph, score, sample_rate, block, limiter, haptic_safety=haptic_safety, offsets_ms=offsets_ms
     )
-    return engine.render(duration, progress)
+    if path is not None:
+        audio_format(path, sample_format)  # a bad name fails before the render
+    elif haptic_path is not None:
+        raise PatchError("haptic_path: give path too (the haptic track is written beside the audio)")
+    rendering = engine.render(duration, progress)
+    if path is not None:
+        with AtomicAudioWriter(path, int(engine.sample_rate), rendering.audio.shape[0], sample_format) as out:
+            out.write(rendering.audio)
+            if haptic_path is not None:
+                clipped = write_signal(haptic_path, rendering.haptic, engine.sample_rate)
+                if clipped:
+                    rendering.warnings.append(clipped)
+    return rendering

@@ -73,7 +73,7 @@ class ParamSpec:
         """Return ``value`` converted to this kind, or raise PatchError naming ``where``."""
         try:
             converted = self._converted(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise PatchError(f"{where}: expected {self.expected()}, got {value!r}") from None
         return value if converted is None else converted
 

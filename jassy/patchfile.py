@@ -13,27 +13,29 @@ Layout::
     [outputs]          audio = "node" or ["left", "right"]; haptic = "node" or [...]
     [[score]]          time (s), node, then one action: set = {param = value}, jump = true|false,
                        or an action of the node type, e.g. impact = {impulse = 0.01, location = 2}
+    [[generate]]       events at regular or Poisson times with random arguments (jassy/generators.py)
 """
 
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from jassy.anytime import ModeBudget
-from jassy.errors import ModelError, PatchError
+from jassy.errors import JassyError, ModelError, PatchError, suggest
 from jassy.events import Event
+from jassy.generators import expand
 from jassy.graph import Graph
+from jassy.inputs import load_toml, number, parse_toml, seconds
 from jassy.modal_model import ModalModel
 from jassy.registry import ugen_class
 from jassy.scheduler import validate_event
 from jassy.ugen import UGen
 
-TOP_KEYS = {"patch", "models", "nodes", "outputs", "score"}
+TOP_KEYS = {"patch", "models", "nodes", "outputs", "score", "generate"}
 PATCH_KEYS = {"name", "description", "duration", "sample_rate", "mode_budget", "cpu_budget"}
 
 
@@ -67,9 +69,8 @@ def is_model_file(spec: str) -> bool:
         return True
     if path.suffix == ".toml" and path.is_file():
         try:
-            with open(path, "rb") as fh:
-                return "frequencies" in tomllib.load(fh)
-        except (OSError, tomllib.TOMLDecodeError):
+            return "frequencies" in load_toml(path, "patch or model file")
+        except JassyError:
             return False
     return False
 
@@ -78,7 +79,7 @@ def resolve_patch(spec: str) -> Path:
     """A patch path, or the path of the built-in patch named ``spec``."""
     path = Path(spec)
     if path.suffix == ".toml" or os.sep in spec:
-        if not path.is_file():
+        if not path.exists():
             raise PatchError(f"{spec}: no such patch file")
         return path
     builtins = builtin_patches()
@@ -96,23 +97,79 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     if not sep or not dot or not node or not param:
         raise PatchError(f"--set {text!r}: expected node.param=value")
     try:
-        value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
+        value = parse_toml(f"v = {raw.strip()}", "--set")["v"]
+    except JassyError:
         value = raw.strip()
     return node, param.strip(), value
 
 
-def load_patch(spec: str | os.PathLike, overrides: list[str] | tuple[str, ...] = ()) -> Patch:
-    """Load and validate a patch file (or built-in name), applying ``node.param=value`` overrides."""
+def _split_top_level(text: str) -> list[str]:
+    """``text`` split at commas outside brackets, braces and quotes."""
+    parts, depth, quote, start = [], 0, "", 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
+def parse_event_option(text: str) -> dict:
+    """A score entry from ``--event 'time=1.0,node=hit,action=impact,impulse=0.02'``: ``time``,
+    ``node``, ``action`` (default ``set``), optional ``jump`` and ``ramp``, and the action's
+    arguments; values in TOML syntax (numbers, true/false, "strings", [lists], {tables}) or bare
+    strings."""
+    where = f"--event {text!r}"
+    fields: dict[str, Any] = {}
+    for item in _split_top_level(text):
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise PatchError(f"{where}: expected key=value items separated by commas, got {item!r}")
+        if key in fields:
+            raise PatchError(f"{where}: {key} given twice")
+        try:
+            fields[key] = parse_toml(f"v = {raw.strip()}", "--event")["v"]
+        except JassyError:
+            fields[key] = raw.strip()
+    for required in ("time", "node"):
+        if required not in fields:
+            raise PatchError(f"{where}: {required}: missing")
+    action = fields.pop("action", "set")
+    if not isinstance(action, str) or action in ("time", "node", "jump", "ramp"):
+        raise PatchError(f"{where}: action: expected the name of an action, got {action!r}")
+    entry = {key: fields.pop(key) for key in ("time", "node", "jump", "ramp") if key in fields}
+    entry[action] = fields
+    return entry
+
+
+def load_patch(
+    spec: str | os.PathLike,
+    overrides: list[str] | tuple[str, ...] = (),
+    events: list[str] | tuple[str, ...] = (),
+) -> Patch:
+    """Load and validate a patch file (or built-in name), applying ``node.param=value`` overrides
+    and adding ``--event`` score entries (see :func:`parse_event_option`)."""
     path = resolve_patch(str(spec))
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise PatchError(f"{path}: not valid TOML ({exc})") from None
-    except OSError as exc:
-        raise PatchError(f"{path}: cannot read ({exc.strerror})") from None
-    return build_patch(data, str(path), path.parent, overrides)
+        data = load_toml(path, "patch file")
+    except JassyError as exc:
+        raise PatchError(str(exc)) from None
+    patch = build_patch(data, str(path), path.parent, overrides)
+    if events:
+        entries = [parse_event_option(text) for text in events]
+        names = [f"--event {text!r}" for text in events]
+        patch.score.extend(_parse_score(entries, patch.graph, str(path), names))
+        patch.score.sort(key=lambda event: event.time)
+    return patch
 
 
 def _table(data: dict, key: str, where: str) -> dict:
@@ -132,7 +189,12 @@ def _load_models(models: dict, where: str, base: Path) -> dict[str, ModalModel]:
             if "file" in entry:
                 if set(entry) != {"file"}:
                     raise PatchError(f"{key}: 'file' cannot be combined with other keys")
-                model = ModalModel.load(base / entry["file"])
+                file = entry["file"]
+                if not isinstance(file, str) or not file.strip() or "\0" in file:
+                    raise PatchError(
+                        f"{key}.file: expected the name of a .toml, .npz or .sy model file, got {file!r}"
+                    )
+                model = ModalModel.load(base / file)
             else:
                 model = ModalModel.from_dict({"name": name, **entry}, key)
         except ModelError as exc:
@@ -195,6 +257,13 @@ def build_patch(
             raise PatchError(f"{key}.type: expected the name of a ugen type")
         cls = ugen_class(table["type"], f"{key}.type")
         params = {k: v for k, v in table.items() if k != "type"}
+        allowed = set(cls.all_specs()) | set(cls.inputs) | ({"inputs"} if cls.variadic else set())
+        for pkey in params:
+            if pkey not in allowed:
+                raise PatchError(
+                    f"{key}: unknown parameter {pkey!r}; "
+                    f"expected one of {', '.join(sorted(allowed))}{suggest(pkey, allowed)}"
+                )
         connect = {}
         if cls.variadic:
             if "inputs" not in params:
@@ -212,7 +281,7 @@ def build_patch(
         for pkey, spec in cls.all_specs().items():
             if spec.kind == "model" and pkey in params:
                 ref = params[pkey]
-                if ref not in models:
+                if not isinstance(ref, str) or ref not in models:
                     known = ", ".join(models) or "none (add [models.NAME])"
                     raise PatchError(f"{key}.{pkey}: unknown model {ref!r}; models are {known}")
                 params[pkey] = models[ref]
@@ -248,15 +317,24 @@ def build_patch(
     if unused:
         raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")
 
-    score = _parse_score(data.get("score", []), graph, where)
     duration = meta.get("duration")
-    if duration is not None and (not isinstance(duration, (int, float)) or duration <= 0):
-        raise PatchError(f"{where}: patch.duration: expected seconds > 0, got {duration!r}")
     rate = meta.get("sample_rate")
-    if rate is not None and (not isinstance(rate, int) or not 1000 <= rate <= 768000):
-        raise PatchError(
-            f"{where}: patch.sample_rate: expected an integer rate in [1000, 768000] Hz, got {rate!r}"
-        )
+    try:
+        if duration is not None:
+            duration = seconds(duration, f"{where}: patch.duration")
+        if rate is not None:
+            rate = number(rate, f"{where}: patch.sample_rate", 1000, 768000, integer=True)
+        generated = expand(data.get("generate", []), models, duration, where)
+    except JassyError as exc:
+        raise PatchError(str(exc)) from None
+    score = _parse_score(data.get("score", []), graph, where)
+    if generated:
+        names, entries = zip(*generated, strict=True)
+        score += _parse_score(list(entries), graph, where, list(names))
+        score.sort(key=lambda event: event.time)
+    for key in ("name", "description"):
+        if not isinstance(meta.get(key, ""), str):
+            raise PatchError(f"{where}: patch.{key}: expected a string, got {meta[key]!r}")
     return Patch(
         graph,
         score,
@@ -268,12 +346,13 @@ def build_patch(
     )
 
 
-def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
+def _parse_score(entries: Any, graph: Graph, where: str, names: list[str] | None = None) -> list[Event]:
+    """Validated events of a score; ``names`` name the entries in errors (default score[i])."""
     if not isinstance(entries, list):
         raise PatchError(f"{where}: score: expected an array of tables ([[score]])")
     events = []
     for i, entry in enumerate(entries):
-        key = f"{where}: score[{i}]"
+        key = names[i] if names else f"{where}: score[{i}]"
         if not isinstance(entry, dict):
             raise PatchError(f"{key}: expected a table")
         for req in ("time", "node"):
@@ -291,6 +370,14 @@ def _parse_score(entries: Any, graph: Graph, where: str) -> list[Event]:
         jump = entry.get("jump", False)
         if not isinstance(jump, bool):
             raise PatchError(f"{key}.jump: expected true or false")
+        if not isinstance(entry["node"], str):
+            raise PatchError(f"{key}.node: expected the name of a node, got {entry['node']!r}")
+        try:
+            seconds(entry["time"], f"{key}.time", allow_zero=True)
+            if entry.get("ramp") is not None:
+                seconds(entry["ramp"], f"{key}.ramp", allow_zero=True)
+        except JassyError as exc:
+            raise PatchError(str(exc)) from None
         event = Event(entry["time"], entry["node"], action, args, jump, entry.get("ramp"))
         events.append(validate_event(graph, event, key))
     return events

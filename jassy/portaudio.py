@@ -1,10 +1,11 @@
 """A small, stable ctypes binding to the PortAudio C library (libportaudio2).
 
-Only what jassy needs: device listing and opening an output stream whose callback is a
-C function pointer (a numba ``@cfunc``), so the audio thread never enters Python. It
-relies on PortAudio's public, versioned C API only (no private attributes of other
-packages). Loading fails with a clear :class:`LiveError` where the library is missing;
-nothing else in jassy imports this module.
+Only what jassy needs: opening an output stream whose callback is a C function pointer
+(a numba ``@cfunc``), so the audio thread never enters Python; this binding is the path
+that opens every live stream. Devices are listed and chosen by name through sounddevice
+(:mod:`jassy.devices`), on the same library, so the indices agree. It relies on
+PortAudio's public, versioned C API only. Loading fails with a clear :class:`LiveError`
+where the library is missing.
 """
 
 from __future__ import annotations
@@ -37,17 +38,6 @@ class DeviceInfo(ctypes.Structure):
         ("default_high_input_latency", ctypes.c_double),
         ("default_high_output_latency", ctypes.c_double),
         ("default_sample_rate", ctypes.c_double),
-    ]
-
-
-class HostApiInfo(ctypes.Structure):
-    _fields_ = [
-        ("struct_version", ctypes.c_int),
-        ("type", ctypes.c_int),
-        ("name", ctypes.c_char_p),
-        ("device_count", ctypes.c_int),
-        ("default_input_device", ctypes.c_int),
-        ("default_output_device", ctypes.c_int),
     ]
 
 
@@ -111,9 +101,10 @@ def library() -> ctypes.CDLL:
         ) from None
     lib.Pa_GetErrorText.restype = ctypes.c_char_p
     lib.Pa_GetDeviceInfo.restype = ctypes.POINTER(DeviceInfo)
-    lib.Pa_GetHostApiInfo.restype = ctypes.POINTER(HostApiInfo)
     lib.Pa_GetStreamInfo.restype = ctypes.POINTER(StreamInfo)
     lib.Pa_GetStreamInfo.argtypes = [ctypes.c_void_p]
+    lib.Pa_GetStreamTime.restype = ctypes.c_double
+    lib.Pa_GetStreamTime.argtypes = [ctypes.c_void_p]
     lib.Pa_OpenStream.argtypes = [
         ctypes.POINTER(ctypes.c_void_p),
         ctypes.POINTER(StreamParameters),
@@ -147,46 +138,14 @@ def check(lib: ctypes.CDLL, code: int, what: str) -> int:
     return code
 
 
-def devices() -> list[dict]:
-    """Output-capable and input devices: index, name, host API, channels, rate, latency."""
+def default_output_device() -> int:
+    """PortAudio's default output device index (device listing and lookup by name:
+    :mod:`jassy.devices`, through sounddevice)."""
     lib = library()
-    out = []
-    default = lib.Pa_GetDefaultOutputDevice()
-    for i in range(check(lib, lib.Pa_GetDeviceCount(), "count devices")):
-        d = lib.Pa_GetDeviceInfo(i).contents
-        out.append(
-            {
-                "index": i,
-                "name": d.name.decode(errors="replace"),
-                "host_api": lib.Pa_GetHostApiInfo(d.host_api).contents.name.decode(errors="replace"),
-                "max_output_channels": d.max_output_channels,
-                "default_sample_rate": d.default_sample_rate,
-                "default_low_output_latency": d.default_low_output_latency,
-                "default": i == default,
-            }
-        )
-    return out
-
-
-def find_device(spec: str | int | None) -> int:
-    """A device index from an index, a name substring, or None for the default output."""
-    lib = library()
-    if spec is None:
-        index = lib.Pa_GetDefaultOutputDevice()
-        if index == PA_NO_DEVICE:
-            raise LiveError("no default output device (see 'jassy devices')")
-        return index
-    found = devices()
-    if isinstance(spec, int) or (isinstance(spec, str) and spec.isdigit()):
-        index = int(spec)
-        if not any(d["index"] == index for d in found):
-            raise LiveError(f"--device {spec}: no such device (see 'jassy devices')")
-        return index
-    matches = [d for d in found if spec.lower() in d["name"].lower() and d["max_output_channels"] > 0]
-    if len(matches) != 1:
-        names = ", ".join(d["name"] for d in found) or "none"
-        raise LiveError(f"--device {spec!r}: expected one matching output device; devices: {names}")
-    return matches[0]["index"]
+    index = lib.Pa_GetDefaultOutputDevice()
+    if index == PA_NO_DEVICE:
+        raise LiveError("no default output device (see 'jassy devices')")
+    return index
 
 
 class OutputStream:
@@ -235,6 +194,19 @@ class OutputStream:
     def output_latency(self) -> float:
         """Device output latency reported by PortAudio (s)."""
         return float(self._lib.Pa_GetStreamInfo(self._stream).contents.output_latency)
+
+    def clock_offset(self, tries: int = 5) -> float:
+        """Local monotonic time minus the stream clock (s), the clock of the callback's
+        ``outputBufferDacTime``: from the tightest of a few paired readings."""
+        import time
+
+        best = (float("inf"), 0.0)
+        for _ in range(tries):
+            before = time.monotonic()
+            stream_time = self._lib.Pa_GetStreamTime(self._stream)
+            after = time.monotonic()
+            best = min(best, (after - before, (before + after) / 2 - stream_time))
+        return best[1]
 
     def start(self) -> None:
         check(self._lib, self._lib.Pa_StartStream(self._stream), "start the stream")

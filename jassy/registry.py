@@ -8,14 +8,19 @@ from __future__ import annotations
 
 import importlib
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 
 _REGISTRY: dict[str, type] = {}
 
 
 def register(cls):
-    """Class decorator: make ``cls`` available under ``cls.type_name``."""
+    """Class decorator: make ``cls`` available under ``cls.type_name``, with a constructor
+    signature and a parameter section in its docstring generated from its ParamSpecs (what
+    ``help()`` and ``inspect.signature`` show)."""
+    from jassy.doc import document_class
+
     _REGISTRY[cls.type_name] = cls
+    document_class(cls)
     return cls
 
 
@@ -36,4 +41,5 @@ def ugen_class(type_name: str, where: str = "type") -> type:
         return _REGISTRY[type_name]
     except KeyError:
         known = ", ".join(sorted(_REGISTRY))
-        raise PatchError(f"{where}: unknown ugen type {type_name!r}; expected one of {known}") from None
+        hint = suggest(type_name, _REGISTRY)
+        raise PatchError(f"{where}: unknown ugen type {type_name!r}; expected one of {known}{hint}") from None

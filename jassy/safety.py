@@ -65,6 +65,74 @@ def limit(buf, n, state, ceiling, release_coeff):
     state[0] = g
 
 
+@nb.njit(cache=True)
+def pinned_samples(buf, n, ceiling, run):
+    """Frames of buf[:, :n] where some channel sits at the limiter's ceiling (within 1e-9):
+    (count, longest run, run still open at the end), runs carried over from ``run`` frames."""
+    count = 0
+    longest = run
+    threshold = ceiling * (1.0 - 1e-9)
+    for i in range(n):
+        pinned = False
+        for c in range(buf.shape[0]):
+            if abs(buf[c, i]) >= threshold:
+                pinned = True
+        if pinned:
+            count += 1
+            run += 1
+            longest = max(longest, run)
+        else:
+            run = 0
+    return count, longest, run
+
+
+class LimiterMeter:
+    """What the final limiter did over a render: frames held at the ceiling, the longest run
+    of them (frames) and the largest input peak (linear, before limiting)."""
+
+    def __init__(self, ceiling: float = CEILING):
+        self.ceiling = ceiling
+        self.pinned = 0
+        self.longest = 0
+        self._run = 0
+        self.input_peak = 0.0
+        self.frames = 0
+
+    def before(self, buf: np.ndarray) -> None:
+        """Record the peak of a chunk about to be limited (finite samples)."""
+        if buf.size:
+            self.input_peak = max(self.input_peak, float(np.max(np.abs(buf))))
+
+    def after(self, buf: np.ndarray, n: int) -> None:
+        """Count the frames of a limited chunk held at the ceiling."""
+        count, self.longest, self._run = pinned_samples(buf, n, self.ceiling, self._run)
+        self.pinned += count
+        self.frames += n
+
+    @property
+    def reduction_db(self) -> float:
+        """Peak gain reduction in dB (0 when the input never exceeded the ceiling)."""
+        return max(0.0, 20 * math.log10(self.input_peak / self.ceiling)) if self.input_peak > 0 else 0.0
+
+    def report(self, sample_rate: float) -> dict:
+        return {
+            "pinned_frames": self.pinned,
+            "longest_pinned_s": self.longest / sample_rate,
+            "peak_reduction_db": self.reduction_db,
+        }
+
+    def warning(self, sample_rate: float) -> str | None:
+        """A warning when the limiter cut peaks, else None."""
+        if self.reduction_db <= 0.0:
+            return None
+        share = 100.0 * self.pinned / max(self.frames, 1)
+        longest_ms = 1e3 * self.longest / sample_rate
+        return (
+            f"limiter: peaks reduced by {self.reduction_db:.1f} dB; {self.pinned} frames ({share:.2f} %) "
+            f"held at the ceiling, the longest run {longest_ms:.1f} ms; lower a gain or use --normalise"
+        )
+
+
 def release_coefficient(release: float, sample_rate: float) -> float:
     """One-pole coefficient for a release time constant ``release`` (s)."""
     return float(np.exp(-1.0 / (release * sample_rate))) if release > 0 else 0.0

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 from jassy.params import ParamSpec, Smoothed
 
 SMOOTH_SPEC = ParamSpec(
@@ -52,6 +52,11 @@ class UGen:
     #: changes through :meth:`set_param_at`, actions through :meth:`act` with their sample
     #: time. The scheduler then hands them over ahead instead of splitting the sub-block.
     inline_events: ClassVar[bool] = False
+    #: True for ugens that share a mode budget (anytime synthesis): they implement
+    #: :meth:`anytime_importance` and honour ``self.budgeted``.
+    supports_budget: ClassVar[bool] = False
+    #: True for :class:`Tap`, which carries another ugen's extra output and is named after it.
+    is_tap: ClassVar[bool] = False
     #: Names of additional outputs (e.g. the contact force of a closed-loop interaction),
     #: written to ``self.extra[name][:n]`` and read by others through :meth:`tap`.
     outputs: ClassVar[tuple[str, ...]] = ()
@@ -68,7 +73,10 @@ class UGen:
         specs = self.all_specs()
         for key in params:
             if key not in specs:
-                raise PatchError(f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}")
+                hint = suggest(key, specs)
+                raise PatchError(
+                    f"{where}: unknown parameter {key!r}; expected one of {', '.join(specs)}{hint}"
+                )
         for key, spec in specs.items():
             if key in params:
                 self.values[key] = self.check_param(key, params[key], f"{where}.{key}")
@@ -208,6 +216,21 @@ class UGen:
         """Compute ``self.out[:n]`` for frames ``start .. start + n - 1``."""
         raise NotImplementedError
 
+    # ------------------------------------------------------ hooks of special kinds
+    def commit(self, start: int, n: int) -> None:
+        """Delays (``is_delay``): store the sub-block's input after every node has run (the
+        graph calls it last, which is what lets a feedback loop pass through a delay)."""
+
+    def min_delay_samples(self) -> int:
+        """Delays (``is_delay``): the shortest delay in samples the ugen can apply; sub-blocks
+        are capped to it when the delay closes a loop."""
+        raise NotImplementedError(f"{self.type_name} is not a delay")
+
+    def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
+        """Budgeted banks (``supports_budget``): per-mode importance for the coming
+        ``period`` frames, given the impulse (N s) scheduled now and in the next period."""
+        raise NotImplementedError(f"{self.type_name} takes no mode budget")
+
     # ---------------------------------------------------------- params and events
     def configure(self, key: str, value: Any) -> None:
         """Set a parameter's initial value (the value every render starts from)."""
@@ -277,6 +300,7 @@ class Tap(UGen):
 
     type_name = "Tap"
     inputs = ("source",)
+    is_tap = True
 
     def __init__(self, source: UGen, output: str):
         super().__init__(source, name=f"{source.name}.{output}" if source.name else None)

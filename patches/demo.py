@@ -26,7 +26,7 @@ from jassy.events import Event
 from jassy.graph import Graph
 from jassy.offline import OfflineEngine, Rendering
 
-MODES = ("scrape", "roll", "drill")
+MODES = ("scrape", "roll", "drill", "poke")
 PRESS_FORCE = 2.0  # N, normal force while the button is held
 TAP_IMPULSE = 0.02  # N s, of the tap when the button goes down
 MOVE_RAMP = 0.02  # s, parameters glide between pointer samples
@@ -45,6 +45,8 @@ def build_scene(mode: str = "scrape") -> Graph:
         raise JassyError(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
     if mode == "drill":
         return build_drill_scene()
+    if mode == "poke":
+        return build_poke_scene()
     tap = ImpactForce(name="tap", duration=0.0008)
     contact = (Scrape if mode == "scrape" else Roll)(name="contact", force=0.0, speed=0.0, seed=1)
     force = Mixer(tap, contact, name="force")
@@ -63,6 +65,75 @@ def build_drill_scene() -> Graph:
     bone = ModalBank(bone_model(), name="bone")(drill)
     out = Mixer(Gain(bone, gain=0.3), Gain(drill.tap("motor"), gain=1.5), name="out")
     return Graph(out, haptic=drill)
+
+
+def build_poke_scene() -> Graph:
+    """The soft ball's squish and press sounds (patches.poke); haptic = the normal force."""
+    from patches.poke import ball_nodes
+    from ugens.mix import Gain
+
+    out, press = ball_nodes()
+    return Graph(Gain(out, gain=0.5, name="out"), haptic=press)
+
+
+class PokeProbe:
+    """A probe sphere pressed into a soft rubber ball (patches.poke's ball: BEM Green's
+    functions and capacitance-matrix contact, physics.deform), stepped at ``rate`` Hz.
+
+    The pointer's x (0..1) is the probe's polar angle over the ball (-45..45 degrees);
+    while pressed it sinks into the ball at ``speed`` m/s down to ``depth`` m, and rises
+    when released. Each step sends the normal force and the sliding speed to the squish
+    and the force to the press node (the haptic channel)."""
+
+    def __init__(self, send: Callable[[Event], None], live: bool = False, rate: float = 1000.0,
+                 depth: float = 0.008, speed: float = 0.05, gap: float = 0.004):  # fmt: skip
+        from physics.deform.bem import Material
+        from physics.deform.greens import reference_greens
+        from physics.deform.haptic import PokeSim, soft_ball
+
+        self.send, self.live, self.rate = send, live, rate
+        self.radius, self.probe_radius = 0.05, 0.015
+        V, F, fixed = soft_ball(self.radius, 3)
+        self.sim = PokeSim(reference_greens(V, F, Material(2e5, 0.45), fixed), self.probe_radius)
+        self.depth, self.speed, self.gap = depth, speed, gap
+        self.x = 0.5
+        self.indent = -gap
+        self.pressed = False
+        self.force = np.zeros(3)
+        self.centre = self._centre()
+
+    @property
+    def touching(self) -> bool:
+        return bool(np.any(self.force))
+
+    def _centre(self) -> np.ndarray:
+        angle = math.radians(90.0 * (self.x - 0.5))
+        reach = self.radius + self.probe_radius - self.indent
+        return reach * np.array([math.sin(angle), 0.0, math.cos(angle)])
+
+    def press(self, x: float, t: float) -> None:
+        self.x, self.pressed = x, True
+
+    def move(self, x: float, t: float) -> None:
+        self.x = x
+
+    def release(self, t: float) -> None:
+        self.pressed = False
+
+    def step(self, t: float) -> None:
+        """One haptic update at time t (s)."""
+        dt = 1.0 / self.rate
+        target = self.depth if self.pressed else -self.gap
+        self.indent += min(max(target - self.indent, -self.speed * dt), self.speed * dt)
+        centre = self._centre()
+        sliding = float(np.linalg.norm(centre - self.centre)) / dt
+        self.centre = centre
+        self.force = self.sim.step(centre).force
+        normal = float(np.linalg.norm(self.force))
+        when = 0.0 if self.live else t
+        rub = {"force": normal, "speed": sliding if normal else 0.0}
+        self.send(Event(when, "squish", "set", rub, ramp=dt))
+        self.send(Event(when, "press", "set", {"amp": normal}, ramp=dt))
 
 
 class DrillProbe:
@@ -93,6 +164,12 @@ class DrillProbe:
         self.controller = None
         self.depth = 0.0
         self.removed = 0.0
+        self.x = 0.5
+        self.force = 0.0
+
+    @property
+    def touching(self) -> bool:
+        return self.controller is not None
 
     def _world(self, x: float) -> np.ndarray:
         v = self.volume
@@ -102,8 +179,15 @@ class DrillProbe:
         return centre
 
     def press(self, x: float, t: float) -> None:
+        self.x = x
         self.controller = self._descent(self._world(x), push=self.push, rpm=self.rpm, v_max=0.05)
         self.send(Event(0.0 if self.live else t, "drill", "set", {"rpm": self.rpm}, ramp=0.05))
+
+    def move(self, x: float, t: float) -> None:
+        """Slide the burr sideways to the pointer's x while it drills."""
+        self.x = x
+        if self.controller is not None:
+            self.controller.pos[0] = self._world(x)[0]
 
     def release(self, t: float) -> None:
         self.controller = None
@@ -119,7 +203,8 @@ class DrillProbe:
         self._state = state
         self.removed += state.removed
         removal = state.removed * 1e9 / self.volume.rho_full * self.rate  # mm^3/s
-        args = {"force": float(np.linalg.norm(state.elastic)), "removal": removal}
+        self.force = float(np.linalg.norm(state.elastic))
+        args = {"force": self.force, "removal": removal}
         self.send(Event(0.0 if self.live else t, "drill", "set", args, ramp=1.0 / self.rate))
 
 
@@ -132,7 +217,12 @@ class Probe:
     width: float = 0.5
     points: int = 9
     live: bool = False
+    x: float = 0.5  # where the probe is (0..1 along the track), pressed or not
     _last: tuple[float, float] | None = None
+
+    @property
+    def touching(self) -> bool:
+        return self._last is not None
 
     def _time(self, t: float) -> float:
         return 0.0 if self.live else t  # live events play as soon as possible
@@ -146,6 +236,7 @@ class Probe:
 
     def press(self, x: float, t: float) -> None:
         self._last = (x, t)
+        self.x = x
         self.send(Event(self._time(t), "plate", "set", {"location": self.location(x)}, jump=True))
         self.send(Event(self._time(t), "tap", "impact", {"impulse": TAP_IMPULSE}))
         self.send(Event(self._time(t), "contact", "set", {"force": PRESS_FORCE, "speed": 0.0}, jump=True))
@@ -158,6 +249,7 @@ class Probe:
             return
         speed = abs(x - x0) * self.width / (t - t0)
         self._last = (x, t)
+        self.x = x
         args = {"speed": min(speed, 5.0)}
         self.send(Event(self._time(t), "contact", "set", args, ramp=MOVE_RAMP))
         self.send(Event(self._time(t), "plate", "set", {"location": self.location(x)}, ramp=MOVE_RAMP))
@@ -201,6 +293,8 @@ def render_script(
     """Render a scripted probe path offline: (time s, "press" | "move" | "release", x)."""
     if mode == "drill":
         return render_drill_script(path, duration, sample_rate, block)[0]
+    if mode == "poke":
+        raise JassyError("--script: poke mode plays live only; its scripted gesture is 'jassy render poke'")
     events: list[Event] = []
     probe = Probe(events.append)
     for t, kind, x in path:
@@ -224,55 +318,92 @@ def stroke(start: float = 0.2, end: float = 1.2, x0: float = 0.1, x1: float = 0.
     return path
 
 
-def run_window(mode: str = "scrape", **live_options) -> None:
-    """Open the demo window (tkinter) and play live until it is closed."""
+def start_live(mode: str, probe_udp: str | None = None, **live_options):
+    """Start the live engine on ``mode``'s scene with its probe (and the drill's physics
+    thread) and, with ``probe_udp`` = HOST:PORT, a UDP probe input driving the probe
+    exactly as the pointer does. Returns (engine, probe, pose receiver or None)."""
+    from jassy.hapticframes import parse_address
+    from jassy.live import LiveEngine
+    from jassy.probeinput import PoseDriver, PoseReceiver
+
+    engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, mode="auto", **live_options)
+    engine.start()
+    physics = {"drill": DrillProbe, "poke": PokeProbe}.get(mode)
+    probe = physics(engine.post, live=True) if physics else Probe(engine.post, live=True)
+    if physics:
+        _start_physics(probe)
+    receiver = None
+    if probe_udp:
+        host, port = parse_address(probe_udp, "--probe-udp")
+        receiver = PoseReceiver(PoseDriver(probe), host, port)
+    return engine, probe, receiver
+
+
+def stop_live(engine, probe, receiver) -> None:
+    """Stop the input, the physics thread and the engine (fade, final frame, children)."""
+    if receiver is not None:
+        receiver.close()
+    probe.running = False
+    engine.stop()
+
+
+def run_headless(mode: str = "scrape", probe_udp: str | None = None, **live_options) -> None:
+    """The live scene without a window, driven by the UDP probe input, until stopped."""
+    import time
+
+    engine, probe, receiver = start_live(mode, probe_udp, **live_options)
+    try:
+        where = f"; probe input on {receiver.address}" if receiver else ""
+        print(f"demo {mode} running headless{where}; Ctrl-C stops", flush=True)
+        while True:
+            time.sleep(0.5)
+    finally:
+        stop_live(engine, probe, receiver)
+
+
+def run_window(mode: str = "scrape", probe_udp: str | None = None, **live_options) -> None:
+    """Open the demo window (tkinter) and play live until it is closed or stopped."""
     try:
         import tkinter as tk
     except ImportError:
         raise JassyError(
             "the demo window needs tkinter (Debian/Ubuntu: apt-get install python3-tk)"
         ) from None
-    from jassy.live import LiveEngine
+    from patches.demo_view import DemoView
 
     try:
         root = tk.Tk()
     except tk.TclError as exc:
-        raise JassyError(f"cannot open a window ({exc}); use --script to run headless") from None
-    engine = LiveEngine(build_scene(mode), [], **live_options)
-    engine.start()
-    probe = DrillProbe(engine.post, live=True) if mode == "drill" else Probe(engine.post, live=True)
-    if mode == "drill":
-        _start_physics(probe)
-    width, height = 600, 300
-    what = "hold to drill into a bone phantom" if mode == "drill" else f"click to tap, drag to {mode}"
-    root.title(f"jassy demo, {mode} mode: {what}")
-    canvas = tk.Canvas(root, width=width, height=height, background="#8a9199")
-    canvas.pack()
-    status = tk.Label(root, anchor="w")
-    status.pack(fill="x")
+        raise JassyError(f"cannot open a window ({exc}); use --script or --headless") from None
+    engine, probe, receiver = start_live(mode, probe_udp, **live_options)
+    stopped: list[BaseException] = []
 
-    def position(event) -> float:
-        return event.x / width
+    def report(exc_type, exc, tb):  # a signal's Stopped, raised inside a Tk callback
+        if isinstance(exc, (KeyboardInterrupt, SystemExit)) or not isinstance(exc, Exception):
+            stopped.append(exc)
+            root.quit()
+        else:
+            raise exc
 
-    canvas.bind("<ButtonPress-1>", lambda e: probe.press(position(e), e.time / 1000.0))
-    if mode != "drill":
-        canvas.bind("<B1-Motion>", lambda e: probe.move(position(e), e.time / 1000.0))
-    canvas.bind("<ButtonRelease-1>", lambda e: probe.release(e.time / 1000.0))
-
-    def refresh() -> None:
-        status.config(text=engine.stats().summary())
-        root.after(500, refresh)
-
-    refresh()
+    root.report_callback_exception = report
     try:
+        view = DemoView(root, mode, engine, probe)
+        view.bind_pointer()
+        print(
+            f"demo {mode} window open" + (f"; probe input on {receiver.address}" if receiver else ""),
+            flush=True,
+        )
         root.mainloop()
     finally:
-        probe.running = False
-        engine.stop()
+        stop_live(engine, probe, receiver)
+        root.destroy()
+    if stopped:
+        raise stopped[0]
 
 
-def _start_physics(probe: DrillProbe) -> None:
-    """Step the drill simulation at its rate in a thread (the sound runs in its own process)."""
+def _start_physics(probe) -> None:
+    """Step the drill or poke simulation at its rate in a thread (the sound runs on the
+    device clock; events go to it as they are computed)."""
     import threading
     import time
 

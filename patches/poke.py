@@ -42,11 +42,10 @@ def soft_model(n_modes: int = 16, seed: int = 3) -> ModalModel:
     return ModalModel(f, math.pi * f / q, a[None, :], name="soft_ball")
 
 
-def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float = 1.0, press_gain: float = 1.0,
-                seed: int = 0, control_step: int = 4):  # fmt: skip
-    """(Graph, score): Scrape ("squish") + high-passed force ("press") -> ModalBank(soft ball),
-    following ``track`` (normal force) and ``rub_speed`` (m/s per track sample), both taken
-    every ``control_step``-th sample (4 ms at 1 kHz: the sound needs no finer control)."""
+def ball_nodes(squish_gain: float = 1.0, press_gain: float = 1.0, seed: int = 0):
+    """(output node, press node): Scrape ("squish", force N and speed m/s) + high-passed
+    normal force ("press": a Sine at 0 Hz whose amplitude is the force, N) -> ModalBank
+    ("ball"). The press node's output is the normal force itself (a haptic channel)."""
     from ugens.filters import Biquad
     from ugens.mix import Gain, Mixer
     from ugens.modal import ModalBank
@@ -54,13 +53,21 @@ def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float =
     from ugens.scrape import Scrape
 
     squish = Scrape(
-        roughness=2e-5, patch=5e-3, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
+        roughness=2e-5, patch=2e-4, f_ref=10.0, v_ref=0.05, stiffness=1e5, seed=seed, name="squish"
     )
     press = Sine(freq=0.0, amp=0.0, phase=math.pi / 2, name="press")
     thump = Biquad(press, mode="highpass", freq=40.0, q=0.7, name="thump")
     drive = Mixer(Gain(squish, gain=squish_gain, name="squish_gain"), Gain(thump, gain=press_gain,
                   name="press_gain"), name="drive")  # fmt: skip
-    out = ModalBank(soft_model(), name="ball")(drive)
+    return ModalBank(soft_model(), name="ball")(drive), press
+
+
+def build_scene(track: ContactTrack, rub_speed: np.ndarray, squish_gain: float = 1.0, press_gain: float = 1.0,
+                seed: int = 0, control_step: int = 4):  # fmt: skip
+    """(Graph, score): Scrape ("squish") + high-passed force ("press") -> ModalBank(soft ball),
+    following ``track`` (normal force) and ``rub_speed`` (m/s per track sample), both taken
+    every ``control_step``-th sample (4 ms at 1 kHz: the sound needs no finer control)."""
+    out, _ = ball_nodes(squish_gain, press_gain, seed)
     k = slice(None, None, max(1, int(control_step)))
     rub = ContactTrack(
         track.bodies, track.times[k], track.normal_force[k], rub_speed[k], track.rolling_speed[k]
@@ -106,7 +113,9 @@ def render_poke(out_wav, haptic_path=None, csv_path=None, duration: float = 4.0,
     press_speed = np.abs(np.sum(velocity * unit, axis=1))
     rub = np.where(res.counts > 0, res.track.slip_speed + press_speed, 0.0)
     graph, score = build_scene(res.track, rub, seed=seed)
-    audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block)
+    audio, warnings = render_normalised(
+        graph, score, duration, out_wav, sample_rate, block, radius=options.get("radius", 0.05)
+    )
     peak = float(np.max(np.abs(audio))) if audio.size else 0.0
     if haptic_path:
         write_signal(haptic_path, res.forces.T.copy(), 1.0 / (res.times[1] - res.times[0]), label="force_")

@@ -3,6 +3,8 @@ both written atomically (a failed run leaves no file behind)."""
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -11,13 +13,34 @@ from jassy.errors import JassyError
 
 PEAK = 10 ** (-6.0 / 20.0)  # -6 dBFS
 
+#: Lists that collect (audio as written, score) of every render (see captured_renders).
+_CAPTURES: list[list] = []
 
-def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, block: int):
-    """Render (graph, score) for ``duration`` s and write ``out_wav`` scaled to a -6 dBFS peak.
+
+@contextlib.contextmanager
+def captured_renders() -> Iterator[list]:
+    """Collect (audio as written, score) of each scene render inside the block (for
+    ``jassy check-audio``, which needs the scheduled event times of a scene)."""
+    found: list = []
+    _CAPTURES.append(found)
+    try:
+        yield found
+    finally:
+        _CAPTURES.remove(found)
+
+
+def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, block: int,
+                      radius: float = 0.1):  # fmt: skip
+    """Render (graph, score) for ``duration`` s through the radiation stage (a body of
+    ``radius`` m, see ugens.radiation) and write ``out_wav`` scaled to a -6 dBFS peak.
     Returns (audio (channels, frames) as written, the engine's warnings)."""
     from jassy.files import AtomicAudioWriter
+    from jassy.graph import Graph
     from jassy.offline import OfflineEngine
+    from ugens.radiation import Radiation
 
+    radiated = [Radiation(node, radius=radius, name=f"radiated{i}") for i, node in enumerate(graph.audio)]
+    graph = Graph(radiated, graph.haptic, graph.budget)
     rendering = OfflineEngine(graph, score, sample_rate, block, limiter=False).render(duration)
     audio = rendering.audio
     if not np.all(np.isfinite(audio)):
@@ -27,6 +50,8 @@ def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, 
         audio = audio * (PEAK / peak)
     with AtomicAudioWriter(out_wav, int(sample_rate), audio.shape[0]) as out:
         out.write(audio)
+    for found in _CAPTURES:
+        found.append((audio, list(score)))
     return audio, list(rendering.warnings)
 
 

@@ -170,7 +170,7 @@ def render_wok(
     hits = impacts(result)
     tracks = contact_tracks(result, with_locations=False)
     graph, score = scene_graph(world.bodies, hits, tracks, voices)
-    audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block)
+    audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block, radius=0.18)
 
     def hand(t):
         p, q = hand_path(t)

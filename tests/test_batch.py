@@ -21,8 +21,9 @@ import pytest
 import soundfile
 
 from jassy.batch import _Lock, add_command, run_batch
-from jassy.batch_exec import BlobReader, make_task, render_task
+from jassy.batch_exec import BlobReader, error_result, make_task, render_task
 from jassy.batch_grid import GridError, load_grid
+from jassy.cli import main
 from jassy.errors import JassyError
 from jassy.files import deterministic_npz, deterministic_wav
 from jassy.offline import OfflineEngine
@@ -461,20 +462,35 @@ def test_rerun_skips_everything_and_repairs_what_is_missing(serial_run, tmp_path
     assert forced.rendered == 8 and files(out) == files(tmp / "out")
 
 
-def test_failing_variant_is_recorded_and_others_go_on(tmp_path, capsys):
+def fail_long_mallet(task):
+    """Render, except that variants with the 0.0003 s mallet fail (as a render error would)."""
+    if task.data["nodes"]["mallet"]["duration"] == 0.0003:
+        return error_result(task, "nodes.mallet.duration: refused by the test")
+    return render_task(task)
+
+
+def test_bad_values_are_refused_before_any_work(tmp_path, capsys):
     grid = write_grid(tmp_path, fmt="pcm16", durations=[0.001, -1.0])
-    code = cli(["batch", str(grid), "-o", str(tmp_path / "out"), "--scheduler", "serial", "-q"])
-    assert code == 1
+    code = main(["batch", str(grid), "-o", str(tmp_path / "out"), "--scheduler", "serial", "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "mallet.duration" in err and "got -1.0" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_failing_variant_is_recorded_and_others_go_on(tmp_path, capsys):
+    grid = write_grid(tmp_path, fmt="pcm16", durations=[0.001, 0.0003])
+    result = run_batch(grid, tmp_path / "out", scheduler="serial", render=fail_long_mallet)
+    assert (result.rendered, result.failed) == (4, 4)
     rows = manifest(tmp_path / "out")
-    bad = [r for r in rows if r["mallet.duration"] == "-1.0"]
+    bad = [r for r in rows if r["mallet.duration"] == "0.0003"]
     good = [r for r in rows if r["mallet.duration"] == "0.001"]
     assert len(bad) == 4 and len(good) == 4
     assert all(r["status"] == "error" and r["output"] == "" for r in bad)
-    assert all("nodes.mallet.duration" in r["error"] and "got -1.0" in r["error"] for r in bad)
+    assert all("refused by the test" in r["error"] for r in bad)
     assert all(r["status"] == "ok" and (tmp_path / "out" / r["output"]).is_file() for r in good)
-    assert "4 variant(s) failed" in capsys.readouterr().err
     # a rerun tries the failed ones again, and only them
-    again = run_batch(grid, tmp_path / "out", scheduler="serial")
+    again = run_batch(grid, tmp_path / "out", scheduler="serial", render=fail_long_mallet)
     assert (again.skipped, again.rendered, again.failed) == (4, 0, 4)
 
 

@@ -6,15 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jassy import Event, Graph, JassyError, render
-from jassy.haptics import (
-    FLAG_CLAMPED,
-    HapticReceiver,
-    HapticSafety,
-    UdpHapticSink,
-    channel_delays,
-    limit_force,
-    parse_frame,
-)
+from jassy.hapticframes import FLAG_CLAMPED, FLAG_FINAL, decode, encode, parse_address
+from jassy.haptics import HapticSafety, channel_delays, limit_force
 from ugens.impact import ImpactForce
 from ugens.mix import Gain
 
@@ -77,22 +70,20 @@ def test_render_applies_the_safety_limits():
         HapticSafety(max_force=0.0)
 
 
-def test_udp_frames_carry_sample_time_and_mean_force():
-    rx = HapticReceiver()
-    try:
-        sink = UdpHapticSink(rx.address, FS, channels=2, frame_rate=1000.0)
-        data = np.vstack([np.arange(480.0), -np.ones(480)])
-        sink.send(data[:, :100], start_frame=4800)
-        sink.send(data[:, 100:], start_frame=4900)
-        frames = [rx.receive() for _ in range(10)]
-        sink.close()
-    finally:
-        rx.close()
-    assert all(f is not None for f in frames)
-    for k, (frame, flags, force) in enumerate(frames):
-        assert frame == 4800 + 48 * k and flags == 0
-        np.testing.assert_allclose(force, [np.mean(np.arange(48 * k, 48 * k + 48)), -1.0], rtol=1e-6)
-    with pytest.raises(JassyError, match="expected at least 16"):
-        parse_frame(b"short")
+def test_udp_frame_format_round_trips_and_rejects_bad_datagrams():
+    force, torque = np.array([1.5, -2.0, np.nan]), np.array([0.25])
+    data = encode(7, 336, 0.123456789, FLAG_CLAMPED | FLAG_FINAL, force, torque, FS)
+    assert len(data) == 40 + 4 * 4 and data[:4] == b"JHAP"
+    frame = decode(data)
+    assert (frame.sequence, frame.sample_time, frame.flags) == (7, 336, FLAG_CLAMPED | FLAG_FINAL)
+    assert frame.device_time == 0.123456789 and frame.sample_rate == FS
+    np.testing.assert_array_equal(frame.force, [1.5, -2.0, 0.0])  # NaN never leaves the engine
+    np.testing.assert_array_equal(frame.torque, [0.25])
+    with pytest.raises(JassyError, match="expected at least 40"):
+        decode(b"short")
+    with pytest.raises(JassyError, match="version 2"):
+        decode(b"XXXX" + data[4:])
+    with pytest.raises(JassyError, match="do not hold"):
+        decode(data[:-4])
     with pytest.raises(JassyError, match="HOST:PORT"):
-        UdpHapticSink("nowhere", FS, 1)
+        parse_address("nowhere")

@@ -6,7 +6,6 @@ each mode by scipy, ModalBank, onset detection on the rendered audio.
 """
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -367,15 +366,18 @@ def test_sound_is_the_resonator_driven_by_the_contact_force():
     # the resonator matters: the force differs from the one against a rigid surface
     assert max_abs_diff(force, rigid_force) > 0.1 * np.max(rigid_force)
     peak = np.max(np.abs(y))
-    # exact: the same modes discretised by scipy (zero-order hold), driven by the recorded force
-    np.testing.assert_allclose(y, zoh_reference(model, force), rtol=0, atol=1e-9 * peak)
-    # ModalBank (force as impulses) differs only by the hold: sinc(f/fs) e^{-i pi f/fs}
+    # the same modes discretised by scipy (zero-order hold), driven by the recorded force (the
+    # mean of each sample's sub-step forces): equal but for the force's shape within a sample
+    assert max_abs_diff(y, zoh_reference(model, force)) < 2e-3 * peak  # 9.4e-4 measured
+    # ModalBank (the response at t_n to the smooth force through the samples) differs only
+    # by the hold and the output time t_{n+1}: sinc(f/fs) e^{-i pi f/fs} e^{2 i pi f/fs}
     bank = ModalBank(model, name="mb")(ArraySource(force))
-    yb = render(Graph(bank), [], 0.2, FS, 64, limiter=False).audio[0]
-    spectrum = np.fft.rfft(yb, 2 * yb.size)
-    freqs = np.fft.rfftfreq(2 * yb.size, 1 / FS)
-    held = np.fft.irfft(spectrum * np.sinc(freqs / FS) * np.exp(-1j * np.pi * freqs / FS))[: yb.size]
-    assert max_abs_diff(y, held) < 0.01 * peak
+    longer = render(Graph(bank), [], 0.25, FS, 64, limiter=False).audio[0]  # the shift wraps its end
+    yb = longer[: y.size]
+    spectrum = np.fft.rfft(longer, 2 * longer.size)
+    freqs = np.fft.rfftfreq(2 * longer.size, 1 / FS)
+    held = np.fft.irfft(spectrum * np.sinc(freqs / FS) * np.exp(1j * np.pi * freqs / FS))[: y.size]
+    assert max_abs_diff(y, held) < 1e-3 * peak
     assert max_abs_diff(y, yb) < 0.1 * peak  # uncorrected: within the half-sample shift
 
 
@@ -407,38 +409,24 @@ def test_hc_is_block_size_invariant_with_strikes_locations_and_parameter_changes
         assert max_abs_diff(outs[0].haptic, other.haptic) < 1e-6 * np.max(np.abs(outs[0].haptic))
 
 
-def test_hc_rejects_invalid_params_and_negative_driving_point_gains():
+def test_hc_rejects_invalid_params_and_signed_gains_without_driving_point_gains():
     with pytest.raises(PatchError, match="mass"):
         HuntCrossleyImpact(RIGID, mass=0.0)
     with pytest.raises(PatchError, match="alpha"):
         HuntCrossleyImpact(RIGID, alpha=0.5)
     with pytest.raises(PatchError, match="dissipation"):
         HuntCrossleyImpact(RIGID, dissipation=-1.0)
-    signed = ModalModel([300.0, 900.0], [1.0, 1.0], [[1e-4, 1e-4], [1e-4, -1e-4]])
-    with pytest.raises(PatchError, match="gain of mode 1"):
-        HuntCrossleyImpact(signed, location=1)
-    hc = HuntCrossleyImpact(signed, name="hc")
+    # signed strike-to-pickup gains: a contact needs the driving-point gains as well
+    signed = ModalModel([300.0, 900.0], [1.0, 1.0], [[1e-4, 1e-4], [1e-4, -1e-4]], name="two")
+    for location in (0, 1):
+        with pytest.raises(
+            PatchError, match=r"model two has signed gains \(mode 1: -0\.0001\) and no driving"
+        ):
+            HuntCrossleyImpact(signed, location=location)
+    driven = ModalModel(signed.frequencies, signed.decays, signed.gains, driving=[[1e-4, 1e-4], [1e-4, 1e-4]])
+    hc = HuntCrossleyImpact(driven, name="hc")
     with pytest.raises(PatchError, match="speed"):
         render(Graph(hc), [Event(0.0, "hc", "strike", {"speed": 0.0})], 0.01)
-    with pytest.raises(PatchError, match="gain of mode 1"):
-        render(Graph(hc), [Event(0.0, "hc", "strike", {"speed": 1.0, "location": 1})], 0.01)
-
-
-def test_hc_with_200_modes_renders_faster_than_20x_real_time():
-    rng = np.random.default_rng(2)
-    model = random_model(rng, 200, 0.2)
-    hc = HuntCrossleyImpact(model, name="hc", mass=0.02, stiffness=1e8, floor=0.0)  # no silence skipping
-    graph = Graph(hc, haptic=hc.tap("force"))
-    events = [Event(0.01 + 0.25 * i, "hc", "strike", {"speed": 1.0}) for i in range(12)]
-    render(graph, events, 0.1, FS, 64)  # warm up
-    best = min(_timed(lambda: render(graph, events, 3.0, FS, 64)) for _ in range(3))
-    assert 3.0 / best > 20
-
-
-def _timed(fn):
-    t = time.perf_counter()
-    fn()
-    return time.perf_counter() - t
 
 
 # -------------------------------------------------------------------- the patch
@@ -490,10 +478,7 @@ def detect_onsets(y, fs):
 def test_marble_patch_renders_and_bounce_onsets_match_the_closed_form():
     patch = load_patch("marble")  # the imports above register ImpactTrain and HuntCrossleyImpact
     assert 4.0 <= patch.duration <= 8.0
-    render(patch.graph, patch.score, 0.1, FS, 64)  # warm up
-    t = time.perf_counter()
-    y = render(patch.graph, patch.score, patch.duration, FS, 64).audio[0]
-    assert patch.duration / (time.perf_counter() - t) > 20
+    y = render(patch.graph, patch.score, patch.duration, FS, 64).audio[0]  # speed: jassy bench contact
     peak_db = 20 * np.log10(np.max(np.abs(y)))
     assert -8.0 < peak_db < -4.5
     bounce = next(ev for ev in patch.score if ev.action == "bounce")

@@ -3,35 +3,20 @@
 Skipped, with the reason, where jackd or libportaudio2 is missing.
 """
 
-import os
 import time
 
 import numpy as np
 import pytest
 
 from jassy import Event, Graph, ModalModel
-from jassy.haptics import HapticReceiver, HapticSafety
+from jassy.hapticframes import FLAG_CLAMPED, FLAG_FINAL, FLAG_STALLED, FLAG_WATCHDOG, FrameRecorder
+from jassy.haptics import HapticSafety
 from jassy.offline import OfflineEngine
 from jassy.patchfile import load_patch
 from jassy.portaudio import LiveError
 from ugens import Gain, ImpactForce, ModalBank
 
 FS = 48000
-
-
-@pytest.fixture(scope="module")
-def jack():
-    import ctypes.util
-
-    from jassy.jackserver import dummy_jack
-
-    if ctypes.util.find_library("portaudio") is None:
-        pytest.skip("libportaudio2 is not installed (apt-get install libportaudio2)")
-    try:
-        with dummy_jack(f"jassy-test-{os.getpid()}", FS, 64, channels=4) as name:
-            yield name
-    except LiveError as exc:
-        pytest.skip(f"no JACK dummy server: {exc}")
 
 
 def tap_graph():
@@ -63,6 +48,26 @@ def test_live_output_is_the_offline_rendering_sample_for_sample(jack, isolation)
     ref = OfflineEngine(load_patch("bell").graph, load_patch("bell").score, FS, 64).render(1.2)
     ok = (rendered >= 0) & (rendered < ref.audio.shape[1])
     assert np.all(np.diff(rendered[rendered >= 0]) == 1)  # every rendered frame played once, in order
+    np.testing.assert_array_equal(heard[0, ok], ref.audio[0, rendered[ok]].astype(np.float32))
+    np.testing.assert_array_equal(heard[1, ok], ref.haptic[0, rendered[ok]].astype(np.float32))
+
+
+def test_callback_mode_plays_the_offline_rendering_with_the_devices_latency_only(jack):
+    from jassy.live import LiveEngine
+
+    patch = load_patch("bell")
+    live = LiveEngine(patch.graph, patch.score, FS, 64, monitor_seconds=3.0, mode="auto")
+    assert live.mode == "callback" and live.mode_reason is None
+    live.start()
+    time.sleep(1.2)
+    stats = live.stop()
+    heard, rendered = live.monitor()
+    assert stats.mode == "callback" and stats.ring_latency == 0.0
+    assert stats.latency == stats.device_latency <= 0.0015  # one 64-frame buffer at 48 kHz
+    assert stats.callbacks == pytest.approx(1.2 * FS / 64, rel=0.15)
+    assert np.all(np.diff(rendered) == 1) and rendered[0] >= 0  # every frame rendered as played
+    ref = OfflineEngine(load_patch("bell").graph, load_patch("bell").score, FS, 64).render(1.2)
+    ok = rendered < ref.audio.shape[1]
     np.testing.assert_array_equal(heard[0, ok], ref.audio[0, rendered[ok]].astype(np.float32))
     np.testing.assert_array_equal(heard[1, ok], ref.haptic[0, rendered[ok]].astype(np.float32))
 
@@ -131,26 +136,78 @@ def test_watchdog_fades_haptics_to_zero_within_10_ms_when_the_producer_stalls(ja
     assert np.max(np.abs(np.diff(resumed))) <= 2000.0 / FS + 1e-6
 
 
-def test_udp_haptic_frames_follow_the_rendered_force(jack):
+def frames_of(recorder):
+    assert recorder.wait_final(), "no final frame"
+    return recorder.stop()
+
+
+@pytest.mark.parametrize("mode", ["ring", "callback"])
+def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mode):
     from jassy.live import LiveEngine
 
-    rx = HapticReceiver()
+    rx = FrameRecorder()
     score = [Event(0.05, "hit", "impact", {"impulse": 0.01})]
-    live = LiveEngine(tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address)
+    live = LiveEngine(
+        tap_graph(), score, FS, 64, ring_blocks=3, haptic_udp=rx.address, monitor_seconds=2.0, mode=mode
+    )
+    assert live.mode == mode
     live.start()
-    frames = []
-    deadline = time.monotonic() + 1.0
-    while time.monotonic() < deadline and len(frames) < 100:
-        f = rx.receive()
-        if f is not None:
-            frames.append(f)
-    live.stop()
-    rx.close()
-    times = [f[0] for f in frames]
-    assert times[:3] == [0, 48, 96] and np.all(np.diff(times) == 48)
+    time.sleep(0.5)
+    stats = live.stop()
+    frames = frames_of(rx)
+    heard, rendered = live.monitor()
+    final = frames[-1]
+    assert final.flags & FLAG_FINAL and np.all(final.force == 0)
+    body = frames[:-1]
+    assert [f.sequence for f in body] == list(range(len(body)))  # one frame per ms, none lost
+    assert [f.sample_time for f in body] == [48 * k for k in range(len(body))]
+    assert 0.4 * FS / 48 < len(body) <= stats.frames_played / 48
+    # the device time of a frame is when its first sample plays: frames 1 ms apart on it
+    device = np.array([f.device_time for f in body])
+    # (a smoothed estimate: the callbacks' own DAC times jitter by a fraction of a block)
+    np.testing.assert_allclose(np.diff(device), 1e-3, atol=1e-4)
+    assert (device[-1] - device[0]) / (device.size - 1) == pytest.approx(1e-3, rel=0.01)
+    # each frame's force is the mean of what the device played over its 48 samples
+    played = heard[1]
+    for f in body[: played.size // 48]:
+        assert f.force[0] == pytest.approx(played[f.sample_time : f.sample_time + 48].mean(), abs=1e-6)
+    # and that is the offline rendering (no underrun: the ring was played in order)
+    assert np.array_equal(rendered[:4800], np.arange(4800))
     ref = OfflineEngine(tap_graph(), score, FS, 64).render(0.1).haptic[0]
-    for t, _, force in frames[:100]:
-        assert force[0] == pytest.approx(ref[t : t + 48].mean(), rel=1e-5, abs=1e-6)
+    for f in body[:100]:
+        assert f.force[0] == pytest.approx(ref[f.sample_time : f.sample_time + 48].mean(), rel=1e-5, abs=1e-6)
+    # they leave as their samples reach the device: 1 ms apart on the local clock too
+    gaps = np.diff([f.received for f in body[20:]])
+    assert np.median(gaps) == pytest.approx(1e-3, abs=1e-4)
+
+
+def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
+    from jassy.live import LiveEngine
+
+    rx = FrameRecorder()
+    hit = ImpactForce(name="hit", duration=0.5)  # a long push, clamped at 1 N
+    graph = Graph(Gain(hit, gain=0.0), haptic=hit)
+    safety = HapticSafety(max_force=1.0, watchdog=0.01)
+    score = [Event(0.0, "hit", "impact", {"impulse": 2.0})]
+    live = LiveEngine(graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, haptic_udp=rx.address)
+    live.start()
+    time.sleep(0.2)
+    live.pause_producer(True)
+    time.sleep(0.05)
+    live.pause_producer(False)
+    time.sleep(0.1)
+    live.stop()
+    frames = frames_of(rx)
+    flags = np.array([f.flags for f in frames])
+    force = np.array([f.force[0] for f in frames])
+    assert np.all(force <= 1.0 + 1e-6) and np.any(flags & FLAG_CLAMPED)
+    clamped = force[flags == FLAG_CLAMPED]  # (callbacks flag all the frames they touch)
+    assert clamped.size >= 100 and np.median(clamped) == pytest.approx(1.0)
+    stalled = np.flatnonzero(flags & FLAG_STALLED)
+    assert stalled.size >= 40  # the 50 ms pause
+    fading = np.flatnonzero(flags & FLAG_WATCHDOG)
+    assert fading[0] == stalled[0] and np.all(force[stalled[0] + 11 : stalled[-1]] == 0)
+    assert flags[-1] == FLAG_FINAL and force[-1] == 0
 
 
 WARM_CHECK = """
@@ -215,5 +272,6 @@ def test_cli_devices_and_play(jack, capsys):
     assert main(["play", "bar", "--duration", "0.3", "-q"]) == 0
     out = capsys.readouterr().out
     assert "playing bar" in out and "underruns" in out
+    assert "mode: callback" in out  # the bar patch renders in the device callback
     assert main(["play", "bar", "--duration", "0.3", "--ring", "0.5"]) == 2
     assert "--ring: expected at least 1 block" in capsys.readouterr().err

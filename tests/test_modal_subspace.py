@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from jassy import ModalModel
 from physics.modal import esprit
 from physics.modal.strikes import clipped_samples, detect_onsets
 
@@ -59,12 +58,3 @@ def test_onsets_of_strikes_over_a_ringing_tail_and_clipping():
     np.testing.assert_allclose(found, onsets, atol=0.001)
     assert clipped_samples(x).size == 0
     assert clipped_samples(np.clip(x, -0.8, 0.8)).size > 10
-
-
-def test_model_keeps_an_attack_through_files(tmp_path):
-    m = ModalModel([100.0], [1.0], [[1.0]], attack=np.array([0.1, -0.2, 0.05]), attack_rate=48000.0)
-    for ext in ("toml", "npz"):
-        m.save(tmp_path / f"m.{ext}")
-        back = ModalModel.load(tmp_path / f"m.{ext}")
-        np.testing.assert_array_equal(back.attack, m.attack)
-        assert back.attack_rate == 48000.0

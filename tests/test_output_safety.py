@@ -90,7 +90,7 @@ def test_cli_render_writes_haptic_track(tmp_path):
         (["render", "bell", "-o", "{out}.mp3"], "expected a .wav or .flac file name"),
         (["render", "bell", "-o", "{out}", "--duration", "-1"], "duration: expected seconds > 0"),
         (["render", "bell", "-o", "{out}", "--sr", "22050"], "below Nyquist"),
-        (["render", "bell", "-o", "{out}", "--block", "0"], "--block: expected an integer >= 1"),
+        (["render", "bell", "-o", "{out}", "--block", "0"], "--block: expected an integer in [1, "),
         (["render", "bell", "-o", "{dir}/missing/x.wav"], "does not exist"),
     ],
 )

@@ -111,7 +111,8 @@ def test_adaptive_matches_fine_fixed_step():
     assert min(np.max(np.abs(qa[-1] - qf[-1])), np.max(np.abs(qa[-1] + qf[-1]))) < 1e-8
 
 
-def test_free_fall_is_exact_with_rk4():
+@pytest.mark.parametrize("method", ["semi-implicit", "rk4"])
+def test_free_fall_is_exact(method):
     p, _, phi = integrate_free(
         np.array([0, 0, 1.0]),
         np.array([1.0, 0, 0, 0]),
@@ -120,7 +121,7 @@ def test_free_fall_is_exact_with_rk4():
         1.0,
         0.01,
         100,
-        "rk4",
+        method,
         gravity=(0, 0, -9.81),
     )
     t = 1.0

@@ -106,9 +106,9 @@ def test_crumple_with_an_energy_budget_stops_when_spent():
     assert np.all(force[last_end:] == 0.0) and force[:last_end].max() > 0
 
 
-def test_break_energies_sum_to_the_budget_and_the_cascade_thins_out():
+def test_break_full_scaling_energies_sum_to_the_budget_and_the_cascade_thins_out():
     budget, mass, tau = 0.05, 1e-3, 5e-5
-    b = Break(name="b", density=800.0, crushing_energy=1e-3, mass=mass, duration=tau, seed=11)
+    b = Break(name="b", density=800.0, crushing_energy=1e-3, mass=mass, duration=tau, seed=11, scaling="full")
     b.log_capacity = 10000
     force = run(b, [Event(0.05, "b", "break", {"energy": budget})], 4.0)[0]
     log = b.event_log()

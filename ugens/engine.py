@@ -30,10 +30,23 @@ reflects with ``port_reflection`` (< 1: the loop is stable). The pipe resonates 
 (1 + R) p+ = p (1 - z^-1) / (1 - p z^-1) p+: a high-pass with a zero at DC, which
 removes the mean exhaust pressure.
 
+Band limiting. A pulse starts with a corner (value 0, slope A e / tau), which sampled as is
+folds energy above Nyquist back into the top octave. The waveguide is fed the pulse train
+with a band-limited ramp correction (BLAMP; Esqueda, Valimaki & Bilbao, "Rounding corners
+with BLAMP", DAFx 2016) at each onset: the residual of a unit ramp filtered by a
+Kaiser-windowed sinc (cut-off BLAMP_CUTOFF of the rate, BLAMP_HALF samples either side),
+tabulated over sub-sample positions, times the slope jump. The correction reaches
+BLAMP_HALF samples before the onset, so the waveguide input (and the sound) lags the
+``pulses`` output by BLAMP_HALF samples (0.67 ms at 48 kHz); ``pulses`` stays the exact
+pulse train.
+
 Output: sound pressure (unitless), scaled so that throttle 1 at 3000 rpm with no
 irregularity peaks at 0.5 (the scale is measured at prepare time by running the kernel).
-Extra output ``pulses``: the port pressure pulse train on the same scale. Not modelled:
-intake, cylinder waveguides, mufflers, engine-block vibration, backfire (SDT ``motor~``).
+Extra output ``pulses``: the port pressure pulse train on the same scale. Intake and
+engine-block (mechanical) noise are added from that pulse train (``intake_level``,
+``mechanical_level``; extra outputs ``intake`` and ``mechanical``; model in
+:mod:`ugens.engine_noise`). Not modelled: cylinder waveguides, mufflers, backfire
+(SDT ``motor~``).
 """
 
 from __future__ import annotations
@@ -49,6 +62,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import engine_noise
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -61,6 +75,40 @@ REFERENCE_RPM = 3000.0
 PEAK = 0.5
 #: Capacity of the queue of firings waiting for their (jittered) onset.
 QUEUE = 16
+#: XORed into the seed for the intake and mechanical noise (a stream of its own).
+NOISE_STREAM = 0x5DEECE66D
+#: Noise level parameters -> slots of the levels vector of ugens.engine_noise.
+_NOISE_LEVELS = {"intake_level": 0, "hiss": 1, "mechanical_level": 2}
+#: Rate (Hz) at which the noise levels are as set; other rates keep the spectral density.
+NOISE_RATE = 48000.0
+#: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
+#: the sample rate), Kaiser window beta, sub-sample positions tabulated.
+BLAMP_HALF = 32
+BLAMP_CUTOFF = 0.47
+BLAMP_BETA = 8.0
+BLAMP_PHASES = 256
+
+
+def blamp_table(half: int = BLAMP_HALF, cutoff: float = BLAMP_CUTOFF, beta: float = BLAMP_BETA,
+                phases: int = BLAMP_PHASES) -> np.ndarray:  # fmt: skip
+    """Residuals of a band-limited unit ramp: row p, column j holds (R * h)(x) - R(x) at
+    x = j - half + p / phases (samples from the corner), R(x) = max(x, 0), h the Kaiser-
+    windowed sinc of unit area with cut-off ``cutoff`` (cycles per sample)."""
+    grid = 64  # integration points per sample
+    tau = np.linspace(-half, half, 2 * half * grid + 1)
+    h = 2.0 * cutoff * np.sinc(2.0 * cutoff * tau) * np.kaiser(tau.size, beta)
+    step = tau[1] - tau[0]
+    h /= np.trapezoid(h, dx=step)
+    # R_s(x) = x C0(x) - C1(x), C0 = int_{-half}^x h, C1 = int_{-half}^x tau h (trapezoids)
+    c0 = np.concatenate([[0.0], np.cumsum(0.5 * (h[1:] + h[:-1]) * step)])
+    th = tau * h
+    c1 = np.concatenate([[0.0], np.cumsum(0.5 * (th[1:] + th[:-1]) * step)])
+    x = np.arange(2 * half)[None, :] - half + np.arange(phases + 1)[:, None] / phases
+    smooth = x * np.interp(x, tau, c0, right=1.0) - np.interp(x, tau, c1, right=c1[-1])
+    return smooth - np.maximum(x, 0.0)
+
+
+_BLAMP = blamp_table()
 
 # parameter vector layout
 _FS, _PER_REV, _IRR, _MIS, _R, _NORM, _DELAY, _PORT, _POLE, _GAIN = range(10)
@@ -84,9 +132,11 @@ def _tap(ring, w, delay):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, ring, par):
+def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, ring, par, blamp, lead):
     """n samples from absolute frame ``start``. st: float state (_PHASE..); queue rows:
-    (onset sample time, amplitude); ist = [queued firings, ring write slot]."""
+    (onset sample time, amplitude); ist = [queued firings, ring write slot]; blamp: the
+    residual table (:func:`blamp_table`); lead: the pulse train with its corrections, by
+    frame modulo its length (2 BLAMP_HALF + 2), read BLAMP_HALF frames late."""
     fs = par[_FS]
     per_rev = par[_PER_REV]
     irr = par[_IRR]
@@ -107,6 +157,9 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, 
     s = rng[0]
     size = ring.size
     log_r = math.log(r)
+    half = blamp.shape[1] // 2
+    phases = blamp.shape[0] - 1
+    span = lead.size
     for i in range(n):
         t = float(start + i)
         inc = rpms[i] * per_rev / (60.0 * fs)
@@ -135,16 +188,29 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, 
                 e = queue[k, 1] * math.exp(x * log_r)
                 s1 += e
                 s2 += x * e
+                # band-limited corner: slope norm * A per sample at the onset
+                q = x * phases
+                row = min(int(q), phases - 1)
+                w1 = q - row
+                slope = norm * queue[k, 1]
+                for j in range(2 * half):
+                    c = (1.0 - w1) * blamp[row, j] + w1 * blamp[row + 1, j]
+                    lead[int(start + i - half + j) % span] += slope * c
                 count -= 1
                 queue[k, 0] = queue[count, 0]
                 queue[k, 1] = queue[count, 1]
             else:
                 k += 1
         p = norm * s2
+        now = int(start + i) % span
+        lead[now] += p
+        late = int(start + i - half) % span
+        p_bl = lead[late]
+        lead[late] = 0.0
         # exhaust waveguide: forward wave written at the port, read at the open end
         back = _tap(ring, w, 2.0 * delay)
         lp_back += (1.0 - pole) * (back - lp_back)
-        x_port = p - port * lp_back
+        x_port = p_bl - port * lp_back
         ring[w] = x_port
         w += 1
         if w == size:
@@ -170,7 +236,7 @@ class Engine(UGen):
     EngineApplet). Output: sound pressure, throttle 1 at 3000 rpm peaks at ~0.5."""
 
     type_name = "Engine"
-    outputs = ("pulses",)
+    outputs = ("pulses", "intake", "mechanical")
     param_specs = {
         "rpm": ParamSpec(
             "float", 800.0, low=0.0, high=20000.0, unit="1/min", smooth=True, doc="crankshaft speed"
@@ -219,6 +285,7 @@ class Engine(UGen):
         "port_reflection": ParamSpec(
             "float", 0.7, low=0.0, high=0.99, doc="reflection coefficient at the port (engine) end"
         ),
+        **engine_noise.NOISE_SPECS,
     }
 
     def check_param(self, key: str, value: Any, where: str) -> Any:
@@ -240,24 +307,19 @@ class Engine(UGen):
         self.ist = np.zeros(2, dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
         self.ring = np.zeros(int(math.ceil(2.0 * delay)) + 2)
+        self.lead = np.zeros(2 * BLAMP_HALF + 2)
         self.par = np.zeros(10)
+        self.noise_coef = engine_noise.design(v, fs)
+        self.noise_state = np.zeros((3, 2))
+        self.noise_rng = np.zeros(1, dtype=np.uint64)
+        self.noise_levels = np.zeros(3)
+        for key in ("intake_level", "hiss", "mechanical_level"):
+            self._param_changed(key, v[key], True)
         self.rpm = self.smoothed("rpm")
         self.throttle = self.smoothed("throttle")
         self._rpms = Control(self.rpm, self.max_block)
         self._throttles = Control(self.throttle, self.max_block)
-        tau = v["pulse"] * fs
-        self.par[:] = (
-            fs,
-            v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
-            v["irregularity"],
-            v["misfire"],
-            math.exp(-1.0 / tau),
-            math.e / tau,
-            delay,
-            v["port_reflection"],
-            math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
-            1.0,
-        )
+        self.par[:] = self._kernel_parameters(fs)
         self.par[_GAIN] = PEAK / self._reference_peak()
         self._run = specialise(
             engine_run,
@@ -273,12 +335,39 @@ class Engine(UGen):
             self.rng,
             self.ring,
             self.par,
+            _BLAMP,
+            self.lead,
+        )
+
+    def _kernel_parameters(self, fs: float) -> np.ndarray:
+        """The kernel's parameter vector at rate fs (gain 1)."""
+        v = self.values
+        tau = v["pulse"] * fs
+        return np.array(
+            [
+                fs,
+                v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
+                v["irregularity"],
+                v["misfire"],
+                math.exp(-1.0 / tau),
+                math.e / tau,
+                v["exhaust_length"] / v["c"] * fs,
+                v["port_reflection"],
+                math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
+                1.0,
+            ]
         )
 
     def _reference_peak(self) -> float:
-        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity."""
-        fs = self.sample_rate
-        par = self.par.copy()
+        """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity,
+        rendered at NOISE_RATE (so the scale does not change with the rate: a band-limited
+        peak grows with it) unless the pipe is shorter than a sample there."""
+        fs = (
+            NOISE_RATE
+            if self.values["exhaust_length"] / self.values["c"] * NOISE_RATE >= 1.0
+            else self.sample_rate
+        )
+        par = self._kernel_parameters(fs)
         par[_IRR] = 0.0
         par[_MIS] = 0.0
         n = int(0.6 * fs)
@@ -294,8 +383,10 @@ class Engine(UGen):
             np.zeros((QUEUE, 2)),
             np.zeros(2, dtype=np.int64),
             np.zeros(1, dtype=np.uint64),
-            np.zeros_like(self.ring),
+            np.zeros(int(math.ceil(2.0 * par[_DELAY])) + 2),
             par,
+            _BLAMP,
+            np.zeros_like(self.lead),
         )
         peak = float(np.max(np.abs(out[n // 2 :])))
         return peak if peak > 0.0 else 1.0
@@ -306,6 +397,9 @@ class Engine(UGen):
         self.ist[:] = 0
         self.rng[0] = self.values["seed"]
         self.ring[:] = 0.0
+        self.lead[:] = 0.0
+        self.noise_state[:] = 0.0
+        self.noise_rng[0] = self.values["seed"] ^ NOISE_STREAM
         for ramp in (self.rpm, self.throttle):
             ramp.set(ramp.target, 0, jump=True)
 
@@ -318,6 +412,11 @@ class Engine(UGen):
             self.par[_MIS] = value
         elif key == "port_reflection":
             self.par[_PORT] = value
+        elif key in _NOISE_LEVELS:
+            # white noise of a fixed variance spreads over fs / 2: the noise terms (hiss,
+            # block) scale by sqrt(fs / NOISE_RATE) to keep their spectral density at any rate
+            density = 1.0 if key == "intake_level" else math.sqrt(self.sample_rate / NOISE_RATE)
+            self.noise_levels[_NOISE_LEVELS[key]] = value * density
 
     def process(self, start: int, n: int) -> None:
         self._run(
@@ -333,7 +432,26 @@ class Engine(UGen):
             self.rng,
             self.ring,
             self.par,
+            _BLAMP,
+            self.lead,
         )
+        if self.noise_levels[0] > 0.0 or self.noise_levels[2] > 0.0:
+            engine_noise.engine_noise(
+                self.extra["pulses"],
+                self.out,
+                self.extra["intake"],
+                self.extra["mechanical"],
+                n,
+                self._rpms.buffer,
+                self._throttles.buffer,
+                self.noise_levels,
+                self.noise_coef,
+                self.noise_state,
+                self.noise_rng,
+            )
+        else:
+            self.extra["intake"][:n] = 0.0
+            self.extra["mechanical"][:n] = 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -342,7 +460,11 @@ class Engine(UGen):
             "ist": self.ist,
             "rng": self.rng,
             "ring": self.ring,
+            "lead": self.lead,
             "par": self.par,
+            "noise_state": self.noise_state,
+            "noise_rng": self.noise_rng,
+            "noise_levels": self.noise_levels,
             "rpm": self.rpm.ramp,
             "throttle": self.throttle.ramp,
         }

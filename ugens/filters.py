@@ -51,9 +51,13 @@ def design_biquad(mode, freq, q, inv_fs, coef):
     coef[4] = (1.0 - alpha) * inv_a0
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
+@nb.njit(cache=True)
 def biquad(x, out, n, coef, state):
-    """Direct Form II transposed with fixed coefficients; state = [s1, s2]."""
+    """Direct Form II transposed with fixed coefficients; state = [s1, s2].
+
+    Compiled without fastmath, as is :func:`biquad_ramp`: a recurrence has nothing to
+    vectorise, and reassociation across unrolled iterations made the output depend on
+    where a block was cut."""
     b0, b1, b2, a1, a2 = coef[0], coef[1], coef[2], coef[3], coef[4]
     s1, s2 = state[0], state[1]
     for i in range(n):
@@ -66,7 +70,7 @@ def biquad(x, out, n, coef, state):
     state[1] = s2
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
+@nb.njit(cache=True)
 def biquad_ramp(x, out, n, mode, freqs, qs, inv_fs, coef, state):
     """Direct Form II transposed, coefficients redesigned each sample from freqs[i], qs[i]."""
     s1, s2 = state[0], state[1]

@@ -64,7 +64,9 @@ def render_pulses(out, start, n, pulses, count):
 
 @register
 class ImpactForce(UGen):
-    """Contact force of impacts: 1 - cos pulses (JASS BangForce) with exact impulse."""
+    """Contact force of impacts: 1 - cos pulses (JASS BangForce) with exact impulse.
+
+    Output: force in N (each pulse integrates to its impulse in N s)."""
 
     type_name = "ImpactForce"
     param_specs = {

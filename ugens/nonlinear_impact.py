@@ -44,9 +44,13 @@ step-invariant response equals the impulse-invariant one filtered by
 level (sinc), e.g. 0.16 dB at 5 kHz at 48 kHz.
 
 Mode energy: with modal mass M_k = 1 / (a_k w_k), E_k = M_k (q'^2 + (w_k^2 + d_k^2) q^2) / 2.
-The gains at the contact must be >= 0 (a driving-point receptance; negative gains would be
-negative masses); modes with zero gain are uncoupled. The main output is the contact
-displacement x_c (m) at the end of each sample, as ModalBank outputs sum_k q_k.
+The gains at the contact are the model's driving-point gains (ModalModel.driving_at, >= 0:
+a driving-point receptance; negative gains would be negative masses); modes with zero gain
+are uncoupled. Output ``contact``: the contact displacement x_c (m) at the end of each
+sample, as ModalBank outputs sum_k q_k. Main output: the displacement heard at the model's
+pickup, the same modes under the same force with the model's (signed) gains
+(:mod:`ugens.heard`, the force held over each sample); it is x_c when the model has no
+separate driving-point gains.
 """
 
 from __future__ import annotations
@@ -61,13 +65,15 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
 
 # hammer array: position x_h, velocity v_h, compression x_n at the current instant, force of
 # the last sample (not yet applied to the stored mode states), energy E_n, active flag,
-# contact potential V(x_n), force of the sample before
-_XH, _VH, _XN, _FP, _EN, _ACTIVE, _VN, _FPP = range(8)
+# contact potential V(x_n), force of the sample before, sum of the mode velocities (contact
+# point velocity) at the end of the last step
+_XH, _VH, _XN, _FP, _EN, _ACTIVE, _VN, _FPP, _SP = range(9)
 # stats array (of the last strike): contact start and end of the first contact (fractional
 # frames), approach speed, compression velocity after the first contact (negative:
 # separating), peak force, contacts ended, energy corrections, in contact, first contact over
@@ -77,6 +83,8 @@ _START, _END, _VIN, _VOUT, _PEAK, _CONTACTS, _CORR, _IN, _MEASURED = range(9)
 _NCOEF = 10
 #: Silent modes are looked for once per this many frames of the clock (as ModalBank).
 FLUSH_PERIOD = 1024
+#: Sub-steps per sample while the hammer touches or may touch within the sample.
+SUBSTEPS = 8
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -305,6 +313,7 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
         hammer[_FP] = f
         hammer[_EN] = e1
         hammer[_VN] = v1
+        hammer[_SP] = sp
         out[i] = sq + gg * f
         force_out[i] = f
         energy_out[i] = e1
@@ -328,6 +337,58 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
                     else:
                         last = j + 1
                 meta[0] = last
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def commit_force(state, hammer, coef):
+    """Apply the pending force hammer[_FP] to the mode states with the force response of
+    the step (coef) that produced it."""
+    fp = hammer[_FP]
+    if fp != 0.0:
+        for j in range(state.shape[1]):
+            state[0, j] += coef[4, j] * fp
+            state[1, j] += coef[5, j] * fp
+        hammer[_FP] = 0.0
+    hammer[_FPP] = 0.0
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def hc_run_substeps(out, force_out, energy_out, start, n, coef, coef_sub, state, hammer, stats, prm,
+                    prm_sub, meta, scratch):  # fmt: skip
+    """hc_run over frames start..start+n-1, but each sample in which the hammer touches or
+    may touch (compression > 0, or > 0 within two samples at the current compression
+    velocity) is integrated in scratch.shape[1] sub-steps (coef_sub, prm_sub: the step
+    T / M). The force is then resolved at M points per sample: the exact modal steps hold
+    it over T / M, so the hold's low-pass (sinc) and the discrete gradient's error move M
+    times higher. The force output of such a sample is its mean (impulse / T). Between
+    samples the pending force is always one of a full step."""
+    m_sub = scratch.shape[1]
+    tt = prm[4]
+    for i in range(n):
+        frame = start + i
+        if hammer[_ACTIVE] == 0.0:  # retired: no contact in the rest of the block
+            hc_run(
+                out[i:], force_out[i:], energy_out[i:], frame, n - i, coef, state, hammer, stats, prm, meta
+            )
+            return
+        near = hammer[_XN] + 2.0 * tt * (hammer[_VH] - hammer[_SP]) > 0.0
+        if hammer[_ACTIVE] != 0.0 and (hammer[_XN] > 0.0 or near):
+            commit_force(state, hammer, coef)
+            end = stats[_END]
+            hc_run(
+                scratch[0], scratch[1], scratch[2], 0, m_sub, coef_sub, state, hammer, stats, prm_sub, meta
+            )
+            if stats[_END] != end:
+                stats[_END] = frame + stats[_END] / m_sub
+            commit_force(state, hammer, coef_sub)
+            out[i] = scratch[0, m_sub - 1]
+            mean = 0.0
+            for m in range(m_sub):
+                mean += scratch[1, m]
+            force_out[i] = mean / m_sub  # the sample's impulse / T
+            energy_out[i] = scratch[2, m_sub - 1]
+        else:
+            hc_run(out[i:], force_out[i:], energy_out[i:], frame, 1, coef, state, hammer, stats, prm, meta)
 
 
 def design(frequencies, decays, gains, sample_rate):
@@ -371,12 +432,13 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     SDT impact~ (Avanzini & Rocchesso, DAFx 2001), Marhefka & Orin (1999) form; energy-
     consistent discretisation (exact modal steps under a held force, discrete-gradient
-    force: Chatziioannou & van Walstijn, JSV 2015). Main output: contact displacement (m);
-    ``force``: contact force (N); ``energy``: E of hammer + modes + contact (J).
+    force: Chatziioannou & van Walstijn, JSV 2015). Main output: displacement at the
+    model's pickup (m, signed gains); ``contact``: contact displacement (m, driving-point
+    gains); ``force``: contact force (N); ``energy``: E of hammer + modes + contact (J).
     """
 
     type_name = "HuntCrossleyImpact"
-    outputs = ("force", "energy")
+    outputs = ("force", "energy", "contact")
     driving_point = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
@@ -431,50 +493,66 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.order = np.argsort(model.decays, kind="stable")  # slowest first: silent modes last
         k = model.n_modes
         self.coef = np.zeros((_NCOEF, k))
+        self.coef_sub = np.zeros((_NCOEF, k))
         self.state = np.zeros((2, k))
-        self.hammer = np.zeros(8)
+        self.hammer = np.zeros(9)
         self.stats = np.zeros(9)
         self.prm = np.zeros(9)
+        self.prm_sub = np.zeros(9)
         self.meta = np.zeros(1, dtype=np.int64)
+        self._scratch = np.zeros((3, SUBSTEPS))
+        self.signed = model.driving is not None  # heard through the signed gains
+        self.heard_coef = np.zeros((6, k))
+        self.heard_state = np.zeros((2, k))
         self._design()
         self._run = specialise(
-            hc_run,
+            hc_run_substeps,
             self.out,
             self.out,
             self.out,
             0,
             0,
             self.coef,
+            self.coef_sub,
             self.state,
             self.hammer,
             self.stats,
             self.prm,
+            self.prm_sub,
             self.meta,
+            self._scratch,
         )
 
     def _design(self) -> None:
-        """Coefficients and scalar parameters from the current values (state untouched)."""
+        """Coefficients and scalar parameters from the current values (state untouched), for
+        a sample and for a sub-step."""
         v, model, o = self.values, self.model, self.order
-        gains = model.gains_at(v["location"])[o]
-        self.coef[:] = design(model.frequencies[o], model.decays[o], gains, self.sample_rate)
-        T = 1.0 / self.sample_rate
-        m = v["mass"]
-        g1, g2, wq, wp = self.coef[4], self.coef[5], self.coef[6], self.coef[7]
-        G = float(np.sum(g1))
-        S2 = float(np.sum(wq * g1 * g1 + wp * g2 * g2))
-        self.prm[:] = (
-            m,
-            v["stiffness"],
-            v["alpha"],
-            v["dissipation"],
-            T,
-            T * T / (2 * m) + G,
-            G,
-            S2,
-            v["floor"],
-        )
+        gains = model.driving_at(v["location"])[o]
+        if self.signed:
+            signed = model.gains_at(v["location"])[o]
+            self.heard_coef[:] = design(model.frequencies[o], model.decays[o], signed, self.sample_rate)[:6]
+        for coef, prm, rate in ((self.coef, self.prm, self.sample_rate),
+                                (self.coef_sub, self.prm_sub, self.sample_rate * SUBSTEPS)):  # fmt: skip
+            coef[:] = design(model.frequencies[o], model.decays[o], gains, rate)
+            T = 1.0 / rate
+            m = v["mass"]
+            g1, g2, wq, wp = coef[4], coef[5], coef[6], coef[7]
+            G = float(np.sum(g1))
+            S2 = float(np.sum(wq * g1 * g1 + wp * g2 * g2))
+            prm[:] = (
+                m,
+                v["stiffness"],
+                v["alpha"],
+                v["dissipation"],
+                T,
+                T * T / (2 * m) + G,
+                G,
+                S2,
+                v["floor"],
+            )
 
     def _reset(self) -> None:
+        self.heard_state[:] = 0.0
         self.state[:] = 0.0
         self.hammer[:] = 0.0
         self.stats[:] = 0.0
@@ -482,12 +560,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     def _commit_force(self) -> None:
         """Apply the last sample's force to the stored mode states (before coefficients change)."""
-        fp = self.hammer[_FP]
-        if fp != 0.0:
-            self.state[0] += self.coef[4] * fp
-            self.state[1] += self.coef[5] * fp
-            self.hammer[_FP] = 0.0
-        self.hammer[_FPP] = 0.0
+        commit_force(self.state, self.hammer, self.coef)
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         self._commit_force()
@@ -511,6 +584,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         h = self.hammer
         h[_XH] = xc + v0 * lead
         h[_VH] = vc + v0
+        h[_SP] = vc
         h[_XN] = v0 * lead
         h[_VN] = potential(h[_XN], self.prm[1], self.prm[2])
         h[_ACTIVE] = 1.0
@@ -559,28 +633,48 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     # -------------------------------------------------------------- processing
     def process(self, start: int, n: int) -> None:
+        self._contact(start, n)
+        if not self.signed:
+            self.out[:n] = self.extra["contact"][:n]
+        elif self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:  # the loop's modes fell silent
+            self.out[:n] = 0.0
+            self.heard_state[:] = 0.0
+        else:
+            heard_run(self.extra["force"], self.out, n, self.heard_coef, self.heard_state)
+
+    def _contact(self, start: int, n: int) -> None:
+        """The closed loop: contact displacement, force and energy."""
         force, energy = self.extra["force"], self.extra["energy"]
         if self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:
             # silent: no mode to compute and no hammer that can touch
-            self.out[:n] = 0.0
+            self.extra["contact"][:n] = 0.0
             force[:n] = 0.0
             m, v = self.prm[0], self.hammer[_VH]
             self.hammer[_XH] += v * n / self.sample_rate
             energy[:n] = 0.5 * m * v * v
             return
         self._run(
-            self.out,
+            self.extra["contact"],
             force,
             energy,
             start,
             n,
             self.coef,
+            self.coef_sub,
             self.state,
             self.hammer,
             self.stats,
             self.prm,
+            self.prm_sub,
             self.meta,
+            self._scratch,
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"state": self.state, "hammer": self.hammer, "stats": self.stats, "meta": self.meta}
+        return {
+            "state": self.state,
+            "hammer": self.hammer,
+            "stats": self.stats,
+            "meta": self.meta,
+            "heard_state": self.heard_state,
+        }

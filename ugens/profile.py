@@ -19,12 +19,8 @@ import os
 from pathlib import Path
 
 import numpy as np
-import pyfftw
-import pyfftw.interfaces.numpy_fft as fftw
 
 from jassy.errors import JassyError
-
-pyfftw.interfaces.cache.enable()
 
 #: File extensions :func:`load_profile` understands.
 PROFILE_FORMATS = (".npy", ".wav", ".csv")
@@ -87,6 +83,10 @@ def fractal_profile(
     spectrum.real, spectrum.imag = noise[:m], noise[m:]
     if n % 2 == 0:
         spectrum[-1] = spectrum[-1].real * math.sqrt(2.0)  # the Nyquist bin is real (same variance)
+    import pyfftw
+    import pyfftw.interfaces.numpy_fft as fftw  # imported on use (slow to import)
+
+    pyfftw.interfaces.cache.enable()
     profile = fftw.irfft(spectrum, n=n)
     scale = math.sqrt(float(profile @ profile) / n)
     return profile * (rms / scale) if scale > 0 else profile

@@ -55,7 +55,9 @@ MIN_PULSE_SAMPLES = 2.0
 _ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
 # layout of the int state cnt[]: pulses in the table, micro-impacts so far, logged rows
 _PULSES, _EVENTS, _LOGGED = range(3)
-_CRUMPLE, _BREAK = 0, 1
+_CRUMPLE, _BREAK, _BREAK_SDT = 0, 1, 2
+#: Break's energy scalings: SDT's (events shrink with the energy left) or full-size events.
+BREAK_SCALINGS = ("sdt", "full")
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -140,14 +142,17 @@ def log_event(log, cnt, t0, energy, size, impulse):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def micro_impacts(
-    out, size_out, start, n, fs, density, crush, frag, mass, T, mode, st, cnt, rng, pulses, log
+    out, size_out, start, n, fs, density, crush, frag, spread, mass, T, mode, st, cnt, rng, pulses, log
 ):
     """Crumple / Break kernel for frames start .. start + n - 1; returns the pulse table.
 
     Per frame idx: output the pulses and the held size, then fire the Poisson events of
     the interval [idx, idx + 1): their pulses start at the next frame. density, crush,
-    frag: per-sample density (1/s), crushing energy (J) and fragment scale. mode 0:
-    rate = density; mode 1 (break): rate = density * energy left / budget.
+    frag: per-sample density (1/s), crushing energy (J) and fragment scale; spread: SDT's
+    fragmentation f, each size times 1 - f + f U (drawn only for f > 0). mode 0:
+    rate = density; mode 1 (break): rate = density * energy left / budget; mode 2 (break
+    as SDT): that rate, each event's energy and size also times energy left / budget,
+    and the run ends once the energy left is below one crushing energy.
     """
     count = cnt[_PULSES]
     for i in range(n):
@@ -157,8 +162,11 @@ def micro_impacts(
         size_out[i] = st[_SIZE]
         pos = 0.0  # position inside [idx, idx + 1) already accounted for
         while st[_RUNNING] != 0.0:
+            if mode == _BREAK_SDT and st[_LEFT] <= crush[i]:
+                st[_RUNNING] = 0.0
+                break
             rate = density[i] / fs
-            if mode == _BREAK:
+            if mode != _CRUMPLE:
                 rate *= st[_LEFT] / st[_BUDGET]
             if rate <= 0.0:
                 break
@@ -167,7 +175,13 @@ def micro_impacts(
                 break
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
             energy = crush[i] * min(max(x, ENERGY_CLIP[0]), ENERGY_CLIP[1])
-            size = frag[i] * (0.5 + 0.5 * u01(rng))
+            size = frag[i]
+            if spread > 0.0:
+                size *= 1.0 - spread + spread * u01(rng)
+            size *= 0.5 + 0.5 * u01(rng)
+            if mode == _BREAK_SDT:
+                energy *= st[_LEFT] / st[_BUDGET]
+                size *= st[_LEFT] / st[_BUDGET]
             if st[_BUDGET] > 0.0:
                 if energy >= st[_LEFT]:
                     energy = st[_LEFT]
@@ -341,6 +355,7 @@ class _Granular(_MicroImpacts):
             x,
             1.0,
             1.0,
+            1.0,
             0,
             self.st,
             self.cnt,
@@ -378,6 +393,7 @@ class _Granular(_MicroImpacts):
             self._per_sample(r["density"], b["density"], n),
             self._per_sample(r["crushing_energy"], b["crushing_energy"], n),
             self._per_sample(r["fragment"], b["fragment"], n),
+            v.get("fragmentation", 0.0),
             v["mass"],
             self._pulse_samples(),
             self._mode,
@@ -398,9 +414,13 @@ class Crumple(_Granular):
 
     Between ``start`` and ``stop`` micro-impacts occur at ``density`` per second, each of
     energy E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), fragment size
-    ``fragment`` * U(0.5, 1), impulse sqrt(2 ``mass`` energy) N s, as a 1 - cos pulse of
-    ``duration``. ``start`` with ``energy`` (J) crumples a finite budget: the last
-    micro-impact takes what is left and the crumpling stops. Source: SDT (Baldan et al.
+    ``fragment`` * (1 - f + f U) * U(0.5, 1) (f = ``fragmentation``, SDT's
+    ``SDTCrumpling_dsp``), impulse sqrt(2 ``mass`` energy) N s, as a 1 - cos pulse of
+    ``duration``. Connect ``size`` to a ModalBank's ``size`` input for SDT's crumpling
+    model: each event retunes the resonator to its fragment size (frequencies and decay
+    rates times 1/sqrt(size), displacement per unit impulse times 1/sqrt(size)).
+    ``start`` with ``energy`` (J) crumples a finite budget: the last micro-impact takes
+    what is left and the crumpling stops. Source: SDT (Baldan et al.
     2017), Rocchesso & Fontana, "The Sounding Object" (2003) ch. 8.
     """
 
@@ -409,6 +429,14 @@ class Crumple(_Granular):
         "density": _DENSITY,
         "crushing_energy": _CRUSH,
         "fragment": _FRAGMENT,
+        "fragmentation": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=1.0,
+            fixed=True,
+            doc="fragmentation spread f: size times 1 - f + f U (SDT crumpling; 0: none)",
+        ),
         "mass": _MASS,
         "duration": _DURATION,
         "seed": _SEED,
@@ -443,11 +471,16 @@ class Break(_Granular):
     """Breaking (SDT breaking~): micro-impacts that draw down a stored energy budget.
 
     ``break`` {energy} stores ``energy`` J; micro-impacts then occur at the rate
-    ``density`` * (energy left / energy stored), so the cascade thins out as it goes, each
-    taking E * clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``), the last one what is
-    left, until the budget is spent. Impulse sqrt(2 ``mass`` energy) N s per pulse, so the
-    energies of all pulses sum to the budget. Extra output ``size``. Source: SDT
-    (Baldan et al. 2017).
+    ``density`` * R, R = energy left / energy stored, so the cascade thins out as it goes.
+    Impulse sqrt(2 ``mass`` energy) N s per pulse. Extra output ``size``.
+
+    ``scaling = "sdt"`` (default, SDT's ``breaking~``): each micro-impact takes
+    E R clip(Exp(1.45), 0.1, 10) (E = ``crushing_energy``) and has the size
+    ``fragment`` R U(0.5, 1), so the fragments get smaller and weaker as the energy runs
+    out and the cascade fades; it ends once the energy left is below E (the rest is not
+    emitted). ``scaling = "full"``: full-size events E clip(Exp(1.45), 0.1, 10) and sizes
+    ``fragment`` U(0.5, 1) throughout, the last one taking what is left, so the energies
+    of all pulses sum to the budget. Source: SDT ``SDTBreaking_dsp`` (Baldan et al. 2017).
     """
 
     type_name = "Break"
@@ -467,6 +500,13 @@ class Break(_Granular):
         "mass": _MASS,
         "duration": _DURATION,
         "seed": _SEED,
+        "scaling": ParamSpec(
+            "str",
+            "sdt",
+            choices=BREAK_SCALINGS,
+            fixed=True,
+            doc="sdt: events shrink with the energy left and fade out; full: full-size events",
+        ),
     }
     actions = {
         "break": {
@@ -476,6 +516,10 @@ class Break(_Granular):
         },
         "stop": {},
     }
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self._mode = _BREAK_SDT if self.values["scaling"] == "sdt" else _BREAK
 
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
         """``break`` {energy}: store the budget and start; ``stop``: abandon what is left."""

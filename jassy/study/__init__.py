@@ -5,33 +5,41 @@ samples on the one clock), presents it (``--present live`` on the device, ``none
 simulated observers), measures the presented offset from the buffers, collects responses
 (terminal keys, a window, a simulated observer or any callable) and appends each trial to
 a CSV file (JSON header in a sidecar) so a session can be interrupted and resumed.
-``jassy study analyze RESULTS.csv ...`` fits psychometric functions (PSS, JND, bootstrap
-CIs), pools participants and plots.
+``jassy study analyze RESULTS.csv ...`` fits the task's psychometric model per condition
+(per participant, pooled and group; profile-likelihood intervals, "not identifiable"
+where the design cannot say), plots and exports. Methods: constant stimuli, staircases,
+QUEST, QUEST+; tasks: TOJ, SJ, 2AFC, 3AFC.
 """
 
 import importlib
 
 #: Public names -> the module defining them, imported on first use (the CLI stays light).
+#: Public names -> the module defining them, imported on first use (the CLI stays light).
 _EXPORTS = {
     "CallableResponder": "jassy.study.observer",
+    "ConstantTrack": "jassy.study.methods",
     "Design": "jassy.study.design",
     "DesignError": "jassy.study.design",
-    "Fit": "jassy.study.analysis",
     "KeyboardResponder": "jassy.study.observer",
     "LivePresenter": "jassy.study.runner",
     "ObserverSpec": "jassy.study.design",
     "OfflinePresenter": "jassy.study.runner",
+    "QuestPlusTrack": "jassy.study.methods",
+    "QuestTrack": "jassy.study.methods",
     "Response": "jassy.study.observer",
     "Session": "jassy.study.runner",
     "SessionResult": "jassy.study.runner",
     "SimulatedObserver": "jassy.study.observer",
+    "Staircase": "jassy.study.methods",
     "TrialInfo": "jassy.study.observer",
     "analyze": "jassy.study.analysis",
-    "fit_psychometric": "jassy.study.analysis",
+    "balanced_latin_square": "jassy.study.design",
+    "export_fits": "jassy.study.analysis",
+    "fit": "jassy.study.fitting",
     "format_report": "jassy.study.analysis",
     "load_design": "jassy.study.design",
+    "make_model": "jassy.study.models",
     "measure_offset": "jassy.study.runner",
-    "p_positive": "jassy.study.observer",
     "parse_design": "jassy.study.design",
     "plot_report": "jassy.study.analysis",
     "read_rows": "jassy.study.runner",
@@ -48,24 +56,29 @@ def __getattr__(name: str):
 
 __all__ = [
     "CallableResponder",
+    "ConstantTrack",
     "Design",
     "DesignError",
-    "Fit",
     "KeyboardResponder",
     "LivePresenter",
     "ObserverSpec",
     "OfflinePresenter",
+    "QuestPlusTrack",
+    "QuestTrack",
     "Response",
     "Session",
     "SessionResult",
     "SimulatedObserver",
+    "Staircase",
     "TrialInfo",
     "analyze",
-    "fit_psychometric",
+    "balanced_latin_square",
+    "export_fits",
+    "fit",
     "format_report",
     "load_design",
+    "make_model",
     "measure_offset",
-    "p_positive",
     "parse_design",
     "plot_report",
     "read_rows",

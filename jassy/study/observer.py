@@ -12,29 +12,33 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.special import ndtr
 
 from jassy.errors import JassyError
-from jassy.study.design import QUESTIONS, Design, ObserverSpec
+from jassy.study.design import ANSWERS, Design, ObserverSpec
+from jassy.study.models import make_model
 
 KEYS = {
-    "which_first": {"a": "audio", "h": "haptic"},
-    "simultaneous": {"s": "simultaneous", "n": "successive"},
+    "toj": {"a": "audio", "h": "haptic"},
+    "sj": {"s": "simultaneous", "n": "successive"},
+    "2afc": {"1": "1", "2": "2"},
+    "3afc": {"1": "1", "2": "2", "3": "3"},
 }
 PROMPTS = {
-    "which_first": "Which came first?  [a] audio (sound)   [h] haptic (touch)   [q] quit",
-    "simultaneous": "Were they simultaneous?  [s] simultaneous   [n] not simultaneous   [q] quit",
+    "toj": "Which came first?  [a] audio (sound)   [h] haptic (touch)   [q] quit",
+    "sj": "Were they simultaneous?  [s] simultaneous   [n] not simultaneous   [q] quit",
+    "2afc": "Which interval was out of sync?  [1] first   [2] second   [q] quit",
+    "3afc": "Which interval was out of sync?  [1] first   [2] second   [3] third   [q] quit",
 }
 
 
 @dataclass
 class Response:
-    """An answer ('audio'/'haptic' or 'simultaneous'/'successive'; None = quit) and its
-    time in seconds from the end of the stimulus."""
+    """An answer (see jassy.study.design.ANSWERS; None = quit) and its time in seconds
+    from the end of the stimulus."""
 
     answer: str | None
     time: float
@@ -47,63 +51,43 @@ class TrialInfo:
     index: int
     planned: int | None
     offset_ms: float  # the offset presented (measured), for simulated observers only
-    question: str
-
-
-def cdf(x: np.ndarray | float, function: str = "gaussian") -> np.ndarray | float:
-    """Standard cumulative Gaussian or logistic (scale so that sigma is the scale parameter)."""
-    if function == "gaussian":
-        return ndtr(x)
-    return 1.0 / (1.0 + np.exp(-np.asarray(x, dtype=float)))
-
-
-def p_positive(
-    x: np.ndarray | float, mu: float, sigma: float, lapse: float, question: str, function: str = "gaussian"
-) -> np.ndarray | float:
-    """Probability of the "positive" answer at offset x (ms; audio minus haptic).
-
-    which_first: P("haptic first") = lapse/2 + (1 - lapse) F((x - mu) / sigma);
-    simultaneous: P("simultaneous") = lapse/2 + (1 - lapse) exp(-(x - mu)^2 / (2 sigma^2)).
-    A lapse is a random answer (either alternative with probability 1/2).
-    """
-    z = (np.asarray(x, dtype=float) - mu) / sigma
-    core = cdf(z, function) if question == "which_first" else np.exp(-0.5 * z * z)
-    return 0.5 * lapse + (1.0 - lapse) * core
-
-
-POSITIVE = {"which_first": "haptic", "simultaneous": "simultaneous"}
+    task: str
+    condition: dict[str, Any] = field(default_factory=dict)
+    interval: int = 0  # m-AFC: the interval holding the asynchrony (simulated observers only)
 
 
 class SimulatedObserver:
-    """A model observer: answers from a psychometric function of the presented offset with
-    a point of subjective simultaneity ``pss_ms``, spread ``sigma_ms`` and lapse rate
-    (see :func:`p_positive`); seeded. Response times are drawn from a log-normal
-    distribution (median 0.5 s) but not waited for."""
+    """A model observer: answers drawn from the task's psychometric model
+    (jassy.study.models) at the presented offset, with the parameters of ``spec`` in the
+    trial's condition; seeded. Response times are drawn from a log-normal distribution
+    (median 0.5 s) but not waited for."""
 
-    def __init__(self, spec: ObserverSpec | None = None, seed: int | np.random.SeedSequence = 0, **kw: Any):
-        spec = spec or ObserverSpec()
-        for key, value in kw.items():
-            setattr(spec, key, value)
-        self.spec = spec
+    def __init__(
+        self, spec: ObserverSpec | None = None, seed: int | np.random.SeedSequence = 0, function: str = ""
+    ):
+        self.spec = spec or ObserverSpec()
+        self.function = self.spec.function or function
         self.rng = np.random.default_rng(seed)
 
     def begin(self, design: Design) -> None:
-        self.question = design.question
+        self.function = self.spec.function or design.function
 
     def respond(self, trial: TrialInfo) -> Response:
-        s = self.spec
-        p = float(p_positive(trial.offset_ms, s.pss_ms, s.sigma_ms, s.lapse, trial.question, s.function))
-        positive = self.rng.random() < p
-        answers = QUESTIONS[trial.question]
-        answer = (
-            POSITIVE[trial.question]
-            if positive
-            else next(a for a in answers if a != POSITIVE[trial.question])
-        )
+        model = make_model(trial.task, self.function or None)
+        theta = self.spec.theta(model, trial.condition)
+        positive = bool(self.rng.random() < float(model.prob(trial.offset_ms, **theta)))
+        if trial.task in ("2afc", "3afc"):
+            others = [i for i in range(1, model.alternatives + 1) if i != trial.interval]
+            answer = str(trial.interval if positive else others[int(self.rng.integers(len(others)))])
+        else:
+            answer = ANSWERS[trial.task][1 if positive == (trial.task == "toj") else 0]
         return Response(answer, float(math.exp(self.rng.normal(math.log(0.5), 0.3))))
 
     def rest(self, message: str) -> bool:
         return True
+
+    def feedback(self, message: str) -> None:
+        pass
 
     def end(self, message: str) -> None:
         pass
@@ -127,6 +111,9 @@ class CallableResponder:
 
     def rest(self, message: str) -> bool:
         return True
+
+    def feedback(self, message: str) -> None:
+        pass
 
     def end(self, message: str) -> None:
         pass
@@ -179,20 +166,23 @@ class KeyboardResponder:
             termios.tcsetattr(fd, termios.TCSADRAIN, old)
 
     def begin(self, design: Design) -> None:
-        self.question = design.question
+        self.task = design.task
         if design.instructions:
             self._print(design.instructions.strip())
         self._print("Press any key to start.")
         self._read_key("abcdefghijklmnopqrstuvwxyz \n")
 
     def respond(self, trial: TrialInfo) -> Response:
-        keys = KEYS[trial.question]
+        keys = KEYS[trial.task]
         counter = f"[{trial.index + 1}/{trial.planned}] " if trial.planned else f"[{trial.index + 1}] "
-        self._print(counter + PROMPTS[trial.question])
+        self._print(counter + PROMPTS[trial.task])
         t0 = time.monotonic()
         key = self._read_key("".join(keys) + "q")
         rt = time.monotonic() - t0
         return Response(None if key == "q" else keys[key], rt)
+
+    def feedback(self, message: str) -> None:
+        self._print(message)
 
     def rest(self, message: str) -> bool:
         self._print(f"{message}  Press c to continue, q to stop (the session can be resumed).")
@@ -245,14 +235,17 @@ class WindowResponder:
             raise KeyboardInterrupt
 
     def respond(self, trial: TrialInfo) -> Response:
-        keys = KEYS[trial.question]
+        keys = KEYS[trial.task]
         names = {
             "audio": "Sound first",
             "haptic": "Touch first",
             "simultaneous": "Simultaneous",
             "successive": "Not simultaneous",
+            "1": "First",
+            "2": "Second",
+            "3": "Third",
         }
-        self.label.config(text=PROMPTS[trial.question].split("[")[0].strip())
+        self.label.config(text=PROMPTS[trial.task].split("[")[0].strip())
         self._buttons([(f"{names[v]} ({k})", v, k) for k, v in keys.items()])
         self.root.update()
         t0 = time.monotonic()
@@ -262,6 +255,11 @@ class WindowResponder:
         self._buttons([])
         self.root.update()
         return Response(None if answer == "quit" else answer, rt)
+
+    def feedback(self, message: str) -> None:
+        self.label.config(text=message)
+        self.root.update()
+        self.root.after(700)
 
     def rest(self, message: str) -> bool:
         self.label.config(text=message)

@@ -26,21 +26,29 @@ import io
 import json
 import os
 import platform
+import re
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from jassy.errors import JassyError
-from jassy.study.design import Design, Schedule
+from jassy.study.design import Condition, Design, Schedule, TrialSpec, check_participant
 from jassy.study.observer import Response, TrialInfo
 
-COLUMNS = [
+CORE_COLUMNS = [
     "trial",
     "participant",
+    "session",
+    "block",
+    "block_name",
+    "practice",
+    "condition",
+]
+TRIAL_COLUMNS = [
     "track",
     "requested_ms",
     "requested_samples",
@@ -48,13 +56,23 @@ COLUMNS = [
     "measured_ms",
     "audio_onset",
     "haptic_onset",
+    "interval",
     "response",
-    "response_time_s",
+    "positive",
     "correct",
+    "response_time_s",
+    "latency_s",
     "underruns",
     "timestamp",
 ]
-FORMAT = "jassy-study-results/1"
+
+
+def columns(design: Design) -> list[str]:
+    """The results CSV columns: ids, the design's factors, then the trial's data."""
+    return CORE_COLUMNS + design.factor_names + TRIAL_COLUMNS
+
+
+FORMAT = "jassy-study-results/2"
 
 
 class ResultsError(JassyError):
@@ -93,24 +111,38 @@ def _measure(audio: np.ndarray, haptic: np.ndarray, design: Design, offset_ms: f
         ) from None
 
 
-def load_stimulus(design: Design):
-    """The design's patch with its score cut to the trial (events before trial_duration)."""
+def load_stimulus(design: Design, condition: Condition | None = None):
+    """The condition's patch (overrides applied, impact impulses scaled by its force
+    level) with its score cut to the trial (events before trial_duration)."""
     from jassy.patchfile import load_patch
 
-    patch = load_patch(design.stimulus)
+    condition = condition or design.conditions[0]
+    patch = load_patch(condition.stimulus, list(condition.overrides))
     if not patch.graph.audio or not patch.graph.haptic:
-        raise JassyError(f"{design.source}: stimulus {design.stimulus!r} needs audio and haptic outputs")
-    patch.score = [ev for ev in patch.score if ev.time < design.trial_duration]
-    if not patch.score:
-        raise JassyError(f"{design.source}: stimulus {design.stimulus!r} has no event before trial_duration")
+        raise JassyError(f"{design.source}: stimulus {condition.stimulus!r} needs audio and haptic outputs")
+    score = [ev for ev in patch.score if ev.time < design.trial_duration]
+    if condition.force_level != 1.0:
+        score = [
+            replace(ev, args={**ev.args, "impulse": ev.args["impulse"] * condition.force_level})
+            if ev.action == "impact" and "impulse" in ev.args
+            else ev
+            for ev in score
+        ]
+    if not score:
+        raise JassyError(
+            f"{design.source}: stimulus {condition.stimulus!r} has no event before trial_duration"
+        )
+    patch.score = score
     return patch
 
 
-def render_trial(design: Design, offset_ms: float, block: int | None = None):
+def render_trial(
+    design: Design, offset_ms: float, condition: Condition | None = None, block: int | None = None
+):
     """Render one trial's stimulus with the audio-haptic offset (ms; negative = audio first)."""
     from jassy.offline import OfflineEngine
 
-    patch = load_stimulus(design)
+    patch = load_stimulus(design, condition)
     engine = OfflineEngine(
         patch.graph,
         patch.score,
@@ -122,14 +154,14 @@ def render_trial(design: Design, offset_ms: float, block: int | None = None):
 
 
 # --------------------------------------------------------------------------- presenters
-@dataclass
-class Presented:
+class Presented(NamedTuple):
     """What was presented: onsets (frames) and offset in samples, underruns during it."""
 
     audio_onset: int
     haptic_onset: int
     measured_samples: int
     underruns: int = 0
+    latency_s: float | None = None  # device output latency measured for this presentation
 
 
 class OfflinePresenter:
@@ -140,15 +172,17 @@ class OfflinePresenter:
 
     def __init__(self, design: Design):
         self.design = design
-        self._cache: dict[int, Presented] = {}
+        self._cache: dict[tuple[int, int], Presented] = {}
 
     def info(self) -> dict[str, Any]:
         return {"mode": self.mode, "device": None, "latency_s": None}
 
-    def present(self, offset_ms: float) -> Presented:
-        key = offset_samples(offset_ms, self.design.sample_rate)
+    def present(self, offset_ms: float, condition: Condition, interval: int = 0) -> Presented:
+        """Render the trial (for m-AFC the interval with the asynchrony; the others are
+        the same stimulus without it) and measure its offset."""
+        key = (condition.index, offset_samples(offset_ms, self.design.sample_rate))
         if key not in self._cache:
-            r = render_trial(self.design, offset_ms)
+            r = render_trial(self.design, offset_ms, condition)
             self._cache[key] = Presented(*_measure(r.audio, r.haptic, self.design, offset_ms))
         p = self._cache[key]
         return Presented(p.audio_onset, p.haptic_onset, p.measured_samples)
@@ -193,20 +227,34 @@ class LivePresenter:
             "max_presentations": self.max_presentations,
         }
 
-    def present(self, offset_ms: float) -> Presented:
-        shown = self._play(offset_ms)
+    def present(self, offset_ms: float, condition: Condition, interval: int = 0) -> Presented:
+        """Play the trial (m-AFC: its intervals in turn, ``interval_gap`` apart, the
+        asynchrony in ``interval``); replay it if the device reported an underrun."""
+        shown = self._trial(offset_ms, condition, interval)
         for _ in range(self.max_presentations - 1):
             if shown.underruns == 0:
                 break
             self.repeats += 1
-            shown = self._play(offset_ms)
+            shown = self._trial(offset_ms, condition, interval)
         return shown
 
-    def _play(self, offset_ms: float) -> Presented:
+    def _trial(self, offset_ms: float, condition: Condition, interval: int) -> Presented:
+        if not interval:
+            return self._play(offset_ms, condition)
+        underruns, target = 0, None
+        for i in range(1, self.design.model.alternatives + 1):
+            if i > 1:
+                time.sleep(self.design.interval_gap)
+            shown = self._play(offset_ms if i == interval else 0.0, condition)
+            underruns += shown.underruns
+            target = shown if i == interval else target
+        return target._replace(underruns=underruns)
+
+    def _play(self, offset_ms: float, condition: Condition) -> Presented:
         from jassy.live import LiveEngine
 
         d = self.design
-        patch = load_stimulus(d)
+        patch = load_stimulus(d, condition)
         engine = LiveEngine(
             patch.graph,
             patch.score,
@@ -218,16 +266,18 @@ class LivePresenter:
             monitor_seconds=d.trial_duration + 1.0,
         )
         engine.start()
-        latency = engine.stats().latency
-        time.sleep(d.trial_duration + latency + 2 * d.block / d.sample_rate)
-        stats = engine.stop()
+        try:
+            latency = engine.stats().latency
+            time.sleep(d.trial_duration + latency + 2 * d.block / d.sample_rate)
+        finally:  # also on a signal: forces fade out, the stream stops, no child outlives us
+            stats = engine.stop()
         self.latency = stats.latency
         self.callbacks += stats.callbacks
         self.underruns += stats.underrun_callbacks
         heard, _ = engine.monitor()
         n_audio = len(patch.graph.audio)
         a, h, m = _measure(heard[:n_audio], heard[n_audio:], d, offset_ms)
-        return Presented(a, h, m, stats.underrun_callbacks)
+        return Presented(a, h, m, stats.underrun_callbacks, stats.latency)
 
     def close(self) -> dict[str, Any]:
         return {
@@ -272,8 +322,14 @@ def software_versions() -> dict[str, str]:
 def read_rows(path: str | os.PathLike, repair: bool = False) -> list[dict[str, str]]:
     """Rows of a results CSV. A last line without its newline (a write cut short) is
     ignored, and removed from the file if ``repair``."""
+    from jassy.inputs import decode, read_bytes
+
     p = Path(path)
-    data = p.read_bytes()
+    try:
+        data = read_bytes(p, "results file")
+        decode(data, str(p))  # all of it is UTF-8, so is any prefix cut at a newline
+    except JassyError as exc:
+        raise ResultsError(str(exc)) from None
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
         data = data[:cut]
@@ -283,8 +339,9 @@ def read_rows(path: str | os.PathLike, repair: bool = False) -> list[dict[str, s
                 f.flush()
                 os.fsync(f.fileno())
     reader = csv.DictReader(io.StringIO(data.decode()))
-    if data and reader.fieldnames != COLUMNS:
-        raise ResultsError(f"{path}: not a jassy study results file (columns {reader.fieldnames})")
+    names = reader.fieldnames or []
+    if data and (names[: len(CORE_COLUMNS)] != CORE_COLUMNS or names[-len(TRIAL_COLUMNS) :] != TRIAL_COLUMNS):
+        raise ResultsError(f"{path}: not a jassy study results file (columns {names})")
     return list(reader)
 
 
@@ -293,9 +350,83 @@ def read_header(path: str | os.PathLike) -> dict[str, Any]:
     if not side.is_file():
         return {}
     try:
-        return json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
+        return json.loads(side.read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise ResultsError(f"{side}: damaged JSON header: {exc}") from None
+
+
+def date_string(now: datetime | None = None) -> str:
+    """PsychoPy's date format for data file names: 2026-11-26_23h14.05.123."""
+    now = now or datetime.now()
+    return now.strftime("%Y-%m-%d_%Hh%M.%S.") + f"{now.microsecond // 1000:03d}"
+
+
+def safe_name(text: str) -> str:
+    """``text`` with every character other than letters, digits, '-' and '_' made '-'."""
+    return re.sub(r"[^A-Za-z0-9_-]", "-", text) or "study"
+
+
+def results_name(design: Design, participant: str, session: str, folder: str | os.PathLike = "data") -> Path:
+    """PsychoPy-style dated results path: FOLDER/PARTICIPANT_STUDY_sSESSION_DATE.csv."""
+    check_participant(participant)
+    return Path(folder) / f"{participant}_{safe_name(design.name)}_s{session}_{date_string()}.csv"
+
+
+def find_unfinished(
+    design: Design, participant: str, session: str, folder: str | os.PathLike = "data"
+) -> Path | None:
+    """The newest results file of this design, participant and session whose last session
+    did not complete (to resume), or None."""
+    check_participant(participant)
+    found = []
+    for path in Path(folder).glob(f"{participant}_{safe_name(design.name)}_s{session}_*.csv"):
+        header = read_header(path)
+        sessions = header.get("sessions") or [{}]
+        if header.get("design_sha256") == design.sha256() and not sessions[-1].get("completed"):
+            found.append(path)
+    return max(found, key=lambda p: p.name) if found else None
+
+
+def summary_path(results: str | os.PathLike) -> Path:
+    p = Path(results)
+    return p.with_name(f"{p.stem}_summary.csv")
+
+
+def write_summary(results: Path, design: Design, rows: list[dict[str, str]]) -> Path:
+    """The wide summary beside the trial CSV: one row per condition (practice excluded),
+    the trials and proportion of positive answers at each offset as columns."""
+    rows = [r for r in rows if r["practice"] == "0"]
+    key = "measured_ms"
+    offsets = sorted({round(float(r[key]), 6) for r in rows})
+    positive = {"toj": "haptic_first", "sj": "simultaneous"}.get(design.task, "correct")
+    head = ["condition", *design.factor_names, "trials"]
+    head += [f"n@{x:g}" for x in offsets] + [f"p_{positive}@{x:g}" for x in offsets]
+    lines = []
+    for c in design.conditions:
+        mine = [r for r in rows if r["condition"] == str(c.index)]
+        if not mine:
+            continue
+        line = [c.index, *(c.factors.get(f, "") for f in design.factor_names), len(mine)]
+        counts = [[r for r in mine if round(float(r[key]), 6) == x] for x in offsets]
+        line += [len(g) for g in counts]
+        line += [f"{sum(r['positive'] == '1' for r in g) / len(g):.4f}" if g else "" for g in counts]
+        lines.append(line)
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(head)
+    writer.writerows(lines)
+    out = summary_path(results)
+    write_text_atomic(out, buf.getvalue())
+    return out
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
 
 
 @dataclass
@@ -307,22 +438,34 @@ class SessionResult:
     new_trials: int
     total_trials: int
     resumed_from: int
-    staircases: dict[str, Any] = field(default_factory=dict)
+    tracks: dict[str, Any] = field(default_factory=dict)
 
 
 class Session:
-    """One participant's run of a design into one results file (resumable)."""
+    """One participant's session of a design into one results file (resumable)."""
 
-    def __init__(self, design: Design, results: str | os.PathLike, participant: str, responder, presenter):
-        if not participant or any(c in participant for c in ',\n\r"'):
-            raise JassyError(
-                f"participant: expected a non-empty id without commas or quotes, got {participant!r}"
-            )
+    def __init__(
+        self,
+        design: Design,
+        results: str | os.PathLike,
+        participant: str,
+        responder,
+        presenter,
+        session: str = "1",
+        participant_number: int | None = None,
+    ):
+        check_participant(participant)
+        check_participant(session, "session")
         self.design, self.results = design, Path(results)
         if self.results.suffix != ".csv":
             raise JassyError(f"{results}: results file name must end in .csv")
-        self.participant = participant
+        self.participant, self.session = participant, session
+        if participant_number is None:
+            digits = re.search(r"(\d+)$", participant)
+            participant_number = int(digits.group(1)) if digits else None
+        self.participant_number = participant_number
         self.responder, self.presenter = responder, presenter
+        self.columns = columns(design)
 
     # ------------------------------------------------------------ resume
     def _replay(self, schedule: Schedule, rows: list[dict[str, str]]) -> None:
@@ -341,7 +484,8 @@ class Session:
                     f"participant (expected trial {i}, offset {spec.offset_ms:g} ms); "
                     "use another results file"
                 )
-            schedule.update(spec, self.design.correct(float(row["measured_ms"]), row["response"]))
+            correct = None if row["correct"] == "" else row["correct"] == "1"
+            schedule.update(spec, row["positive"] == "1", correct)
 
     def _open(self) -> tuple[list[dict[str, str]], dict[str, Any]]:
         header = read_header(self.results)
@@ -352,18 +496,23 @@ class Session:
                 )
             if header.get("design_sha256") != self.design.sha256():
                 raise ResultsError(f"{self.results}: written for another design (or an edited one)")
-            if header.get("participant") != self.participant:
+            if header.get("participant") != self.participant or header.get("session") != self.session:
                 raise ResultsError(
-                    f"{self.results}: belongs to participant {header.get('participant')!r}, "
-                    f"not {self.participant!r}"
+                    f"{self.results}: belongs to participant {header.get('participant')!r} session "
+                    f"{header.get('session')!r}, not {self.participant!r} session {self.session!r}"
                 )
             rows = read_rows(self.results, repair=True)
         else:
             self.results.parent.mkdir(parents=True, exist_ok=True)
             header = {
                 "format": FORMAT,
-                "columns": COLUMNS,
+                "columns": self.columns,
                 "participant": self.participant,
+                "session": self.session,
+                "participant_number": self.participant_number,
+                "task": self.design.task,
+                "function": self.design.function,
+                "conditions": [c.factors for c in self.design.conditions],
                 "design_file": self.design.source,
                 "design_sha256": self.design.sha256(),
                 "design": self.design.raw,
@@ -374,10 +523,44 @@ class Session:
             }
             rows = []
             with open(self.results, "w", newline="") as f:
-                f.write(",".join(COLUMNS) + "\n")
+                f.write(",".join(self.columns) + "\n")
                 f.flush()
                 os.fsync(f.fileno())
         return rows, header
+
+    def _row(
+        self, spec: TrialSpec, shown: Presented, measured_ms: float, response: Response, positive, correct
+    ) -> str:
+        d = self.design
+        condition = d.conditions[spec.condition]
+        values = [
+            spec.index,
+            self.participant,
+            self.session,
+            spec.block,
+            spec.block_name,
+            int(spec.practice),
+            spec.condition,
+            *(condition.factors.get(f, "") for f in d.factor_names),
+            spec.track,
+            repr(float(spec.offset_ms)),
+            offset_samples(spec.offset_ms, d.sample_rate),
+            shown.measured_samples,
+            repr(measured_ms),
+            shown.audio_onset,
+            shown.haptic_onset,
+            spec.interval,
+            response.answer,
+            int(positive),
+            "" if correct is None else int(correct),
+            f"{response.time:.4f}",
+            "" if shown.latency_s is None else f"{shown.latency_s:.6f}",
+            shown.underruns,
+            datetime.now(UTC).isoformat(timespec="milliseconds"),
+        ]
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerow(values)
+        return buf.getvalue()
 
     # ------------------------------------------------------------ run
     def run(self, max_trials: int | None = None) -> SessionResult:
@@ -385,21 +568,22 @@ class Session:
         trials were run in this call."""
         d = self.design
         rows, header = self._open()
-        schedule = d.schedule(self.participant)
+        schedule = d.schedule(self.participant, self.session, self.participant_number)
         self._replay(schedule, rows)
         session = {
             "started": datetime.now(UTC).isoformat(),
             "resumed_from": len(rows),
             "software": software_versions(),
             "presentation": self.presenter.info(),
+            "block_order": [b.name for b in schedule.blocks],
+            "live_trials": [],
         }
         header["sessions"].append(session)
         side = sidecar_path(self.results)
         _write_json_atomic(side, header)
-        done = len(rows)
-        new = 0
-        completed = False
-        underruns = 0
+        done, new, completed, underruns = len(rows), 0, False, 0
+        block = int(rows[-1]["block"]) if rows else None  # resuming inside a block: no new message
+        in_block = 0
         self.responder.begin(d)
         try:
             with open(self.results, "a", newline="") as out:
@@ -410,12 +594,28 @@ class Session:
                     if spec is None:
                         completed = True
                         break
-                    rest = d.breaks_every and new and done % d.breaks_every == 0
-                    if rest and not self.responder.rest(f"Break: {done} trials done."):
+                    if spec.block != block:  # a new block: its instructions (if any) first
+                        in_block, block = 0, spec.block
+                        current = schedule.blocks[spec.block]
+                        title = "Practice" if current.practice else f"Block {current.name}"
+                        shown_text = current.instructions.strip()
+                        if (shown_text or len(schedule.blocks) > 1) and not self.responder.rest(
+                            f"{title}. {shown_text}".strip()
+                        ):
+                            break
+                    elif (
+                        d.breaks_every
+                        and in_block
+                        and in_block % d.breaks_every == 0
+                        and not self.responder.rest(f"Break: {done} trials done.")
+                    ):
                         break
-                    shown = self.presenter.present(spec.offset_ms)
+                    condition = d.conditions[spec.condition]
+                    shown = self.presenter.present(spec.offset_ms, condition, spec.interval)
                     measured_ms = shown.measured_samples * 1000.0 / d.sample_rate
-                    info = TrialInfo(spec.index, schedule.planned, measured_ms, d.question)
+                    info = TrialInfo(
+                        spec.index, schedule.planned, measured_ms, d.task, condition.factors, spec.interval
+                    )
                     response: Response = self.responder.respond(info)
                     if response.answer is None:
                         break
@@ -423,30 +623,20 @@ class Session:
                         raise JassyError(
                             f"response {response.answer!r}: expected one of {', '.join(d.answers)}"
                         )
-                    correct = d.correct(measured_ms, response.answer)
-                    schedule.update(spec, correct)
+                    positive = d.positive(spec, response.answer)
+                    correct = d.correct(spec, measured_ms, response.answer)
+                    schedule.update(spec, positive, correct)
                     underruns += shown.underruns
-                    row = [
-                        spec.index,
-                        self.participant,
-                        spec.track,
-                        repr(float(spec.offset_ms)),
-                        offset_samples(spec.offset_ms, d.sample_rate),
-                        shown.measured_samples,
-                        repr(measured_ms),
-                        shown.audio_onset,
-                        shown.haptic_onset,
-                        response.answer,
-                        f"{response.time:.4f}",
-                        "" if correct is None else int(correct),
-                        shown.underruns,
-                        datetime.now(UTC).isoformat(timespec="milliseconds"),
-                    ]
-                    out.write(",".join(str(v) for v in row) + "\n")  # one write, then to disk
-                    out.flush()
+                    out.write(self._row(spec, shown, measured_ms, response, positive, correct))
+                    out.flush()  # one line per write, then to disk
                     os.fsync(out.fileno())
+                    if shown.latency_s is not None:
+                        session["live_trials"].append([spec.index, shown.latency_s, shown.underruns])
+                    if spec.practice and d.practice.get("feedback") and correct is not None:
+                        self.responder.feedback("Correct." if correct else "Wrong.")
                     done += 1
                     new += 1
+                    in_block += 1
                     if self.presenter.mode == "live" and d.pause:
                         time.sleep(d.pause)
         finally:
@@ -457,9 +647,10 @@ class Session:
                 underruns=underruns,
                 presentation=self.presenter.info(),
                 device_stats=self.presenter.close(),
-                staircases=schedule.summary(),
+                tracks=schedule.summary(),
             )
             _write_json_atomic(side, header)
+            write_summary(self.results, d, read_rows(self.results))
         self.responder.end(
             "Thank you: the session is complete." if completed else "Session stopped; it can be resumed."
         )
@@ -475,36 +666,45 @@ def run_study(
     device: str | int | None = None,
     max_trials: int | None = None,
     observer_seed: int | None = None,
+    session: str = "1",
+    participant_number: int | None = None,
 ) -> SessionResult:
     """Run ``design`` for one participant (default responder: the design's simulated
     observer, seeded from the design seed and participant unless ``observer_seed``)."""
     from jassy.study.observer import SimulatedObserver
 
+    check_participant(participant)
     if responder is None:
         seed = (
-            observer_seed if observer_seed is not None else design.participant_seed(participant).spawn(1)[0]
+            observer_seed
+            if observer_seed is not None
+            else design.participant_seed(participant, session).spawn(1)[0]
         )
-        responder = SimulatedObserver(design.observer, seed)
+        responder = SimulatedObserver(design.observer, seed, design.function)
     if present == "none":
         presenter = OfflinePresenter(design)
     elif present == "live":
         presenter = LivePresenter(design, device)
     else:
         raise JassyError(f"--present: expected none or live, got {present!r}")
-    return Session(design, results, participant, responder, presenter).run(max_trials)
+    return Session(design, results, participant, responder, presenter, session, participant_number).run(
+        max_trials
+    )
 
 
 __all__ = [
-    "COLUMNS",
     "LivePresenter",
     "OfflinePresenter",
     "Presented",
     "Session",
     "SessionResult",
+    "columns",
+    "find_unfinished",
     "measure_offset",
     "onset",
     "read_header",
     "read_rows",
     "render_trial",
+    "results_name",
     "run_study",
 ]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import time
 
 from jassy.errors import JassyError
@@ -26,12 +27,9 @@ SHAPES = ("bar", "plate", "bowl", "sphere")
 
 
 def _check_output(path: str) -> None:
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in (".toml", ".npz"):
-        raise JassyError(f"-o/--output: {path}: expected a .toml or .npz model file name")
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise JassyError(f"-o/--output: {path}: the folder {folder} does not exist")
+    from jassy.files import check_output
+
+    check_output(path, "-o/--output", (".toml", ".npz"))
 
 
 def _positive(name: str, value, integer: bool = False, allow_zero: bool = False) -> None:
@@ -56,21 +54,48 @@ def parse_point(text: str) -> tuple[str, tuple[float, float, float]]:
     return name.strip(), xyz  # type: ignore[return-value]
 
 
+#: Most modes ``jassy modes`` computes.
+MAX_MODES = 20000
+#: Most Loop subdivisions of the gain surface (each multiplies its vertices by 4).
+MAX_SUBDIVIDE = 8
+
+
+def fem_bytes(elements: float, modes: int) -> float:
+    """Estimated peak memory (bytes) of the voxel FEM solve for ``elements`` voxels and
+    ``modes`` modes: about 35 KiB per element (stiffness, mass and the factor, whose fill
+    grows like the cube root of the size; measured 0.1 GB at 2000 and 0.32 GB at 8000
+    elements) plus the Krylov block of 4 vectors per mode over 3 dofs per element."""
+    return 35e3 * elements * max(1.0, elements / 8000) ** (1 / 3) + 96.0 * modes * elements
+
+
 def cmd_modes(args: argparse.Namespace) -> int:
     """``jassy modes MESH --material NAME -o MODEL``: finite element modes of a mesh."""
     _check_output(args.output)
     _positive("--modes", args.modes, integer=True)
+    if args.modes > MAX_MODES:
+        raise JassyError(f"--modes: expected an integer in [1, {MAX_MODES}], got {args.modes}")
     _positive("--pitch", args.pitch)
     _positive("--elements", args.elements, integer=True)
     _positive("--scale", args.scale)
     _positive("--fmax", args.fmax)
-    if args.subdivide is not None and args.subdivide < 0:
-        raise JassyError(f"--subdivide: expected an integer >= 0, got {args.subdivide}")
+    if args.subdivide is not None and not 0 <= args.subdivide <= MAX_SUBDIVIDE:
+        raise JassyError(f"--subdivide: expected an integer in [0, {MAX_SUBDIVIDE}], got {args.subdivide}")
     if args.pitch is not None and args.elements is not None:
         raise JassyError("--pitch and --elements: give one of them, not both")
     points = dict(parse_point(p) for p in args.point or ())
     if args.surface and points:
         raise JassyError("--surface: the sampled surface exists only without --point (a model per vertex)")
+    if args.surface:
+        from jassy.files import check_distinct, check_output
+
+        check_output(args.surface, "--surface")
+        check_distinct({"-o/--output": args.output, "--surface": args.surface})
+    if not os.path.exists(args.mesh) and args.mesh not in SHAPES:
+        raise JassyError(f"{args.mesh}: no such mesh file (or built-in shape: {', '.join(SHAPES)})")
+    from jassy.limits import check_memory
+
+    if args.elements is not None:
+        check_memory(fem_bytes(args.elements, args.modes), f"--elements {args.elements}")
 
     from physics.modal import meshes
     from physics.modal.fem import modes_from_mesh
@@ -96,6 +121,20 @@ def cmd_modes(args: argparse.Namespace) -> int:
         subdivide, n = 0, len(mesh.vertices)
         while subdivide < 3 and n * 4 <= 2000 and not points:
             subdivide, n = subdivide + 1, n * 4
+    try:
+        volume = abs(float(mesh.volume))
+    except (ZeroDivisionError, FloatingPointError, ValueError):
+        volume = 0.0
+    if not volume > 0:
+        raise JassyError(f"{args.mesh}: the mesh encloses no volume (flat or degenerate); expected a solid")
+    if args.pitch is not None:
+        elements = volume / args.pitch**3
+        check_memory(fem_bytes(elements, args.modes), f"--pitch {args.pitch:g} ({elements:.3g} elements)")
+    surface_vertices = len(mesh.vertices) * 4.0**subdivide
+    check_memory(
+        surface_vertices * (args.modes * 32 + 1024),
+        f"--subdivide {subdivide} ({surface_vertices:.3g} vertices)",
+    )
     t0 = time.perf_counter()
     model, report, surface = modes_from_mesh(
         mesh,
@@ -152,6 +191,15 @@ def cmd_fit(args: argparse.Namespace) -> int:
         raise JassyError(f"--fmax: expected more than --fmin ({args.fmin:g} Hz), got {args.fmax:g}")
     if args.plot and os.path.splitext(args.plot)[1].lower() not in (".png", ".pdf", ".svg"):
         raise JassyError(f"--plot: {args.plot}: expected a .png, .pdf or .svg file name")
+    if args.plot:
+        from jassy.cli_checks import require_extra
+        from jassy.files import check_distinct, check_output
+
+        require_extra("matplotlib", "plot", "--plot")
+        check_output(args.plot, "--plot")
+        check_distinct({"-o/--output": args.output, "--plot": args.plot})
+    for path in args.recordings:
+        _check_recording(path, args.duration)
 
     import numpy as np
 
@@ -167,6 +215,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
     names = tuple(os.path.splitext(os.path.basename(p))[0] for p in args.recordings)
     if len(set(names)) != len(names):
         names = tuple(f"r{i}" for i in range(len(names)))
+    if not args.quiet and sys.stderr.isatty():  # a progress note on a terminal, as renders show
+        seconds = sum(len(x) for x in sigs) / rates[0]
+        print(
+            f"fitting {len(sigs)} recording(s), {seconds:.1f} s of audio (Ctrl-C stops) ...", file=sys.stderr
+        )
     t0 = time.perf_counter()
     result = fit_recordings(
         sigs,
@@ -195,6 +248,31 @@ def cmd_fit(args: argparse.Namespace) -> int:
             + (f"; plot -> {args.plot}" if args.plot else "")
         )
     return 0
+
+
+#: Longest recording analysed by ``jassy fit`` unless --max-seconds says otherwise (s): the
+#: analysis costs far more per second of audio than rendering.
+FIT_SECONDS = 60.0
+
+
+def _check_recording(path: str, duration: float | None) -> None:
+    """Before reading a recording: a regular audio file with a real sample rate, not longer
+    (after --duration) than the fit limit, whose samples fit in the memory limit."""
+    import soundfile
+
+    from jassy.inputs import regular_file
+    from jassy.limits import check_memory, check_seconds
+
+    regular_file(path, "recording")
+    try:
+        info = soundfile.info(path)
+    except Exception as exc:  # soundfile raises RuntimeError / LibsndfileError for non-audio
+        raise JassyError(f"{path}: cannot read audio ({' '.join(str(exc).split())})") from None
+    if not 1000 <= info.samplerate <= 768000:
+        raise JassyError(f"{path}: sample rate {info.samplerate} Hz; expected 1000 to 768000 Hz")
+    length = info.frames / info.samplerate
+    check_seconds(min(length, duration or length), f"{path}", default=FIT_SECONDS)
+    check_memory(info.frames * max(info.channels, 1) * 8 * 8, f"{path}")
 
 
 def describe_model(path: str | os.PathLike) -> str:

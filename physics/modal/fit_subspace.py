@@ -93,6 +93,7 @@ class FitResult:
     levels_db: np.ndarray
     noise_db: float
     notes: list[str] = field(default_factory=list)
+    attack: np.ndarray = field(default_factory=lambda: np.zeros(0))  # first hit's residual
 
     @property
     def onset(self) -> float:
@@ -105,7 +106,7 @@ class FitResult:
         lines = [
             f"fitted {m.n_modes} modes from {hits} strike(s) in {len(self.onsets)} recording(s) at "
             f"{self.sample_rate:g} Hz; {m.n_points} gain row(s)"
-            + (f"; attack {m.attack.size / self.sample_rate * 1e3:.1f} ms" if m.attack.size else ""),
+            + (f"; attack {self.attack.size / self.sample_rate * 1e3:.1f} ms" if self.attack.size else ""),
             "onsets (s): " + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in self.onsets),
             "residual (recording - resynthesis, energy per hit and channel): "
             + ", ".join(f"{r:.1f} dB" for r in self.residual_db),
@@ -453,7 +454,7 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
         freqs, decays, rows, names, name, attack=attack, attack_rate=rate if attack.size else 0.0
     )
     noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
-    return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes)
+    return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes, attack)
 
 
 def _gain_rows(segments, mags, recs, locations, points):

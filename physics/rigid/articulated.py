@@ -26,8 +26,21 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from jassy.errors import JassyError
-
-REVOLUTE, PRISMATIC = 0, 1
+from jassy.jit import specialise
+from physics.rigid.aba import (
+    ABA_BAD_FEXT,
+    ABA_BAD_Q,
+    ABA_BAD_QD,
+    ABA_BAD_TAU,
+    ABA_OK,
+    PRISMATIC,
+    REVOLUTE,
+    ChainModel,
+    aba_checked,
+    aba_data_size,
+    aba_into,
+    new_aba_data,
+)
 
 
 @numba.njit(cache=True)
@@ -162,42 +175,6 @@ def _velocities(parent, Xup, S, qd):
 
 
 @numba.njit(cache=True)
-def _aba(parent, jtype, axis, xtree, inertia, a0, q, qd, tau, fext):
-    n = q.size
-    Xup, S = _kinematics(jtype, axis, xtree, q)
-    v, c = _velocities(parent, Xup, S, qd)
-    IA = inertia.copy()
-    pA = np.empty((n, 6))
-    for i in range(n):
-        pA[i] = _crf_mv(v[i], _mv(inertia[i], v[i])) - fext[i]
-    U = np.empty((n, 6))
-    d = np.empty(n)
-    u = np.empty(n)
-    Ia = np.empty((6, 6))
-    for i in range(n - 1, -1, -1):
-        U[i] = _mv(IA[i], S[i])
-        d[i] = S[i] @ U[i]
-        if not d[i] > 0.0:
-            return np.full(n, np.nan)
-        u[i] = tau[i] - S[i] @ pA[i]
-        p = parent[i]
-        if p >= 0:
-            for r in range(6):
-                for k in range(6):
-                    Ia[r, k] = IA[i, r, k] - U[i, r] * U[i, k] / d[i]
-            pa = pA[i] + _mv(Ia, c[i]) + U[i] * (u[i] / d[i])
-            _add_xtax(IA[p], Xup[i], Ia)
-            pA[p] += _mtv(Xup[i], pa)
-    a = np.empty((n, 6))
-    qdd = np.empty(n)
-    for i in range(n):
-        ap = _mv(Xup[i], a0 if parent[i] < 0 else a[parent[i]]) + c[i]
-        qdd[i] = (u[i] - U[i] @ ap) / d[i]
-        a[i] = ap + S[i] * qdd[i]
-    return qdd
-
-
-@numba.njit(cache=True)
 def _rnea(parent, jtype, axis, xtree, inertia, a0, q, qd, qdd, fext):
     n = q.size
     Xup, S = _kinematics(jtype, axis, xtree, q)
@@ -258,7 +235,7 @@ def _poses(parent, jtype, axis, jrot, jpos, q):
 
 
 @numba.njit(cache=True)
-def _simulate(parent, jtype, axis, xtree, inertia, a0, q0, qd0, tau, h, steps, rk4):
+def _simulate(m, d, q0, qd0, tau, h, steps, rk4):
     n = q0.size
     fext = np.zeros((n, 6))
     Q = np.empty((steps + 1, n))
@@ -267,17 +244,22 @@ def _simulate(parent, jtype, axis, xtree, inertia, a0, q0, qd0, tau, h, steps, r
     q, qd = q0.copy(), qd0.copy()
     for s in range(steps):
         if rk4:
-            k1q, k1v = qd, _aba(parent, jtype, axis, xtree, inertia, a0, q, qd, tau, fext)
+            k1q = qd
+            aba_into(m, d, q, qd, tau, fext)
+            k1v = d.qdd.copy()
             q2, v2 = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
-            k2q, k2v = v2, _aba(parent, jtype, axis, xtree, inertia, a0, q2, v2, tau, fext)
-            q3, v3 = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
-            k3q, k3v = v3, _aba(parent, jtype, axis, xtree, inertia, a0, q3, v3, tau, fext)
-            q4, v4 = q + h * k3q, qd + h * k3v
-            k4v = _aba(parent, jtype, axis, xtree, inertia, a0, q4, v4, tau, fext)
-            q = q + (h / 6.0) * (k1q + 2.0 * k2q + 2.0 * k3q + v4)
-            qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            aba_into(m, d, q2, v2, tau, fext)
+            k2v = d.qdd.copy()
+            q3, v3 = q + 0.5 * h * v2, qd + 0.5 * h * k2v
+            aba_into(m, d, q3, v3, tau, fext)
+            k3v = d.qdd.copy()
+            q4, v4 = q + h * v3, qd + h * k3v
+            aba_into(m, d, q4, v4, tau, fext)
+            q = q + (h / 6.0) * (k1q + 2.0 * v2 + 2.0 * v3 + v4)
+            qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + d.qdd)
         else:  # semi-implicit (symplectic) Euler
-            qd = qd + h * _aba(parent, jtype, axis, xtree, inertia, a0, q, qd, tau, fext)
+            aba_into(m, d, q, qd, tau, fext)
+            qd = qd + h * d.qdd
             q = q + h * qd
         Q[s + 1], QD[s + 1] = q, qd
     return Q, QD
@@ -308,6 +290,10 @@ class Chain:
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
     xtree: np.ndarray = field(init=False, repr=False)
     spatial_inertia: np.ndarray = field(init=False, repr=False)
+    model: ChainModel = field(init=False, repr=False)
+    _scratch: np.ndarray = field(init=False, repr=False)
+    _no_force: np.ndarray = field(init=False, repr=False)
+    _aba_entry: object = field(init=False, repr=False, default=None)
 
     def __post_init__(self):
         parent = np.asarray(self.parent, dtype=np.int64).ravel()
@@ -346,6 +332,15 @@ class Chain:
         sI = np.array([_spatial_inertia(arrs["mass"][i], arrs["com"][i], Ic[i]) for i in range(n)])
         object.__setattr__(self, "xtree", xtree)
         object.__setattr__(self, "spatial_inertia", sI)
+        S = np.zeros((n, 6))
+        S[jt == REVOLUTE, :3] = arrs["axis"][jt == REVOLUTE]
+        S[jt == PRISMATIC, 3:] = arrs["axis"][jt == PRISMATIC]
+        a0 = np.concatenate([np.zeros(3), -arrs["gravity"]])  # base acceleration -g (fictitious)
+        model = ChainModel(parent, jt, arrs["axis"], R, arrs["joint_pos"], sI, S, a0)
+        object.__setattr__(self, "model", model)
+        # scratch of the public ``aba``: numba kernels hold the GIL, so one call runs at a time
+        object.__setattr__(self, "_scratch", np.zeros(aba_data_size(n)))
+        object.__setattr__(self, "_no_force", np.zeros((n, 6)))  # f_ext = 0, never written
 
     @property
     def n(self) -> int:
@@ -386,14 +381,38 @@ def _state(chain: Chain, name: str, x, shape=None) -> np.ndarray:
     return a
 
 
+_BAD_INPUT = {ABA_BAD_Q: "q", ABA_BAD_QD: "qd", ABA_BAD_TAU: "tau", ABA_BAD_FEXT: "f_ext"}
+
+
+def _vector(x, shape: tuple, name: str) -> np.ndarray:
+    """x as a writeable, C-contiguous float64 array of ``shape`` (one numba type for every call;
+    finiteness is checked in the kernel)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous and x.flags.writeable:
+        a = x
+    else:
+        a = np.array(x, dtype=np.float64, order="C")
+    if a.shape != shape:
+        raise JassyError(f"{name}: expected finite array of shape {shape}, got {a.shape}")
+    return a
+
+
 def aba(chain: Chain, q, qd, tau, f_ext=None) -> np.ndarray:
     """Joint accelerations qdd (n,) by the O(n) articulated-body algorithm.
 
     q (rad | m), qd, tau (N m | N): (n,). f_ext: (n, 6) external spatial force on each link,
-    (torque; force) about the link-frame origin in link coordinates (N m; N), default 0."""
-    fe = _state(chain, "f_ext", f_ext, (chain.n, 6))
-    qdd = _aba(*chain._args(), _state(chain, "q", q), _state(chain, "qd", qd), _state(chain, "tau", tau), fe)
-    if not np.all(np.isfinite(qdd)):
+    (torque; force) about the link-frame origin in link coordinates (N m; N), default 0.
+    The chain was validated when it was built; a call checks shapes and finiteness only."""
+    n = chain.parent.size
+    fe = chain._no_force if f_ext is None else _vector(f_ext, (n, 6), "f_ext")
+    qdd = np.empty(n)
+    args = (chain.model, chain._scratch, _vector(q, (n,), "q"), _vector(qd, (n,), "qd"))
+    args += (_vector(tau, (n,), "tau"), fe, qdd)
+    if chain._aba_entry is None:  # numba's typing of the model record costs microseconds a call
+        object.__setattr__(chain, "_aba_entry", specialise(aba_checked, *args))
+    code = chain._aba_entry(*args)
+    if code != ABA_OK:
+        if code in _BAD_INPUT:
+            raise JassyError(f"{_BAD_INPUT[code]}: expected finite values")
         raise JassyError("chain: singular articulated inertia (a joint moves no mass)")
     return qdd
 
@@ -444,8 +463,8 @@ def simulate(chain: Chain, q0, qd0, h: float, steps: int, integrator: str = "rk4
     if not (h > 0 and np.isfinite(h)) or int(steps) < 0:
         raise JassyError(f"h, steps: expected h > 0 and steps >= 0, got {h}, {steps}")
     Q, QD = _simulate(
-        *chain._args(), _state(chain, "q0", q0), _state(chain, "qd0", qd0), _state(chain, "tau", tau),
-        float(h), int(steps), integrator == "rk4",
+        chain.model, new_aba_data(chain.n), _state(chain, "q0", q0), _state(chain, "qd0", qd0),
+        _state(chain, "tau", tau), float(h), int(steps), integrator == "rk4",
     )  # fmt: skip
     if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(QD))):
         raise JassyError("chain: simulation diverged or hit a singular articulated inertia")

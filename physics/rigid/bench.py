@@ -37,15 +37,19 @@ def pile(n: int, seed: int = 0, h: float = 1e-3):
     return world, state
 
 
-def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False) -> list[dict]:
+def bench_rigid(
+    sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False, progress=lambda message: None
+) -> list[dict]:
     """Rows: bodies, contacts per step, steps/s and real-time factor of the settled pile; then
-    the wok scene (physics only, and physics + events + audio render) against real time."""
+    the wok scene (physics only, and physics + events + audio render) against real time.
+    ``progress(message)`` is told which case starts."""
     from physics.rigid.world import simulate
 
     if quick:
         sizes, seconds = tuple(s for s in sizes if s <= 100), 0.2
     rows = []
     for n in sizes:
+        progress(f"pile of {n} bodies, {seconds:g} s")
         world, state = pile(n)
         t0 = time.perf_counter()
         result = simulate(world, seconds, state=state, sample_every=0)
@@ -61,6 +65,7 @@ def bench_rigid(sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False
                 "real_time_factor": seconds / wall,
             }
         )
+    progress("wok scene: physics alone and the full render")
     rows += _wok_rows(2.0 if quick else 6.0)
     return rows
 

@@ -1,9 +1,11 @@
-"""Free-motion integrators for rigid bodies (no contact): semi-implicit Euler, RK4, adaptive RK4.
+"""Free-motion integrators for rigid bodies (no contact): semi-implicit, RK4, adaptive RK4.
 
 Each advances one body's (position p in m, unit quaternion q, body twist phi) by h seconds
 under gravity g (m/s^2, world) and a constant body-frame wrench ``ext`` (N m, N):
 
-- ``SEMI_IMPLICIT``: velocity first, then pose with the new velocity (symplectic Euler). The
+- ``SEMI_IMPLICIT`` (the default): the centre of mass moves in closed form under the step's
+  constant acceleration a = g + R f / m (gravity and the body force f taken at the step's
+  start): p1 = p + h v + h^2 a / 2, v1 = v + h a, exact for ballistic flight at any step. The
   angular part uses the implicit midpoint rule on Euler's equations, which conserves the
   kinetic energy and |L| of a torque-free body exactly (they are quadratic invariants); the
   orientation moves by exp(h w_mid) on SO(3).
@@ -119,18 +121,24 @@ def _rotate(qw, qx, qy, qz, x, y, z):
 
 
 @nb.njit(cache=True)
-def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi):
-    """Symplectic Euler with an implicit-midpoint angular update (see module doc), written
-    into out_p, out_q, out_phi (scalar arithmetic, no allocation)."""
+def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi, ballistic=True):
+    """Closed-form translation under constant acceleration with an implicit-midpoint angular
+    update (see module doc), written into out_p, out_q, out_phi (scalar arithmetic, no
+    allocation). ``ballistic=False``: the centre moves with the new velocity instead,
+    p1 = p + h v1 (symplectic Euler), for a body held by a resting contact whose solve folded
+    the step's gravity increment into its velocity (it then stays put with zero velocity)."""
     x0, x1, x2 = _implicit_midpoint_omega(
         phi[0], phi[1], phi[2], inertia[0], inertia[1], inertia[2], ext[0], ext[1], ext[2], h
     )
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
-    vx, vy, vz = _rotate(
-        qw, qx, qy, qz, phi[3] + h * ext[3] / mass, phi[4] + h * ext[4] / mass, phi[5] + h * ext[5] / mass
-    )
-    vx, vy, vz = vx + h * gravity[0], vy + h * gravity[1], vz + h * gravity[2]
-    out_p[0], out_p[1], out_p[2] = p[0] + h * vx, p[1] + h * vy, p[2] + h * vz
+    ux, uy, uz = _rotate(qw, qx, qy, qz, phi[3], phi[4], phi[5])  # world velocity at the start
+    ax, ay, az = _rotate(qw, qx, qy, qz, ext[3] / mass, ext[4] / mass, ext[5] / mass)
+    ax, ay, az = ax + gravity[0], ay + gravity[1], az + gravity[2]
+    vx, vy, vz = ux + h * ax, uy + h * ay, uz + h * az
+    drift = 0.5 * h if ballistic else h
+    out_p[0] = p[0] + h * (ux + drift * ax)
+    out_p[1] = p[1] + h * (uy + drift * ay)
+    out_p[2] = p[2] + h * (uz + drift * az)
     # q1 = q exp(h wm): exp of the rotation vector r = h (w0 + w1) / 2
     r0, r1, r2 = 0.5 * h * (phi[0] + x0), 0.5 * h * (phi[1] + x1), 0.5 * h * (phi[2] + x2)
     angle = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
@@ -149,7 +157,7 @@ def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, 
 
 @nb.njit(cache=True)
 def semi_implicit_step(p, q, phi, inertia, mass, gravity, ext, h):
-    """Symplectic Euler with an implicit-midpoint angular update (see module doc)."""
+    """Closed-form translation, implicit-midpoint rotation (see module doc)."""
     p1, q1, phi1 = np.empty(3), np.empty(4), np.empty(6)
     semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, p1, q1, phi1)
     return p1, q1, phi1

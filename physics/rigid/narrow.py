@@ -3,17 +3,23 @@
 Every contact is (point, normal, gap, feature of a, feature of b, barycentric weights on b)
 with the normal pointing from b to a (pushing a along +n) and gap < 0 meaning penetration.
 Pairs are ordered so that type(a) <= type(b) (sphere < capsule < box < convex < plane <
-mesh). Methods:
+mesh < compound). Methods:
 
 - sphere/capsule vs sphere/capsule: closest points of two segments (Ericson 5.1.9);
 - sphere vs polytope (box, convex): inside by the face planes (deepest face), outside by the
   closest point on the hull triangles; a capsule is tested as its two end spheres and its
   middle sphere;
-- polytope vs polytope: each against the other's reference face (the face plane, found by
-  separating axes over face normals, that the other's vertices reach least deep behind): its
-  vertices over that face, and the points where its hull edges cross the face's side planes
-  (a face-face manifold: a cube on a cube turned or aligned gets the corners of the overlap);
-  no contact if a face plane of one has the other beyond it (edge-edge axes are not tested);
+- polytope vs polytope: separating axes over both bodies' face normals and the cross
+  products of their edge directions (Gottschalk, Lin, Manocha, "OBBTree", SIGGRAPH 1996;
+  Ericson 5.2.1); no contact if one separates them by more than the margin. If an edge axis
+  beats every face axis (by EDGE_PREFERENCE), one contact between the two nearest edges with
+  that axis's separation as gap (the true distance of two edges passing each other);
+  otherwise each body against the other's reference face (the face plane that the other's
+  vertices reach least deep behind): its vertices over that face, and the points where its
+  hull edges cross the face's side planes (a face-face manifold: a cube on a cube turned or
+  aligned gets the corners of the overlap);
+- compound (concave) bodies: each of their convex pieces as a polytope, against planes and
+  meshes their surface vertices;
 - anything vs plane: the sphere centres or vertices against the plane;
 - anything vs triangle mesh: the same points against the mesh's triangle grid, keeping the
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
@@ -36,7 +42,11 @@ from physics.rigid.meshgrid import (
     triangle_point,
     triangle_weights,
 )
-from physics.rigid.shapes import CAPSULE, MESH, PLANE, SPHERE
+from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
+
+PIECE = 100000  # features of a compound's k-th convex piece are offset by PIECE * k
+EDGE = 2000  # feature of an edge-edge contact: EDGE + the edge's row among its polytope's edges
+EDGE_PREFERENCE = 1e-5  # m: an edge axis must beat every face axis by this to give the contact
 
 # All kernels below use scalar arithmetic (3-vectors as float triples): no allocation per
 # contact or per vertex.
@@ -181,19 +191,20 @@ def _deepest_plane(lx, ly, lz, b, pstart, planes):
 
 
 @nb.njit(cache=True, inline="always")
-def _polytope_distance(x, y, z, b, pos, rot, geo):
-    """Signed distance from the world point (x, y, z) to polytope b, the outward world normal
-    at the closest point, and the index of the face plane or hull triangle reached."""
+def _polytope_distance(x, y, z, b, sb, pos, rot, geo):
+    """Signed distance from the world point (x, y, z) to polytope b (geometry slot sb), the
+    outward world normal at the closest point, and the index of the face plane or hull
+    triangle reached."""
     pstart, planes, hstart, htris = geo[6], geo[7], geo[8], geo[9]
     lx, ly, lz = to_local(b, pos, rot, x, y, z)
-    best, face = _deepest_plane(lx, ly, lz, b, pstart, planes)
+    best, face = _deepest_plane(lx, ly, lz, sb, pstart, planes)
     if best <= 0.0:
         nx, ny, nz = _rotate(b, rot, planes[face, 0], planes[face, 1], planes[face, 2])
-        return best, nx, ny, nz, face - pstart[b]
+        return best, nx, ny, nz, face - pstart[sb]
     best_d2 = math.inf
     tri = -1
     qx = qy = qz = 0.0
-    for t in range(hstart[b], hstart[b + 1]):
+    for t in range(hstart[sb], hstart[sb + 1]):
         u, v, w = triangle_weights(lx, ly, lz, htris, t)
         px, py, pz = triangle_point(htris, t, u, v, w)
         d2 = (lx - px) ** 2 + (ly - py) ** 2 + (lz - pz) ** 2
@@ -205,40 +216,43 @@ def _polytope_distance(x, y, z, b, pos, rot, geo):
         nx, ny, nz = _rotate(b, rot, (lx - qx) / dist, (ly - qy) / dist, (lz - qz) / dist)
     else:
         nx, ny, nz = _rotate(b, rot, planes[face, 0], planes[face, 1], planes[face, 2])
-    return dist, nx, ny, nz, tri - hstart[b]
+    return dist, nx, ny, nz, tri - hstart[sb]
 
 
-@nb.njit(cache=True, inline="always")
-def _spheres_polytope(a, b, pos, rot, geo, margin, buf, count):
+@nb.njit(cache=True, _nrt=False)
+def _spheres_polytope(a, b, sb, piece, pos, rot, geo, margin, buf, count):
+    """Contacts of sphere or capsule a with polytope b's geometry slot sb (its piece number
+    ``piece``: features are offset by PIECE times it)."""
     pstart, planes, offsets, points = geo[6], geo[7], geo[21], geo[22]
     for k in range(offsets[a], offsets[a + 1]):
         x, y, z, r = body_point(k, a, pos, rot, points)
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
-        if _deepest_plane(lx, ly, lz, b, pstart, planes)[0] > r + margin:
+        if _deepest_plane(lx, ly, lz, sb, pstart, planes)[0] > r + margin:
             continue  # a face plane separates: the distance is larger still
-        sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, pos, rot, geo)
+        sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, sb, pos, rot, geo)
         gap = sd - r
         if gap <= margin:
-            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, -1, feature)
+            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, -1, feature + PIECE * piece)
     return count
 
 
 @nb.njit(cache=True, inline="always")
-def _plane_separates(a, b, pos, rot, geo, margin):
-    """Whether one of polytope b's face planes has all of a's bounding sphere more than
-    ``margin`` beyond it (then the two are further apart than margin: no contact)."""
+def _plane_separates(a, b, sb, pos, rot, geo, margin):
+    """Whether one of the face planes of polytope b's geometry slot sb has all of a's bounding
+    sphere more than ``margin`` beyond it (then the two are further apart than margin)."""
     lx, ly, lz = to_local(b, pos, rot, pos[a, 0], pos[a, 1], pos[a, 2])
-    return _deepest_plane(lx, ly, lz, b, geo[6], geo[7])[0] > geo[3][a] + margin
+    return _deepest_plane(lx, ly, lz, sb, geo[6], geo[7])[0] > geo[3][a] + margin
 
 
 @nb.njit(cache=True, inline="always")
-def _reference_face(a, b, pos, rot, geo):
+def _reference_face(a, sa, b, sb, pos, rot, geo):
     """Polytope b's face plane that polytope a's vertices reach least deep behind (separating
-    axes over b's face normals): (plane index, separation = the smallest signed distance of
-    a's vertices beyond it, m; above 0 the plane separates the two)."""
+    axes over b's face normals; sa, sb: their geometry slots): (plane index, separation = the
+    smallest signed distance of a's vertices beyond it, m; above 0 the plane separates the
+    two)."""
     vstart, verts, pstart, planes = geo[4], geo[5], geo[6], geo[7]
-    best, face = -math.inf, pstart[b]
-    for j in range(pstart[b], pstart[b + 1]):
+    best, face = -math.inf, pstart[sb]
+    for j in range(pstart[sb], pstart[sb + 1]):
         # plane j in a's frame (one transform per plane, not per plane and vertex)
         wx, wy, wz = _rotate(b, rot, planes[j, 0], planes[j, 1], planes[j, 2])
         offset = (
@@ -249,7 +263,7 @@ def _reference_face(a, b, pos, rot, geo):
         )
         nx, ny, nz = to_local(a, pos, rot, pos[a, 0] + wx, pos[a, 1] + wy, pos[a, 2] + wz)
         sep = math.inf
-        for v in range(vstart[a], vstart[a + 1]):
+        for v in range(vstart[sa], vstart[sa + 1]):
             sep = min(sep, nx * verts[v, 0] + ny * verts[v, 1] + nz * verts[v, 2] - offset)
         if sep > best:
             best, face = sep, j
@@ -276,27 +290,26 @@ def _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip):
     return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sd, fa, fb)
 
 
-@nb.njit(cache=True, inline="always")
-def _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, flip):
-    """Contacts of polytope a on polytope b's reference face (_reference_face; normal from b to
-    a, reversed if flip): a's vertices within margin of the face plane and over the face
-    (within margin of b's other face planes), and the points where a's hull edges cross b's
-    other face planes while within margin of the face plane (the corners of the overlap of
-    two faces, where no vertex of either lies over the other)."""
+@nb.njit(cache=True, _nrt=False)
+def _polytope_on_face(a, sa, b, sb, face, pieces, pos, rot, geo, margin, buf, count, flip):
+    """Contacts of polytope a (geometry slot sa) on polytope b's (slot sb) reference face
+    (_reference_face; normal from b to a, reversed if flip): a's vertices within margin of the
+    face plane and over the face (within margin of b's other face planes), and the points
+    where a's hull edges cross b's other face planes while within margin of the face plane
+    (the corners of the overlap of two faces, where no vertex of either lies over the other).
+    pieces: the piece numbers of a and b (features offset by PIECE times them)."""
     vstart, verts, pstart, planes, hstart, htris = geo[4], geo[5], geo[6], geo[7], geo[8], geo[9]
-    face, sep = _reference_face(a, b, pos, rot, geo)
-    if sep > margin:
-        return count
     fnx, fny, fnz, fd = planes[face, 0], planes[face, 1], planes[face, 2], planes[face, 3]
     nx, ny, nz = _rotate(b, rot, fnx, fny, fnz)
-    fb = face - pstart[b]
-    for v in range(vstart[a], vstart[a + 1]):
+    fb = face - pstart[sb] + PIECE * pieces[1]
+    for v in range(vstart[sa], vstart[sa + 1]):
         x, y, z = to_world(a, pos, rot, verts[v, 0], verts[v, 1], verts[v, 2])
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
         sd = fnx * lx + fny * ly + fnz * lz - fd
-        if sd <= margin and _beyond_sides(lx, ly, lz, b, face, pstart, planes) <= margin:
-            count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, v - vstart[a], fb, flip)
-    for t in range(hstart[a], hstart[a + 1]):
+        if sd <= margin and _beyond_sides(lx, ly, lz, sb, face, pstart, planes) <= margin:
+            fa = v - vstart[sa] + PIECE * pieces[0]
+            count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip)
+    for t in range(hstart[sa], hstart[sa + 1]):
         for e in range(3):
             f = (e + 1) % 3
             if (htris[t, e, 0], htris[t, e, 1], htris[t, e, 2]) >= (
@@ -310,7 +323,7 @@ def _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, flip):
             x, y, z = to_world(a, pos, rot, htris[t, f, 0], htris[t, f, 1], htris[t, f, 2])
             qx, qy, qz = to_local(b, pos, rot, x, y, z)
             lo, hi = 0.0, 1.0  # clip p + s (q - p) to b's side half-spaces and the face's margin
-            for k in range(pstart[b], pstart[b + 1]):
+            for k in range(pstart[sb], pstart[sb + 1]):
                 limit = margin if k == face else 0.0
                 d1 = planes[k, 0] * px + planes[k, 1] * py + planes[k, 2] * pz - planes[k, 3] - limit
                 d2 = planes[k, 0] * qx + planes[k, 1] * qy + planes[k, 2] * qz - planes[k, 3] - limit
@@ -327,9 +340,112 @@ def _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, flip):
                 lx, ly, lz = px + s * (qx - px), py + s * (qy - py), pz + s * (qz - pz)
                 sd = fnx * lx + fny * ly + fnz * lz - fd
                 x, y, z = to_world(b, pos, rot, lx, ly, lz)
-                fa = 1000 + 6 * (t - hstart[a]) + 2 * e + end
+                fa = 1000 + 6 * (t - hstart[sa]) + 2 * e + end + PIECE * pieces[0]
                 count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip)
     return count
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_separation(a, sa, b, sb, pos, rot, geo):
+    """The best separating axis among the cross products of the edge directions of polytopes
+    a and b (geometry slots sa, sb): (separation, m: a's vertices' smallest projection minus
+    b's largest, the distance of the two when their nearest features are two edges; world
+    axis from b to a; a's and b's direction rows in geo[27]); -inf if all are parallel."""
+    vstart, verts, dstart, dirs = geo[4], geo[5], geo[26], geo[27]
+    best, bnx, bny, bnz, best_a, best_b = -math.inf, 0.0, 0.0, 1.0, -1, -1
+    for da in range(dstart[sa], dstart[sa + 1]):
+        ex, ey, ez = _rotate(a, rot, dirs[da, 0], dirs[da, 1], dirs[da, 2])
+        for db in range(dstart[sb], dstart[sb + 1]):
+            fx, fy, fz = _rotate(b, rot, dirs[db, 0], dirs[db, 1], dirs[db, 2])
+            nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+            length = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if length < 1e-6:
+                continue  # parallel edges: a face axis covers them
+            nx, ny, nz = nx / length, ny / length, nz / length
+            lo_a, hi_a = _projection(a, sa, nx, ny, nz, pos, rot, vstart, verts)
+            lo_b, hi_b = _projection(b, sb, nx, ny, nz, pos, rot, vstart, verts)
+            if lo_a - hi_b > best:
+                best, bnx, bny, bnz, best_a, best_b = lo_a - hi_b, nx, ny, nz, da, db
+            if lo_b - hi_a > best:
+                best, bnx, bny, bnz, best_a, best_b = lo_b - hi_a, -nx, -ny, -nz, da, db
+    return best, bnx, bny, bnz, best_a, best_b
+
+
+@nb.njit(cache=True, inline="always")
+def _projection(a, sa, nx, ny, nz, pos, rot, vstart, verts):
+    """(smallest, largest) projection (m) on the world axis n of the vertices of body a's
+    geometry slot sa."""
+    lx, ly, lz = to_local(a, pos, rot, pos[a, 0] + nx, pos[a, 1] + ny, pos[a, 2] + nz)
+    centre = nx * pos[a, 0] + ny * pos[a, 1] + nz * pos[a, 2]
+    lo, hi = math.inf, -math.inf
+    for v in range(vstart[sa], vstart[sa + 1]):
+        d = lx * verts[v, 0] + ly * verts[v, 1] + lz * verts[v, 2]
+        lo, hi = min(lo, d), max(hi, d)
+    return centre + lo, centre + hi
+
+
+@nb.njit(cache=True, inline="always")
+def _support_edge(a, sa, direction, sign, nx, ny, nz, pos, rot, geo):
+    """Body a's edge (geometry slot sa) along direction row ``direction`` that lies furthest
+    along sign * n: (edge row in geo[24], its world end points)."""
+    estart, edges, edge_dir = geo[23], geo[24], geo[25]
+    best, edge = -math.inf, -1
+    for e in range(estart[sa], estart[sa + 1]):
+        if edge_dir[e] != direction:
+            continue
+        mx, my, mz = to_world(
+            a,
+            pos,
+            rot,
+            0.5 * (edges[e, 0] + edges[e, 3]),
+            0.5 * (edges[e, 1] + edges[e, 4]),
+            0.5 * (edges[e, 2] + edges[e, 5]),
+        )
+        along = sign * (nx * mx + ny * my + nz * mz)
+        if along > best:
+            best, edge = along, e
+    p = to_world(a, pos, rot, edges[edge, 0], edges[edge, 1], edges[edge, 2])
+    q = to_world(a, pos, rot, edges[edge, 3], edges[edge, 4], edges[edge, 5])
+    return edge, p, q
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_contact(a, sa, b, sb, sep, nx, ny, nz, da, db, pieces, pos, rot, geo, buf, count):
+    """One contact where the edges of a and b along directions da, db that face each other
+    across the axis n (from b to a) come closest: the middle of their closest points, gap
+    ``sep``, features EDGE + the edge rows (offset by PIECE times the piece numbers)."""
+    ea, pa, qa = _support_edge(a, sa, da, -1.0, nx, ny, nz, pos, rot, geo)
+    eb, pb, qb = _support_edge(b, sb, db, 1.0, nx, ny, nz, pos, rot, geo)
+    s, t = segment_params(pa, qa, pb, qb)
+    px = 0.5 * (pa[0] + s * (qa[0] - pa[0]) + pb[0] + t * (qb[0] - pb[0]))
+    py = 0.5 * (pa[1] + s * (qa[1] - pa[1]) + pb[1] + t * (qb[1] - pb[1]))
+    pz = 0.5 * (pa[2] + s * (qa[2] - pa[2]) + pb[2] + t * (qb[2] - pb[2]))
+    estart = geo[23]
+    fa = EDGE + ea - estart[sa] + PIECE * pieces[0]
+    fb = EDGE + eb - estart[sb] + PIECE * pieces[1]
+    return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sep, fa, fb)
+
+
+@nb.njit(cache=True, _nrt=False)
+def _polytopes(a, sa, b, sb, pieces, pos, rot, geo, margin, buf, count):
+    """Contacts of two polytopes (geometry slots sa, sb; piece numbers ``pieces``) by
+    separating axes: the face normals of each (_reference_face) and the cross products of
+    their edge directions (_edge_separation). No contact when an axis separates them by more
+    than margin; one edge-edge contact when an edge axis separates (or overlaps) them by
+    EDGE_PREFERENCE more than every face axis; else the face manifolds of each on the other."""
+    face_ab, sep_ab = _reference_face(a, sa, b, sb, pos, rot, geo)
+    face_ba, sep_ba = _reference_face(b, sb, a, sa, pos, rot, geo)
+    face_sep = max(sep_ab, sep_ba)
+    if face_sep > margin:
+        return count
+    sep, nx, ny, nz, da, db = _edge_separation(a, sa, b, sb, pos, rot, geo)
+    if sep > margin:
+        return count
+    if sep > face_sep + EDGE_PREFERENCE:
+        return _edge_contact(a, sa, b, sb, sep, nx, ny, nz, da, db, pieces, pos, rot, geo, buf, count)
+    count = _polytope_on_face(a, sa, b, sb, face_ab, pieces, pos, rot, geo, margin, buf, count, False)
+    flipped = (pieces[1], pieces[0])
+    return _polytope_on_face(b, sb, a, sa, face_ba, flipped, pos, rot, geo, margin, buf, count, True)
 
 
 @nb.njit(cache=True, inline="always")
@@ -495,7 +611,11 @@ def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
     if btype[a] > btype[b]:
         a, b = b, a
     ta, tb = btype[a], btype[b]
-    if ta >= PLANE:
+    if tb == COMPOUND and ta < PLANE:
+        return _with_compound(a, b, pos, rot, geo, margin, buf, count)
+    if tb == COMPOUND:
+        a, b, tb = b, a, ta  # the compound's surface points against the plane or mesh
+    elif ta >= PLANE:
         return count  # plane/mesh against plane/mesh: both environment
     if tb == PLANE:
         return _against_plane(a, b, pos, rot, geo, margin, buf, count)
@@ -504,11 +624,29 @@ def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
     if tb <= CAPSULE:
         return _segment_segment(a, b, pos, rot, geo, margin, buf, count)
     if ta <= CAPSULE:
-        return _spheres_polytope(a, b, pos, rot, geo, margin, buf, count)
-    if _plane_separates(a, b, pos, rot, geo, margin) or _plane_separates(b, a, pos, rot, geo, margin):
+        return _spheres_polytope(a, b, b, 0, pos, rot, geo, margin, buf, count)
+    if _plane_separates(a, b, b, pos, rot, geo, margin) or _plane_separates(b, a, a, pos, rot, geo, margin):
         return count
-    count = _polytope_on_face(a, b, pos, rot, geo, margin, buf, count, False)
-    return _polytope_on_face(b, a, pos, rot, geo, margin, buf, count, True)
+    return _polytopes(a, a, b, b, (0, 0), pos, rot, geo, margin, buf, count)
+
+
+@nb.njit(cache=True, _nrt=False)
+def _with_compound(a, b, pos, rot, geo, margin, buf, count):
+    """Contacts of body a (a sphere, capsule, polytope or compound) with compound b: with each
+    convex piece of b (geometry slots geo[29][geo[28][b]:geo[28][b + 1]]), piece by piece for
+    a compound a too."""
+    ta, first, slots = geo[0][a], geo[28], geo[29]
+    for j in range(first[b], first[b + 1]):
+        sb, pb = slots[j], j - first[b]
+        if _plane_separates(a, b, sb, pos, rot, geo, margin):
+            continue  # a's bounding sphere is beyond this piece of b
+        if ta <= CAPSULE:
+            count = _spheres_polytope(a, b, sb, pb, pos, rot, geo, margin, buf, count)
+            continue
+        for i in range(first[a], first[a + 1]):
+            sa, pa = slots[i], i - first[a]
+            count = _polytopes(a, sa, b, sb, (pa, pb), pos, rot, geo, margin, buf, count)
+    return count
 
 
 @nb.njit(cache=True)

@@ -10,6 +10,11 @@ principal axes; :func:`mass_properties` returns that transform and the principal
 - ``Plane(normal, offset)``: the half-space n.x <= offset is solid (static bodies only).
 - ``TriangleMesh(mesh, thickness)``: a general (possibly open, concave) triangle surface, e.g.
   a wok, for static or kinematic bodies; points are kept on the side its normals face.
+- ``Compound(mesh, pieces)``: a closed, possibly concave solid for any body: mass properties
+  of the mesh itself, contacts with planes and meshes at its vertices, with other bodies
+  piece by piece over convex pieces (given, or found by CoACD's approximate convex
+  decomposition: Wei et al., "Approximate convex decomposition for 3D meshes with collision-
+  aware concavity and tree search", SIGGRAPH 2022).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import trimesh
 
 from jassy.errors import JassyError
 
-SPHERE, CAPSULE, BOX, CONVEX, PLANE, MESH = range(6)
+SPHERE, CAPSULE, BOX, CONVEX, PLANE, MESH, COMPOUND = range(7)
 
 
 def _positive(value: float, name: str) -> float:
@@ -130,7 +135,45 @@ class TriangleMesh:
         object.__setattr__(self, "surface", src)
 
 
-Shape = Sphere | Capsule | Box | Convex | Plane | TriangleMesh
+@dataclass(frozen=True)
+class Compound:
+    """A closed solid ``mesh`` (trimesh.Trimesh, watertight; may be concave) and its convex
+    ``pieces`` (point sets or meshes whose hulls cover it, in the mesh's frame). Without
+    pieces they are found by CoACD (the ``concave`` extra: pip install coacd) with its
+    concavity ``threshold`` (a fraction of the mesh's size; smaller: more, tighter pieces)."""
+
+    mesh: object
+    pieces: tuple = ()
+    threshold: float = 0.05
+    kind = COMPOUND
+    surface: trimesh.Trimesh = field(init=False, repr=False, compare=False)
+    hulls: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        src = self.mesh
+        if not isinstance(src, trimesh.Trimesh) or not src.is_volume:
+            raise JassyError("Compound.mesh: expected a closed (watertight) trimesh.Trimesh")
+        pieces = self.pieces if len(self.pieces) else convex_pieces(src, self.threshold)
+        hulls = tuple(Convex(p).hull for p in pieces)
+        object.__setattr__(self, "surface", src)
+        object.__setattr__(self, "hulls", hulls)
+
+
+def convex_pieces(mesh: trimesh.Trimesh, threshold: float = 0.05, seed: int = 0) -> list[np.ndarray]:
+    """Vertex sets (m) of an approximate convex decomposition of the closed ``mesh`` by CoACD
+    (concavity below ``threshold`` times the mesh's size)."""
+    try:
+        import coacd
+    except ImportError as exc:
+        raise JassyError(
+            "Compound: convex decomposition needs CoACD (pip install coacd), or give pieces"
+        ) from exc
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(coacd.Mesh(mesh.vertices, mesh.faces), threshold=threshold, seed=seed)
+    return [np.asarray(vertices, float) for vertices, _ in parts]
+
+
+Shape = Sphere | Capsule | Box | Convex | Plane | TriangleMesh | Compound
 
 
 @dataclass(frozen=True)
@@ -166,8 +209,8 @@ def mass_properties(shape: Shape, density: float) -> MassProperties:
         i_axis = mc * r * r / 2.0 + ms * 0.4 * r * r
         i_perp = mc * (3 * r * r + (2 * hl) ** 2) / 12.0 + ms * (0.4 * r * r + hl * hl + 0.75 * hl * r)
         return MassProperties(mc + ms, np.array([i_perp, i_perp, i_axis]), zero, eye)
-    if isinstance(shape, Convex):
-        hull = shape.hull
+    if isinstance(shape, (Convex, Compound)):
+        hull = shape.hull if isinstance(shape, Convex) else shape.surface
         props = hull.mass_properties
         m = rho * props["volume"]
         inertia = np.asarray(props["inertia"]) * rho  # about the centre of mass, shape axes

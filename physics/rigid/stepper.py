@@ -5,7 +5,11 @@ One outer step of h seconds:
 1. contacts of the current configuration (gap <= slop) are resolved at the impulse level
    (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
    rolling resistance, penetration recovery and a warm start);
-2. every body moves freely to the end of the step (integrate.advance_body_into);
+2. every body moves freely to the end of the step (integrate.advance_body_into). With the
+   default integrator a body in flight follows the exact ballistic path (so impact times and
+   speeds of a bouncing body are those of the closed form); a body held by a resting contact
+   of the solve (a recorded non-impact contact) drifts with its new velocity instead, the
+   solve having folded the step's gravity increment into it, and so stays put at rest;
 3. a pair that was apart at the start (slop < gap <= how far the two can close in the step,
    from their relative velocity and spins) and penetrates at the end, having closed
    faster than ``bounce_threshold`` on average, has hit inside the step: its time of impact
@@ -52,6 +56,7 @@ from physics.rigid.codes import (
     REC_BARY,
     REC_FEAT_A,
     REC_FEAT_B,
+    REC_IMPACT,
     REC_IMPULSE,
     REC_LOCAL_A,
     REC_LOCAL_B,
@@ -168,15 +173,38 @@ def _penalty(buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, time,
 
 
 @nb.njit(cache=True)
+def _mark_resting(rec, first, last, kind, resting):
+    """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
+    (those of the solve just done)."""
+    resting[:] = False
+    for r in range(first, last):
+        if rec[r, REC_IMPACT] == 0.0:
+            for col in (REC_A, REC_B):
+                i = int(rec[r, col])
+                resting[i] = kind[i] == DYNAMIC
+
+
+@nb.njit(cache=True)
 def _move(i, tau, pos, quat, phi, mover, out_p, out_q, out_phi):
     """Pose and twist of body i after tau seconds of free motion, into row i of out_p, out_q,
     out_phi. mover: (kind, kinematic v, kinematic w, mass, inertia, prm, gravity (3,), zero
-    wrench (6,))."""
-    kind, kin_v, kin_w, mass, inertia, prm, gravity, ext = mover
+    wrench (6,), resting (N,): held by a resting contact of the last solve)."""
+    kind, kin_v, kin_w, mass, inertia, prm, gravity, ext, resting = mover
     method = int(prm[P_METHOD])
     if kind[i] == DYNAMIC and method == SEMI_IMPLICIT and tau > 0.0:
         semi_implicit_into(
-            pos[i], quat[i], phi[i], inertia[i], mass[i], gravity, ext, tau, out_p[i], out_q[i], out_phi[i]
+            pos[i],
+            quat[i],
+            phi[i],
+            inertia[i],
+            mass[i],
+            gravity,
+            ext,
+            tau,
+            out_p[i],
+            out_q[i],
+            out_phi[i],
+            not resting[i],
         )
     elif kind[i] == DYNAMIC:
         advance_body_into(
@@ -437,7 +465,8 @@ def run_steps(
     scratch = _new_buffers(256, near)
     gravity = np.array([prm[P_GX], prm[P_GY], prm[P_GZ]])
     gravity_norm = math.sqrt(dot3(gravity, gravity))
-    mover = (kind, kin_v, kin_w, mass, inertia, prm, gravity, np.zeros(6))
+    resting = np.zeros(n, np.bool_)
+    mover = (kind, kin_v, kin_w, mass, inertia, prm, gravity, np.zeros(6), resting)
     new_pos, new_quat, new_phi = np.empty_like(pos), np.empty_like(quat), np.empty_like(phi)
     rot, new_rot = np.empty((n, 3, 3)), np.empty((n, 3, 3))
     solver = new_solver(256, n, warm[0].shape[0])
@@ -478,6 +507,7 @@ def run_steps(
             if count > solver[S_IDX].shape[0]:
                 solver = new_solver(2 * count, n, warm[0].shape[0])
             time = (first + s) * h + t_local
+            solved = nrec
             if model == IMPULSE:
                 nrec = resolve(
                     buf,
@@ -509,6 +539,7 @@ def run_steps(
             stats[3] += 1
             if nrec < 0:
                 raise RuntimeError("run_steps: contact record buffer overflow")
+            _mark_resting(rec, solved, nrec, kind, resting)
             for i in range(n):
                 _move(i, dt, pos, quat, phi, mover, new_pos, new_quat, new_phi)
             first_hit = dt

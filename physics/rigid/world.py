@@ -26,6 +26,7 @@ from physics.rigid.meshgrid import build_grid
 from physics.rigid.shapes import (
     BOX,
     CAPSULE,
+    COMPOUND,
     CONVEX,
     MESH,
     PLANE,
@@ -253,20 +254,39 @@ def _principal_pose(position, quaternion, com, rotation):
     return np.asarray(position, float) + r_shape @ com, _matrix_quat(r_shape @ rotation)
 
 
-def _polytope(shape, com, rotation):
-    """(vertices, face planes (n, d), hull triangles) of a box or convex hull, principal frame."""
-    if isinstance(shape, Box):
-        import trimesh
-
-        mesh = trimesh.creation.box(extents=2.0 * np.asarray(shape.half_extents, float))
-    else:
-        mesh = shape.hull
+def _polytope(mesh, com, rotation):
+    """Polytope tables of a convex trimesh (shape frame) in the principal frame: (vertices,
+    face planes (n, d), hull triangles, edges (E, 6): the end points of the hull's edges
+    between faces that are not coplanar, each edge's row among the directions, and the
+    directions (D, 3): the edges' distinct directions up to sign)."""
     verts = (np.asarray(mesh.vertices) - com) @ rotation
     tris = verts[np.asarray(mesh.faces)]
     normals = np.asarray(mesh.face_normals) @ rotation
     offsets = np.einsum("ij,ij->i", normals, tris[:, 0])
     planes = np.unique(np.round(np.c_[normals, offsets], 12), axis=0)  # coplanar triangles share a plane
-    return verts, planes, tris
+    ends = np.asarray(mesh.face_adjacency_edges)[np.asarray(mesh.face_adjacency_angles) > 1e-9]
+    edges = np.c_[verts[ends[:, 0]], verts[ends[:, 1]]]
+    units = edges[:, 3:] - edges[:, :3]
+    units /= np.linalg.norm(units, axis=1)[:, None]
+    first = np.argmax(np.abs(units) > 1e-9, axis=1)  # sign: the first non-zero component positive
+    units *= np.sign(units[np.arange(len(units)), first])[:, None]
+    dirs, edge_dir = np.unique(np.round(units, 9), axis=0, return_inverse=True)
+    return verts, planes, tris, edges, edge_dir.reshape(-1), dirs
+
+
+def _shape_polytopes(shape, com, rotation):
+    """Polytope tables (_polytope) of a box or convex body (one) or of a compound's pieces."""
+    import trimesh
+
+    if isinstance(shape, Box):
+        return [
+            _polytope(
+                trimesh.creation.box(extents=2.0 * np.asarray(shape.half_extents, float)), com, rotation
+            )
+        ]
+    if shape.kind == CONVEX:
+        return [_polytope(shape.hull, com, rotation)]
+    return [_polytope(hull, com, rotation) for hull in shape.hulls]
 
 
 def _build_arrays(bodies: list[Body]):
@@ -282,8 +302,9 @@ def _build_arrays(bodies: list[Body]):
     rest, fric, roll = (
         np.array([getattr(b.material, k) for b in bodies]) for k in ("restitution", "friction", "rolling")
     )
-    verts, planes, htris, frames = [], [], [], []
-    vstart, pstart, hstart = [0], [0], [0]
+    frames = []
+    slots = [None] * n  # geometry slot i: body i's polytope; compound pieces after the bodies
+    pieces = []  # per body, its geometry slots (a box or convex body: its own)
     mesh_id = np.full(n, -1, np.int64)
     grids = []
     kinds = {"dynamic": codes.DYNAMIC, "static": codes.STATIC, "kinematic": codes.KINEMATIC}
@@ -300,14 +321,18 @@ def _build_arrays(bodies: list[Body]):
             com, rotation = np.zeros(3), np.eye(3)
         frames.append((com, rotation))
         bound[i] = bounding_radius(shape, com, rotation)
-        v = p = t = np.zeros((0, 3))
+        pieces.append([])
         if shape.kind == SPHERE:
             param[i, 0] = shape.radius
         elif shape.kind == CAPSULE:
             param[i, :2] = shape.radius, shape.half_length
-            v = np.array([[0, 0, -shape.half_length], [0, 0, shape.half_length]], float)
         elif shape.kind in (BOX, CONVEX):
-            v, p, t = _polytope(shape, com, rotation)
+            slots[i] = _shape_polytopes(shape, com, rotation)[0]
+            pieces[i] = [i]
+        elif shape.kind == COMPOUND:
+            for table in _shape_polytopes(shape, com, rotation):
+                pieces[i].append(len(slots))
+                slots.append(table)
         elif shape.kind == PLANE:
             nrm = np.asarray(shape.normal, float)
             param[i, :3] = nrm / np.linalg.norm(nrm)
@@ -318,43 +343,69 @@ def _build_arrays(bodies: list[Body]):
             grids.append(
                 build_grid(np.asarray(shape.surface.vertices, float), np.asarray(shape.surface.faces))
             )
-        verts.append(np.asarray(v, float).reshape(-1, 3))
-        planes.append(np.asarray(p, float).reshape(-1, 4))
-        htris.append(np.asarray(t, float).reshape(-1, 3, 3))
-        vstart.append(vstart[-1] + len(verts[-1]))
-        pstart.append(pstart[-1] + len(planes[-1]))
-        hstart.append(hstart[-1] + len(htris[-1]))
     mesh_tables = _mesh_tables(grids)
+    tables = [_slot_table(slots, k) for k in range(6)]
+    vstart, verts = tables[0]
     geo = (
         btype,
         kind,
         param,
         bound,
-        np.array(vstart, np.int64),
-        np.concatenate(verts),
-        np.array(pstart, np.int64),
-        np.concatenate(planes),
-        np.array(hstart, np.int64),
-        np.concatenate(htris),
+        vstart,
+        verts,
+        *tables[1],
+        *tables[2],
         mesh_id,
         *mesh_tables,
-        *_point_table([b.shape for b in bodies], verts),
+        *_point_table(bodies, frames, slots),
+        *tables[3],
+        tables[4][1][:, 0].astype(np.int64),
+        *tables[5],
+        *_slot_table([np.asarray(p, np.int64) for p in pieces], None),
     )
     body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
     return geo, kind, mass, inertia, body_arrays, frames
 
 
-def _point_table(shapes: list[Shape], verts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _slot_table(slots, k):
+    """(starts (S + 1,), rows concatenated) of table k of each geometry slot's polytope
+    (_polytope; k = None: slots holds the tables themselves); an empty slot has no rows.
+    Edge directions (k = 4) are offset to rows of the concatenated directions (k = 5)."""
+    shapes = ((0, 3), (0, 4), (0, 3, 3), (0, 6), (0, 1), (0, 3))
+    rows, shift = [], 0
+    for slot in slots:
+        if k is None:
+            rows.append(slot)
+            continue
+        table = (
+            np.zeros(shapes[k]) if slot is None else np.asarray(slot[k], float).reshape((-1, *shapes[k][1:]))
+        )
+        if k == 4 and slot is not None:
+            table = table + shift
+            shift += len(slot[5])
+        rows.append(table)
+    starts = np.cumsum([0] + [len(r) for r in rows]).astype(np.int64)
+    empty = np.zeros(0, np.int64) if k is None else np.zeros(shapes[k])
+    return starts, np.concatenate(rows) if rows else empty
+
+
+def _point_table(bodies, frames, slots) -> tuple[np.ndarray, np.ndarray]:
     """The points standing for each body against planes and meshes (narrow.body_point): (offsets
     (N + 1,): body i's rows are offsets[i] to offsets[i + 1]; rows (P, 4): body-frame position
-    and radius, m): a sphere's centre, a capsule's axis ends and middle, a polytope's vertices."""
+    and radius, m): a sphere's centre, a capsule's axis ends and middle, a polytope's vertices,
+    a compound's surface vertices."""
     rows = []
-    for shape, v in zip(shapes, verts, strict=True):
+    for i, body in enumerate(bodies):
+        shape = body.shape
         if shape.kind == SPHERE:
             rows.append([[0.0, 0.0, 0.0, shape.radius]])
         elif shape.kind == CAPSULE:
-            rows.append([[0.0, 0.0, (i - 1) * shape.half_length, shape.radius] for i in range(3)])
+            rows.append([[0.0, 0.0, (j - 1) * shape.half_length, shape.radius] for j in range(3)])
         elif shape.kind in (BOX, CONVEX):
+            rows.append(np.c_[slots[i][0], np.zeros(len(slots[i][0]))])
+        elif shape.kind == COMPOUND:
+            com, rotation = frames[i]
+            v = (np.asarray(shape.surface.vertices, float) - com) @ rotation
             rows.append(np.c_[v, np.zeros(len(v))])
         else:
             rows.append(np.zeros((0, 4)))

@@ -75,9 +75,20 @@ def _local_solve(a, b, d, zn, zt, mu, rn0, rt0, rho):
 
 
 @numba.njit(cache=True)
-def _residual(W, w, r, mu, rho):
-    """(relative natural-map residual, u = W r + w)."""
-    u = W @ r + w
+def _velocities(W, w, r, u):
+    """u = W r + w, in place (no temporary)."""
+    n = w.size
+    for k in range(n):
+        acc = w[k]
+        for j in range(n):
+            acc += W[k, j] * r[j]
+        u[k] = acc
+
+
+@numba.njit(cache=True)
+def _residual(W, w, r, mu, rho, u):
+    """Relative natural-map residual of r, with u = W r + w written into ``u``."""
+    _velocities(W, w, r, u)
     num = 0.0
     den = 0.0
     for i in range(mu.size):
@@ -86,29 +97,28 @@ def _residual(W, w, r, mu, rho):
         num += (r[2 * i] - pn) ** 2 + (r[2 * i + 1] - pt) ** 2
         den += (rho[i] * w[2 * i]) ** 2 + (rho[i] * w[2 * i + 1]) ** 2
     if den == 0.0:
-        return np.sqrt(num), u
-    return np.sqrt(num / den), u
+        return np.sqrt(num)
+    return np.sqrt(num / den)
 
 
 @numba.njit(cache=True)
-def _scaling(W, c):
+def _scaling(W, c, rho):
     """rho_i = 1 / ||W_ii||_F, or 0 for a contact that no impulse can move (||W_ii|| ~ 0)."""
-    nrm = np.empty(c)
+    big = 0.0
     for i in range(c):
-        nrm[i] = np.sqrt(W[2 * i, 2 * i] ** 2 + 2 * W[2 * i, 2 * i + 1] ** 2 + W[2 * i + 1, 2 * i + 1] ** 2)
-    big = np.max(nrm)
-    rho = np.zeros(c)
+        rho[i] = np.sqrt(W[2 * i, 2 * i] ** 2 + 2 * W[2 * i, 2 * i + 1] ** 2 + W[2 * i + 1, 2 * i + 1] ** 2)
+        big = max(big, rho[i])
     for i in range(c):
-        if nrm[i] > 1e-13 * big:
-            rho[i] = 1.0 / nrm[i]
-    return rho
+        rho[i] = 1.0 / rho[i] if rho[i] > 1e-13 * big else 0.0
 
 
 @numba.njit(cache=True)
-def _pgs(W, w, mu, r, tol, max_iter):
+def _pgs(W, w, mu, r, u, tol, max_iter):
+    """Gauss-Seidel sweeps from r until the residual is below tol; u = W r + w on return."""
     c = mu.size
-    rho = _scaling(W, c)
-    res, u = _residual(W, w, r, mu, rho)
+    rho = np.empty(c)
+    _scaling(W, c, rho)
+    res = _residual(W, w, r, mu, rho, u)
     it = 0
     while res > tol and it < max_iter:
         for i in range(c):
@@ -127,21 +137,48 @@ def _pgs(W, w, mu, r, tol, max_iter):
                 for k in range(2 * c):
                     u[k] += W[k, 2 * i] * dn + W[k, 2 * i + 1] * dt
         it += 1
-        res, u = _residual(W, w, r, mu, rho)
-    return it, res, u
+        res = _residual(W, w, r, mu, rho, u)
+    return it, res
+
+
+@numba.njit(cache=True)
+def _finite(x) -> bool:
+    total = 0.0
+    for v in x.ravel():
+        total += v * 0.0  # NaN for a NaN or an infinity
+    return total == 0.0
+
+
+@numba.njit(cache=True)
+def _checked_pgs(W, w, mu, r, u, tol, max_iter):
+    """``_pgs`` after the value checks (in one compiled call: a small problem's solve costs
+    microseconds, less than a handful of numpy checks from Python). Sweeps are -1 on bad
+    values."""
+    if not (_finite(W) and _finite(w) and _finite(mu) and _finite(r)):
+        return -1, np.inf
+    for m in mu:
+        if m < 0.0:
+            return -1, np.inf
+    return _pgs(W, w, mu, r, u, tol, max_iter)
+
+
+def _array(x, ndim: int) -> np.ndarray:
+    """x as a C-contiguous float64 array (x itself when it already is one)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous and x.ndim == ndim:
+        return x
+    return np.ascontiguousarray(x, dtype=np.float64).reshape((-1,) if ndim == 1 else np.shape(x))
 
 
 def solve_dfcp(W, w, mu, r0=None, tol: float = 1e-10, max_iter: int = 10000) -> DFCPResult:
     """Solve (W r + w, r) in C(mu) by projected Gauss-Seidel; W (2c, 2c), w (2c,), mu (c,) or scalar,
     r0 (c, 2) warm start (N s). Stops on the residual (module docstring) or after max_iter sweeps."""
-    W = np.ascontiguousarray(W, dtype=np.float64)
-    w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1)
+    W, w = _array(W, 2), _array(w, 1)
     c = w.size // 2
     if w.size != 2 * c or W.shape != (2 * c, 2 * c):
         raise JassyError(f"W, w: expected shapes (2c, 2c) and (2c,), got {W.shape} and {w.shape}")
-    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64), (c,)).copy()
-    if np.any(mu < 0) or not (np.all(np.isfinite(mu)) and np.all(np.isfinite(W)) and np.all(np.isfinite(w))):
-        raise JassyError("W, w, mu: expected finite values and mu >= 0")
+    mu = np.full(c, float(mu)) if np.ndim(mu) == 0 else _array(mu, 1).copy()
+    if mu.size != c:
+        raise JassyError(f"mu: expected a scalar or {c} values, got {mu.size}")
     if not (tol > 0 and max_iter >= 1):
         raise JassyError(f"tol, max_iter: expected tol > 0 and max_iter >= 1, got {tol}, {max_iter}")
     r = np.zeros(2 * c) if r0 is None else np.array(r0, dtype=np.float64).reshape(-1)
@@ -149,15 +186,18 @@ def solve_dfcp(W, w, mu, r0=None, tol: float = 1e-10, max_iter: int = 10000) -> 
         raise JassyError(f"r0: expected {c} contacts x 2 values, got {r.size}")
     if c == 0:
         return DFCPResult(np.zeros((0, 2)), np.zeros((0, 2)), 0, 0.0, True)
-    it, res, u = _pgs(W, w, mu, r, float(tol), int(max_iter))
+    u = np.empty(2 * c)
+    it, res = _checked_pgs(W, w, mu, r, u, float(tol), int(max_iter))
+    if it < 0:
+        raise JassyError("W, w, mu: expected finite values and mu >= 0")
     return DFCPResult(r.reshape(c, 2), u.reshape(c, 2), int(it), float(res), bool(res <= tol))
 
 
 def natural_map_residual(W, w, r, mu) -> float:
     """The solver's stopping residual (module docstring) for impulses r (c, 2)."""
-    W = np.ascontiguousarray(W, dtype=np.float64)
-    w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1)
+    W, w = _array(W, 2), _array(w, 1)
     c = w.size // 2
     mu = np.broadcast_to(np.asarray(mu, dtype=np.float64), (c,)).copy()
-    rho = _scaling(W, c)
-    return float(_residual(W, w, np.asarray(r, dtype=np.float64).reshape(-1), mu, rho)[0])
+    rho = np.empty(c)
+    _scaling(W, c, rho)
+    return float(_residual(W, w, np.array(r, dtype=np.float64).reshape(-1), mu, rho, np.empty(2 * c)))

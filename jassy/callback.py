@@ -1,0 +1,748 @@
+"""Sound rendered in the audio callback: the graph's program run by the PortAudio callback.
+
+SuperCollider's model: the device's callback (a numba ``@cfunc``, never the GIL) renders
+each buffer itself by running the graph's program (jassy.program) and writes the audio and
+haptic channels straight to the device: no ring, so the output latency is the device's.
+Python only pushes events into single-producer single-consumer queues, each record stamped
+with the frame it applies at, and reads counters, meters and the monitor.
+
+Sub-blocks are cut exactly as the offline scheduler cuts them (block boundaries on the
+absolute clock, and the frames of events that are not inline; strikes are inline), and
+the output stage is the offline engine's (limiter, haptic force and slew limits), so the
+device receives the offline rendering sample for sample.
+
+Event records (float64 x EVENT): [frame, node record, opcode, a, b, c, ...]:
+
+- SET_RAMP: a smoothed parameter's ramp (slot a of the record) moves to b over c samples
+  (c < 1: jumps), as :class:`jassy.params.Smoothed`; SET_BIQUAD also redesigns the filter;
+- STRIKE: an impact pulse (t0 = a, T = b, amplitude c; see ugens.impact) is added;
+- MODAL: a ModalBank's target coefficients are copied from the staging rows at address a
+  and approached over b samples (b < 1: jumps), as ``ModalBank._param_changed``.
+
+Python computes what needs the ugens' Python code (pulse amplitudes, modal designs) when it
+pushes an event; the callback only copies and steps. Two queues: ``score`` (stamped events
+pushed ahead by a feeder thread, in time order) and ``now`` (posted events, applied at the
+next sub-block that reaches their frame).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+from numba import types
+
+from jassy import hapticframes, haptics, program, safety
+from jassy.errors import JassyError
+from jassy.events import Event
+from jassy.graph import Graph
+from jassy.hapticframes import FLAG_WATCHDOG
+from jassy.haptics import HapticSafety, limit_force
+from jassy.jit import drop_stale_cache
+from jassy.program import (
+    KERNEL_MODULES,
+    RECORD,
+    Program,
+    _f64,
+    _f64_rows,
+    _i64,
+    run_program,
+    void_pointer,
+    why_not_compiled,
+)
+from jassy.safety import CEILING, limit, release_coefficient
+from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from ugens.filters import Biquad, design_biquad
+from ugens.impact import ImpactForce, pulse_sum
+from ugens.mix import Gain
+from ugens.modal import ModalBank
+from ugens.scrape import ResonantScrape, Scrape
+
+drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODULES])
+
+# control slots (int64)
+(
+    FRAME,
+    CALLBACKS,
+    MAX_FRAMES,
+    FLAGS,
+    XRUNS,
+    PLAYED,
+    PROGRAM,
+    BUS,
+    BUS_COUNT,
+    ROWS,
+    N_ROWS,
+    N_AUDIO,
+    CHANNELS,
+    BLOCK,
+    STAGE,
+    PARAMS,
+    LIMITER,
+    HAPTIC_LAST,
+    NONFINITE,
+    HAPTIC_FLAGS,
+    DROPPED,
+    MONITOR,
+    MONITOR_INDEX,
+    MONITOR_CAP,
+    LEVELS,
+    WATCHDOG,
+    FADE_LEFT,
+    TAP_LOG,
+    TAP_LOG_ROWS,
+    TAP_HAPTIC_ROWS,
+    TAP_LOGGED,
+    PRIORITY,
+    REALTIME,
+    CLOCK,
+    BUSY_MAX_NS,
+    BUSY_TOTAL_NS,
+    BUFFER_NS,
+    BUSY_OVER,
+) = range(38)
+#: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
+QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_OVER + 1, 4, 2
+CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
+# float64 parameter slots
+CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
+EVENT = 8
+SET_RAMP, SET_BIQUAD, STRIKE, MODAL_TARGET = 1, 2, 3, 4
+OUTPUT_UNDERFLOW = 4  # PortAudio's paOutputUnderflow status flag
+#: Impact pulses that may overlap in the callback (the offline table grows instead).
+PULSE_CAPACITY = 256
+#: Staged modal designs per ModalBank (events of one bank in flight at once).
+MODAL_SLOTS = 16
+#: How far ahead of the device the feeder pushes score events (s).
+HORIZON = 0.25
+
+
+@nb.njit(cache=True, nogil=True)
+def apply_event(prog, ev, control):
+    """Apply one event record (see the module docstring) to the program's arrays."""
+    base = int(ev[1])
+    op = int(ev[2])
+    if op in (SET_RAMP, SET_BIQUAD):
+        ramp = _f64(prog[base + int(ev[3])], 4)
+        value = ev[4]
+        m = int(ev[5])
+        if m < 1:
+            ramp[0] = value
+            ramp[1] = value
+            ramp[2] = 0.0
+            ramp[3] = 0.0
+        else:
+            cur = ramp[0]
+            ramp[1] = value
+            ramp[2] = (value - cur) / m
+            ramp[3] = m
+        if op == SET_BIQUAD:
+            setup = _f64(prog[base + 10], 2)
+            freq = _f64(prog[base + 4], 4)
+            q = _f64(prog[base + 5], 4)
+            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(prog[base + 8], 5))
+    elif op == STRIKE:
+        pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
+        count = _i64(prog[base + 5], 1)
+        c = count[0]
+        if c < pulses.shape[0]:
+            pulses[c, 0] = ev[3]
+            pulses[c, 1] = ev[4]
+            pulses[c, 2] = ev[5]
+            count[0] = c + 1
+        else:
+            control[DROPPED] += 1
+    elif op == MODAL_TARGET:
+        k = prog[base + 5]
+        bank = _f64_rows(prog[base + 4], 6, k)
+        delta = _f64_rows(prog[base + 6], 4, k)
+        target = _f64_rows(prog[base + 7], 4, k)
+        meta = _i64(prog[base + 8], 3)
+        staged = _f64_rows(int(ev[3]), 4, k)
+        m = int(ev[4])
+        for r in range(4):
+            for j in range(k):
+                target[r, j] = staged[r, j]
+        if m < 1:
+            for r in range(4):
+                for j in range(k):
+                    bank[r, j] = target[r, j]
+            meta[1] = 0
+        else:
+            for r in range(4):
+                for j in range(k):
+                    delta[r, j] = (target[r, j] - bank[r, j]) / m
+            meta[1] = m
+
+
+@nb.njit(cache=True, nogil=True)
+def _next_cut(control, queue_index, pos, stop, prog):
+    """Apply the due records of one queue (frame <= pos, and strikes before ``stop``);
+    return the frame of its first record left before ``stop`` (``stop`` if none)."""
+    slot = QUEUES + QUEUE_SLOTS * queue_index
+    cap = control[slot + 1]
+    records = _f64_rows(control[slot], cap, EVENT)
+    w = control[slot + 2]
+    r = control[slot + 3]
+    while r < w:
+        ev = records[r % cap]
+        frame = int(ev[0])
+        if frame <= pos or (frame < stop and int(ev[2]) == STRIKE):
+            apply_event(prog, ev, control)
+            r += 1
+        else:
+            if frame < stop:
+                stop = frame
+            break
+    control[slot + 3] = r
+    return stop
+
+
+@nb.njit(cache=True, nogil=True)
+def render_into(control, out, frames):
+    """Render ``frames`` frames of the program into the interleaved float32 ``out``."""
+    prog = _i64(control[PROGRAM], 1)
+    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
+    block = control[BLOCK]
+    rows_n = control[N_ROWS]
+    na = control[N_AUDIO]
+    ch = control[CHANNELS]
+    bus = _f64_rows(control[BUS], control[BUS_COUNT], block)
+    rows = _i64(control[ROWS], rows_n)
+    stage = _f64_rows(control[STAGE], rows_n, block)
+    par = _f64(control[PARAMS], 4)
+    lim = _f64(control[LIMITER], 1)
+    nh = rows_n - na
+    last = _f64(control[HAPTIC_LAST], max(nh, 1))
+    levels = _f64(control[LEVELS], max(ch, 1))
+    mcap = control[MONITOR_CAP]
+    begin = control[FRAME]
+    pos = begin
+    end = begin + frames
+    for c in range(ch):
+        levels[c] = 0.0
+    while pos < end:
+        stop = min(end, (pos // block + 1) * block)
+        for q in range(N_QUEUES):
+            stop = _next_cut(control, q, pos, stop, prog)
+        m = stop - pos
+        run_program(prog, pos, m)
+        for c in range(rows_n):
+            src = bus[rows[c]]
+            for i in range(m):
+                x = src[i]
+                if not math.isfinite(x):
+                    control[NONFINITE] += 1
+                    x = 0.0
+                stage[c, i] = x
+        limit(stage[:na], m, lim, par[CEIL], par[RELEASE])
+        if nh > 0:
+            control[HAPTIC_FLAGS] |= limit_force(stage[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
+            left = control[FADE_LEFT]
+            if left >= 0:  # the run ends: forces fade linearly to zero over the watchdog time
+                window = control[WATCHDOG]
+                for i in range(m):
+                    w = max(left - i, 0) / window
+                    for c in range(na, rows_n):
+                        stage[c, i] *= w
+                control[FADE_LEFT] = max(left - m, 0)
+        at = pos - begin
+        for i in range(m):
+            for c in range(ch):
+                y = stage[c, i]
+                out[(at + i) * ch + c] = y
+                if abs(y) > levels[c]:
+                    levels[c] = abs(y)
+        if mcap > 0:
+            mon = _f64_rows(control[MONITOR], mcap, ch)
+            index = _i64(control[MONITOR_INDEX], mcap)
+            for i in range(m):
+                slot = (pos + i) % mcap
+                for c in range(ch):
+                    mon[slot, c] = stage[c, i]
+                index[slot] = pos + i
+        pos = stop
+    control[FRAME] = end
+
+
+# libc's scheduler calls, by symbol (so the callback stays cacheable); pid 0 = this thread
+_sched_getscheduler = types.ExternalFunction("sched_getscheduler", types.int32(types.int32))
+_sched_setscheduler = types.ExternalFunction(
+    "sched_setscheduler", types.int32(types.int32, types.int32, types.voidptr)
+)
+_clock_gettime = types.ExternalFunction("clock_gettime", types.int32(types.int32, types.voidptr))
+SCHED_OTHER, SCHED_FIFO, CLOCK_MONOTONIC = 0, 1, 1
+#: SCHED_FIFO priority asked for a callback thread the host left at normal priority (a
+#: JACK server started without -R); JACK's own real-time clients use 70-95.
+CALLBACK_PRIORITY = 40
+
+
+@nb.njit(cache=True, nogil=True)
+def _make_realtime(control):
+    """On the first callback: if the host runs it at normal priority, ask for SCHED_FIFO
+    (granted with root, CAP_SYS_NICE or an rtprio limit); REALTIME = 1 if it runs real-time."""
+    granted = _sched_getscheduler(0) != SCHED_OTHER
+    if not granted:
+        granted = _sched_setscheduler(0, SCHED_FIFO, void_pointer(control[PRIORITY])) == 0
+    control[REALTIME] = 1 if granted else 0
+
+
+@nb.njit(cache=True, nogil=True)
+def _now_ns(control):
+    """CLOCK_MONOTONIC in ns (through the timespec at control[CLOCK])."""
+    _clock_gettime(CLOCK_MONOTONIC, void_pointer(control[CLOCK]))
+    ts = _i64(control[CLOCK], 2)
+    return ts[0] * 1_000_000_000 + ts[1]
+
+
+@nb.njit(cache=True, nogil=True)
+def tap_callback(control, out, frames, dac, flags):
+    """Log the haptic channels of ``out`` and this callback (first stream frame, frames,
+    DAC time, flags) into the stream tap of :mod:`jassy.hapticsender` (addresses in the
+    TAP_* slots: the log rows, then the haptic ring)."""
+    ch, na = control[CHANNELS], control[N_AUDIO]
+    nh = ch - na
+    lrows, hrows = control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS]
+    log = _f64_rows(control[TAP_LOG], lrows, 4)
+    ring = _f64_rows(control[TAP_LOG] + lrows * 4 * 8, hrows, max(nh, 1))
+    logged = _i64(control[TAP_LOGGED], 1)
+    p = control[PLAYED]
+    for i in range(frames):
+        for c in range(nh):
+            ring[(p + i) % hrows, c] = out[i * ch + na + c]
+    row = logged[0] % lrows
+    log[row, 0] = p
+    log[row, 1] = frames
+    log[row, 2] = dac
+    log[row, 3] = flags
+    logged[0] += 1
+
+
+@nb.cfunc(
+    types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr),
+    cache=True,
+)
+def program_callback(inp, out, frames, time_info, status, user):
+    """PortAudio callback: render the graph's program for this buffer, count."""
+    control = nb.carray(user, (CONTROL,), np.int64)
+    if control[CALLBACKS] == 0:
+        _make_realtime(control)
+    control[CALLBACKS] += 1
+    control[FLAGS] |= status
+    if status & OUTPUT_UNDERFLOW:
+        control[XRUNS] += 1
+    if frames > control[MAX_FRAMES]:
+        control[MAX_FRAMES] = frames
+    o = nb.carray(out, (frames * control[CHANNELS],), np.float32)
+    flags_before, fading = control[HAPTIC_FLAGS], control[FADE_LEFT] > 0
+    control[HAPTIC_FLAGS] = 0
+    began = _now_ns(control)
+    render_into(control, o, frames)
+    busy = _now_ns(control) - began
+    control[BUSY_TOTAL_NS] += busy
+    if busy > control[BUSY_MAX_NS]:
+        control[BUSY_MAX_NS] = busy
+    if busy > control[BUFFER_NS]:
+        control[BUSY_OVER] += 1
+    if control[TAP_LOG] != 0:  # the haptic samples and this buffer's DAC time, for the UDP sender
+        dac = nb.carray(time_info, (3,), np.float64)[2]
+        tap_callback(control, o, frames, dac, control[HAPTIC_FLAGS] | (FLAG_WATCHDOG if fading else 0))
+    control[HAPTIC_FLAGS] |= flags_before
+    control[PLAYED] += frames
+    return 0
+
+
+#: Parameters whose events the callback applies, per ugen class (others: Python only).
+_RAMPED = {
+    Gain: ("gain",),
+    Scrape: ("force", "speed"),
+    ResonantScrape: ("force", "speed"),
+    Biquad: ("freq", "q"),
+}
+#: Record slot of each ramped parameter (see jassy.program's records).
+_RAMP_SLOT = {
+    (Gain, "gain"): 4,
+    (Scrape, "force"): 3,
+    (Scrape, "speed"): 4,
+    (ResonantScrape, "force"): 3,
+    (ResonantScrape, "speed"): 4,
+    (Biquad, "freq"): 4,
+    (Biquad, "q"): 5,
+}
+
+
+def why_not_callback(graph: Graph, score: Sequence[Event], offsets_ms: dict | None, haptic_udp) -> str | None:
+    """Why ``graph`` and ``score`` cannot be rendered in the callback (None if they can)."""
+    reason = why_not_compiled(graph)
+    if reason is not None:
+        return reason
+    if offsets_ms and any(offsets_ms.values()):
+        return "per-channel offsets are applied by the ring producer"
+    if haptic_udp:
+        return "UDP haptic frames without haptic channels on the device are sent by the ring producer"
+    for i, event in enumerate(score):
+        reason = _event_not_supported(graph, event)
+        if reason is not None:
+            return f"score[{i}]: {reason}"
+    return None
+
+
+def choose_mode(
+    mode: str, graph: Graph, score: Sequence[Event], offsets_ms: dict | None, haptic_udp
+) -> tuple[str, str | None]:
+    """("callback", None) or ("ring", why) for a requested mode: auto, callback or ring."""
+    if mode not in ("auto", "callback", "ring"):
+        raise JassyError(f"mode: expected auto, callback or ring, got {mode!r}")
+    if mode == "ring":
+        return "ring", "asked for"
+    reason = why_not_callback(graph, score, offsets_ms, haptic_udp)
+    if reason is not None and mode == "callback":
+        raise JassyError(f"callback mode: {reason}")
+    return ("ring", reason) if reason is not None else ("callback", None)
+
+
+def _event_not_supported(graph: Graph, event: Event) -> str | None:
+    node = graph.nodes.get(event.node)
+    if node is None:
+        return None  # reported by validation
+    if event.action != "set":
+        return None if isinstance(node, ImpactForce) else f"action {event.action!r} of {node.type_name}"
+    if isinstance(node, (ModalBank, ImpactForce)):
+        return None
+    allowed = _RAMPED.get(type(node), ())
+    for key in event.args:
+        if key not in allowed:
+            return f"{node.type_name} parameter {key!r} changes only between Python sub-blocks"
+    return None
+
+
+class CallbackStats(NamedTuple):
+    """Counters of a callback-mode run."""
+
+    callbacks: int
+    xruns: int
+    frames_played: int
+    max_callback_frames: int
+    status_flags: int
+    device_latency: float
+    dropped: int
+    nonfinite: int
+    realtime: bool
+    busy_max: float  # s: the longest callback (rendering included)
+    busy_mean: float  # s
+    busy_over: int  # callbacks that took longer than a buffer lasts
+
+
+class EventQueue:
+    """A single-producer single-consumer queue of event records in ``control``'s slots: the
+    producer writes the record, then publishes the write position; the callback publishes
+    the read position after applying."""
+
+    def __init__(self, control: np.ndarray, index: int, capacity: int):
+        self.records = np.zeros((capacity, EVENT))
+        self.control = control
+        self.slot = QUEUES + QUEUE_SLOTS * index
+        control[self.slot] = self.records.ctypes.data
+        control[self.slot + 1] = capacity
+
+    @property
+    def write(self) -> int:
+        return int(self.control[self.slot + 2])
+
+    @property
+    def read(self) -> int:
+        return int(self.control[self.slot + 3])
+
+    def push(self, record: Sequence[float], timeout: float = 1.0) -> int:
+        """Append a record (waits while full); returns its position."""
+        cap = self.records.shape[0]
+        w = self.write
+        deadline = time.monotonic() + timeout
+        while w - self.read >= cap:
+            if time.monotonic() > deadline:
+                raise JassyError("callback event queue full: the device stopped taking buffers")
+            time.sleep(0.0005)
+        self.records[w % cap, : len(record)] = record
+        self.control[self.slot + 2] = w + 1
+        return w
+
+
+class CallbackRenderer:
+    """The graph's program and its event translation, driven by a PortAudio callback.
+
+    Create, then ``open_stream`` (or drive :func:`render_into` directly in tests); events go
+    through :meth:`push` (stamped) or :meth:`post` (live input)."""
+
+    def __init__(
+        self,
+        graph: Graph,
+        score: Sequence[Event],
+        sample_rate: float,
+        block: int,
+        haptic_to_card: bool = True,
+        haptic_safety: HapticSafety | None = None,
+        monitor_seconds: float = 0.0,
+        queue_capacity: int = 4096,
+    ):
+        self.graph = graph
+        self.sample_rate = float(sample_rate)
+        self.block = int(block)
+        self.safety = haptic_safety or HapticSafety()
+        graph.prepare(self.sample_rate, self.block)
+        for node in graph.order:
+            if isinstance(node, ImpactForce):  # a fixed table: the callback never allocates
+                node.pulses = np.zeros((PULSE_CAPACITY, 3))
+        self.program = Program(graph)
+        self.n_audio = len(graph.audio)
+        self.rows = np.ascontiguousarray(graph.bus_rows)
+        self.channels = self.n_audio + (len(graph.haptic) if haptic_to_card else 0)
+        control = np.zeros(CONTROL, dtype=np.int64)
+        self.control = control
+        self.params = np.array(
+            [CEILING, release_coefficient(0.05, self.sample_rate), self.safety.max_force, 0.0]
+        )
+        self.params[MAX_STEP] = self.safety.step(self.sample_rate)
+        self.stage = np.zeros((self.rows.size, self.block))
+        self.limiter = np.ones(1)
+        self.haptic_last = np.zeros(max(len(graph.haptic), 1))
+        self.levels = np.zeros(max(self.channels, 1))
+        mcap = int(round(monitor_seconds * self.sample_rate))
+        self.monitor_signal = np.zeros((max(mcap, 1), max(self.channels, 1)))
+        self.monitor_index = np.full(max(mcap, 1), -1, dtype=np.int64)
+        for slot, array in (
+            (PROGRAM, self.program.table),
+            (BUS, graph.bus),
+            (ROWS, self.rows),
+            (STAGE, self.stage),
+            (PARAMS, self.params),
+            (LIMITER, self.limiter),
+            (HAPTIC_LAST, self.haptic_last),
+            (MONITOR, self.monitor_signal),
+            (MONITOR_INDEX, self.monitor_index),
+            (LEVELS, self.levels),
+        ):
+            control[slot] = array.ctypes.data
+        control[BUS_COUNT] = graph.bus.shape[0]
+        control[N_ROWS] = self.rows.size
+        control[N_AUDIO] = self.n_audio
+        control[CHANNELS] = self.channels
+        control[BLOCK] = self.block
+        control[MONITOR_CAP] = mcap
+        control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
+        self.priority = np.array([CALLBACK_PRIORITY, 0], dtype=np.int32)  # struct sched_param
+        control[PRIORITY] = self.priority.ctypes.data
+        control[REALTIME] = -1
+        self.timespec = np.zeros(2, dtype=np.int64)
+        control[CLOCK] = self.timespec.ctypes.data
+        control[BUFFER_NS] = int(self.block / self.sample_rate * 1e9)
+        control[FADE_LEFT] = -1
+        self.score_queue = EventQueue(control, 0, queue_capacity)
+        self.now_queue = EventQueue(control, 1, queue_capacity)
+        self._bases = {node.name: 1 + i * RECORD for i, node in enumerate(graph.order)}
+        self._staging: dict[str, tuple[np.ndarray, list]] = {}
+        for node in graph.order:
+            if isinstance(node, ModalBank):
+                k = node.bank.shape[1]
+                self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
+        self._staged = 0
+        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
+        self.score = sorted(checked, key=lambda ev: ev.time)
+        self._next_score = 0
+        self._lock = threading.Lock()
+        self.late = 0  # posted events whose time had already been played
+
+    # --------------------------------------------------------------- translation
+    def frame(self) -> int:
+        """The next frame the callback renders."""
+        return int(self.control[FRAME])
+
+    def records(self, event: Event, sample_time: float, queue: EventQueue) -> list[list[float]]:
+        """The records that apply a validated event at fractional sample ``sample_time``, as
+        the offline scheduler dispatches it (jassy.scheduler.Scheduler._dispatch); they are
+        to be pushed, in order, into ``queue``."""
+        self._queue = queue
+        self._pending = 0
+        frame = math.ceil(sample_time - _SAMPLE_SLACK)
+        node = self.graph.nodes[event.node]
+        base = self._bases[event.node]
+        out: list[list[float]] = []
+        if event.action == "set":
+            ramp = event.ramp
+            if ramp is not None:
+                end = math.ceil((event.time + ramp) * self.sample_rate - _SAMPLE_SLACK)
+                ramp = (end - frame) / self.sample_rate
+            for key, value in event.args.items():
+                out.extend(self._set_records(node, base, frame, key, value, event.jump, ramp))
+                self._pending = len(out)
+            return out
+        location = event.args.get("location")
+        if location is not None:
+            for target in self.graph.location_targets(event.node):
+                base_t = self._bases[target.name]
+                out.extend(self._set_records(target, base_t, frame, "location", location, True, None))
+                self._pending = len(out)
+        tau = event.args.get("duration") or node.values["duration"]
+        samples = max(tau * self.sample_rate, 2.0)
+        amp = event.args["impulse"] * self.sample_rate / pulse_sum(sample_time, samples)
+        out.append([frame, base, STRIKE, sample_time, samples, amp])
+        return out
+
+    def _ramp_samples(self, node, ramp: float | None) -> int:
+        seconds = ramp if ramp is not None else node.values["smooth"]
+        return int(round(seconds * self.sample_rate))
+
+    def _set_records(self, node, base, frame, key, value, jump, ramp) -> list[list[float]]:
+        node.values[key] = value
+        if isinstance(node, ImpactForce):
+            return []  # read by the next strikes, computed here
+        m = 0 if jump else self._ramp_samples(node, ramp)
+        if isinstance(node, ModalBank):
+            node._refresh_design_cache()
+            staging, used_by = self._staging[node.name]
+            slot = self._staged % MODAL_SLOTS
+            self._staged += 1
+            deadline = time.monotonic() + 1.0
+            while used_by[slot] is not None and used_by[slot][0].read <= used_by[slot][1]:
+                if time.monotonic() > deadline:
+                    raise JassyError("callback: the device stopped taking buffers")
+                time.sleep(0.0005)
+            staging[slot] = node._fresh
+            used_by[slot] = (self._queue, self._queue.write + self._pending)  # free once read
+            return [[frame, base, MODAL_TARGET, staging[slot].ctypes.data, m]]
+        op = SET_BIQUAD if isinstance(node, Biquad) else SET_RAMP
+        return [[frame, base, op, _RAMP_SLOT[(type(node), key)], value, m]]
+
+    # --------------------------------------------------------------------- input
+    def feed(self, horizon_frames: int) -> None:
+        """Push the score events due before frame ``now + horizon_frames``."""
+        with self._lock:
+            limit_frame = self.frame() + horizon_frames
+            while self._next_score < len(self.score):
+                event = self.score[self._next_score]
+                sample_time = event.time * self.sample_rate
+                if sample_time >= limit_frame:
+                    break
+                for record in self.records(event, sample_time, self.score_queue):
+                    self.score_queue.push(record)
+                self._next_score += 1
+
+    def post(self, event: Event) -> int:
+        """Apply a live event at its time if still ahead, else at the next sub-block; returns
+        the frame it was stamped with."""
+        event = validate_event(self.graph, event, "posted event")
+        reason = _event_not_supported(self.graph, event)
+        if reason is not None:
+            raise JassyError(f"posted event: {reason} (not in callback mode)")
+        with self._lock:
+            if 0 < event.time * self.sample_rate < self.frame() - self.block:
+                self.late += 1
+            sample_time = max(event.time * self.sample_rate, float(self.frame()))
+            records = self.records(event, sample_time, self.now_queue)
+            for record in records:
+                self.now_queue.push(record)
+        return int(records[-1][0]) if records else self.frame()
+
+    # ------------------------------------------------------------------- readout
+    def stats(self, device_latency: float = 0.0) -> CallbackStats:
+        c = self.control
+        return CallbackStats(
+            int(c[CALLBACKS]),
+            int(c[XRUNS]),
+            int(c[PLAYED]),
+            int(c[MAX_FRAMES]),
+            int(c[FLAGS]),
+            device_latency,
+            int(c[DROPPED]),
+            int(c[NONFINITE]),
+            bool(c[REALTIME] == 1),
+            c[BUSY_MAX_NS] * 1e-9,
+            c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
+            int(c[BUSY_OVER]),
+        )
+
+    def levels_now(self) -> np.ndarray:
+        """Peak |sample| per device channel in the last buffer (meters)."""
+        return self.levels[: self.channels].copy()
+
+    def monitor(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the device received last: (channels, frames) in playing order and the
+        rendered frame of each (the same in callback mode: nothing is rendered ahead)."""
+        cap = int(self.control[MONITOR_CAP])
+        if not cap:
+            raise JassyError("no monitor: create the engine with monitor_seconds > 0")
+        played = int(self.control[PLAYED])
+        size = min(played, cap)
+        order = np.arange(played - size, played) % cap
+        signal = self.monitor_signal[order].T.astype(np.float32).astype(np.float64)
+        return signal, self.monitor_index[order].copy()
+
+    def end(self) -> None:
+        """Start the final fade of the haptic channels (to zero within the watchdog time)."""
+        self.control[FADE_LEFT] = self.control[WATCHDOG]
+
+    def faded(self) -> bool:
+        return self.control[FADE_LEFT] == 0
+
+
+class CallbackPlayer:
+    """Plays a :class:`CallbackRenderer` on a PortAudio device; a feeder thread pushes the
+    score ahead of the device (HORIZON s)."""
+
+    def __init__(self, renderer: CallbackRenderer):
+        self.renderer = renderer
+        self.stream = None
+        self.device_latency = 0.0
+        self._stop = threading.Event()
+        self._feeder: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    def start(self, device: int | None) -> None:
+        from jassy import portaudio
+
+        r = self.renderer
+        horizon = int(HORIZON * r.sample_rate)
+        r.feed(horizon)
+        self.stream = portaudio.OutputStream(
+            portaudio.default_output_device() if device is None else device,
+            r.channels,
+            r.sample_rate,
+            r.block,
+            program_callback.address,
+            r.control.ctypes.data,
+        )
+        self.device_latency = self.stream.output_latency
+        self.stream.start()
+        self._feeder = threading.Thread(target=self._feed, args=(horizon,), name="jassy-feeder", daemon=True)
+        self._feeder.start()
+
+    def _feed(self, horizon: int) -> None:
+        try:
+            while not self._stop.wait(0.01):
+                self.renderer.feed(horizon)
+        except BaseException as exc:  # reported by stop()
+            self._error = exc
+
+    def stop(self) -> None:
+        """Fade the forces, stop the feeder and the stream (PortAudio is released)."""
+        from jassy import portaudio
+
+        r = self.renderer
+        if self.stream is not None:
+            r.end()
+            deadline = time.monotonic() + 0.5  # a dead device never plays the fade
+            while not r.faded() and time.monotonic() < deadline:
+                time.sleep(0.001)
+        self._stop.set()
+        if self._feeder is not None:
+            self._feeder.join(timeout=2.0)
+        if self.stream is not None:
+            self.stream.close()
+            self.stream = None
+            portaudio.release()
+        if self._error is not None:
+            raise JassyError(f"callback feeder: {type(self._error).__name__}: {self._error}")

@@ -1,0 +1,118 @@
+"""The demo window under Xvfb: driven by the UDP probe input along a scripted path, its
+screenshots show the plate (not a blank canvas) and change where the probe moved."""
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jassy.probeinput import encode_pose
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def xvfb():
+    """A virtual X display for the module; skipped, saying why, where Xvfb or Pillow's X
+    screenshots are missing."""
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    pytest.importorskip("PIL.ImageGrab", reason="screenshots need Pillow (pip install pillow)")
+    number = 90 + os.getpid() % 500
+    proc = subprocess.Popen(
+        ["Xvfb", f":{number}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 10
+    while not Path(f"/tmp/.X11-unix/X{number}").exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"Xvfb :{number} did not start within 10 s")
+        time.sleep(0.05)
+    yield f":{number}"
+    proc.terminate()
+    proc.wait(timeout=5)
+
+
+def screenshot(display: str) -> np.ndarray:
+    from PIL import ImageGrab
+
+    return np.asarray(ImageGrab.grab(xdisplay=display).convert("RGB")).astype(int)
+
+
+def send_path(sock, port, points, seconds_each=0.3, rate=200.0):
+    """Hold each (x m, z m) pose of ``points`` for ``seconds_each`` at ``rate`` Hz."""
+    k = 0
+    for x, z in points:
+        end = time.monotonic() + seconds_each
+        while time.monotonic() < end:
+            sock.sendto(encode_pose(k, time.monotonic(), (x, 0.0, z)), ("127.0.0.1", port))
+            k += 1
+            time.sleep(1.0 / rate)
+
+
+def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp_path):
+    from patches.demo_view import HEIGHT, WIDTH, DemoView
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jassy", "demo", "--mode", "scrape", "--probe-udp", f"127.0.0.1:{port}"],
+        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        line = proc.stdout.readline()
+        assert "window open" in line, line + proc.stdout.read()
+        send_path(sock, port, [(0.1, 0.01)], seconds_each=0.5)  # hovering at 20 % of the track
+        hover = screenshot(xvfb)
+        # touch down there, slide to 80 % and stay pressed
+        send_path(sock, port, [(0.1, -0.001)] + [(0.1 + 0.02 * k, -0.001) for k in range(1, 16)], 0.02)
+        send_path(sock, port, [(0.4, -0.001)], seconds_each=0.3)
+        pressed = screenshot(xvfb)
+        arrows = []  # scraping to and fro on the spot (+-3 mm at 5 Hz): the force vector shows
+        wiggle = [(0.4 + 0.003 * np.sin(2 * np.pi * k / 40), -0.001) for k in range(40)]
+        for _ in range(4):
+            send_path(sock, port, wiggle, seconds_each=0.005)
+            arrows.append(screenshot(xvfb))
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+    finally:
+        sock.close()
+        if proc.poll() is None:
+            proc.kill()
+    from PIL import Image
+
+    Image.fromarray(hover.astype(np.uint8)).save(tmp_path / "hover.png")
+    Image.fromarray(pressed.astype(np.uint8)).save(tmp_path / "pressed.png")
+    for k, shot in enumerate(arrows):
+        Image.fromarray(shot.astype(np.uint8)).save(tmp_path / f"scraping{k}.png")
+    canvas = hover[:HEIGHT, :WIDTH]
+    # not a blank canvas: the plate's modal texture has many shades and real contrast
+    assert len(np.unique(canvas.reshape(-1, 3), axis=0)) > 200 and canvas.std() > 20
+    changed = np.any(pressed[:HEIGHT, :WIDTH] != canvas, axis=2)
+    changed[HEIGHT - 30 :] = False  # the meters' text changes all the time
+    ys, xs = np.nonzero(changed)
+    view = DemoView.__new__(DemoView)
+    start, end = view.track_point(0.2), view.track_point(0.8)
+    near_start = np.hypot(xs - start[0], ys - start[1]) < 30
+    near_end = (np.abs(xs - end[0]) < 30) & (ys > end[1] - 40) & (ys < end[1] + 140)  # probe, force arrow
+    assert near_start.sum() > 50 and near_end.sum() > 50  # the probe left one place, appeared at the other
+    assert np.all(near_start | near_end), "pixels changed where the probe never was"
+    green = [np.all(shot[:HEIGHT, :WIDTH] == (64, 255, 128), axis=2) for shot in arrows]
+    below = [np.nonzero(g) for g in green]
+    assert any(
+        ys.size > 20 and np.all(np.abs(xs - end[0]) < 8) and np.all(ys >= end[1] - 1) for ys, xs in below
+    )

@@ -1,0 +1,142 @@
+"""ModalBank precision="mixed": float32 delta-form modes where the error bound allows, float64
+for the rest, against the closed-form modal response and the float64 bank."""
+
+import numpy as np
+import pytest
+from helpers import ArraySource
+from test_modal_bank import FS, error_db, spread_model
+
+from jassy import Event, Graph, ModalModel, render
+from ugens.modal import ModalBank, design, split_by_precision
+from ugens.modal_f32 import TOLERANCE, float32_error, resonate_delta
+
+FREQS = np.geomspace(20.0, 20000.0, 7)
+DECAYS = np.geomspace(0.5, 500.0, 7)
+
+
+def mixed_impulse_response(model, seconds, precision="mixed", block=4096):
+    x = np.zeros(int(seconds * FS))
+    x[0] = FS
+    bank = ModalBank(model, precision=precision)(ArraySource(x))
+    return render(Graph(bank), [], seconds, FS, block, limiter=False).audio[0]
+
+
+def test_mixed_bank_holds_minus_60_db_over_the_whole_decay_on_the_grid():
+    """Each mode of the grid 20 Hz - 20 kHz x 0.5 - 500 /s alone, until e^{-d t} < e^-8,
+    against a e^{-d t} sin(2 pi f t); the bound that chose its precision is never below
+    the measured error, and most modes run in float32."""
+    n32 = 0
+    for f in FREQS:
+        for d in DECAYS:
+            model = ModalModel([f], [d], [[1.0]])
+            seconds = min(8.0 / d, 16.0)
+            y = mixed_impulse_response(model, seconds)
+            ref = model.impulse_response(seconds, FS)
+            err = error_db(y[1:], ref[1:])
+            assert err < -60.0, (f, d, err)
+            c1, c2, _ = design(model.frequencies, model.decays, FS)
+            bound = float32_error(c1, c2, FS)[0]
+            if bound <= TOLERANCE:
+                n32 += 1
+                assert err < 20 * np.log10(bound) + 1.0, (f, d, err, bound)
+    assert n32 >= 0.9 * FREQS.size * DECAYS.size
+
+
+def float32_only_response(f, d, seconds):
+    """A single mode forced into float32 (no bound), through the delta-form kernel."""
+    c1, c2, s = design(np.array([f]), np.array([d]), FS)
+    bank = np.stack([c1, c2, s, np.zeros(1), np.zeros(1), np.zeros(1)])
+    split = split_by_precision(bank, FS, tolerance=np.inf)
+    assert split.narrow.size == 1
+    x = np.zeros(int(seconds * FS))
+    x[0] = 1.0
+    out = np.zeros(x.size)
+    c0, b2, g, dd = split.narrow_coef
+    y, dy = split.narrow_state
+    resonate_delta(x, out, x.size, c0, b2, g, dd, y, dy, 1, np.zeros(1))
+    return out
+
+
+def test_the_bound_is_needed_very_high_q_modes_fail_in_float32():
+    """20 kHz, d = 0.5 /s (omega / d = 2.5e5): the delta form's coefficient rounding alone
+    moves the response by more than -60 dB, and the bound says so; the mixed bank keeps it
+    in float64."""
+    f, d, seconds = 20000.0, 0.5, 6.0
+    ref = ModalModel([f], [d], [[1.0]]).impulse_response(seconds, FS)
+    assert error_db(float32_only_response(f, d, seconds)[1:], ref[1:]) > -60.0
+    c1, c2, _ = design(np.array([f]), np.array([d]), FS)
+    assert float32_error(c1, c2, FS)[0] > 10 ** (-60 / 20)
+    # the same kernel on a low, light mode (where the two-pole float32 form fails) is fine
+    f, d = 20.0, 0.5
+    ref = ModalModel([f], [d], [[1.0]]).impulse_response(seconds, FS)
+    assert error_db(float32_only_response(f, d, seconds)[1:], ref[1:]) < -80.0
+
+
+def test_mixed_bank_passes_where_float32_two_pole_fails():
+    """The modes of test_modal_bank's float32 failure (low, lightly damped): in float32."""
+    model = ModalModel([20.0, 31.0, 45.0], [0.5, 0.6, 0.8], [[1.0, 1.0, 1.0]])
+    c1, c2, _ = design(model.frequencies, model.decays, FS)
+    assert np.all(float32_error(c1, c2, FS) <= TOLERANCE)
+    ref = model.impulse_response(2.0, FS)
+    assert error_db(mixed_impulse_response(model, 2.0, block=64)[1:], ref[1:]) < -80.0
+
+
+def render_noise(model, precision, score=(), seconds=0.5, block=64):
+    x = np.random.default_rng(0).standard_normal(int(seconds * FS))
+    x[FS // 4 :] = 0.0  # then ring out (silent-mode skipping in both parts)
+    bank = ModalBank(model, name="bank", precision=precision)(ArraySource(x))
+    return render(Graph(bank), list(score), seconds, FS, block, limiter=False).audio[0]
+
+
+@pytest.mark.parametrize("block", [1, 64, 1000])
+@pytest.mark.parametrize("all_float32", [False, True])
+def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, all_float32):
+    """Broadband force, a ramped freq_scale change (run in float64, then back to mixed) and a
+    location jump: within -60 dB of the float64 bank at any block size, with and without
+    float64 modes in the split."""
+    model = spread_model()
+    if all_float32:
+        model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
+    score = [
+        Event(0.1, "bank", "set", {"freq_scale": 1.2}, ramp=0.01),
+        Event(0.2, "bank", "set", {"location": 1}, jump=True),
+    ]
+    ref = render_noise(model, "float64", score, block=block)
+    y = render_noise(model, "mixed", score, block=block)
+    assert error_db(y, ref) < -60.0
+
+
+def test_mixed_state_save_and_restore_continues_identically():
+    from jassy import OfflineEngine
+
+    model = spread_model(8)
+    x = np.random.default_rng(0).standard_normal(FS)
+    bank = ModalBank(model, name="bank", precision="mixed")(ArraySource(x))
+    eng = OfflineEngine(Graph(bank), [], FS, 64, limiter=False)
+    eng.render(0.25)
+    saved = bank.get_state()
+    a = eng.render(0.25).audio
+    bank.set_state(saved)
+    eng.scheduler.frame -= int(0.25 * FS)
+    b = eng.render(0.25).audio
+    np.testing.assert_array_equal(a, b)
+
+
+def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
+    """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
+    recursion, to float32 rounding, on mid-band well-damped modes."""
+    from jassy.bench_c import c_runner, compile_modal_f32
+    from ugens.modal import resonate
+
+    fn, note = compile_modal_f32()
+    if fn is None:
+        pytest.skip(note)
+    f, d = np.array([300.0, 1000.0, 3000.0, 5000.0, 7000.0]), np.full(5, 50.0)
+    c1, c2, s = design(f, d, FS)
+    force = np.random.default_rng(2).standard_normal(4099)
+    run = c_runner(fn, force, c1, c2, s)
+    run()
+    ref = np.zeros(force.size)
+    z = np.zeros(5)
+    resonate(force, ref, force.size, c1, c2, s, z, z.copy(), z.copy(), 5, np.zeros(1))
+    assert error_db(run.output.astype(np.float64), ref) < -60.0

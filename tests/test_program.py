@@ -1,0 +1,74 @@
+"""The graph's program (one numba function over the nodes' own arrays) renders the same bits
+as running the nodes one by one, and says why a graph cannot run as a program."""
+
+import numpy as np
+import pytest
+
+from jassy import Event, Graph, ModalModel
+from jassy.offline import OfflineEngine
+from jassy.program import why_not_compiled
+from ugens import Gain, ImpactForce, Mixer, ModalBank
+from ugens.filters import Biquad
+from ugens.radiation import Radiation
+from ugens.scrape import ResonantScrape, Scrape
+
+FS = 48000
+
+
+def plate_model():
+    rng = np.random.default_rng(5)
+    f = np.geomspace(80.0, 15000.0, 30)
+    return ModalModel(f, rng.uniform(1.0, 60.0, 30), rng.uniform(0.1, 1.0, (3, 30)))
+
+
+def contact_graph():
+    """A tap, a scrape and a rubbed stick on a plate: every kind of program node."""
+    tap = ImpactForce(name="tap", duration=0.0007)
+    scrape = Scrape(name="scrape", force=1.0, speed=0.0, patch=0.002)
+    stick = ResonantScrape(name="stick", force=0.0, speed=0.0)
+    force = Mixer(tap, scrape, stick, name="force", gains=[1.0, 0.5, 0.2])
+    plate = ModalBank(plate_model(), name="plate")(force)
+    high = Biquad(plate, name="high", mode="highpass", freq=60.0)
+    radiated = Radiation(high, name="radiated", radius=0.2)
+    out = Gain(radiated, gain=0.05, name="out")
+    return Graph(out, haptic=force)
+
+
+def contact_score():
+    score = []
+    for k in range(12):
+        t = 0.013 * k + 0.37 / FS * k
+        score.append(Event(t, "tap", "impact", {"impulse": 0.002 * (k + 1), "location": k % 3}))
+    score += [
+        Event(0.02, "scrape", "set", {"speed": 0.3, "force": 2.0}, ramp=0.05),
+        Event(0.07 + 3.5 / FS, "stick", "set", {"speed": 0.2, "force": 1.0}, jump=True),
+        Event(0.09, "plate", "set", {"freq_scale": 1.1, "decay_scale": 2.0}, ramp=0.01),
+        Event(0.1 + 10.25 / FS, "out", "set", {"gain": 0.02}, ramp=0.003),
+        Event(0.11, "high", "set", {"freq": 300.0}, ramp=0.01),
+        Event(0.14, "plate", "set", {"location": 2}, jump=True),
+        Event(0.15, "scrape", "set", {"speed": 0.0}, jump=True),
+    ]
+    return score
+
+
+@pytest.mark.parametrize("block", [1, 64, 4096])
+def test_program_renders_the_same_bits_as_the_nodes_one_by_one(block):
+    rendered = []
+    for program in (False, True):
+        engine = OfflineEngine(contact_graph(), contact_score(), FS, block, program=program)
+        assert (engine.program is not None) == program
+        rendered.append(engine.render(0.2))
+    assert np.any(rendered[0].audio != 0) and np.any(rendered[0].haptic != 0)
+    np.testing.assert_array_equal(rendered[1].audio, rendered[0].audio)
+    np.testing.assert_array_equal(rendered[1].haptic, rendered[0].haptic)
+
+
+def test_a_graph_with_a_node_without_kernel_says_which():
+    from ugens.delay import Delay
+
+    tap = ImpactForce(name="tap")
+    graph = Graph(Delay(ModalBank(plate_model(), name="plate")(tap), name="echo", time=0.01))
+    assert "'echo'" in why_not_compiled(graph)
+    engine = OfflineEngine(graph, [], FS, 64)
+    assert engine.program is None and "echo" in engine.why_not_program
+    assert why_not_compiled(contact_graph()) is None
