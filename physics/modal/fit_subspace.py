@@ -1,4 +1,5 @@
-"""Subspace modal fit (work in progress, not yet behind `jassy fit`): fit modal models (frequencies, decay rates, gains) to recordings of struck objects.
+"""Subspace modal fit (work in progress, not yet behind `jassy fit`): modal models
+(frequencies, decay rates, gains) fitted to recordings of struck objects.
 
 Method: pooled subspace estimation (ESPRIT, :mod:`physics.modal.esprit`) at three time-
 frequency resolutions, each on what the previous ones left:
@@ -450,9 +451,7 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
     attack = _attack(segments[0], z, amps[0], rate, attack_ms)
     bar.step("done")
     levels = 10 * np.log10(energy / energy.max())
-    model = ModalModel(
-        freqs, decays, rows, names, name, attack=attack, attack_rate=rate if attack.size else 0.0
-    )
+    model = ModalModel(freqs, decays, rows, names, name)
     noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
     return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes, attack)
 
@@ -518,10 +517,10 @@ def _attack(seg: Segment, z: np.ndarray, c: np.ndarray, rate: float, attack_ms: 
 
 
 def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0.0, row: int = 0,
-                 phases=None, attack: bool = False) -> np.ndarray:  # fmt: skip
+                 phases=None, attack=None) -> np.ndarray:  # fmt: skip
     """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt)
-    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus the stored attack
-    with ``attack``."""
+    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus ``attack`` samples
+    (e.g. ``FitResult.attack``, at the same rate) from the onset."""
     t = np.arange(n) / sample_rate - onset
     live = t >= 0
     tt = t[live]
@@ -533,12 +532,10 @@ def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0
             * np.exp(-model.decays[k] * tt)
             * np.sin(2 * np.pi * model.frequencies[k] * tt + ph[k])
         )
-    if attack and model.attack.size:
-        if model.attack_rate != sample_rate:
-            raise JassyError(f"attack: stored at {model.attack_rate:g} Hz, resynthesis at {sample_rate:g} Hz")
+    if attack is not None and attack.size:
         i0 = int(np.argmax(live)) if live.any() else n
-        m = min(model.attack.size, n - i0)
-        out[i0 : i0 + m] += model.attack[:m]
+        m = min(attack.size, n - i0)
+        out[i0 : i0 + m] += attack[:m]
     return out
 
 
@@ -587,7 +584,7 @@ def plot_fit(result: FitResult, recording: np.ndarray, path: str | os.PathLike, 
     rate = result.sample_rate
     x = np.asarray(recording, dtype=np.float64)
     x = x[:, 0] if x.ndim == 2 else x
-    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row], attack=True)
+    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row], attack=result.attack)
     nper = 1024 if rate > 30000 else 512
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, sharey=True)
     ref = None
