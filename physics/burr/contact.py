@@ -337,7 +337,7 @@ def _shares(m, d, defined, count, a2):
     return wsum
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
 def _grow_box(t, i, j, k):
     """Grow the tally's changed box to hold voxel (i, j, k)."""
     t.lo_i = min(t.lo_i, i)
