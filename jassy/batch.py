@@ -414,14 +414,43 @@ def _print_plan(grid: Grid) -> None:
         print(f"  ... {len(grid.variants) - 5} more")
 
 
+#: The grid file format, as ``jassy batch --help`` shows it (docs/formats.md has more).
+GRID_HELP = """\
+grid file (TOML):
+  [batch]          name, description, manifest = "csv" | "parquet"
+  [render]         duration (s), sample_rate (Hz), block, format ("float32" | "pcm16" | "pcm24"),
+                   container ("wav" | "flac"), haptic ("wav" | "npz" | "csv": also the force track)
+  patch = "bar"    patch name(s) or file(s) to sweep
+  [set]            fixed overrides: "node.param" = value
+  [grid]           "key" = [values, ...]: the full product of all lists; or a factor of named
+                   levels: [grid.material] metal = { "bar.decay_scale" = 1.0, ... }
+  [random]         n = draws per grid point, seed, "key" = { uniform = [lo, hi] } |
+                   { loguniform = [lo, hi] } | { choice = [...] } | { randint = [lo, hi] }
+  [[sweep]]        several sweeps instead, each with patch, set, grid, random, render
+  [patches.NAME]   an inline patch (the layout of a patch file)
+keys: node.param, score[i].time | .jump | .ramp, score[i].ACTION.ARG (e.g.
+  score[0].impact.impulse), models.NAME.file, render.duration | .sample_rate | .block | .format
+outputs: OUTDIR/<patch>-<id12>.wav (id: SHA-256 of patch, overrides, options) and
+  OUTDIR/manifest.csv, one row per variant (parameters, output, status, error, peak, sha256, ...)
+example:
+  patch = "bar"
+  [render]
+  duration = 1.0
+  [grid]
+  "score[0].impact.impulse" = [0.001, 0.01]
+  "bar.freq_scale" = [0.5, 1.0, 2.0]
+"""
+
+
 def add_command(subparsers) -> argparse.ArgumentParser:
     """Add ``jassy batch`` to the CLI's subparsers."""
     p = subparsers.add_parser(
         "batch",
         help="render a grid or random sweep of patch variants: one file each plus a manifest",
-        description="Render every variant of a grid file (see jassy/batch_grid.py for the format) "
-        "into OUTDIR, on all local cores with Dask (or a process pool without it) or on a Dask "
-        "cluster. Reruns skip finished variants.",
+        description="Render every variant of a grid file into OUTDIR, on all local cores with Dask "
+        "(or a process pool without it) or on a Dask cluster. Reruns skip finished variants.",
+        epilog=GRID_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("grid", help="grid file (.toml): patches, [grid] / [random] sweeps, [render] options")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="directory for files and manifest")

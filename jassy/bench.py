@@ -63,11 +63,13 @@ class _Source:
         self.out = data
 
 
-def _bank_runner(model: ModalModel, force: np.ndarray, block: int) -> Callable[[], None]:
+def _bank_runner(
+    model: ModalModel, force: np.ndarray, block: int, precision: str = "float64"
+) -> Callable[[], None]:
     """A function that runs ``ModalBank.process`` over ``force`` in calls of ``block`` frames."""
     from ugens.modal import ModalBank
 
-    bank = ModalBank(model)
+    bank = ModalBank(model, precision=precision)
     src = _Source(np.zeros(block))
     bank.sources["input"] = src
     bank.prepare(SAMPLE_RATE, block)
@@ -81,10 +83,12 @@ def _bank_runner(model: ModalModel, force: np.ndarray, block: int) -> Callable[[
     return run
 
 
-def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dict:
+def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024, c_loop=None) -> dict:
     from scipy.signal import lfilter
 
+    from jassy.bench_c import c_runner
     from ugens.modal import design
+    from ugens.modal_f32 import TOLERANCE, float32_error
 
     model = random_model(k)
     frames = int(seconds * SAMPLE_RATE * min(1.0, 1024 / k) * 4) // big_block * big_block
@@ -107,8 +111,15 @@ def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dic
             acc += lfilter([g[i]], [1.0, -c1[i], c2[i]], force[:scipy_frames])
 
     runs = [_bank_runner(model, force, block), _bank_runner(model, force, big_block), run_plain, run_scipy]
-    t_bank, t_big, t_plain, t_scipy = _best_times(runs)
+    runs += [_bank_runner(model, force, block, "mixed"), _bank_runner(model, force, big_block, "mixed")]
+    if c_loop is not None:
+        runs.append(c_runner(c_loop, force, c1, c2, g))
+    t_bank, t_big, t_plain, t_scipy, t_mixed, t_mixed_big, *t_c = _best_times(runs, repeats=5)
     return {
+        "mixed": k * frames / t_mixed,
+        "mixed_big_block": k * frames / t_mixed_big,
+        "mixed_float32_share": float(np.mean(float32_error(c1, c2, SAMPLE_RATE) <= TOLERANCE)),
+        "c_float32": k * frames / t_c[0] if t_c else None,
         "modes": k,
         "block": block,
         "jassy": k * frames / t_bank,
@@ -120,14 +131,22 @@ def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024) -> dic
 
 
 def modal_bench(mode_counts=(64, 1024, 16384), seconds: float = 1.0, block: int = 64) -> list[dict]:
-    """Mode-samples per second of ModalBank vs a plain numba loop and a scipy lfilter loop.
+    """Mode-samples per second of ModalBank vs a plain numba loop, a scipy lfilter loop and
+    a C float32 loop compiled now (jassy.bench_c; skipped with a message without ``cc``).
 
-    jassy (through ``ModalBank.process``, so its per-call overhead counts) and the plain
-    loop run on the same random force in calls of ``block`` frames; jassy is also timed in
-    calls of 1024 frames; scipy's lfilter filters 1/16 of the frames in one call per mode
-    (its cost is linear in frames).
+    jassy (through ``ModalBank.process``, so its per-call overhead counts; float64 and
+    ``precision = "mixed"``) and the plain loop run on the same random force in calls of
+    ``block`` frames; jassy is also timed in calls of 1024 frames; the C loop runs over the
+    whole force in one call; scipy's lfilter filters 1/16 of the frames in one call per
+    mode (its cost is linear in frames).
     """
-    return [_modal_row(k, seconds, block) for k in mode_counts]
+    from jassy.bench_c import compile_modal_f32
+
+    c_loop, note = compile_modal_f32()
+    rows = [_modal_row(k, seconds, block, c_loop=c_loop) for k in mode_counts]
+    for r in rows:
+        r["c_note"] = note
+    return rows
 
 
 def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> dict:
@@ -208,7 +227,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
 
 def print_modal(rows: list[dict], graph: dict) -> None:
     big = rows[0]["big_block"]
-    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 3; references timed in the same run)")
+    print(f"ModalBank at {SAMPLE_RATE} Hz, mode-samples/s (best of 5; references timed in the same run)")
     small = rows[0]["block"]
     print(
         f"{'modes':>6} {f'jassy b{small}':>10} {f'jassy b{big}':>11} {'plain numba':>12} "
@@ -219,6 +238,22 @@ def print_modal(rows: list[dict], graph: dict) -> None:
             f"{r['modes']:>6} {r['jassy']:>10.3g} {r['jassy_big_block']:>11.3g} {r['plain_numba']:>12.3g} "
             f"{r['scipy_lfilter']:>11.3g} {r['jassy'] / r['plain_numba']:>8.2f}x "
             f"{r['jassy'] / r['scipy_lfilter']:>8.0f}x {r['jassy_big_block'] / r['scipy_lfilter']:>13.0f}x"
+        )
+    print(
+        f'precision="mixed" (float32 delta form where the -60 dB bound allows) vs C float32 '
+        f"({rows[0]['c_note']})"
+    )
+    print(
+        f"{'modes':>6} {'float32 %':>9} {f'mixed b{small}':>10} {f'mixed b{big}':>11} {'C float32':>10} "
+        f"{f'b{small}/C':>8} {f'b{big}/C':>9} {f'vs f64 b{big}':>12}"
+    )
+    for r in rows:
+        c = r["c_float32"]
+        ratios = f"{r['mixed'] / c:>7.2f}x {r['mixed_big_block'] / c:>8.2f}x" if c else f"{'-':>8} {'-':>9}"
+        print(
+            f"{r['modes']:>6} {100 * r['mixed_float32_share']:>8.0f}% {r['mixed']:>10.3g} "
+            f"{r['mixed_big_block']:>11.3g} {c or float('nan'):>10.3g} {ratios} "
+            f"{r['mixed_big_block'] / r['jassy_big_block']:>11.2f}x"
         )
     print(
         f"bell patch, {graph['modes']} modes, {graph['seconds']:g} s, block {graph['block']}: graph "

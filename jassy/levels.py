@@ -103,5 +103,6 @@ def calibrated(model: ModalModel, sample_rate: float = 48000.0) -> ModalModel:
     """The model with its reference gain stored (e.g. to ship it in the model file)."""
     gain = reference_gain(ModalModel(model.frequencies, model.decays, model.gains), sample_rate)
     return ModalModel(
-        model.frequencies, model.decays, model.gains, model.points, model.name, model.source, gain
-    )
+        model.frequencies, model.decays, model.gains, model.points, model.name, model.source, gain,
+        model.driving,
+    )  # fmt: skip

@@ -5,9 +5,16 @@ Gains between locations are interpolated barycentrically (the sound texture map)
 location is a vertex index, a point name, or up to three vertices with weights.
 
 Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
-``name`` and ``reference_gain``), NPZ (same keys) and JASS ``.sy`` text files (read only).
+``name``, ``reference_gain`` and ``driving``), NPZ (same keys) and JASS ``.sy`` text files
+(read only).
 ``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
 jassy.levels); without it the bank computes it from the model by the same rule.
+
+Signed gains. ``gains`` are strike-to-pickup gains phi_k(c) phi_k(p) / M_k (mass-normalised
+mode shapes phi_k at the contact c and the pickup p), which have signs. A contact in a
+closed loop (HuntCrossleyImpact, Friction) needs the driving-point gains phi_k(c)^2 / M_k
+(>= 0) at the same locations: the optional ``driving`` rows. Without them the gains must
+be >= 0 and serve as both (a pickup at the contact).
 """
 
 from __future__ import annotations
@@ -77,6 +84,7 @@ class ModalModel:
     name: str = ""
     source: str = field(default="", compare=False)
     reference_gain: float | None = None  # for level = "calibrated" (jassy.levels)
+    driving: np.ndarray | None = field(default=None, compare=False)  # driving-point gains [p, k]
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -91,6 +99,13 @@ class ModalModel:
         if gains.ndim == 1:
             gains = gains[None, :]
         self.gains = gains
+        if self.driving is not None:
+            try:
+                self.driving = np.asarray(self.driving, dtype=np.float64).reshape(gains.shape)
+            except (TypeError, ValueError, OverflowError):
+                raise ModelError(
+                    f"{where}: driving: expected numeric rows shaped like gains {gains.shape}"
+                ) from None
         self.points = tuple(self.points)
         self.validate()
 
@@ -138,6 +153,8 @@ class ModalModel:
             and self.reference_gain > 0
         ):
             raise ModelError(f"{where}: reference_gain: expected a number > 0, got {self.reference_gain!r}")
+        if self.driving is not None and (not np.all(np.isfinite(self.driving)) or np.any(self.driving < 0)):
+            raise ModelError(f"{where}: driving: expected finite driving-point gains >= 0")
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -162,28 +179,41 @@ class ModalModel:
 
     def gains_at(self, location: Location | int | str | None = None) -> np.ndarray:
         """Per-mode gains at a location (barycentric blend of its vertices' rows)."""
+        return self._blend(self.gains, location)
+
+    def _blend(self, rows: np.ndarray, location: Location | int | str | None) -> np.ndarray:
         if location is None:
-            return self.gains[0].copy()
+            return rows[0].copy()
         loc = parse_location(location, "location")
         out = np.zeros(self.n_modes)
         for v, w in zip(loc.vertices, loc.weights, strict=True):
-            out += w * self.gains[self.point_index(v, "location")]
+            out += w * rows[self.point_index(v, "location")]
         return out
 
+    def driving_at(self, location: Location | int | str | None = None) -> np.ndarray | None:
+        """Driving-point gains at a location (blended as gains_at): the ``driving`` rows, or
+        the gains themselves if they are all >= 0; None for signed gains without them."""
+        if self.driving is not None:
+            return self._blend(self.driving, location)
+        return self.gains_at(location) if not np.any(self.gains < 0) else None
+
     # ------------------------------------------------------------- derived models
+    def _driving_columns(self, modes: Any) -> np.ndarray | None:
+        return None if self.driving is None else self.driving[:, modes]
+
     def below(self, f_max: float) -> ModalModel:
         """The modes with frequency below ``f_max`` Hz."""
         keep = self.frequencies < f_max
         return ModalModel(
             self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
-            reference_gain=self.reference_gain,
+            reference_gain=self.reference_gain, driving=self._driving_columns(keep),
         )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
         """The first n modes."""
         return ModalModel(
             self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
-            reference_gain=self.reference_gain,
+            reference_gain=self.reference_gain, driving=self._driving_columns(slice(0, n)),
         )  # fmt: skip
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
@@ -229,7 +259,7 @@ class ModalModel:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving"}
         for key in data:
             if key not in allowed:
                 raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
@@ -252,7 +282,17 @@ class ModalModel:
         if reference is not None and (isinstance(reference, bool) or not isinstance(reference, (int, float))):
             raise ModelError(f"{source}: reference_gain: expected a number > 0, got {reference!r}")
         reference = None if reference is None else float(reference)
-        return cls(data["frequencies"], data["decays"], data["gains"], tuple(points), name, source, reference)
+        driving = data.get("driving")
+        return cls(
+            data["frequencies"],
+            data["decays"],
+            data["gains"],
+            tuple(points),
+            name,
+            source,
+            reference,
+            driving,
+        )
 
     @classmethod
     def from_sy(cls, text: str, source: str = "model.sy") -> ModalModel:
@@ -293,6 +333,8 @@ class ModalModel:
                 with open(tmp, "wb") as fh:
                     ref = self.reference_gain
                     extra = {} if ref is None else {"reference_gain": np.array(ref)}
+                    if self.driving is not None:
+                        extra["driving"] = self.driving
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -321,6 +363,10 @@ class ModalModel:
         lines.append("gains = [")
         lines.extend(f"  {arr(row)}," for row in self.gains)
         lines.append("]")
+        if self.driving is not None:
+            lines.append("driving = [")
+            lines.extend(f"  {arr(row)}," for row in self.driving)
+            lines.append("]")
         return "\n".join(lines) + "\n"
 
 

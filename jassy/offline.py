@@ -244,9 +244,26 @@ def render(
     progress: bool = False,
     haptic_safety: HapticSafety | None = None,
     offsets_ms: dict[str, float] | None = None,
+    path: str | os.PathLike | None = None,
+    haptic_path: str | os.PathLike | None = None,
+    sample_format: str = "float32",
 ) -> Rendering:
-    """Render a graph and score offline into arrays (see :class:`OfflineEngine`)."""
+    """Render a graph and score offline into arrays (see :class:`OfflineEngine`). With
+    ``path`` (.wav or .flac, ``sample_format`` float32, pcm24 or pcm16) the audio is also
+    written there atomically, and the haptic track to ``haptic_path`` (.wav, .npz or .csv)."""
     engine = OfflineEngine(
         graph, score, sample_rate, block, limiter, haptic_safety=haptic_safety, offsets_ms=offsets_ms
     )
-    return engine.render(duration, progress)
+    if path is not None:
+        audio_format(path, sample_format)  # a bad name fails before the render
+    elif haptic_path is not None:
+        raise PatchError("haptic_path: give path too (the haptic track is written beside the audio)")
+    rendering = engine.render(duration, progress)
+    if path is not None:
+        with AtomicAudioWriter(path, int(engine.sample_rate), rendering.audio.shape[0], sample_format) as out:
+            out.write(rendering.audio)
+            if haptic_path is not None:
+                clipped = write_signal(haptic_path, rendering.haptic, engine.sample_rate)
+                if clipped:
+                    rendering.warnings.append(clipped)
+    return rendering

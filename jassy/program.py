@@ -207,6 +207,8 @@ def why_not_compiled(graph: Graph) -> str | None:
             return f"node {node.name!r} ({node.type_name}) has no program kernel"
         if isinstance(node, (Scrape, ResonantScrape)) and node._curves is not None:
             return f"node {node.name!r} follows contact curves"
+        if isinstance(node, ModalBank) and "size" in node.sources:
+            return f"node {node.name!r} is retuned by a fragment size input"
     return None
 
 

@@ -78,8 +78,9 @@ def ss_plate_model(
         at = shape(uv[:, 0], uv[:, 1])
         names = tuple(points)
     listen = shape(np.array([pickup[0]]), np.array([pickup[1]]))[0]
-    gains = at * listen / mass
-    return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name)
+    gains = at * listen / mass  # strike to pickup: signed
+    driving = at * at / mass  # at the strike point itself, for contacts in a closed loop
+    return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name, driving=driving)
 
 
 def tin_sheet_model() -> ModalModel:

@@ -65,6 +65,25 @@ OBJECTS: dict[str, ObjectInfo] = {
          "lower_panel": "centre line, 0.5 m up", "latch_edge": "beside the handle, 0.95 m up",
          "hinge_edge": "6 cm from the hinges, 1 m up"},
     ),
+    "wine_glass": ObjectInfo(
+        "wine_glass_model.toml",
+        "soda-lime wine glass, 155 mm tall, bowl 76 mm across (62 mm at the rim), 2.2 mm wall, "
+        "70 mm stem on a 64 mm foot",
+        "finite elements (jassy modes) of a revolved profile, free (held lightly), 18 modes to 13 kHz; "
+        "reference gain stored",
+        {"rim": "3 mm below the rim, outside", "bowl": "the widest point of the bowl",
+         "stem": "half way up the stem", "foot": "the edge of the foot"},
+    ),
+    "mug": ObjectInfo(
+        "mug_model.toml",
+        "ceramic mug, 82 mm across, 95 mm tall, 4 mm wall, 6 mm base, D-shaped handle of 10 mm "
+        "round section",
+        "finite elements (jassy modes) of the revolved cup with its handle, free, 24 modes to 19 kHz; "
+        "reference gain stored",
+        {"rim": "3 mm below the rim, a quarter turn from the handle",
+         "side": "half way up the side, a quarter turn from the handle",
+         "handle": "the outside of the handle's bend", "base": "the centre of the bottom, outside"},
+    ),
 }  # fmt: skip
 
 

@@ -20,6 +20,7 @@ MODEL_MODULES = (
     "patches.models_machines",
     "patches.models_stochastic",
     "patches.models_surface",
+    "patches.models_vessels",
     "physics.modal.shipped",
 )
 

@@ -218,7 +218,11 @@ def test_friction_rejects_bad_settings():
     signed = ModalModel([100.0, 200.0], [1.0, 1.0], [[1.0, -1.0], [1.0, 1.0]])
     with pytest.raises(PatchError, match="driving-point"):
         Friction(signed, name="fr", location=0)
-    Friction(signed, name="fr", location=1)
+    with pytest.raises(PatchError, match="signed gains"):  # its positive row is no driving point either
+        Friction(signed, name="fr", location=1)
+    Friction(
+        ModalModel(signed.frequencies, signed.decays, signed.gains, driving=[[1, 1], [1, 1]]), location=0
+    )
     with pytest.raises(PatchError, match="driving-point"):  # the default location, checked at prepare
         run(Friction(signed, name="fr", speed=0.1, force=1.0), duration=0.01)
     for key, value in [

@@ -409,21 +409,24 @@ def test_hc_is_block_size_invariant_with_strikes_locations_and_parameter_changes
         assert max_abs_diff(outs[0].haptic, other.haptic) < 1e-6 * np.max(np.abs(outs[0].haptic))
 
 
-def test_hc_rejects_invalid_params_and_negative_driving_point_gains():
+def test_hc_rejects_invalid_params_and_signed_gains_without_driving_point_gains():
     with pytest.raises(PatchError, match="mass"):
         HuntCrossleyImpact(RIGID, mass=0.0)
     with pytest.raises(PatchError, match="alpha"):
         HuntCrossleyImpact(RIGID, alpha=0.5)
     with pytest.raises(PatchError, match="dissipation"):
         HuntCrossleyImpact(RIGID, dissipation=-1.0)
-    signed = ModalModel([300.0, 900.0], [1.0, 1.0], [[1e-4, 1e-4], [1e-4, -1e-4]])
-    with pytest.raises(PatchError, match="gain of mode 1"):
-        HuntCrossleyImpact(signed, location=1)
-    hc = HuntCrossleyImpact(signed, name="hc")
+    # signed strike-to-pickup gains: a contact needs the driving-point gains as well
+    signed = ModalModel([300.0, 900.0], [1.0, 1.0], [[1e-4, 1e-4], [1e-4, -1e-4]], name="two")
+    for location in (0, 1):
+        with pytest.raises(
+            PatchError, match=r"model two has signed gains \(mode 1: -0\.0001\) and no driving"
+        ):
+            HuntCrossleyImpact(signed, location=location)
+    driven = ModalModel(signed.frequencies, signed.decays, signed.gains, driving=[[1e-4, 1e-4], [1e-4, 1e-4]])
+    hc = HuntCrossleyImpact(driven, name="hc")
     with pytest.raises(PatchError, match="speed"):
         render(Graph(hc), [Event(0.0, "hc", "strike", {"speed": 0.0})], 0.01)
-    with pytest.raises(PatchError, match="gain of mode 1"):
-        render(Graph(hc), [Event(0.0, "hc", "strike", {"speed": 1.0, "location": 1})], 0.01)
 
 
 # -------------------------------------------------------------------- the patch

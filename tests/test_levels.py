@@ -62,3 +62,12 @@ def test_normalise_reaches_the_target_on_a_sine(tmp_path, mode, target):
 def test_target_without_normalise_is_refused(tmp_path, capsys):
     assert main(["render", "bar", "-o", str(tmp_path / "x.wav"), "--target", "-3"]) == 2
     assert "--target" in capsys.readouterr().err
+
+
+def test_render_writes_the_file_it_returns(tmp_path):
+    patch = load_patch("bar")
+    out = render(patch.graph, patch.score, 0.5, path=tmp_path / "bar.wav", haptic_path=tmp_path / "f.npz")
+    data, fs = sf.read(tmp_path / "bar.wav", always_2d=True)
+    assert fs == 48000 and data.shape == out.audio.T.shape
+    np.testing.assert_array_equal(data.T, out.audio.astype(np.float32))
+    assert np.load(tmp_path / "f.npz")["data"].shape == out.haptic.shape

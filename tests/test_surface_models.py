@@ -279,32 +279,55 @@ def test_roll_on_a_speed_sweep_matches_a_low_pass_redesigned_every_sample():
 # --------------------------------------------------------------------------- RathRoll
 def rath_reference(x, speed, load, mass, grain, depth):
     """SDT's rolling filter (ground trace, bump, flight) with the momentum bookkeeping of the
-    RathRoll docstring, in plain Python; x is the surface signal."""
-    trace, airborne, c, bump = 0.0, False, 0.0, 0.0
+    RathRoll docstring, in plain Python; x is the surface signal. Returns the output and
+    the take-off samples."""
+    trace, airborne, c, bump, takeoffs = 0.0, False, 0.0, 0.0, []
     decay = min(2 * grain * abs(speed), 2.0)
     out = np.zeros(x.size)
     for i, xi in enumerate(x):
         ground = max(trace - decay, xi)
         if airborne:
             c -= load
-            if c <= 0:
+            if c <= 0:  # landed in this sample: on the ground for the rest of it
                 out[i], airborne = bump - c - load, False
             else:
                 out[i] = -load
-        elif ground > trace and decay > 0:
+        if not airborne and ground > trace and decay > 0:
             bump = (ground - trace) * depth * 0.5 * mass * speed**2 / math.sqrt(decay)
-            c, airborne, out[i] = 2 * bump, True, bump
+            c, airborne = 2 * bump, True
+            out[i] += bump
+            takeoffs.append(i)
         trace = ground
-    return out
+    return out, np.array(takeoffs)
+
+
+def sdt_takeoffs(x, speed, load, mass, grain, depth):
+    """Take-off samples of SDT's ``SDTRolling_dsp`` (transcribed: ballFlight = 2 bump at a
+    take-off, then max(0, ballFlight - gravity) every sample) with gravity = load."""
+    trace, flight, kinetic = 0.0, 0.0, 0.5 * mass * speed**2
+    decay = min(2 * grain * abs(speed), 2.0)
+    takeoffs = []
+    for i, xi in enumerate(x):
+        ground = max(trace - decay, xi)
+        if ground > trace and not flight and decay:
+            flight = 2.0 * (ground - trace) * depth * kinetic / math.sqrt(decay)
+            takeoffs.append(i)
+        trace = ground
+        flight = max(0.0, flight - load)
+    return np.array(takeoffs)
 
 
 def test_rath_roll_matches_the_rolling_filter_on_an_input_signal():
     x = np.random.default_rng(0).uniform(-1, 1, 3000)
     node = RathRoll(ArraySource(x), name="r", speed=0.7, force=0.3, mass=0.05, grain=0.1, depth=3000.0)
     y = run(node, duration=3000 / FS, block=64)
-    ref = rath_reference(x, 0.7, 0.05 * GRAVITY + 0.3, 0.05, 0.1, 3000.0)
+    ref, takeoffs = rath_reference(x, 0.7, 0.05 * GRAVITY + 0.3, 0.05, 0.1, 3000.0)
     assert np.max(np.abs(y - ref)) < 1e-9 * np.max(np.abs(ref))
     assert np.sum(ref < 0) > 100  # the ball does fly
+    # the take-offs are SDT's: flights last the ballistic time rounded up to the sample
+    sdt = sdt_takeoffs(x, 0.7, 0.05 * GRAVITY + 0.3, 0.05, 0.1, 3000.0)
+    assert sdt.size > 30
+    np.testing.assert_array_equal(takeoffs, sdt)
 
 
 def test_rath_roll_impact_rate_grows_with_speed_and_force_is_dc_free():

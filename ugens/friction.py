@@ -24,8 +24,14 @@ q_k'' + 2 d_k q_k' + (w_k^2 + d_k^2) q_k = a_k w_k f, the contact displacement i
 x_c = sum_k q_k (the main output, in m) and its modes are stepped with ModalBank's exact
 impulse-invariant recursion q_k[n] = c1 q_k[n-1] - c2 q_k[n-2] + g_k f[n] with
 g_k = a_k R_k sin(theta_k) / fs, so for the same force the output equals a ModalBank's.
+An external force f_e on the same point (input ``strike``) enters as g_k (f + f_e), and the
+pickup hears f + f_e: with no contact (F_N = 0) the output is the resonator's linear
+response to f_e alone.
 The gains a[p, k] at the contact are a driving-point response (force applied and motion
-observed at the same point): they must be >= 0, or the loop would create energy.
+observed at the same point; ModalModel.driving_at): they must be >= 0, or the loop would
+create energy. The main output is what the model's pickup hears: the same modes under the
+same force with the model's signed gains (:mod:`ugens.heard`, the same recursion); it is
+x_c (output ``contact``) when the model has no separate driving-point gains.
 
 Discretisation (per sample, no delay in the loop). The contact velocity is the mean
 velocity over the last sample, v_c[n] = (x_c[n] - x_c[n-1]) fs; with the resonator
@@ -72,6 +78,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams, design
 from ugens.noise import uniform
@@ -178,9 +185,10 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def friction_run(out, fout, n, speeds, normals, modes, h, state, rng, par):
-    """n samples of the closed loop. modes rows: c1, c2, g, y1, y2; h: scratch per mode;
-    state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
+def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, par):
+    """n samples of the closed loop. strikes: an external force (N) on the contact point,
+    added to the resonator's free motion before the bristle is solved; modes rows: c1, c2,
+    g, y1, y2; h: scratch per mode; state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
     fs = par[_FS]
     T = 1.0 / fs
     s0 = par[_S0]
@@ -201,8 +209,9 @@ def friction_run(out, fout, n, speeds, normals, modes, h, state, rng, par):
     s = rng[0]
     for i in range(n):
         xh = 0.0
+        fe = strikes[i]
         for k in range(nm):
-            hk = c1[k] * y1[k] - c2[k] * y2[k]
+            hk = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fe
             h[k] = hk
             xh += hk
         s, u = uniform(s)
@@ -248,16 +257,21 @@ class Friction(ModelParams, UGen):
     finger on a glass, a squeaking hinge). Dupont et al., IEEE TAC 2002; Avanzini, Serafin
     & Rocchesso, IEEE TSAP 2005; SDT ``friction~``.
 
-    Output: the resonator's contact displacement (m). Extra output ``force``: the friction
-    force on the resonator (N, positive along +speed).
+    Input ``strike`` (optional): a force in N on the same point of the same resonator (an
+    ImpactForce: a glass struck while it is rubbed); the friction loop feels its motion.
+    Output: the resonator's displacement at the model's pickup (m, signed gains). Extra
+    outputs ``contact``: the contact displacement (m, driving-point gains); ``force``: the
+    friction force on the resonator (N, positive along +speed).
     """
 
     type_name = "Friction"
     driving_point = True
-    outputs = ("force",)
+    outputs = ("force", "contact")
+    inputs = ("strike",)
+    optional_inputs = ("strike",)
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
-        "location": ParamSpec("location", 0, doc="contact location on the model (gains >= 0)"),
+        "location": ParamSpec("location", 0, doc="contact location on the model"),
         "force": ParamSpec(
             "float", 0.0, low=0.0, high=1e4, unit="N", smooth=True, doc="normal force F_N (0: no contact)"
         ),
@@ -285,6 +299,10 @@ class Friction(ModelParams, UGen):
         self.state = np.zeros(3)  # z, x_prev, v_prev
         self.rng = np.zeros(1, dtype=np.uint64)
         self.par = np.zeros(10)
+        self.signed = self.model.driving is not None  # heard through the signed gains
+        self.heard_coef = np.zeros((6, self.model.n_modes))
+        self.heard_state = np.zeros((2, self.model.n_modes))
+        self._drive = np.zeros(self.max_block)  # friction + strike force heard at the pickup
         self.speed = self.smoothed("speed")
         self.force = self.smoothed("force")
         self._speeds = Control(self.speed, self.max_block)
@@ -297,6 +315,7 @@ class Friction(ModelParams, UGen):
             0,
             self._speeds.buffer,
             self._forces.buffer,
+            self.input_buffer("strike"),
             self.modes,
             self.scratch,
             self.state,
@@ -310,7 +329,9 @@ class Friction(ModelParams, UGen):
         c1, c2, s = design(self.model.frequencies, self.model.decays, fs)
         self.modes[0] = c1
         self.modes[1] = c2
-        self.modes[2] = s / fs * self.model.gains_at(v["location"])
+        self.modes[2] = s / fs * self.model.driving_at(v["location"])
+        if self.signed:
+            self.heard_coef[:] = impulse_invariant(c1, c2, s / fs * self.model.gains_at(v["location"]))
         self.par[:] = (
             fs,
             v["sigma0"],
@@ -325,6 +346,7 @@ class Friction(ModelParams, UGen):
         )
 
     def _reset(self) -> None:
+        self.heard_state[:] = 0.0
         self.modes[3:] = 0.0
         self.state[:] = 0.0
         self.rng[0] = self.values["seed"]
@@ -339,17 +361,26 @@ class Friction(ModelParams, UGen):
 
     def process(self, start: int, n: int) -> None:
         self._run(
-            self.out,
+            self.extra["contact"],
             self.extra["force"],
             n,
             self._speeds.values(n),
             self._forces.values(n),
+            self.input_buffer("strike"),
             self.modes,
             self.scratch,
             self.state,
             self.rng,
             self.par,
         )
+        if self.signed:
+            drive = self.extra["force"]
+            if "strike" in self.sources:  # the pickup hears the strike's force too
+                drive = self._drive
+                np.add(self.extra["force"][:n], self.sources["strike"].out[:n], out=drive[:n])
+            heard_run(drive, self.out, n, self.heard_coef, self.heard_state)
+        else:
+            self.out[:n] = self.extra["contact"][:n]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -359,4 +390,5 @@ class Friction(ModelParams, UGen):
             "speed": self.speed.ramp,
             "force": self.force.ramp,
             "par": self.par,
+            "heard_state": self.heard_state,
         }

@@ -202,6 +202,24 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
 
 
+@nb.njit(fastmath=FASTMATH, cache=True)
+def mixed_step(
+    force, out, start, n, wide_bank, wide_meta, coef, state, narrow_meta, floor, last, narrow_last
+):
+    """One sub-block of a bank split by precision (MixedSplit): the float64 modes by
+    :func:`bank_step` (rows c1, c2, g, d, y1, y2) write out[:n], the float32 delta-form
+    modes (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
+    fp = last[0]
+    if wide_meta[2] > 0:
+        bank_step(force, out, start, n, wide_bank, wide_meta, floor, last)
+    else:
+        for i in range(n):
+            out[i] = 0.0
+    narrow_last[0] = fp
+    delta_step(force, out, start, n, coef, state, narrow_meta, floor, narrow_last, FLUSH_PERIOD)
+    last[0] = force[n - 1]
+
+
 def design(frequencies, decays, sample_rate):
     """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64.
 
@@ -257,7 +275,8 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
 class ModelParams:
     """Validation of a ``model`` param (a ModalModel) and a ``location`` param (checked
     against the model), for ugens that own a modal resonator. With ``driving_point``,
-    the gains at the location must be >= 0 (a contact's driving-point response)."""
+    the model must give driving-point gains (ModalModel.driving_at: its ``driving`` rows,
+    or gains that are all >= 0)."""
 
     driving_point = False
 
@@ -289,12 +308,12 @@ class ModelParams:
             model = self.values.get("model")
             if model is not None:
                 model.check_location(loc, where)
-                gains = model.gains_at(loc) if self.driving_point else None
-                if gains is not None and np.any(gains < 0):
-                    k = int(np.argmax(gains < 0))
+                if self.driving_point and model.driving_at(loc) is None:
+                    k = int(np.argmin(model.gains.min(axis=0)))  # the most negative gain's mode
                     raise PatchError(
-                        f"{where}: the model's gain of mode {k} here is {gains[k]:g} < 0; a contact needs "
-                        "the driving-point response (gains >= 0, e.g. squared mode shapes / (M w))"
+                        f"{where}: model {model.name or model.source or '(unnamed)'} has signed gains "
+                        f"(mode {k}: {model.gains[:, k].min():g}) and no driving-point gains; a contact "
+                        "needs the model's `driving` rows (phi(c)^2 / M >= 0) or gains >= 0"
                     )
             return loc
         return super().check_value(spec, value, where)
@@ -385,6 +404,12 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         self._mixed = self.values["precision"] == "mixed"
         self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
+        if self._mixed:
+            e = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            self._mixed_step = specialise(
+                mixed_step, self.out, self.out, 0, 0, e.wide_bank, e.wide_meta, e.narrow_coef, e.narrow_state,
+                e.narrow_meta, self._floor, self.last, e.narrow_last,
+            )  # fmt: skip
         self.budgeted = False
         self._faded = np.zeros(k, dtype=bool)
         self._weights = a_weighting_power(self.model.frequencies[self.order])
@@ -574,20 +599,10 @@ class ModalBank(ModelParams, UGen):
         split = self._split
         if split is None:
             split = self._split = split_by_precision(self.bank, self.sample_rate)
-        split.narrow_last[0] = self.last[0]
-        self._step(inp, out, start, n, split.wide_bank, split.wide_meta, self._floor, self.last)
-        delta_step(
-            inp,
-            out,
-            start,
-            n,
-            split.narrow_coef,
-            split.narrow_state,
-            split.narrow_meta,
-            self._floor,
-            split.narrow_last,
-            FLUSH_PERIOD,
-        )
+        self._mixed_step(
+            inp, out, start, n, split.wide_bank, split.wide_meta, split.narrow_coef, split.narrow_state,
+            split.narrow_meta, self._floor, self.last, split.narrow_last,
+        )  # fmt: skip
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):

@@ -8,16 +8,16 @@ most of theta^2, i.e. the frequency. Written for the increment Delta[n] = y[n] -
 
 with c0 = 1 - c1 + c2 = (1 - R)^2 + 4 R sin^2(theta / 2) and b2 = 1 - c2 = 1 - R^2, the
 same recursion keeps the full relative precision of the small coefficients (the
-"modified coupled" / delta-operator form: Middleton and Goodwin, "Improved finite word
+delta-operator form: Middleton and Goodwin, "Improved finite word
 length characteristics in digital control using delta operators", IEEE Trans. Automat.
 Contr. 31(11), 1986). Both are computed in float64 and rounded once to float32; what
 remains is that rounding: a frequency error of about 2^-25 omega and a decay error of
 about 2^-24 d, whose effect on the response a e^{-d t} sin(omega t) peaks at
 (|d omega| + |d d|) / (d e) of a (at t = 1/d). :func:`float32_error` evaluates this for
 the coefficients actually rounded, relative to the mode's own peak, plus the state's
-rounding noise; modes above the tolerance stay in float64 ("mixed precision"): in
-practice very high Q, omega / d above about 1e5 (a 20 kHz mode decaying slower than
-about 1.3 /s).
+rounding noise; modes above the tolerance stay in float64 ("mixed precision"): very
+high Q only, omega / d above about 3e4-1e5 depending on how the coefficients happen to
+round (of 20 Hz-20 kHz x 0.5-500 /s: 6.3 kHz and 20 kHz at d = 0.5 /s).
 
 Cost per mode and sample: 3 FMA + 2 adds in 8-lane float32 (AVX2) against 3 FMA + 1 add
 in 4-lane float64.

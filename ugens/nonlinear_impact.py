@@ -44,9 +44,13 @@ step-invariant response equals the impulse-invariant one filtered by
 level (sinc), e.g. 0.16 dB at 5 kHz at 48 kHz.
 
 Mode energy: with modal mass M_k = 1 / (a_k w_k), E_k = M_k (q'^2 + (w_k^2 + d_k^2) q^2) / 2.
-The gains at the contact must be >= 0 (a driving-point receptance; negative gains would be
-negative masses); modes with zero gain are uncoupled. The main output is the contact
-displacement x_c (m) at the end of each sample, as ModalBank outputs sum_k q_k.
+The gains at the contact are the model's driving-point gains (ModalModel.driving_at, >= 0:
+a driving-point receptance; negative gains would be negative masses); modes with zero gain
+are uncoupled. Output ``contact``: the contact displacement x_c (m) at the end of each
+sample, as ModalBank outputs sum_k q_k. Main output: the displacement heard at the model's
+pickup, the same modes under the same force with the model's (signed) gains
+(:mod:`ugens.heard`, the force held over each sample); it is x_c when the model has no
+separate driving-point gains.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
 
@@ -427,12 +432,13 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     SDT impact~ (Avanzini & Rocchesso, DAFx 2001), Marhefka & Orin (1999) form; energy-
     consistent discretisation (exact modal steps under a held force, discrete-gradient
-    force: Chatziioannou & van Walstijn, JSV 2015). Main output: contact displacement (m);
-    ``force``: contact force (N); ``energy``: E of hammer + modes + contact (J).
+    force: Chatziioannou & van Walstijn, JSV 2015). Main output: displacement at the
+    model's pickup (m, signed gains); ``contact``: contact displacement (m, driving-point
+    gains); ``force``: contact force (N); ``energy``: E of hammer + modes + contact (J).
     """
 
     type_name = "HuntCrossleyImpact"
-    outputs = ("force", "energy")
+    outputs = ("force", "energy", "contact")
     driving_point = True
     param_specs = {
         "model": ParamSpec("model", required=True, fixed=True, doc="the resonator's ModalModel"),
@@ -495,6 +501,9 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.prm_sub = np.zeros(9)
         self.meta = np.zeros(1, dtype=np.int64)
         self._scratch = np.zeros((3, SUBSTEPS))
+        self.signed = model.driving is not None  # heard through the signed gains
+        self.heard_coef = np.zeros((6, k))
+        self.heard_state = np.zeros((2, k))
         self._design()
         self._run = specialise(
             hc_run_substeps,
@@ -518,7 +527,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         """Coefficients and scalar parameters from the current values (state untouched), for
         a sample and for a sub-step."""
         v, model, o = self.values, self.model, self.order
-        gains = model.gains_at(v["location"])[o]
+        gains = model.driving_at(v["location"])[o]
+        if self.signed:
+            signed = model.gains_at(v["location"])[o]
+            self.heard_coef[:] = design(model.frequencies[o], model.decays[o], signed, self.sample_rate)[:6]
         for coef, prm, rate in ((self.coef, self.prm, self.sample_rate),
                                 (self.coef_sub, self.prm_sub, self.sample_rate * SUBSTEPS)):  # fmt: skip
             coef[:] = design(model.frequencies[o], model.decays[o], gains, rate)
@@ -540,6 +552,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
             )
 
     def _reset(self) -> None:
+        self.heard_state[:] = 0.0
         self.state[:] = 0.0
         self.hammer[:] = 0.0
         self.stats[:] = 0.0
@@ -620,17 +633,28 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     # -------------------------------------------------------------- processing
     def process(self, start: int, n: int) -> None:
+        self._contact(start, n)
+        if not self.signed:
+            self.out[:n] = self.extra["contact"][:n]
+        elif self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:  # the loop's modes fell silent
+            self.out[:n] = 0.0
+            self.heard_state[:] = 0.0
+        else:
+            heard_run(self.extra["force"], self.out, n, self.heard_coef, self.heard_state)
+
+    def _contact(self, start: int, n: int) -> None:
+        """The closed loop: contact displacement, force and energy."""
         force, energy = self.extra["force"], self.extra["energy"]
         if self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:
             # silent: no mode to compute and no hammer that can touch
-            self.out[:n] = 0.0
+            self.extra["contact"][:n] = 0.0
             force[:n] = 0.0
             m, v = self.prm[0], self.hammer[_VH]
             self.hammer[_XH] += v * n / self.sample_rate
             energy[:n] = 0.5 * m * v * v
             return
         self._run(
-            self.out,
+            self.extra["contact"],
             force,
             energy,
             start,
@@ -647,4 +671,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"state": self.state, "hammer": self.hammer, "stats": self.stats, "meta": self.meta}
+        return {
+            "state": self.state,
+            "hammer": self.hammer,
+            "stats": self.stats,
+            "meta": self.meta,
+            "heard_state": self.heard_state,
+        }

@@ -144,11 +144,81 @@ def absorption_filter(attenuation_db: np.ndarray, fs: float) -> np.ndarray:
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def reverb_run(x, out, right, n, pre, ring, ist, lengths, sections, filter_state, signs, par, line):
+def _absorb(y, m, sections, filter_state, j):
+    """y[:m] through line j's SECTIONS = 7 biquads (direct form II transposed), sample by
+    sample through the whole cascade so the sections' recurrences overlap."""
+    b00, b10, b20 = sections[0, 0, j], sections[0, 1, j], sections[0, 2, j]
+    a10, a20 = sections[0, 3, j], sections[0, 4, j]
+    s10, s20 = filter_state[0, 0, j], filter_state[0, 1, j]
+    b01, b11, b21 = sections[1, 0, j], sections[1, 1, j], sections[1, 2, j]
+    a11, a21 = sections[1, 3, j], sections[1, 4, j]
+    s11, s21 = filter_state[1, 0, j], filter_state[1, 1, j]
+    b02, b12, b22 = sections[2, 0, j], sections[2, 1, j], sections[2, 2, j]
+    a12, a22 = sections[2, 3, j], sections[2, 4, j]
+    s12, s22 = filter_state[2, 0, j], filter_state[2, 1, j]
+    b03, b13, b23 = sections[3, 0, j], sections[3, 1, j], sections[3, 2, j]
+    a13, a23 = sections[3, 3, j], sections[3, 4, j]
+    s13, s23 = filter_state[3, 0, j], filter_state[3, 1, j]
+    b04, b14, b24 = sections[4, 0, j], sections[4, 1, j], sections[4, 2, j]
+    a14, a24 = sections[4, 3, j], sections[4, 4, j]
+    s14, s24 = filter_state[4, 0, j], filter_state[4, 1, j]
+    b05, b15, b25 = sections[5, 0, j], sections[5, 1, j], sections[5, 2, j]
+    a15, a25 = sections[5, 3, j], sections[5, 4, j]
+    s15, s25 = filter_state[5, 0, j], filter_state[5, 1, j]
+    b06, b16, b26 = sections[6, 0, j], sections[6, 1, j], sections[6, 2, j]
+    a16, a26 = sections[6, 3, j], sections[6, 4, j]
+    s16, s26 = filter_state[6, 0, j], filter_state[6, 1, j]
+    for t in range(m):
+        u = y[t]
+        v = b00 * u + s10
+        s10 = b10 * u - a10 * v + s20
+        s20 = b20 * u - a20 * v
+        u = v
+        v = b01 * u + s11
+        s11 = b11 * u - a11 * v + s21
+        s21 = b21 * u - a21 * v
+        u = v
+        v = b02 * u + s12
+        s12 = b12 * u - a12 * v + s22
+        s22 = b22 * u - a22 * v
+        u = v
+        v = b03 * u + s13
+        s13 = b13 * u - a13 * v + s23
+        s23 = b23 * u - a23 * v
+        u = v
+        v = b04 * u + s14
+        s14 = b14 * u - a14 * v + s24
+        s24 = b24 * u - a24 * v
+        u = v
+        v = b05 * u + s15
+        s15 = b15 * u - a15 * v + s25
+        s25 = b25 * u - a25 * v
+        u = v
+        v = b06 * u + s16
+        s16 = b16 * u - a16 * v + s26
+        s26 = b26 * u - a26 * v
+        u = v
+        y[t] = u
+    filter_state[0, 0, j], filter_state[0, 1, j] = s10, s20
+    filter_state[1, 0, j], filter_state[1, 1, j] = s11, s21
+    filter_state[2, 0, j], filter_state[2, 1, j] = s12, s22
+    filter_state[3, 0, j], filter_state[3, 1, j] = s13, s23
+    filter_state[4, 0, j], filter_state[4, 1, j] = s14, s24
+    filter_state[5, 0, j], filter_state[5, 1, j] = s15, s25
+    filter_state[6, 0, j], filter_state[6, 1, j] = s16, s26
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def reverb_run(x, out, right, n, pre, ring, ist, lengths, sections, filter_state, signs, par, chunk, wet_in):
     """n samples. pre: pre-delay ring; ring (LINES, size): the lines; ist = [pre-delay
     write, ring write]; sections (SECTIONS, 5, LINES): each line's absorption filter
     [b0, b1, b2, a1, a2]; filter_state (SECTIONS, 2, LINES); signs: the input weights of
-    the lines; par = [pre-delay samples, dry, wet]; line (LINES): scratch."""
+    the lines; par = [pre-delay samples, dry, wet]; chunk (LINES + 2, C), wet_in (C):
+    scratch, C <= the shortest line.
+
+    The network runs in chunks of at most C samples: everything a line delivers within a
+    chunk was written before it, so each line's chunk is read and filtered at once (the
+    filter state in registers), then the feedback matrix writes the chunk back."""
     pre_len = int(par[0])
     dry = par[1]
     wet = par[2]
@@ -157,46 +227,63 @@ def reverb_run(x, out, right, n, pre, ring, ist, lengths, sections, filter_state
     norm = 1.0 / math.sqrt(LINES)
     pw = ist[0]
     w = ist[1]
-    for i in range(n):
-        pre[pw] = x[i]
-        r = pw - pre_len
-        if r < 0:
-            r += pre_size
-        v = norm * pre[r]
-        pw += 1
-        if pw == pre_size:
-            pw = 0
-        left_sum = 0.0
-        right_sum = 0.0
+    i = 0
+    while i < n:
+        m = min(n - i, wet_in.size)
+        for t in range(m):
+            pre[pw] = x[i + t]
+            r = pw - pre_len
+            if r < 0:
+                r += pre_size
+            wet_in[t] = norm * pre[r]
+            pw += 1
+            if pw == pre_size:
+                pw = 0
+        left = chunk[LINES]
+        rite = chunk[LINES + 1]
+        for t in range(m):
+            left[t] = 0.0
+            rite[t] = 0.0
         for j in range(LINES):
-            y = ring[j, (w - lengths[j]) & mask]
-            left_sum += y
-            right_sum += y if j % 2 == 0 else -y
-            line[j] = y
-        # absorption filters, all lines side by side (direct form II transposed)
-        for k in range(SECTIONS):
-            for j in range(LINES):
-                u = line[j]
-                y = sections[k, 0, j] * u + filter_state[k, 0, j]
-                filter_state[k, 0, j] = sections[k, 1, j] * u - sections[k, 3, j] * y + filter_state[k, 1, j]
-                filter_state[k, 1, j] = sections[k, 2, j] * u - sections[k, 4, j] * y
-                line[j] = y
-        # 8-point fast Walsh-Hadamard transform
-        a0, a1, a2, a3 = line[0] + line[1], line[0] - line[1], line[2] + line[3], line[2] - line[3]
-        a4, a5, a6, a7 = line[4] + line[5], line[4] - line[5], line[6] + line[7], line[6] - line[7]
-        c0, c1, c2, c3 = a0 + a2, a1 + a3, a0 - a2, a1 - a3
-        c4, c5, c6, c7 = a4 + a6, a5 + a7, a4 - a6, a5 - a7
-        ring[0, w] = norm * (c0 + c4) + signs[0] * v
-        ring[1, w] = norm * (c1 + c5) + signs[1] * v
-        ring[2, w] = norm * (c2 + c6) + signs[2] * v
-        ring[3, w] = norm * (c3 + c7) + signs[3] * v
-        ring[4, w] = norm * (c0 - c4) + signs[4] * v
-        ring[5, w] = norm * (c1 - c5) + signs[5] * v
-        ring[6, w] = norm * (c2 - c6) + signs[6] * v
-        ring[7, w] = norm * (c3 - c7) + signs[7] * v
-        w = (w + 1) & mask
-        out[i] = dry * x[i] + wet * norm * left_sum
-        right[i] = dry * x[i] + wet * norm * right_sum
+            y = chunk[j]
+            start = w - lengths[j]
+            sign = 1.0 if j % 2 == 0 else -1.0
+            for t in range(m):
+                v = ring[j, (start + t) & mask]
+                left[t] += v
+                rite[t] += sign * v
+                y[t] = v
+            _absorb(y, m, sections, filter_state, j)
+        for t in range(m):
+            # 8-point fast Walsh-Hadamard transform
+            a0, a1_, a2_, a3 = (
+                chunk[0, t] + chunk[1, t],
+                chunk[0, t] - chunk[1, t],
+                chunk[2, t] + chunk[3, t],
+                chunk[2, t] - chunk[3, t],
+            )
+            a4, a5, a6, a7 = (
+                chunk[4, t] + chunk[5, t],
+                chunk[4, t] - chunk[5, t],
+                chunk[6, t] + chunk[7, t],
+                chunk[6, t] - chunk[7, t],
+            )
+            c0, c1, c2, c3 = a0 + a2_, a1_ + a3, a0 - a2_, a1_ - a3
+            c4, c5, c6, c7 = a4 + a6, a5 + a7, a4 - a6, a5 - a7
+            v = wet_in[t]
+            wt = (w + t) & mask
+            ring[0, wt] = norm * (c0 + c4) + signs[0] * v
+            ring[1, wt] = norm * (c1 + c5) + signs[1] * v
+            ring[2, wt] = norm * (c2 + c6) + signs[2] * v
+            ring[3, wt] = norm * (c3 + c7) + signs[3] * v
+            ring[4, wt] = norm * (c0 - c4) + signs[4] * v
+            ring[5, wt] = norm * (c1 - c5) + signs[5] * v
+            ring[6, wt] = norm * (c2 - c6) + signs[6] * v
+            ring[7, wt] = norm * (c3 - c7) + signs[7] * v
+            out[i + t] = dry * x[i + t] + wet * norm * left[t]
+            right[i + t] = dry * x[i + t] + wet * norm * rite[t]
+        w = (w + m) & mask
+        i += m
     ist[0] = pw
     ist[1] = w
 
@@ -260,7 +347,9 @@ class Reverb(UGen):
         self.pre = np.zeros(pre_len + 1)
         self.par = np.array([pre_len, v["dry"], v["wet"]], dtype=np.float64)
         self.ist = np.zeros(2, dtype=np.int64)
-        self.line = np.zeros(LINES)
+        chunk = int(self.lengths.min())
+        self.chunk = np.zeros((LINES + 2, chunk))
+        self.wet_in = np.zeros(chunk)
         self._run = specialise(reverb_run, *self._arguments(0))
 
     def _arguments(self, n: int) -> tuple:
@@ -277,7 +366,8 @@ class Reverb(UGen):
             self.filter_state,
             INPUT_SIGNS,
             self.par,
-            self.line,
+            self.chunk,
+            self.wet_in,
         )
 
     def _reset(self) -> None:

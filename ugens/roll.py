@@ -11,11 +11,13 @@ import math
 import numba as nb
 import numpy as np
 
+from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
+from ugens.profile import ProfileError, fractal_profile
 from ugens.scrape import (
     NYQUIST_FRACTION,
     STIFFNESS_SPEC,
@@ -30,10 +32,105 @@ from ugens.scrape import (
 
 #: Standard gravity, m/s^2 (SDT_EARTH).
 GRAVITY = 9.81
+#: Points per revolution of the ball's unevenness table.
+BALL_POINTS = 256
+#: Harmonics of the ball's unevenness (amplitudes 1/k^3, the first one 1).
+BALL_HARMONICS = 6
+
+
+def ball_unevenness(seed: int) -> np.ndarray:
+    """One revolution of a ball's unevenness g(phi): sum_k k^-3 cos(k phi + psi_k),
+    k = 1 .. BALL_HARMONICS, random phases psi_k from ``seed``; sampled at BALL_POINTS
+    angles plus one wrap point. The fundamental (amplitude 1) dominates, as for an
+    out-of-round ball whose centre rises and falls once per turn; |g| < 1.21."""
+    psi = np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi, BALL_HARMONICS)
+    phi = 2.0 * np.pi * np.arange(BALL_POINTS + 1) / BALL_POINTS
+    k = np.arange(1, BALL_HARMONICS + 1)[:, None]
+    return (np.cos(k * phi + psi[:, None]) / k**3).sum(axis=0)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def turn_weight(table, phase, depth):
+    """1 + depth g(phase) from the unevenness table (phase in revolutions, [0, 1))."""
+    x = phase * BALL_POINTS
+    i = int(x)
+    return 1.0 + depth * (table[i] + (x - i) * (table[i + 1] - table[i]))
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def modulate_by_turn(out, n, speeds, table, turn, per_metre, depth):
+    """out[:n] *= 1 + depth g(phase): the ball's unevenness at its rotation phase.
+
+    turn[0]: phase in revolutions, advanced by |v| per_metre / fs per sample (per_metre
+    = 1 / (2 pi r fs))."""
+    phase = turn[0]
+    for i in range(n):
+        out[i] *= turn_weight(table, phase, depth)
+        phase += abs(speeds[i]) * per_metre
+        phase -= math.floor(phase)
+    turn[0] = phase
+
+
+class Turning:
+    """Mixin of Roll and RathRoll: with a ``radius`` r > 0 the generated profile is the
+    ball's own surface, one revolution long: round(2 pi r / dx) points spaced exactly
+    2 pi r / points, so the force repeats every 2 pi r of travel (a given ``profile`` or
+    ``profile_file`` is read as it is)."""
+
+    def turning(self) -> bool:
+        v = self.values
+        return v["radius"] > 0 and v["profile"] is None and not v["profile_file"]
+
+    def loop_dx(self) -> float:
+        """Spacing of the profile points, m."""
+        v = self.values
+        if not self.turning():
+            return v["dx"]
+        return 2.0 * math.pi * v["radius"] / max(4, round(2.0 * math.pi * v["radius"] / v["dx"]))
+
+    def heights(self, where: str | None = None) -> np.ndarray:
+        if not self.turning():
+            return super().heights(where)
+        v = self.values
+        dx = self.loop_dx()
+        n = round(2.0 * math.pi * v["radius"] / dx)
+        rms = 1.0 if self.unit_rms else v["roughness"]
+        key = (n, v["beta"], rms, v["seed"], dx, v["k_low"])
+        if self._generated is None or self._generated[0] != key:
+            try:
+                heights = fractal_profile(*key[:5], k_low=v["k_low"] or None)
+            except ProfileError as exc:
+                raise PatchError(f"{where or f'nodes.{self.name}'}: {exc}") from None
+            self._generated = (key, heights)
+        return self._generated[1]
+
+
+def rotation_specs() -> dict[str, ParamSpec]:
+    """The ball's ``radius`` and ``unevenness`` (a per-revolution load variation)."""
+    return {
+        "radius": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=10.0,
+            unit="m",
+            fixed=True,
+            doc="ball radius r: the profile is one revolution of the ball, repeating every "
+            "2 pi r of travel, and its unevenness varies the load (0: no rotation)",
+        ),
+        "unevenness": ParamSpec(
+            "float",
+            0.4,
+            low=0.0,
+            high=0.8,
+            fixed=True,
+            doc="relative load variation per revolution (the ball's out-of-roundness)",
+        ),
+    }
 
 
 @register
-class Roll(NeedleContact):
+class Roll(Turning, NeedleContact):
     """Rolling force: a smooth profile read at the rolling speed through a speed-tracking low-pass.
 
     van den Doel, Kry & Pai, FoleyAutomatic (SIGGRAPH 2001), JASS ``ContactForce`` roll:
@@ -47,6 +144,12 @@ class Roll(NeedleContact):
     Output force (N): stiffness * s(F, v) * h_lp(x(t)), with the amplitude law s of
     ugens/scrape.py (sqrt(F v / (f_ref v_ref)) by default): RMS = stiffness * roughness
     (times the low-pass's share of the profile's variance) at the reference contact.
+
+    With a ``radius`` r > 0 the ball turns: the profile is the ball's own surface, one
+    revolution long (``Turning``), and its unevenness varies the load: the output is
+    multiplied by
+    1 + ``unevenness`` g(phi), phi the rotation angle (``ball_unevenness``), so the sound's
+    envelope is modulated at the rotation rate |v| / (2 pi r).
     """
 
     type_name = "Roll"
@@ -75,24 +178,51 @@ class Roll(NeedleContact):
             doc="speed at which the cutoff is fc0",
         ),
         **law_specs(v_ref=0.2),
+        **rotation_specs(),
     }
 
     def cutoff_per_speed(self) -> float:
         """kc = fc0 / v0 (Hz per m/s)."""
         return self.values["fc0"] / self.values["v0"]
 
+    def _prepare(self) -> None:
+        super()._prepare()
+        v = self.values
+        self.cfg[0] = 1.0 / (self.loop_dx() * self.sample_rate)
+        self.ball = ball_unevenness(v["seed"] + 1)
+        self.turn = np.zeros(1)
+        self._per_metre = 1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.turn[0] = 0.0
+
+    def process(self, start: int, n: int) -> None:
+        super().process(start, n)
+        if self._per_metre > 0.0:
+            modulate_by_turn(
+                self.out, n, self._speeds, self.ball, self.turn, self._per_metre, self.values["unevenness"]
+            )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {**super().state_arrays(), "turn": self.turn}
+
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg):
+def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg, ball):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
 
-    cfg = [1/(dx fs), mass, grain, depth, has_input, cubic, smoothed];
-    state = [pos, trace, airborne, flight counter c (N samples), bump B (N), s1, s2];
-    coef = [b0, b1, b2, a1, a2] of the optional contact low-pass (DF2T, states s1, s2).
-    Per sample: W = m g + F; x = input or profile; decay = clip(2 grain |v|, 0, 2);
-    ground = max(trace - decay, x). Airborne: c -= W; land when c <= 0 (output B - c - W),
-    else output -W. On the ground: if ground > trace and decay > 0, launch with
-    B = (ground - trace) depth (m v^2 / 2) / sqrt(decay), c = 2 B (output B).
+    cfg = [1/(dx fs), mass, grain, depth, has_input, cubic, smoothed, 1/(2 pi r fs),
+    unevenness]; state = [pos, trace, airborne, flight counter c (N samples), bump B (N),
+    s1, s2, rotation phase (revolutions)]; coef = [b0, b1, b2, a1, a2] of the optional
+    contact low-pass (DF2T, states s1, s2); ball: the unevenness table (ball_unevenness).
+    Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
+    x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
+    Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
+    is on the ground for the rest of the sample), else output -W. On the ground (also on
+    the landing sample: a flight lasts ceil(2 B / W) samples, the first sample at or after
+    the ballistic landing time 2 B / W, as SDT): if ground > trace and decay > 0, launch
+    with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
     """
     inv_dxfs = cfg[0]
@@ -102,6 +232,8 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     has_input = cfg[4] != 0.0
     cubic = cfg[5] != 0.0
     smoothed = cfg[6] != 0.0
+    per_metre = cfg[7]
+    uneven = cfg[8]
     L = prof.shape[0]
     pos = state[0]
     trace = state[1]
@@ -110,10 +242,16 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     bump = state[4]
     s1 = state[5]
     s2 = state[6]
+    phase = state[7]
     weight = mass * GRAVITY
     for i in range(n):
         v = speeds[i]
-        load = weight + forces[i]
+        w = 1.0
+        if per_metre > 0.0:
+            w = turn_weight(ball, phase, uneven)
+            phase += abs(v) * per_metre
+            phase -= math.floor(phase)
+        load = (weight + forces[i]) * w
         x = inputs[i] if has_input else read_profile(prof, pos, cubic)
         decay = min(2.0 * grain * abs(v), 2.0)
         ground = max(trace - decay, x)
@@ -125,13 +263,13 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
                 airborne = False
             else:
                 y = -load
-        elif ground > trace and decay > 0.0:
-            b = (ground - trace) * depth * 0.5 * mass * v * v / math.sqrt(decay)
+        if not airborne and ground > trace and decay > 0.0:
+            b = (ground - trace) * depth * 0.5 * mass * v * v * w / math.sqrt(decay)
             if b > 0.0:
                 bump = b
                 c = 2.0 * b
                 airborne = True
-                y = b
+                y += b
         trace = ground
         if smoothed:
             z = coef[0] * y + s1
@@ -149,6 +287,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     state[4] = bump
     state[5] = s1
     state[6] = s2
+    state[7] = phase
 
 
 @register
@@ -163,8 +302,10 @@ class RathRoll(ProfileContact):
     per sample; a rise while the ball is on the ground launches it with the bump force
     B = (ground - trace) * depth * (m v^2 / 2) / sqrt(decay) N for one sample (impulse
     B / fs), and it stays airborne until a counter of 2 B, decremented by W every sample,
-    reaches zero: 2 B / W samples, the ballistic flight time 2 u / g_eff of a launch speed
-    u = B / (m fs) under the load W (SDT: flight = 2 bump, decremented by m g per sample).
+    reaches zero: the ballistic flight time 2 u / g_eff = 2 B / W samples of a launch speed
+    u = B / (m fs) under the load W (SDT: flight = 2 bump, decremented by m g per sample);
+    the ball is back on the ground from the landing sample on and may take off again
+    there, so a flight lasts ceil(2 B / W) samples, as in SDT.
     B grows about as depth v^2.5, so the take-off rate rises with speed until flights get
     long (about 0.8 m/s with the defaults); faster, the ball skips bumps: fewer, harder hops.
 
@@ -177,6 +318,11 @@ class RathRoll(ProfileContact):
     deflect the resonator. Optionally (``contact_cutoff``) the output is low-passed for the
     finite duration of each micro-impact. Extra output ``contact``: the total contact force
     on the surface (N), output + W (0 in flight without the low-pass), e.g. for haptics.
+
+    With a ``radius`` r > 0 the ball turns: its unevenness, periodic per revolution (every
+    2 pi r of travel), scales the load W and the bumps B by 1 + ``unevenness`` g(phi)
+    (``ball_unevenness``), so the take-offs and their strength follow the rotation rate
+    |v| / (2 pi r).
     """
 
     type_name = "RathRoll"
@@ -217,6 +363,7 @@ class RathRoll(ProfileContact):
             "duration (~1/cutoff s; SDT gets it from its impact interactor); 0: none",
         ),
         **profile_specs(beta=1.0, roughness=None, dx=1e-5, length=2**16, k_low=100.0),
+        **rotation_specs(),
     }
 
     def _prepare(self) -> None:
@@ -231,9 +378,12 @@ class RathRoll(ProfileContact):
                 float("input" in self.sources),
                 float(v["interp"] == "cubic"),
                 float(v["contact_cutoff"] > 0),
+                1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0,
+                v["unevenness"],
             ]
         )
-        self.state = np.zeros(7)
+        self.ball = ball_unevenness(v["seed"] + 1)
+        self.state = np.zeros(8)
         self.coef = np.zeros(5)
         if v["contact_cutoff"] > 0:
             fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
@@ -250,6 +400,7 @@ class RathRoll(ProfileContact):
             self.state,
             self.coef,
             self.cfg,
+            self.ball,
         )
 
     def _reset(self) -> None:
@@ -272,6 +423,7 @@ class RathRoll(ProfileContact):
             self.state,
             self.coef,
             self.cfg,
+            self.ball,
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:

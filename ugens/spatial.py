@@ -115,14 +115,15 @@ def spatialise(x, left, right, n, xs, ys, zs, ring, ist, st, par):
             delay = r / c * fs
             if binaural:
                 theta = math.asin(s)
-                near = -a / c * math.sin(abs(theta)) * fs
+                near = -a / c * abs(s) * fs  # sin |theta| = |s|
                 far = a / c * abs(theta) * fs
                 d_r = delay + (near if theta >= 0.0 else far)
                 d_l = delay + (far if theta >= 0.0 else near)
                 g_l = gain
                 g_r = gain
-                bl0, bl1, al1 = shadow_coefficients(shadow_alpha(math.acos(-s)), w0, fs)
-                br0, br1, ar1 = shadow_coefficients(shadow_alpha(math.acos(s)), w0, fs)
+                phi_r = math.acos(s)
+                bl0, bl1, al1 = shadow_coefficients(shadow_alpha(math.pi - phi_r), w0, fs)  # acos(-s)
+                br0, br1, ar1 = shadow_coefficients(shadow_alpha(phi_r), w0, fs)
             else:
                 d_l = delay
                 d_r = delay

@@ -1,7 +1,7 @@
 """Burr-bone contact: voxel-sphere overlap volumes, moments, penetration, forces, erosion.
 
 Agus, Giachetti, Gobbetti, Zanetti, Zorcolo, "Real-time haptic and visual simulation of
-bone dissection", IEEE VR 2002 / Presence 12(1) 2003 (the seed 001's burr-bone model).
+bone dissection", IEEE VR 2002 / Presence 12(1) 2003.
 
 All kernels work in grid units (lengths in voxels, volumes in voxel^3, density in counter
 units 0..255); :mod:`physics.burr.loop` converts to SI. A voxel is taken as the sphere of
@@ -9,9 +9,9 @@ equal volume, radius ``R_VOXEL = (3 / (4 pi))^(1/3)`` voxels, centred on the vox
 so a voxel fully inside the burr contributes exactly its volume (1 voxel^3).
 
 * overlap of the burr (radius R) and a voxel sphere (radius r) at centre distance d
-  (the seed's delta v(d), exact sphere-sphere lens volume):
+  (delta v(d), the exact sphere-sphere lens volume):
   pi (R + r - d)^2 (d^2 + 2 d r - 3 r^2 + 2 d R + 6 r R - 3 R^2) / (12 d);
-* the disc of the two spheres' intersection circle (the seed's delta sigma(d), the voxel's
+* the disc of the two spheres' intersection circle (delta sigma(d), the voxel's
   share of the burr surface): pi (2 (R^2 + r^2) - d^2 - (r^2 - R^2)^2 / d^2) / 4, its plane
   at distance d / 2 + (R^2 - r^2) / (2 d) from the burr centre;
 * m0 = sum rho_i dv_i, m1 = sum rho_i dv_i (x_i - x_c); n = -m1 / |m1|;
@@ -21,6 +21,7 @@ so a voxel fully inside the burr contributes exactly its volume (1 voxel^3).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -193,13 +194,85 @@ def cap_box(cx, cy, cz, R, nvec, cos_t, lo, hi, shape):
 PI_R2 = math.pi * R_VOXEL * R_VOXEL
 
 
+class BurrModel(NamedTuple):
+    """The burr and erosion constants in grid units: radius (voxels), voxel edge (m),
+    friction coefficient mu, kmass (counter units removed per joule)."""
+
+    radius: float
+    voxel: float
+    mu: float
+    kmass: float
+
+
+class ContactOptions(NamedTuple):
+    """One haptic step: burr centre (3,) (grid units), normal (3,) (zeros = undefined),
+    Hertz contact radius a_hertz (voxels), load |F_e| (N), spin omega (3,) (rad/s), tool
+    velocity (3,) (m/s), dt (s), erode (bool)."""
+
+    centre: np.ndarray
+    normal: np.ndarray
+    a_hertz: float
+    load: float
+    omega: np.ndarray
+    velocity: np.ndarray
+    dt: float
+    erode: bool
+
+
+CONTACT_VOXEL = np.dtype(
+    [("i", np.int64), ("j", np.int64), ("k", np.int64), ("dist2", np.float64), ("xi2", np.float64),
+     ("share", np.float64), ("radius", np.float64)]
+)  # fmt: skip
+"""A gathered contact voxel: grid index (i, j, k), squared distance dist2 to the burr
+centre and xi2 to the axis along -n (voxel^2), surface share (voxel^2) and contact-point
+radius (voxels)."""
+
+
+CONTACT_TALLY = np.dtype(
+    [("force_x", np.float64), ("force_y", np.float64), ("force_z", np.float64), ("torque_x", np.float64),
+     ("torque_y", np.float64), ("torque_z", np.float64), ("power", np.float64), ("expected", np.float64),
+     ("removed", np.float64), ("voxels", np.float64), ("area", np.float64), ("lo_i", np.int64),
+     ("lo_j", np.int64), ("lo_k", np.int64), ("hi_i", np.int64), ("hi_j", np.int64), ("hi_k", np.int64)]
+)  # fmt: skip
+"""What one surface pass adds up (SI): friction force (N) and torque (N m) about the burr
+centre, frictional power (W), expected and actual counter decrements, contact voxels, sum
+of their surface shares (m^2), and the grid box [lo, hi] (inclusive; empty: lo > hi) of
+the voxels changed."""
+
+
+class ContactData(NamedTuple):
+    """The eroding density (uint8 grid, modified in place), the roulette's splitmix64 state
+    rng (1,) uint64, the scratch records of the gathered voxels (CONTACT_VOXEL; capacity:
+    the voxels of the burr ball's box) and the tally (one CONTACT_TALLY record)."""
+
+    density: np.ndarray
+    rng: np.ndarray
+    voxels: np.ndarray
+    tally: np.ndarray
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _gather(dens, cx, cy, cz, R, nvec, defined, lo, hi, idx, geo):
-    """Collect the occupied voxels in the burr ball (d < R + r) on the bone side (along -n):
-    idx[m] = (i, j, k), geo[m] = (d^2, xi^2). Returns (count, max xi^2)."""
+def _reset(d):
+    """Zero the tally and empty the changed box."""
+    t = d.tally[0]
+    t.force_x = t.force_y = t.force_z = 0.0
+    t.torque_x = t.torque_y = t.torque_z = 0.0
+    t.power = t.expected = t.removed = t.voxels = t.area = 0.0
+    t.lo_i, t.lo_j, t.lo_k = d.density.shape
+    t.hi_i = t.hi_j = t.hi_k = -1
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def _gather(m, opt, d, defined, lo, hi):
+    """Collect the occupied voxels in the burr ball (d < R + r) on the bone side (along -n)
+    into the scratch. Returns (count, max xi^2)."""
+    dens, voxels = d.density, d.voxels
+    cx, cy, cz = opt.centre[0], opt.centre[1], opt.centre[2]
+    nvec = opt.normal
+    R = m.radius
     r = R_VOXEL
     reach2 = (R + r) * (R + r)
-    m = 0
+    n = 0
     xmax = 0.0
     for i in range(lo[0], hi[0] + 1):
         dx = i - cx
@@ -224,14 +297,15 @@ def _gather(dens, cx, cy, cz, R, nvec, defined, lo, hi, idx, geo):
                     if along <= 0.0:
                         continue
                     xi2 = d2 - along * along
-                idx[m, 0] = i
-                idx[m, 1] = j
-                idx[m, 2] = k
-                geo[m, 0] = d2
-                geo[m, 1] = xi2
+                rec = voxels[n]
+                rec.i = i
+                rec.j = j
+                rec.k = k
+                rec.dist2 = d2
+                rec.xi2 = xi2
                 xmax = max(xmax, xi2)
-                m += 1
-    return m, xmax
+                n += 1
+    return n, xmax
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -247,24 +321,57 @@ def _share(d2, R):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _apply(dens, cx, cy, cz, R, defined, a2, count, idx, geo, p_scale, mu, omega, vtool, voxel, kmass, dt,
-           erode, rng, box, out):  # fmt: skip
+def _shares(m, d, defined, count, a2):
+    """Surface share and contact radius of the gathered voxels inside the contact radius
+    (a2 = a^2); returns the sum of shares weighted by the Hertz profile sqrt(1 - xi^2/a^2)."""
+    voxels = d.voxels
+    wsum = 0.0
+    for n in range(count):
+        rec = voxels[n]
+        if defined and rec.xi2 >= a2:
+            continue
+        ds, rc = _share(rec.dist2, m.radius)
+        rec.share = ds
+        rec.radius = rc
+        wsum += ds * (math.sqrt(1.0 - rec.xi2 / a2) if defined else 1.0)
+    return wsum
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
+def _grow_box(t, i, j, k):
+    """Grow the tally's changed box to hold voxel (i, j, k)."""
+    t.lo_i = min(t.lo_i, i)
+    t.lo_j = min(t.lo_j, j)
+    t.lo_k = min(t.lo_k, k)
+    t.hi_i = max(t.hi_i, i)
+    t.hi_j = max(t.hi_j, j)
+    t.hi_k = max(t.hi_k, k)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def _apply(m, opt, d, defined, count, a2, p_scale):
+    """Friction, frictional power and (with opt.erode) erosion of each contact voxel under
+    the pressure p_scale * sqrt(1 - xi^2/a^2) (Pa)."""
+    voxels, t = d.voxels, d.tally[0]
+    cx, cy, cz = opt.centre[0], opt.centre[1], opt.centre[2]
+    omega, vtool = opt.omega, opt.velocity
+    voxel, mu = m.voxel, m.mu
     area_scale = voxel * voxel
-    s_state = rng[0]
-    for m in range(count):
-        d2 = geo[m, 0]
-        xi2 = geo[m, 1]
+    s_state = d.rng[0]
+    for n in range(count):
+        rec = voxels[n]
+        xi2 = rec.xi2
         if defined and xi2 >= a2:
             continue
-        ds, rc = geo[m, 2], geo[m, 3]  # surface share and contact radius, from surface_pass
+        ds, rc = rec.share, rec.radius
         if ds <= 0.0:
             continue
         w = math.sqrt(1.0 - xi2 / a2) if defined else 1.0
-        i = idx[m, 0]
-        j = idx[m, 1]
-        k = idx[m, 2]
-        d = math.sqrt(d2)
-        rp = rc / d * voxel if d > 0.0 else 0.0
+        i = rec.i
+        j = rec.j
+        k = rec.k
+        dist = math.sqrt(rec.dist2)
+        rp = rc / dist * voxel if dist > 0.0 else 0.0
         px = (i - cx) * rp
         py = (j - cy) * rp
         pz = (k - cz) * rp
@@ -278,20 +385,21 @@ def _apply(dens, cx, cy, cz, R, defined, a2, count, idx, geo, p_scale, mu, omega
             fx = -f * vx
             fy = -f * vy
             fz = -f * vz
-            out[0] += fx
-            out[1] += fy
-            out[2] += fz
-            out[3] += py * fz - pz * fy
-            out[4] += pz * fx - px * fz
-            out[5] += px * fy - py * fx
+            t.force_x += fx
+            t.force_y += fy
+            t.force_z += fz
+            t.torque_x += py * fz - pz * fy
+            t.torque_y += pz * fx - px * fz
+            t.torque_z += px * fy - py * fx
         power = mu * fn * sp
-        out[6] += power
-        out[9] += 1.0
-        out[10] += ds * area_scale
-        if erode:
+        t.power += power
+        t.voxels += 1.0
+        t.area += ds * area_scale
+        if opt.erode:
+            dens = d.density
             c = dens[i, j, k]
-            e = kmass * power * dt
-            out[7] += e
+            e = m.kmass * power * opt.dt
+            t.expected += e
             dec = math.floor(e)
             s_state, u = uniform01(s_state)
             if u < e - dec:
@@ -300,87 +408,51 @@ def _apply(dens, cx, cy, cz, R, defined, a2, count, idx, geo, p_scale, mu, omega
                 dec = float(c)
             if dec > 0.0:
                 dens[i, j, k] = np.uint8(int(c) - int(dec))
-                out[8] += dec
-                box[0] = min(box[0], i)
-                box[1] = min(box[1], j)
-                box[2] = min(box[2], k)
-                box[3] = max(box[3], i)
-                box[4] = max(box[4], j)
-                box[5] = max(box[5], k)
-    rng[0] = s_state
+                t.removed += dec
+                _grow_box(t, i, j, k)
+    d.rng[0] = s_state
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def surface_pass(
-    dens,
-    cx,
-    cy,
-    cz,
-    R,
-    nvec,
-    a_hertz,
-    load,
-    mu,
-    omega,
-    vtool,
-    voxel,
-    kmass,
-    dt,
-    erode,
-    rng,
-    box,
-    out,
-    idx,
-    geo,
-):
-    """Hertz pressure, friction and erosion over the burr's contact voxels.
+def surface_pass(model, options, data):
+    """:func:`contact_pass` on a BurrModel, ContactOptions and ContactData given as plain
+    tuples (numba types a plain tuple's fields in C, a NamedTuple's in Python: ~0.5 us a
+    field per call at haptic rate)."""
+    contact_pass(BurrModel(*model), ContactOptions(*options), ContactData(*data))
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def contact_pass(m, opt, d):
+    """Hertz pressure, friction and erosion over the burr's contact voxels; fills d.tally
+    and the changed box.
 
     Grid units in, SI out. Contact voxels: the occupied voxels in the burr ball on the bone
-    side (along -n; all of them if the normal nvec is zeros, i.e. undefined), each with a
-    surface share dsigma: the seed's intersection disc for voxels straddling the burr surface,
-    and pi r^2 for voxels already fully inside the burr (material the burr has sunk into,
-    e.g. soft tissue, is cut too). The pressure P(xi) = P0 sqrt(1 - xi^2/a^2) (xi: distance
-    from the axis through the burr centre along -n; uniform if n is undefined) is normalised
-    so that sum P dsigma = load = |F_e| (N). The contact radius is a = max(a_hertz,
-    xi_max + r), xi_max the widest contact voxel: on a flat surface this is the cap's chord,
-    and it keeps an irregular (partly eroded) contact patch loaded. omega (rad/s, vector) and
-    vtool (m/s): each contact point p slides at v = omega x p + vtool, gets friction
-    mu P dsigma against v and dissipates phi = mu P |v| dsigma (W); with ``erode`` its
-    counter decreases by kmass * phi * dt (kmass: counter units per joule), as an integer
-    decrement by Russian roulette (floor, plus one with probability equal to the
+    side (along -n; all of them if the normal is zeros, i.e. undefined), each with a surface
+    share dsigma: the intersection disc for voxels straddling the burr surface, and pi r^2
+    for voxels already fully inside the burr (material the burr has sunk into, e.g. soft
+    tissue, is cut too). The pressure P(xi) = P0 sqrt(1 - xi^2/a^2) (xi: distance from the
+    axis through the burr centre along -n; uniform if n is undefined) is normalised so that
+    sum P dsigma = load = |F_e| (N). The contact radius is a = max(a_hertz, xi_max + r),
+    xi_max the widest contact voxel: on a flat surface this is the cap's chord, and it keeps
+    an irregular (partly eroded) contact patch loaded. Each contact point p slides at
+    v = omega x p + velocity, gets friction mu P dsigma against v and dissipates
+    phi = mu P |v| dsigma (W); with ``erode`` its counter decreases by kmass * phi * dt, as
+    an integer decrement by Russian roulette (floor, plus one with probability equal to the
     fractional part), never below 0.
-
-    idx (int64, (N, 3)) and geo (float64, (N, 4): d^2, xi^2, dsigma, contact radius):
-    scratch, N >= voxels in the ball's box.
-    out: [Fx, Fy, Fz, Tx, Ty, Tz, power W, expected decrement (counts), actual decrement
-    (counts), contact voxels, sum dsigma (m^2)]; box: the grid box of the changed voxels.
     """
-    shape = dens.shape
     lo = np.zeros(3, np.int64)
     hi = np.zeros(3, np.int64)
+    nvec = opt.normal
     defined = not (nvec[0] == 0.0 and nvec[1] == 0.0 and nvec[2] == 0.0)
-    for q in range(out.size):
-        out[q] = 0.0
-    box[0] = shape[0]
-    box[1] = shape[1]
-    box[2] = shape[2]
-    box[3] = -1
-    box[4] = -1
-    box[5] = -1
-    cap_box(cx, cy, cz, R, nvec, -R_VOXEL / R, lo, hi, shape)  # the bone-side hemisphere
-    count, xi2max = _gather(dens, cx, cy, cz, R, nvec, defined, lo, hi, idx, geo)
-    a = max(a_hertz, math.sqrt(xi2max) + R_VOXEL)
+    _reset(d)
+    c = opt.centre
+    R = m.radius
+    cap_box(c[0], c[1], c[2], R, nvec, -R_VOXEL / R, lo, hi, d.density.shape)  # bone-side hemisphere
+    count, xi2max = _gather(m, opt, d, defined, lo, hi)
+    a = max(opt.a_hertz, math.sqrt(xi2max) + R_VOXEL)
     a2 = a * a
-    wsum = 0.0
-    for m in range(count):
-        if defined and geo[m, 1] >= a2:
-            continue
-        ds, rc = _share(geo[m, 0], R)
-        geo[m, 2] = ds  # kept for _apply
-        geo[m, 3] = rc
-        wsum += ds * (math.sqrt(1.0 - geo[m, 1] / a2) if defined else 1.0)
-    if wsum <= 0.0 or load <= 0.0:
+    wsum = _shares(m, d, defined, count, a2)
+    if wsum <= 0.0 or opt.load <= 0.0:
         return
-    p_scale = load / (wsum * voxel * voxel)  # Pa per unit weight
-    _apply(dens, cx, cy, cz, R, defined, a2, count, idx, geo, p_scale, mu, omega, vtool, voxel, kmass, dt,
-           erode, rng, box, out)  # fmt: skip
+    p_scale = opt.load / (wsum * m.voxel * m.voxel)  # Pa per unit weight
+    _apply(m, opt, d, defined, count, a2, p_scale)

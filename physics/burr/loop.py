@@ -1,6 +1,6 @@
 """The haptic-rate burr simulation: pose in, force out; and the constant-force descent.
 
-One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003; seed 001):
+One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
 
 1. moments m0, m1 of the density in the burr ball (octree or brute-force voxel sum);
 2. n = -m1/|m1| (out of the bone), h from m0 = pi rho0 R^3 (h/R)^2 (1 - h/(3R)) and the
@@ -19,6 +19,7 @@ The force returned is the force of the bone on the burr (what the haptic device 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -26,9 +27,20 @@ import numpy as np
 
 from jassy.errors import JassyError
 from jassy.events import ContactTrack, HapticFrame
-from physics.burr.contact import brute_moments, depth_from_m0, surface_pass
+from physics.burr.contact import (
+    CONTACT_TALLY,
+    CONTACT_VOXEL,
+    BurrModel,
+    ContactData,
+    ContactOptions,
+    brute_moments,
+    depth_from_m0,
+    surface_pass,
+)
 from physics.burr.octree import Octree
 from physics.burr.volume import Volume
+
+_Tally = namedtuple("_Tally", CONTACT_TALLY.names)  # a CONTACT_TALLY record as Python numbers
 
 
 @dataclass
@@ -101,13 +113,12 @@ class BurrSim:
         self.params = params or BurrParams()
         self.params.check()
         self.octree = Octree(volume.density) if self.params.method == "octree" else None
-        self.rng = np.array([seed], dtype=np.uint64)
         self._mom = np.zeros(4)
-        self._out = np.zeros(11)
-        self._box = np.zeros(6, dtype=np.int64)
         side = 2 * int(math.ceil(self.params.radius / volume.voxel + 1.0)) + 3
-        self._idx = np.zeros((side**3, 3), dtype=np.int64)
-        self._geo = np.zeros((side**3, 4))
+        cap = side**3
+        rng = np.array([seed], dtype=np.uint64)
+        self.data = ContactData(volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY))
+        self._data_fields = tuple(self.data)
         self.removed_total = 0.0
         self.work_total = 0.0
 
@@ -145,32 +156,33 @@ class BurrSim:
         g = v.to_grid(centre)
         omega = omega if isinstance(omega, np.ndarray) else np.asarray(omega, dtype=np.float64)
         velocity = velocity if isinstance(velocity, np.ndarray) else np.asarray(velocity, dtype=np.float64)
-        surface_pass(
-            v.density, g[0], g[1], g[2], R / v.voxel, normal, a, load, p.mu,
-            omega.astype(np.float64, copy=False), velocity.astype(np.float64, copy=False), v.voxel,
-            self.kmass, dt, bool(erode), self.rng, self._box, self._out, self._idx, self._geo,
-        )  # fmt: skip
-        o = self._out
-        if self.octree is not None and o[8] > 0:
-            self.octree.update(self._box)
-        friction = o[0:3].copy()
-        removed = float(o[8]) * v.mass_per_count
+        options = ContactOptions(g, normal, a, load, omega.astype(np.float64, copy=False),
+                                 velocity.astype(np.float64, copy=False), float(dt), bool(erode))  # fmt: skip
+        d = self.data
+        surface_pass(tuple(BurrModel(R / v.voxel, float(v.voxel), float(p.mu), self.kmass)), tuple(options),
+                     self._data_fields)  # fmt: skip
+        t = _Tally(*d.tally[0].item())
+        if self.octree is not None and t.removed > 0:
+            self.octree.update(np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k], dtype=np.int64))
+        friction = np.array([t.force_x, t.force_y, t.force_z])
+        power = t.power
+        removed = t.removed * v.mass_per_count
         self.removed_total += removed
-        self.work_total += float(o[6]) * dt if erode else 0.0
+        self.work_total += power * dt if erode else 0.0
         return ContactState(
             force=elastic + friction,
             elastic=elastic,
             friction=friction,
-            torque=o[3:6].copy(),
+            torque=np.array([t.torque_x, t.torque_y, t.torque_z]),
             normal=normal,
             depth=h,
             m0=m0,
             m1=m1,
-            power=float(o[6]),
+            power=power,
             removed=removed,
-            expected=float(o[7]) * v.mass_per_count,
-            contact_area=float(o[10]),
-            slip_speed=float(o[6]) / (p.mu * load) if p.mu > 0 and load > 0 else 0.0,
+            expected=t.expected * v.mass_per_count,
+            contact_area=t.area,
+            slip_speed=power / (p.mu * load) if p.mu > 0 and load > 0 else 0.0,
         )
 
 
@@ -250,7 +262,7 @@ def smooth_rate(x: np.ndarray, width: int) -> np.ndarray:
 
 
 class Descent:
-    """The seed's reference experiment: vertical descent at constant force.
+    """The reference experiment of Agus et al.: vertical descent at constant force.
 
     A force-controlled arm (admittance): the commanded vertical velocity is
     v = (F_z - F_push) / b, clipped to +-v_max, where F_z is the vertical contact force on

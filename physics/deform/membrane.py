@@ -1,5 +1,5 @@
 """Tearable mass-spring membrane over a triangle mesh (the capsulorhexis model of Agus et al.,
-VRIPHYS 2006; seed 001).
+VRIPHYS 2006).
 
 Particles are free, anchored (fixed) or scripted (positions set by a function of time: the
 forceps). Forces: gravity, environment viscosity (drag -m gamma v), and springs along the
@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -44,90 +45,167 @@ class Tear:
     strain: float
 
 
+class MembraneModel(NamedTuple):
+    """The static arrays the kernel reads: masses (n,) kg, kind (n,) FREE / ANCHORED /
+    SCRIPTED, scripted (k,) particle indices, springs (S, 2) particle pairs, rest_length (S,)
+    m, stiffness (S,) N/m, damping (S,) N s/m, tear_strain (S,), partner (S,) spring removed
+    with a torn one (-1 = none), gravity (3,) m/s^2, viscosity gamma (1/s)."""
+
+    masses: np.ndarray
+    kind: np.ndarray
+    scripted: np.ndarray
+    springs: np.ndarray
+    rest_length: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    tear_strain: np.ndarray
+    partner: np.ndarray
+    gravity: np.ndarray
+    viscosity: float
+
+
+class StepOptions(NamedTuple):
+    """One step: substep h_s (s), number of substeps, time at the step's start (s)."""
+
+    substep: float
+    substeps: int
+    start_time: float
+
+
+class TearLog(NamedTuple):
+    """Springs torn during a step: spring index, time (s), midpoint (m) and strain of each,
+    and count[0] of them (capacity: the number of springs)."""
+
+    spring: np.ndarray
+    time: np.ndarray
+    position: np.ndarray
+    strain: np.ndarray
+    count: np.ndarray
+
+
+class MembraneData(NamedTuple):
+    """State x, v (n, 3) (m, m/s) and alive (S,) (updated in place); scripted positions
+    (k, 3) m at the step's start and end; tears; forceps_force (3,) N,
+    the force on the scripted particles averaged over the substeps."""
+
+    x: np.ndarray
+    v: np.ndarray
+    alive: np.ndarray
+    script_start: np.ndarray
+    script_end: np.ndarray
+    tears: TearLog
+    forceps_force: np.ndarray
+
+
+@numba.njit(cache=True, inline="always")
+def _load_gravity(m, f):
+    """Reset the forces f (n, 3) N to gravity m_i g."""
+    mass, g = m.masses, m.gravity
+    for i in range(f.shape[0]):
+        for a in range(3):
+            f[i, a] = mass[i] * g[a]
+
+
+@numba.njit(cache=True, inline="always")
+def _record_tear(d, e, t, i, j, strain):
+    """Log spring e (particles i, j) torn at time t with ``strain``."""
+    log = d.tears
+    q = log.count[0]
+    log.spring[q] = e
+    log.time[q] = t
+    for a in range(3):
+        log.position[q, a] = 0.5 * (d.x[i, a] + d.x[j, a])
+    log.strain[q] = strain
+    log.count[0] = q + 1
+
+
+@numba.njit(cache=True, inline="always")
+def _spring_forces(m, opt, d, f, s):
+    """Add each live spring's Hooke and dashpot force to f; tear (and log) the springs
+    strained beyond tear_strain, with their partners, in substep s."""
+    x, v, alive = d.x, d.v, d.alive
+    springs, L0, k, c, tear, partner = (
+        m.springs,
+        m.rest_length,
+        m.stiffness,
+        m.damping,
+        m.tear_strain,
+        m.partner,
+    )
+    for e in range(springs.shape[0]):
+        if not alive[e]:
+            continue
+        i, j = springs[e, 0], springs[e, 1]
+        d0, d1, d2 = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
+        L = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        strain = (L - L0[e]) / L0[e]
+        if strain > tear[e]:
+            alive[e] = False
+            if partner[e] >= 0:
+                alive[partner[e]] = False
+            _record_tear(d, e, opt.start_time + s * opt.substep, i, j, strain)
+            continue
+        if L == 0.0:
+            continue
+        u0, u1, u2 = d0 / L, d1 / L, d2 / L
+        rv = (v[j, 0] - v[i, 0]) * u0 + (v[j, 1] - v[i, 1]) * u1 + (v[j, 2] - v[i, 2]) * u2
+        fs = k[e] * (L - L0[e]) + c[e] * rv
+        f[i, 0] += fs * u0
+        f[i, 1] += fs * u1
+        f[i, 2] += fs * u2
+        f[j, 0] -= fs * u0
+        f[j, 1] -= fs * u1
+        f[j, 2] -= fs * u2
+
+
+@numba.njit(cache=True, inline="always")
+def _forceps_force(m, opt, d, f):
+    """Add this substep's share of the non-gravity force on the scripted particles."""
+    for q in range(m.scripted.size):
+        i = m.scripted[q]
+        for a in range(3):
+            d.forceps_force[a] += (f[i, a] - m.masses[i] * m.gravity[a]) / opt.substeps
+
+
+@numba.njit(cache=True, inline="always")
+def _integrate(m, opt, d, f, damp):
+    """Semi-implicit Euler for the free particles (velocity scaled by ``damp`` for the
+    viscosity); anchored particles are held at rest."""
+    hs, x, v, kind, mass = opt.substep, d.x, d.v, m.kind, m.masses
+    for i in range(x.shape[0]):
+        if kind[i] == FREE:
+            for a in range(3):
+                v[i, a] = (v[i, a] + hs * f[i, a] / mass[i]) * damp
+                x[i, a] += hs * v[i, a]
+        elif kind[i] == ANCHORED:
+            for a in range(3):
+                v[i, a] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _move_scripted(m, opt, d, w):
+    """Place the scripted particles at fraction w of the way from their start to end
+    positions, moving at the step's mean velocity."""
+    s0, s1 = d.script_start, d.script_end
+    for q in range(m.scripted.size):
+        i = m.scripted[q]
+        for a in range(3):
+            d.x[i, a] = (1.0 - w) * s0[q, a] + w * s1[q, a]
+            d.v[i, a] = (s1[q, a] - s0[q, a]) / (opt.substep * opt.substeps)
+
+
 @numba.njit(cache=True)
-def _substeps(
-    x,
-    v,
-    m,
-    kind,
-    springs,
-    L0,
-    k,
-    c,
-    tear,
-    alive,
-    partner,
-    gravity,
-    visc,
-    hs,
-    nsub,
-    t0,
-    s0,
-    s1,
-    sidx,
-    tid,
-    ttime,
-    tpos,
-    tstrain,
-    ntear,
-    force,
-):
-    n = x.shape[0]
-    f = np.empty((n, 3))
-    damp = 1.0 / (1.0 + hs * visc)
-    force[:] = 0.0
-    for s in range(nsub):
-        for i in range(n):
-            for a in range(3):
-                f[i, a] = m[i] * gravity[a]
-        for e in range(springs.shape[0]):
-            if not alive[e]:
-                continue
-            i, j = springs[e, 0], springs[e, 1]
-            d0, d1, d2 = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-            L = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            strain = (L - L0[e]) / L0[e]
-            if strain > tear[e]:
-                alive[e] = False
-                if partner[e] >= 0:
-                    alive[partner[e]] = False
-                q = ntear[0]
-                tid[q] = e
-                ttime[q] = t0 + s * hs
-                for a in range(3):
-                    tpos[q, a] = 0.5 * (x[i, a] + x[j, a])
-                tstrain[q] = strain
-                ntear[0] = q + 1
-                continue
-            if L == 0.0:
-                continue
-            u0, u1, u2 = d0 / L, d1 / L, d2 / L
-            rv = (v[j, 0] - v[i, 0]) * u0 + (v[j, 1] - v[i, 1]) * u1 + (v[j, 2] - v[i, 2]) * u2
-            fs = k[e] * (L - L0[e]) + c[e] * rv
-            f[i, 0] += fs * u0
-            f[i, 1] += fs * u1
-            f[i, 2] += fs * u2
-            f[j, 0] -= fs * u0
-            f[j, 1] -= fs * u1
-            f[j, 2] -= fs * u2
-        for q in range(sidx.size):
-            i = sidx[q]
-            for a in range(3):
-                force[a] += (f[i, a] - m[i] * gravity[a]) / nsub
-        w = (s + 1.0) / nsub
-        for i in range(n):
-            if kind[i] == 0:
-                for a in range(3):
-                    v[i, a] = (v[i, a] + hs * f[i, a] / m[i]) * damp
-                    x[i, a] += hs * v[i, a]
-            elif kind[i] == 1:
-                for a in range(3):
-                    v[i, a] = 0.0
-        for q in range(sidx.size):
-            i = sidx[q]
-            for a in range(3):
-                x[i, a] = (1.0 - w) * s0[q, a] + w * s1[q, a]
-                v[i, a] = (s1[q, a] - s0[q, a]) / (hs * nsub)
+def _substeps(m, opt, d):
+    """One step of ``opt.substeps`` substeps: the list of stages."""
+    f = np.empty((d.x.shape[0], 3))
+    damp = 1.0 / (1.0 + opt.substep * m.viscosity)
+    d.forceps_force[:] = 0.0
+    for s in range(opt.substeps):
+        _load_gravity(m, f)
+        _spring_forces(m, opt, d, f, s)
+        _forceps_force(m, opt, d, f)
+        _integrate(m, opt, d, f, damp)
+        _move_scripted(m, opt, d, (s + 1.0) / opt.substeps)
 
 
 def _edges(triangles):
@@ -174,6 +252,7 @@ class Membrane:
     viscosity: float = 0.0
     rest_length: np.ndarray = field(init=False, repr=False)
     max_substep: float = field(init=False)
+    model: MembraneModel = field(init=False, repr=False)
 
     def __post_init__(self):
         rest = np.asarray(self.rest, dtype=np.float64)
@@ -229,6 +308,11 @@ class Membrane:
             ("tri_springs", np.asarray(self.tri_springs, np.int64).reshape(-1, 3)),
         ]:
             object.__setattr__(self, name, val)
+        model = MembraneModel(
+            m, kind, np.flatnonzero(kind == SCRIPTED), sp, L0, arrays["stiffness"], arrays["damping"],
+            arrays["tear_strain"], partner, g, float(self.viscosity),
+        )  # fmt: skip
+        object.__setattr__(self, "model", model)
 
     @property
     def scripted(self) -> np.ndarray:
@@ -270,47 +354,23 @@ class Membrane:
                     raise JassyError(f"script: expected finite positions of shape ({sidx.size}, 3)")
         nsub = max(1, math.ceil(h / self.max_substep))
         cap = self.springs.shape[0]
-        tid = np.empty(cap, np.int64)
-        ttime = np.empty(cap)
-        tpos = np.empty((cap, 3))
-        tstrain = np.empty(cap)
-        ntear = np.zeros(1, np.int64)
-        force = np.zeros(3)
-        _substeps(
-            state.x,
-            state.v,
-            self.masses,
-            self.kind,
-            self.springs,
-            self.rest_length,
-            self.stiffness,
-            self.damping,
-            self.tear_strain,
-            state.alive,
-            self.partner,
-            self.gravity,
-            float(self.viscosity),
-            h / nsub,
-            nsub,
-            float(state.time),
-            s0,
-            s1,
-            sidx,
-            tid,
-            ttime,
-            tpos,
-            tstrain,
-            ntear,
-            force,
+        tears = TearLog(
+            np.empty(cap, np.int64), np.empty(cap), np.empty((cap, 3)), np.empty(cap), np.zeros(1, np.int64)
         )
+        data = MembraneData(state.x, state.v, state.alive, s0, s1, tears, np.zeros(3))
+        _substeps(self.model, StepOptions(h / nsub, nsub, float(state.time)), data)
         state.time += h
-        state.forceps_force = force
+        state.forceps_force = data.forceps_force
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
             raise JassyError("h: the membrane went unstable (non-finite state)")
-        k = int(ntear[0])
         return [
-            Tear(float(ttime[q]), int(tid[q]), tuple(map(float, tpos[q])), float(tstrain[q]))
-            for q in range(k)
+            Tear(
+                float(tears.time[q]),
+                int(tears.spring[q]),
+                tuple(map(float, tears.position[q])),
+                float(tears.strain[q]),
+            )  # fmt: skip
+            for q in range(int(tears.count[0]))
         ]
 
 

@@ -1,0 +1,101 @@
+"""A C float32 modal loop compiled at benchmark time: the reference for ``jassy bench modal``.
+
+The source is the two-pole recursion of ugens.modal.resonate in float32, four samples per
+pass over the modes, built with the system ``cc`` (-O3 -march=native -ffast-math) into a
+temporary shared library and called through ctypes. No binary is shipped.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+FLAGS = ("-O3", "-march=native", "-ffast-math", "-shared", "-fPIC")
+
+SOURCE = r"""
+void modal_f32(const float *restrict force, float *restrict out, int n,
+               const float *restrict c1, const float *restrict c2, const float *restrict g,
+               float *restrict y1, float *restrict y2, int modes, float *restrict last)
+{
+    float fp = last[0];
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        float f0 = force[i], f1 = force[i + 1], f2 = force[i + 2], f3 = force[i + 3];
+        float s0 = 0.f, s1 = 0.f, s2 = 0.f, s3 = 0.f;
+        for (int k = 0; k < modes; k++) {
+            float p = c1[k], q = c2[k], gk = g[k], u1 = y1[k], u2 = y2[k];
+            float v0 = p * u1 - q * u2 + gk * fp;
+            float v1 = p * v0 - q * u1 + gk * f0;
+            float v2 = p * v1 - q * v0 + gk * f1;
+            float v3 = p * v2 - q * v1 + gk * f2;
+            y2[k] = v2;
+            y1[k] = v3;
+            s0 += v0; s1 += v1; s2 += v2; s3 += v3;
+        }
+        out[i] = s0; out[i + 1] = s1; out[i + 2] = s2; out[i + 3] = s3;
+        fp = f3;
+    }
+    for (; i < n; i++) {
+        float s = 0.f;
+        for (int k = 0; k < modes; k++) {
+            float v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp;
+            y2[k] = y1[k];
+            y1[k] = v;
+            s += v;
+        }
+        out[i] = s;
+        fp = force[i];
+    }
+    last[0] = fp;
+}
+"""
+
+
+def compile_modal_f32() -> tuple[Callable | None, str]:
+    """(the compiled function, a description) or (None, why not): no ``cc`` on the path, or
+    the compiler failed."""
+    cc = shutil.which("cc")
+    if cc is None:
+        return None, "no C compiler (cc) on PATH: C float32 reference skipped"
+    with tempfile.TemporaryDirectory(prefix="jassy-bench-") as tmp:
+        src, lib = Path(tmp) / "modal_f32.c", Path(tmp) / "modal_f32.so"
+        src.write_text(SOURCE)
+        run = subprocess.run(
+            [cc, *FLAGS, "-o", str(lib), str(src)], capture_output=True, text=True, timeout=60
+        )
+        if run.returncode != 0:
+            return None, f"cc failed ({run.stderr.strip()[:200]}): C float32 reference skipped"
+        fn = ctypes.CDLL(str(lib)).modal_f32  # stays mapped after the file is removed
+    ptr = ctypes.POINTER(ctypes.c_float)
+    fn.argtypes = [ptr, ptr, ctypes.c_int, ptr, ptr, ptr, ptr, ptr, ctypes.c_int, ptr]
+    fn.restype = None
+    return fn, f"cc {' '.join(FLAGS[:3])}"
+
+
+def c_runner(fn: Callable, force: np.ndarray, c1, c2, g) -> Callable[[], None]:
+    """A function that runs the compiled loop over ``force`` in one call (fresh state)."""
+    f32 = [np.ascontiguousarray(a, dtype=np.float32) for a in (force, c1, c2, g)]
+    force32, c1f, c2f, gf = f32
+    out = np.zeros_like(force32)
+    y1, y2, last = np.zeros_like(c1f), np.zeros_like(c1f), np.zeros(1, np.float32)
+    ptr = ctypes.POINTER(ctypes.c_float)
+
+    def p(a):
+        return a.ctypes.data_as(ptr)
+
+    args = (p(force32), p(out), force32.size, p(c1f), p(c2f), p(gf), p(y1), p(y2), c1f.size, p(last))
+
+    def run():
+        y1[:] = 0.0
+        y2[:] = 0.0
+        last[0] = 0.0
+        fn(*args)
+
+    run.output = out  # for checks
+    return run

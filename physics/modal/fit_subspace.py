@@ -1,0 +1,603 @@
+"""Subspace modal fit (work in progress, not yet behind `jassy fit`): modal models
+(frequencies, decay rates, gains) fitted to recordings of struck objects.
+
+Method: pooled subspace estimation (ESPRIT, :mod:`physics.modal.esprit`) at three time-
+frequency resolutions, each on what the previous ones left:
+
+1. **Strikes.** Onsets are detected (:mod:`physics.modal.strikes`); each hit lasts until the
+   next one. Clipped samples are left out of every least-squares fit, and each hit's
+   analysis starts after its last clipped sample.
+2. **Narrow bands** (200 Hz apart, 400 Hz wide, decimated to 1 kHz, the whole hit): slowly
+   decaying modes (d <= 40 /s), closely spaced pairs. Every hit and channel adds its Hankel
+   rows to one Gram matrix per band, so poles are pooled over all of them.
+3. **Wide bands** (2 kHz apart, the first 0.3 s of the hit minus the modes found so far):
+   modes of 20-800 /s, which are too broad and too short for a narrow band's filter.
+4. **Full rate** (the first 40 ms, minus everything found so far): modes up to several
+   thousand /s (wood, small objects, high frequencies), with no band filter in the way.
+5. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
+   linear least squares at the full rate (closed-form Gram matrix), minus what the previous
+   hits still ring; gain = |amplitude| at the onset.
+
+A band's model order is the number of Gram eigenvalues above the noise (the Marchenko-Pastur
+edge of the noise level measured in the spectrum), so a mode needs no spectral peak above a
+running median to be found: a broad fast mode and a mode in a dense cluster count alike.
+
+Gains are in the recording's units per unit impulse (the model struck with 1 N s at the
+recorded point reproduces the recording). The model keeps magnitudes only; the phases of a
+real strike (contact duration, propagation) are reported. The **attack** - the first hit's
+residual (recording minus modal resynthesis) over its first milliseconds, the contact and the
+unresolved high modes - is kept in the model (``ModalModel.attack``) and played with every
+strike (van den Doel, Kry & Pai 2001, "FoleyAutomatic", use the same residual excitation).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import warnings
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from jassy.errors import JassyError
+from jassy.modal_model import ModalModel
+from physics.modal import esprit
+from physics.modal.strikes import Hit, clipped_samples, detect_onsets, hits_of
+
+
+class Stage(NamedTuple):
+    """One resolution of the pole search: bands ``spacing`` Hz apart with a flat part of
+    ``spacing`` Hz and tapers to ``edge`` Hz from the centre (0 = full rate, no bands),
+    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s kept."""
+
+    name: str
+    spacing: float
+    edge: float
+    seconds: float
+    d_min: float
+    d_max: float
+
+
+#: Least energy of a mode relative to the noise variance per sample (matched filter SNR, 7 dB).
+MIN_SNR = 5.0
+
+STAGES = (
+    Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
+    Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
+    Stage("full rate", 0.0, 0.0, 0.04, 200.0, 6000.0),
+)
+
+
+class Segment(NamedTuple):
+    """The samples of one hit in one channel (from ``hit.first``), with what the fit needs."""
+
+    recording: int
+    channel: int
+    hit: Hit
+    x: np.ndarray
+    excluded: np.ndarray  # clipped sample indices relative to x
+    noise: np.ndarray  # noise |X_k|^2 level per bin of the segment's FFT (length n_fft // 2 + 1)
+    n_fft: int
+
+
+@dataclass
+class FitResult:
+    """A fitted model plus diagnostics (times in s from the start of each recording)."""
+
+    model: ModalModel
+    sample_rate: float
+    onsets: list[list[float]]
+    residual_db: list[float]
+    phases: np.ndarray
+    levels_db: np.ndarray
+    noise_db: float
+    notes: list[str] = field(default_factory=list)
+    attack: np.ndarray = field(default_factory=lambda: np.zeros(0))  # first hit's residual
+
+    @property
+    def onset(self) -> float:
+        """The first strike of the first recording (s)."""
+        return self.onsets[0][0]
+
+    def report(self) -> str:
+        m = self.model
+        hits = sum(len(o) for o in self.onsets)
+        lines = [
+            f"fitted {m.n_modes} modes from {hits} strike(s) in {len(self.onsets)} recording(s) at "
+            f"{self.sample_rate:g} Hz; {m.n_points} gain row(s)"
+            + (f"; attack {self.attack.size / self.sample_rate * 1e3:.1f} ms" if self.attack.size else ""),
+            "onsets (s): " + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in self.onsets),
+            "residual (recording - resynthesis, energy per hit and channel): "
+            + ", ".join(f"{r:.1f} dB" for r in self.residual_db),
+            f"{'#':>3} {'f (Hz)':>10} {'d (1/s)':>9} {'T60 (s)':>8} {'level dB':>8}  gains",
+        ]
+        for k in range(m.n_modes):
+            t60 = math.log(1000) / m.decays[k] if m.decays[k] > 0 else float("inf")
+            g = " ".join(f"{v:.4g}" for v in m.gains[:, k][:8]) + (" ..." if m.n_points > 8 else "")
+            f, d, lv = m.frequencies[k], m.decays[k], self.levels_db[k]
+            lines.append(f"{k:>3} {f:>10.2f} {d:>9.3f} {t60:>8.3f} {lv:>8.1f}  {g}")
+        lines.extend(self.notes)
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- noise
+
+
+def noise_floor(power: np.ndarray, bin_hz: float, span: float = 1000.0) -> np.ndarray:
+    """Noise level of every bin of a periodogram: the 20th percentile of blocks of ~20 Hz,
+    divided by ln(1/0.8) (|X|^2 of noise is exponentially distributed), then the lowest such
+    block within +-``span`` Hz (mode skirts lift percentiles, noise does not dip locally)."""
+    from scipy.ndimage import minimum_filter1d
+
+    block = max(int(round(20.0 / bin_hz)), 16)
+    n_blocks = max(power.size // block, 1)
+    q = np.percentile(power[: n_blocks * block].reshape(n_blocks, block), 20, axis=1) / 0.2231
+    q = minimum_filter1d(q, size=2 * max(int(span / (block * bin_hz)), 1) + 1, mode="nearest")
+    out = np.repeat(q, block)
+    return np.concatenate([out, np.full(power.size - out.size, q[-1])])
+
+
+# ----------------------------------------------------------------------------- poles
+
+
+class Pole(NamedTuple):
+    frequency: float  # Hz
+    decay: float  # 1/s
+
+
+def _z(poles: list[Pole], rate: float) -> np.ndarray:
+    f = np.array([p.frequency for p in poles])
+    d = np.array([p.decay for p in poles])
+    return np.exp((-d + 2j * np.pi * f) / rate)
+
+
+def _duplicate(p: Pole, poles: list[Pole]) -> bool:
+    """Within the half-power half-width of a pole already found (a leftover of subtracting it)."""
+    return any(abs(p.frequency - q.frequency) < max(0.5, (p.decay + q.decay) / (4 * np.pi)) for q in poles)
+
+
+def _band_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin) -> list[Pole]:
+    """Poles of one banded stage from the residual signals (one per segment)."""
+    keep_n = [min(r.size, int(stage.seconds * rate)) for r in residuals]
+    specs, n_ffts = [], []
+    for r, n in zip(residuals, keep_n, strict=True):
+        n_fft = 1 << int(math.ceil(math.log2(2 * max(n, 16))))
+        specs.append(np.fft.rfft(r[:n], n_fft))
+        n_ffts.append(n_fft)
+    trim_s = 4.0 / (stage.edge - stage.spacing / 2)  # the band filter's transients
+    out: list[Pole] = []
+    centres = np.arange(f_lo + stage.spacing / 2, f_hi + stage.spacing / 2, stage.spacing)
+    for centre in centres:
+        ys, noise = [], 0.0
+        for seg, spec, n_fft, n in zip(segments, specs, n_ffts, keep_n, strict=True):
+            # the noise of this segment at this stage's FFT size (|X|^2 scales with the length)
+            nb = np.interp(np.arange(spec.size) * rate / n_fft, np.arange(seg.noise.size) * rate / seg.n_fft,
+                           seg.noise) * n / seg.x.size  # fmt: skip
+            band = esprit.band_signal(spec, n_fft, n, rate, centre, stage.spacing / 2, stage.edge, nb)
+            trim = int(math.ceil(trim_s * band.rate))
+            if band.y.size > 2 * trim + 16:
+                ys.append(band.y[trim:-trim])
+                noise = max(noise, band.noise)
+        if not ys:
+            continue
+        shortest = min(y.size for y in ys)
+        width = int(np.clip(shortest // 3, 8, 160))
+        gram, rows = esprit.pooled_gram(ys, width)
+        if rows == 0:
+            continue
+        z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
+        brate = band.rate
+        # refine the poles in and next to the band (the others are filter edges and noise)
+        near = np.abs(np.angle(z) * brate / (2 * np.pi)) <= stage.edge
+        z, amps = esprit.refine(ys, brate, z[near])
+        for k, zk in enumerate(z):
+            f = centre + np.angle(zk) * brate / (2 * np.pi)
+            d = -math.log(abs(zk)) * brate
+            snr = max(_matched_snr(a[k], zk, y.size, noise) for a, y in zip(amps, ys, strict=True))
+            if (abs(f - centre) <= stage.spacing / 2 and f_lo <= f <= f_hi and stage.d_min <= d <= stage.d_max
+                    and snr >= MIN_SNR):  # fmt: skip
+                p = Pole(float(f), float(d))
+                if not _duplicate(p, out):
+                    out.append(p)
+    return out
+
+
+def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin) -> list[Pole]:
+    """Poles of damped sinusoids in the first ``stage.seconds`` of the residuals (real signals
+    at the full rate: each mode is a conjugate pair)."""
+    n = min(int(stage.seconds * rate), min(r.size for r in residuals))
+    if n < 64:
+        return []
+    ys = [r[:n].astype(np.complex128) for r in residuals]
+    width = int(min(n // 3, 320))
+    gram, rows = esprit.pooled_gram(ys, width)
+    noise = max(float(np.max(s.noise)) / s.x.size for s in segments)
+    z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
+    fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]
+    real = [r[:n] for r in residuals]
+    z, amps = esprit.refine(real, rate, z, real=True)
+    out = []
+    for k, zk in enumerate(z):
+        f = np.angle(zk) * rate / (2 * np.pi)
+        d = -math.log(abs(zk)) * rate
+        # a real sinusoid of amplitude |c| has |c|^2 / 2 the power of a complex one
+        snr = max(_matched_snr(a[k], zk, n, noise) / 2 for a in amps)
+        if f_lo <= f <= f_hi and stage.d_min < d <= stage.d_max and snr >= MIN_SNR:
+            out.append(Pole(float(f), float(d)))
+    return out
+
+
+def _matched_snr(c: complex, z: complex, n: int, noise: float) -> float:
+    """Energy of c z^m over m < n relative to the noise variance per sample."""
+    r2 = abs(z) ** 2
+    energy = abs(c) ** 2 * (n if abs(1 - r2) < 1e-12 else (1 - r2**n) / (1 - r2))
+    return energy / max(noise, 1e-300)
+
+
+# ----------------------------------------------------------------------------- amplitudes
+
+
+def _segment_amplitudes(segments: list[Segment], z: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(own, total) complex amplitudes per segment at its first sample: total = everything
+    ringing there; own = total minus the ringing of the previous hit of the same recording
+    and channel, propagated to this hit's start."""
+    own, total = [], []
+    prev: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
+    for seg in segments:
+        c = esprit.amplitudes(seg.x, z, seg.excluded)
+        key = (seg.recording, seg.channel)
+        mine = c.copy()
+        if key in prev:
+            start, c_prev = prev[key]
+            mine = c - c_prev * z ** (seg.hit.first - start)
+        prev[key] = (seg.hit.first, c)
+        own.append(mine)
+        total.append(c)
+    return own, total
+
+
+def _residuals(segments: list[Segment], z: np.ndarray, rate: float, seconds: float) -> list[np.ndarray]:
+    n_max = int(seconds * rate)
+    out = []
+    for seg in segments:
+        x = seg.x[:n_max]
+        if z.size:
+            c = esprit.amplitudes(x, z, seg.excluded[seg.excluded < x.size])
+            x = x - esprit.resynthesis(x.size, z, c)
+        out.append(x)
+    return out
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+def _as_channels(sig, k: int) -> np.ndarray:
+    x = np.asarray(sig, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2:
+        raise JassyError(f"recording {k}: expected a mono or multichannel signal (frames x channels)")
+    if not np.all(np.isfinite(x)):
+        raise JassyError(f"recording {k}: contains NaN or Inf")
+    return x
+
+
+class _Progress:
+    """A one-line progress bar on stderr (nothing when ``enabled`` is false)."""
+
+    def __init__(self, enabled: bool, total: int):
+        self.enabled, self.total, self.done = enabled, total, 0
+
+    def step(self, label: str) -> None:
+        self.done += 1
+        if self.enabled:
+            filled = int(30 * self.done / self.total)
+            sys.stderr.write(f"\rfit [{'#' * filled}{'.' * (30 - filled)}] {label:<14}")
+            sys.stderr.flush()
+            if self.done == self.total:
+                sys.stderr.write("\n")
+
+
+def fit_recordings(
+    signals,
+    sample_rate: float,
+    max_modes: int = 60,
+    f_min: float = 20.0,
+    f_max: float | None = None,
+    onset: float | None = None,
+    skip: float = 0.0,
+    duration: float | None = None,
+    name: str = "fit",
+    points: tuple[str, ...] = (),
+    locations: tuple[str, ...] | None = None,
+    margin: float = 4.0,
+    attack_ms: float = 20.0,
+    progress: bool = False,
+) -> FitResult:
+    """Fit one modal model to recordings (1-D arrays or frames x channels, or a list of them).
+
+    Poles are pooled over every hit and channel. Gains: one row per hit when ``locations``
+    names them (in order over all recordings; x channels as ``name:ch``); otherwise one row
+    per recording and channel (``points`` names the recordings), the hits' gains averaged
+    after scaling each hit to the loudest. ``skip`` (s) leaves out the contact after each
+    onset, ``duration`` (s) caps each hit, ``onset`` (s) gives a single strike's time instead
+    of detecting strikes. ``margin`` = how far a mode's Gram eigenvalue must exceed the noise
+    edge. Raises JassyError with one clear line for unusable input.
+    """
+    from physics.modal._blas import single_threaded
+
+    with warnings.catch_warnings(), np.errstate(all="ignore"), single_threaded():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _fit(signals, sample_rate, max_modes, f_min, f_max, onset, skip, duration, name, points,
+                    locations, margin, attack_ms, progress)  # fmt: skip
+
+
+def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, points, locations, margin,
+         attack_ms, progress) -> FitResult:  # fmt: skip
+    if not (rate > 0 and math.isfinite(rate)):
+        raise JassyError(f"sample rate: expected > 0 Hz, got {rate}")
+    if isinstance(signals, np.ndarray):
+        signals = [signals]
+    recs = [_as_channels(s, k) for k, s in enumerate(signals)]
+    f_hi = min(f_max or 20000.0, 0.49 * rate)
+    if f_hi <= f_min:
+        raise JassyError(f"--fmax: expected more than --fmin ({f_min:g} Hz) and below Nyquist, got {f_hi:g}")
+    notes: list[str] = []
+    segments: list[Segment] = []
+    onsets_s: list[list[float]] = []
+    for r, x in enumerate(recs):
+        mono = x.mean(axis=1)
+        if not np.any(mono != 0) and not np.any(x != 0):
+            raise JassyError(f"recording {r}: the signal is silent")
+        clipped = [clipped_samples(x[:, c]) for c in range(x.shape[1])]
+        n_clip = sum(c.size for c in clipped)
+        if n_clip:
+            notes.append(f"warning: recording {r}: {n_clip} clipped sample(s) left out of the fit")
+            print(notes[-1], file=sys.stderr)
+        all_clipped = np.unique(np.concatenate(clipped))
+        if onset is not None:
+            n0 = int(round(onset * rate))
+            if not 0 <= n0 < x.shape[0]:
+                raise JassyError(f"--onset: {onset:g} s is outside the recording ({x.shape[0] / rate:g} s)")
+            ons = [n0]
+        else:
+            ons = detect_onsets(mono, rate)
+            if not ons:
+                raise JassyError(f"recording {r}: no strike found (no sudden rise of the level)")
+        hits = hits_of(ons, x.shape[0], all_clipped, rate, skip)
+        onsets_s.append([h.onset / rate for h in hits])
+        for h in hits:
+            stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
+            if stop - h.first < int(0.02 * rate):
+                raise JassyError(
+                    f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
+                    f"({(stop - h.first) / rate * 1e3:.1f} ms after the onset; need >= 20 ms)"
+                )
+            for c in range(x.shape[1]):
+                seg_x = x[h.first : stop, c]
+                exc = clipped[c][(clipped[c] >= h.first) & (clipped[c] < stop)] - h.first
+                n_fft = 1 << int(math.ceil(math.log2(2 * seg_x.size)))
+                power = np.abs(np.fft.rfft(seg_x, n_fft)) ** 2
+                floor = noise_floor(power, rate / n_fft)
+                segments.append(Segment(r, c, h, seg_x, exc.astype(np.int64), floor, n_fft))
+    if locations is not None and len(locations) != sum(len(o) for o in onsets_s):
+        raise JassyError(
+            f"--locations: expected {sum(len(o) for o in onsets_s)} names (one per strike found at "
+            + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in onsets_s)
+            + f" s), got {len(locations)}"
+        )
+
+    bar = _Progress(progress, len(STAGES) + 2)
+    poles: list[Pole] = []
+    for stage in STAGES:
+        z = _z(poles, rate) if poles else np.zeros(0, dtype=complex)
+        res = _residuals(segments, z, rate, stage.seconds)
+        finder = _band_poles if stage.spacing else _full_rate_poles
+        new = finder(stage, res, segments, rate, f_min, f_hi, margin)
+        poles.extend(p for p in new if not _duplicate(p, poles))
+        bar.step(stage.name)
+    if not poles:
+        raise JassyError(
+            "fit: no decaying modes found above the noise; check the recording (a strike of a "
+            "resonant object), --fmin/--fmax or --onset"
+        )
+    poles.sort()
+    z = _z(poles, rate)
+    amps, totals = _segment_amplitudes(segments, z)
+    # a pole fitted to the skirt of a broad mode found later loses its amplitude to that
+    # mode in the joint fit: keep the poles that still stand out of the noise
+    snr = np.zeros(z.size)
+    for seg, c in zip(segments, totals, strict=True):
+        bins = np.clip((np.angle(z) / (2 * np.pi) * seg.n_fft).astype(int), 0, seg.noise.size - 1)
+        sigma2 = seg.noise[bins] / seg.x.size
+        snr = np.maximum(
+            snr, [_matched_snr(ck, zk, seg.x.size, s2) / 2 for ck, zk, s2 in zip(c, z, sigma2, strict=True)]
+        )
+    if np.any(snr < MIN_SNR):
+        poles = [p for p, ok in zip(poles, snr >= MIN_SNR, strict=True) if ok]
+        if not poles:
+            raise JassyError("fit: no decaying modes found above the noise; check the recording")
+        z = _z(poles, rate)
+        amps, totals = _segment_amplitudes(segments, z)
+    bar.step("amplitudes")
+    freqs = np.array([p.frequency for p in poles])
+    decays = np.array([p.decay for p in poles])
+    # referred to each hit's onset: c e^{s (t - t_first)} = (c e^{-s (first - onset)}) e^{s (t - t_onset)}
+    c0 = np.array([a * z ** -(s.hit.first - s.hit.onset) for a, s in zip(amps, segments, strict=True)])
+    mags = np.abs(c0)
+    energy = (mags**2).max(axis=0) / (4 * np.maximum(decays, 1e-3))
+    keep = np.sort(np.argsort(energy)[::-1][:max_modes])
+    freqs, decays, z, c0, mags, energy = (
+        freqs[keep],
+        decays[keep],
+        z[keep],
+        c0[:, keep],
+        mags[:, keep],
+        energy[keep],
+    )
+    amps, totals = [a[keep] for a in amps], [a[keep] for a in totals]
+
+    rows, names = _gain_rows(segments, mags, recs, locations, points)
+    residual = []
+    for seg, c in zip(segments, totals, strict=True):
+        own = np.delete(np.arange(seg.x.size), seg.excluded)
+        err = seg.x - esprit.resynthesis(seg.x.size, z, c)
+        residual.append(
+            10 * math.log10(max(np.sum(err[own] ** 2) / max(np.sum(seg.x[own] ** 2), 1e-300), 1e-30))
+        )
+    attack = _attack(segments[0], z, amps[0], rate, attack_ms)
+    bar.step("done")
+    levels = 10 * np.log10(energy / energy.max())
+    model = ModalModel(freqs, decays, rows, names, name)
+    noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
+    return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes, attack)
+
+
+def _gain_rows(segments, mags, recs, locations, points):
+    """(gain rows, row names): per hit (with locations) or per recording and channel."""
+    multi = any(x.shape[1] > 1 for x in recs)
+    if locations is not None:
+        hit_ids = sorted({(s.recording, s.hit.onset) for s in segments})
+        rows, names = [], []
+        for (r, n0), loc in zip(hit_ids, locations, strict=True):
+            for i, s in enumerate(segments):
+                if (s.recording, s.hit.onset) == (r, n0):
+                    rows.append(mags[i])
+                    names.append(f"{loc}:{s.channel}" if multi else loc)
+        return np.array(rows), tuple(names)
+    rows, names = [], []
+    for r, x in enumerate(recs):
+        for c in range(x.shape[1]):
+            idx = [i for i, s in enumerate(segments) if (s.recording, s.channel) == (r, c)]
+            g = mags[idx]
+            if len(idx) > 1:  # scale each hit to the loudest, then average
+                ref = g[int(np.argmax(np.sum(g**2, axis=1)))]
+                strong = ref >= 0.1 * ref.max()
+                scale = np.array([np.median(row[strong] / ref[strong]) for row in g])
+                g = g / np.maximum(scale, 1e-12)[:, None]
+            rows.append(g.mean(axis=0))
+            base = points[r] if r < len(points) else f"r{r}"
+            names.append(f"{base}:{c}" if multi else base)
+    if len(recs) == 1 and not multi and not points:
+        names = []
+    return np.array(rows), tuple(names)
+
+
+def _attack(seg: Segment, z: np.ndarray, c: np.ndarray, rate: float, attack_ms: float) -> np.ndarray:
+    """The first hit's residual from its onset over up to ``attack_ms`` (until it falls to the
+    noise), faded out over its last quarter: the contact and what no mode explains."""
+    if attack_ms <= 0:
+        return np.zeros(0)
+    n = int(attack_ms * 1e-3 * rate)
+    # from the onset (the clipped/contact samples before ``first`` included), modes back-propagated
+    lead = seg.hit.first - seg.hit.onset
+    x = seg.x[: max(n - lead, 0)]
+    res = x - esprit.resynthesis(x.size, z, c)
+    sigma = math.sqrt(float(np.median(seg.noise)) / seg.x.size)
+    hop = max(int(rate / 2000), 1)
+    env = (
+        np.array([np.max(np.abs(res[i : i + hop])) for i in range(0, res.size, hop)])
+        if res.size
+        else np.zeros(0)
+    )
+    loud = np.flatnonzero(env > 4 * sigma)
+    if loud.size == 0:
+        return np.zeros(0)
+    m = min(res.size, (loud[-1] + 1) * hop)
+    out = res[:m].copy()
+    fade = max(m // 4, 1)
+    out[m - fade :] *= 0.5 + 0.5 * np.cos(np.linspace(0, np.pi, fade))
+    return out
+
+
+# ----------------------------------------------------------------------------- resynthesis, files
+
+
+def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0.0, row: int = 0,
+                 phases=None, attack=None) -> np.ndarray:  # fmt: skip
+    """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt)
+    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus ``attack`` samples
+    (e.g. ``FitResult.attack``, at the same rate) from the onset."""
+    t = np.arange(n) / sample_rate - onset
+    live = t >= 0
+    tt = t[live]
+    out = np.zeros(n)
+    ph = np.zeros(model.n_modes) if phases is None else np.asarray(phases)
+    for k in range(model.n_modes):
+        out[live] += (
+            model.gains[row, k]
+            * np.exp(-model.decays[k] * tt)
+            * np.sin(2 * np.pi * model.frequencies[k] * tt + ph[k])
+        )
+    if attack is not None and attack.size:
+        i0 = int(np.argmax(live)) if live.any() else n
+        m = min(attack.size, n - i0)
+        out[i0 : i0 + m] += attack[:m]
+    return out
+
+
+def read_recording(path: str | os.PathLike) -> tuple[np.ndarray, float]:
+    """(float64 samples, frames x channels, sample rate) of an audio file soundfile reads."""
+    import soundfile as sf
+
+    if not os.path.isfile(path):
+        raise JassyError(f"{path}: no such recording")
+    try:
+        data, rate = sf.read(str(path), dtype="float64", always_2d=True)
+    except Exception as exc:  # soundfile raises RuntimeError / LibsndfileError
+        raise JassyError(f"{path}: cannot read audio ({exc})") from None
+    if data.shape[0] == 0:
+        raise JassyError(f"{path}: the recording is empty")
+    return data, float(rate)
+
+
+def fit_files(paths, **kwargs) -> FitResult:
+    """:func:`fit_recordings` on audio files (all at the same sample rate)."""
+    sigs, rates = [], []
+    for p in paths:
+        x, r = read_recording(p)
+        sigs.append(x)
+        rates.append(r)
+    if len(set(rates)) > 1:
+        raise JassyError(f"recordings: expected one sample rate, got {sorted(set(rates))}")
+    kwargs.setdefault("points", tuple(os.path.splitext(os.path.basename(str(p)))[0] for p in paths))
+    return fit_recordings(sigs, rates[0], **kwargs)
+
+
+def plot_fit(result: FitResult, recording: np.ndarray, path: str | os.PathLike, row: int = 0) -> None:
+    """Spectrograms of the recording (first channel), the resynthesis of its first strike
+    (fitted phases, with the attack) and their difference."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise JassyError(
+            "--plot: matplotlib is not installed (pip install 'jassy[plot]' or pip install matplotlib)"
+        ) from None
+    from scipy.signal import spectrogram
+
+    rate = result.sample_rate
+    x = np.asarray(recording, dtype=np.float64)
+    x = x[:, 0] if x.ndim == 2 else x
+    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row], attack=result.attack)
+    nper = 1024 if rate > 30000 else 512
+    fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, sharey=True)
+    ref = None
+    for ax, sig, title in zip(
+        axes, (x, y, x - y), ("recording", "resynthesis", "residual (recording - resynthesis)"), strict=True
+    ):
+        f, t, s = spectrogram(sig, rate, nperseg=nper, noverlap=nper * 3 // 4)
+        db = 10 * np.log10(s + 1e-20)
+        ref = db.max() if ref is None else ref
+        mesh = ax.pcolormesh(t, f, db, vmin=ref - 90, vmax=ref, shading="auto", cmap="magma")
+        ax.set_title(title)
+        ax.set_ylabel("Hz")
+    axes[-1].set_xlabel("s")
+    fig.colorbar(mesh, ax=axes, label="dB")
+    fig.savefig(str(path), dpi=110)
+    plt.close(fig)

@@ -1,0 +1,60 @@
+"""Building blocks of the subspace modal fit (physics.modal.esprit, physics.modal.strikes):
+pooled ESPRIT exact on noise-free damped exponentials, closed-form least-squares amplitudes
+against a dense solve, strike onsets and clipped samples on signals made here."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physics.modal import esprit
+from physics.modal.strikes import clipped_samples, detect_onsets
+
+RATE = 48000
+
+
+def test_esprit_is_exact_without_noise():
+    """Two damped complex exponentials, two signals with different amplitudes (pooled)."""
+    s_true = np.array([-3.0 + 2j * np.pi * 40.0, -10.0 - 2j * np.pi * 120.0])
+    z_true = np.exp(s_true / 1000.0)
+    n = np.arange(300)
+    ys = [
+        (np.asarray(a)[None, :] * z_true[None, :] ** n[:, None]).sum(axis=1)
+        for a in ([1.0, 0.3j], [0.2, -1.0])
+    ]
+    gram, rows = esprit.pooled_gram(ys, 40)
+    z = esprit.esprit_poles(gram, rows, noise=1e-8, margin=4.0, max_order=10)
+    assert z.size == 2
+    np.testing.assert_allclose(np.sort_complex(np.log(z) * 1000), np.sort_complex(s_true), rtol=1e-8)
+
+
+def test_amplitudes_closed_form_gram_matches_dense_least_squares():
+    rng = np.random.default_rng(0)
+    z = np.exp((-np.array([2.0, 50.0, 400.0]) + 2j * np.pi * np.array([300.0, 310.0, 5000.0])) / RATE)
+    n = np.arange(4000)
+    x = rng.standard_normal(n.size)
+    excluded = np.array([3, 4, 5, 100])
+    keep = np.setdiff1d(n, excluded)
+    basis = np.hstack([(z[None, :] ** n[:, None]).real, -(z[None, :] ** n[:, None]).imag])[keep]
+    coef = np.linalg.lstsq(basis, x[keep], rcond=None)[0]
+    np.testing.assert_allclose(esprit.amplitudes(x, z, excluded), coef[:3] + 1j * coef[3:], rtol=1e-6)
+
+
+def test_onsets_of_strikes_over_a_ringing_tail_and_clipping():
+    t = np.arange(3 * RATE) / RATE
+    x = np.zeros(t.size)
+    onsets = [0.05, 1.1, 2.3]
+    for t0, a in zip(onsets, [1.0, 0.5, 0.7], strict=True):
+        tt = np.clip(t - t0, 0, None)
+        x += (
+            (t >= t0)
+            * a
+            * (
+                np.exp(-0.5 * tt) * np.sin(2 * np.pi * 200 * tt)
+                + 0.3 * np.exp(-300 * tt) * np.sin(2 * np.pi * 7000 * tt)
+            )
+        )
+    x += 1e-4 * np.random.default_rng(1).standard_normal(t.size)
+    found = np.array(detect_onsets(x, RATE)) / RATE
+    np.testing.assert_allclose(found, onsets, atol=0.001)
+    assert clipped_samples(x).size == 0
+    assert clipped_samples(np.clip(x, -0.8, 0.8)).size > 10
