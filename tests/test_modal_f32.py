@@ -140,3 +140,6 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     z = np.zeros(5)
     resonate(force, ref, force.size, c1, c2, s, z, z.copy(), z.copy(), 5, np.zeros(1))
     assert error_db(run.output.astype(np.float64), ref) < -60.0
+    # loading the -ffast-math library must not switch the process to flush-to-zero
+    tiny = np.finfo(np.float64).smallest_subnormal
+    assert np.float64(tiny) * np.float64(3.0) / np.float64(2.0) > 0.0
