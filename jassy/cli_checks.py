@@ -214,9 +214,14 @@ def signals_stop() -> Iterator[_Stop]:
         yield stop
         return
 
+    from jassy import stopflag
+
     def handler(signum, frame):
         stop.signal = signum
+        stopflag.requested.set()
         raise KeyboardInterrupt
+
+    stopflag.requested.clear()
 
     saved = {}
     for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
@@ -227,3 +232,4 @@ def signals_stop() -> Iterator[_Stop]:
     finally:
         for sig, previous in saved.items():
             signal.signal(sig, previous)
+        stopflag.requested.clear()

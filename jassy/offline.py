@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from jassy import stopflag
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
@@ -128,6 +129,7 @@ class OfflineEngine:
         try:
             done = 0
             while done < frames:
+                stopflag.check()  # a SIGTERM whose KeyboardInterrupt was lost still stops here
                 n = min(size, frames - done)
                 self.produce(buf, n)
                 a, h = abuf[:, :n], hbuf[:, :n]

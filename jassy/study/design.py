@@ -694,6 +694,12 @@ def _read_conditions_file(path: Path, where: str) -> list[dict[str, Any]]:
             raise DesignError(str(exc)) from None
         if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
             raise DesignError(f"{path}: condition: expected [[condition]] tables")
+        for i, row in enumerate(rows):
+            for key, value in row.items():
+                if isinstance(value, (list, dict)):
+                    raise DesignError(
+                        f"{path}: condition[{i}].{key}: expected a string or a number, got {value!r}"
+                    )
         return rows
     if path.suffix != ".csv":
         raise DesignError(f"{where}: conditions: expected a .csv or .toml file, got {path.name}")
@@ -728,6 +734,11 @@ def _parse_conditions(data, study, where, base, stimulus) -> list[Condition]:
     for key, levels in factors.items():
         if not isinstance(levels, list) or not levels:
             raise DesignError(f"{where}: factors: {key}: expected a non-empty list of levels")
+        for level in levels:
+            if isinstance(level, (list, dict)):
+                raise DesignError(
+                    f"{where}: factors: {key}: expected levels that are strings or numbers, got {level!r}"
+                )
         if any(key in r for r in rows):
             raise DesignError(f"{where}: factors: {key}: also a column of the conditions file")
     crossed = [
