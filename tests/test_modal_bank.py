@@ -170,10 +170,11 @@ def test_silent_modes_are_zeroed_and_skipped():
     assert not np.any((y != 0) & (np.abs(y) < np.finfo(float).tiny))  # no subnormal output
 
 
-def test_state_save_and_restore_continues_identically():
+@pytest.mark.parametrize("precision", ["float64", "mixed"])
+def test_state_save_and_restore_continues_identically(precision):
     model = spread_model(8)
     x = np.random.default_rng(0).standard_normal(FS)
-    bank = ModalBank(model, name="bank")(ArraySource(x))
+    bank = ModalBank(model, name="bank", precision=precision)(ArraySource(x))
     from jassy import OfflineEngine
 
     eng = OfflineEngine(Graph(bank), [], FS, 64, limiter=False)

@@ -106,22 +106,6 @@ def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(bl
     assert error_db(y, ref) < -60.0
 
 
-def test_mixed_state_save_and_restore_continues_identically():
-    from jassy import OfflineEngine
-
-    model = spread_model(8)
-    x = np.random.default_rng(0).standard_normal(FS)
-    bank = ModalBank(model, name="bank", precision="mixed")(ArraySource(x))
-    eng = OfflineEngine(Graph(bank), [], FS, 64, limiter=False)
-    eng.render(0.25)
-    saved = bank.get_state()
-    a = eng.render(0.25).audio
-    bank.set_state(saved)
-    eng.scheduler.frame -= int(0.25 * FS)
-    b = eng.render(0.25).audio
-    np.testing.assert_array_equal(a, b)
-
-
 def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
