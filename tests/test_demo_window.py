@@ -113,6 +113,11 @@ def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp
     assert np.all(near_start | near_end), "pixels changed where the probe never was"
     green = [np.all(shot[:HEIGHT, :WIDTH] == (64, 255, 128), axis=2) for shot in arrows]
     below = [np.nonzero(g) for g in green]
+    # the arrow hangs down from the contact point, which the +-3 mm wiggle moves by a few px
     assert any(
-        ys.size > 20 and np.all(np.abs(xs - end[0]) < 8) and np.all(ys >= end[1] - 1) for ys, xs in below
+        ys.size > 20
+        and np.all(np.abs(xs - end[0]) < 10)
+        and np.all(ys >= end[1] - 10)
+        and ys.max() - ys.min() >= 5
+        for ys, xs in below
     )
