@@ -272,6 +272,18 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     )
 
 
+#: The ``level`` of a ugen whose own modal resonator is heard (Friction, HuntCrossleyImpact).
+HEARD_LEVEL = ParamSpec(
+    "str",
+    "raw",
+    choices=("raw", "calibrated"),
+    fixed=True,
+    doc="'raw': the heard output in the model's gain units (m for finite-element models); "
+    "'calibrated': times the model's reference gain, the scale of a calibrated ModalBank "
+    "(a 1e-3 N s, 1 ms strike at the loudest point peaks at -18 dBFS; jassy.levels)",
+)
+
+
 class ModelParams:
     """Validation of a ``model`` param (a ModalModel) and a ``location`` param (checked
     against the model), for ugens that own a modal resonator. With ``driving_point``,
@@ -279,6 +291,13 @@ class ModelParams:
     or gains that are all >= 0)."""
 
     driving_point = False
+
+    def level_gain(self) -> float:
+        """The factor of the heard output: the model's reference gain when the ``level``
+        param is 'calibrated', else 1."""
+        if self.values.get("level") != "calibrated":
+            return 1.0
+        return reference_gain(self.model, self.sample_rate)
 
     def __init__(self, *sources: UGen, name: str | None = None, where: str | None = None, **params: Any):
         """The model may also be given as the first positional argument."""
@@ -384,9 +403,7 @@ class ModalBank(ModelParams, UGen):
         self._size_input = self.sources.get("size")
         self._size = 1.0  # the fragment size of the current design
         model = self.model
-        self._level_gain = (
-            reference_gain(model, self.sample_rate) if self.values["level"] == "calibrated" else 1.0
-        )
+        self._level_gain = self.level_gain()
         self.order = np.argsort(model.decays, kind="stable")
         self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
         self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
