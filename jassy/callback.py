@@ -58,8 +58,9 @@ from jassy.program import (
 )
 from jassy.safety import CEILING, limit, release_coefficient
 from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
 from ugens.filters import Biquad, design_biquad
-from ugens.impact import ImpactForce, pulse_sum
+from ugens.impact import ImpactForce
 from ugens.mix import Gain
 from ugens.modal import ModalBank
 from ugens.scrape import ResonantScrape, Scrape
@@ -600,7 +601,7 @@ class CallbackRenderer:
                 out.extend(self._set_records(target, base_t, frame, "location", location, True, None))
                 self._pending = len(out)
         tau = event.args.get("duration") or node.values["duration"]
-        samples = max(tau * self.sample_rate, 2.0)
+        samples = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
         amp = event.args["impulse"] * self.sample_rate / pulse_sum(sample_time, samples)
         out.append([frame, base, STRIKE, sample_time, samples, amp])
         return out
