@@ -106,3 +106,13 @@ def calibrated(model: ModalModel, sample_rate: float = 48000.0) -> ModalModel:
         model.frequencies, model.decays, model.gains, model.points, model.name, model.source, gain,
         model.driving,
     )  # fmt: skip
+
+
+#: Reference sound pressure of dB SPL (Pa).
+P_REF = 20e-6
+
+
+def spl_db(pressure: float) -> float:
+    """Sound pressure level (dB re 20 uPa) of a pressure in Pa (an RMS or a peak value); a
+    SoundPressure node's output x is at spl_db(|x|) + full_scale_spl - 93.98 dB."""
+    return 20.0 * float(np.log10(pressure / P_REF))

@@ -67,7 +67,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
-from ugens.modal import ModelParams
+from ugens.modal import HEARD_LEVEL, ModelParams
 
 # hammer array: position x_h, velocity v_h, compression x_n at the current instant, force of
 # the last sample (not yet applied to the stored mode states), energy E_n, active flag,
@@ -433,7 +433,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
     SDT impact~ (Avanzini & Rocchesso, DAFx 2001), Marhefka & Orin (1999) form; energy-
     consistent discretisation (exact modal steps under a held force, discrete-gradient
     force: Chatziioannou & van Walstijn, JSV 2015). Main output: displacement at the
-    model's pickup (m, signed gains); ``contact``: contact displacement (m, driving-point
+    model's pickup (m, signed gains; times the model's reference gain with ``level =
+    "calibrated"``, the scale of a calibrated ModalBank); ``contact``: contact displacement (m, driving-point
     gains); ``force``: contact force (N); ``energy``: E of hammer + modes + contact (J).
     """
 
@@ -468,6 +469,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
             unit="m",
             doc="mode amplitude below which a silent mode is zeroed (only once the hammer has left)",
         ),
+        "level": HEARD_LEVEL,
     }
     actions = {
         "strike": {
@@ -504,6 +506,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.signed = model.driving is not None  # heard through the signed gains
         self.heard_coef = np.zeros((6, k))
         self.heard_state = np.zeros((2, k))
+        self._level_gain = self.level_gain()
         self._design()
         self._run = specialise(
             hc_run_substeps,
@@ -529,7 +532,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         v, model, o = self.values, self.model, self.order
         gains = model.driving_at(v["location"])[o]
         if self.signed:
-            signed = model.gains_at(v["location"])[o]
+            signed = model.gains_at(v["location"])[o] * self._level_gain
             self.heard_coef[:] = design(model.frequencies[o], model.decays[o], signed, self.sample_rate)[:6]
         for coef, prm, rate in ((self.coef, self.prm, self.sample_rate),
                                 (self.coef_sub, self.prm_sub, self.sample_rate * SUBSTEPS)):  # fmt: skip
@@ -635,7 +638,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
     def process(self, start: int, n: int) -> None:
         self._contact(start, n)
         if not self.signed:
-            self.out[:n] = self.extra["contact"][:n]
+            np.multiply(self.extra["contact"][:n], self._level_gain, out=self.out[:n])
         elif self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:  # the loop's modes fell silent
             self.out[:n] = 0.0
             self.heard_state[:] = 0.0
