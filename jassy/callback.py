@@ -44,6 +44,7 @@ from jassy.graph import Graph
 from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import drop_stale_cache
+from jassy.memlock import resident
 from jassy.program import (
     KERNEL_MODULES,
     RECORD,
@@ -106,9 +107,10 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     BUSY_TOTAL_NS,
     BUFFER_NS,
     BUSY_OVER,
-) = range(38)
+    BUSY_MAX_AT,
+) = range(39)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_OVER + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_MAX_AT + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -348,6 +350,7 @@ def program_callback(inp, out, frames, time_info, status, user):
     control[BUSY_TOTAL_NS] += busy
     if busy > control[BUSY_MAX_NS]:
         control[BUSY_MAX_NS] = busy
+        control[BUSY_MAX_AT] = control[CALLBACKS]
     if busy > control[BUFFER_NS]:
         control[BUSY_OVER] += 1
     if control[TAP_LOG] != 0:  # the haptic samples and this buffer's DAC time, for the UDP sender
@@ -437,6 +440,7 @@ class CallbackStats(NamedTuple):
     busy_max: float  # s: the longest callback (rendering included)
     busy_mean: float  # s
     busy_over: int  # callbacks that took longer than a buffer lasts
+    busy_max_at: int  # which callback was the longest (1 = the first)
 
 
 class EventQueue:
@@ -557,6 +561,15 @@ class CallbackRenderer:
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played
 
+    def memory(self) -> list[np.ndarray]:
+        """Every array the callback reads or writes (to keep resident: jassy.memlock)."""
+        arrays = [array for group in self.program._arrays.values() for array in group]
+        arrays += [self.program.table, self.graph.bus, self.rows, self.control, self.stage]
+        arrays += [self.params, self.limiter, self.haptic_last, self.levels, self.monitor_signal]
+        arrays += [self.monitor_index, self.priority, self.timespec]
+        arrays += [self.score_queue.records, self.now_queue.records]
+        return arrays + [staging for staging, _ in self._staging.values()]
+
     # --------------------------------------------------------------- translation
     def frame(self) -> int:
         """The next frame the callback renders."""
@@ -664,6 +677,7 @@ class CallbackRenderer:
             c[BUSY_MAX_NS] * 1e-9,
             c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
             int(c[BUSY_OVER]),
+            int(c[BUSY_MAX_AT]),
         )
 
     def levels_now(self) -> np.ndarray:
@@ -698,6 +712,7 @@ class CallbackPlayer:
         self.renderer = renderer
         self.stream = None
         self.device_latency = 0.0
+        self.resident = (0, 0)  # bytes of the callback's memory locked, only faulted in
         self._stop = threading.Event()
         self._feeder: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -708,6 +723,7 @@ class CallbackPlayer:
         r = self.renderer
         horizon = int(HORIZON * r.sample_rate)
         r.feed(horizon)
+        self.resident = resident(r.memory())
         self.stream = portaudio.OutputStream(
             portaudio.default_output_device() if device is None else device,
             r.channels,

@@ -357,7 +357,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
         result = bench.live_bench(
-            seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring, mode=args.mode
+            seconds=args.seconds or 60.0,
+            block=args.block,
+            ring_blocks=args.ring,
+            mode=args.mode,
+            floor=args.floor,
         )
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
@@ -570,6 +574,11 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["auto", "callback", "ring"],
         default="auto",
         help="live: engine mode (default auto)",
+    )
+    p.add_argument(
+        "--floor",
+        action="store_true",
+        help="live: then as long a run of a callback writing silence (the host's own underruns)",
     )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")

@@ -56,6 +56,7 @@ from jassy.hapticsender import (
     child_setup,
     run_sender,
 )
+from jassy.memlock import resident
 from jassy.offline import OfflineEngine
 from jassy.scheduler import validate_event
 
@@ -347,6 +348,7 @@ class LiveEngine:
         from jassy.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
+        resident([self._memory])  # the rings, monitor and tap the callbacks write
         if self._haptic_udp is not None:  # forked first: before PortAudio runs in this process
             self._sender = multiprocessing.get_context("fork").Process(
                 target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
