@@ -90,7 +90,8 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
 @register
 class SoundPressure(UGen):
     """Sound pressure at ``distance`` m from a body of ``radius`` m (a pulsating sphere) whose
-    surface moves with the input (velocity in m/s, or displacement in m). Output: the
+    surface moves with the input (velocity in m/s, or displacement in m; or a source's own
+    pressure in Pa at distance ``radius``, only spread). Output: the
     pressure re ``full_scale_spl`` (default 1.0 = 105 dB SPL re 20 uPa, 3.56 Pa). Kinsler et
     al., Fundamentals of Acoustics (2000), sec. 7.4."""
 
