@@ -87,6 +87,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if not args.quiet:
+        from jassy.startup import first_run_notice
+
+        first_run_notice(lambda line: print(line, file=sys.stderr, flush=True))
     if args.normalise and args.patch in SCENES:
         raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
     if args.target is not None and not args.normalise:
@@ -379,11 +383,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         def say(message: str) -> None:
             print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
 
+        from physics.rigid.pile_bench import bench_piles, print_piles
+
         rows = bench_rigid(quick=args.quick, progress=say)
+        piles = bench_piles((10, 100) if args.quick else (100, 1000), progress=say)
         say("solvers: ABA, Lemke, PGS")
         solvers = bench_solvers(quick=args.quick)
-        print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
-            print_rigid(rows), print_solvers(solvers))  # fmt: skip
+        print(json.dumps({"world": rows, "mujoco": piles, "solvers": solvers}, indent=2)) if args.json else (
+            print_rigid(rows), print_piles(piles), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
         from physics.deform.bench import bench_deform, print_deform
         from physics.deform.cataract_bench import bench_cataract, print_cataract
@@ -403,6 +410,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             dfcp = bench_dfcp()
         print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
+    if args.name == "startup":
+        from jassy.startup import bench_startup, print_startup
+
+        scenes = ("bell",) if args.quick else ("bell", "wok")
+        rows = bench_startup(
+            scenes, progress=lambda m: print(f"bench startup: {m} ...", file=sys.stderr, flush=True)
+        )
+        print(json.dumps(rows, indent=2)) if args.json else print_startup(rows)
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -557,14 +572,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod"],
+        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "startup"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
         "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom; "
         "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
-        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts",
+        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
+        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok)",
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
@@ -584,6 +600,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
 
+    p = sub.add_parser("warm", help="compile the numba kernels of scenes ahead of their first render")
+    p.add_argument("scenes", nargs="*", default=["bell", "wok"], help="patches or scenes (default: bell wok)")
+    p.add_argument("--jobs", type=int, help="scenes compiled at once (default: one per core)")
+    p.set_defaults(func=_cmd_warm)
+
     p = sub.add_parser("rod", help="run a 2D-rod experiment (prints JSON)")
     p.add_argument("name", help="experiment name (see 'jassy rod list')")
     p.add_argument("--plot", metavar="PNG", help="also write a plot")
@@ -593,6 +614,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_limit_options(sub)
     return parser
+
+
+def _cmd_warm(args: argparse.Namespace) -> int:
+    from jassy.startup import warm
+
+    if args.jobs is not None and args.jobs < 1:
+        raise JassyError(f"--jobs: expected a whole number >= 1, got {args.jobs}")
+    for name in args.scenes:  # an unknown name fails here, in one line, before any compiling
+        if name not in SCENES:
+            from jassy.patchfile import load_patch
+
+            load_patch(name, (), ())
+    return 1 if warm(args.scenes, args.jobs) else 0
 
 
 def _cmd_rod(args: argparse.Namespace) -> int:

@@ -68,6 +68,15 @@ def test_displacement_input_is_differentiated_and_full_scale_rescales():
     assert SoundPressure.param_specs["full_scale_spl"].default == 105.0
 
 
+def test_a_pressure_input_is_spread_as_one_over_r_without_filtering():
+    """Explosion-like sources give Pa at a reference distance (radius): heard at distance r
+    the pressure is p radius / r at every frequency."""
+    for freq in (50.0, 5000.0):
+        assert steady_amplitude(freq, input_kind="pressure", radius=2.0, distance=8.0) == pytest.approx(
+            0.25, rel=1e-9
+        )
+
+
 def test_spl_of_one_pascal_rms_is_94_db():
     assert spl_db(1.0) == pytest.approx(20 * math.log10(1 / P_REF))
     assert spl_db(P_REF) == pytest.approx(0.0)

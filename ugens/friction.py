@@ -64,6 +64,13 @@ bowed-string.toml the slip lasts 16 % of the period, Helmholtz motion's ideal be
 bowing point, 12 %); sigma1 = 0.02 and sigma2 = 0.01
 N s/m stay far below 2 Z, so the Stribeck drop, not viscosity, shapes the motion.
 Location changes during a render take effect at once (the gains jump; the state is kept).
+
+Regimes (measured map: examples/friction_regimes.py). A mode sings when the friction force
+falls with slip speed around the operating point, i.e. for slip speeds up to a few
+``stribeck`` speeds: faster, the force is flat (Coulomb) and the contact slides silently.
+More force raises the level until, at low speed, the contact sticks too long and the motion
+turns raucous or moves to a lower mode; too little force for the speed gives several slips
+per period (higher partials): Schelleng's diagram for the bowed string.
 """
 
 from __future__ import annotations

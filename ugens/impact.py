@@ -45,7 +45,8 @@ def render_pulses(out, start, n, pulses, count):
     end = start + n
     for p in range(count):
         if pulses[p, 0] + pulses[p, 1] > end:
-            pulses[kept, :] = pulses[p, :]
+            for c in range(3):  # element-wise: a row slice copy compiles numba's shape-error text
+                pulses[kept, c] = pulses[p, c]
             kept += 1
     return kept
 

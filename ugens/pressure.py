@@ -20,7 +20,9 @@ Input: the surface velocity in m/s (``input_kind = "velocity"``), or a displacem
 (``"displacement"``: differentiated by the first difference (x[n] - x[n-1]) fs, whose
 magnitude is 2 sin(omega T / 2) / T, within 0.2 dB of omega up to 5 kHz at 48 kHz). The
 finite-element models of the object library have displacement gains (m per N s), the
-plate models velocity gains (m/s per N s). Output: p divided by the pressure of
+plate models velocity gains (m/s per N s). A source that already radiates a pressure (in Pa
+at distance ``radius`` from it: ``input_kind = "pressure"``, e.g. Explosion's pressure at its
+own listener with radius = distance) is only spread, p radius / distance. Output: p divided by the pressure of
 ``full_scale_spl`` (dB re 20 uPa), by default 105 dB SPL (3.56 Pa, the cinema reference:
 pink noise at -20 dB re full scale plays at 85 dB SPL), so a level in dB re full scale plus
 105 is the sound pressure level at the listening distance; ``full_scale_spl = 93.98`` gives
@@ -88,7 +90,8 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
 @register
 class SoundPressure(UGen):
     """Sound pressure at ``distance`` m from a body of ``radius`` m (a pulsating sphere) whose
-    surface moves with the input (velocity in m/s, or displacement in m). Output: the
+    surface moves with the input (velocity in m/s, or displacement in m; or a source's own
+    pressure in Pa at distance ``radius``, only spread). Output: the
     pressure re ``full_scale_spl`` (default 1.0 = 105 dB SPL re 20 uPa, 3.56 Pa). Kinsler et
     al., Fundamentals of Acoustics (2000), sec. 7.4."""
 
@@ -104,8 +107,9 @@ class SoundPressure(UGen):
             doc="listening distance r from the centre (>= radius): pressure falls as 1/r",
         ),
         "input_kind": ParamSpec(
-            "str", "velocity", choices=("velocity", "displacement"), fixed=True,
-            doc="what the input is: surface velocity (m/s) or displacement (m, differentiated)",
+            "str", "velocity", choices=("velocity", "displacement", "pressure"), fixed=True,
+            doc="the input: surface velocity (m/s), displacement (m, differentiated) or a pressure "
+            "(Pa) at distance `radius` from the source, spread as 1/r to `distance`",
         ),
         "density": ParamSpec(
             "float", AIR_DENSITY, low=1e-3, high=2e4, unit="kg/m^3", fixed=True, doc="density of the medium"
@@ -128,16 +132,19 @@ class SoundPressure(UGen):
             )
         self.coef = pressure_coefficients(v["radius"], v["distance"], v["density"], v["c"], self.sample_rate)
         self.differentiate = float(self.sample_rate) if v["input_kind"] == "displacement" else 0.0
+        self.spreading = v["radius"] / v["distance"] if v["input_kind"] == "pressure" else None
         self.state = np.zeros(3)
 
     def _reset(self) -> None:
         self.state[:] = 0.0
 
     def process(self, start: int, n: int) -> None:
-        radiate_pressure(
-            self.sources["input"].out, self.out, n, self.coef, self.state, self.differentiate,
-            1.0 / (P_REF * 10.0 ** (self.values["full_scale_spl"] / 20.0)),
-        )  # fmt: skip
+        scale = 1.0 / (P_REF * 10.0 ** (self.values["full_scale_spl"] / 20.0))
+        source = self.sources["input"].out
+        if self.spreading is not None:  # already a pressure: spherical spreading only
+            np.multiply(source[:n], self.spreading * scale, out=self.out[:n])
+            return
+        radiate_pressure(source, self.out, n, self.coef, self.state, self.differentiate, scale)
 
     def state_arrays(self):
         return {"state": self.state, "coef": self.coef}
