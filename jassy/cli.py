@@ -314,7 +314,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"  {name:<12} {module}.{function}")
     print("ugens:")
     for name, cls in ugen_types().items():
-        params = ", ".join(cls.param_specs)
+        params = ", ".join(cls.all_specs())  # with the common `smooth`
         actions = ", ".join(cls.actions)
         extra = f"; actions: {actions}" if actions else ""
         print(f"  {name:<14} {_first_line(cls.__doc__)}")
