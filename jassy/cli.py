@@ -21,19 +21,9 @@ from jassy.cli_checks import (
 )
 from jassy.errors import JassyError
 from jassy.offline import OFFLINE_BLOCK
+from patches.scenes import SCENES
 
 DEFAULT_RATE = 48000
-
-
-#: Built-in scenes that run physics before rendering: name -> (module, function). The
-#: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
-SCENES = {
-    "drill": ("patches.drill", "render_drill"),
-    "wok": ("patches.wok", "render_wok"),
-    "drop": ("patches.drop", "render_drop"),
-    "poke": ("patches.poke", "render_poke"),
-    "archery": ("patches.archery", "render_archery"),
-}
 
 
 def _render_scene(args: argparse.Namespace) -> int:
