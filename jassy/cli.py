@@ -21,19 +21,9 @@ from jassy.cli_checks import (
 )
 from jassy.errors import JassyError
 from jassy.offline import OFFLINE_BLOCK
+from patches.scenes import SCENES
 
 DEFAULT_RATE = 48000
-
-
-#: Built-in scenes that run physics before rendering: name -> (module, function). The
-#: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
-SCENES = {
-    "drill": ("patches.drill", "render_drill"),
-    "wok": ("patches.wok", "render_wok"),
-    "drop": ("patches.drop", "render_drop"),
-    "poke": ("patches.poke", "render_poke"),
-    "archery": ("patches.archery", "render_archery"),
-}
 
 
 def _render_scene(args: argparse.Namespace) -> int:
@@ -143,10 +133,14 @@ def _cmd_render(args: argparse.Namespace) -> int:
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
     if not args.quiet:
+        from jassy.levels import spl_summary
+
         peak_db = 20 * math.log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
         print(
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
-            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
+            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS"
+            + ("" if args.normalise else spl_summary(patch.graph.audio, peak_db))
+            + f", rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
             + (
                 f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
@@ -314,7 +308,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"  {name:<12} {module}.{function}")
     print("ugens:")
     for name, cls in ugen_types().items():
-        params = ", ".join(cls.param_specs)
+        params = ", ".join(cls.all_specs())  # with the common `smooth`
         actions = ", ".join(cls.actions)
         extra = f"; actions: {actions}" if actions else ""
         print(f"  {name:<14} {_first_line(cls.__doc__)}")

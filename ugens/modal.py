@@ -163,6 +163,9 @@ def flush_silent(y1, y2, active, floor):
     return last
 
 
+#: Longest ring-out (s, to -60 dB) of a mode that a retune moves to or above Nyquist.
+LEAVING_FADE = 1e-3
+
 #: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
@@ -586,6 +589,7 @@ class ModalBank(ModelParams, UGen):
             self._span(self._input.out, self.out, start, n)
             return
         inp, out, pending, done, k = self._input.out, self.out, self._pending, 0, 0
+        kinks = []  # (frame offset, end correction) of the retunes
         while True:
             at_event = pending[0][0] - start if pending and pending[0][0] < start + n else n
             at_size = sizes[k] if k < len(sizes) else n
@@ -596,13 +600,15 @@ class ModalBank(ModelParams, UGen):
                 self._span(inp[done:], out[done:], start + done, at - done)
                 done = at
             if at_size <= at_event:
-                self._retune(float(self._size_input.out[at_size]))
+                kinks.append((at_size, self._retune(float(self._size_input.out[at_size]))))
                 k += 1
             else:
                 frame, key, value, jump, ramp = pending.popleft()
                 self.set_param(key, value, jump=jump, ramp=ramp)
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
+        for at, correction in kinks:
+            out[at] += correction
 
     def _size_changes(self, n: int) -> np.ndarray:
         """Offsets in this block where the size input differs from the size before it."""
@@ -612,33 +618,67 @@ class ModalBank(ModelParams, UGen):
         prev[1:] = s[:-1]
         return np.flatnonzero((s != prev) & (s > 0.0))
 
-    def _retune(self, size: float) -> None:
-        """Jump to the design for fragment size ``size``, keeping every ringing mode's
-        amplitude and phase: y[n] = A R^n sin(n theta + phi) continues with the new
-        R and theta from the same (A, phi) at the last output sample."""
+    def _retune(self, size: float) -> float:
+        """Retune to fragment size ``size`` from the next frame n0 on, keeping every
+        ringing mode's amplitude and phase: frame n0 still rings at the old tuning (it
+        hears the force sample before it with the old gain), and y = A R^k sin(k theta +
+        phi) continues from the same (A, phi) at n0 with the new R and theta.
+
+        Returns the end correction for frame n0. The retune bends each mode's waveform
+        there (its slope jumps, its value does not); sampled as it is, that kink folds its
+        1/f^2 spectrum about Nyquist as a sampled impulse response does (see
+        :func:`direct_ratio`), a broadband error that dense events (crumpling) repeat
+        hundreds of times a second. The correction is the direct gain's counterpart for a
+        kink: per unit slope jump (per sample), the bank's direct gain per unit initial
+        slope of a mode, K / theta with K = (d / g) R sin theta (1/12 for ``"taylor"``),
+        for the sine part of the jump (A cos phi, initial slope theta) and the cosine
+        part (A sin phi, initial slope -delta, delta = -ln R). A mode moved to or above
+        Nyquist rings out at its old pole, damped to -60 dB within LEAVING_FADE s (cutting
+        it would be a step)."""
         if size == self._size:
-            return
+            return 0.0
         self._settle()
-        c1, c2 = self.coef[0].copy(), self.coef[1].copy()
+        c1, c2, g_old = self.coef[0].copy(), self.coef[1].copy(), self.coef[2].copy()
+        poles = self._pole_design()[0]
+        kink_old = poles[3] * poles[2]
         self._size = size
         self._refresh_design_cache()
         self.target[:] = self._fresh
         self.coef[:] = self._fresh
         self.meta[1] = 0
         self._ramping = False
-        y1, y2 = self.y
-        old, new = c2 > 0.0, self.coef[1] > 0.0
+        kink_new = self._poles[1][3] * self._poles[1][2]
+        old = c2 > 0.0
         r = np.sqrt(np.where(old, c2, 1.0))
         cos_t = np.where(old, c1 / (2.0 * r), 1.0)
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 1e-24))
-        a_sin = y1  # A sin(phi) at the last sample
-        a_cos = (y1 * cos_t - r * y2) / sin_t  # A cos(phi)
-        r_new = np.sqrt(np.where(new, self.coef[1], 1.0))
-        cos_n = np.where(new, self.coef[0] / (2.0 * r_new), 1.0)
-        sin_n = np.sqrt(np.maximum(1.0 - cos_n * cos_n, 0.0))
-        keep = old & new
-        y2[:] = np.where(keep, (a_sin * cos_n - a_cos * sin_n) / r_new, 0.0)
-        y1[:] = np.where(keep, y1, 0.0)
+        leaving = old & (self.coef[1] <= 0.0)
+        if leaving.any():
+            shrink = np.minimum(1.0, np.exp(-np.log(1000.0) / (LEAVING_FADE * self.sample_rate)) / r)
+            self.coef[0] = np.where(leaving, c1 * shrink, self.coef[0])
+            self.coef[1] = np.where(leaving, c2 * shrink * shrink, self.coef[1])
+            kink_new = np.where(leaving, kink_old, kink_new)
+        self.target[:] = self.coef
+        keep = old & (self.coef[1] > 0.0)
+        r_new = np.sqrt(np.where(keep, self.coef[1], 1.0))
+        cos_n = np.where(keep, self.coef[0] / (2.0 * r_new), 1.0)
+        sin_n = np.sqrt(np.maximum(1.0 - cos_n * cos_n, 1e-24))
+        y1, y2 = self.y
+        fp = self.last[0]
+        # complex state Z = A R^k e^{i (k theta + phi)}, y = Im Z; a force sample F enters
+        # a step as Z <- p (Z + F g / (R sin theta)), p = R e^{i theta}
+        pole = r * (cos_t + 1j * sin_t)
+        pole_new = r_new * (cos_n + 1j * sin_n)
+        z = (y1 * cos_t - r * y2) / sin_t + 1j * y1  # at the last output sample
+        z0 = pole * (z + fp * g_old / (r * sin_t))  # frame n0 at the old tuning
+        virtual = z0 / pole_new - fp * self.coef[2] / (r_new * sin_n)  # new tuning's state before n0
+        y1[:] = np.where(keep, virtual.imag, 0.0)
+        y2[:] = np.where(keep, (virtual / pole_new).imag, 0.0)
+        theta, theta_new = np.arctan2(sin_t, cos_t), np.arctan2(sin_n, cos_n)
+        delta, delta_new = -np.log(r), -np.log(r_new)
+        sine = kink_new - kink_old
+        cosine = delta_new * kink_new / theta_new - delta * kink_old / theta
+        return float(np.sum(np.where(keep, z0.real * sine - z0.imag * cosine, 0.0)))
 
     def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""

@@ -89,9 +89,11 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
 
 @register
 class SoundPressure(UGen):
-    """Sound pressure at ``distance`` m from a body of ``radius`` m (a pulsating sphere) whose
-    surface moves with the input (velocity in m/s, or displacement in m; or a source's own
-    pressure in Pa at distance ``radius``, only spread). Output: the
+    """Sound pressure at a listening distance from a vibrating body, re a full scale in dB SPL.
+
+    The body is a pulsating sphere of ``radius`` m heard at ``distance`` m, its surface moving
+    with the input (velocity in m/s, or displacement in m; or a source's own pressure in Pa
+    at distance ``radius``, only spread). Output: the
     pressure re ``full_scale_spl`` (default 1.0 = 105 dB SPL re 20 uPa, 3.56 Pa). Kinsler et
     al., Fundamentals of Acoustics (2000), sec. 7.4."""
 
