@@ -156,7 +156,7 @@ def score(truth: Truth, model, min_level_db: float = 10.0) -> dict:
 def bench_fit(cases: int = 40, seed0: int = 1000, verbose: bool = False) -> dict:
     """Fit ``cases`` random recordings (1-5 strikes, locations given) and the speed case (a
     10 s recording of five strikes of 40 modes); return totals and timings (CPU s)."""
-    from physics.modal.fit_subspace import fit_recordings
+    from physics.modal.fit import fit_recordings
 
     tot = {"counted": 0, "found": 0, "decay_ok": 0, "gain_ok": 0}
     residuals, cpu = [], []
