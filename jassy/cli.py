@@ -399,6 +399,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             dfcp = bench_dfcp()
         print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
+    if args.name == "fit":
+        from physics.modal._blas import single_threaded
+        from physics.modal.fit_bench import bench_fit, print_fit
+
+        with single_threaded():
+            result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
+        print(json.dumps(result, indent=2)) if args.json else print_fit(result)
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -553,14 +560,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod"],
+        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "fit"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
         "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom; "
         "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
-        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts",
+        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
+        "fit: jassy fit's recall and errors on random synthetic recordings, and its speed",
     )
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")

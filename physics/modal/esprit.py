@@ -38,7 +38,7 @@ def band_signal(spectrum, n_fft, n_valid, rate, centre, flat, edge, noise_bins) 
     """Band of the zero-padded spectrum ``spectrum`` (length ``n_fft`` complex FFT of a real
     signal of ``n_valid`` samples at ``rate``): flat gain 1 within ``flat`` Hz of ``centre``,
     cosine taper to 0 at ``edge`` Hz, decimated to about 2.5 x edge samples/s. ``noise_bins``
-    = the noise |X_k|^2 level for every bin (used only inside the flat part)."""
+    = the noise |X_k|^2 level for every bin (its median over the flat part is the band's)."""
     bin_hz = rate / n_fft
     kc = int(round(centre / bin_hz))
     half = int(math.ceil(edge / bin_hz))
@@ -57,7 +57,7 @@ def band_signal(spectrum, n_fft, n_valid, rate, centre, flat, edge, noise_bins) 
     y = np.fft.ifft(sub) * (size / n_fft)
     n_sub = int(n_valid * size / n_fft)
     flat_k = ks[inside & (dist <= flat_bins)]
-    level = float(np.max(noise_bins[flat_k])) if flat_k.size else 0.0
+    level = float(np.median(noise_bins[flat_k])) if flat_k.size else 0.0
     return Band(y[:n_sub], size * bin_hz, kc * bin_hz, level * size / n_fft**2)
 
 

@@ -231,7 +231,8 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     ys = [r[:n].astype(np.complex128) for r in residuals]
     width = int(min(n // 3, 320))
     gram, rows = esprit.pooled_gram(ys, width)
-    noise = max(float(np.max(s.noise)) / s.x.size for s in segments)
+    # the broadband noise level (a broad mode lifts the floor of the bins around it)
+    noise = max(float(np.median(s.noise)) / s.x.size for s in segments)
     z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
     fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
     z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]

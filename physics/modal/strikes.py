@@ -94,13 +94,14 @@ def detect_onsets(x: np.ndarray, rate: float, rise_db: float = 12.0, floor_db: f
 
 def hits_of(onsets: list[int], n: int, clipped: np.ndarray, rate: float, skip: float) -> list[Hit]:
     """Hits from onsets: each lasts until the next onset; its fit starts ``skip`` s after the
-    onset and after the last clipped sample within the first 50 ms of the hit."""
+    onset and after the hit's last clipped sample (the poles are estimated from unclipped
+    samples only)."""
     hits = []
     for i, n0 in enumerate(onsets):
         end = onsets[i + 1] if i + 1 < len(onsets) else n0 + (n - n0)
         end = min(end, n)
         first = n0 + int(round(skip * rate))
-        near = clipped[(clipped >= n0) & (clipped < min(end, n0 + int(0.05 * rate)))]
+        near = clipped[(clipped >= n0) & (clipped < end)]
         if near.size:
             first = max(first, int(near[-1]) + 1)
         hits.append(Hit(n0, min(first, end), end))
