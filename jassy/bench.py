@@ -349,13 +349,20 @@ def _busy_python(seconds: float) -> int:
 
 
 def live_bench(
-    seconds: float = 60.0, n_modes: int = 5000, block: int = 64, ring_blocks: float = 2.5, mode: str = "auto"
+    seconds: float = 60.0,
+    n_modes: int = 5000,
+    block: int = 64,
+    ring_blocks: float = 2.5,
+    mode: str = "auto",
+    floor: bool = False,
 ) -> dict:
     """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
-    the main thread does heavy Python work; the mode (callback or ring), underruns,
-    latency and audio-haptic skew at a tap's onset (measured on the frames the callback
-    handed to the device)."""
-    from jassy.jackserver import dummy_jack
+    the main thread does heavy Python work; the mode (callback or ring), underruns (and
+    jackd's late cycles by cause), latency and audio-haptic skew at a tap's onset
+    (measured on the frames the callback handed to the device). ``floor``: then as long a
+    run of a callback that only writes silence (jassy.bench_floor): the underruns the
+    host causes on its own."""
+    from jassy.jackserver import dummy_jack, server_xruns
     from jassy.live import LiveEngine
     from ugens.impact import ImpactForce
     from ugens.mix import Gain, Mixer
@@ -388,7 +395,7 @@ def live_bench(
     from jassy.hapticframes import FrameRecorder
 
     recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
-    with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2):
+    with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2) as server:
         live = LiveEngine(
             graph,
             score,
@@ -401,7 +408,9 @@ def live_bench(
             send_log_frames=int(seconds * 1000) + 1000,
         )
         live.start()
+        before = server_xruns(server.log)
         _busy_python(seconds)
+        late = server_xruns(server.log)
         stats = live.stop()
         busy = live.callback_stats() if stats.mode == "callback" else None
         recorder.wait_final()
@@ -414,6 +423,10 @@ def live_bench(
     first_played = stats.frames_played - heard.shape[1]  # the stream frame of heard[:, 0]
     silent_from = first_played + int(np.argmax(rendered >= int((quiet_at + 1.5) * SAMPLE_RATE)))
     haptic.update(udp_tap(frames, heard, first_played, silent_from, first_played + audio_on))
+    if floor:
+        from jassy.bench_floor import floor_run
+
+        haptic.update(floor_run(seconds, SAMPLE_RATE, block, _busy_python))
     return {
         "seconds": seconds,
         "modes": n_modes,
@@ -424,9 +437,12 @@ def live_bench(
         "underrun_callbacks": stats.underrun_callbacks,
         "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
         "device_underflows": stats.device_underflows,
+        "server_driver_xruns": late.driver - before.driver,
+        "server_client_xruns": late.client - before.client,
         "callback_busy_max_ms": busy.busy_max * 1e3 if busy else None,
         "callback_busy_mean_ms": busy.busy_mean * 1e3 if busy else None,
         "callbacks_longer_than_a_buffer": busy.busy_over if busy else None,
+        "longest_callback_index": busy.busy_max_at if busy else None,
         "realtime": stats.realtime,
         "latency_ms": stats.latency * 1e3,
         "ring_ms": stats.ring_latency * 1e3,
@@ -506,5 +522,15 @@ def print_live(r: dict) -> None:
         f"  position in -> force out: median {r['position_to_force_p50_samples']:.0f} samples, max "
         f"{r['position_to_force_max_samples']:.0f} ({r['loop_presses']} presses, {r['loop_missed']} missed, "
         f"{r['loop_mode']} mode; "
-        f"engine latency {r['loop_engine_latency_samples']:.0f})"
+        f"engine latency {r['loop_engine_latency_samples']:.0f})\n"
+        f"  jackd's late cycles: {r['server_driver_xruns']} of its own timer, "
+        f"{r['server_client_xruns']} waiting for a client"
+        + (
+            f"\n  floor (a callback writing silence, {r['floor_seconds']:.0f} s, same server settings and "
+            f"busy main thread): {r['floor_callbacks']} callbacks, {r['floor_underruns']} underruns; "
+            f"jackd's late cycles: {r['floor_driver_xruns']} of its own timer, "
+            f"{r['floor_client_xruns']} waiting for a client"
+            if "floor_underruns" in r
+            else ""
+        )
     )

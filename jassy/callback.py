@@ -44,6 +44,7 @@ from jassy.graph import Graph
 from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import drop_stale_cache
+from jassy.memlock import resident
 from jassy.program import (
     KERNEL_MODULES,
     RECORD,
@@ -57,8 +58,9 @@ from jassy.program import (
 )
 from jassy.safety import CEILING, limit, release_coefficient
 from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
 from ugens.filters import Biquad, design_biquad
-from ugens.impact import ImpactForce, pulse_sum
+from ugens.impact import ImpactForce
 from ugens.mix import Gain
 from ugens.modal import ModalBank
 from ugens.scrape import ResonantScrape, Scrape
@@ -105,9 +107,10 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     BUSY_TOTAL_NS,
     BUFFER_NS,
     BUSY_OVER,
-) = range(38)
+    BUSY_MAX_AT,
+) = range(39)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_OVER + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_MAX_AT + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -347,6 +350,7 @@ def program_callback(inp, out, frames, time_info, status, user):
     control[BUSY_TOTAL_NS] += busy
     if busy > control[BUSY_MAX_NS]:
         control[BUSY_MAX_NS] = busy
+        control[BUSY_MAX_AT] = control[CALLBACKS]
     if busy > control[BUFFER_NS]:
         control[BUSY_OVER] += 1
     if control[TAP_LOG] != 0:  # the haptic samples and this buffer's DAC time, for the UDP sender
@@ -436,6 +440,7 @@ class CallbackStats(NamedTuple):
     busy_max: float  # s: the longest callback (rendering included)
     busy_mean: float  # s
     busy_over: int  # callbacks that took longer than a buffer lasts
+    busy_max_at: int  # which callback was the longest (1 = the first)
 
 
 class EventQueue:
@@ -555,6 +560,25 @@ class CallbackRenderer:
         self._next_score = 0
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played
+        self._warm_posts()
+
+    def _warm_posts(self) -> None:
+        """Translate (and drop) a silent impact on every ImpactForce node: the first
+        translation loads the pulse kernel, milliseconds that would otherwise delay the
+        first live tap after the stream starts."""
+        for node in self.graph.order:
+            if isinstance(node, ImpactForce):
+                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
+                self.records(validate_event(self.graph, silent, "warm-up"), 0.0, self.now_queue)
+
+    def memory(self) -> list[np.ndarray]:
+        """Every array the callback reads or writes (to keep resident: jassy.memlock)."""
+        arrays = [array for group in self.program._arrays.values() for array in group]
+        arrays += [self.program.table, self.graph.bus, self.rows, self.control, self.stage]
+        arrays += [self.params, self.limiter, self.haptic_last, self.levels, self.monitor_signal]
+        arrays += [self.monitor_index, self.priority, self.timespec]
+        arrays += [self.score_queue.records, self.now_queue.records]
+        return arrays + [staging for staging, _ in self._staging.values()]
 
     # --------------------------------------------------------------- translation
     def frame(self) -> int:
@@ -587,7 +611,7 @@ class CallbackRenderer:
                 out.extend(self._set_records(target, base_t, frame, "location", location, True, None))
                 self._pending = len(out)
         tau = event.args.get("duration") or node.values["duration"]
-        samples = max(tau * self.sample_rate, 2.0)
+        samples = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
         amp = event.args["impulse"] * self.sample_rate / pulse_sum(sample_time, samples)
         out.append([frame, base, STRIKE, sample_time, samples, amp])
         return out
@@ -663,6 +687,7 @@ class CallbackRenderer:
             c[BUSY_MAX_NS] * 1e-9,
             c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
             int(c[BUSY_OVER]),
+            int(c[BUSY_MAX_AT]),
         )
 
     def levels_now(self) -> np.ndarray:
@@ -697,6 +722,7 @@ class CallbackPlayer:
         self.renderer = renderer
         self.stream = None
         self.device_latency = 0.0
+        self.resident = (0, 0)  # bytes of the callback's memory locked, only faulted in
         self._stop = threading.Event()
         self._feeder: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -707,6 +733,7 @@ class CallbackPlayer:
         r = self.renderer
         horizon = int(HORIZON * r.sample_rate)
         r.feed(horizon)
+        self.resident = resident(r.memory())
         self.stream = portaudio.OutputStream(
             portaudio.default_output_device() if device is None else device,
             r.channels,

@@ -21,19 +21,9 @@ from jassy.cli_checks import (
 )
 from jassy.errors import JassyError
 from jassy.offline import OFFLINE_BLOCK
+from patches.scenes import SCENES
 
 DEFAULT_RATE = 48000
-
-
-#: Built-in scenes that run physics before rendering: name -> (module, function). The
-#: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
-SCENES = {
-    "drill": ("patches.drill", "render_drill"),
-    "wok": ("patches.wok", "render_wok"),
-    "drop": ("patches.drop", "render_drop"),
-    "poke": ("patches.poke", "render_poke"),
-    "archery": ("patches.archery", "render_archery"),
-}
 
 
 def _render_scene(args: argparse.Namespace) -> int:
@@ -87,6 +77,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
+    if not args.quiet:
+        from jassy.startup import first_run_notice
+
+        first_run_notice(lambda line: print(line, file=sys.stderr, flush=True))
     if args.normalise and args.patch in SCENES:
         raise JassyError(f"--normalise: physics scenes ({', '.join(SCENES)}) are not normalised; use a gain")
     if args.target is not None and not args.normalise:
@@ -139,10 +133,14 @@ def _cmd_render(args: argparse.Namespace) -> int:
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
     if not args.quiet:
+        from jassy.levels import spl_summary
+
         peak_db = 20 * math.log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
         print(
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
-            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
+            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS"
+            + ("" if args.normalise else spl_summary(patch.graph.audio, peak_db))
+            + f", rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
             + (
                 f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
@@ -310,7 +308,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"  {name:<12} {module}.{function}")
     print("ugens:")
     for name, cls in ugen_types().items():
-        params = ", ".join(cls.param_specs)
+        params = ", ".join(cls.all_specs())  # with the common `smooth`
         actions = ", ".join(cls.actions)
         extra = f"; actions: {actions}" if actions else ""
         print(f"  {name:<14} {_first_line(cls.__doc__)}")
@@ -357,7 +355,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
     if args.name == "live":
         result = bench.live_bench(
-            seconds=args.seconds or 60.0, block=args.block, ring_blocks=args.ring, mode=args.mode
+            seconds=args.seconds or 60.0,
+            block=args.block,
+            ring_blocks=args.ring,
+            mode=args.mode,
+            floor=args.floor,
         )
         print(json.dumps(result, indent=2) if args.json else "", end="")
         if not args.json:
@@ -375,11 +377,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         def say(message: str) -> None:
             print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
 
+        from physics.rigid.pile_bench import bench_piles, print_piles
+
         rows = bench_rigid(quick=args.quick, progress=say)
+        piles = bench_piles((10, 100) if args.quick else (100, 1000), progress=say)
         say("solvers: ABA, Lemke, PGS")
         solvers = bench_solvers(quick=args.quick)
-        print(json.dumps({"world": rows, "solvers": solvers}, indent=2)) if args.json else (
-            print_rigid(rows), print_solvers(solvers))  # fmt: skip
+        print(json.dumps({"world": rows, "mujoco": piles, "solvers": solvers}, indent=2)) if args.json else (
+            print_rigid(rows), print_piles(piles), print_solvers(solvers))  # fmt: skip
     if args.name == "deform":
         from physics.deform.bench import bench_deform, print_deform
         from physics.deform.cataract_bench import bench_cataract, print_cataract
@@ -411,6 +416,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2)) if args.json else print_anytime(result)
         if args.plot:
             plot_anytime(result, args.plot)
+    if args.name == "startup":
+        from jassy.startup import bench_startup, print_startup
+
+        scenes = ("bell",) if args.quick else ("bell", "wok")
+        rows = bench_startup(
+            scenes, progress=lambda m: print(f"bench startup: {m} ...", file=sys.stderr, flush=True)
+        )
+        print(json.dumps(rows, indent=2)) if args.json else print_startup(rows)
     if args.name == "modal":
         counts = (64, 1024) if args.quick else (64, 1024, 16384)
         rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -565,7 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "anytime"],
+        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "startup", "anytime"],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
@@ -573,6 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
         "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
         "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
+        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok); "
         "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok)",
     )
     p.add_argument("--plot", metavar="PNG", help="anytime: plot the error against the budget")
@@ -585,9 +599,19 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         help="live: engine mode (default auto)",
     )
+    p.add_argument(
+        "--floor",
+        action="store_true",
+        help="live: then as long a run of a callback writing silence (the host's own underruns)",
+    )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser("warm", help="compile the numba kernels of scenes ahead of their first render")
+    p.add_argument("scenes", nargs="*", default=["bell", "wok"], help="patches or scenes (default: bell wok)")
+    p.add_argument("--jobs", type=int, help="scenes compiled at once (default: one per core)")
+    p.set_defaults(func=_cmd_warm)
 
     p = sub.add_parser("rod", help="run a 2D-rod experiment (prints JSON)")
     p.add_argument("name", help="experiment name (see 'jassy rod list')")
@@ -598,6 +622,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_limit_options(sub)
     return parser
+
+
+def _cmd_warm(args: argparse.Namespace) -> int:
+    from jassy.startup import warm
+
+    if args.jobs is not None and args.jobs < 1:
+        raise JassyError(f"--jobs: expected a whole number >= 1, got {args.jobs}")
+    for name in args.scenes:  # an unknown name fails here, in one line, before any compiling
+        if name not in SCENES:
+            from jassy.patchfile import load_patch
+
+            load_patch(name, (), ())
+    return 1 if warm(args.scenes, args.jobs) else 0
 
 
 def _cmd_rod(args: argparse.Namespace) -> int:

@@ -78,8 +78,11 @@ def _table(rows: list[tuple[str, ...]], heads: tuple[str, ...], markdown: bool) 
     if markdown:
         out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
         return out + [
-            "| " + " | ".join(f"`{r[0]}`" if i == 0 else c for i, c in enumerate(r)) + " |" for r in rows
-        ]
+            "| "
+            + " | ".join(f"`{r[0]}`" if i == 0 else c.replace("|", "\\|") for i, c in enumerate(r))
+            + " |"
+            for r in rows
+        ]  # a literal | inside a cell (the choices of a str parameter) would split it
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(heads)]
     widths[-1] = 0  # the description runs on
     fmt = "  " + "  ".join(f"{{:<{w}}}" for w in widths)

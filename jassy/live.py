@@ -56,8 +56,10 @@ from jassy.hapticsender import (
     child_setup,
     run_sender,
 )
+from jassy.memlock import resident
 from jassy.offline import OfflineEngine
 from jassy.scheduler import validate_event
+from ugens.impact import ImpactForce
 
 HEADER, STATE, DATA_OFFSET_F32 = 32, 128, 256  # int64 slots, float64 slots, first float32 slot
 CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, FLAGS = range(9)
@@ -247,8 +249,10 @@ class LiveEngine:
     is available and PortAudio is not yet loaded in this process.
 
     mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
-    latency = the device's); "ring" uses the producer above; "auto" takes the callback
-    where the graph, score and options allow it (``mode_reason`` says why not otherwise).
+    latency = the device's); "ring" uses the producer above; "auto" (the default) takes
+    the callback where the graph, score and options allow it (``mode_reason`` says why
+    not otherwise): it never has fewer frames of latency, and its underruns on a loaded
+    machine are the host's own (see ``jassy bench live --floor``).
     """
 
     def __init__(
@@ -267,7 +271,7 @@ class LiveEngine:
         isolation: str = "auto",
         haptic_torque: int = 0,
         send_log_frames: int = 0,
-        mode: str = "ring",
+        mode: str = "auto",
     ):
         if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
@@ -347,6 +351,7 @@ class LiveEngine:
         from jassy.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
+        resident([self._memory])  # the rings, monitor and tap the callbacks write
         if self._haptic_udp is not None:  # forked first: before PortAudio runs in this process
             self._sender = multiprocessing.get_context("fork").Process(
                 target=self._sender_main, args=(os.getpid(),), name="jassy-haptic-udp", daemon=True
@@ -605,6 +610,10 @@ class LiveEngine:
         kinds = {}
         for event in self.score:
             kinds.setdefault((event.node, event.action, event.ramp is None), event)
+        for node in self.graph.order:  # live taps: posted, so not in the score
+            if isinstance(node, ImpactForce):
+                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
+                kinds.setdefault((node.name, "impact", True), silent)
         split = 1.5 * self.block / self.sample_rate
         rehearsal = [replace(event, time=split) for event in kinds.values()]
         warm = OfflineEngine(

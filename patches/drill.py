@@ -1,9 +1,10 @@
 """Drilling: the burr-bone haptic simulation (physics.burr) driving a DrillSource into bone.
 
-The seed's reference experiment (Agus et al., seed 001 "Fitting parameters to experimental
-data"): a spinning burr descends vertically at constant force into a phantom; the 1 kHz
-haptic loop gives the force on the burr, the depth and the removed mass; its DrillTrack
-(normal force, removal rate, rotation speed) drives a DrillSource whose force excites a
+The experiment with which Agus et al. fit their burr parameters to measurements
+("Physics-based burr haptic simulation: tuning and evaluation", HAPTICS 2004): a spinning burr
+descends vertically at constant force into a phantom; the 1 kHz haptic loop gives the force on
+the burr, the depth and the removed mass; its DrillTrack (normal force, removal rate, rotation
+speed) drives a DrillSource whose force excites a
 bone-like ModalModel (a few dozen heavily damped modes), mixed with the handpiece whine.
 
 ``render_drill(out_wav, haptic_path=None, csv_path=None, duration=6.0, **options)`` writes

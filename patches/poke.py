@@ -82,12 +82,15 @@ def run_experiment(duration: float = 4.0, radius: float = 0.05, probe_radius: fl
                    rate: float = 1000.0, mask_radius: float = 0.0, cache_dir=None):  # fmt: skip
     """Build (or load) the ball's Green's functions and run the demo gesture. Returns
     (PokeResult, GreensFunctions)."""
-    from physics.deform.bem import Material
+    from physics.deform.bem import SOFT_GEL_DENSITY
     from physics.deform.greens import reference_greens
     from physics.deform.haptic import PokeSim, poke_path, run_poke, soft_ball
+    from physics.modal.materials import Material
 
     V, F, fixed = soft_ball(radius, subdivisions)
-    greens = reference_greens(V, F, Material(E, nu), fixed, cache_dir=cache_dir)
+    greens = reference_greens(
+        V, F, Material("soft ball", E, nu, SOFT_GEL_DENSITY), fixed, cache_dir=cache_dir
+    )
     sim = PokeSim(greens, probe_radius, mask_radius)
     return run_poke(sim, poke_path(radius, probe_radius, depth), duration, rate), greens
 

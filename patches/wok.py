@@ -1,4 +1,4 @@
-"""The virtual wok (van den Doel, Kry & Pai 2001; seed 000 "Example 1: Virtual Wok").
+"""The virtual wok (van den Doel, Kry & Pai, "FoleyAutomatic", SIGGRAPH 2001).
 
 A carbon-steel wok (a spherical cap of rim radius 0.18 m and radius of curvature 0.35 m,
 a kinematic triangle mesh held by its handle) is shaken and tossed by a scripted hand: the

@@ -9,7 +9,7 @@ import trimesh
 
 from jassy.errors import JassyError
 from physics.deform.bem import (
-    Material,
+    SOFT_GEL_DENSITY,
     assemble,
     dof_columns,
     face_geometry,
@@ -20,8 +20,9 @@ from physics.deform.bem import (
 from physics.deform.capacitance import CapacitanceSolver, smw_solve
 from physics.deform.greens import reference_greens
 from physics.deform.quadrature import integrate
+from physics.modal.materials import Material
 
-MAT = Material(1e6, 0.3)
+MAT = Material("gel", 1e6, 0.3, SOFT_GEL_DENSITY)
 
 
 def _sphere(sub, radius=1.0):
@@ -36,7 +37,9 @@ def test_traction_kernel_integrates_to_minus_identity_inside():
     V, F = mesh_arrays(V, F)
     normals, areas = face_geometry(V, F)
     X = np.array([[0.0, 0.0, 0.0], [0.3, -0.2, 0.5], [0.0, 0.0, 0.9], [0.5, 0.5, 0.6]])
-    H, _ = integrate(X, -np.ones(len(X), dtype=np.int64), V, F, normals, areas, MAT.shear, MAT.nu)
+    H, _ = integrate(
+        X, -np.ones(len(X), dtype=np.int64), V, F, normals, areas, MAT.shear_modulus, MAT.poisson
+    )
     sums = H.reshape(len(X), 3, -1, 3).sum(axis=2)
     for s in sums:
         np.testing.assert_allclose(s, -np.eye(3), atol=1e-5)
@@ -50,7 +53,7 @@ def test_rigid_translation_gives_zero_traction():
     assert np.abs(H @ np.tile(c, n)).max() < 1e-12 * np.abs(H).max() * 1e-3
     # Dirichlet problem: every vertex translated by c
     u, p = solve_mixed(H, G, np.ones(n, dtype=bool), np.tile(c, (n, 1)))
-    scale = MAT.E * np.linalg.norm(c) / 0.1
+    scale = MAT.youngs * np.linalg.norm(c) / 0.1
     assert np.abs(p).max() < 1e-9 * scale
     # mixed: the base translated, the rest traction-free -> the whole body translates
     base = V[:, 2] < -0.08
@@ -66,7 +69,7 @@ def _pressure_error(sub):
     H, G = assemble(V, F, MAT)
     p = 1e3
     u = solve_traction(H, G, V, -p * N)
-    scale = p * (1 - 2 * MAT.nu) / MAT.E
+    scale = p * (1 - 2 * MAT.poisson) / MAT.youngs
     return np.abs(u + scale * V).max() / scale
 
 
@@ -82,13 +85,13 @@ def _uniaxial_error(sub):
     V, F, N = _sphere(sub)
     H, G = assemble(V, F, MAT)
     s = 2e3
-    strain = np.diag([-MAT.nu * s / MAT.E, -MAT.nu * s / MAT.E, s / MAT.E])
+    strain = np.diag([-MAT.poisson * s / MAT.youngs, -MAT.poisson * s / MAT.youngs, s / MAT.youngs])
     exact_u = V @ strain
     exact_p = np.zeros_like(V)
     exact_p[:, 2] = s * N[:, 2]
     base = V[:, 2] < -0.7
     u, p = solve_mixed(H, G, base, np.where(base[:, None], exact_u, exact_p))
-    return np.abs(u - exact_u).max() / (s / MAT.E), np.abs(p[base] - exact_p[base]).max() / s
+    return np.abs(u - exact_u).max() / (s / MAT.youngs), np.abs(p[base] - exact_p[base]).max() / s
 
 
 def test_mixed_uniaxial_field_converges():
@@ -101,7 +104,7 @@ def test_mixed_uniaxial_field_converges():
 def ball(tmp_path_factory):
     """A 162-vertex ball of radius 5 cm with its bottom cap fixed, H, G and Green's functions."""
     V, F, _ = _sphere(2, radius=0.05)
-    mat = Material(2e5, 0.4)
+    mat = Material("gel", 2e5, 0.4, SOFT_GEL_DENSITY)
     fixed = V[:, 2] < -0.04
     H, G = assemble(V, F, mat)
     g = reference_greens(V, F, mat, fixed, cache_dir=tmp_path_factory.mktemp("greens"))
@@ -190,14 +193,14 @@ def test_vertex_masks_match_a_direct_constrained_solve(ball):
 
 def test_greens_cache_round_trip(tmp_path):
     V, F, _ = _sphere(1, radius=0.05)
-    mat = Material(2e5, 0.4)
+    mat = Material("gel", 2e5, 0.4, SOFT_GEL_DENSITY)
     fixed = V[:, 2] < -0.03
     g1 = reference_greens(V, F, mat, fixed, cache_dir=tmp_path)
     files = list(tmp_path.glob("*.npz"))
     assert not g1.from_cache and [f.name for f in files] == [f"{g1.key}.npz"]
     g2 = reference_greens(V, F, mat, fixed, cache_dir=tmp_path)
     assert g2.from_cache and np.array_equal(g1.xi, g2.xi)
-    g3 = reference_greens(V, F, Material(2e5, 0.3), fixed, cache_dir=tmp_path)
+    g3 = reference_greens(V, F, Material("gel", 2e5, 0.3, SOFT_GEL_DENSITY), fixed, cache_dir=tmp_path)
     assert not g3.from_cache and g3.key != g1.key
     g4 = reference_greens(V, F, mat, np.flatnonzero(fixed)[:-1], cache_dir=tmp_path)
     assert g4.key not in (g1.key, g3.key)
@@ -210,9 +213,9 @@ def test_greens_cache_round_trip(tmp_path):
 def test_bad_input_raises():
     V, F, _ = _sphere(1)
     with pytest.raises(JassyError, match="nu"):
-        Material(1e6, 0.5)
+        Material("gel", 1e6, 0.5, SOFT_GEL_DENSITY)
     with pytest.raises(JassyError, match="E"):
-        Material(-1.0, 0.3)
+        Material("gel", -1.0, 0.3, SOFT_GEL_DENSITY)
     with pytest.raises(JassyError, match="closed"):
         mesh_arrays(V, F[:-1])
     with pytest.raises(JassyError, match="outward"):

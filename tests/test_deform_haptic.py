@@ -8,9 +8,10 @@ import soundfile
 
 from jassy.errors import JassyError
 from jassy.events import ContactTrack, HapticFrame
-from physics.deform.bem import Material, assemble, solve_mixed
+from physics.deform.bem import SOFT_GEL_DENSITY, assemble, solve_mixed
 from physics.deform.greens import reference_greens
 from physics.deform.haptic import PokeSim, poke_path, run_poke, soft_ball
+from physics.modal.materials import Material
 
 R, RP = 0.05, 0.015
 
@@ -18,7 +19,7 @@ R, RP = 0.05, 0.015
 @pytest.fixture(scope="module")
 def ball(tmp_path_factory):
     V, F, fixed = soft_ball(R, 2)
-    mat = Material(2e5, 0.45)
+    mat = Material("gel", 2e5, 0.45, SOFT_GEL_DENSITY)
     g = reference_greens(V, F, mat, fixed, cache_dir=tmp_path_factory.mktemp("greens"))
     return V, F, fixed, mat, g
 

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,3 +72,26 @@ def test_a_server_that_stops_answering_fails_within_seconds_saying_why():
     finally:
         os.kill(started.pid, signal.SIGCONT)
         server.__exit__(None, None, None)
+
+
+def test_jackd_late_cycles_are_counted_by_cause(tmp_path):
+    from jassy.jackserver import server_xruns
+
+    log = tmp_path / "jackd.log"
+    log.write_text(  # jackd 1.9's own lines: the dummy driver late twice, a client late once
+        "JACK server starting in realtime mode with priority 10\n"
+        "JackTimedDriver::Process XRun = 9 usec\n"
+        "JackEngine::XRun: client = PortAudio was not finished, state = Triggered\n"
+        "JackTimedDriver::Process XRun = 1068 usec\n"
+    )
+    assert server_xruns(str(log)) == (2, 1)
+
+
+def test_callback_memory_is_kept_resident_without_changing_it():
+    from jassy.memlock import resident
+
+    data = np.arange(300_000, dtype=np.float64)  # 2.4 MB: pages not yet all written
+    fresh = np.zeros(100_000)
+    locked, touched = resident([data, fresh, data[::2]])  # a strided view is skipped
+    assert locked + touched == data.nbytes + fresh.nbytes
+    assert np.array_equal(data, np.arange(300_000)) and not fresh.any()

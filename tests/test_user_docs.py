@@ -1,6 +1,6 @@
 """User documentation that must stay true: `jassy batch --help` (the grid format and its
 example), the model example of docs/formats.md, the README's file-writing snippet, and the
-wine glass and mug meshes of the object library (real dimensions, points on the surface)."""
+wine glass, mug and pot meshes of the object library (real dimensions, points on the surface)."""
 
 from __future__ import annotations
 
@@ -16,17 +16,19 @@ import numpy as np
 import pytest
 
 from jassy.batch import GRID_HELP
-from jassy.batch_grid import load_grid
+from jassy.batch.grid import load_grid
 from jassy.modal_model import ModalModel
-from patches.models_vessels import TURN, mug_points, wine_glass_points
+from patches.models_vessels import TURN, mug_points, pot_points, wine_glass_points
 from patches.objects import OBJECTS
 from physics.modal.subdivision import surface_frames
 from physics.modal.vessels import (
     GLASS,
     MUG,
+    POT,
     handle_centreline,
     mug,
     mug_profile,
+    pot,
     wine_glass,
     wine_glass_profile,
 )
@@ -90,7 +92,7 @@ def pappus_volume(profile: np.ndarray, sections: int) -> float:
     return abs(2 * math.pi * moment) * polygon
 
 
-def test_wine_glass_and_mug_meshes_have_their_stated_dimensions():
+def test_wine_glass_mug_and_pot_meshes_have_their_stated_dimensions():
     glass = wine_glass()
     assert glass.is_watertight
     assert glass.volume == pytest.approx(pappus_volume(wine_glass_profile(), 72), rel=1e-3)
@@ -103,10 +105,16 @@ def test_wine_glass_and_mug_meshes_have_their_stated_dimensions():
     expected = pappus_volume(mug_profile(), 72) + handle
     assert cup.volume == pytest.approx(expected, rel=5e-3)  # the tube's polygonal section
     assert cup.bounds[1, 2] == pytest.approx(MUG.height)
+    kettle = pot()
+    assert kettle.is_watertight
+    assert kettle.volume == pytest.approx(pappus_volume(mug_profile(POT), 96), rel=1e-3)
+    assert kettle.bounds[1, 2] == pytest.approx(POT.height)
+    assert np.ptp(kettle.vertices[:, :2], axis=0).max() == pytest.approx(2 * POT.radius, rel=1e-3)
 
 
 @pytest.mark.parametrize(
-    "name, mesh, points", [("wine_glass", wine_glass, wine_glass_points), ("mug", mug, mug_points)]
+    "name, mesh, points",
+    [("wine_glass", wine_glass, wine_glass_points), ("mug", mug, mug_points), ("pot", pot, pot_points)],
 )
 def test_named_points_lie_on_the_surface_and_are_described(name, mesh, points):
     surface = mesh(turn=TURN)

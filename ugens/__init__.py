@@ -19,6 +19,7 @@ from ugens.noise import FractalNoise, WhiteNoise
 from ugens.nonlinear_impact import HuntCrossleyImpact
 from ugens.oscillators import Sine
 from ugens.pitchshift import PitchShift
+from ugens.pressure import SoundPressure
 from ugens.radiation import Radiation
 from ugens.reverb import Reverb
 from ugens.roll import RathRoll, Roll
@@ -66,6 +67,7 @@ __all__ = [
     "Sampler",
     "Scrape",
     "Sine",
+    "SoundPressure",
     "Spatialiser",
     "SpectralFeatures",
     "WhiteNoise",

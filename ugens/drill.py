@@ -1,7 +1,7 @@
 """DrillSource: the excitation of a surgical burr cutting bone.
 
 Agus et al., "Real-time haptic and visual simulation of bone dissection" (IEEE VR 2002,
-Presence 2003; seed 001): the burr spins at ``rpm`` against bone with normal force
+pp. 209-216; Presence 12(1):110-122, 2003): the burr spins at ``rpm`` against bone with normal force
 ``force`` and removes material at ``removal``. Sound model (after the modal-synthesis
 contact sources of van den Doel, Kry & Pai, FoleyAutomatic, SIGGRAPH 2001):
 
@@ -70,7 +70,7 @@ def drill_kernel(out, motor, n, rpms, forces, removals, gains, phase, rng, fs, r
 class DrillSource(UGen):
     """A spinning burr cutting bone: rotation harmonics plus cutting noise (force, N).
 
-    Agus et al. IEEE VR 2002 / Presence 2003 (burr-bone model, seed 001); the ``force`` and
+    Agus et al. IEEE VR 2002 / Presence 2003 (burr-bone model); the ``force`` and
     ``removal`` controls come from physics.burr's haptic loop.
     """
 

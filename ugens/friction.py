@@ -64,6 +64,13 @@ bowed-string.toml the slip lasts 16 % of the period, Helmholtz motion's ideal be
 bowing point, 12 %); sigma1 = 0.02 and sigma2 = 0.01
 N s/m stay far below 2 Z, so the Stribeck drop, not viscosity, shapes the motion.
 Location changes during a render take effect at once (the gains jump; the state is kept).
+
+Regimes (measured map: examples/friction_regimes.py). A mode sings when the friction force
+falls with slip speed around the operating point, i.e. for slip speeds up to a few
+``stribeck`` speeds: faster, the force is flat (Coulomb) and the contact slides silently.
+More force raises the level until, at low speed, the contact sticks too long and the motion
+turns raucous or moves to a lower mode; too little force for the speed gives several slips
+per period (higher partials): Schelleng's diagram for the bowed string.
 """
 
 from __future__ import annotations
@@ -80,7 +87,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
-from ugens.modal import ModelParams, design
+from ugens.modal import HEARD_LEVEL, ModelParams, design
 from ugens.noise import uniform
 
 #: Normal forces at or below this (N) mean no contact (keeps z_ss representable).
@@ -259,7 +266,9 @@ class Friction(ModelParams, UGen):
 
     Input ``strike`` (optional): a force in N on the same point of the same resonator (an
     ImpactForce: a glass struck while it is rubbed); the friction loop feels its motion.
-    Output: the resonator's displacement at the model's pickup (m, signed gains). Extra
+    Output: the resonator's displacement at the model's pickup (m, signed gains), or with
+    ``level = "calibrated"`` that times the model's reference gain: the scale of a calibrated
+    ModalBank, so a rubbed and a struck resonator sound at the same level as a bank. Extra
     outputs ``contact``: the contact displacement (m, driving-point gains); ``force``: the
     friction force on the resonator (N, positive along +speed).
     """
@@ -289,6 +298,7 @@ class Friction(ModelParams, UGen):
         "sigma2": _coef(0.01, 0.0, 1e4, "N s/m", "viscous friction"),
         "noise": _coef(0.0, 0.0, 1e3, "sqrt(N s/m)", "sigma3: roughness noise sigma3 u sqrt(|v| F_N)"),
         "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed of the noise"),
+        "level": HEARD_LEVEL,
     }
 
     def _prepare(self) -> None:
@@ -303,6 +313,7 @@ class Friction(ModelParams, UGen):
         self.heard_coef = np.zeros((6, self.model.n_modes))
         self.heard_state = np.zeros((2, self.model.n_modes))
         self._drive = np.zeros(self.max_block)  # friction + strike force heard at the pickup
+        self._level_gain = self.level_gain()
         self.speed = self.smoothed("speed")
         self.force = self.smoothed("force")
         self._speeds = Control(self.speed, self.max_block)
@@ -331,7 +342,8 @@ class Friction(ModelParams, UGen):
         self.modes[1] = c2
         self.modes[2] = s / fs * self.model.driving_at(v["location"])
         if self.signed:
-            self.heard_coef[:] = impulse_invariant(c1, c2, s / fs * self.model.gains_at(v["location"]))
+            heard = s / fs * self.model.gains_at(v["location"]) * self._level_gain
+            self.heard_coef[:] = impulse_invariant(c1, c2, heard)
         self.par[:] = (
             fs,
             v["sigma0"],
@@ -380,7 +392,7 @@ class Friction(ModelParams, UGen):
                 np.add(self.extra["force"][:n], self.sources["strike"].out[:n], out=drive[:n])
             heard_run(drive, self.out, n, self.heard_coef, self.heard_state)
         else:
-            self.out[:n] = self.extra["contact"][:n]
+            np.multiply(self.extra["contact"][:n], self._level_gain, out=self.out[:n])
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

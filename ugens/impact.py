@@ -20,19 +20,7 @@ import numpy as np
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-
-_MIN_SAMPLES = 2.0
-
-
-@nb.njit(cache=True)
-def pulse_sum(t0, T):
-    """Sum of (1 - cos(2 pi (n - t0)/T)) over integers t0 < n < t0 + T."""
-    s = 0.0
-    n = math.floor(t0) + 1
-    while n < t0 + T:
-        s += 1.0 - math.cos(2.0 * math.pi * (n - t0) / T)
-        n += 1
-    return s
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum, raised_cosine, with_room
 
 
 @nb.njit(cache=True)
@@ -52,12 +40,13 @@ def render_pulses(out, start, n, pulses, count):
         for idx in range(first, last):
             x = idx - t0
             if x < T:
-                out[idx - start] += A * (1.0 - math.cos(2.0 * math.pi * x / T))
+                out[idx - start] += A * raised_cosine(x, T)
     kept = 0
     end = start + n
     for p in range(count):
         if pulses[p, 0] + pulses[p, 1] > end:
-            pulses[kept, :] = pulses[p, :]
+            for c in range(3):  # element-wise: a row slice copy compiles numba's shape-error text
+                pulses[kept, c] = pulses[p, c]
             kept += 1
     return kept
 
@@ -118,11 +107,10 @@ class ImpactForce(UGen):
     def strike(self, sample_time: float, impulse: float, duration: float | None = None) -> None:
         """Start a pulse of ``impulse`` N s at fractional sample ``sample_time``."""
         tau = self.values["duration"] if duration is None else duration
-        T = max(tau * self.sample_rate, _MIN_SAMPLES)
+        T = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
         amp = impulse * self.sample_rate / pulse_sum(sample_time, T)
         c = int(self.count[0])
-        if c == self.pulses.shape[0]:
-            self.pulses = np.concatenate([self.pulses, np.zeros_like(self.pulses)])
+        self.pulses = with_room(self.pulses, c + 1)
         self.pulses[c] = (sample_time, T, amp)
         self.count[0] = c + 1
         self._idle = False

@@ -44,10 +44,10 @@ from jassy.errors import PatchError
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.impact import pulse_sum, render_pulses
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum, with_room
+from ugens.impact import render_pulses
 from ugens.noise import uniform
 
-_MIN_SAMPLES = 2.0
 #: 2 (15/16)^(2/5) int_0^1 (1 - s^(5/2))^(-1/2) ds (Johnson 1985, eq. 11.24 for a sphere).
 HERTZ_CONSTANT = 2.868
 #: Durations at or above this are soft enough for one pulse when ``micro`` is automatic.
@@ -273,10 +273,9 @@ class ImpactTrain(UGen):
         fs = self.sample_rate
         m = len(starts)
         c = int(self.count[0])
-        while c + m > self.pulses.shape[0]:
-            self.pulses = np.concatenate([self.pulses, np.zeros_like(self.pulses)])
+        self.pulses = with_room(self.pulses, c + m)
         for i in range(m):
-            T = max(float(durations[i]) * fs, _MIN_SAMPLES)
+            T = max(float(durations[i]) * fs, MIN_PULSE_SAMPLES)
             t0 = float(starts[i])
             self.pulses[c + i] = (t0, T, float(impulses[i]) * fs / pulse_sum(t0, T))
         self.count[0] = c + m

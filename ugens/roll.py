@@ -22,6 +22,7 @@ from ugens.scrape import (
     NYQUIST_FRACTION,
     STIFFNESS_SPEC,
     NeedleContact,
+    ProfileConfig,
     ProfileContact,
     contact_specs,
     law_specs,
@@ -188,7 +189,7 @@ class Roll(Turning, NeedleContact):
     def _prepare(self) -> None:
         super()._prepare()
         v = self.values
-        self.cfg[0] = 1.0 / (self.loop_dx() * self.sample_rate)
+        self.cfg[ProfileConfig._fields.index("inv_dxfs")] = 1.0 / (self.loop_dx() * self.sample_rate)
         self.ball = ball_unevenness(v["seed"] + 1)
         self.turn = np.zeros(1)
         self._per_metre = 1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0

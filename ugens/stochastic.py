@@ -40,7 +40,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.impact import pulse_sum
+from ugens.cells import pulse_sum, raised_cosine, with_room
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -101,7 +101,7 @@ def pulse_frame(pulses, count, idx):
         T = pulses[p, 1]
         x = idx - t0
         if 0.0 < x < T:
-            s += pulses[p, 2] * (1.0 - math.cos(2.0 * math.pi * x / T))
+            s += pulses[p, 2] * raised_cosine(x, T)
         if t0 + T > idx + 1:
             if kept != p:
                 pulses[kept, 0] = t0
@@ -116,12 +116,9 @@ def add_pulse(pulses, count, t0, T, impulse, fs):
     """Append a pulse of ``impulse`` N s at fractional sample t0 (T samples long).
 
     Returns the table (a larger copy if it was full). The amplitude makes the sampled
-    pulse sum to exactly impulse * fs (ugens.impact.pulse_sum).
+    pulse sum to exactly impulse * fs (ugens.cells.pulse_sum).
     """
-    if count == pulses.shape[0]:
-        grown = np.zeros((2 * pulses.shape[0], 3))
-        grown[:count] = pulses[:count]
-        pulses = grown
+    pulses = with_room(pulses, count + 1)
     pulses[count, 0] = t0
     pulses[count, 1] = T
     pulses[count, 2] = impulse * fs / pulse_sum(t0, T)

@@ -1,4 +1,4 @@
-"""Burr-bone drilling at haptic rate (Agus et al., IEEE VR 2002/2003, Presence 2003; seed 001).
+"""Burr-bone drilling at haptic rate (Agus et al., IEEE VR 2002/2003, Presence 12(1), 2003).
 
 volume: 8-bit density volumes (NPZ/raw, procedural phantom); contact: voxel-sphere overlap
 kernels, brute-force moments, h inversion, Hertz friction and Russian-roulette erosion;

@@ -1,20 +1,20 @@
 """Multiresolution moments of the density: an octree (mip pyramid) of per-block m0, m1.
 
 Agus et al., "Adaptive techniques for real-time haptic and visual simulation of bone
-dissection", IEEE VR 2003; IERAPSI D4.2 sections 2.2.1-2.2.2 (seed 001).
+dissection", IEEE VR 2003; IERAPSI deliverable D4.2 sections 2.2.1-2.2.2.
 
 Level l holds blocks of s = 2^l voxels per side; block (I, J, K) covers voxels
 [I s, (I + 1) s) on each axis and stores [m0, m1x, m1y, m1z] with m1 taken about the block
 centre c_I = I s + (s - 1)/2 (grid units; voxels outside the volume count as empty).
 Levels below ``base`` (default 2, i.e. 4^3 bricks) are not stored: the voxels are read
 directly, which keeps a 512^3 pyramid at ~70 MB. Parents are built from children by the
-seed's rule m0^I = sum_k m0^{I,k}, m1^I = sum_k (m1^{I,k} + (c_{I,k} - c_I) m0^{I,k}).
+shift rule of D4.2 2.2.1: m0^I = sum_k m0^{I,k}, m1^I = sum_k (m1^{I,k} + (c_{I,k} - c_I) m0^{I,k}).
 
 Descent for a burr of radius R at c (see :func:`octree_moments`): empty blocks and blocks out
 of reach are skipped; a block whose voxel spheres are all inside the burr adds its stored
 moments (shifted to the burr centre); a partial block is refined, or, once its side is at or
 below ``leaf`` voxels, holds one density throughout (m1 = 0) and reaches at least its own
-side into the burr, adds the seed's partial-volume contribution: with the block taken as
+side into the burr, adds the partial-volume contribution of D4.2 2.2.2: with the block taken as
 the sphere of equal volume (radius s R_VOXEL), the lens volume dV and centroid R_b and a
 linear density model rho(x) = m0/V + g.(x - c_I), g = 12 m1 / (V s^2),
 

@@ -13,33 +13,15 @@ exactly sum_j a_j p_j with the vertex area a_j = one third of the adjacent trian
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.linalg as sla
 
 from jassy.errors import JassyError
 from physics.deform.quadrature import integrate
+from physics.modal.materials import Material
 
-
-@dataclass(frozen=True)
-class Material:
-    """Isotropic linear elastic material: Young's modulus E (Pa), Poisson ratio nu."""
-
-    E: float
-    nu: float
-
-    def __post_init__(self):
-        if not (math.isfinite(self.E) and self.E > 0):
-            raise JassyError(f"Material.E: expected a Young's modulus > 0 Pa, got {self.E!r}")
-        if not (math.isfinite(self.nu) and -1.0 < self.nu < 0.5):
-            raise JassyError(f"Material.nu: expected a Poisson ratio in (-1, 0.5), got {self.nu!r}")
-
-    @property
-    def shear(self) -> float:
-        """Shear modulus mu = E / (2 (1 + nu)), Pa."""
-        return self.E / (2.0 * (1.0 + self.nu))
+#: Density (kg/m^3) given to soft-gel materials: elastostatics does not use it.
+SOFT_GEL_DENSITY = 1000.0
 
 
 def mesh_arrays(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +66,7 @@ def assemble(vertices, faces, material: Material) -> tuple[np.ndarray, np.ndarra
     V, F = mesh_arrays(vertices, faces)
     normals, areas = face_geometry(V, F)
     n = V.shape[0]
-    H, G = integrate(V, np.arange(n), V, F, normals, areas, material.shear, material.nu)
+    H, G = integrate(V, np.arange(n), V, F, normals, areas, material.shear_modulus, material.poisson)
     blocks = H.reshape(n, 3, n, 3)
     sums = blocks.sum(axis=2)  # the diagonal blocks are still zero here
     idx = np.arange(n)

@@ -26,12 +26,13 @@ def bench_deform(quick: bool = False, contacts=(1, 5, 10), reps: int = 2000) -> 
     set unchanged (set check + O(s^2) solve), with the set changed (gather + LU + solve),
     the O(ns) full deformation, headroom = 1 ms / update, and the median step of the
     sliding poke gesture (PokeSim.step incl. contact detection)."""
-    from physics.deform.bem import Material, assemble
+    from physics.deform.bem import SOFT_GEL_DENSITY, assemble
     from physics.deform.capacitance import CapacitanceSolver
     from physics.deform.greens import reference_greens
     from physics.deform.haptic import PokeSim, poke_path, run_poke, soft_ball
+    from physics.modal.materials import Material
 
-    material = Material(2e5, 0.45)
+    material = Material("soft gel", 2e5, 0.45, SOFT_GEL_DENSITY)
     rows = []
     greens = None
     with tempfile.TemporaryDirectory() as cache:

@@ -1,4 +1,4 @@
-"""The cataract-surgery experiment (Agus et al., VRIPHYS 2006; seed 001): capsulorhexis of the
+"""The cataract-surgery experiment (Agus et al., VRIPHYS 2006, pp. 91-100): capsulorhexis of the
 anterior capsule with forceps, then phacoemulsification of the lens along a cross-shaped
 groove until it splits into quasi-rigid fragments that fall and collide in the capsule bag."""
 

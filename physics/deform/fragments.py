@@ -1,12 +1,12 @@
 """Erodible tetrahedral particle solids that break into quasi-rigid fragments (Agus et al.,
-VRIPHYS 2006; seed 001: "particle simplices with connectivity").
+VRIPHYS 2006, pp. 91-100: "particle simplices with connectivity").
 
 A :class:`TetMesh` (model) holds particles and tetrahedra with their face neighbours. A face
 of a live tet is *external* when no live tet shares it. A live tet with 1, 2 or 3 external
-faces is removable (the seed's three removal primitives); removing it turns the faces it
+faces is removable (the paper's three removal primitives); removing it turns the faces it
 shared into external faces of its neighbours and deletes the particles no live tet uses
 any more (those it alone owned). Interior tets (0 external faces) cannot be removed, so a
-tool eats the solid from its surface. Beyond the seed, a tet with 4 external faces (held
+tool eats the solid from its surface. Beyond the paper, a tet with 4 external faces (held
 only through edges or vertices, or a lone one-tet fragment) is also removable: otherwise
 such crumbs left by the tool keep the pieces on both sides of a groove connected.
 

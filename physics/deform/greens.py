@@ -31,7 +31,8 @@ import scipy.linalg as sla
 
 from jassy.errors import JassyError
 from jassy.files import atomic_path
-from physics.deform.bem import Material, assemble, dof_columns, mesh_arrays, vertex_areas
+from physics.deform.bem import assemble, dof_columns, mesh_arrays, vertex_areas
+from physics.modal.materials import Material
 
 FORMAT = "jassy-greens-v1"
 
@@ -91,7 +92,7 @@ def fixed_mask(n: int, fixed) -> np.ndarray:
 
 def cache_key(V: np.ndarray, F: np.ndarray, material: Material, fixed: np.ndarray) -> str:
     h = hashlib.sha256(FORMAT.encode())
-    for arr in (V.astype("<f8"), F.astype("<i8"), np.array([material.E, material.nu], "<f8"),
+    for arr in (V.astype("<f8"), F.astype("<i8"), np.array([material.youngs, material.poisson], "<f8"),
                 np.flatnonzero(fixed).astype("<i8")):  # fmt: skip
         h.update(str(arr.shape).encode())
         h.update(np.ascontiguousarray(arr).tobytes())
@@ -120,7 +121,9 @@ def reference_greens(vertices, faces, material: Material, fixed, cache_dir=None,
     (vertices in m), ``material`` and ``fixed`` (bool mask or vertex indices). Loaded from
     the cache if present (and ``use_cache``), else computed and, if ``use_cache``, stored."""
     if not isinstance(material, Material):
-        raise JassyError(f"material: expected a physics.deform.bem.Material, got {type(material).__name__}")
+        raise JassyError(
+            f"material: expected a physics.modal.materials.Material, got {type(material).__name__}"
+        )
     V, F = mesh_arrays(vertices, faces)
     mask = fixed_mask(V.shape[0], fixed)
     key = cache_key(V, F, material, mask)

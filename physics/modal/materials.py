@@ -36,7 +36,9 @@ from jassy.errors import JassyError
 
 @dataclass(frozen=True)
 class Material:
-    """E (Pa), nu, rho (kg/m^3) and damping d(f) = d0 + pi eta f + beta (2 pi f)^2 / 2 (1/s)."""
+    """Isotropic linear elastic material of every elastic model (modal FEM, BEM deformation):
+    Young's modulus E = ``youngs`` (Pa), Poisson ratio nu = ``poisson``, density rho (kg/m^3)
+    and damping d(f) = d0 + pi eta f + beta (2 pi f)^2 / 2 (1/s)."""
 
     name: str
     youngs: float
@@ -48,8 +50,8 @@ class Material:
 
     def __post_init__(self):
         checks = (
-            ("youngs", self.youngs, self.youngs > 0, "> 0 Pa"),
-            ("poisson", self.poisson, -1.0 < self.poisson < 0.5, "in (-1, 0.5)"),
+            ("youngs", self.youngs, self.youngs > 0, "> 0 Pa (Young's modulus E)"),
+            ("poisson", self.poisson, -1.0 < self.poisson < 0.5, "in (-1, 0.5) (Poisson ratio nu)"),
             ("density", self.density, self.density > 0, "> 0 kg/m^3"),
             ("loss", self.loss, self.loss >= 0, ">= 0"),
             ("d0", self.d0, self.d0 >= 0, ">= 0 1/s"),

@@ -1,4 +1,4 @@
-"""Parametric meshes of a wine glass and a mug (SI units, axis z, base at z = 0).
+"""Parametric meshes of a wine glass, a mug and a cooking pot (SI units, axis z, base at z = 0).
 
 Both are solids of revolution of a closed (r, z) profile (``trimesh.creation.revolve``);
 the mug's handle is a separate closed tube whose end caps stop 0.2 mm short of the outer
@@ -40,9 +40,23 @@ class Mug(NamedTuple):
     handle_radius: float = 0.005  # of the tube
 
 
+class Pot(NamedTuple):
+    """Dimensions (m) of an open cooking pot: straight wall, flat base, no lid or handles.
+
+    The default is a cast-iron Dutch oven of the common stove-top size, about 10 in
+    (254 mm) wide and 5 in (127 mm) tall (MetroKitchen, "Dutch ovens", metrokitchen.com;
+    Wikipedia, "Dutch oven": a thick-walled pot, usually of cast iron)."""
+
+    radius: float = 0.127  # outer
+    height: float = 0.127
+    wall: float = 0.005
+    base: float = 0.006
+
+
 #: The shipped objects' dimensions.
 GLASS = WineGlass()
 MUG = Mug()
+POT = Pot()
 
 
 def wine_glass_profile(g: WineGlass = GLASS, segments: int = 24) -> np.ndarray:
@@ -93,8 +107,8 @@ def wine_glass(g: WineGlass = GLASS, sections: int = 72, turn: float = 0.3):
     return mesh
 
 
-def mug_profile(m: Mug = MUG) -> np.ndarray:
-    """Closed (r, z) cross-section of the cup: flat base, straight wall, flat rim."""
+def mug_profile(m: Mug | Pot = MUG) -> np.ndarray:
+    """Closed (r, z) cross-section of the cup (or of a pot): flat base, straight wall, flat rim."""
     return np.array(
         [
             [0.0, 0.0],
@@ -162,5 +176,14 @@ def mug(m: Mug = MUG, sections: int = 72, turn: float = 0.3):
     cup = trimesh.creation.revolve(mug_profile(m), sections=sections)
     handle = tube(handle_centreline(m), m.handle_radius)
     mesh = trimesh.util.concatenate([cup, handle])
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(turn, [0, 0, 1]))
+    return mesh
+
+
+def pot(p: Pot = POT, sections: int = 96, turn: float = 0.3):
+    """The pot as a watertight Trimesh, turned by ``turn`` rad about z."""
+    import trimesh
+
+    mesh = trimesh.creation.revolve(mug_profile(p), sections=sections)
     mesh.apply_transform(trimesh.transformations.rotation_matrix(turn, [0, 0, 1]))
     return mesh

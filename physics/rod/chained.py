@@ -9,7 +9,7 @@ M = rho_A int J^T J ds (dense (n+3)^2, Gauss-Legendre, arc.NQ points per element
 V_g = rho_A g (L y0 + int (L - s) sin theta ds) with gradient rho_A g int (L - s) lambda_j cos theta
 and Hessian -rho_A g int (L - s) lambda_a lambda_b sin theta (lambda_j = d theta / d q_j).
 Boundary conditions are rows of C: identity rows at the start, tip-point Jacobian rows at the
-end. ``kkt_factor`` is a dense LU (O(n^3)). Extra methods beyond the R1/R2 contract:
+end. ``kkt_factor`` is a dense LU (O(n^3)). Extra methods beyond FormulationBase:
 ``potential``, ``dynamics``, ``constraint_hessian``, ``point_hessian``, ``project``, ``kkt_factor``.
 """
 

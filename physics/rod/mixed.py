@@ -12,7 +12,7 @@ of a step straight into that band storage from the per-element blocks (no sparse
 ``step`` factors it. ``advance`` re-glues the elements exactly by forward kinematics from X_0
 (continuity holds to round-off after every step).
 
-Additions to the R1/R2 contract: RodState.lam and advance(..., lam) (geometric stiffness of
+Additions to FormulationBase: RodState.lam and advance(..., lam) (geometric stiffness of
 the gluing constraints in the next step, see physics.rod.model); ``constraint_hessian``,
 ``potential``, ``dynamics``, ``point_hessian``, ``point_jacobians``, ``angle_jacobians``,
 ``project``, ``kkt_factor`` and ``kkt_band`` are extra.

@@ -6,7 +6,8 @@ bending E_b = 1/2 EI sum_i (kappa_i - kappa0_i)^2 l, gravity V_g = rho_A g int y
 Boundary conditions at each end: "clamped" (x, y, theta held), "pinned" (x, y held),
 "roller" (y held: a frictionless horizontal support) or "free". The start is held at
 ``start``; the end at ``end`` if given, else at the end pose of the rest shape (rod started at
-``start`` with its rest curvature). "roller" and ``end`` extend the R1/R2 contract.
+``start`` with its rest curvature). "roller" and ``end`` are this package's additions to the
+super-circle model (Bertails et al., "Super-Helices", SIGGRAPH 2006).
 
 One linearly implicit (semi-implicit Euler) step for the next velocity v+:
 (M + h D + h^2 K) v+ = M v + h (-grad V + f_gyro) with bilateral constraints C v+ = -g(q)/h

@@ -1,0 +1,50 @@
+"""First render in a fresh process: the kernels it compiles are bounded and a second process
+loads every one of them from numba's cache (jassy.startup; timings: `jassy bench startup`)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from jassy.startup import cached_kernels, render_argv, run_fresh
+
+#: Bounds well above this code's first bell render (26 functions, 36 specialisations, about 16 s
+#: of CPU on the shared 2-core VM): a regression that doubles either fails.
+MAX_KERNELS, MAX_SPECIALISATIONS, MAX_COLD_CPU_S = 45, 65, 90.0
+
+
+def _index_stamps(folder) -> dict:
+    return {
+        os.path.join(root, name): os.stat(os.path.join(root, name)).st_mtime_ns
+        for root, _, files in os.walk(folder)
+        for name in files
+    }
+
+
+@pytest.mark.timeout(600)
+def test_a_cold_bell_render_compiles_few_kernels_and_a_warm_one_compiles_none(tmp_path):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cold = run_fresh(render_argv("bell", str(tmp_path)), cache_dir=str(cache))
+    kernels, specialisations = cached_kernels(str(cache))
+    assert 0 < kernels <= MAX_KERNELS and 0 < specialisations <= MAX_SPECIALISATIONS, (
+        kernels,
+        specialisations,
+    )
+    assert cold.cpu_s < MAX_COLD_CPU_S
+    before = _index_stamps(cache)
+    warm = run_fresh(render_argv("bell", str(tmp_path)), cache_dir=str(cache))
+    # every kernel came from the cache: numba rewrote no index and added no file
+    assert _index_stamps(cache) == before
+    assert warm.cpu_s < cold.cpu_s / 2
+
+
+def test_warm_refuses_an_unknown_scene_in_one_line():
+    proc = subprocess.run(
+        [sys.executable, "-m", "jassy", "warm", "nosuch"], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "nosuch" in proc.stderr
