@@ -191,6 +191,15 @@ class Scheduler:
                 _set(target, frame, "location", location, True, None)
         node.act(ev.action, ev.args, self.sample_times[index])
 
+    def _dispatch_due(self, pos: int, never: int) -> int:
+        """Dispatch every event that applies at or before frame ``pos``; return the frame of
+        the next event left (``never`` if none)."""
+        frames, count = self.apply_frames, len(self.apply_frames)
+        while self.next_event < count and frames[self.next_event] <= pos:
+            self._dispatch(self.next_event)
+            self.next_event += 1
+        return frames[self.next_event] if self.next_event < count else never
+
     def _dispatch_inline(self, stop: int, never: int) -> int:
         """Dispatch the inline events before frame ``stop`` up to the first event that is not
         inline; return the frame of the next event left (``never`` if none)."""
@@ -225,10 +234,8 @@ class Scheduler:
         end = begin + n
         upcoming = frames[self.next_event] if self.next_event < count else never
         while pos < end:
-            while upcoming <= pos:
-                self._dispatch(self.next_event)
-                self.next_event += 1
-                upcoming = frames[self.next_event] if self.next_event < count else never
+            if upcoming <= pos:
+                upcoming = self._dispatch_due(pos, never)
             if limit == block and pos % block == 0 and (period is None or period % block == 0):
                 # fast path: whole blocks up to the next event that splits one, or the end
                 while pos + block <= end:
@@ -273,10 +280,7 @@ class Scheduler:
         upcoming = frames[self.next_event] if self.next_event < count else never
         while pos < end:
             if upcoming <= pos:
-                while upcoming <= pos:
-                    self._dispatch(self.next_event)
-                    self.next_event += 1
-                    upcoming = frames[self.next_event] if self.next_event < count else never
+                upcoming = self._dispatch_due(pos, never)
                 program.sync()
             if pos % block == 0:
                 whole = (min(upcoming, end) - pos) // block
