@@ -135,6 +135,8 @@ class Scheduler:
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
             budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses)
+            if not budget.active:  # it holds every mode: no decisions, no sub-block cuts
+                self.period = None
 
     def insert(self, event: Event) -> None:
         """Add a validated event during a render (live input). An event whose time has
@@ -156,15 +158,18 @@ class Scheduler:
             return True
         return all(t.inline_events for t in self.graph.location_targets(event.node))
 
-    def upcoming_impulses(self, start: int, end: int) -> list[tuple[list, float]]:
-        """(ugens downstream, impulse N s) of the impact-like events applied in frames
-        [start, end); an action without an ``impulse`` argument counts as 1 N s."""
+    def upcoming_impulses(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
+        """(frame, ugens downstream, impulse N s, location or None) of the impact-like events
+        applied in frames [start, end); an action without an ``impulse`` argument counts as
+        1 N s."""
         out = []
         i = bisect.bisect_left(self.apply_frames, start)
         while i < len(self.events) and self.apply_frames[i] < end:
             ev = self.events[i]
             if ev.action != "set":
-                out.append((self.graph.location_targets(ev.node), float(ev.args.get("impulse", 1.0))))
+                targets = self.graph.location_targets(ev.node)
+                impulse = float(ev.args.get("impulse", 1.0))
+                out.append((self.apply_frames[i], targets, impulse, ev.args.get("location")))
             i += 1
         return out
 
