@@ -560,6 +560,16 @@ class CallbackRenderer:
         self._next_score = 0
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played
+        self._warm_posts()
+
+    def _warm_posts(self) -> None:
+        """Translate (and drop) a silent impact on every ImpactForce node: the first
+        translation loads the pulse kernel, milliseconds that would otherwise delay the
+        first live tap after the stream starts."""
+        for node in self.graph.order:
+            if isinstance(node, ImpactForce):
+                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
+                self.records(validate_event(self.graph, silent, "warm-up"), 0.0, self.now_queue)
 
     def memory(self) -> list[np.ndarray]:
         """Every array the callback reads or writes (to keep resident: jassy.memlock)."""

@@ -59,6 +59,7 @@ from jassy.hapticsender import (
 from jassy.memlock import resident
 from jassy.offline import OfflineEngine
 from jassy.scheduler import validate_event
+from ugens.impact import ImpactForce
 
 HEADER, STATE, DATA_OFFSET_F32 = 32, 128, 256  # int64 slots, float64 slots, first float32 slot
 CAP, CHANNELS, N_AUDIO, WRITE, READ, UNDER_FRAMES, CALLBACKS, UNDER_CALLBACKS, FLAGS = range(9)
@@ -248,8 +249,10 @@ class LiveEngine:
     is available and PortAudio is not yet loaded in this process.
 
     mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
-    latency = the device's); "ring" uses the producer above; "auto" takes the callback
-    where the graph, score and options allow it (``mode_reason`` says why not otherwise).
+    latency = the device's); "ring" uses the producer above; "auto" (the default) takes
+    the callback where the graph, score and options allow it (``mode_reason`` says why
+    not otherwise): it never has fewer frames of latency, and its underruns on a loaded
+    machine are the host's own (see ``jassy bench live --floor``).
     """
 
     def __init__(
@@ -268,7 +271,7 @@ class LiveEngine:
         isolation: str = "auto",
         haptic_torque: int = 0,
         send_log_frames: int = 0,
-        mode: str = "ring",
+        mode: str = "auto",
     ):
         if not ring_blocks >= 1:
             raise JassyError(f"--ring: expected at least 1 block, got {ring_blocks}")
@@ -607,6 +610,10 @@ class LiveEngine:
         kinds = {}
         for event in self.score:
             kinds.setdefault((event.node, event.action, event.ramp is None), event)
+        for node in self.graph.order:  # live taps: posted, so not in the score
+            if isinstance(node, ImpactForce):
+                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
+                kinds.setdefault((node.name, "impact", True), silent)
         split = 1.5 * self.block / self.sample_rate
         rehearsal = [replace(event, time=split) for event in kinds.values()]
         warm = OfflineEngine(

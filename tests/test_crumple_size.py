@@ -43,21 +43,32 @@ def test_size_scales_frequency_decay_and_amplitude():
 
 
 def test_retune_keeps_amplitude_and_phase():
+    """From the frame where the size changes on, the mode rings at the new tuning with the
+    amplitude and phase it had at that frame; that frame carries the kink's end correction,
+    the Euler-Maclaurin term (slope jump per sample) / 12 (the direct gain's counterpart
+    for a kink, as h'(0) / (12 fs^2) is for an impulse)."""
     f, d, a, J = 800.0, 5.0, 1.0, 1e-3
     n, at = 9600, 4000
     force = np.zeros(n)
     force[0] = J * FS
     size = np.ones(n)
     size[at:] = 0.5
+    u = math.sqrt(0.5)
+    t0 = at / FS  # the retune's instant: frame ``at`` still has the old tuning
+    phase0 = 2 * math.pi * f * t0
+    amp0 = J * a * math.exp(-d * t0)
+    before = J * a * np.exp(-d * np.arange(at + 1) / FS) * np.sin(2 * math.pi * f * np.arange(at + 1) / FS)
+    t = np.arange(at, n) / FS - t0
+    after = amp0 * np.exp(-d * t / u) * np.sin(phase0 + 2 * math.pi * f * t / u)
+    slope_old = amp0 * (2 * math.pi * f * math.cos(phase0) - d * math.sin(phase0))
+    slope_new = amp0 * (2 * math.pi * f * math.cos(phase0) - d * math.sin(phase0)) / u
+    kink = (slope_new - slope_old) / FS / 12
     for block in (64, 1000):
         y = bank_output(model([f], [d], [a]), force, size, block)
-        t0 = (at - 1) / FS  # the last sample before the retune
-        phase0 = 2 * math.pi * f * t0
-        amp0 = J * a * math.exp(-d * t0)
-        t = np.arange(at - 1, n) / FS - t0
-        u = math.sqrt(0.5)
-        exact = amp0 * np.exp(-d * t / u) * np.sin(phase0 + 2 * math.pi * f * t / u)
-        assert np.max(np.abs(y[at - 1 :] - exact)) < 1e-6 * amp0
+        assert np.max(np.abs(y[1:at] - before[1:at])) < 1e-6 * amp0
+        assert np.max(np.abs(y[at + 1 :] - after[1:])) < 1e-6 * amp0
+        assert abs(y[at] - (after[0] + kink)) < 1e-6 * amp0
+        assert abs(kink) > 1e-3 * amp0  # the correction is there
 
 
 NFFT = 1 << 17

@@ -105,3 +105,54 @@ def test_calibrated_hunt_crossley_is_the_raw_sound_times_the_reference_gain(file
     np.testing.assert_allclose(
         calibrated, raw * reference_gain(model, FS), rtol=1e-9, atol=1e-12 * np.abs(calibrated).max()
     )
+
+
+def test_a_dropped_object_rings_a_calibrated_mode_at_the_level_its_momentum_predicts():
+    """Bounce (force in N) dropped from h: the first impact exchanges J = m sqrt(2 g h)
+    (1 + e) N s as a 1 - cos pulse of tau; an undamped mode a sin(w t) then rings at
+    a J |sinc(f tau) / (1 - (f tau)^2)|, times the reference gain when calibrated, until the
+    next impact 2 e sqrt(2 g h) / g later."""
+    from ugens import Bounce, ModalBank
+
+    f, a, m, e, h, tau = 300.0, 1e-3, 0.01, 0.7, 0.2, 5e-4
+    model = ModalModel([f], [0.0], [[a]])
+    ball = Bounce(name="ball", mass=m, restitution=e, duration=tau)
+    bank = ModalBank(model, name="plate", level="calibrated")(ball)
+    y = render(
+        Graph(bank), [Event(0.0, "ball", "drop", {"height": h})], duration=0.5, sample_rate=FS, limiter=False
+    )
+    v = math.sqrt(2 * 9.81 * h)
+    first = math.sqrt(2 * h / 9.81)  # the fall
+    second = first + 2 * e * v / 9.81  # the first flight
+    ringing = y.audio[0][int((first + 0.01) * FS) : int((second - 0.001) * FS)]
+    x = f * tau
+    expected = (
+        reference_gain(model, FS)
+        * a
+        * m
+        * v
+        * (1 + e)
+        * abs(math.sin(math.pi * x) / (math.pi * x) / (1 - x * x))
+    )
+    assert np.abs(ringing).max() == pytest.approx(expected, rel=2e-3)
+
+
+@pytest.mark.parametrize(
+    "patch", ["examples/wine_glass.toml", "examples/door_knock.toml", "examples/pot.toml", "rain"]
+)
+def test_the_examples_need_no_gains_and_sound_between_minus_30_and_minus_6_dbfs(patch):
+    """Forces in N to sound pressure at a listening distance: no Gain nodes, mixers at unity,
+    the peak within -30..-6 dBFS (re 105 dB SPL) and the limiter idle."""
+    from jassy.patchfile import load_patch
+
+    root = Path(__file__).resolve().parents[1]
+    loaded = load_patch(root / patch if patch.endswith(".toml") else patch)
+    nodes = loaded.graph.nodes.values()
+    assert not [n.name for n in nodes if n.type_name == "Gain"]
+    mixers = [n.values["gains"] for n in nodes if n.type_name == "Mixer"]
+    assert all(gains is None or np.all(np.asarray(gains) == 1.0) for gains in mixers)  # None: all 1
+    assert [n.type_name for n in loaded.graph.audio] == ["SoundPressure"]
+    result = render(loaded.graph, loaded.score, loaded.duration, sample_rate=FS)
+    peak = 20 * math.log10(float(np.abs(result.audio).max()))
+    assert -30.0 <= peak <= -6.0, f"{patch}: {peak:.1f} dBFS"
+    assert not result.warnings

@@ -35,7 +35,7 @@ def test_live_output_is_the_offline_rendering_sample_for_sample(jack, isolation)
 
     patch = load_patch("bell")
     live = LiveEngine(
-        patch.graph, patch.score, FS, 64, ring_blocks=3, monitor_seconds=3.0, isolation=isolation
+        patch.graph, patch.score, FS, 64, ring_blocks=3, monitor_seconds=3.0, isolation=isolation, mode="ring"
     )
     live.start()
     time.sleep(1.2)
@@ -91,7 +91,7 @@ def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
 def test_posted_events_play_within_the_latency(jack):
     from jassy.live import TAKEN_AT, LiveEngine
 
-    live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0)
+    live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0, mode="ring")
     live.start()
     time.sleep(0.3)
     posted_at = int(live.header[3])  # frames written to the ring when the event is posted
@@ -114,7 +114,9 @@ def test_watchdog_fades_haptics_to_zero_within_10_ms_when_the_producer_stalls(ja
     graph = Graph(Gain(hit, gain=0.0), haptic=hit)
     score = [Event(0.0, "hit", "impact", {"impulse": 2.0})]
     safety = HapticSafety(max_force=3.0, max_slew=2000.0, watchdog=0.01)
-    live = LiveEngine(graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, monitor_seconds=2.0)
+    live = LiveEngine(
+        graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, monitor_seconds=2.0, mode="ring"
+    )
     live.start()
     time.sleep(0.25)
     live.pause_producer(True)
@@ -189,7 +191,9 @@ def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
     graph = Graph(Gain(hit, gain=0.0), haptic=hit)
     safety = HapticSafety(max_force=1.0, watchdog=0.01)
     score = [Event(0.0, "hit", "impact", {"impulse": 2.0})]
-    live = LiveEngine(graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, haptic_udp=rx.address)
+    live = LiveEngine(
+        graph, score, FS, 64, ring_blocks=3, haptic_safety=safety, haptic_udp=rx.address, mode="ring"
+    )
     live.start()
     time.sleep(0.2)
     live.pause_producer(True)
@@ -246,6 +250,78 @@ def test_warm_up_loads_every_kernel_the_score_needs_before_the_stream_starts():
 
     run = subprocess.run([sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "[]", run.stdout
+
+
+POST_WARM_CHECK = """
+import sys
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+from jassy import Event, Graph, ModalModel
+from jassy.callback import CallbackRenderer, render_into
+from jassy.live import LiveEngine
+from ugens import Gain, ImpactForce, ModalBank
+
+hit = ImpactForce(name="hit", duration=0.001)
+bank = ModalBank(ModalModel([440.0, 1320.0], [2.0, 5.0], [[1.0, 0.5]]), name="bank")(hit)
+graph = Graph(Gain(bank, gain=0.5, name="out"), haptic=hit)
+if sys.argv[1] == "callback":  # the renderer as the stream starts, the score empty
+    renderer = CallbackRenderer(graph, [], 48000, 64)
+    device = np.zeros(128, dtype=np.float32)
+    play = lambda: render_into(renderer.control, device, 64)
+    post = renderer.post
+else:  # the ring producer's engine after its warm-up
+    engine = LiveEngine(graph, [], 48000, 64, 2.5, mode="ring")._warm_engine()
+    device = np.zeros((len(graph.bus_rows), 64))
+    play = lambda: engine.produce(device, 64)
+    post = engine.scheduler.insert
+play()
+loaded = []
+original = Dispatcher.add_overload
+
+
+def add_overload(self, cres):
+    loaded.append(self.py_func.__qualname__)
+    original(self, cres)
+
+
+Dispatcher.add_overload = add_overload
+post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
+heard = 0.0
+for _ in range(10):
+    play()
+    heard = max(heard, float(np.abs(device).max()))
+print(loaded, heard > 0)
+"""
+
+
+@pytest.mark.parametrize("mode", ["callback", "ring"])
+def test_the_first_live_tap_loads_no_kernel(mode):
+    """A live tap posted right after the stream starts (the score is empty, so nothing
+    rehearsed it) must not load the impact pulse kernel then: milliseconds of numba cache
+    loading (1.5 s when the cache is cold) before the tap is stamped. Checked in a fresh
+    process (this one has every kernel loaded already)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-c", POST_WARM_CHECK, mode], capture_output=True, text=True, check=True, timeout=300
+    )
+    assert run.stdout.strip() == "[] True", run.stdout
+
+
+def test_a_tap_posted_as_the_callback_stream_starts_plays_at_its_stamp(jack):
+    from jassy.live import LiveEngine
+
+    live = LiveEngine(tap_graph(), [], FS, 64, monitor_seconds=2.0)
+    assert live.mode == "callback"  # the default where the graph allows it
+    live.start()
+    stamped = live._callback.renderer.post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
+    time.sleep(0.3)
+    live.stop()
+    heard, rendered = live.monitor()
+    onset = first_onset(heard[1])
+    assert rendered[onset] == stamped + 1  # an impact's first non-zero sample follows its time
+    assert first_onset(heard[0]) == onset  # sound and force on the same frame
 
 
 def test_missing_portaudio_is_a_clear_error(monkeypatch):

@@ -56,7 +56,7 @@ separate driving-point gains.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -226,25 +226,38 @@ def energy_safeguard(f, e_prev, vh_free, mass, tt, s0, s1, s2, x_free, kk, k, al
     return good
 
 
+class HammerParams(NamedTuple):
+    """The contact's scalar parameters for one step size T, stored in this order in the float64
+    arrays ``prm`` (a sample) and ``prm_sub`` (a sub-step)."""
+
+    mass: float  #: hammer mass m (kg)
+    stiffness: float  #: contact stiffness k (N/m^alpha)
+    alpha: float  #: contact exponent
+    dissipation: float  #: Hunt-Crossley lambda (s/m)
+    step: float  #: T (s)
+    compliance: float  #: K = T^2/(2 m) + G: x_{n+1} = x_free - K f_n (m/N)
+    gain_sum: float  #: G = sum_k g1_k, the modes' contact displacement per force (m/N)
+    energy_gain: float  #: S2 = sum_k (wq g1^2 + wp g2^2), the modes' energy per force^2 (J/N^2)
+    floor: float  #: mode amplitude below which a silent mode is zeroed (m)
+
+
+@nb.njit(inline="always", cache=True)
+def hammer_params(prm):
+    """The HammerParams record held in ``prm``."""
+    return HammerParams(prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm, meta):
     """Frames start..start+n-1: per sample, one pass over the modes, then the scalar solve.
 
     state rows: mode positions q and velocities p *without* the last force hammer[_FP]
-    (applied at the start of the next pass). prm: mass, k, alpha, lambda, T, K, G, S2, floor.
+    (applied at the start of the next pass). prm holds a HammerParams.
     meta[0]: modes to compute (0 once every mode is silent and the hammer retired).
     """
-    mass, k, alpha, lam, tt, kk, gg, s2, floor = (
-        prm[0],
-        prm[1],
-        prm[2],
-        prm[3],
-        prm[4],
-        prm[5],
-        prm[6],
-        prm[7],
-        prm[8],
-    )
+    p = hammer_params(prm)
+    mass, k, alpha, lam, tt = p.mass, p.stiffness, p.alpha, p.dissipation, p.step
+    kk, gg, s2, floor = p.compliance, p.gain_sum, p.energy_gain, p.floor
     inv_t = 1.0 / tt
     a11 = coef[0]
     a12 = coef[1]
@@ -363,7 +376,7 @@ def hc_run_substeps(out, force_out, energy_out, start, n, coef, coef_sub, state,
     times higher. The force output of such a sample is its mean (impulse / T). Between
     samples the pending force is always one of a full step."""
     m_sub = scratch.shape[1]
-    tt = prm[4]
+    tt = hammer_params(prm).step
     for i in range(n):
         frame = start + i
         if hammer[_ACTIVE] == 0.0:  # retired: no contact in the rest of the block
@@ -542,17 +555,22 @@ class HuntCrossleyImpact(ModelParams, UGen):
             g1, g2, wq, wp = coef[4], coef[5], coef[6], coef[7]
             G = float(np.sum(g1))
             S2 = float(np.sum(wq * g1 * g1 + wp * g2 * g2))
-            prm[:] = (
-                m,
-                v["stiffness"],
-                v["alpha"],
-                v["dissipation"],
-                T,
-                T * T / (2 * m) + G,
-                G,
-                S2,
-                v["floor"],
+            prm[:] = HammerParams(
+                mass=m,
+                stiffness=v["stiffness"],
+                alpha=v["alpha"],
+                dissipation=v["dissipation"],
+                step=T,
+                compliance=T * T / (2 * m) + G,
+                gain_sum=G,
+                energy_gain=S2,
+                floor=v["floor"],
             )
+
+    @property
+    def params(self) -> HammerParams:
+        """The contact's parameters for a full sample step."""
+        return HammerParams(*self.prm)
 
     def _reset(self) -> None:
         self.heard_state[:] = 0.0
@@ -568,7 +586,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         self._commit_force()
         self._design()
-        self.hammer[_VN] = potential(self.hammer[_XN], self.prm[1], self.prm[2])
+        self.hammer[_VN] = potential(self.hammer[_XN], self.params.stiffness, self.params.alpha)
         self.hammer[_EN] = self.energy()
 
     # ------------------------------------------------------------------ events
@@ -589,7 +607,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         h[_VH] = vc + v0
         h[_SP] = vc
         h[_XN] = v0 * lead
-        h[_VN] = potential(h[_XN], self.prm[1], self.prm[2])
+        h[_VN] = potential(h[_XN], self.params.stiffness, self.params.alpha)
         h[_ACTIVE] = 1.0
         self.stats[:] = 0.0
         self.stats[_START] = sample_time
@@ -606,7 +624,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         p = self.state[1] + self.coef[5] * fp
         modal = float(np.sum(self.coef[6] * q * q + self.coef[7] * p * p))
         x = self.hammer[_XH] - float(np.sum(q))
-        m, k, alpha = self.prm[0], self.prm[1], self.prm[2]
+        m, k, alpha = self.params.mass, self.params.stiffness, self.params.alpha
         return 0.5 * m * self.hammer[_VH] ** 2 + modal + float(potential(x, k, alpha))
 
     @property
@@ -652,7 +670,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
             # silent: no mode to compute and no hammer that can touch
             self.extra["contact"][:n] = 0.0
             force[:n] = 0.0
-            m, v = self.prm[0], self.hammer[_VH]
+            m, v = self.params.mass, self.hammer[_VH]
             self.hammer[_XH] += v * n / self.sample_rate
             energy[:n] = 0.5 * m * v * v
             return

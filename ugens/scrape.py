@@ -19,7 +19,7 @@ contact (f_ref, v_ref) s = 1.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -98,24 +98,65 @@ def wrap(pos, length):
     return pos
 
 
+class ProfileConfig(NamedTuple):
+    """Settings of :func:`profile_contact`, stored in this order in the float64 array ``cfg``."""
+
+    inv_dxfs: float  #: 1/(dx fs): profile points per (m/s) per sample
+    cutoff_per_speed: float  #: kc, low-pass cutoff per slip speed (Hz per m/s; 0 = no filter)
+    f_max: float  #: highest cutoff (Hz)
+    inv_fs: float  #: sample period (s)
+    gain: float  #: amplitude at the reference contact
+    law: float  #: index of the amplitude law in LAWS
+    inv_ref: float  #: 1/(f_ref v_ref) (1/(N m/s))
+    min_speed: float  #: slip speed below which the contact is silent (m/s)
+    cubic: float  #: 1.0 for cubic profile interpolation, 0.0 for linear
+
+
+@nb.njit(inline="always", cache=True)
+def profile_config(cfg):
+    """The ProfileConfig record held in ``cfg``."""
+    return ProfileConfig(cfg[0], cfg[1], cfg[2], cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8])
+
+
+class NoiseConfig(NamedTuple):
+    """Settings of :func:`resonant_noise`, stored in this order in the float64 array ``cfg``."""
+
+    f0: float  #: resonance at rest (Hz)
+    slope: float  #: resonance rise per slip speed (Hz per m/s)
+    d0: float  #: decay rate at rest (1/s)
+    d_slope: float  #: decay rate rise per slip speed (1/s per m/s)
+    inv_fs: float  #: sample period (s)
+    f_max: float  #: highest resonance (Hz)
+    gain: float  #: amplitude at the reference contact
+    law: float  #: index of the amplitude law in LAWS
+    inv_ref: float  #: 1/(f_ref v_ref) (1/(N m/s))
+    min_speed: float  #: slip speed below which the contact is silent (m/s)
+
+
+@nb.njit(inline="always", cache=True)
+def noise_config(cfg):
+    """The NoiseConfig record held in ``cfg``."""
+    return NoiseConfig(cfg[0], cfg[1], cfg[2], cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8], cfg[9])
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     """Needle on a looped profile, low-passed with cutoff kc |v|, times gain s(F, v).
 
-    cfg = [1/(dx fs), kc (Hz per m/s; 0 = no filter), f_max (Hz), 1/fs, gain, law,
-    1/(f_ref v_ref), min_speed, cubic]; state = [pos (points), s1, s2, cutoff of coef (Hz)];
+    cfg holds a ProfileConfig; state = [pos (points), s1, s2, cutoff of coef (Hz)];
     coef = RBJ low-pass [b0, b1, b2, a1, a2] for the cutoff state[3], redesigned when the
     cutoff the speed asks for differs from it by more than CUTOFF_STEP (relative).
     """
-    inv_dxfs = cfg[0]
-    kc = cfg[1]
-    f_max = cfg[2]
-    inv_fs = cfg[3]
-    gain = cfg[4]
-    law = int(cfg[5])
-    inv_ref = cfg[6]
-    min_speed = cfg[7]
-    cubic = cfg[8] != 0.0
+    c = profile_config(cfg)
+    inv_dxfs = c.inv_dxfs
+    kc = c.cutoff_per_speed
+    f_max = c.f_max
+    inv_fs = c.inv_fs
+    gain = c.gain
+    law = int(c.law)
+    inv_ref = c.inv_ref
+    min_speed = c.min_speed
+    cubic = c.cubic != 0.0
     L = prof.shape[0]
     pos = state[0]
     s1 = state[1]
@@ -147,19 +188,19 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
 
     y = g (x - x[-2]) + 2 R cos(theta) y[-1] - R^2 y[-2], g = sqrt((1 - R^2) / 2), with
     theta = 2 pi clamp(f0 + slope |v|) / fs and R = exp(-(d0 + d_slope |v|) / fs).
-    cfg = [f0, slope, d0, d_slope, 1/fs, f_max, gain, law, 1/(f_ref v_ref), min_speed];
-    state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
+    cfg holds a NoiseConfig; state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
     """
-    f0 = cfg[0]
-    slope = cfg[1]
-    d0 = cfg[2]
-    d_slope = cfg[3]
-    inv_fs = cfg[4]
-    f_max = cfg[5]
-    gain = cfg[6]
-    law = int(cfg[7])
-    inv_ref = cfg[8]
-    min_speed = cfg[9]
+    c = noise_config(cfg)
+    f0 = c.f0
+    slope = c.slope
+    d0 = c.d0
+    d_slope = c.d_slope
+    inv_fs = c.inv_fs
+    f_max = c.f_max
+    gain = c.gain
+    law = int(c.law)
+    inv_ref = c.inv_ref
+    min_speed = c.min_speed
     x1, x2, y1, y2 = state[0], state[1], state[2], state[3]
     v_coef, c1, c2, g = state[4], state[5], state[6], state[7]
     s = rng[0]
@@ -470,19 +511,18 @@ class NeedleContact(ProfileContact):
         super()._prepare()
         v, fs = self.values, self.sample_rate
         law, inv_ref, min_speed = self._law_config()
-        self.cfg = np.array(
-            [
-                1.0 / (v["dx"] * fs),
-                self.cutoff_per_speed(),
-                NYQUIST_FRACTION * fs,
-                1.0 / fs,
-                v["stiffness"],
-                law,
-                inv_ref,
-                min_speed,
-                float(v["interp"] == "cubic"),
-            ]
+        config = ProfileConfig(
+            inv_dxfs=1.0 / (v["dx"] * fs),
+            cutoff_per_speed=self.cutoff_per_speed(),
+            f_max=NYQUIST_FRACTION * fs,
+            inv_fs=1.0 / fs,
+            gain=v["stiffness"],
+            law=law,
+            inv_ref=inv_ref,
+            min_speed=min_speed,
+            cubic=float(v["interp"] == "cubic"),
         )
+        self.cfg = np.array(config, dtype=np.float64)
         self.state = np.zeros(4)  # pos, s1, s2, v of coef
         self.coef = np.zeros(5)
         self._kernel = specialise(
@@ -605,20 +645,19 @@ class ResonantScrape(ContactControls):
         super()._prepare()
         v, fs = self.values, self.sample_rate
         law, inv_ref, min_speed = self._law_config()
-        self.cfg = np.array(
-            [
-                v["f0"],
-                v["slope"],
-                v["damping"],
-                v["damping_slope"],
-                1.0 / fs,
-                NYQUIST_FRACTION * fs,
-                v["gain"],
-                law,
-                inv_ref,
-                min_speed,
-            ]
+        config = NoiseConfig(
+            f0=v["f0"],
+            slope=v["slope"],
+            d0=v["damping"],
+            d_slope=v["damping_slope"],
+            inv_fs=1.0 / fs,
+            f_max=NYQUIST_FRACTION * fs,
+            gain=v["gain"],
+            law=law,
+            inv_ref=inv_ref,
+            min_speed=min_speed,
         )
+        self.cfg = np.array(config, dtype=np.float64)
         self.rng = np.zeros(1, dtype=np.uint64)
         self.state = np.zeros(8)
         self._kernel = specialise(

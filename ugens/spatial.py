@@ -28,6 +28,16 @@ model for binaural sound synthesis", IEEE Trans. Speech Audio Proc. 6(5), 1998):
   +6 dB at high frequencies facing the ear, -20 dB behind the head; discretised by the
   bilinear transform.
 
+Control rate. The geometry (distance, delays, gains, filter coefficients) is evaluated
+every CONTROL_PERIOD samples of the stream (whatever the blocks) and each value ramps
+linearly in between, aimed at the geometry of the position extrapolated one period on
+(2 p(m) - p(m - N)): no lag for a source moving at constant velocity, no steps (zipper
+noise). A still source is at its exact geometry, as if evaluated per sample. Against the
+per-sample model (tests/test_spatial.py), rms error relative to the output: 3.5e-7 for a
+0.5 m/s walk, 2e-5 for a 2 m/s pass 0.5 m from the head, 1.1e-3 for a circle at 1 m once a
+second (the ITD's kink in time as the source crosses the ear axis is rounded off over one
+period).
+
 Output: the left ear or loudspeaker; extra output ``right``. JASS counterpart:
 ``SpatialMixer`` / HRTF; SDT has none (it leaves space to the host).
 """
@@ -54,10 +64,24 @@ ALPHA_MIN = 0.1
 PHI_MIN = math.radians(150.0)
 MODES = ("stereo", "binaural")
 
+#: Samples between two evaluations of the geometry (0.33 ms at 48 kHz); see the module doc.
+CONTROL_PERIOD = 16
+
 # parameter vector layout
 _FS, _C, _A, _REF, _MIN_R, _BINAURAL, _ABSORB = range(7)
-# float state layout: air low-pass (left, right), head shadow (left x1, y1, right x1, y1)
-_LP_L, _LP_R, _HX_L, _HY_L, _HX_R, _HY_R = range(6)
+# float state layout: air low-pass (left, right), head shadow (left x1, y1, right x1, y1),
+# the position at the last control point and for how many control points it has not
+# moved; then three rows of the ramped values: their
+# current values, their per-sample steps, and the targets of the ramps being set
+_LP_L, _LP_R, _HX_L, _HY_L, _HX_R, _HY_R, _LAST_X, _LAST_Y, _LAST_Z, _STILL = range(10)
+# ramped values (offsets in a row): ear gains, ear delays (samples), air low-pass
+# coefficient, head-shadow numerator coefficients (b0, b1) of each ear
+_G_L, _G_R, _D_L, _D_R, _K, _BL0, _BL1, _BR0, _BR1 = range(9)
+_VALUES = 9
+_NOW, _STEP, _TARGET = 10, 10 + _VALUES, 10 + 2 * _VALUES  # where each row starts
+_STATE_SIZE = 10 + 3 * _VALUES
+# integer state layout: write slot, samples left to the next control point
+_WRITE, _PHASE = range(2)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -75,89 +99,172 @@ def shadow_alpha(phi):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def spatialise(x, left, right, n, xs, ys, zs, ring, ist, st, par):
-    """n samples of the source x at positions (xs, ys, zs)[i]; ring: the input's delay line."""
+def geometry(px, py, pz, par, max_delay, out, row):
+    """The ramped values (offsets _G_L .. _BR1 from out[row]) of a source at (px, py, pz) m."""
     fs = par[_FS]
     c = par[_C]
     a = par[_A]
-    ref = par[_REF]
-    min_r = par[_MIN_R]
+    r = max(math.sqrt(px * px + py * py + pz * pz), par[_MIN_R])
+    s = min(max(px / r, -1.0), 1.0)
+    gain = par[_REF] / r
+    delay = r / c * fs
+    if par[_BINAURAL] != 0.0:
+        theta = math.asin(s)
+        near = -a / c * abs(s) * fs  # sin |theta| = |s|
+        far = a / c * abs(theta) * fs
+        d_r = delay + (near if theta >= 0.0 else far)
+        d_l = delay + (far if theta >= 0.0 else near)
+        g_l = gain
+        g_r = gain
+        phi_r = math.acos(s)
+        w0 = c / a
+        bl0, bl1, _ = shadow_coefficients(shadow_alpha(math.pi - phi_r), w0, fs)  # acos(-s)
+        br0, br1, _ = shadow_coefficients(shadow_alpha(phi_r), w0, fs)
+    else:
+        d_l = delay
+        d_r = delay
+        angle = 0.25 * math.pi * (1.0 + s)
+        g_l = gain * math.cos(angle)
+        g_r = gain * math.sin(angle)
+        bl0 = br0 = 1.0
+        bl1 = br1 = 0.0
+    out[row + _G_L] = g_l
+    out[row + _G_R] = g_r
+    out[row + _D_L] = min(max(d_l, MIN_DELAY), max_delay)
+    out[row + _D_R] = min(max(d_r, MIN_DELAY), max_delay)
+    out[row + _K] = -math.expm1(-2.0 * math.pi * ABSORPTION_CUTOFF / math.sqrt(r) / fs)
+    out[row + _BL0] = bl0
+    out[row + _BL1] = bl1
+    out[row + _BR0] = br0
+    out[row + _BR1] = br1
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def control_point(px, py, pz, st, par, max_delay):
+    """At a control point with the source at (px, py, pz): set each ramped value's step so
+    that it reaches, CONTROL_PERIOD samples on, the geometry of the position extrapolated
+    from the last control point (the value itself carries on where its ramp ended). A
+    source that has not moved for a whole period is at its own geometry (the ramp aimed
+    there ends there, bar rounding) and stays there without evaluating it again; so is
+    the first control point of a stream."""
+    if math.isnan(st[_LAST_X]):
+        still = 2.0
+    elif px == st[_LAST_X] and py == st[_LAST_Y] and pz == st[_LAST_Z]:
+        still = st[_STILL] + 1.0
+    else:
+        still = 0.0
+    st[_STILL] = still
+    if still > 2.0:
+        return
+    if still == 2.0:
+        geometry(px, py, pz, par, max_delay, st, _NOW)
+        st[_STEP : _STEP + _VALUES] = 0.0
+    else:
+        ex = 2.0 * px - st[_LAST_X]
+        ey = 2.0 * py - st[_LAST_Y]
+        ez = 2.0 * pz - st[_LAST_Z]
+        geometry(ex, ey, ez, par, max_delay, st, _TARGET)
+        for v in range(_VALUES):
+            st[_STEP + v] = (st[_TARGET + v] - st[_NOW + v]) * (1.0 / CONTROL_PERIOD)
+    st[_LAST_X] = px
+    st[_LAST_Y] = py
+    st[_LAST_Z] = pz
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def spatialise(x, left, right, n, xs, ys, zs, ring, ist, st, par):
+    """n samples of the source x at positions (xs, ys, zs)[i]; ring: the input's delay line.
+    The geometry is evaluated at the control points (every CONTROL_PERIOD samples of the
+    stream, wherever the blocks are cut) and ramped linearly in between."""
+    fs = par[_FS]
     binaural = par[_BINAURAL] != 0.0
     absorb = par[_ABSORB] != 0.0
-    w0 = c / a
+    w0 = par[_C] / par[_A]
+    a1 = (2.0 * w0 - 2.0 * fs) / (2.0 * w0 + 2.0 * fs)  # the head shadow's pole (fixed)
     mask = ring.size - 1
     max_delay = ring.size - 4.0
-    w = ist[0]
+    w = ist[_WRITE]
+    phase = ist[_PHASE]
     lp_l = st[_LP_L]
     lp_r = st[_LP_R]
     hx_l = st[_HX_L]
     hy_l = st[_HY_L]
     hx_r = st[_HX_R]
     hy_r = st[_HY_R]
-    last_x = math.nan  # no geometry yet: the first sample computes it
-    last_y = math.nan
-    last_z = math.nan
-    g_l = g_r = d_l = d_r = k = 0.0
-    bl0 = bl1 = al1 = br0 = br1 = ar1 = 0.0
-    for i in range(n):
-        w = (w + 1) & mask
-        ring[w] = x[i]
-        px = xs[i]
-        py = ys[i]
-        pz = zs[i]
-        if px != last_x or py != last_y or pz != last_z:  # new geometry (else reuse it)
-            last_x = px
-            last_y = py
-            last_z = pz
-            r = max(math.sqrt(px * px + py * py + pz * pz), min_r)
-            s = min(max(px / r, -1.0), 1.0)
-            gain = ref / r
-            delay = r / c * fs
+    i = 0
+    while i < n:
+        if phase == 0:
+            control_point(xs[i], ys[i], zs[i], st, par, max_delay)
+            phase = CONTROL_PERIOD
+        g_l, g_r, d_l, d_r, k = (
+            st[_NOW + _G_L],
+            st[_NOW + _G_R],
+            st[_NOW + _D_L],
+            st[_NOW + _D_R],
+            st[_NOW + _K],
+        )
+        bl0, bl1, br0, br1 = st[_NOW + _BL0], st[_NOW + _BL1], st[_NOW + _BR0], st[_NOW + _BR1]
+        dg_l, dg_r, dd_l, dd_r = st[_STEP + _G_L], st[_STEP + _G_R], st[_STEP + _D_L], st[_STEP + _D_R]
+        dk, dbl0, dbl1, dbr0, dbr1 = (
+            st[_STEP + _K],
+            st[_STEP + _BL0],
+            st[_STEP + _BL1],
+            st[_STEP + _BR0],
+            st[_STEP + _BR1],
+        )
+        m = min(phase, n - i)
+        for j in range(i, i + m):
+            w = (w + 1) & mask
+            ring[w] = x[j]
+            yl = g_l * hermite_read(ring, w, d_l)
+            yr = g_r * hermite_read(ring, w, d_r)
+            if absorb:
+                lp_l += k * (yl - lp_l)
+                lp_r += k * (yr - lp_r)
+                yl = lp_l
+                yr = lp_r
             if binaural:
-                theta = math.asin(s)
-                near = -a / c * abs(s) * fs  # sin |theta| = |s|
-                far = a / c * abs(theta) * fs
-                d_r = delay + (near if theta >= 0.0 else far)
-                d_l = delay + (far if theta >= 0.0 else near)
-                g_l = gain
-                g_r = gain
-                phi_r = math.acos(s)
-                bl0, bl1, al1 = shadow_coefficients(shadow_alpha(math.pi - phi_r), w0, fs)  # acos(-s)
-                br0, br1, ar1 = shadow_coefficients(shadow_alpha(phi_r), w0, fs)
-            else:
-                d_l = delay
-                d_r = delay
-                angle = 0.25 * math.pi * (1.0 + s)
-                g_l = gain * math.cos(angle)
-                g_r = gain * math.sin(angle)
-            d_l = min(max(d_l, MIN_DELAY), max_delay)
-            d_r = min(max(d_r, MIN_DELAY), max_delay)
-            k = -math.expm1(-2.0 * math.pi * ABSORPTION_CUTOFF / math.sqrt(r) / fs)
-        yl = g_l * hermite_read(ring, w, d_l)
-        yr = g_r * hermite_read(ring, w, d_r)
-        if absorb:
-            lp_l += k * (yl - lp_l)
-            lp_r += k * (yr - lp_r)
-            yl = lp_l
-            yr = lp_r
-        if binaural:
-            out_l = bl0 * yl + bl1 * hx_l - al1 * hy_l
-            hx_l = yl
-            hy_l = out_l
-            out_r = br0 * yr + br1 * hx_r - ar1 * hy_r
-            hx_r = yr
-            hy_r = out_r
-            yl = out_l
-            yr = out_r
-        left[i] = yl
-        right[i] = yr
-    ist[0] = w
+                out_l = bl0 * yl + bl1 * hx_l - a1 * hy_l
+                hx_l = yl
+                hy_l = out_l
+                out_r = br0 * yr + br1 * hx_r - a1 * hy_r
+                hx_r = yr
+                hy_r = out_r
+                yl = out_l
+                yr = out_r
+            left[j] = yl
+            right[j] = yr
+            g_l += dg_l
+            g_r += dg_r
+            d_l += dd_l
+            d_r += dd_r
+            k += dk
+            bl0 += dbl0
+            bl1 += dbl1
+            br0 += dbr0
+            br1 += dbr1
+        st[_NOW + _G_L], st[_NOW + _G_R], st[_NOW + _D_L], st[_NOW + _D_R], st[_NOW + _K] = (
+            g_l,
+            g_r,
+            d_l,
+            d_r,
+            k,
+        )
+        st[_NOW + _BL0], st[_NOW + _BL1], st[_NOW + _BR0], st[_NOW + _BR1] = bl0, bl1, br0, br1
+        i += m
+        phase -= m
+    ist[_WRITE] = w
+    ist[_PHASE] = phase
     st[_LP_L] = lp_l
     st[_LP_R] = lp_r
     st[_HX_L] = hx_l
     st[_HY_L] = hy_l
     st[_HX_R] = hx_r
     st[_HY_R] = hy_r
+
+
+#: Each position coordinate and the audio-rate input that overrides it.
+_TRACKS = (("x", "track_x"), ("y", "track_y"), ("z", "track_z"))
 
 
 def _coordinate(name: str, default: float, axis: str) -> ParamSpec:
@@ -205,8 +312,8 @@ class Spatialiser(UGen):
         v, fs = self.values, self.sample_rate
         longest = v["max_distance"] / v["c"] * fs + v["head_radius"] / v["c"] * fs * 3.0 + 8
         self.ring = np.zeros(1 << int(math.ceil(math.log2(longest))))
-        self.ist = np.zeros(1, dtype=np.int64)
-        self.st = np.zeros(6)
+        self.ist = np.zeros(2, dtype=np.int64)
+        self.st = np.zeros(_STATE_SIZE)
         self.par = np.array(
             [
                 fs,
@@ -220,32 +327,15 @@ class Spatialiser(UGen):
         )
         self.ramps = {key: self.smoothed(key) for key in ("x", "y", "z")}
         self.controls = {key: Control(ramp, self.max_block) for key, ramp in self.ramps.items()}
-        self._run = specialise(spatialise, *self._arguments(0, self.controls["x"].buffer))
-
-    def _position(self, key: str, n: int) -> np.ndarray:
-        source = self.sources.get(f"track_{key}")
-        return source.out if source is not None else self.controls[key].values(n)
-
-    def _arguments(self, n: int, *positions: np.ndarray) -> tuple:
-        xs, ys, zs = (positions * 3)[:3] if len(positions) == 1 else positions
-        return (
-            self.input_buffer("input"),
-            self.out,
-            self.extra["right"],
-            n,
-            xs,
-            ys,
-            zs,
-            self.ring,
-            self.ist,
-            self.st,
-            self.par,
-        )
+        xs = self.controls["x"].buffer
+        example = (self.input_buffer("input"), self.out, self.extra["right"], 0, xs, xs, xs)
+        self._run = specialise(spatialise, *example, self.ring, self.ist, self.st, self.par)
 
     def _reset(self) -> None:
         self.ring[:] = 0.0
         self.ist[:] = 0
         self.st[:] = 0.0
+        self.st[_LAST_X] = math.nan  # no control point yet
         for ramp in self.ramps.values():
             ramp.set(ramp.target, 0, jump=True)
 
@@ -253,7 +343,14 @@ class Spatialiser(UGen):
         self.ramps[key].set(value, self.ramp_samples(), jump)
 
     def process(self, start: int, n: int) -> None:
-        self._run(*self._arguments(n, *(self._position(key, n) for key in ("x", "y", "z"))))
+        sources, controls = self.sources, self.controls
+        xs, ys, zs = [
+            sources[track].out if track in sources else controls[key].values(n) for key, track in _TRACKS
+        ]
+        right = self.extra["right"]
+        self._run(
+            sources["input"].out, self.out, right, n, xs, ys, zs, self.ring, self.ist, self.st, self.par
+        )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

@@ -264,6 +264,7 @@ class LivePresenter:
             self.device,
             offsets_ms={"audio": float(offset_ms), "haptic": 0.0},
             monitor_seconds=d.trial_duration + 1.0,
+            mode="ring",  # offsets need the ring: every trial, 0 ms too, on one path and latency
         )
         engine.start()
         try:
