@@ -97,7 +97,7 @@ def bench_piles(
             t0 = time.process_time()
             mujoco_steps((model, data), steps)
             theirs.append(time.process_time() - t0)
-        depth_j = pile_depths(result.state.pos, result.state.quat, side)
+        depth_j = pile_depths(result.state.pos[-n:], result.state.quat[-n:], side)  # after the pen's planes
         depth_m = pile_depths(data.xpos[1:], data.xquat[1:], side)
         rows.append(
             {
