@@ -172,8 +172,8 @@ def measure(name: str, main: Render, over: Render | None, clipped: int) -> Audio
 # ----------------------------------------------------------------------------- rendering
 def shipped_names() -> list[str]:
     """Every built-in patch and scene, patches first."""
-    from jassy.cli import SCENES
     from jassy.patchfile import builtin_patches
+    from patches.scenes import SCENES
 
     return sorted(builtin_patches()) + sorted(SCENES)
 
@@ -194,8 +194,8 @@ def render_patch(name: str, rate: float, duration: float | None = None) -> tuple
 
 def render_scene(name: str, rate: float, duration: float | None = None) -> tuple[Render, int]:
     """(mono render as written, 0) of a physics scene, with its score's event times."""
-    from jassy.cli import SCENES
     from patches.scene_io import captured_renders
+    from patches.scenes import SCENES
 
     module, function = SCENES[name]
     render = getattr(importlib.import_module(module), function)
@@ -208,7 +208,7 @@ def render_scene(name: str, rate: float, duration: float | None = None) -> tuple
 
 def check(name: str, duration: float | None = None, aliasing: bool = True) -> AudioReport:
     """Render ``name`` (a patch or scene) and measure it."""
-    from jassy.cli import SCENES
+    from patches.scenes import SCENES
 
     renderer = render_scene if name in SCENES else render_patch
     main, clipped = renderer(name, RATE, duration)

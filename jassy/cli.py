@@ -21,19 +21,9 @@ from jassy.cli_checks import (
 )
 from jassy.errors import JassyError
 from jassy.offline import OFFLINE_BLOCK
+from patches.scenes import SCENES
 
 DEFAULT_RATE = 48000
-
-
-#: Built-in scenes that run physics before rendering: name -> (module, function). The
-#: function takes (out, haptic_path, csv_path, duration, sample_rate, block, **options).
-SCENES = {
-    "drill": ("patches.drill", "render_drill"),
-    "wok": ("patches.wok", "render_wok"),
-    "drop": ("patches.drop", "render_drop"),
-    "poke": ("patches.poke", "render_poke"),
-    "archery": ("patches.archery", "render_archery"),
-}
 
 
 def _render_scene(args: argparse.Namespace) -> int:
@@ -143,10 +133,14 @@ def _cmd_render(args: argparse.Namespace) -> int:
     for warning in summary["warnings"]:
         print(f"jassy: warning: {warning}", file=sys.stderr)
     if not args.quiet:
+        from jassy.levels import spl_summary
+
         peak_db = 20 * math.log10(summary["peak"]) if summary["peak"] > 0 else float("-inf")
         print(
             f"wrote {args.output}: {summary['duration']:.3f} s at {rate:g} Hz, "
-            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS, rendered in {elapsed:.2f} s"
+            f"{len(patch.graph.audio)} ch, peak {peak_db:.1f} dBFS"
+            + ("" if args.normalise else spl_summary(patch.graph.audio, peak_db))
+            + f", rendered in {elapsed:.2f} s"
             + (f"; haptic -> {args.haptic}" if args.haptic else "")
             + (
                 f"; normalised by {summary['gain_db']:+.1f} dB to {summary['level']:.1f} "
@@ -314,7 +308,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"  {name:<12} {module}.{function}")
     print("ugens:")
     for name, cls in ugen_types().items():
-        params = ", ".join(cls.param_specs)
+        params = ", ".join(cls.all_specs())  # with the common `smooth`
         actions = ", ".join(cls.actions)
         extra = f"; actions: {actions}" if actions else ""
         print(f"  {name:<14} {_first_line(cls.__doc__)}")
@@ -410,6 +404,25 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             dfcp = bench_dfcp()
         print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
+    if args.name == "fit":
+        from physics.modal._blas import single_threaded
+        from physics.modal.fit_bench import bench_fit, print_fit
+
+        with single_threaded():
+            result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
+        print(json.dumps(result, indent=2)) if args.json else print_fit(result)
+    if args.name == "anytime":
+        from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
+
+        if args.plot:
+            from jassy.preview import check_png, require_matplotlib
+
+            require_matplotlib("--plot")
+            check_png(args.plot, "--plot")
+        result = bench_anytime(quick=args.quick)
+        print(json.dumps(result, indent=2)) if args.json else print_anytime(result)
+        if args.plot:
+            plot_anytime(result, args.plot)
     if args.name == "startup":
         from jassy.startup import bench_startup, print_startup
 
@@ -572,7 +585,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "startup"],
+        choices=[
+            "modal",
+            "contact",
+            "live",
+            "batch",
+            "burr",
+            "rigid",
+            "deform",
+            "rod",
+            "startup",
+            "anytime",
+            "fit",
+        ],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
@@ -580,8 +605,11 @@ def build_parser() -> argparse.ArgumentParser:
         "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
         "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
-        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok)",
+        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok); "
+        "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok); "
+        "fit: jassy fit's recall and errors on random synthetic recordings, and its speed",
     )
+    p.add_argument("--plot", metavar="PNG", help="anytime: plot the error against the budget")
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
     p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")

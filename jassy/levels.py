@@ -116,3 +116,15 @@ def spl_db(pressure: float) -> float:
     """Sound pressure level (dB re 20 uPa) of a pressure in Pa (an RMS or a peak value); a
     SoundPressure node's output x is at spl_db(|x|) + full_scale_spl - 93.98 dB."""
     return 20.0 * float(np.log10(pressure / P_REF))
+
+
+def spl_summary(audio_nodes, peak_dbfs: float) -> str:
+    """ " = 97.6 dB SPL at 1 m" when every audio output is a SoundPressure node, all with the
+    same full scale and distance (the render's peak read as a sound pressure level), else ""."""
+    if not all(node.type_name == "SoundPressure" for node in audio_nodes):
+        return ""
+    kinds = {(node.values["full_scale_spl"], node.values["distance"]) for node in audio_nodes}
+    if len(kinds) != 1:
+        return ""
+    full_scale, distance = kinds.pop()
+    return f" = {peak_dbfs + full_scale:.1f} dB SPL at {distance:g} m"

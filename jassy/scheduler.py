@@ -135,6 +135,8 @@ class Scheduler:
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
             budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses)
+            if not budget.active:  # it holds every mode: no decisions, no sub-block cuts
+                self.period = None
 
     def insert(self, event: Event) -> None:
         """Add a validated event during a render (live input). An event whose time has
@@ -156,15 +158,18 @@ class Scheduler:
             return True
         return all(t.inline_events for t in self.graph.location_targets(event.node))
 
-    def upcoming_impulses(self, start: int, end: int) -> list[tuple[list, float]]:
-        """(ugens downstream, impulse N s) of the impact-like events applied in frames
-        [start, end); an action without an ``impulse`` argument counts as 1 N s."""
+    def upcoming_impulses(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
+        """(frame, ugens downstream, impulse N s, location or None) of the impact-like events
+        applied in frames [start, end); an action without an ``impulse`` argument counts as
+        1 N s."""
         out = []
         i = bisect.bisect_left(self.apply_frames, start)
         while i < len(self.events) and self.apply_frames[i] < end:
             ev = self.events[i]
             if ev.action != "set":
-                out.append((self.graph.location_targets(ev.node), float(ev.args.get("impulse", 1.0))))
+                targets = self.graph.location_targets(ev.node)
+                impulse = float(ev.args.get("impulse", 1.0))
+                out.append((self.apply_frames[i], targets, impulse, ev.args.get("location")))
             i += 1
         return out
 
@@ -185,6 +190,15 @@ class Scheduler:
             for target in self.graph.location_targets(ev.node):
                 _set(target, frame, "location", location, True, None)
         node.act(ev.action, ev.args, self.sample_times[index])
+
+    def _dispatch_due(self, pos: int, never: int) -> int:
+        """Dispatch every event that applies at or before frame ``pos``; return the frame of
+        the next event left (``never`` if none)."""
+        frames, count = self.apply_frames, len(self.apply_frames)
+        while self.next_event < count and frames[self.next_event] <= pos:
+            self._dispatch(self.next_event)
+            self.next_event += 1
+        return frames[self.next_event] if self.next_event < count else never
 
     def _dispatch_inline(self, stop: int, never: int) -> int:
         """Dispatch the inline events before frame ``stop`` up to the first event that is not
@@ -220,10 +234,8 @@ class Scheduler:
         end = begin + n
         upcoming = frames[self.next_event] if self.next_event < count else never
         while pos < end:
-            while upcoming <= pos:
-                self._dispatch(self.next_event)
-                self.next_event += 1
-                upcoming = frames[self.next_event] if self.next_event < count else never
+            if upcoming <= pos:
+                upcoming = self._dispatch_due(pos, never)
             if limit == block and pos % block == 0 and (period is None or period % block == 0):
                 # fast path: whole blocks up to the next event that splits one, or the end
                 while pos + block <= end:
@@ -268,10 +280,7 @@ class Scheduler:
         upcoming = frames[self.next_event] if self.next_event < count else never
         while pos < end:
             if upcoming <= pos:
-                while upcoming <= pos:
-                    self._dispatch(self.next_event)
-                    self.next_event += 1
-                    upcoming = frames[self.next_event] if self.next_event < count else never
+                upcoming = self._dispatch_due(pos, never)
                 program.sync()
             if pos % block == 0:
                 whole = (min(upcoming, end) - pos) // block

@@ -21,8 +21,8 @@ import pytest
 import soundfile
 
 from jassy.batch import _Lock, add_command, run_batch
-from jassy.batch_exec import BlobReader, error_result, make_task, render_task
-from jassy.batch_grid import GridError, load_grid
+from jassy.batch.backends import BlobReader, error_result, make_task, render_task
+from jassy.batch.grid import GridError, load_grid
 from jassy.cli import main
 from jassy.errors import JassyError
 from jassy.files import deterministic_npz, deterministic_wav
@@ -587,7 +587,7 @@ def test_pool_fails_a_variant_that_always_kills_its_worker(serial_run, tmp_path)
 def cluster():
     """A LocalCluster of 2 worker processes, started here the way ``jassy batch`` starts one."""
     pytest.importorskip("distributed")
-    from jassy.batch_exec import local_cluster
+    from jassy.batch.backends import local_cluster
 
     with local_cluster(2) as cluster:
         yield cluster
@@ -659,8 +659,8 @@ def test_cli_dry_run_and_bad_arguments(serial_run, tmp_path, capsys):
 
 
 def test_manifest_columns_are_the_reserved_names():
-    from jassy.batch_grid import RESERVED_COLUMNS
-    from jassy.batch_manifest import columns
+    from jassy.batch.grid import RESERVED_COLUMNS
+    from jassy.batch.manifest import columns
 
     assert sorted(columns([], haptic=True)) == sorted(RESERVED_COLUMNS)
 

@@ -1,6 +1,7 @@
 """The demo window under Xvfb: driven by the UDP probe input along a scripted path, its
 screenshots show the plate (not a blank canvas) and change where the probe moved."""
 
+import math
 import os
 import shutil
 import signal
@@ -121,3 +122,117 @@ def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp
         and ys.max() - ys.min() >= 5
         for ys, xs in below
     )
+
+
+def lens_area(R: float, r: float, d: float) -> float:
+    """Area shared by two circles of radii R and r whose centres are d apart."""
+    a = r * r * math.acos((d * d + r * r - R * R) / (2 * d * r))
+    b = R * R * math.acos((d * d + R * R - r * r) / (2 * d * R))
+    return a + b - 0.5 * math.sqrt((-d + r + R) * (d + r - R) * (d - r + R) * (d + r + R))
+
+
+@pytest.mark.timeout(240)  # the ball's Green's functions and contact kernels load for ~30 s
+def test_poke_window_dents_the_ball_where_the_probe_presses(jack, xvfb, tmp_path):
+    from patches.demo_view import BALL_CENTRE, BALL_SCALE, HEIGHT, WIDTH
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jassy", "demo", "--mode", "poke", "--probe-udp", f"127.0.0.1:{port}"],
+        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    top = 0.25  # m: the middle of the 0.5 m the probe input maps to -45..45 degrees: the top
+    try:
+        line = proc.stdout.readline()
+        assert "window open" in line, line + proc.stdout.read()
+        send_path(sock, port, [(top, 0.01)], seconds_each=0.5)  # hovering over the top
+        hover = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(top, -0.001)], seconds_each=0.8)  # pressed: sinks 8 mm at 5 cm/s
+        pressed = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(top, 0.01)], seconds_each=0.8)  # lifted: the ball is round again
+        lifted = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+    finally:
+        sock.close()
+        if proc.poll() is None:
+            proc.kill()
+
+    from PIL import Image
+
+    for name, shot in (("hover", hover), ("pressed", pressed), ("lifted", lifted)):
+        Image.fromarray(shot.astype(np.uint8)).save(tmp_path / f"poke_{name}.png")
+
+    def ball(shot):
+        return np.all(shot == (0xC0, 0x50, 0x4D), axis=2)  # the ball's fill
+
+    R, r = 0.05 * BALL_SCALE, 0.015 * BALL_SCALE  # ball and probe sphere radii (px)
+    # hovering: a round ball (its 2 px outline inside the radius)
+    assert ball(hover).sum() == pytest.approx(math.pi * (R - 1) ** 2, rel=0.03)
+    assert ball(lifted).sum() == pytest.approx(ball(hover).sum(), rel=0.01)
+    # pressed 8 mm deep: the probe sphere's overlap with the ball is cut out of it, at the top
+    dent = ball(hover) & ~ball(pressed)
+    depth = 0.008 * BALL_SCALE
+    assert dent.sum() == pytest.approx(lens_area(R, r, R + r - depth), rel=0.3)
+    ys, xs = np.nonzero(dent)
+    cx, cy = BALL_CENTRE
+    assert np.all(np.abs(xs - cx) < r + 3) and np.all(ys < cy - R + depth + 4)
+    # the force on the probe points up, out of the ball: a green arrow from the dent's floor
+    gy, gx = np.nonzero(np.all(pressed == (0x40, 0xFF, 0x80), axis=2))
+    floor = cy - R + depth
+    assert gy.size > 20 and np.all(np.abs(gx - cx) < 8) and gy.max() <= floor + 6 and gy.min() < floor - 10
+    assert not np.all(lifted == (0x40, 0xFF, 0x80), axis=2).any()  # no force once lifted
+
+
+@pytest.mark.timeout(180)
+def test_drill_window_removes_bone_under_the_burr(jack, xvfb, tmp_path):
+    from patches.demo_view import HEIGHT, WIDTH
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jassy", "demo", "--mode", "drill", "--probe-udp", f"127.0.0.1:{port}"],
+        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    middle = 0.25  # m: the middle of the 0.5 m the probe input maps across the bone slice
+    try:
+        line = proc.stdout.readline()
+        assert "window open" in line, line + proc.stdout.read()
+        send_path(sock, port, [(middle, 0.01)], seconds_each=0.5)  # hovering
+        hover = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)  # drilling
+        early = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)
+        late = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+    finally:
+        sock.close()
+        if proc.poll() is None:
+            proc.kill()
+    from PIL import Image
+
+    for name, shot in (("hover", hover), ("early", early), ("late", late)):
+        Image.fromarray(shot.astype(np.uint8)).save(tmp_path / f"drill_{name}.png")
+    r, g, b = (hover[..., k] for k in range(3))
+    bone = (r > 0) & (np.abs(g - 0.92 * r) <= 1) & (np.abs(b - 0.8 * r) <= 1)  # grey, 0.92, 0.8
+
+    def hole(shot):  # bone before, a voxel with no bone left now
+        return bone & np.all(shot == (32, 38, 46), axis=2)
+
+    assert len(np.unique(hover[bone], axis=0)) > 20  # the slice's grey levels, not a blank canvas
+    ys, xs = np.nonzero(hole(late))
+    burr = np.nonzero(np.all(late == (0xFF, 0xD0, 0x40), axis=2))[1]  # the burr's outline
+    assert xs.size > 100  # bone removed ...
+    assert burr.min() - 2 <= xs.min() and xs.max() <= burr.max() + 2  # ... only under the burr
+    assert np.all(hole(early) <= hole(late)) and hole(early).sum() < xs.size  # and it stays removed

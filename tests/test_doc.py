@@ -67,3 +67,20 @@ def test_constructors_show_their_parameters_to_help_and_editors():
             assert f"    {key} (" in cls.__doc__
     bank = inspect.signature(ugen_class("ModalBank"))
     assert list(bank.parameters)[:3] == ["sources", "name", "where"]
+
+
+def test_list_names_every_parameter_including_smooth(capsys):
+    assert main(["list"]) == 0
+    text = capsys.readouterr().out
+    for name, cls in ugen_types().items():
+        line = text.split(f"  {name} ", 1)[1].splitlines()[1]
+        assert line.strip().startswith("params: ")
+        assert line.split("params: ", 1)[1].split(";")[0].split(", ") == list(cls.all_specs()), name
+
+
+def test_the_markdown_reference_escapes_choices_inside_table_cells(capsys):
+    assert main(["doc", "--markdown"]) == 0
+    text = capsys.readouterr().out
+    row = next(ln for ln in text.splitlines() if ln.startswith("| `input_kind` |"))
+    assert row.count(" | ") == 5  # six cells: the choices' bars are escaped
+    assert "'velocity' \\| 'displacement' \\| 'pressure'" in row

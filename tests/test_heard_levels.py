@@ -135,3 +135,24 @@ def test_a_dropped_object_rings_a_calibrated_mode_at_the_level_its_momentum_pred
         * abs(math.sin(math.pi * x) / (math.pi * x) / (1 - x * x))
     )
     assert np.abs(ringing).max() == pytest.approx(expected, rel=2e-3)
+
+
+@pytest.mark.parametrize(
+    "patch", ["examples/wine_glass.toml", "examples/door_knock.toml", "examples/pot.toml", "rain"]
+)
+def test_the_examples_need_no_gains_and_sound_between_minus_30_and_minus_6_dbfs(patch):
+    """Forces in N to sound pressure at a listening distance: no Gain nodes, mixers at unity,
+    the peak within -30..-6 dBFS (re 105 dB SPL) and the limiter idle."""
+    from jassy.patchfile import load_patch
+
+    root = Path(__file__).resolve().parents[1]
+    loaded = load_patch(root / patch if patch.endswith(".toml") else patch)
+    nodes = loaded.graph.nodes.values()
+    assert not [n.name for n in nodes if n.type_name == "Gain"]
+    mixers = [n.values["gains"] for n in nodes if n.type_name == "Mixer"]
+    assert all(gains is None or np.all(np.asarray(gains) == 1.0) for gains in mixers)  # None: all 1
+    assert [n.type_name for n in loaded.graph.audio] == ["SoundPressure"]
+    result = render(loaded.graph, loaded.score, loaded.duration, sample_rate=FS)
+    peak = 20 * math.log10(float(np.abs(result.audio).max()))
+    assert -30.0 <= peak <= -6.0, f"{patch}: {peak:.1f} dBFS"
+    assert not result.warnings

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 import pytest
@@ -85,3 +86,55 @@ def test_spl_of_one_pascal_rms_is_94_db():
 def test_a_listener_inside_the_body_is_refused():
     with pytest.raises(PatchError, match=r"nodes.p.distance: expected a distance >= radius"):
         render(Graph(SoundPressure(Sine(name="u"), name="p", radius=0.5, distance=0.2)), [], duration=0.01)
+
+
+def test_render_reports_the_peak_as_a_sound_pressure_level(tmp_path, capsys):
+    """A patch heard through SoundPressure: the summary reads the peak as dB SPL (dBFS +
+    full_scale_spl) at the listening distance; the peak of a unit velocity sine far above the
+    corner is rho c a / r."""
+    from jassy.cli import main
+
+    patch = tmp_path / "p.toml"
+    patch.write_text(
+        textwrap.dedent(
+            """
+            [patch]
+            name = "p"
+            duration = 0.2
+            [nodes.u]
+            type = "Sine"
+            freq = 10000.0
+            [nodes.p]
+            type = "SoundPressure"
+            input = "u"
+            radius = 0.05
+            distance = 2.0
+            full_scale_spl = 120.0
+            [outputs]
+            audio = "p"
+            """
+        )
+    )
+    assert main(["render", str(patch), "-o", str(tmp_path / "p.wav")]) == 0
+    out = capsys.readouterr().out
+    ka = 2 * math.pi * 10000.0 * 0.05 / SPEED_OF_SOUND
+    peak = AIR_DENSITY * SPEED_OF_SOUND * 0.05 / 2.0 * ka / math.sqrt(1 + ka * ka)
+    spl = float(out.split(" dB SPL at 2 m")[0].rsplit("= ", 1)[1])
+    assert spl == pytest.approx(spl_db(peak), abs=0.1)
+
+
+@pytest.mark.parametrize(("speed", "span", "distance"), [(10.0, 0.5, 2.0), (25.0, 0.01, 1.0)])
+def test_a_wire_in_the_wind_gives_the_curle_dipole_pressure(speed, span, distance):
+    """KarmanWhistle with a span: the lift per correlated length l = min(3 d, L), rms
+    0.5 (rho v^2 / 2) d l at omega = 2 pi St v / d, radiates dp = omega F' / (4 pi c r)
+    (Curle), N = L / l lengths add in power: p_rms = sqrt(L / l) omega F' / (4 pi c r)."""
+    from ugens import KarmanWhistle
+
+    d, st, lift = 0.003, 0.2, 0.5
+    wire = KarmanWhistle(name="k", speed=speed, diameter=d, q=2.0, span=span, distance=distance, seed=4)
+    y = render(Graph(wire), [], duration=4.0, sample_rate=FS, limiter=False).audio[0][FS // 10 :]
+    length = min(3 * d, span)
+    force = lift * 0.5 * AIR_DENSITY * speed**2 * d * length
+    omega = 2 * math.pi * st * speed / d
+    expected = math.sqrt(span / length) * omega * force / (4 * math.pi * SPEED_OF_SOUND * distance)
+    assert np.sqrt(np.mean(y**2)) == pytest.approx(expected, rel=0.08)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from jassy.batch import GRID_HELP
-from jassy.batch_grid import load_grid
+from jassy.batch.grid import load_grid
 from jassy.modal_model import ModalModel
 from patches.models_vessels import TURN, mug_points, pot_points, wine_glass_points
 from patches.objects import OBJECTS

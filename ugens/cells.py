@@ -6,7 +6,10 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 * :func:`raised_cosine`: the 1 - cos contact pulse of JASS's BangForce (van den Doel & Pai,
   "JASS: a Java audio synthesis system for programmers", ICAD 2001);
 * :func:`pulse_sum`: its sampled sum, which scales a pulse to an exact impulse;
-* :func:`with_room`: a table that doubles its rows when full (pulse tables).
+* :func:`with_room`: a table that doubles its rows when full (pulse tables);
+* :func:`decay_sums`, :func:`add_onset`, :func:`drop_row`: exponential pulses r^x and x r^x
+  (x samples after their onsets) kept as two running sums and a queue of pending onsets
+  (the blast waves of Explosion, the firings of Engine).
 """
 
 from __future__ import annotations
@@ -46,5 +49,30 @@ def with_room(table, rows):
     while size < rows:
         size *= 2
     grown = np.zeros((size, table.shape[1]))
-    grown[: table.shape[0]] = table
+    for i in range(table.shape[0]):  # element-wise: a slice copy compiles numba's shape-error text
+        for j in range(table.shape[1]):
+            grown[i, j] = table[i, j]
     return grown
+
+
+@nb.njit(inline="always", cache=True)
+def decay_sums(s1, s2, r):
+    """One sample later: s1 = sum A r^x -> r s1, s2 = sum x A r^x -> r (s2 + s1)."""
+    return r * s1, r * (s2 + s1)
+
+
+@nb.njit(inline="always", cache=True)
+def add_onset(s1, s2, amp, x, log_r):
+    """The sums with a pulse of amplitude ``amp`` that started ``x`` samples ago (log_r = ln r)."""
+    e = amp * math.exp(x * log_r)
+    return s1 + e, s2 + x * e
+
+
+@nb.njit(inline="always", cache=True)
+def drop_row(queue, k, count):
+    """Remove row k of the first ``count`` rows of a two-column queue (the last row takes its
+    place); returns the new count."""
+    count -= 1
+    queue[k, 0] = queue[count, 0]
+    queue[k, 1] = queue[count, 1]
+    return count

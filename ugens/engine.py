@@ -63,6 +63,7 @@ from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import engine_noise
+from ugens.cells import add_onset, decay_sums, drop_row
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -178,16 +179,13 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, 
                 queue[count, 1] = amp
                 count += 1
         # propagate the pulse sum to frame t, then start the pulses whose onset has come
-        s2 = r * (s2 + s1)
-        s1 = r * s1
+        s1, s2 = decay_sums(s1, s2, r)
         k = 0
         while k < count:
             onset = queue[k, 0]
             if onset <= t:
                 x = t - onset
-                e = queue[k, 1] * math.exp(x * log_r)
-                s1 += e
-                s2 += x * e
+                s1, s2 = add_onset(s1, s2, queue[k, 1], x, log_r)
                 # band-limited corner: slope norm * A per sample at the onset
                 q = x * phases
                 row = min(int(q), phases - 1)
@@ -196,9 +194,7 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, 
                 for j in range(2 * half):
                     c = (1.0 - w1) * blamp[row, j] + w1 * blamp[row + 1, j]
                     lead[int(start + i - half + j) % span] += slope * c
-                count -= 1
-                queue[k, 0] = queue[count, 0]
-                queue[k, 1] = queue[count, 1]
+                count = drop_row(queue, k, count)
             else:
                 k += 1
         p = norm * s2

@@ -43,6 +43,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import add_onset, decay_sums, drop_row, with_room
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
@@ -91,19 +92,13 @@ def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
     tail_gain = par[_TAIL_GAIN]
     for i in range(n):
         t = float(start + i)
-        s2 = r * (s2 + s1)
-        s1 = r * s1
+        s1, s2 = decay_sums(s1, s2, r)
         k = 0
         while k < k_count:
             onset = queue[k, 0]
             if onset <= t:
-                x = t - onset
-                e = queue[k, 1] * math.exp(x * log_r)
-                s1 += e
-                s2 += x * e
-                k_count -= 1
-                queue[k, 0] = queue[k_count, 0]
-                queue[k, 1] = queue[k_count, 1]
+                s1, s2 = add_onset(s1, s2, queue[k, 1], t - onset, log_r)
+                k_count = drop_row(queue, k, k_count)
             else:
                 k += 1
         p = s1 - s2 * inv_tp
@@ -233,8 +228,7 @@ class Explosion(UGen):
         if action != "blast":
             return super().act(action, args, sample_time)
         k = int(self.count[0])
-        if k == self.queue.shape[0]:
-            self.queue = np.concatenate([self.queue, np.zeros_like(self.queue)])
+        self.queue = with_room(self.queue, k + 1)
         self.queue[k] = (sample_time + self.delay, args["overpressure"] / self.values["distance"])
         self.count[0] = k + 1
 

@@ -20,7 +20,9 @@ Input: the surface velocity in m/s (``input_kind = "velocity"``), or a displacem
 (``"displacement"``: differentiated by the first difference (x[n] - x[n-1]) fs, whose
 magnitude is 2 sin(omega T / 2) / T, within 0.2 dB of omega up to 5 kHz at 48 kHz). The
 finite-element models of the object library have displacement gains (m per N s), the
-plate models velocity gains (m/s per N s). A source that already radiates a pressure (in Pa
+plate models velocity gains (m/s per N s); feed it a bank at ``level = "raw"`` (a calibrated
+bank's output is in full scale, not in m), and models whose gains are in physical units (the
+formula models of the bar and the bell are not). A source that already radiates a pressure (in Pa
 at distance ``radius`` from it: ``input_kind = "pressure"``, e.g. Explosion's pressure at its
 own listener with radius = distance) is only spread, p radius / distance. Output: p divided by the pressure of
 ``full_scale_spl`` (dB re 20 uPa), by default 105 dB SPL (3.56 Pa, the cinema reference:
@@ -89,9 +91,11 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
 
 @register
 class SoundPressure(UGen):
-    """Sound pressure at ``distance`` m from a body of ``radius`` m (a pulsating sphere) whose
-    surface moves with the input (velocity in m/s, or displacement in m; or a source's own
-    pressure in Pa at distance ``radius``, only spread). Output: the
+    """Sound pressure at a listening distance from a vibrating body, re a full scale in dB SPL.
+
+    The body is a pulsating sphere of ``radius`` m heard at ``distance`` m, its surface moving
+    with the input (velocity in m/s, or displacement in m; or a source's own pressure in Pa
+    at distance ``radius``, only spread). Output: the
     pressure re ``full_scale_spl`` (default 1.0 = 105 dB SPL re 20 uPa, 3.56 Pa). Kinsler et
     al., Fundamentals of Acoustics (2000), sec. 7.4."""
 

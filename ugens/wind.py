@@ -246,12 +246,28 @@ class Wind(_Flow):
     }
 
 
+def aeolian_pressure(speed, diameter, span, distance, strouhal=0.2, lift=0.5, correlation=3.0,
+                     density=1.204, c=343.2):  # fmt: skip
+    """RMS sound pressure (Pa) of a wire's Aeolian tone at ``distance`` m, on the axis of the
+    lift (across the flow and the wire): Curle's compact dipole p = dF/dt / (4 pi c r) of the
+    fluctuating lift, rms ``lift`` 1/2 rho v^2 d per unit length, at omega = 2 pi St v / d,
+    correlated over ``correlation`` diameters and adding incoherently along the ``span``
+    (Phillips 1956): p_rms = St rho v^3 C_L' sqrt(L l) / (4 c r), l = min(correlation d, L)."""
+    length = min(correlation * diameter, span)
+    return strouhal * density * speed**3 * lift * math.sqrt(span * length) / (4.0 * c * distance)
+
+
 @register
 class KarmanWhistle(_Flow):
     """Aeolian tone of a wire or edge in a flow: narrow noise band at f = St v / d.
 
     The Karman vortex street sheds at f = St v / d (St ~ 0.2); level ~ v^3. Model in the
-    module docstring. SDT ``windkarman~``."""
+    module docstring. SDT ``windkarman~``. With a ``span`` > 0 the level is physical: the
+    output is the sound pressure in Pa at ``distance`` m on the lift's axis (Curle's dipole
+    of the fluctuating lift, Phillips 1956: :func:`aeolian_pressure`, with ``lift`` the rms
+    lift coefficient, about 0.5 for a cylinder at 1e3 < Re < 1e5, and ``correlation`` the
+    spanwise correlation length in diameters, about 3; Blevins, *Flow-Induced Vibration*,
+    1990, ch. 3), instead of ``level``; a diameter ramp uses its target's level."""
 
     type_name = "KarmanWhistle"
     size_key = "diameter"
@@ -266,7 +282,34 @@ class KarmanWhistle(_Flow):
         "gustiness": _GUSTINESS_SPEC,
         "gust_time": _GUST_TIME_SPEC,
         "seed": _SEED_SPEC,
-    }
+        "span": ParamSpec(
+            "float", 0.0, low=0.0, high=1e4, unit="m",
+            doc="length of wire in the flow; > 0: output in Pa at `distance` (Curle dipole), `level` unused",
+        ),
+        "distance": ParamSpec(
+            "float", 1.0, low=1e-3, high=1e5, unit="m", doc="listening distance of the physical level"
+        ),
+        "lift": ParamSpec(
+            "float", 0.5, low=0.0, high=5.0, doc="rms lift coefficient C_L' of the physical level"
+        ),
+        "correlation": ParamSpec(
+            "float", 3.0, low=0.1, high=1e3, doc="spanwise correlation length in diameters (physical level)"
+        ),
+    }  # fmt: skip
+
+    def _update(self) -> None:
+        super()._update()
+        v = self.values
+        if v["span"] > 0.0:  # the Pa RMS at the reference speed, as the kernel's level
+            self.par[_LEVEL] = aeolian_pressure(
+                REFERENCE_SPEED, v["diameter"], v["span"], v["distance"], v["strouhal"], v["lift"],
+                v["correlation"],
+            )  # fmt: skip
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        super()._param_changed(key, value, jump)
+        if key == "diameter" and self.values["span"] > 0.0:
+            self._update()  # the physical level depends on the diameter
 
 
 def helmholtz_frequency(volume: float, neck_length: float, neck_radius: float, c: float) -> float:

@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from jassy.batch_grid import HAPTIC, HEAD, TAIL, canonical
+from jassy.batch.grid import HAPTIC, HEAD, TAIL, canonical
 from jassy.errors import JassyError
 from jassy.files import atomic_path
 

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from jassy.batch_grid import RenderOptions, Variant, apply_overrides, sha256_bytes
+from jassy.batch.grid import RenderOptions, Variant, apply_overrides, sha256_bytes
 from jassy.errors import JassyError, PatchError, RenderError
 
 DEFAULT_RATE = 48000
@@ -247,7 +247,7 @@ class _Slot:
 
 
 #: Imported once by the fork server, so pool workers start warm (numba's kernels loaded).
-PRELOAD = ["jassy.batch_exec", "jassy.patchfile", "jassy.batch_warmup"]
+PRELOAD = ["jassy.batch.backends", "jassy.patchfile", "jassy.batch.warmup"]
 
 
 def _pool_context(multiprocessing):

@@ -12,7 +12,7 @@ variant's parameters, output file, duration, peak, SHA-256 of the file, and the 
 it failed. Outputs and the manifest are written atomically and the manifest is kept up to
 date while the batch runs, so a rerun skips every variant whose file is there with the
 recorded hash, and renders only the rest (failed variants are tried again). The grid
-format is described in :mod:`jassy.batch_grid`; the backends in :mod:`jassy.batch_exec`.
+format is described in :mod:`jassy.batch.grid`; the backends in :mod:`jassy.batch.backends`.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from jassy.batch_exec import (
+from jassy.batch.backends import (
     BlobReader,
     RenderFn,
     Result,
@@ -41,8 +41,8 @@ from jassy.batch_exec import (
     run_pool,
     run_serial,
 )
-from jassy.batch_grid import Grid, load_grid, sha256_bytes, sha256_file
-from jassy.batch_manifest import (
+from jassy.batch.grid import Grid, load_grid, sha256_bytes, sha256_file
+from jassy.batch.manifest import (
     Journal,
     Row,
     columns,
