@@ -784,6 +784,9 @@ class ModalBank(ModelParams, UGen):
         it sounds now. ``kick_*``: (impulse N s, location or None) of each impact
         scheduled in this and the next period. See jassy.anytime."""
         self._settle()
+        if not (kick_now or kick_next or self.meta[0] or self._onset is not None or self._heard.any()):
+            silent = np.zeros(self.model.n_modes)  # nothing rings, nothing comes
+            return silent, silent, silent > 0.0
         y1, y2 = self.y
         amp2 = np.maximum(y1 * y1 - self.coef[0] * y1 * y2 + self.coef[1] * y2 * y2, 0.0) / self._sin2
         forced = 0.0
