@@ -404,6 +404,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             dfcp = bench_dfcp()
         print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
+    if args.name == "fit":
+        from physics.modal._blas import single_threaded
+        from physics.modal.fit_bench import bench_fit, print_fit
+
+        with single_threaded():
+            result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
+        print(json.dumps(result, indent=2)) if args.json else print_fit(result)
     if args.name == "anytime":
         from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
 
@@ -578,7 +585,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "startup", "anytime"],
+        choices=[
+            "modal",
+            "contact",
+            "live",
+            "batch",
+            "burr",
+            "rigid",
+            "deform",
+            "rod",
+            "startup",
+            "anytime",
+            "fit",
+        ],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
@@ -587,7 +606,8 @@ def build_parser() -> argparse.ArgumentParser:
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
         "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
         "startup: first render in a fresh process, empty and filled kernel cache (bell, wok); "
-        "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok)",
+        "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok); "
+        "fit: jassy fit's recall and errors on random synthetic recordings, and its speed",
     )
     p.add_argument("--plot", metavar="PNG", help="anytime: plot the error against the budget")
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
