@@ -1,15 +1,26 @@
 """Anytime synthesis: one mode budget shared by every ModalBank of a graph.
 
-Every ``period`` frames of the clock (the scheduler splits sub-blocks there, so the result
-does not depend on the block size) the budget ranks all modes of all banks by importance
+At multiples of ``period`` frames on the clock (the scheduler splits sub-blocks there, so
+the result does not depend on the block size) the budget ranks all modes of all banks by
 
-    I_k = w(f_k) * (A_k^2 + (a_k J_b)^2)
+    I_k = w(f_k) * (A_k^2 + (a_k J_b)^2 + a_k^2 S_b(f_k) (1 - e^{-2 d_k tau}) / (2 d_k))
 
-where A_k is the mode's current amplitude (from its two state samples), a_k J_b the
-amplitude an impulse J_b gives it (J_b: the larger of the impulse the bank received in
-the last period and the impulses of impacts scheduled upstream of it in this period), and
-w the A-weighting power gain (IEC 61672) as loudness weighting. The top ``max_modes``
-modes are computed for the next period; the rest are silenced.
+where A_k is the mode's current amplitude (from its two state samples), a_k its amplitude
+per unit impulse at the point struck, (a_k J_b)^2 summed over the impacts scheduled
+upstream of bank b in this period, S_b the power spectral density (N^2/Hz, Hann-windowed periodogram, mean
+removed) of the force the bank heard in the last period, and w = 1 (the budget minimises
+the output's error energy) or, with ``weighting = "A"``, the A-weighting power gain (IEC
+61672) as a loudness proxy. The last term is the squared amplitude a stationary
+force of that spectrum builds in a mode over the horizon tau, so continuous contacts
+(scraping, rolling, friction) compete with impacts and ringing modes on one scale. The
+top ``max_modes`` modes are computed for the next period; the rest are silenced and cost
+nothing (the bank runs only its first, kept, modes).
+
+A decision is taken only where something may change the ranking: an impact scheduled in
+this or the next period, a force heard in the last period, or a mode fading out. Between
+them the kept set only loses modes (ringing modes decay, silent ones are skipped), which
+the banks do by themselves. A budget that covers every mode never decides: the render is
+the full synthesis.
 
 Leaving without clicks: the scheduler knows the score, so the budget also ranks the modes
 for the *following* period (amplitudes decayed by one period, impacts scheduled then). A
@@ -30,6 +41,9 @@ import numpy as np
 
 from jassy.errors import PatchError
 
+#: the impacts (impulse N s, location) on a bank no impact strikes
+NO_KICK: list[tuple[float, object]] = []
+
 
 def a_weighting_power(f: np.ndarray) -> np.ndarray:
     """Squared A-weighting gain at frequencies f (Hz), normalised to 1 at 1 kHz."""
@@ -46,12 +60,15 @@ class ModeBudget:
 
     max_modes: modes computed at most (leaving modes included); cpu_fraction: adapt
     max_modes so rendering takes this fraction of real time; period: frames between
-    decisions.
+    decisions; horizon: seconds over which a continuous force's build-up is judged;
+    weighting: "flat" (rank by output energy) or "A" (by A-weighted energy, a loudness proxy).
     """
 
     max_modes: int | None = None
     cpu_fraction: float | None = None
-    period: int = 512
+    period: int = 2048
+    horizon: float = 0.1
+    weighting: str = "flat"
     peak_modes: int = field(default=0, init=False)
     decisions: int = field(default=0, init=False)
 
@@ -66,25 +83,39 @@ class ModeBudget:
             )
         if not isinstance(self.period, int) or self.period < 8:
             raise PatchError(f"budget period: expected an integer >= 8 frames, got {self.period!r}")
+        if self.weighting not in ("flat", "A"):
+            raise PatchError(f"budget weighting: expected 'flat' or 'A', got {self.weighting!r}")
+        if not 0 < self.horizon <= 60:
+            raise PatchError(f"budget horizon: expected seconds in (0, 60], got {self.horizon!r}")
 
     def attach(self, banks: list, sample_rate: float, upcoming) -> None:
         """Start a render: ``banks`` expose anytime_importance/anytime_apply;
-        ``upcoming(start, end)`` lists (node, impulse) of impacts scheduled in [start, end)."""
+        ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
+        scheduled in [start, end)."""
         self.banks = banks
         self.sample_rate = sample_rate
         self.upcoming = upcoming
-        self.limit = self.max_modes or sum(b.model.n_modes for b in banks)
+        total = sum(b.model.n_modes for b in banks)
+        self.limit = min(self.max_modes or total, total)
         self.peak_modes = 0
         self.decisions = 0
         self._clock = None
+        self._fading = False
+        #: a budget that holds every mode never decides (full synthesis)
+        self.active = self.cpu_fraction is not None or self.limit < total
+        for bank in banks:
+            bank.budgeted = self.active
+            if self.active:
+                bank.anytime_attach(self.period, self.horizon, self.weighting)
 
-    def _predicted(self, start: int, end: int) -> dict[int, float]:
-        """Largest scheduled impulse (N s) per bank in frames [start, end)."""
-        predicted = {id(b): 0.0 for b in self.banks}
-        for node_banks, impulse in self.upcoming(start, end):
-            for bank in node_banks:
-                if id(bank) in predicted:
-                    predicted[id(bank)] = max(predicted[id(bank)], impulse)
+    def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
+        """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
+        ``kicks`` (frame, nodes, impulse, location) in frames [start, end)."""
+        predicted: dict[int, list[tuple[float, object]]] = {}
+        for frame, node_banks, impulse, location in kicks:
+            if start <= frame < end and impulse > 0.0:
+                for bank in node_banks:
+                    predicted.setdefault(id(bank), []).append((impulse, location))
         return predicted
 
     def _top(self, score: np.ndarray) -> np.ndarray:
@@ -98,14 +129,39 @@ class ModeBudget:
         return keep
 
     def step(self, start: int, n: int) -> None:
-        """Graph step: decide at every multiple of ``period`` on the clock."""
-        if start % self.period:
+        """Graph step, before the banks render frames [start, start + n): decide at
+        multiples of ``period`` where the ranking may change, and at once where a bank
+        that heard nothing for a period starts to hear a force nobody scheduled (a
+        contact starting), so that its modes sound from the contact's first sample."""
+        if not self.active:
             return
-        if self.cpu_fraction is not None:
+        boundary = start % self.period == 0
+        kicks = self.upcoming(start, start + 2 * self.period) if boundary else []
+        now = self._predicted(kicks, start, start + self.period)
+        if boundary:
+            for bank in self.banks:
+                bank.anytime_expect(id(bank) in now)
+        onset = any([b.anytime_onset(n) for b in self.banks])
+        if not (
+            onset
+            or (
+                boundary
+                and (
+                    kicks
+                    or self._fading
+                    or self.cpu_fraction is not None
+                    or any(b.anytime_driven() for b in self.banks)
+                )
+            )
+        ):
+            return
+        if boundary and self.cpu_fraction is not None:
             self._adapt()
-        now = self._predicted(start, start + self.period)
-        later = self._predicted(start + self.period, start + 2 * self.period)
-        parts = [b.anytime_importance(now[id(b)], later[id(b)], self.period) for b in self.banks]
+        later = self._predicted(kicks, start + self.period, start + 2 * self.period)
+        parts = [
+            b.anytime_importance(now.get(id(b), NO_KICK), later.get(id(b), NO_KICK), self.period)
+            for b in self.banks
+        ]
         keep = self._top(np.concatenate([p[0] for p in parts]))
         fade = (
             keep & ~self._top(np.concatenate([p[1] for p in parts])) & np.concatenate([p[2] for p in parts])
@@ -115,6 +171,7 @@ class ModeBudget:
             sl = slice(offset, offset + part[0].size)
             total += bank.anytime_apply(keep[sl] & ~fade[sl], fade[sl], self.period)
             offset += part[0].size
+        self._fading = bool(fade.any())
         self.peak_modes = max(self.peak_modes, total)
         self.decisions += 1
 

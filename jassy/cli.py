@@ -404,6 +404,25 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             dfcp = bench_dfcp()
         print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
+    if args.name == "fit":
+        from physics.modal._blas import single_threaded
+        from physics.modal.fit_bench import bench_fit, print_fit
+
+        with single_threaded():
+            result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
+        print(json.dumps(result, indent=2)) if args.json else print_fit(result)
+    if args.name == "anytime":
+        from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
+
+        if args.plot:
+            from jassy.preview import check_png, require_matplotlib
+
+            require_matplotlib("--plot")
+            check_png(args.plot, "--plot")
+        result = bench_anytime(quick=args.quick)
+        print(json.dumps(result, indent=2)) if args.json else print_anytime(result)
+        if args.plot:
+            plot_anytime(result, args.plot)
     if args.name == "startup":
         from jassy.startup import bench_startup, print_startup
 
@@ -566,7 +585,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument(
         "name",
-        choices=["modal", "contact", "live", "batch", "burr", "rigid", "deform", "rod", "startup"],
+        choices=[
+            "modal",
+            "contact",
+            "live",
+            "batch",
+            "burr",
+            "rigid",
+            "deform",
+            "rod",
+            "startup",
+            "anytime",
+            "fit",
+        ],
         help="modal: ModalBank vs plain numba and scipy, and the graph; "
         "contact: real-time factor of every built-in patch; "
         "live: underruns, latency and skew on a JACK dummy server; "
@@ -574,8 +605,11 @@ def build_parser() -> argparse.ArgumentParser:
         "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
         "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
         "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
-        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok)",
+        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok); "
+        "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok); "
+        "fit: jassy fit's recall and errors on random synthetic recordings, and its speed",
     )
+    p.add_argument("--plot", metavar="PNG", help="anytime: plot the error against the budget")
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
     p.add_argument("--block", type=int, default=64, help="live: device buffer in frames (default 64)")

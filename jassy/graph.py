@@ -178,7 +178,13 @@ class Graph:
         if self.budget is not None and self.budgeted:
             for node in self.budgeted:
                 node.budgeted = True
-            self.steps.insert(self.order.index(self.budgeted[0]), self.budget.step)
+            # the decision runs after everything the banks hear and before any bank (nodes
+            # fed by no bank first: that keeps the order topological), so it can see the
+            # force of the sub-block about to be rendered
+            fed = {id(node) for bank in self.budgeted for node in [bank, *self.downstream(bank.name)]}
+            early = [node.process for node in self.order if id(node) not in fed]
+            late = [node.process for node in self.order if id(node) in fed]
+            self.steps = early + [self.budget.step] + late + [node.commit for node in self.delays]
 
     def reset(self) -> None:
         for node in self.order:

@@ -18,8 +18,10 @@ from jassy.portaudio import LiveError
 START_TIMEOUT = 5.0
 ANSWER_TIMEOUT = 10.0
 #: SCHED_FIFO priority of jackd's cycle (``jackd -R -P``; its clients' process threads
-#: run 5 below). jackd's own default; 80 gave no fewer underruns on the test machine.
-REALTIME_PRIORITY = 10
+#: run 5 below): above jassy's own real-time helpers (the UDP frame sender at 45, the ring
+#: producer at 40), which at jackd's default of 10 preempt the audio cycle. Measured,
+#: ``jassy bench live`` at 64 frames: 31 and 42 underruns per minute at 70, 48 and 75 at 10.
+REALTIME_PRIORITY = 70
 
 
 class JackServer(NamedTuple):

@@ -23,6 +23,18 @@ def count_nonfinite(buf):
 
 
 @nb.njit(cache=True)
+def peak_abs(buf):
+    """Largest |sample| of a finite 2-D buffer, without a temporary array."""
+    peak = 0.0
+    for c in range(buf.shape[0]):
+        for i in range(buf.shape[1]):
+            a = abs(buf[c, i])
+            if a > peak:
+                peak = a
+    return peak
+
+
+@nb.njit(cache=True)
 def zero_nonfinite(buf):
     """Replace NaN/Inf samples of a 2-D buffer by 0 in place."""
     for c in range(buf.shape[0]):
@@ -38,10 +50,23 @@ def limit(buf, n, state, ceiling, release_coeff):
     Gain drops at once to ceiling/|x| when a sample would exceed the ceiling (no lookahead,
     so no delay) and recovers towards 1 with a one-pole of coefficient ``release_coeff``.
     Non-finite samples become 0. state = [gain]. |output| <= ceiling always holds.
+    While the gain is exactly 1 (fully released: 1 - 0 * release stays 1) and samples are
+    finite and within the ceiling, they pass unchanged, so those are only read.
     """
     g = state[0]
     channels = buf.shape[0]
-    for i in range(n):
+    start = 0
+    if g == 1.0:
+        while start < n:
+            inside = True
+            for c in range(channels):
+                x = buf[c, start]
+                if not (abs(x) <= ceiling):  # also NaN
+                    inside = False
+            if not inside:
+                break
+            start += 1
+    for i in range(start, n):
         peak = 0.0
         for c in range(channels):
             x = buf[c, i]
@@ -101,7 +126,7 @@ class LimiterMeter:
     def before(self, buf: np.ndarray) -> None:
         """Record the peak of a chunk about to be limited (finite samples)."""
         if buf.size:
-            self.input_peak = max(self.input_peak, float(np.max(np.abs(buf))))
+            self.input_peak = max(self.input_peak, peak_abs(buf))
 
     def after(self, buf: np.ndarray, n: int) -> None:
         """Count the frames of a limited chunk held at the ceiling."""

@@ -226,9 +226,18 @@ class UGen:
         are capped to it when the delay closes a loop."""
         raise NotImplementedError(f"{self.type_name} is not a delay")
 
-    def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
+    def anytime_attach(self, period: int, horizon: float, weighting: str) -> None:
+        """Budgeted banks: start a budgeted render (decisions every ``period`` frames)."""
+        raise NotImplementedError(f"{self.type_name} takes no mode budget")
+
+    def anytime_driven(self) -> bool:
+        """Budgeted banks: whether any force was heard in the last budget period."""
+        raise NotImplementedError(f"{self.type_name} takes no mode budget")
+
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
         """Budgeted banks (``supports_budget``): per-mode importance for the coming
-        ``period`` frames, given the impulse (N s) scheduled now and in the next period."""
+        ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
+        the next period."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events

@@ -18,6 +18,15 @@ Gains: the velocity at a fixed pickup point q (a contact microphone) per N s of 
 at contact point p, a[p, k] = phi_k(p) phi_k(q) / M (m/s per N s; ModalBank renders each
 mode as sin instead of cos, same magnitude). Decay d = d0 + pi f eta (1/s) for a loss
 factor eta (internal friction) plus a constant d0 (air and supports).
+
+Sound texture along a track: besides the named track points t0 .. t{n-1}, a track may carry
+``between`` further points in each of its intervals (``t{i}_{j}``, the fraction j / (between
++ 1) of the way from t{i} to t{i+1}; stored after the named points, so t{i} stays row i).
+ModalBank interpolates gains between neighbouring points linearly (a 1-D mesh's shape
+functions: {vertices = ["t2_3", "t2_4"], weights = [0.5, 0.5]} is the midpoint). Along a
+straight track a mode shape is a sum of two sinusoids whose wavenumbers are at most the
+plate's bending wavenumber k = (omega^2 rho h / D)^(1/4); linear interpolation at a
+midpoint then errs by at most 1 - cos(k s / 2) of the mode's peak gain (spacing s).
 """
 
 from __future__ import annotations
@@ -44,14 +53,17 @@ def ss_plate_model(
     f_max: float = 20000.0,
     name: str = "plate",
     points: dict[str, tuple[float, float]] | None = None,
+    between: int = 0,
+    digits: int | None = None,
 ) -> ModalModel:
     """The lowest ``n_modes`` modes below ``f_max`` Hz of a simply supported plate.
 
     a, b: sides (m); h: thickness (m); rho: density (kg/m^3); e1, e2: Young's moduli
     along a and b (Pa); nu: Poisson's ratio; eta: loss factor; d0: constant decay (1/s).
     Locations: ``n_points`` points t0 .. t{n-1} evenly spaced on the straight ``track``
-    between two (x/a, y/b) points, or the named (x/a, y/b) ``points``; pickup: (x/a, y/b) of the
-    listening point.
+    between two (x/a, y/b) points, with ``between`` more in each interval (module docstring),
+    or the named (x/a, y/b) ``points``; pickup: (x/a, y/b) of the listening point. ``digits``:
+    round gains to that many significant digits (smaller files for dense tracks).
     """
     d1 = e1 * h**3 / (12 * (1 - nu**2))
     d2 = e2 * h**3 / (12 * (1 - nu**2))
@@ -69,10 +81,9 @@ def ss_plate_model(
         return np.sin(np.pi * np.outer(u, m)) * np.sin(np.pi * np.outer(v, n))
 
     if points is None:
-        w = np.linspace(0.0, 1.0, n_points)
+        w, names = track_points(n_points, between)
         (u0, v0), (u1, v1) = track
         at = shape(u0 + w * (u1 - u0), v0 + w * (v1 - v0))
-        names = tuple(f"t{i}" for i in range(n_points))
     else:
         uv = np.array(list(points.values()), dtype=np.float64)
         at = shape(uv[:, 0], uv[:, 1])
@@ -80,7 +91,21 @@ def ss_plate_model(
     listen = shape(np.array([pickup[0]]), np.array([pickup[1]]))[0]
     gains = at * listen / mass  # strike to pickup: signed
     driving = at * at / mass  # at the strike point itself, for contacts in a closed loop
+    if digits is not None:
+        gains, driving = (
+            np.array([float(f"{x:.{digits}g}") for x in g.flat]).reshape(g.shape) for g in (gains, driving)
+        )
     return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name, driving=driving)
+
+
+def track_points(n_points: int, between: int) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Fractions (0..1) along a track and names: t0 .. t{n-1} first, then ``between`` points
+    t{i}_{j} in each interval i."""
+    named = np.linspace(0.0, 1.0, n_points)
+    step = 1.0 / ((n_points - 1) * (between + 1))
+    inner = [(i, j) for i in range(n_points - 1) for j in range(1, between + 1)]
+    w = np.concatenate([named, [named[i] + j * step for i, j in inner]])
+    return w, tuple(f"t{i}" for i in range(n_points)) + tuple(f"t{i}_{j}" for i, j in inner)
 
 
 def tin_sheet_model() -> ModalModel:
@@ -96,7 +121,9 @@ def tin_sheet_model() -> ModalModel:
 
 
 def steel_plate_model() -> ModalModel:
-    """A 0.6 x 0.45 m steel plate, 2 mm thick: 300 modes from 37 Hz to 7.3 kHz, ringing for seconds."""
+    """A 0.6 x 0.45 m steel plate, 2 mm thick: the 675 modes below 16 kHz (from 37 Hz), ringing
+    for seconds. Track t0 .. t8 with 7 points between each pair (65 points, 7.5 mm apart: more
+    than 4 per bending wavelength at 16 kHz, 35 mm); gains to 7 significant digits."""
     return ss_plate_model(
         a=0.6,
         b=0.45,
@@ -109,13 +136,19 @@ def steel_plate_model() -> ModalModel:
         d0=1.5,
         track=((0.12, 0.3), (0.88, 0.62)),
         pickup=(0.37, 0.71),
+        n_modes=1000,
+        f_max=16000.0,
         name="steel_plate",
+        between=7,
+        digits=7,
     )
 
 
 def wood_board_model() -> ModalModel:
     """A 0.8 x 0.3 m pine board, 18 mm thick (E along the grain 10 GPa, across 0.8 GPa):
-    the 160 modes below 20 kHz (190 Hz up), loss factor 0.015 (short, dull decays)."""
+    the 160 modes below 20 kHz (190 Hz up), loss factor 0.015 (short, dull decays). Track
+    t0 .. t8 with 3 points between each pair (33 points, 20 mm apart: 4 per bending
+    wavelength along the grain at 20 kHz, 90 mm); gains to 7 significant digits."""
     return ss_plate_model(
         a=0.8,
         b=0.3,
@@ -130,6 +163,8 @@ def wood_board_model() -> ModalModel:
         pickup=(0.33, 0.62),
         n_modes=200,
         name="wood_board",
+        between=3,
+        digits=7,
     )
 
 

@@ -20,6 +20,14 @@ def _along(name: str, count: int, what: str) -> dict[str, str]:
     return {f"{name}{i}": f"{what} {i}/{count - 1} of the way" for i in range(count)}
 
 
+def _along_track(between: int, what: str) -> dict[str, str]:
+    """t0 .. t8 and the ``between`` points in each interval (patches.models_surface.track_points)."""
+    from patches.models_surface import track_points
+
+    fractions, names = track_points(9, between)
+    return {name: f"{what} {w:.1%} of the way" for name, w in zip(names, fractions, strict=True)}
+
+
 OBJECTS: dict[str, ObjectInfo] = {
     "bell": ObjectInfo(
         "bell_model.toml", "church bell, strike note 392 Hz (about 0.5 m across)",
@@ -45,12 +53,13 @@ OBJECTS: dict[str, ObjectInfo] = {
          "corner": "7 % from each edge of a corner"},
     ),
     "steel_plate": ObjectInfo(
-        "steel_plate_model.toml", "steel plate, 600 x 450 x 2 mm", "simply supported plate, 300 modes",
-        _along("t", 9, "on the diagonal track from (12 %, 30 %) to (88 %, 62 %):"),
+        "steel_plate_model.toml", "steel plate, 600 x 450 x 2 mm",
+        "simply supported plate, 675 modes to 16 kHz",
+        _along_track(7, "on the diagonal track from (12 %, 30 %) to (88 %, 62 %):"),
     ),
     "wooden_board": ObjectInfo(
         "wood_board_model.toml", "pine board, 800 x 300 x 18 mm", "orthotropic simply supported plate",
-        _along("t", 9, "on the track from (10 %, 50 %) to (90 %, 40 %):"),
+        _along_track(3, "on the track from (10 %, 50 %) to (90 %, 40 %):"),
     ),
     "tin_sheet": ObjectInfo(
         "tin_sheet_model.toml", "tinplate panel, 500 x 350 x 0.8 mm",

@@ -182,3 +182,36 @@ def test_cli_list_names_every_patch_scene_and_ugen(capsys):
     out = capsys.readouterr().out
     for name in [*builtin_patches(), "drill", *ugen_types()]:
         assert name in out
+
+
+def reference_limiter(x, ceiling, release):
+    """The limiter sample by sample in plain Python: gain drops to ceiling/peak, recovers
+    as g = 1 - (1 - g) * release; NaN/Inf become 0; output clipped to the ceiling."""
+    y = np.where(np.isfinite(x), x, 0.0)
+    g = 1.0
+    for i in range(y.shape[1]):
+        peak = float(np.max(np.abs(y[:, i])))
+        g = 1.0 - (1.0 - g) * release
+        if peak * g > ceiling:
+            g = ceiling / peak
+        y[:, i] = np.clip(y[:, i] * g, -ceiling, ceiling)
+    return y
+
+
+def test_limiter_passes_quiet_stretches_untouched_and_matches_the_reference_bit_for_bit():
+    from jassy.safety import limit, release_coefficient
+
+    rng = np.random.default_rng(7)
+    x = rng.standard_normal((2, 6000)) * 0.2  # quiet, with loud bursts and a NaN
+    x[:, 1000:1010] *= 8.0
+    x[0, 3000] = np.nan
+    x[1, 4500:4503] = 3.0
+    release = release_coefficient(0.0005, 48000)
+    expected = reference_limiter(x, CEILING, release)
+    for block in (1, 64, 6000):
+        y, state = x.copy(), np.ones(1)
+        for start in range(0, y.shape[1], block):
+            piece = y[:, start : start + block]  # a view: limited in place
+            limit(piece, piece.shape[1], state, CEILING, release)
+        np.testing.assert_array_equal(y, expected)
+    np.testing.assert_array_equal(expected[:, :1000], x[:, :1000])  # before the first burst: as it was

@@ -169,6 +169,20 @@ LEAVING_FADE = 1e-3
 #: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
+#: Anytime budget: the importance of a mode already computed is multiplied by this, so modes
+#: near the margin do not swap at every decision (each swap costs a reordering and cuts a mode).
+KEPT_BONUS = 1.25
+
+#: Anytime budget: weights that smooth a force's periodogram over neighbouring bins.
+PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
+
+#: Anytime budget: the share of the previous smoothed periodogram kept at each decision.
+PSD_MEMORY = 0.75
+
+#: Anytime budget: banks of at most this many modes judge a continuous force by its power
+#: alone (spread flat over frequency), without a transform.
+FLAT_SPECTRUM_MODES = 8
+
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
@@ -480,8 +494,9 @@ class ModalBank(ModelParams, UGen):
                 e.narrow_meta, self._floor, self.last, e.narrow_last,
             )  # fmt: skip
         self.budgeted = False
+        self._heard = None  # the force over the last budget period (anytime_attach)
         self._faded = np.zeros(k, dtype=bool)
-        self._weights = a_weighting_power(self.model.frequencies[self.order])
+        self._weights = np.ones(k)  # per-mode importance weights (anytime_attach)
         self._refresh_design_cache()
         self._step = specialise(
             bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor, self.last
@@ -553,21 +568,40 @@ class ModalBank(ModelParams, UGen):
         self.coef[:] = self.target
         self.meta[:] = (0, 0, self.model.n_modes)
         self._ramping = False
-        self._impulse = 0.0  # |force| integrated over the current anytime period (N s)
-        self._last_impulse = 0.0
+        if self._heard is not None:
+            self._heard[:] = 0.0
+            self._expected, self._onset, self._psd = False, None, None
 
     def _refresh_design_cache(self) -> None:
-        """Keep the design for the current parameters (``fresh``) and each mode's squared
-        amplitude per unit impulse (``unit2``) for the anytime budget."""
+        """Keep the design for the current parameters (``fresh``) and, for the anytime
+        budget, each mode's energy decay per sample and sin^2 theta."""
         self._fresh = self._design()
-        c1, c2, g, _ = self._fresh
+        c2 = self._fresh[1]
         self._fresh_c2 = c2.copy()  # R^2: energy decay per sample
         self._sin2 = self._poles[2]
-        self._unit2 = (g * self.sample_rate) ** 2 * self._poles[3]
+        if self._heard is not None:
+            self._refresh_forcing()
+
+    def _refresh_forcing(self) -> None:
+        """Per mode (internal order) for the anytime budget: the DFT bin of its frequency
+        in a budget period, and its growth under a steady force over the budget's horizon
+        tau, (1 - e^{-2 d tau}) / (2 d) in s (the amplitude^2 a stationary force of power
+        spectral density S gives it is unit2 S times this)."""
+        v, retune = self.values, 1.0 / np.sqrt(self._size)
+        freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
+        decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
+        period = self._heard.size
+        self._bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
+        two_d_tau = 2.0 * decays * self._horizon
+        self._growth = np.where(
+            two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
+        )
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         self._settle()
         self._refresh_design_cache()
+        allowed = int(self.meta[2])  # modes a budget silenced follow ramps virtually:
+        self.coef[:, allowed:] = self.target[:, allowed:] - self.meta[1] * self.delta[:, allowed:]
         self.target[:] = self._fresh
         ramp = self.ramp_samples()
         if jump or ramp < 1:
@@ -695,8 +729,9 @@ class ModalBank(ModelParams, UGen):
         else:
             self._settle()
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
-        if self.budgeted:
-            self._impulse += float(np.abs(inp[:n]).sum()) / self.sample_rate
+        if self.budgeted:  # the force of the current budget period, for continuous excitation
+            at = start % self._heard.size
+            self._heard[at : at + n] = inp[:n]
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -710,21 +745,89 @@ class ModalBank(ModelParams, UGen):
         )  # fmt: skip
 
     # ------------------------------------------------------------ anytime synthesis
-    def anytime_importance(self, impulse_now: float, impulse_next: float, period: int):
+    def anytime_attach(self, period: int, horizon: float, weighting: str) -> None:
+        """Start a budgeted render with decisions every ``period`` frames; a continuous
+        force is judged by the amplitude it builds in ``horizon`` seconds; modes are
+        weighted by ``weighting`` ("flat" or "A", see jassy.anytime)."""
+        freqs = self.model.frequencies[self.order]
+        self._weights = a_weighting_power(freqs) if weighting == "A" else np.ones(freqs.size)
+        self._heard = np.zeros(period)
+        self._expected = False
+        self._onset = None  # the force that wakes a silent bank (anytime_onset)
+        self._psd = None
+        self._window = np.hanning(period)
+        self._window_power = self.sample_rate * float(np.sum(self._window**2))
+        self._horizon = horizon
+        self._refresh_forcing()
+
+    def anytime_driven(self) -> bool:
+        """Whether the bank heard any force in the last budget period."""
+        return bool(self._heard.any())
+
+    def anytime_expect(self, kicked: bool) -> None:
+        """The budget foresaw (True) or not an impact on this bank in this period."""
+        self._expected = kicked
+
+    def anytime_onset(self, n: int) -> bool:
+        """Whether the bank, silent for a period and struck by nothing scheduled, hears a
+        force in the next ``n`` frames (its input is rendered before the budget decides).
+        Its importance then counts that force's power (flat over frequency)."""
+        if self._expected or not self._input.out[:n].any() or self._heard.any():
+            self._onset = None
+            return False
+        self._onset = self._input.out[:n].copy()
+        return True
+
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
         """Per mode, in internal order: importance for this period, importance for the
-        next one (amplitude decayed by a period, the impulses scheduled then), and whether
-        it sounds now. See jassy.anytime."""
+        next one (amplitude decayed by a period, the impulse scheduled then), and whether
+        it sounds now. ``kick_*``: (impulse N s, location or None) of each impact
+        scheduled in this and the next period. See jassy.anytime."""
         self._settle()
-        impulse = max(self._impulse, impulse_now)
-        self._impulse = 0.0
+        if not (kick_now or kick_next or self.meta[0] or self._onset is not None or self._heard.any()):
+            silent = np.zeros(self.model.n_modes)  # nothing rings, nothing comes
+            return silent, silent, silent > 0.0
         y1, y2 = self.y
         amp2 = np.maximum(y1 * y1 - self.coef[0] * y1 * y2 + self.coef[1] * y2 * y2, 0.0) / self._sin2
-        weighted = self._weights * amp2
-        now = weighted + self._weights * self._unit2 * (impulse * impulse)
-        later = weighted * self._fresh_c2**period + self._weights * self._unit2 * (
-            impulse_next * impulse_next
-        )
+        forced = 0.0
+        gain_now = self.target[2] - self.meta[1] * self.delta[2]  # along a ramp (location, gain)
+        unit2 = (gain_now * self.sample_rate) ** 2 * self._poles[3]
+        if self._onset is not None:
+            force, self._onset = self._onset - self._onset.mean(), None
+            power = np.dot(force, force) / force.size
+            forced = unit2 * (power / self.sample_rate) * self._growth
+        elif self._heard.any():
+            force = self._heard - self._heard.mean()  # a steady load makes no sound
+            if self.model.n_modes > FLAT_SPECTRUM_MODES:
+                psd = np.abs(np.fft.rfft(force * self._window)) ** 2 / self._window_power
+                # a periodogram of noise scatters by its own size from bin to bin: smooth
+                # it over neighbouring bins and over periods (it is the trend that ranks)
+                psd = np.convolve(psd, PSD_SMOOTHING, mode="same")
+                if self._psd is not None:
+                    psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
+                self._psd = psd
+                forced = unit2 * psd[self._bins] * self._growth
+            else:  # a few modes: the force's power spread flat (no transform)
+                forced = unit2 * (np.dot(force, force) / (force.size * self.sample_rate)) * self._growth
+        w = self._weights
+        now = w * (np.maximum(amp2, forced) + self._kicked(kick_now, unit2))
+        kept = int(self.meta[2])
+        now[:kept] *= np.where(self._faded[:kept], 1.0, KEPT_BONUS)  # hysteresis: no churn at the margin
+        later = w * (np.maximum(amp2 * self._fresh_c2**period, forced) + self._kicked(kick_next, unit2))
         return now, later, amp2 > self._floor * self._floor
+
+    def _kicked(self, kicks: list, unit2: np.ndarray) -> np.ndarray | float:
+        """Squared amplitude per mode that impacts (impulse N s, location; None: the
+        current one, whose squared amplitudes per unit impulse are ``unit2``) give."""
+        total = 0.0
+        for impulse, location in kicks:
+            if location is None:
+                total = total + unit2 * (impulse * impulse)
+            else:
+                v = self.values
+                a = self.model.gains_at(location)[self.order] * (v["gain"] * self._level_gain * impulse)
+                total = total + a * a / self._size
+        return total
 
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
@@ -732,20 +835,25 @@ class ModalBank(ModelParams, UGen):
         self._settle()
         old_active = int(self.meta[0])
         n_keep, n_fade = int(keep.sum()), int(fade.sum())
-        if not n_fade and not self._faded.any() and n_keep == old_active and keep[:old_active].all():
-            self.meta[2] = old_active  # the same modes as now: nothing to move
-            return old_active
+        allowed = int(self.meta[2])
+        if not n_fade and not self._faded.any() and n_keep == allowed and keep[:allowed].all():
+            return allowed  # the same modes as now: nothing to move
         perm = np.concatenate([np.flatnonzero(keep), np.flatnonzero(fade), np.flatnonzero(~keep & ~fade)])
         restore = (perm >= old_active) | self._faded[perm]  # entering, or back from a fade
         for arr in (self.bank, self.delta, self.target):
             arr[:] = arr[:, perm]
         self.order = self.order[perm]
-        self._poles = None  # designed in the old order
-        for name in ("_weights", "_fresh", "_fresh_c2", "_sin2", "_unit2"):
+        key, poles, sin2, inv = self._poles
+        self._poles = (key, poles[:, perm], sin2[perm], inv[perm])
+        self._gain_rows = {None: self._poles[1]}  # gain rows were in the old order
+        for name in ("_weights", "_fresh", "_fresh_c2", "_sin2", "_bins", "_growth"):
             setattr(self, name, getattr(self, name)[..., perm])
-        cols = np.flatnonzero(restore[:n_keep]) if self._ramping else np.arange(n_keep)
-        self.coef[:, cols] = self.target[:, cols] = self._fresh[:, cols]
-        self.delta[:, cols] = 0.0
+        back = np.flatnonzero(self._faded[perm])  # faded modes: their ramp is lost
+        self.target[:, back] = self._fresh[:, back]
+        self.delta[:, back] = 0.0
+        # entering modes take the coefficients their ramp has reached (target - left * delta)
+        cols = np.flatnonzero(restore[:n_keep])
+        self.coef[:, cols] = self.target[:, cols] - self.meta[1] * self.delta[:, cols]
         fading = slice(n_keep, n_keep + n_fade)
         shrink = np.exp(-np.log(1000.0) / period)  # -60 dB over one period
         self.coef[0, fading] *= shrink
@@ -754,9 +862,7 @@ class ModalBank(ModelParams, UGen):
         self.target[:, fading] = self.coef[:, fading]
         self.delta[:, fading] = 0.0
         silent = slice(n_keep + n_fade, None)
-        self.y[:, silent] = 0.0
-        self.coef[:, silent] = self.target[:, silent] = self._fresh[:, silent]
-        self.delta[:, silent] = 0.0
+        self.y[:, silent] = 0.0  # coefficients kept: they follow ramps virtually (_param_changed)
         self._faded[:] = False
         self._faded[fading] = True
         self.meta[0] = self.meta[2] = n_keep + n_fade

@@ -52,18 +52,6 @@ def project(x, weight, z, out):
 
 
 @nb.njit(cache=True)
-def excluded_gram(index, z, out):
-    """out[i, j] += sum over excluded samples n of conj(z_i)^n z_j^n (removed from the
-    closed-form Gram matrix of the full range)."""
-    for m in range(index.size):
-        n = index[m]
-        for i in range(z.size):
-            zi = np.conj(z[i]) ** n
-            for j in range(z.size):
-                out[i, j] += zi * z[j] ** n
-
-
-@nb.njit(cache=True)
 def synthesise(n, z, c, out):
     """out[t] += Re(sum_k c[k] z[k]^t) for t < n (recursive powers, stopped once negligible)."""
     for k in range(z.size):

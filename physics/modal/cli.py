@@ -182,8 +182,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     _positive("--modes", args.modes, integer=True)
     _positive("--fmin", args.fmin)
     _positive("--fmax", args.fmax)
-    _positive("--threshold", args.threshold)
-    _positive("--range", args.range)
+    _positive("--margin", args.margin)
+    _positive("--max-time", args.max_time)
     _positive("--onset", args.onset, allow_zero=True)
     _positive("--skip", args.skip, allow_zero=True)
     _positive("--duration", args.duration)
@@ -215,7 +215,13 @@ def cmd_fit(args: argparse.Namespace) -> int:
     names = tuple(os.path.splitext(os.path.basename(p))[0] for p in args.recordings)
     if len(set(names)) != len(names):
         names = tuple(f"r{i}" for i in range(len(names)))
-    if not args.quiet and sys.stderr.isatty():  # a progress note on a terminal, as renders show
+    locations = None
+    if args.locations is not None:
+        locations = tuple(n.strip() for n in args.locations.split(","))
+        if not all(locations):
+            raise JassyError(f"--locations: expected comma-separated names, got {args.locations!r}")
+    show = not args.quiet and sys.stderr.isatty()
+    if show:
         seconds = sum(len(x) for x in sigs) / rates[0]
         print(
             f"fitting {len(sigs)} recording(s), {seconds:.1f} s of audio (Ctrl-C stops) ...", file=sys.stderr
@@ -227,13 +233,15 @@ def cmd_fit(args: argparse.Namespace) -> int:
         max_modes=args.modes,
         f_min=args.fmin,
         f_max=args.fmax,
-        threshold_db=args.threshold,
-        dynamic_range=args.range,
         onset=args.onset,
         skip=args.skip,
         duration=args.duration,
         name=args.name or names[0],
         points=names,
+        locations=locations,
+        margin=args.margin,
+        progress=show,
+        time_limit=args.max_time,
     )
     model = result.model
     if args.normalise:
@@ -369,8 +377,8 @@ def add_commands(subparsers) -> None:
         "fit",
         help="fit a modal model to impact recordings",
         description="Frequencies, decay rates and gains of the modes in impact recordings "
-        "(peak picking, subband matrix pencil, least squares). Several recordings (one per "
-        "strike location) share the modes and give one gain row each.",
+        "(subspace estimation, ESPRIT, in sub-bands; strikes detected and pooled; clipped samples "
+        "left out). Several recordings or channels share the modes and give one gain row each.",
     )
     p.add_argument("recordings", nargs="+", help="audio files (WAV, FLAC, ...)")
     p.add_argument("-o", "--output", required=True, help="model file (.toml or .npz)")
@@ -378,12 +386,20 @@ def add_commands(subparsers) -> None:
     p.add_argument("--fmin", type=float, default=20.0, help="lowest frequency in Hz (default 20)")
     p.add_argument("--fmax", type=float, help="highest frequency in Hz (default: 0.98 Nyquist)")
     p.add_argument(
-        "--threshold", type=float, default=15.0, help="peak height above the noise floor, dB (default 15)"
+        "--margin",
+        type=float,
+        default=4.0,
+        help="how far a mode's subspace eigenvalue must exceed the noise edge (default 4)",
     )
     p.add_argument(
-        "--range", type=float, default=70.0, help="dynamic range below the loudest peak, dB (default 70)"
+        "--locations",
+        metavar="A,B,...",
+        help="name each detected strike (in order): one gain row per strike, a texture map of the hits",
     )
-    p.add_argument("--onset", type=float, help="impact time in s (default: detected)")
+    p.add_argument(
+        "--max-time", type=float, default=300.0, help="stop the fit after this many seconds (default 300)"
+    )
+    p.add_argument("--onset", type=float, help="impact time in s (default: strikes detected)")
     p.add_argument("--skip", type=float, default=0.0, help="seconds after the onset left out (contact)")
     p.add_argument("--duration", type=float, help="seconds analysed after the onset (default: all)")
     p.add_argument("--normalise", action="store_true", help="scale gains so the loudest is 1")

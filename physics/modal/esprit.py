@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from physics.modal._fit_kernels import excluded_gram, hankel_gram, project, synthesise
+from physics.modal._fit_kernels import hankel_gram, project, synthesise
 
 
 class Band(NamedTuple):
@@ -38,7 +38,7 @@ def band_signal(spectrum, n_fft, n_valid, rate, centre, flat, edge, noise_bins) 
     """Band of the zero-padded spectrum ``spectrum`` (length ``n_fft`` complex FFT of a real
     signal of ``n_valid`` samples at ``rate``): flat gain 1 within ``flat`` Hz of ``centre``,
     cosine taper to 0 at ``edge`` Hz, decimated to about 2.5 x edge samples/s. ``noise_bins``
-    = the noise |X_k|^2 level for every bin (used only inside the flat part)."""
+    = the noise |X_k|^2 level for every bin (its median over the flat part is the band's)."""
     bin_hz = rate / n_fft
     kc = int(round(centre / bin_hz))
     half = int(math.ceil(edge / bin_hz))
@@ -57,7 +57,7 @@ def band_signal(spectrum, n_fft, n_valid, rate, centre, flat, edge, noise_bins) 
     y = np.fft.ifft(sub) * (size / n_fft)
     n_sub = int(n_valid * size / n_fft)
     flat_k = ks[inside & (dist <= flat_bins)]
-    level = float(np.max(noise_bins[flat_k])) if flat_k.size else 0.0
+    level = float(np.median(noise_bins[flat_k])) if flat_k.size else 0.0
     return Band(y[:n_sub], size * bin_hz, kc * bin_hz, level * size / n_fft**2)
 
 
@@ -116,9 +116,8 @@ def amplitudes(x: np.ndarray, z: np.ndarray, excluded: np.ndarray | None = None)
     weight = np.ones(n)
     if excluded is not None and excluded.size:
         weight[excluded] = 0.0
-        corr = np.zeros((2 * k, 2 * k), dtype=complex)
-        excluded_gram(excluded.astype(np.int64), basis, corr)
-        gram = gram - corr
+        powers = np.exp(np.outer(excluded.astype(np.float64), np.log(basis)))
+        gram = gram - np.conj(powers).T @ powers
     rhs = np.zeros(k, dtype=complex)
     project(np.ascontiguousarray(x, dtype=np.float64).astype(np.complex128), weight, z, rhs)
     b = np.concatenate([rhs, np.conj(rhs)])
@@ -141,45 +140,71 @@ def resynthesis(n: int, z: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def refine(
-    signals, rate: float, z0: np.ndarray, real: bool = False, max_nfev: int = 4, max_samples: int = 1500
+    signals, rate: float, z0: np.ndarray, real: bool = False, max_nfev: int = 12, max_samples: int = 1500
 ):
-    """Maximum-likelihood poles in white noise (variable projection, Golub & Pereyra 1973):
-    poles shared by the complex ``signals`` (y[n] ~ sum_k c_k z_k^n, one set of c per signal,
-    solved linearly) refined from ``z0`` by Levenberg-Marquardt on (decay, angular frequency).
-    ``real``: the signals are real and each pole comes with its conjugate. ESPRIT alone is
-    biased towards undamped poles when much of the record is noise. Returns (poles,
-    amplitudes per signal; with ``real``, c such that y ~ Re(sum c z^n))."""
+    """Maximum-likelihood poles in white noise: poles shared by the ``signals`` (y[n] ~ sum_k
+    c_k z_k^n, one set of c per signal; with ``real``, real signals y ~ Re(sum_k c_k z_k^n))
+    refined from ``z0`` jointly with the amplitudes by Levenberg-Marquardt with the analytic
+    Jacobian (d/ds z^n = n z^n / rate for s = -decay + i omega). ESPRIT alone is biased
+    towards undamped poles when much of the record is noise. Returns (poles, amplitudes per
+    signal)."""
     from scipy.optimize import least_squares
 
     if z0.size == 0:
         return z0, [np.zeros(0, dtype=complex) for _ in signals]
-    signals = [y[:max_samples] for y in signals]
+    signals = [np.asarray(y[:max_samples]) for y in signals]
+    k, n_sig = z0.size, len(signals)
     ns = [np.arange(y.size) for y in signals]
 
-    def unpack(p):
-        k = z0.size
-        return np.exp(-p[:k] / rate + 1j * p[k:] / rate)
+    def powers(p, n):
+        s = -p[:k] + 1j * p[k : 2 * k]
+        return np.exp(np.outer(n, s / rate))
 
-    def solve(z):
-        amps, res = [], []
-        zz = np.concatenate([z, np.conj(z)]) if real else z
-        for y, n in zip(signals, ns, strict=True):
-            basis = np.exp(np.outer(n, np.log(zz)))
-            c, *_ = np.linalg.lstsq(basis, y, rcond=None)
-            amps.append(2 * c[: z.size] if real else c)
-            res.append(y - basis @ c)
-        return amps, np.concatenate(res)
+    def amps_of(p):
+        c = p[2 * k :].reshape(n_sig, 2, k)
+        return c[:, 0] + 1j * c[:, 1]
 
-    def resid(p):
-        r = solve(unpack(p))[1]
+    def parts(r):
         return r.real if real else np.concatenate([r.real, r.imag])
 
+    def resid(p):
+        c = amps_of(p)
+        return np.concatenate(
+            [parts(powers(p, n) @ c[i] - y) for i, (y, n) in enumerate(zip(signals, ns, strict=True))]
+        )
+
+    def jac(p):
+        c = amps_of(p)
+        blocks = []
+        for i, n in enumerate(ns):
+            e = powers(p, n)
+            ce = e * c[i][None, :] * (n / rate)[:, None]
+            cols = np.zeros((n.size, 2 * k + 2 * k * n_sig), dtype=complex)
+            cols[:, :k] = -ce
+            cols[:, k : 2 * k] = 1j * ce
+            off = 2 * k + 2 * k * i
+            cols[:, off : off + k] = e
+            cols[:, off + k : off + 2 * k] = 1j * e
+            blocks.append(cols.real if real else np.vstack([cols.real, cols.imag]))
+        return np.vstack(blocks)
+
     logz = np.log(z0)
-    p0 = np.concatenate([-logz.real * rate, logz.imag * rate])
+    p_poles = np.concatenate([-logz.real * rate, logz.imag * rate])
+    c0 = []
+    for y, n in zip(signals, ns, strict=True):
+        e = np.exp(np.outer(n, logz))
+        if real:
+            basis = np.hstack([e.real, -e.imag])
+            a = np.linalg.lstsq(basis, y, rcond=None)[0]
+            c0.append([a[:k], a[k:]])
+        else:
+            a = np.linalg.lstsq(e, y, rcond=None)[0]
+            c0.append([a.real, a.imag])
+    p0 = np.concatenate([p_poles, np.asarray(c0, dtype=float).ravel()])
     try:
-        sol = least_squares(resid, p0, method="lm", max_nfev=max_nfev * p0.size, xtol=1e-10, ftol=1e-12)
+        sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-10, ftol=1e-12)
         p = sol.x if np.all(np.isfinite(sol.x)) else p0
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
         p = p0
-    z = unpack(p)
-    return z, solve(z)[0]
+    z = np.exp((-p[:k] + 1j * p[k : 2 * k]) / rate)
+    return z, list(amps_of(p))

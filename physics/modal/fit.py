@@ -1,359 +1,344 @@
-"""Fit modal parameters (frequencies, decay rates, gains) to impact recordings.
+"""Modal models (frequencies, decay rates, gains) fitted to recordings of struck objects
+(``jassy fit``).
 
-Method (peak picking, then a high-resolution subband estimator, then least squares):
+Why subspace estimation: a spectral peak picker needs each mode to stand out of the
+spectrum, which a fast-decaying (broad) mode or a mode inside a dense cluster does not;
+ESPRIT counts modes by the eigenvalues of the signal's Hankel Gram matrix above the noise,
+resolves poles closer than a bin, and estimates decay and frequency together. Running it in
+decimated sub-bands keeps each eigenproblem small (Laroche 1993; Badeau, David & Richard 2006).
 
-1. **Onset.** The first sample whose magnitude exceeds ``onset_db`` below the peak (or, with a
-   quiet pre-roll, 8 noise standard deviations), or the time given.
-2. **Candidates.** Peaks of the magnitude spectrum (pyfftw, zero-padded 4x, the end of the
-   segment tapered) that stand ``threshold_db`` above a running-median noise floor, at most
-   ``dynamic_range`` dB below the strongest peak and inside [f_min, f_max].
-3. **Subband matrix pencil** (Hua & Sarkar 1990, "Matrix pencil method for estimating
-   parameters of exponentially damped/undamped sinusoids in noise"; the subband form as in
-   Laroche 1993 / Badeau et al. 2006 ESPRIT). For each candidate the spectrum of the
-   zero-padded segment is multiplied by a Hann band window around it and moved to baseband
-   with a short inverse FFT, which is the signal band-pass filtered and decimated to a few
-   hundred complex samples. A damped sinusoid stays a damped sinusoid with the same pole
-   through any linear filter, so the pencil of that short signal (model order = peaks in
-   the band + 2, samples away from both ends so the filter transients are excluded) gives
-   the mode's frequency and decay rate with sub-bin precision, over the whole time the
-   mode is above the noise.
-4. **Gains.** With the poles fixed, complex amplitudes by linear least squares on the full-rate
-   signal (all modes at once, so overlapping modes are separated); gain = |amplitude|
-   referred back to the onset. Gains are in the recording's units per unit impulse: the
-   resynthesis of the model for a 1 N s impulse reproduces the recording (phases aside, see
-   below). Several recordings (one per strike location) share the poles and get one gain
-   row each.
+Method: pooled subspace estimation (ESPRIT, :mod:`physics.modal.esprit`) at three time-
+frequency resolutions, each on what the previous ones left:
 
-Phases: a recorded impact has a finite contact time, a microphone and a propagation delay,
-so the fitted phases are not those of a pure sin(); the model keeps magnitudes only (the
-report lists the phases). The residual (recording minus resynthesis with the fitted phases)
-is reported in dB relative to the recording over the fitted window.
+1. **Strikes.** Onsets are detected (:mod:`physics.modal.strikes`); each hit lasts until the
+   next one. Clipped samples are left out of every least-squares fit, and each hit's
+   analysis starts after its last clipped sample.
+2. **Narrow bands** (200 Hz apart, 400 Hz wide, decimated to 1 kHz, the whole hit): slowly
+   decaying modes (d <= 40 /s), closely spaced pairs. Every hit and channel adds its Hankel
+   rows to one Gram matrix per band, so poles are pooled over all of them.
+3. **Wide bands** (2 kHz apart, the first 0.3 s of the hit minus the modes found so far):
+   modes of 20-800 /s, which are too broad and too short for a narrow band's filter.
+4. **Full rate** (the first 40 ms, minus everything found so far): modes up to several
+   thousand /s (wood, small objects, high frequencies), with no band filter in the way.
+5. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
+   linear least squares at the full rate (closed-form Gram matrix), minus what the previous
+   hits still ring; gain = |amplitude| at the onset.
+
+A band's model order is the number of Gram eigenvalues above the noise (the Marchenko-Pastur
+edge of the noise level measured in the spectrum), so a mode needs no spectral peak above a
+running median to be found: a broad fast mode and a mode in a dense cluster count alike.
+
+Gains are in the recording's units per unit impulse (the model struck with 1 N s at the
+recorded point reproduces the recording). The model keeps magnitudes only; the phases of a
+real strike (contact duration, propagation) are reported. The **attack** - the first hit's
+residual (recording minus modal resynthesis) over its first milliseconds, the contact and the
+unresolved high modes - is kept in the model (``ModalModel.attack``) and played with every
+strike (van den Doel, Kry & Pai 2001, "FoleyAutomatic", use the same residual excitation).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import sys
+import time
+import warnings
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
+from physics.modal import esprit
+from physics.modal.strikes import Hit, clipped_samples, detect_onsets, hits_of
 
 
-def _fft():
-    """pyfftw's numpy-compatible interface with its plan cache (numpy.fft if missing)."""
-    try:
-        import pyfftw
-        import pyfftw.interfaces.numpy_fft as fft
+class Stage(NamedTuple):
+    """One resolution of the pole search: bands ``spacing`` Hz apart with a flat part of
+    ``spacing`` Hz and tapers to ``edge`` Hz from the centre (0 = full rate, no bands),
+    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s kept."""
 
-        pyfftw.interfaces.cache.enable()
-        return fft
-    except ImportError:  # pragma: no cover - pyfftw is a dependency
-        return np.fft
+    name: str
+    spacing: float
+    edge: float
+    seconds: float
+    d_min: float
+    d_max: float
+
+
+#: Least energy of a mode relative to the noise variance per sample (matched filter SNR, 13 dB:
+#: the best damped sinusoid fitted to white noise somewhere in 20 kHz x 1 s reaches ~10 dB).
+MIN_SNR = 20.0
+
+STAGES = (
+    Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
+    Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
+    Stage("full rate", 0.0, 0.0, 0.04, 200.0, 6000.0),
+)
+
+
+class Segment(NamedTuple):
+    """The samples of one hit in one channel (from ``hit.first``), with what the fit needs."""
+
+    recording: int
+    channel: int
+    hit: Hit
+    x: np.ndarray
+    excluded: np.ndarray  # clipped sample indices relative to x
+    noise: np.ndarray  # noise |X_k|^2 level per bin of the segment's FFT (length n_fft // 2 + 1)
+    n_fft: int
 
 
 @dataclass
 class FitResult:
-    """A fitted model plus diagnostics (times in s relative to the start of the recording)."""
+    """A fitted model plus diagnostics (times in s from the start of each recording)."""
 
     model: ModalModel
     sample_rate: float
-    onset: float
-    window: tuple[float, float]
+    onsets: list[list[float]]
     residual_db: list[float]
     phases: np.ndarray
     levels_db: np.ndarray
     noise_db: float
-    candidates: int
     notes: list[str] = field(default_factory=list)
+    attack: np.ndarray = field(default_factory=lambda: np.zeros(0))  # first hit's residual
+
+    @property
+    def onset(self) -> float:
+        """The first strike of the first recording (s)."""
+        return self.onsets[0][0]
 
     def report(self) -> str:
         m = self.model
+        hits = sum(len(o) for o in self.onsets)
         lines = [
-            f"fitted {m.n_modes} modes ({self.candidates} spectral peaks) from {m.n_points} recording(s) "
-            f"at {self.sample_rate:g} Hz; onset {self.onset * 1e3:.1f} ms; fit window "
-            f"{self.window[0]:.3f}-{self.window[1]:.3f} s",
-            "residual (recording - resynthesis, energy over the window): "
+            f"fitted {m.n_modes} modes from {hits} strike(s) in {len(self.onsets)} recording(s) at "
+            f"{self.sample_rate:g} Hz; {m.n_points} gain row(s)"
+            + (f"; attack {self.attack.size / self.sample_rate * 1e3:.1f} ms" if self.attack.size else ""),
+            "onsets (s): " + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in self.onsets),
+            "residual (recording - resynthesis, energy per hit and channel): "
             + ", ".join(f"{r:.1f} dB" for r in self.residual_db),
             f"{'#':>3} {'f (Hz)':>10} {'d (1/s)':>9} {'T60 (s)':>8} {'level dB':>8}  gains",
         ]
         for k in range(m.n_modes):
             t60 = math.log(1000) / m.decays[k] if m.decays[k] > 0 else float("inf")
-            g = " ".join(f"{v:.4g}" for v in m.gains[:, k])
+            g = " ".join(f"{v:.4g}" for v in m.gains[:, k][:8]) + (" ..." if m.n_points > 8 else "")
             f, d, lv = m.frequencies[k], m.decays[k], self.levels_db[k]
             lines.append(f"{k:>3} {f:>10.2f} {d:>9.3f} {t60:>8.3f} {lv:>8.1f}  {g}")
         lines.extend(self.notes)
         return "\n".join(lines)
 
 
-# --------------------------------------------------------------------------- helpers
+# ----------------------------------------------------------------------------- noise
 
 
-def matrix_pencil(
-    y: np.ndarray, order: int, rate: float, max_pencil: int = 160
-) -> tuple[np.ndarray, np.ndarray]:
-    """(poles, amplitudes): complex poles s = -d + i 2 pi f (1/s) of a sum of ``order`` damped
-    complex exponentials sampled at ``rate`` (Hua & Sarkar's pencil with SVD truncation; the
-    pencil parameter is N/3, capped at ``max_pencil``), and their complex amplitudes at
-    sample 0 by least squares."""
-    n = y.size
-    lp = int(np.clip(n // 3, order + 1, max(max_pencil, order + 1)))
-    rows = n - lp
-    if rows < order + 1:
-        raise ValueError("too few samples for the pencil")
-    hank = np.lib.stride_tricks.sliding_window_view(y, lp + 1)[:rows]
-    _, _, vh = np.linalg.svd(hank, full_matrices=False)
-    v = vh[:order].T  # (lp + 1, order): the rows of vh span the row space of the Hankel matrix
-    z = np.linalg.eigvals(np.linalg.pinv(v[:-1]) @ v[1:])
-    z = z[np.abs(z) > 1e-12]
-    vander = z[None, :] ** np.arange(n)[:, None]
-    amp, *_ = np.linalg.lstsq(vander, y, rcond=None)
-    return np.log(z) * rate, amp
+def noise_floor(x: np.ndarray, rate: float, n_fft: int, span: float = 1000.0) -> np.ndarray:
+    """Noise level |X_k|^2 of every bin of the length-``n_fft`` FFT of ``x`` (white noise of
+    variance s^2 gives s^2 len(x)), by minimum statistics (Martin 2001, "Noise power spectral
+    density estimation based on optimal smoothing and minimum statistics"): Hann-windowed
+    frames, the 20th percentile over time of each bin divided by ln(1/0.8) (|X|^2 of noise
+    is exponentially distributed), then the median within +-``span`` Hz. Decaying
+    modes leave the later frames; the window keeps a loud mode's skirt out of distant bins
+    (a periodogram of the whole strike would count it as noise)."""
+    from scipy.ndimage import percentile_filter
+
+    width = int(np.clip(1 << int(math.log2(max(x.size // 8, 1))), 64, 2048))
+    if x.size < width:
+        width = 1 << int(math.log2(max(x.size, 2)))
+    window = np.hanning(width)
+    frames = np.lib.stride_tricks.sliding_window_view(x, width)[:: width // 2] * window
+    power = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / np.sum(window**2)
+    level = np.percentile(power, 20, axis=0) / 0.2231 if power.shape[0] >= 5 else power.mean(axis=0)
+    bin_hz = rate / width
+    level = percentile_filter(level, 50, size=2 * max(int(span / bin_hz), 1) + 1, mode="nearest")
+    freqs = np.arange(n_fft // 2 + 1) * rate / n_fft
+    return np.interp(freqs, np.arange(level.size) * bin_hz, level) * x.size
 
 
-def detect_onset(x: np.ndarray, rate: float, onset_db: float = 20.0) -> int:
-    """Index of the impact: the first sample above the peak minus ``onset_db`` dB, or, when
-    the recording starts with >= 10 ms before it, the first above 8 pre-roll noise sigmas."""
-    peak = float(np.max(np.abs(x)))
-    if peak == 0:
-        raise JassyError("recording: the signal is silent")
-    first = int(np.argmax(np.abs(x) >= peak * 10 ** (-onset_db / 20)))
-    pre = int(0.010 * rate)
-    if first > pre:
-        sigma = float(np.std(x[: first - pre // 2]))
-        above = np.flatnonzero(np.abs(x[: first + 1]) > 8 * sigma)
-        if above.size:
-            return int(above[0])
-    return first
+# ----------------------------------------------------------------------------- poles
 
 
-def _peaks(mag_db: np.ndarray, freqs: np.ndarray, f_min, f_max, threshold_db, dynamic_range, max_modes):
-    from scipy.ndimage import median_filter
-    from scipy.signal import find_peaks
-
-    df = freqs[1] - freqs[0]
-    width = max(int(round(200.0 / df)) | 1, 31)
-    floor = median_filter(mag_db, size=width, mode="nearest")
-    band = (freqs >= f_min) & (freqs <= f_max)
-    idx, props = find_peaks(mag_db, prominence=threshold_db, distance=3)
-    ok = band[idx] & (mag_db[idx] >= floor[idx] + threshold_db)
-    idx = idx[ok]
-    if idx.size == 0:
-        return idx, floor
-    top = mag_db[idx].max()
-    idx = idx[mag_db[idx] >= top - dynamic_range]
-    if idx.size > max_modes:
-        idx = np.sort(idx[np.argsort(mag_db[idx])[::-1][:max_modes]])
-    return idx, floor
+class Pole(NamedTuple):
+    frequency: float  # Hz
+    decay: float  # 1/s
 
 
-def _half_power_width(mag_db: np.ndarray, i: int, df: float) -> float:
-    """-3 dB width (Hz) of the peak at bin i."""
-    target = mag_db[i] - 3.0
-    lo = i
-    while lo > 0 and mag_db[lo] > target:
-        lo -= 1
-    hi = i
-    while hi < mag_db.size - 1 and mag_db[hi] > target:
-        hi += 1
-    return (hi - lo) * df
+def _z(poles: list[Pole], rate: float) -> np.ndarray:
+    f = np.array([p.frequency for p in poles])
+    d = np.array([p.decay for p in poles])
+    return np.exp((-d + 2j * np.pi * f) / rate)
 
 
-# --------------------------------------------------------------------------- fitting
+def _duplicate(p: Pole, poles: list[Pole]) -> bool:
+    """Within the half-power half-width of a pole already found (a leftover of subtracting it)."""
+    return any(abs(p.frequency - q.frequency) < max(0.5, (p.decay + q.decay) / (4 * np.pi)) for q in poles)
 
 
-@dataclass
-class _Segment:
-    x: np.ndarray  # the analysed samples (from the fit start)
-    start: int  # index of x[0] in the recording
-    onset: int
+def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
+    return np.arange(f_lo + stage.spacing / 2, f_hi + stage.spacing / 2, stage.spacing)
 
 
-def _poles_of(seg: _Segment, rate: float, opts: dict) -> tuple[list[tuple[float, float]], int, float]:
-    """(list of (f, d) poles, number of candidate peaks, noise floor dB) from one segment."""
-    fft = _fft()
-    x = seg.x
-    n = x.size
-    taper = np.ones(n)
-    m = n // 4
-    taper[n - m :] = 0.5 * (1 + np.cos(np.linspace(0, np.pi, m)))
-    nf = 4 * (1 << int(math.ceil(math.log2(n))))
-    spec = np.abs(fft.rfft(x * taper, nf))
-    freqs = np.arange(spec.size) * rate / nf
-    mag_db = 20 * np.log10(spec + 1e-30)
-    f_max = min(opts["f_max"] or rate / 2 * 0.98, rate / 2 * 0.98)
-    idx, floor = _peaks(
-        mag_db, freqs, opts["f_min"], f_max, opts["threshold_db"], opts["dynamic_range"], opts["max_modes"]
-    )
-    noise_db = float(np.median(floor))
-    if idx.size == 0:
-        return [], 0, noise_db
-    df = freqs[1]
-    # full spectrum of the untapered segment, zero-padded to >= 2n (no circular wrap)
-    n2 = 1 << int(math.ceil(math.log2(2 * n)))
-    full = fft.fft(x, n2)
-    bin_hz = rate / n2
-    cand_f = freqs[idx]
-    poles = []
-    for i, fc in zip(idx, cand_f, strict=True):
-        width = _half_power_width(mag_db, int(i), df)
-        bw = float(np.clip(max(0.02 * fc, 12 * width), opts["band_min"], opts["band_max"]))
-        half = max(int(round(bw / 2 / bin_hz)), 4)
-        kc = int(round(fc / bin_hz))
-        ks = np.arange(kc - half, kc + half + 1)
-        win = 0.5 + 0.5 * np.cos(np.pi * (ks - kc) / (half + 1))
-        size = 4 * (2 * half + 1)  # 2x oversampled, complex
-        sub = np.zeros(size, dtype=complex)
-        sub[(ks - kc) % size] = full[ks % n2] * win
-        y = fft.ifft(sub) * size / n2  # decimated by n2 / size, shifted by -kc bins
-        sub_rate = size * bin_hz
-        # valid part: skip the band filter's transients at both ends and the zero padding
-        margin = int(math.ceil(4.0 * sub_rate / bw))
-        valid_end = int(n / (n2 / size))
-        env = np.abs(y[:valid_end])
-        if valid_end - margin < 16:
+def _band_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin, work) -> list[Pole]:
+    """Poles of one banded stage from the residual signals (one per segment)."""
+    keep_n = [min(r.size, int(stage.seconds * rate)) for r in residuals]
+    # one FFT size for all segments: their bands are shifted by the same frequency and pool
+    n_fft = 1 << int(math.ceil(math.log2(2 * max(max(keep_n), 16))))
+    specs = [np.fft.rfft(r[:n], n_fft) for r, n in zip(residuals, keep_n, strict=True)]
+    n_ffts = [n_fft] * len(specs)
+    trim_s = 4.0 / (stage.edge - stage.spacing / 2)  # the band filter's transients
+    out: list[Pole] = []
+    # the noise of each segment at this stage's FFT size (|X|^2 scales with the length)
+    noises = [
+        np.interp(
+            np.arange(spec.size) * rate / n_fft, np.arange(seg.noise.size) * rate / seg.n_fft, seg.noise
+        )
+        * n
+        / seg.x.size
+        for seg, spec, n_fft, n in zip(segments, specs, n_ffts, keep_n, strict=True)
+    ]
+    for centre in _band_centres(stage, f_lo, f_hi):
+        work.step(stage.name)
+        ys, noise = [], 0.0
+        for spec, n_fft, n, nb in zip(specs, n_ffts, keep_n, noises, strict=True):
+            band = esprit.band_signal(spec, n_fft, n, rate, centre, stage.spacing / 2, stage.edge, nb)
+            trim = int(math.ceil(trim_s * band.rate))
+            if band.y.size > 2 * trim + 16:
+                ys.append(band.y[trim:-trim])
+                noise = max(noise, band.noise)
+        if not ys:
             continue
-        tail = env[max(valid_end - max(valid_end // 5, 4), margin) : valid_end - margin]
-        noise = float(np.median(tail)) if tail.size else 0.0
-        above = np.flatnonzero(env[margin : valid_end - margin] > 4 * noise) + margin
-        stop = int(above[-1]) + 1 if above.size else valid_end - margin
-        stop = min(max(stop, margin + 16), valid_end - margin)
-        seg_y = y[margin:stop]
-        near = np.abs(cand_f - fc) < bw / 2
-        in_band = int(np.sum(near))
-        order = min(in_band + opts["extra_order"], seg_y.size // 3 - 1)
-        if order < 1:
+        shortest = min(y.size for y in ys)
+        width = int(np.clip(shortest // 3, 8, 160))
+        gram, rows = esprit.pooled_gram(ys, width)
+        if rows == 0:
             continue
-        try:
-            s, amp = matrix_pencil(seg_y, order, sub_rate)
-        except (ValueError, np.linalg.LinAlgError):
-            continue
-        # one starting pole per candidate in the band: the strongest pencil pole near it
-        starts = []
-        for fo in cand_f[near]:
-            f_est = s.imag / (2 * np.pi) + kc * bin_hz
-            ok = (np.abs(f_est - fo) < max(2 * df, width)) & (-s.real > -1e-3)
-            if ok.any():
-                j = np.flatnonzero(ok)[np.argmax(np.abs(amp[ok]))]
-                starts.append(complex(max(-s[j].real, 0.0), f_est[j] - kc * bin_hz))
-            else:
-                starts.append(complex(np.pi * width / 2, fo - kc * bin_hz))
-        target = int(np.argmin(np.abs(cand_f[near] - fc)))
-        y_fit = y[margin : valid_end - margin]
-        d_hat, f_hat = _refine(y_fit, sub_rate, starts, target)
-        f_hat += kc * bin_hz
-        if abs(f_hat - fc) < max(2 * df, width) and d_hat >= 0:
-            poles.append((float(f_hat), float(d_hat)))
-    return poles, int(idx.size), noise_db
-
-
-def _refine(y: np.ndarray, rate: float, starts: list[complex], target: int) -> tuple[float, float]:
-    """Nonlinear least squares (variable projection: amplitudes solved linearly) of a sum of
-    damped complex exponentials to y, from starting (decay, frequency offset) pairs given as
-    complex numbers d + i f; returns the refined (d, f) of ``starts[target]``. This is the
-    maximum-likelihood estimate in white noise, which the pencil alone is not (at low SNR it
-    also splits a mode into two nearby poles)."""
-    from scipy.optimize import least_squares
-
-    t = np.arange(y.size) / rate
-    x0 = np.array([[z.real, z.imag] for z in starts]).ravel()
-
-    def resid(p):
-        d, f = p[0::2], p[1::2]
-        basis = np.exp(np.outer(t, -d + 2j * np.pi * f))
-        c, *_ = np.linalg.lstsq(basis, y, rcond=None)
-        r = y - basis @ c
-        return np.concatenate([r.real, r.imag])
-
-    scale = np.tile([max(1.0, abs(x0[0::2]).max()), rate / y.size], len(starts))
-    try:
-        sol = least_squares(resid, x0, x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=400)
-        p = sol.x
-    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
-        p = x0
-    return float(p[2 * target]), float(p[2 * target + 1])
-
-
-def _refine_full_rate(x: np.ndarray, rate: float, freqs, decays, c, sweeps: int = 2):
-    """Space-alternating refinement at the full sample rate: for each mode in turn (loudest
-    first), subtract all the others and fit (f, d, amplitude, phase) of one damped sinusoid
-    by Gauss-Newton (scipy least_squares, analytic Jacobian) over the time the mode is above
-    the noise (at most until it has decayed by 60 dB). No band filter is involved, so
-    fast-decaying modes keep all their early samples. Returns refined (freqs, decays, c)."""
-    from scipy.optimize import least_squares
-
-    freqs, decays, c = freqs.copy(), decays.copy(), c.copy()
-    n = x.size
-    t_all = np.arange(n) / rate
-    parts = np.array([_one(t_all, freqs[k], decays[k], c[k]) for k in range(freqs.size)])
-    total = parts.sum(axis=0)
-    order = np.argsort(-np.abs(c))
-    for _ in range(sweeps):
-        for k in order:
-            target = x - (total - parts[k])
-            # up to where the mode has fallen by 60 dB (beyond, it only adds noise)
-            end = n if decays[k] <= 0 else int(min(n, rate * max(np.log(1000.0) / decays[k], 0.05)))
-            end = max(end, min(n, 64))
-            t = t_all[:end]
-            y = target[:end]
-
-            def resid(p, t=t, y=y):
-                return _one(t, p[0], p[1], complex(p[2], p[3])) - y
-
-            def jac(p, t=t):
-                f, d, cs, cc = p
-                e = np.exp(-d * t)
-                w = 2 * np.pi * f * t
-                sn, cs_ = np.sin(w), np.cos(w)
-                j = np.empty((t.size, 4))
-                j[:, 0] = e * 2 * np.pi * t * (cs * cs_ - cc * sn)
-                j[:, 1] = -t * e * (cs * sn + cc * cs_)
-                j[:, 2] = e * sn
-                j[:, 3] = e * cs_
-                return j
-
-            p0 = np.array([freqs[k], decays[k], c[k].real, c[k].imag])
-            try:
-                sol = least_squares(resid, p0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=50)
-            except (ValueError, np.linalg.LinAlgError):  # pragma: no cover
+        z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
+        brate = band.rate
+        # refine the poles in and next to the band (the others are filter edges and noise)
+        near = np.abs(np.angle(z) * brate / (2 * np.pi)) <= stage.edge
+        z, amps = esprit.refine(ys, brate, z[near])
+        for k, zk in enumerate(z):
+            if not 0 < abs(zk) < math.inf:  # a pole refined away (decay beyond the float range)
                 continue
-            f, d, cs, cc = sol.x
-            if not (np.isfinite(sol.x).all() and d >= 0 and abs(f - freqs[k]) < 0.01 * freqs[k]):
-                continue
-            freqs[k], decays[k], c[k] = f, d, complex(cs, cc)
-            new = _one(t_all, f, d, c[k])
-            total += new - parts[k]
-            parts[k] = new
-    return freqs, decays, c
-
-
-def _one(t, f, d, c):
-    """Im(c e^{(-d + i 2 pi f) t}) = e^{-dt} (Re c sin + Im c cos)."""
-    w = 2 * np.pi * f * t
-    return np.exp(-d * t) * (c.real * np.sin(w) + c.imag * np.cos(w))
-
-
-def _merge_poles(poles: list[tuple[float, float]], resolution: float) -> list[tuple[float, float]]:
-    poles = sorted(poles)
-    out: list[tuple[float, float]] = []
-    for f, d in poles:
-        if out and f - out[-1][0] < max(resolution, 2e-4 * f):
-            continue
-        out.append((f, d))
+            f = band.centre + np.angle(zk) * brate / (2 * np.pi)
+            d = -math.log(abs(zk)) * brate
+            snr = max(_matched_snr(a[k], zk, y.size, noise) for a, y in zip(amps, ys, strict=True))
+            inside = abs(f - centre) <= 0.55 * stage.spacing and f_lo <= f <= f_hi
+            if inside and stage.d_min <= d <= stage.d_max and snr >= MIN_SNR:
+                p = Pole(float(f), float(d))
+                if not _duplicate(p, out):
+                    out.append(p)
     return out
 
 
-def _amplitudes(x: np.ndarray, rate: float, freqs: np.ndarray, decays: np.ndarray) -> np.ndarray:
-    """Complex c_k with x[n] ~ sum_k Im(c_k e^{(-d_k + i w_k) n / rate}) (least squares)."""
-    t = np.arange(x.size) / rate
-    env = np.exp(-np.outer(t, decays))
-    ph = np.outer(t, 2 * np.pi * freqs)
-    basis = np.hstack([env * np.sin(ph), env * np.cos(ph)])
-    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
-    k = freqs.size
-    return coef[:k] + 1j * coef[k:]  # Im(c e^{iwt}) = Re(c) sin + Im(c) cos
+def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin, work) -> list[Pole]:
+    """Poles of damped sinusoids in the first ``stage.seconds`` of the residuals (real signals
+    at the full rate: each mode is a conjugate pair)."""
+    n = min(int(stage.seconds * rate), min(r.size for r in residuals))
+    if n < 64:
+        return []
+    ys = [r[:n].astype(np.complex128) for r in residuals]
+    width = int(min(n // 3, 320))
+    gram, rows = esprit.pooled_gram(ys, width)
+    # the broadband noise level (a broad mode lifts the floor of the bins around it)
+    noise = max(float(np.median(s.noise)) / s.x.size for s in segments)
+    z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
+    fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]
+    real = [r[:n] for r in residuals]
+    z, amps = esprit.refine(real, rate, z, real=True)
+    out = []
+    for k, zk in enumerate(z):
+        if not 0 < abs(zk) < math.inf:
+            continue
+        f = np.angle(zk) * rate / (2 * np.pi)
+        d = -math.log(abs(zk)) * rate
+        # a real sinusoid of amplitude |c| has |c|^2 / 2 the power of a complex one
+        snr = max(_matched_snr(a[k], zk, n, noise) / 2 for a in amps)
+        if f_lo <= f <= f_hi and stage.d_min < d <= stage.d_max and snr >= MIN_SNR:
+            out.append(Pole(float(f), float(d)))
+    return out
+
+
+def _matched_snr(c: complex, z: complex, n: int, noise: float) -> float:
+    """Energy of c z^m over m < n relative to the noise variance per sample."""
+    r2 = abs(z) ** 2
+    energy = abs(c) ** 2 * (n if abs(1 - r2) < 1e-12 else (1 - r2**n) / (1 - r2))
+    return energy / max(noise, 1e-300)
+
+
+# ----------------------------------------------------------------------------- amplitudes
+
+
+def _segment_amplitudes(segments: list[Segment], z: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(own, total) complex amplitudes per segment at its first sample: total = everything
+    ringing there; own = total minus the ringing of the previous hit of the same recording
+    and channel, propagated to this hit's start."""
+    own, total = [], []
+    prev: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
+    for seg in segments:
+        c = esprit.amplitudes(seg.x, z, seg.excluded)
+        key = (seg.recording, seg.channel)
+        mine = c.copy()
+        if key in prev:
+            start, c_prev = prev[key]
+            mine = c - c_prev * z ** (seg.hit.first - start)
+        prev[key] = (seg.hit.first, c)
+        own.append(mine)
+        total.append(c)
+    return own, total
+
+
+def _residuals(segments: list[Segment], z: np.ndarray, rate: float, seconds: float) -> list[np.ndarray]:
+    n_max = int(seconds * rate)
+    out = []
+    for seg in segments:
+        x = seg.x[:n_max]
+        if z.size:
+            c = esprit.amplitudes(x, z, seg.excluded[seg.excluded < x.size])
+            x = x - esprit.resynthesis(x.size, z, c)
+        out.append(x)
+    return out
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+def _as_channels(sig, k: int) -> np.ndarray:
+    x = np.asarray(sig, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2:
+        raise JassyError(f"recording {k}: expected a mono or multichannel signal (frames x channels)")
+    if not np.all(np.isfinite(x)):
+        raise JassyError(f"recording {k}: contains NaN or Inf")
+    return x
+
+
+class _Work:
+    """Progress of the fit (a tqdm bar on stderr when ``enabled``) and its time limit: each
+    step past ``time_limit`` seconds of wall-clock time stops the fit with a JassyError."""
+
+    def __init__(self, enabled: bool, total: int, time_limit: float | None):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc="fit", disable=not enabled, leave=False,
+                        bar_format="{desc}: {bar:30} {percentage:3.0f}% {postfix} [{elapsed}]")  # fmt: skip
+        self.start, self.time_limit = time.monotonic(), time_limit
+
+    def step(self, label: str) -> None:
+        if self.time_limit is not None and time.monotonic() - self.start > self.time_limit:
+            self.bar.close()
+            raise JassyError(
+                f"fit: stopped after {self.time_limit:g} s (--max-time); fit less with --duration, "
+                "--fmin/--fmax, or allow more time"
+            )
+        self.bar.set_postfix_str(label, refresh=False)
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 def fit_recordings(
@@ -362,122 +347,227 @@ def fit_recordings(
     max_modes: int = 60,
     f_min: float = 20.0,
     f_max: float | None = None,
-    threshold_db: float = 15.0,
-    dynamic_range: float = 70.0,
     onset: float | None = None,
     skip: float = 0.0,
     duration: float | None = None,
     name: str = "fit",
     points: tuple[str, ...] = (),
+    locations: tuple[str, ...] | None = None,
+    margin: float = 4.0,
+    attack_ms: float = 20.0,
+    progress: bool = False,
+    time_limit: float | None = None,
 ) -> FitResult:
-    """Fit one modal model to one or more impact recordings (1-D arrays, or (frames, ch)).
+    """Fit one modal model to recordings (1-D arrays or frames x channels, or a list of them).
 
-    Poles (f, d) are estimated from every recording and merged; gains get one row per
-    recording. ``skip`` (s) leaves out the contact itself after the onset; ``duration``
-    (s) caps the analysed length.
+    Poles are pooled over every hit and channel. Gains: one row per hit when ``locations``
+    names them (in order over all recordings; x channels as ``name:ch``); otherwise one row
+    per recording and channel (``points`` names the recordings), the hits' gains averaged
+    after scaling each hit to the loudest. ``skip`` (s) leaves out the contact after each
+    onset, ``duration`` (s) caps each hit, ``onset`` (s) gives a single strike's time instead
+    of detecting strikes. ``margin`` = how far a mode's Gram eigenvalue must exceed the noise
+    edge. ``progress`` shows a bar on stderr; past ``time_limit`` s (wall clock) the fit stops.
+    Raises JassyError with one clear line for unusable input.
     """
-    if sample_rate <= 0:
-        raise JassyError(f"sample rate: expected > 0 Hz, got {sample_rate}")
-    if isinstance(signals, np.ndarray) and signals.ndim == 1:
+    from physics.modal._blas import single_threaded
+
+    with warnings.catch_warnings(), np.errstate(all="ignore"), single_threaded():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _fit(signals, sample_rate, max_modes, f_min, f_max, onset, skip, duration, name, points,
+                    locations, margin, attack_ms, progress, time_limit)  # fmt: skip
+
+
+def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, points, locations, margin,
+         attack_ms, progress, time_limit) -> FitResult:  # fmt: skip
+    if not (rate > 0 and math.isfinite(rate)):
+        raise JassyError(f"sample rate: expected > 0 Hz, got {rate}")
+    if isinstance(signals, np.ndarray):
         signals = [signals]
-    opts = dict(
-        f_min=f_min,
-        f_max=f_max,
-        threshold_db=threshold_db,
-        dynamic_range=dynamic_range,
-        max_modes=max_modes,
-        band_min=20.0,
-        band_max=400.0,
-        extra_order=2,
-        ls_seconds=4.0,
-    )
-    segments = []
-    for k, sig in enumerate(signals):
-        x = np.asarray(sig, dtype=np.float64)
-        if x.ndim == 2:
-            x = x.mean(axis=1)
-        if x.ndim != 1 or x.size < 64:
-            raise JassyError(f"recording {k}: expected a mono or multichannel signal of >= 64 samples")
-        if not np.all(np.isfinite(x)):
-            raise JassyError(f"recording {k}: contains NaN or Inf")
-        n0 = int(round(onset * sample_rate)) if onset is not None else detect_onset(x, sample_rate)
-        if not 0 <= n0 < x.size - 64:
-            raise JassyError(f"--onset: {n0 / sample_rate:g} s is outside the recording")
-        start = n0 + int(round(skip * sample_rate))
-        stop = x.size if duration is None else min(x.size, start + int(round(duration * sample_rate)))
-        if stop - start < 64:
-            raise JassyError(f"recording {k}: less than 64 samples after the onset")
-        segments.append(_Segment(x[start:stop], start, n0))
-    all_poles: list[tuple[float, float]] = []
-    n_cand = 0
-    noise = []
-    for seg in segments:
-        p, c, nd = _poles_of(seg, sample_rate, opts)
-        all_poles.extend(p)
-        n_cand = max(n_cand, c)
-        noise.append(nd)
-    resolution = 0.25 * sample_rate / max(s.x.size for s in segments)
-    poles = _merge_poles(all_poles, resolution)
+    recs = [_as_channels(s, k) for k, s in enumerate(signals)]
+    f_hi = min(f_max or 20000.0, 0.49 * rate)
+    if f_hi <= f_min:
+        raise JassyError(f"--fmax: expected more than --fmin ({f_min:g} Hz) and below Nyquist, got {f_hi:g}")
+    notes: list[str] = []
+    segments: list[Segment] = []
+    onsets_s: list[list[float]] = []
+    for r, x in enumerate(recs):
+        mono = x.mean(axis=1)
+        if not np.any(mono != 0) and not np.any(x != 0):
+            raise JassyError(f"recording {r}: the signal is silent")
+        clipped = [clipped_samples(x[:, c]) for c in range(x.shape[1])]
+        n_clip = sum(c.size for c in clipped)
+        if n_clip:
+            notes.append(
+                f"warning: recording {r}: {n_clip} of {x.size} samples ({100 * n_clip / x.size:.1f} %) are "
+                "clipped; they are left out of the fit (record with less gain for a better fit)"
+            )
+            print(notes[-1], file=sys.stderr)
+        all_clipped = np.unique(np.concatenate(clipped))
+        if onset is not None:
+            n0 = int(round(onset * rate))
+            if not 0 <= n0 < x.shape[0]:
+                raise JassyError(f"--onset: {onset:g} s is outside the recording ({x.shape[0] / rate:g} s)")
+            ons = [n0]
+        else:
+            ons = detect_onsets(mono, rate)
+            if not ons:
+                raise JassyError(f"recording {r}: no strike found (no sudden rise of the level)")
+        hits = hits_of(ons, x.shape[0], all_clipped, rate, skip)
+        onsets_s.append([h.onset / rate for h in hits])
+        for h in hits:
+            stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
+            if stop - h.first < int(0.02 * rate):
+                raise JassyError(
+                    f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
+                    f"({(stop - h.first) / rate * 1e3:.1f} ms after the onset; need >= 20 ms)"
+                )
+            for c in range(x.shape[1]):
+                seg_x = x[h.first : stop, c]
+                exc = clipped[c][(clipped[c] >= h.first) & (clipped[c] < stop)] - h.first
+                n_fft = 1 << int(math.ceil(math.log2(2 * seg_x.size)))
+                floor = noise_floor(seg_x, rate, n_fft)
+                segments.append(Segment(r, c, h, seg_x, exc.astype(np.int64), floor, n_fft))
+    if locations is not None and len(locations) != sum(len(o) for o in onsets_s):
+        raise JassyError(
+            f"--locations: expected {sum(len(o) for o in onsets_s)} names (one per strike found at "
+            + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in onsets_s)
+            + f" s), got {len(locations)}"
+        )
+
+    total = sum(_band_centres(st, f_min, f_hi).size if st.spacing else 1 for st in STAGES) + 2
+    work = _Work(progress, total, time_limit)
+    poles: list[Pole] = []
+    for stage in STAGES:
+        z = _z(poles, rate) if poles else np.zeros(0, dtype=complex)
+        res = _residuals(segments, z, rate, stage.seconds)
+        finder = _band_poles if stage.spacing else _full_rate_poles
+        new = finder(stage, res, segments, rate, f_min, f_hi, margin, work)
+        poles.extend(p for p in new if not _duplicate(p, poles))
+        if not stage.spacing:
+            work.step(stage.name)
     if not poles:
         raise JassyError(
-            "fit: no modes found (no spectral peak stands out of the noise); check the recording, "
-            "--fmin/--fmax or lower --threshold"
+            "fit: no decaying modes found above the noise; check the recording (a strike of a "
+            "resonant object), --fmin/--fmax or --onset"
         )
-    freqs = np.array([p[0] for p in poles])
-    decays = np.array([p[1] for p in poles])
-    # refine the poles at the full rate on the first (or only) recording
-    seg0 = segments[0]
-    n_ls = min(seg0.x.size, int(opts["ls_seconds"] * sample_rate))
-    c = _amplitudes(seg0.x[:n_ls], sample_rate, freqs, decays)
-    freqs, decays, c = _refine_full_rate(seg0.x[:n_ls], sample_rate, freqs, decays, c)
-    order = np.argsort(freqs)
-    freqs, decays = freqs[order], decays[order]
-    gains = np.zeros((len(segments), freqs.size))
-    phases = np.zeros((len(segments), freqs.size))
-    residual = []
-    for r, seg in enumerate(segments):
-        n_ls = min(seg.x.size, int(opts["ls_seconds"] * sample_rate))
-        c = _amplitudes(seg.x[:n_ls], sample_rate, freqs, decays)
-        back = np.exp(decays * (seg.start - seg.onset) / sample_rate)
-        # refer amplitude and phase to the onset: c e^{s (t - t_start)} = c e^{-s dt0} e^{s (t - t0)}
-        c0 = c * back * np.exp(-1j * 2 * np.pi * freqs * (seg.start - seg.onset) / sample_rate)
-        gains[r] = np.abs(c0)
-        phases[r] = np.angle(c0)
-        resyn = _synth(seg.x.size, sample_rate, freqs, decays, c)
-        err = np.sum((seg.x - resyn) ** 2) / max(np.sum(seg.x**2), 1e-300)
-        residual.append(10 * math.log10(max(err, 1e-30)))
-    # level of each mode: its energy a^2 / (4 d) relative to the loudest
-    energy = np.max(gains, axis=0) ** 2 / (4 * np.maximum(decays, 1e-3))
-    levels = 10 * np.log10(energy / energy.max())
-    model = ModalModel(freqs, decays, gains, points if len(points) == len(segments) else (), name)
-    seg0 = segments[0]
-    window = (seg0.start / sample_rate, (seg0.start + seg0.x.size) / sample_rate)
-    return FitResult(
-        model,
-        float(sample_rate),
-        seg0.onset / sample_rate,
-        window,
-        residual,
-        phases,
-        levels,
-        float(np.mean(noise)),
-        n_cand,
+    poles.sort()
+    z = _z(poles, rate)
+    amps, totals = _segment_amplitudes(segments, z)
+    # a pole fitted to the skirt of a broad mode found later loses its amplitude to that
+    # mode in the joint fit: keep the poles that still stand out of the noise
+    snr = np.zeros(z.size)
+    for seg, c in zip(segments, totals, strict=True):
+        bins = np.clip((np.angle(z) / (2 * np.pi) * seg.n_fft).astype(int), 0, seg.noise.size - 1)
+        sigma2 = seg.noise[bins] / seg.x.size
+        snr = np.maximum(
+            snr, [_matched_snr(ck, zk, seg.x.size, s2) / 2 for ck, zk, s2 in zip(c, z, sigma2, strict=True)]
+        )
+    if np.any(snr < MIN_SNR):
+        poles = [p for p, ok in zip(poles, snr >= MIN_SNR, strict=True) if ok]
+        if not poles:
+            raise JassyError("fit: no decaying modes found above the noise; check the recording")
+        z = _z(poles, rate)
+        amps, totals = _segment_amplitudes(segments, z)
+    work.step("amplitudes")
+    freqs = np.array([p.frequency for p in poles])
+    decays = np.array([p.decay for p in poles])
+    # referred to each hit's onset: c e^{s (t - t_first)} = (c e^{-s (first - onset)}) e^{s (t - t_onset)}
+    c0 = np.array([a * z ** -(s.hit.first - s.hit.onset) for a, s in zip(amps, segments, strict=True)])
+    mags = np.abs(c0)
+    energy = (mags**2).max(axis=0) / (4 * np.maximum(decays, 1e-3))
+    keep = np.sort(np.argsort(energy)[::-1][:max_modes])
+    freqs, decays, z, c0, mags, energy = (
+        freqs[keep],
+        decays[keep],
+        z[keep],
+        c0[:, keep],
+        mags[:, keep],
+        energy[keep],
     )
+    amps, totals = [a[keep] for a in amps], [a[keep] for a in totals]
+
+    rows, names = _gain_rows(segments, mags, recs, locations, points)
+    residual = []
+    for seg, c in zip(segments, totals, strict=True):
+        own = np.delete(np.arange(seg.x.size), seg.excluded)
+        err = seg.x - esprit.resynthesis(seg.x.size, z, c)
+        residual.append(
+            10 * math.log10(max(np.sum(err[own] ** 2) / max(np.sum(seg.x[own] ** 2), 1e-300), 1e-30))
+        )
+    attack = _attack(segments[0], z, amps[0], rate, attack_ms)
+    work.step("done")
+    work.close()
+    levels = 10 * np.log10(energy / energy.max())
+    model = ModalModel(freqs, decays, rows, names, name)
+    noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
+    return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes, attack)
 
 
-def _synth(n: int, rate: float, freqs, decays, c) -> np.ndarray:
-    t = np.arange(n) / rate
-    out = np.zeros(n)
-    for f, d, ck in zip(freqs, decays, c, strict=True):
-        out += np.exp(-d * t) * (ck.real * np.sin(2 * np.pi * f * t) + ck.imag * np.cos(2 * np.pi * f * t))
+def _gain_rows(segments, mags, recs, locations, points):
+    """(gain rows, row names): per hit (with locations) or per recording and channel."""
+    multi = any(x.shape[1] > 1 for x in recs)
+    if locations is not None:
+        hit_ids = sorted({(s.recording, s.hit.onset) for s in segments})
+        rows, names = [], []
+        for (r, n0), loc in zip(hit_ids, locations, strict=True):
+            for i, s in enumerate(segments):
+                if (s.recording, s.hit.onset) == (r, n0):
+                    rows.append(mags[i])
+                    names.append(f"{loc}:{s.channel}" if multi else loc)
+        return np.array(rows), tuple(names)
+    rows, names = [], []
+    for r, x in enumerate(recs):
+        for c in range(x.shape[1]):
+            idx = [i for i, s in enumerate(segments) if (s.recording, s.channel) == (r, c)]
+            g = mags[idx]
+            if len(idx) > 1:  # scale each hit to the loudest, then average
+                ref = g[int(np.argmax(np.sum(g**2, axis=1)))]
+                strong = ref >= 0.1 * ref.max()
+                scale = np.array([np.median(row[strong] / ref[strong]) for row in g])
+                g = g / np.maximum(scale, 1e-12)[:, None]
+            rows.append(g.mean(axis=0))
+            base = points[r] if r < len(points) else f"r{r}"
+            names.append(f"{base}:{c}" if multi else base)
+    if len(recs) == 1 and not multi and not points:
+        names = []
+    return np.array(rows), tuple(names)
+
+
+def _attack(seg: Segment, z: np.ndarray, c: np.ndarray, rate: float, attack_ms: float) -> np.ndarray:
+    """The first hit's residual from its onset over up to ``attack_ms`` (until it falls to the
+    noise), faded out over its last quarter: the contact and what no mode explains."""
+    if attack_ms <= 0:
+        return np.zeros(0)
+    n = int(attack_ms * 1e-3 * rate)
+    # from the onset (the clipped/contact samples before ``first`` included), modes back-propagated
+    lead = seg.hit.first - seg.hit.onset
+    x = seg.x[: max(n - lead, 0)]
+    res = x - esprit.resynthesis(x.size, z, c)
+    sigma = math.sqrt(float(np.median(seg.noise)) / seg.x.size)
+    hop = max(int(rate / 2000), 1)
+    env = (
+        np.array([np.max(np.abs(res[i : i + hop])) for i in range(0, res.size, hop)])
+        if res.size
+        else np.zeros(0)
+    )
+    loud = np.flatnonzero(env > 4 * sigma)
+    if loud.size == 0:
+        return np.zeros(0)
+    m = min(res.size, (loud[-1] + 1) * hop)
+    out = res[:m].copy()
+    fade = max(m // 4, 1)
+    out[m - fade :] *= 0.5 + 0.5 * np.cos(np.linspace(0, np.pi, fade))
     return out
 
 
-def resynthesise(
-    model: ModalModel, n: int, sample_rate: float, onset: float = 0.0, row: int = 0, phases=None
-):
-    """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt),
-    with optional per-mode phases (e.g. ``FitResult.phases[row]``)."""
+# ----------------------------------------------------------------------------- resynthesis, files
+
+
+def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0.0, row: int = 0,
+                 phases=None, attack=None) -> np.ndarray:  # fmt: skip
+    """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt)
+    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus ``attack`` samples
+    (e.g. ``FitResult.attack``, at the same rate) from the onset."""
     t = np.arange(n) / sample_rate - onset
     live = t >= 0
     tt = t[live]
@@ -489,11 +579,15 @@ def resynthesise(
             * np.exp(-model.decays[k] * tt)
             * np.sin(2 * np.pi * model.frequencies[k] * tt + ph[k])
         )
+    if attack is not None and attack.size:
+        i0 = int(np.argmax(live)) if live.any() else n
+        m = min(attack.size, n - i0)
+        out[i0 : i0 + m] += attack[:m]
     return out
 
 
 def read_recording(path: str | os.PathLike) -> tuple[np.ndarray, float]:
-    """(mono float64 samples, sample rate) of an audio file soundfile reads (WAV, FLAC, ...)."""
+    """(float64 samples, frames x channels, sample rate) of an audio file soundfile reads."""
     import soundfile as sf
 
     if not os.path.isfile(path):
@@ -502,7 +596,9 @@ def read_recording(path: str | os.PathLike) -> tuple[np.ndarray, float]:
         data, rate = sf.read(str(path), dtype="float64", always_2d=True)
     except Exception as exc:  # soundfile raises RuntimeError / LibsndfileError
         raise JassyError(f"{path}: cannot read audio ({exc})") from None
-    return data.mean(axis=1), float(rate)
+    if data.shape[0] == 0:
+        raise JassyError(f"{path}: the recording is empty")
+    return data, float(rate)
 
 
 def fit_files(paths, **kwargs) -> FitResult:
@@ -519,7 +615,8 @@ def fit_files(paths, **kwargs) -> FitResult:
 
 
 def plot_fit(result: FitResult, recording: np.ndarray, path: str | os.PathLike, row: int = 0) -> None:
-    """Spectrograms of the recording, the resynthesis (fitted phases) and their difference."""
+    """Spectrograms of the recording (first channel), the resynthesis of its first strike
+    (fitted phases, with the attack) and their difference."""
     try:
         import matplotlib
 
@@ -533,7 +630,8 @@ def plot_fit(result: FitResult, recording: np.ndarray, path: str | os.PathLike, 
 
     rate = result.sample_rate
     x = np.asarray(recording, dtype=np.float64)
-    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row])
+    x = x[:, 0] if x.ndim == 2 else x
+    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row], attack=result.attack)
     nper = 1024 if rate > 30000 else 512
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, sharey=True)
     ref = None

@@ -96,10 +96,10 @@ def random_recording(seed: int, n_modes=None, strikes=None, snr_db=None, seconds
     return x, Truth(f, d, gains, onsets, sigma, rate, n)
 
 
-def crb_frequency(a, f, d, sigma, rate, n) -> float:
-    """Cramer-Rao bound (Hz, standard deviation) of f for a e^{-dt} sin(2 pi f t + phi) in
-    white noise of variance sigma^2, n samples at ``rate``: sqrt of [F^{-1}]_ff with F the
-    Fisher information of (a, phi, f, d)."""
+def crb_bounds(a, f, d, sigma, rate, n) -> tuple[float, float]:
+    """Cramer-Rao bounds (standard deviations: Hz, 1/s) of f and d for a e^{-dt} sin(2 pi f t
+    + phi) in white noise of variance sigma^2, n samples at ``rate``: square roots of the
+    diagonal of F^{-1}, F the Fisher information of (a, phi, f, d)."""
     m = min(n, int(rate * 20 / max(d, 1e-9)) + 16)
     t = np.arange(m) / rate
     e = np.exp(-d * t)
@@ -107,9 +107,10 @@ def crb_frequency(a, f, d, sigma, rate, n) -> float:
     jac = np.stack([e * s, a * e * c, a * e * c * 2 * np.pi * t, -a * t * e * s], axis=1)
     fisher = jac.T @ jac / sigma**2
     try:
-        return float(math.sqrt(abs(np.linalg.inv(fisher)[2, 2])))
+        inv = np.linalg.inv(fisher)
     except np.linalg.LinAlgError:
-        return float("inf")
+        return float("inf"), float("inf")
+    return float(math.sqrt(abs(inv[2, 2]))), float(math.sqrt(abs(inv[3, 3])))
 
 
 def level_above_noise(a, d, sigma, rate, seconds) -> float:
@@ -123,7 +124,7 @@ def score(truth: Truth, model, min_level_db: float = 10.0) -> dict:
     """Recall and errors of the counted modes (see the module docstring)."""
     ends = np.append(truth.onsets[1:], truth.n / truth.rate)
     lengths = ends - truth.onsets
-    counted = found = f_ok = d_ok = g_ok = 0
+    counted = found = f_ok = d_ok = d_crb_ok = g_ok = 0
     errors = []
     for k, (f, d) in enumerate(zip(truth.frequencies, truth.decays, strict=True)):
         levels = [
@@ -134,8 +135,10 @@ def score(truth: Truth, model, min_level_db: float = 10.0) -> dict:
         if levels[h] < min_level_db:
             continue
         counted += 1
-        crb = crb_frequency(truth.gains[h, k], f, d, truth.sigma, truth.rate, int(lengths[h] * truth.rate))
-        tol = max(3 * crb, 1e-3 * f)
+        crb_f, crb_d = crb_bounds(
+            truth.gains[h, k], f, d, truth.sigma, truth.rate, int(lengths[h] * truth.rate)
+        )
+        tol = max(3 * crb_f, 1e-3 * f)
         j = int(np.argmin(np.abs(model.frequencies - f)))
         if abs(model.frequencies[j] - f) > tol:
             errors.append(("missed", f, d, levels[h]))
@@ -144,27 +147,36 @@ def score(truth: Truth, model, min_level_db: float = 10.0) -> dict:
         f_ok += 1
         derr = abs(model.decays[j] / d - 1)
         d_ok += int(derr <= 0.05)
+        d_crb_ok += int(abs(model.decays[j] - d) <= max(0.05 * d, 3 * crb_d))
         row = h if model.n_points == truth.gains.shape[0] else 0
         gain = truth.gains[h, k] if model.n_points == truth.gains.shape[0] else truth.gains[0, k]
         gerr = abs(20 * math.log10(max(model.gains[row, j], 1e-30) / gain))
         g_ok += int(gerr <= 1.0)
         if derr > 0.05 or gerr > 1.0:
             errors.append(("error", f, d, levels[h], model.decays[j], gerr))
-    return {"counted": counted, "found": found, "decay_ok": d_ok, "gain_ok": g_ok, "errors": errors}
+    return {"counted": counted, "found": found, "decay_ok": d_ok, "decay_crb_ok": d_crb_ok, "gain_ok": g_ok,
+            "errors": errors}  # fmt: skip
 
 
-def bench_fit(cases: int = 40, seed0: int = 1000, verbose: bool = False) -> dict:
+def bench_fit(cases: int = 40, seed0: int = 1000, verbose: bool = False, progress: bool = False) -> dict:
     """Fit ``cases`` random recordings (1-5 strikes, locations given) and the speed case (a
     10 s recording of five strikes of 40 modes); return totals and timings (CPU s)."""
-    from physics.modal.fit_subspace import fit_recordings
+    from tqdm import tqdm
 
-    tot = {"counted": 0, "found": 0, "decay_ok": 0, "gain_ok": 0}
-    residuals, cpu = [], []
-    for i in range(cases):
+    from jassy.errors import JassyError
+    from physics.modal.fit import fit_recordings
+
+    tot = {"counted": 0, "found": 0, "decay_ok": 0, "decay_crb_ok": 0, "gain_ok": 0}
+    residuals, cpu, onsets_missed = [], [], 0
+    for i in tqdm(range(cases), desc="bench fit", disable=not progress, leave=False):
         x, truth = random_recording(seed0 + i)
         names = tuple(f"p{h}" for h in range(truth.onsets.size))
         t0 = time.process_time()
-        res = fit_recordings(x, truth.rate, locations=names)
+        try:
+            res = fit_recordings(x, truth.rate, locations=names)
+        except JassyError:  # another number of strikes detected: one gain row, scored on the first
+            onsets_missed += 1
+            res = fit_recordings(x, truth.rate)
         cpu.append(time.process_time() - t0)
         s = score(truth, res.model)
         for key in tot:
@@ -178,8 +190,9 @@ def bench_fit(cases: int = 40, seed0: int = 1000, verbose: bool = False) -> dict
     t0 = time.process_time()
     fit_recordings(x, truth.rate, locations=tuple(f"p{h}" for h in range(5)))
     speed = time.process_time() - t0
-    return {**tot, "cases": cases, "residual_db_median": float(np.median(residuals)),
-            "cpu_median": float(np.median(cpu)), "cpu_max": float(np.max(cpu)),
+    return {**tot, "cases": cases, "onsets_missed": onsets_missed,
+            "residual_db_median": float(np.median(residuals)), "cpu_median": float(np.median(cpu)),
+            "cpu_max": float(np.max(cpu)),
             "speed_10s_5_strikes": speed}  # fmt: skip
 
 
@@ -189,9 +202,10 @@ def print_fit(r: dict) -> None:
     print(f"modes >= 10 dB above the noise: {r['counted']}")
     print(f"recall (within max(3 CRB, 0.1 %)): {100 * r['found'] / c:.1f} %")
     print(
-        f"decay within 5 %: {100 * r['decay_ok'] / c:.1f} %   "
-        f"gain within 1 dB: {100 * r['gain_ok'] / c:.1f} %"
+        f"decay within 5 %: {100 * r['decay_ok'] / c:.1f} % (within max(5 %, 3 CRB): "
+        f"{100 * r['decay_crb_ok'] / c:.1f} %)   gain within 1 dB: {100 * r['gain_ok'] / c:.1f} %"
     )
+    print(f"recordings whose strikes were not all detected: {r['onsets_missed']} of {r['cases']}")
     print(f"resynthesis residual (median over recordings): {r['residual_db_median']:.1f} dB")
     print(f"CPU per recording: median {r['cpu_median']:.2f} s, max {r['cpu_max']:.2f} s")
     print(f"10 s, 48 kHz, five strikes, 40 modes: {r['speed_10s_5_strikes']:.2f} s CPU")

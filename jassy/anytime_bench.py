@@ -1,0 +1,152 @@
+"""``jassy bench anytime``: error and CPU time of budgeted synthesis against the full bank.
+
+For each scene (the ``bell`` and ``scrape`` patches and the ``wok`` scene's sound graph),
+renders the full synthesis and budgets of 10, 25, 50 and 100 % of the graph's modes, at
+48 kHz in blocks of 4096 frames, node by node (the budget decides between sub-blocks).
+
+- error: 10 log10 of the energy of (budgeted - full) over the energy of full, on the
+  rendered audio (dB; exact synthesis gives about -300 dB);
+- CPU: thread CPU time spent in the ModalBanks plus the budget's decisions, divided by the
+  CPU time of the ModalBanks of the full render; the best of ``repeats`` runs of each,
+  interleaved in the same process.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+FRACTIONS = (0.1, 0.25, 0.5, 1.0)
+SAMPLE_RATE = 48000
+BLOCK = 4096
+
+
+def patch_scene(name: str, seconds: float):
+    """A builder of (graph, score) for a built-in patch."""
+    from jassy.patchfile import load_patch
+
+    def build():
+        patch = load_patch(name)
+        return patch.graph, patch.score
+
+    return build, seconds
+
+
+def wok_scene(seconds: float):
+    """A builder of the wok scene's sound graph (physics simulated once)."""
+    from patches.rigid_sound import scene_graph
+    from patches.wok import simulate_wok
+    from physics.rigid.events import contact_tracks, impacts
+
+    world, voices, result = simulate_wok(seconds)
+    hits, tracks = impacts(result), contact_tracks(result, with_locations=False)
+
+    def build():
+        return scene_graph(world.bodies, hits, tracks, voices)
+
+    return build, seconds
+
+
+def _timed_render(build, seconds: float, fraction: float | None):
+    """(audio, bank CPU s, decision CPU s, modes) of one render."""
+    from jassy.anytime import ModeBudget
+    from jassy.offline import OfflineEngine
+
+    graph, score = build()
+    banks = [node for node in graph.order if node.supports_budget]
+    total = sum(b.model.n_modes for b in banks)
+    if fraction is not None:
+        graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
+    spent = [0, 0]
+
+    def clocked(fn, slot):
+        def run(start, n):
+            t = time.thread_time_ns()
+            fn(start, n)
+            spent[slot] += time.thread_time_ns() - t
+
+        return run
+
+    for bank in banks:
+        bank.process = clocked(bank.process, 0)
+    if graph.budget is not None:
+        graph.budget.step = clocked(graph.budget.step, 1)
+    engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
+    audio = engine.render(seconds).audio
+    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total
+
+
+def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:
+    """Rows (fraction, modes, error dB, bank CPU ratio, decision share) for one scene."""
+    full_audio, _, _, total = _timed_render(build, seconds, None)  # also compiles
+    full_cpu = []
+    best = {f: None for f in fractions}
+    for _ in range(repeats):
+        full_cpu.append(_timed_render(build, seconds, None)[1])
+        for f in fractions:
+            audio, bank, decide, _ = _timed_render(build, seconds, f)
+            if best[f] is None or bank + decide < best[f][1] + best[f][2]:
+                best[f] = (audio, bank, decide)
+    reference = min(full_cpu)
+    energy = float(np.sum(full_audio**2))
+    rows = []
+    for f in fractions:
+        audio, bank, decide = best[f]
+        error = float(np.sum((audio - full_audio) ** 2)) / energy
+        rows.append(
+            {
+                "fraction": f,
+                "modes": max(1, int(round(f * total))),
+                "error_db": round(10 * np.log10(max(error, 1e-30)), 1),
+                "cpu_ratio": round((bank + decide) / reference, 3),
+                "decisions_ratio": round(decide / reference, 3),
+            }
+        )
+    return {"modes": total, "seconds": seconds, "full_bank_cpu_s": round(reference, 4), "rows": rows}
+
+
+def bench_anytime(quick: bool = False, names=("bell", "scrape", "wok")) -> dict:
+    """Every scene of ``names``; ``quick``: shorter renders and one repeat."""
+    scenes = {
+        "bell": lambda: patch_scene("bell", 4.0 if quick else 8.0),
+        "scrape": lambda: patch_scene("scrape", 3.5 if quick else 7.0),
+        "wok": lambda: wok_scene(1.5 if quick else 4.0),
+    }
+    return {name: bench_scene(*scenes[name](), repeats=1 if quick else 3) for name in names}
+
+
+def print_anytime(result: dict) -> None:
+    print("anytime synthesis: error and CPU of a mode budget against the full bank (48 kHz, block 4096)")
+    for name, scene in result.items():
+        full_ms = scene["full_bank_cpu_s"] * 1e3
+        print(f"\n{name}: {scene['modes']} modes, {scene['seconds']:g} s, full bank {full_ms:.1f} ms CPU")
+        print("  budget   modes   error dB   CPU / full bank   (of which decisions)")
+        for r in scene["rows"]:
+            cpu, share = r["cpu_ratio"], r["decisions_ratio"]
+            print(
+                f"  {r['fraction']:6.0%}  {r['modes']:6d}  {r['error_db']:9.1f}   {cpu:15.2f}   {share:10.2f}"
+            )
+
+
+def plot_anytime(result: dict, path: str) -> None:
+    """Error against budget, one curve per scene, to a PNG (atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jassy.files import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, scene in result.items():
+        rows = [r for r in scene["rows"] if r["fraction"] < 1.0]
+        ax.plot([100 * r["fraction"] for r in rows], [r["error_db"] for r in rows], "o-", label=name)
+    ax.axhline(-15, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("modes computed (%)")
+    ax.set_ylabel("error vs full synthesis (dB)")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)
