@@ -52,7 +52,6 @@ def test_decays_from_half_to_two_thousand_per_second_and_a_beating_pair():
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.xfail(strict=True, reason="target missed: 22 of 27 modes found, 18 decays within 5 %")
 def test_random_modal_sets_with_several_strikes():
     """Random sets made by the bench's generator (clusters, 1/sqrt(f) gains, decays growing
     with frequency, 40 dB SNR), two strikes with their own gains: modes 10 dB above the
@@ -67,8 +66,8 @@ def test_random_modal_sets_with_several_strikes():
             tot[key] += s[key]
     assert tot["counted"] >= 25
     assert tot["found"] >= 0.95 * tot["counted"], tot
-    assert tot["decay_ok"] >= 0.90 * tot["counted"], tot
-    assert tot["gain_ok"] >= 0.90 * tot["counted"], tot
+    assert tot["decay_ok"] >= 0.95 * tot["counted"], tot
+    assert tot["gain_ok"] >= 0.95 * tot["counted"], tot
 
 
 def test_clipped_samples_are_left_out_with_a_warning(capsys):
@@ -83,3 +82,20 @@ def test_clipped_samples_are_left_out_with_a_warning(capsys):
     assert any("clipped" in note for note in result.notes)
     assert "clipped" in capsys.readouterr().err
     assert_recovered(result.model, f, d, a)
+
+
+def test_a_recording_clipped_to_its_end_exits_2_quickly(tmp_path, capsys):
+    """A 1 s strike recorded 12 dB too hot (clipped until its end): a warning, then one
+    error line saying how long it is clipped, exit 2 (the old fitter ran for minutes)."""
+    import soundfile as sf
+
+    from jassy.cli import main
+
+    x = strike([220.0, 900.0], [0.5, 2.0], [1.0, 0.5], 1.0, sigma=1e-4)
+    path = tmp_path / "hot.wav"
+    sf.write(path, np.clip(4 * x / np.max(np.abs(x)), -1, 1), RATE, subtype="PCM_16")
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "clipped" in err[0] and "warning" in err[0]
+    assert "clipped until" in err[1] and len(err) == 2
+    assert not (tmp_path / "m.toml").exists()

@@ -42,7 +42,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.cells import pulse_sum, raised_cosine, with_room
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Rate of the exponential energy distribution of SDT's crumpling (lambda = 1.45).
 ENERGY_LAMBDA = 1.45
@@ -232,7 +232,7 @@ def bounces(
     return pulses
 
 
-_SEED = ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed (splitmix64 stream)")
+_SEED = seed_spec("random seed (splitmix64 stream)")
 _MASS = ParamSpec(
     "float",
     1e-3,

@@ -57,7 +57,8 @@ from physics.modal.strikes import Hit, clipped_samples, detect_onsets, hits_of
 class Stage(NamedTuple):
     """One resolution of the pole search: bands ``spacing`` Hz apart with a flat part of
     ``spacing`` Hz and tapers to ``edge`` Hz from the centre (0 = full rate, no bands),
-    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s kept."""
+    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s and
+    bands below ``f_max`` Hz kept."""
 
     name: str
     spacing: float
@@ -65,6 +66,7 @@ class Stage(NamedTuple):
     seconds: float
     d_min: float
     d_max: float
+    f_max: float = math.inf
 
 
 #: Least energy of a mode relative to the noise variance per sample (matched filter SNR, 13 dB:
@@ -72,6 +74,7 @@ class Stage(NamedTuple):
 MIN_SNR = 20.0
 
 STAGES = (
+    Stage("zoom bands", 50.0, 50.0, 6.0, 0.0, 10.0, 2000.0),
     Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
     Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
     Stage("full rate", 0.0, 0.0, 0.04, 200.0, 6000.0),
@@ -176,6 +179,7 @@ def _duplicate(p: Pole, poles: list[Pole]) -> bool:
 
 
 def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
+    f_hi = min(f_hi, stage.f_max)
     return np.arange(f_lo + stage.spacing / 2, f_hi + stage.spacing / 2, stage.spacing)
 
 
@@ -416,6 +420,12 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
         onsets_s.append([h.onset / rate for h in hits])
         for h in hits:
             stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
+            if stop - h.first < int(0.02 * rate) and h.first > h.onset + int(round(skip * rate)):
+                raise JassyError(
+                    f"recording {r}: the strike at {h.onset / rate:.3f} s is clipped until "
+                    f"{(h.first - 1) / rate:.3f} s, leaving {(stop - h.first) / rate * 1e3:.1f} ms of "
+                    "unclipped decay (need >= 20 ms); record with less gain"
+                )
             if stop - h.first < int(0.02 * rate):
                 raise JassyError(
                     f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
