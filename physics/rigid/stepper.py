@@ -393,7 +393,7 @@ def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
     the step). gap[p]: a lower bound of pair p's gap (its smallest contact gap, polytope face
     planes standing in for the distance; ``margin`` when none is that close); touching[p]: it
     has a contact within slop. The solve skips contacts beyond slop."""
-    count = 0
+    count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
         margin = slop + reach[p]
