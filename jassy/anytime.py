@@ -6,8 +6,8 @@ the result does not depend on the block size) the budget ranks all modes of all 
     I_k = w(f_k) * (A_k^2 + (a_k J_b)^2 + a_k^2 S_b(f_k) (1 - e^{-2 d_k tau}) / (2 d_k))
 
 where A_k is the mode's current amplitude (from its two state samples), a_k its amplitude
-per unit impulse, J_b the largest impulse of the impacts scheduled upstream of bank b in
-this period, S_b the power spectral density (N^2/Hz, Hann-windowed periodogram, mean
+per unit impulse at the point struck, (a_k J_b)^2 summed over the impacts scheduled
+upstream of bank b in this period, S_b the power spectral density (N^2/Hz, Hann-windowed periodogram, mean
 removed) of the force the bank heard in the last period, and w = 1 (the budget minimises
 the output's error energy) or, with ``weighting = "A"``, the A-weighting power gain (IEC
 61672) as a loudness proxy. The last term is the squared amplitude a stationary
@@ -41,8 +41,8 @@ import numpy as np
 
 from jassy.errors import PatchError
 
-#: (impulse N s, location) of a bank no impact strikes
-NO_KICK = (0.0, None)
+#: the impacts (impulse N s, location) on a bank no impact strikes
+NO_KICK: list[tuple[float, object]] = []
 
 
 def a_weighting_power(f: np.ndarray) -> np.ndarray:
@@ -108,15 +108,14 @@ class ModeBudget:
             if self.active:
                 bank.anytime_attach(self.period, self.horizon, self.weighting)
 
-    def _predicted(self, kicks: list, start: int, end: int) -> dict[int, tuple[float, object]]:
-        """The largest impulse (N s) of ``kicks`` (frame, nodes, impulse, location) in frames
-        [start, end) per bank, with the location it strikes (None: the bank's own)."""
-        predicted: dict[int, tuple[float, object]] = {}
+    def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
+        """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
+        ``kicks`` (frame, nodes, impulse, location) in frames [start, end)."""
+        predicted: dict[int, list[tuple[float, object]]] = {}
         for frame, node_banks, impulse, location in kicks:
-            if start <= frame < end:
+            if start <= frame < end and impulse > 0.0:
                 for bank in node_banks:
-                    if impulse > predicted.get(id(bank), NO_KICK)[0]:
-                        predicted[id(bank)] = (impulse, location)
+                    predicted.setdefault(id(bank), []).append((impulse, location))
         return predicted
 
     def _top(self, score: np.ndarray) -> np.ndarray:

@@ -70,22 +70,24 @@ def void_pointer(typingctx, address):
     return sig, codegen
 
 
-@nb.njit(cache=True, nogil=True)
+# The array views below are inlined into the program: called with literal sizes they would
+# otherwise be compiled once per size.
+@nb.njit(cache=True, nogil=True, inline="always")
 def _f64(address, size):
     return nb.carray(void_pointer(address), (size,), np.float64)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _f64_rows(address, rows, size):
     return nb.carray(void_pointer(address), (rows, size), np.float64)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _i64(address, size):
     return nb.carray(void_pointer(address), (size,), np.int64)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _u64(address, size):
     return nb.carray(void_pointer(address), (size,), np.uint64)
 

@@ -161,16 +161,22 @@ class Scheduler:
     def upcoming_impulses(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
         """(frame, ugens downstream, impulse N s, location or None) of the impact-like events
         applied in frames [start, end); an action without an ``impulse`` argument counts as
-        1 N s."""
-        out = []
+        1 N s. The location is the impact's own, else one set on that ugen at that frame
+        (rigid scenes set each bank's location, then strike its hammer)."""
+        out, impacts, placed = [], [], {}
         i = bisect.bisect_left(self.apply_frames, start)
         while i < len(self.events) and self.apply_frames[i] < end:
             ev = self.events[i]
             if ev.action != "set":
-                targets = self.graph.location_targets(ev.node)
-                impulse = float(ev.args.get("impulse", 1.0))
-                out.append((self.apply_frames[i], targets, impulse, ev.args.get("location")))
+                impacts.append((self.apply_frames[i], ev))
+            elif "location" in ev.args:
+                placed[(self.apply_frames[i], ev.node)] = ev.args["location"]
             i += 1
+        for frame, ev in impacts:
+            impulse, location = float(ev.args.get("impulse", 1.0)), ev.args.get("location")
+            for target in self.graph.location_targets(ev.node):
+                where = location if location is not None else placed.get((frame, target.name))
+                out.append((frame, [target], impulse, where))
         return out
 
     def _dispatch(self, index: int) -> None:

@@ -234,10 +234,10 @@ class UGen:
         """Budgeted banks: whether any force was heard in the last budget period."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_importance(self, kick_now: tuple, kick_next: tuple, period: int):
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
         """Budgeted banks (``supports_budget``): per-mode importance for the coming
-        ``period`` frames, given the (impulse N s, location) scheduled now and in the next
-        period."""
+        ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
+        the next period."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events

@@ -187,3 +187,52 @@ def test_poke_window_dents_the_ball_where_the_probe_presses(jack, xvfb, tmp_path
     floor = cy - R + depth
     assert gy.size > 20 and np.all(np.abs(gx - cx) < 8) and gy.max() <= floor + 6 and gy.min() < floor - 10
     assert not np.all(lifted == (0x40, 0xFF, 0x80), axis=2).any()  # no force once lifted
+
+
+@pytest.mark.timeout(180)
+def test_drill_window_removes_bone_under_the_burr(jack, xvfb, tmp_path):
+    from patches.demo_view import HEIGHT, WIDTH
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jassy", "demo", "--mode", "drill", "--probe-udp", f"127.0.0.1:{port}"],
+        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    middle = 0.25  # m: the middle of the 0.5 m the probe input maps across the bone slice
+    try:
+        line = proc.stdout.readline()
+        assert "window open" in line, line + proc.stdout.read()
+        send_path(sock, port, [(middle, 0.01)], seconds_each=0.5)  # hovering
+        hover = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)  # drilling
+        early = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)
+        late = screenshot(xvfb)[:HEIGHT, :WIDTH]
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+    finally:
+        sock.close()
+        if proc.poll() is None:
+            proc.kill()
+    from PIL import Image
+
+    for name, shot in (("hover", hover), ("early", early), ("late", late)):
+        Image.fromarray(shot.astype(np.uint8)).save(tmp_path / f"drill_{name}.png")
+    r, g, b = (hover[..., k] for k in range(3))
+    bone = (r > 0) & (np.abs(g - 0.92 * r) <= 1) & (np.abs(b - 0.8 * r) <= 1)  # grey, 0.92, 0.8
+
+    def hole(shot):  # bone before, a voxel with no bone left now
+        return bone & np.all(shot == (32, 38, 46), axis=2)
+
+    assert len(np.unique(hover[bone], axis=0)) > 20  # the slice's grey levels, not a blank canvas
+    ys, xs = np.nonzero(hole(late))
+    burr = np.nonzero(np.all(late == (0xFF, 0xD0, 0x40), axis=2))[1]  # the burr's outline
+    assert xs.size > 100  # bone removed ...
+    assert burr.min() - 2 <= xs.min() and xs.max() <= burr.max() + 2  # ... only under the burr
+    assert np.all(hole(early) <= hole(late)) and hole(early).sum() < xs.size  # and it stays removed

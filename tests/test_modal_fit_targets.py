@@ -52,7 +52,6 @@ def test_decays_from_half_to_two_thousand_per_second_and_a_beating_pair():
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.xfail(strict=True, reason="target missed: 22 of 27 modes found, 18 decays within 5 %")
 def test_random_modal_sets_with_several_strikes():
     """Random sets made by the bench's generator (clusters, 1/sqrt(f) gains, decays growing
     with frequency, 40 dB SNR), two strikes with their own gains: modes 10 dB above the
@@ -67,16 +66,13 @@ def test_random_modal_sets_with_several_strikes():
             tot[key] += s[key]
     assert tot["counted"] >= 25
     assert tot["found"] >= 0.95 * tot["counted"], tot
-    assert tot["decay_ok"] >= 0.90 * tot["counted"], tot
-    assert tot["gain_ok"] >= 0.90 * tot["counted"], tot
+    assert tot["decay_ok"] >= 0.95 * tot["counted"], tot
+    assert tot["gain_ok"] >= 0.95 * tot["counted"], tot
 
 
-@pytest.mark.xfail(
-    strict=True, reason="missed: the 3700 Hz, 40 /s mode is lost once the fit starts after 90 ms"
-)
 def test_clipped_samples_are_left_out_with_a_warning(capsys):
-    """The first 9 ms of a strike clipped at half its peak: the fit warns, leaves those
-    samples out and still recovers the modes."""
+    """A strike clipped at half its peak (on and off for its first 90 ms): the fit warns,
+    estimates the poles after the last clipped sample and still recovers the modes."""
     f, d, a = [440.0, 1500.0, 3700.0], [3.0, 12.0, 40.0], [1.0, 0.6, 0.4]
     x = strike(f, d, a, 1.0, sigma=1e-4)
     ceiling = 0.5 * np.max(np.abs(x))
@@ -86,3 +82,20 @@ def test_clipped_samples_are_left_out_with_a_warning(capsys):
     assert any("clipped" in note for note in result.notes)
     assert "clipped" in capsys.readouterr().err
     assert_recovered(result.model, f, d, a)
+
+
+def test_a_recording_clipped_to_its_end_exits_2_quickly(tmp_path, capsys):
+    """A 1 s strike recorded 12 dB too hot (clipped until its end): a warning, then one
+    error line saying how long it is clipped, exit 2 (the old fitter ran for minutes)."""
+    import soundfile as sf
+
+    from jassy.cli import main
+
+    x = strike([220.0, 900.0], [0.5, 2.0], [1.0, 0.5], 1.0, sigma=1e-4)
+    path = tmp_path / "hot.wav"
+    sf.write(path, np.clip(4 * x / np.max(np.abs(x)), -1, 1), RATE, subtype="PCM_16")
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "clipped" in err[0] and "warning" in err[0]
+    assert "clipped until" in err[1] and len(err) == 2
+    assert not (tmp_path / "m.toml").exists()

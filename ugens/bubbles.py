@@ -44,6 +44,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
+from ugens.noise import seed_spec
 from ugens.stochastic import next_event, u01
 
 #: Radius at which a bubble at depth 1 has amplitude 1 (m).
@@ -403,7 +404,7 @@ class BubbleStream(_Bubbles):
             "int", 64, low=1, high=4096, fixed=True, doc="maximum number of sounding bubbles"
         ),
         "floor": _FLOOR,
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed (splitmix64 stream)"),
+        "seed": seed_spec("random seed (splitmix64 stream)"),
     }
 
     def _prepare(self) -> None:

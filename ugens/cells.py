@@ -49,7 +49,9 @@ def with_room(table, rows):
     while size < rows:
         size *= 2
     grown = np.zeros((size, table.shape[1]))
-    grown[: table.shape[0]] = table
+    for i in range(table.shape[0]):  # element-wise: a slice copy compiles numba's shape-error text
+        for j in range(table.shape[1]):
+            grown[i, j] = table[i, j]
     return grown
 
 

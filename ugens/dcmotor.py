@@ -41,7 +41,7 @@ from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Reference speed (rad/s) and current (A) of the component levels.
 REFERENCE_SPEED = 2.0 * math.pi * 50.0
@@ -160,7 +160,7 @@ class DCMotor(UGen):
         "ripple_level": ParamSpec("float", 0.01, low=0.0, high=100.0, doc="torque-ripple tone at 1 A"),
         "brush_level": ParamSpec("float", 0.04, low=0.0, high=100.0, doc="brush noise at 1 A, 3000 rpm"),
         "gear_level": ParamSpec("float", 0.03, low=0.0, high=100.0, doc="gear-mesh whine at 3000 rpm"),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
     }
     _LEVELS = {"rotor_level": _ROTOR, "ripple_level": _RIPPLE, "brush_level": _BRUSH, "gear_level": _GEAR}
 

@@ -30,7 +30,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 MAX_HARMONICS = 64
 
@@ -95,7 +95,7 @@ class DrillSource(UGen):
         "chips": ParamSpec("float", 0.05, low=0.0, high=100.0, unit="N s/mm^3",
                            doc="cutting-noise peak amplitude per mm^3/s of removal"),
         "idle": ParamSpec("float", 0.05, low=0.0, high=10.0, doc="amplitude of the motor output"),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
     }  # fmt: skip
 
     def _prepare(self) -> None:

@@ -65,7 +65,7 @@ from jassy.ugen import UGen
 from ugens import engine_noise
 from ugens.cells import add_onset, decay_sums, drop_row
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Largest firing delay, as a fraction of the firing interval, at irregularity 1.
 JITTER = 0.25
@@ -246,7 +246,7 @@ class Engine(UGen):
             "float", 0.1, low=0.0, high=1.0, doc="per-firing jitter of timing and amplitude (0: periodic)"
         ),
         "misfire": ParamSpec("float", 0.0, low=0.0, high=1.0, doc="probability that a firing fails"),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
         "pulse": ParamSpec(
             "float",
             0.0015,

@@ -46,7 +46,7 @@ from jassy.ugen import UGen
 from ugens.cells import add_onset, decay_sums, drop_row, with_room
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Capacity of the queue of blasts travelling to the listener.
 QUEUE = 32
@@ -159,7 +159,7 @@ class Explosion(UGen):
         "rumble": ParamSpec(
             "float", 300.0, low=10.0, high=20000.0, unit="Hz", fixed=True, doc="low-pass cut-off of the tail"
         ),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
     }
     actions = {
         "blast": {

@@ -88,7 +88,7 @@ from jassy.ugen import UGen
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams, design
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Normal forces at or below this (N) mean no contact (keeps z_ss representable).
 MIN_CONTACT = 1e-9
@@ -297,7 +297,7 @@ class Friction(ModelParams, UGen):
         "sigma1": _coef(0.02, 0.0, 1e4, "N s/m", "bristle damping"),
         "sigma2": _coef(0.01, 0.0, 1e4, "N s/m", "viscous friction"),
         "noise": _coef(0.0, 0.0, 1e3, "sqrt(N s/m)", "sigma3: roughness noise sigma3 u sqrt(|v| F_N)"),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed of the noise"),
+        "seed": seed_spec("random seed of the noise"),
         "level": HEARD_LEVEL,
     }
 

@@ -51,8 +51,52 @@ def render_pulses(out, start, n, pulses, count):
     return kept
 
 
+class PulseSource(UGen):
+    """Base of the ugens whose output is a table of 1 - cos pulses (ImpactForce, ImpactTrain):
+    the table, its growth, rendering and saved state."""
+
+    def _prepare(self) -> None:
+        self.pulses = np.zeros((16, 3))
+        self.count = np.zeros(1, dtype=np.int64)
+        self._idle = False
+
+    def _reset(self) -> None:
+        self.pulses[:] = 0.0
+        self.count[0] = 0
+        self._idle = False
+
+    def add_pulse(self, sample_time: float, duration: float, impulse: float) -> None:
+        """Start a pulse of ``impulse`` N s lasting ``duration`` s (at least MIN_PULSE_SAMPLES)
+        at fractional sample ``sample_time``; its samples sum exactly to the impulse."""
+        T = max(duration * self.sample_rate, MIN_PULSE_SAMPLES)
+        amp = impulse * self.sample_rate / pulse_sum(sample_time, T)
+        c = int(self.count[0])
+        self.pulses = with_room(self.pulses, c + 1)
+        self.pulses[c] = (sample_time, T, amp)
+        self.count[0] = c + 1
+        self._idle = False
+
+    def process(self, start: int, n: int) -> None:
+        if self._idle:
+            return
+        c = int(self.count[0])
+        self.count[0] = render_pulses(self.out, start, n, self.pulses, c)
+        # out[:n] is zero from here on while no pulse is added
+        self._idle = c == 0 and self.count[0] == 0 and n == self.max_block
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {"pulses": self.pulses, "count": self.count}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
+        super().set_state(state)
+
+    def _state_restored(self) -> None:
+        self._idle = False
+
+
 @register
-class ImpactForce(UGen):
+class ImpactForce(PulseSource):
     """Contact force of impacts: 1 - cos pulses (JASS BangForce) with exact impulse.
 
     Output: force in N (each pulse integrates to its impulse in N s)."""
@@ -94,47 +138,12 @@ class ImpactForce(UGen):
         ``frame`` has already been handed over (events come in time order)."""
         self.set_param(key, value, jump=jump, ramp=ramp)
 
-    def _prepare(self) -> None:
-        self.pulses = np.zeros((16, 3))
-        self.count = np.zeros(1, dtype=np.int64)
-        self._idle = False
-
-    def _reset(self) -> None:
-        self.pulses[:] = 0.0
-        self.count[0] = 0
-        self._idle = False
-
     def strike(self, sample_time: float, impulse: float, duration: float | None = None) -> None:
         """Start a pulse of ``impulse`` N s at fractional sample ``sample_time``."""
-        tau = self.values["duration"] if duration is None else duration
-        T = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
-        amp = impulse * self.sample_rate / pulse_sum(sample_time, T)
-        c = int(self.count[0])
-        self.pulses = with_room(self.pulses, c + 1)
-        self.pulses[c] = (sample_time, T, amp)
-        self.count[0] = c + 1
-        self._idle = False
+        self.add_pulse(sample_time, self.values["duration"] if duration is None else duration, impulse)
 
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
         """``impact``: start a pulse (impulse N s, optional duration s) at ``sample_time``."""
         if action != "impact":
             return super().act(action, args, sample_time)
         self.strike(sample_time, args["impulse"], args.get("duration"))
-
-    def process(self, start: int, n: int) -> None:
-        if self._idle:
-            return
-        c = int(self.count[0])
-        self.count[0] = render_pulses(self.out, start, n, self.pulses, c)
-        # out[:n] is zero from here on while no pulse is added
-        self._idle = c == 0 and self.count[0] == 0 and n == self.max_block
-
-    def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"pulses": self.pulses, "count": self.count}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
-        super().set_state(state)
-
-    def _state_restored(self) -> None:
-        self._idle = False

@@ -43,10 +43,8 @@ import numpy as np
 from jassy.errors import PatchError
 from jassy.params import ParamSpec
 from jassy.registry import register
-from jassy.ugen import UGen
-from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum, with_room
-from ugens.impact import render_pulses
-from ugens.noise import uniform
+from ugens.impact import PulseSource
+from ugens.noise import seed_spec, uniform
 
 #: 2 (15/16)^(2/5) int_0^1 (1 - s^(5/2))^(-1/2) ds (Johnson 1985, eq. 11.24 for a sphere).
 HERTZ_CONSTANT = 2.868
@@ -138,7 +136,7 @@ def _opt(low: float, high: float, unit: str, doc: str, low_open: bool = True) ->
 
 
 @register
-class ImpactTrain(UGen):
+class ImpactTrain(PulseSource):
     """Impacts as bursts of micro-collisions and bouncing trains: 1 - cos force pulses (N).
 
     FoleyAutomatic (van den Doel, Kry & Pai 2001) micro-collisions within ~15 ms; bounce law
@@ -186,7 +184,7 @@ class ImpactTrain(UGen):
         "gravity": ParamSpec(
             "float", 9.81, low=0.0, low_open=True, high=1e3, unit="m/s^2", doc="gravity for bounces"
         ),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
     }
     actions = {
         "impact": {
@@ -254,32 +252,20 @@ class ImpactTrain(UGen):
 
     # --------------------------------------------------------------- lifecycle
     def _prepare(self) -> None:
-        self.pulses = np.zeros((16, 3))
-        self.count = np.zeros(1, dtype=np.int64)
+        super()._prepare()
         self.rng = np.zeros(1, dtype=np.uint64)
         self._times = np.zeros(64)
         self._weights = np.zeros(64)
-        self._idle = False
 
     def _reset(self) -> None:
-        self.pulses[:] = 0.0
-        self.count[0] = 0
+        super()._reset()
         self.rng[0] = self.values["seed"]
-        self._idle = False
 
     def add_pulses(self, starts: np.ndarray, durations: np.ndarray, impulses: np.ndarray) -> None:
         """Add 1 - cos pulses starting at fractional samples ``starts`` (durations in s,
         impulses in N s; each pulse sums exactly to its impulse)."""
-        fs = self.sample_rate
-        m = len(starts)
-        c = int(self.count[0])
-        self.pulses = with_room(self.pulses, c + m)
-        for i in range(m):
-            T = max(float(durations[i]) * fs, MIN_PULSE_SAMPLES)
-            t0 = float(starts[i])
-            self.pulses[c + i] = (t0, T, float(impulses[i]) * fs / pulse_sum(t0, T))
-        self.count[0] = c + m
-        self._idle = False
+        for t0, duration, impulse in zip(starts, durations, impulses, strict=True):
+            self.add_pulse(float(t0), float(duration), float(impulse))
 
     def _burst(self, sample_time: float, impulse: float, n: int, spread: float, tau: float):
         """Onsets (fractional samples), durations and impulses of one impact's micro-collisions."""
@@ -330,20 +316,5 @@ class ImpactTrain(UGen):
         if parts:
             self.add_pulses(*(np.concatenate(p) for p in zip(*parts, strict=True)))
 
-    def process(self, start: int, n: int) -> None:
-        if self._idle:
-            return
-        c = int(self.count[0])
-        self.count[0] = render_pulses(self.out, start, n, self.pulses, c)
-        # out[:n] stays zero from here on while no pulse is added
-        self._idle = c == 0 and self.count[0] == 0 and n == self.max_block
-
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"pulses": self.pulses, "count": self.count, "rng": self.rng}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
-        super().set_state(state)
-
-    def _state_restored(self) -> None:
-        self._idle = False
+        return {**super().state_arrays(), "rng": self.rng}

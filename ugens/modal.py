@@ -778,12 +778,15 @@ class ModalBank(ModelParams, UGen):
         self._onset = self._input.out[:n].copy()
         return True
 
-    def anytime_importance(self, kick_now: tuple, kick_next: tuple, period: int):
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
         """Per mode, in internal order: importance for this period, importance for the
         next one (amplitude decayed by a period, the impulse scheduled then), and whether
-        it sounds now. ``kick_*``: (impulse N s, location or None) of the largest impact
+        it sounds now. ``kick_*``: (impulse N s, location or None) of each impact
         scheduled in this and the next period. See jassy.anytime."""
         self._settle()
+        if not (kick_now or kick_next or self.meta[0] or self._onset is not None or self._heard.any()):
+            silent = np.zeros(self.model.n_modes)  # nothing rings, nothing comes
+            return silent, silent, silent > 0.0
         y1, y2 = self.y
         amp2 = np.maximum(y1 * y1 - self.coef[0] * y1 * y2 + self.coef[1] * y2 * y2, 0.0) / self._sin2
         forced = 0.0
@@ -807,22 +810,24 @@ class ModalBank(ModelParams, UGen):
             else:  # a few modes: the force's power spread flat (no transform)
                 forced = unit2 * (np.dot(force, force) / (force.size * self.sample_rate)) * self._growth
         w = self._weights
-        now = w * (np.maximum(amp2, forced) + self._kicked(*kick_now, unit2))
+        now = w * (np.maximum(amp2, forced) + self._kicked(kick_now, unit2))
         kept = int(self.meta[2])
         now[:kept] *= np.where(self._faded[:kept], 1.0, KEPT_BONUS)  # hysteresis: no churn at the margin
-        later = w * (np.maximum(amp2 * self._fresh_c2**period, forced) + self._kicked(*kick_next, unit2))
+        later = w * (np.maximum(amp2 * self._fresh_c2**period, forced) + self._kicked(kick_next, unit2))
         return now, later, amp2 > self._floor * self._floor
 
-    def _kicked(self, impulse: float, location, unit2: np.ndarray) -> np.ndarray | float:
-        """Squared amplitude per mode that an impulse (N s) at ``location`` (None: the
-        current one, whose squared amplitudes per unit impulse are ``unit2``) gives."""
-        if impulse == 0.0:
-            return 0.0
-        if location is None:
-            return unit2 * (impulse * impulse)
-        v = self.values
-        a = self.model.gains_at(location)[self.order] * (v["gain"] * self._level_gain * impulse)
-        return a * a / self._size
+    def _kicked(self, kicks: list, unit2: np.ndarray) -> np.ndarray | float:
+        """Squared amplitude per mode that impacts (impulse N s, location; None: the
+        current one, whose squared amplitudes per unit impulse are ``unit2``) give."""
+        total = 0.0
+        for impulse, location in kicks:
+            if location is None:
+                total = total + unit2 * (impulse * impulse)
+            else:
+                v = self.values
+                a = self.model.gains_at(location)[self.order] * (v["gain"] * self._level_gain * impulse)
+                total = total + a * a / self._size
+        return total
 
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the

@@ -27,7 +27,10 @@ F_LOW = 5.0
 #: Pole-zero sections per octave of the cascade (ripple about the slope < 0.2 dB).
 PER_OCTAVE = 2
 
-_SEED_SPEC = ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed")
+
+def seed_spec(doc: str = "random seed") -> ParamSpec:
+    """The ``seed`` parameter of a ugen drawing from the splitmix64 stream (:func:`uniform`)."""
+    return ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc=doc)
 
 
 @nb.njit(cache=True)
@@ -109,7 +112,7 @@ class WhiteNoise(_Noise):
     type_name = "WhiteNoise"
     param_specs = {
         "amp": ParamSpec("float", 1.0, smooth=True, doc="peak amplitude"),
-        "seed": _SEED_SPEC,
+        "seed": seed_spec(),
     }
 
     def process(self, start: int, n: int) -> None:
@@ -133,7 +136,7 @@ class FractalNoise(_Noise):
     param_specs = {
         "beta": ParamSpec("float", 1.0, low=0.0, high=2.0, fixed=True, doc="spectral exponent"),
         "amp": ParamSpec("float", 1.0, smooth=True, doc="RMS amplitude"),
-        "seed": _SEED_SPEC,
+        "seed": seed_spec(),
     }
 
     def _prepare(self) -> None:

@@ -31,7 +31,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
 
 LAWS = ("sqrt", "linear")
@@ -637,7 +637,7 @@ class ResonantScrape(ContactControls):
         "gain": ParamSpec(
             "float", 1.0, low=0.0, high=1e6, unit="N", fixed=True, doc="RMS force at the reference contact"
         ),
-        "seed": ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed"),
+        "seed": seed_spec(),
         **law_specs(),
     }
 

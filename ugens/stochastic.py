@@ -42,7 +42,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.cells import pulse_sum, raised_cosine, with_room
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Rate of the exponential energy distribution of SDT's crumpling (lambda = 1.45).
 ENERGY_LAMBDA = 1.45
@@ -232,7 +232,7 @@ def bounces(
     return pulses
 
 
-_SEED = ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed (splitmix64 stream)")
+_SEED = seed_spec("random seed (splitmix64 stream)")
 #: Default micro-impact: a 0.2 g fragment (a 25 cm^2 facet of 80 g/m^2 paper, or a glass
 #: shard of 0.08 cm^3) at 1 m/s (a hand's crumpling speed), E = m v^2 / 2 = 1e-4 J: impulse
 #: sqrt(2 m E) = 2e-4 N s, so through a calibrated ModalBank (ugens.modal, jassy.levels)

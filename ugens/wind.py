@@ -48,7 +48,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
-from ugens.noise import uniform
+from ugens.noise import seed_spec, uniform
 
 #: Reference speed of the ``level`` parameter (m/s).
 REFERENCE_SPEED = 10.0
@@ -129,7 +129,7 @@ _GUSTINESS_SPEC = ParamSpec(
 _GUST_TIME_SPEC = ParamSpec(
     "float", 1.5, low=0.01, high=100.0, unit="s", fixed=True, doc="correlation time of the gusts"
 )
-_SEED_SPEC = ParamSpec("int", 0, low=0, high=2**64 - 1, fixed=True, doc="random seed")
+_SEED_SPEC = seed_spec()
 
 
 class _Flow(UGen):
@@ -242,7 +242,7 @@ class Wind(_Flow):
             "float", 0.3, low=0.0, high=2.0, doc="relative RMS speed fluctuation of the gusts"
         ),
         "gust_time": _GUST_TIME_SPEC,
-        "seed": _SEED_SPEC,
+        "seed": seed_spec(),
     }
 
 
@@ -281,7 +281,7 @@ class KarmanWhistle(_Flow):
         "level": _LEVEL_SPEC,
         "gustiness": _GUSTINESS_SPEC,
         "gust_time": _GUST_TIME_SPEC,
-        "seed": _SEED_SPEC,
+        "seed": seed_spec(),
         "span": ParamSpec(
             "float", 0.0, low=0.0, high=1e4, unit="m",
             doc="length of wire in the flow; > 0: output in Pa at `distance` (Curle dipole), `level` unused",
@@ -353,7 +353,7 @@ class CavityTone(_Flow):
         "level": _LEVEL_SPEC,
         "gustiness": _GUSTINESS_SPEC,
         "gust_time": _GUST_TIME_SPEC,
-        "seed": _SEED_SPEC,
+        "seed": seed_spec(),
     }
 
     def resonance(self) -> float:

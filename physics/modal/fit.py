@@ -57,7 +57,8 @@ from physics.modal.strikes import Hit, clipped_samples, detect_onsets, hits_of
 class Stage(NamedTuple):
     """One resolution of the pole search: bands ``spacing`` Hz apart with a flat part of
     ``spacing`` Hz and tapers to ``edge`` Hz from the centre (0 = full rate, no bands),
-    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s kept."""
+    analysing at most ``seconds`` of each hit; poles with decay in (d_min, d_max] 1/s and
+    bands below ``f_max`` Hz kept."""
 
     name: str
     spacing: float
@@ -65,6 +66,7 @@ class Stage(NamedTuple):
     seconds: float
     d_min: float
     d_max: float
+    f_max: float = math.inf
 
 
 #: Least energy of a mode relative to the noise variance per sample (matched filter SNR, 13 dB:
@@ -72,6 +74,7 @@ class Stage(NamedTuple):
 MIN_SNR = 20.0
 
 STAGES = (
+    Stage("zoom bands", 50.0, 50.0, 6.0, 0.0, 10.0, 2000.0),
     Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
     Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
     Stage("full rate", 0.0, 0.0, 0.04, 200.0, 6000.0),
@@ -133,19 +136,27 @@ class FitResult:
 # ----------------------------------------------------------------------------- noise
 
 
-def noise_floor(power: np.ndarray, bin_hz: float, span: float = 1000.0) -> np.ndarray:
-    """Noise level of every bin of a periodogram: the 20th percentile of blocks of ~20 Hz,
-    divided by ln(1/0.8) (|X|^2 of noise is exponentially distributed), then the lower
-    quartile of those blocks within +-``span`` Hz (mode skirts lift blocks; the lowest block
-    of many would underestimate the noise)."""
+def noise_floor(x: np.ndarray, rate: float, n_fft: int, span: float = 1000.0) -> np.ndarray:
+    """Noise level |X_k|^2 of every bin of the length-``n_fft`` FFT of ``x`` (white noise of
+    variance s^2 gives s^2 len(x)), by minimum statistics (Martin 2001, "Noise power spectral
+    density estimation based on optimal smoothing and minimum statistics"): Hann-windowed
+    frames, the 20th percentile over time of each bin divided by ln(1/0.8) (|X|^2 of noise
+    is exponentially distributed), then the median within +-``span`` Hz. Decaying
+    modes leave the later frames; the window keeps a loud mode's skirt out of distant bins
+    (a periodogram of the whole strike would count it as noise)."""
     from scipy.ndimage import percentile_filter
 
-    block = max(int(round(20.0 / bin_hz)), 16)
-    n_blocks = max(power.size // block, 1)
-    q = np.percentile(power[: n_blocks * block].reshape(n_blocks, block), 20, axis=1) / 0.2231
-    q = percentile_filter(q, 25, size=2 * max(int(span / (block * bin_hz)), 1) + 1, mode="nearest")
-    out = np.repeat(q, block)
-    return np.concatenate([out, np.full(power.size - out.size, q[-1])])
+    width = int(np.clip(1 << int(math.log2(max(x.size // 8, 1))), 64, 2048))
+    if x.size < width:
+        width = 1 << int(math.log2(max(x.size, 2)))
+    window = np.hanning(width)
+    frames = np.lib.stride_tricks.sliding_window_view(x, width)[:: width // 2] * window
+    power = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / np.sum(window**2)
+    level = np.percentile(power, 20, axis=0) / 0.2231 if power.shape[0] >= 5 else power.mean(axis=0)
+    bin_hz = rate / width
+    level = percentile_filter(level, 50, size=2 * max(int(span / bin_hz), 1) + 1, mode="nearest")
+    freqs = np.arange(n_fft // 2 + 1) * rate / n_fft
+    return np.interp(freqs, np.arange(level.size) * bin_hz, level) * x.size
 
 
 # ----------------------------------------------------------------------------- poles
@@ -168,6 +179,7 @@ def _duplicate(p: Pole, poles: list[Pole]) -> bool:
 
 
 def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
+    f_hi = min(f_hi, stage.f_max)
     return np.arange(f_lo + stage.spacing / 2, f_hi + stage.spacing / 2, stage.spacing)
 
 
@@ -211,6 +223,8 @@ def _band_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin, wor
         near = np.abs(np.angle(z) * brate / (2 * np.pi)) <= stage.edge
         z, amps = esprit.refine(ys, brate, z[near])
         for k, zk in enumerate(z):
+            if not 0 < abs(zk) < math.inf:  # a pole refined away (decay beyond the float range)
+                continue
             f = band.centre + np.angle(zk) * brate / (2 * np.pi)
             d = -math.log(abs(zk)) * brate
             snr = max(_matched_snr(a[k], zk, y.size, noise) for a, y in zip(amps, ys, strict=True))
@@ -240,6 +254,8 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     z, amps = esprit.refine(real, rate, z, real=True)
     out = []
     for k, zk in enumerate(z):
+        if not 0 < abs(zk) < math.inf:
+            continue
         f = np.angle(zk) * rate / (2 * np.pi)
         d = -math.log(abs(zk)) * rate
         # a real sinusoid of amplitude |c| has |c|^2 / 2 the power of a complex one
@@ -404,6 +420,12 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
         onsets_s.append([h.onset / rate for h in hits])
         for h in hits:
             stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
+            if stop - h.first < int(0.02 * rate) and h.first > h.onset + int(round(skip * rate)):
+                raise JassyError(
+                    f"recording {r}: the strike at {h.onset / rate:.3f} s is clipped until "
+                    f"{(h.first - 1) / rate:.3f} s, leaving {(stop - h.first) / rate * 1e3:.1f} ms of "
+                    "unclipped decay (need >= 20 ms); record with less gain"
+                )
             if stop - h.first < int(0.02 * rate):
                 raise JassyError(
                     f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
@@ -413,8 +435,7 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
                 seg_x = x[h.first : stop, c]
                 exc = clipped[c][(clipped[c] >= h.first) & (clipped[c] < stop)] - h.first
                 n_fft = 1 << int(math.ceil(math.log2(2 * seg_x.size)))
-                power = np.abs(np.fft.rfft(seg_x, n_fft)) ** 2
-                floor = noise_floor(power, rate / n_fft)
+                floor = noise_floor(seg_x, rate, n_fft)
                 segments.append(Segment(r, c, h, seg_x, exc.astype(np.int64), floor, n_fft))
     if locations is not None and len(locations) != sum(len(o) for o in onsets_s):
         raise JassyError(
