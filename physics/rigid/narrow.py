@@ -451,9 +451,14 @@ def _polytopes(a, sa, b, sb, pieces, pos, rot, geo, margin, buf, count):
         return count
     if sep > face_sep + EDGE_PREFERENCE:
         return _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, buf, count)
-    count = _polytope_on_face(a, sa, b, sb, face_ab, pieces, pos, rot, geo, margin, buf, count, False)
+    # flags and zeros as np types: a literal argument would compile a callee once per value
+    count = _polytope_on_face(
+        a, sa, b, sb, face_ab, pieces, pos, rot, geo, margin, buf, count, np.bool_(False)
+    )
     flipped = (pieces[1], pieces[0])
-    return _polytope_on_face(b, sb, a, sa, face_ba, flipped, pos, rot, geo, margin, buf, count, True)
+    return _polytope_on_face(
+        b, sb, a, sa, face_ba, flipped, pos, rot, geo, margin, buf, count, np.bool_(True)
+    )
 
 
 @nb.njit(cache=True, inline="always")
@@ -632,10 +637,10 @@ def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
     if tb <= CAPSULE:
         return _segment_segment(a, b, pos, rot, geo, margin, buf, count)
     if ta <= CAPSULE:
-        return _spheres_polytope(a, b, b, 0, pos, rot, geo, margin, buf, count)
+        return _spheres_polytope(a, b, b, np.int64(0), pos, rot, geo, margin, buf, count)
     if _plane_separates(a, b, b, pos, rot, geo, margin) or _plane_separates(b, a, a, pos, rot, geo, margin):
         return count
-    return _polytopes(a, a, b, b, (0, 0), pos, rot, geo, margin, buf, count)
+    return _polytopes(a, a, b, b, (np.int64(0), np.int64(0)), pos, rot, geo, margin, buf, count)
 
 
 @nb.njit(cache=True, _nrt=False)

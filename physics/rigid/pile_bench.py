@@ -47,7 +47,8 @@ def pile_depths(pos: np.ndarray, quat: np.ndarray, side: float) -> np.ndarray:
     """Penetration depth (m, 0 if none) of every touching pair and every body against the pen
     (floor z = 0, walls |x|, |y| = side) of a pile whose body i is a sphere for even i and a
     cube for odd i. Exact for spheres against anything and for cube corners against the pen;
-    cube against cube counts corners inside the other cube (edge-edge overlap is not seen)."""
+    cube against cube counts corners inside the other cube (edge-edge overlap, and the overlap
+    of two cubes face to face with aligned edges, are not seen)."""
     rot = _rotations(quat)
     sphere = np.arange(len(pos)) % 2 == 0
     corners = pos[:, None, :] + np.einsum("nij,kj->nki", rot, _CORNERS)
@@ -97,7 +98,7 @@ def bench_piles(
             t0 = time.process_time()
             mujoco_steps((model, data), steps)
             theirs.append(time.process_time() - t0)
-        depth_j = pile_depths(result.state.pos, result.state.quat, side)
+        depth_j = pile_depths(result.state.pos[-n:], result.state.quat[-n:], side)  # after the pen's planes
         depth_m = pile_depths(data.xpos[1:], data.xquat[1:], side)
         rows.append(
             {

@@ -256,7 +256,7 @@ def _turn(i, tau, quat, kin_w, out_q):
 def _pair_gap(a, b, pos, rot, geo, margin, scratch):
     """Smallest gap (m) of pair (a, b), at most margin (no reference counting, like
     narrow.pair_contacts)."""
-    count = pair_contacts(a, b, pos, rot, geo, margin, scratch, 0)
+    count = pair_contacts(a, b, pos, rot, geo, margin, scratch, np.int64(0))  # not a literal 0: one compile
     best = margin
     for c in range(count):
         best = min(best, scratch[2][c])
@@ -461,15 +461,16 @@ def run_steps(
     kin_v = np.zeros((n, 3))
     kin_w = np.zeros((n, 3))
     near = new_mesh_memory(geo[21][-1])
-    buf = _new_buffers(MAX_CONTACTS, near)
-    scratch = _new_buffers(256, near)
+    # sizes as np.int64: literal sizes would compile the function once per value
+    buf = _new_buffers(np.int64(MAX_CONTACTS), near)
+    scratch = _new_buffers(np.int64(256), near)
     gravity = np.array([prm[P_GX], prm[P_GY], prm[P_GZ]])
     gravity_norm = math.sqrt(dot3(gravity, gravity))
     resting = np.zeros(n, np.bool_)
     mover = (kind, kin_v, kin_w, mass, inertia, prm, gravity, np.zeros(6), resting)
     new_pos, new_quat, new_phi = np.empty_like(pos), np.empty_like(quat), np.empty_like(phi)
     rot, new_rot = np.empty((n, 3, 3)), np.empty((n, 3, 3))
-    solver = new_solver(256, n, warm[0].shape[0])
+    solver = new_solver(np.int64(256), n, warm[0].shape[0])
     moved = (np.empty_like(pos), np.empty_like(quat), np.empty_like(phi))
     slop = prm[P_SLOP]
     model = int(prm[P_MODEL])
