@@ -10,6 +10,7 @@ Examples::
     jassy modes part.stl --scale 0.001 --material aluminium --modes 40 -o part.toml --surface part_surface.ply
     jassy fit strike.wav -o strike.toml --plot strike.png
     jassy fit a.wav b.wav c.wav -o plate.toml --fmax 12000     # one gain row per recording
+    jassy fit taps.wav -o plate.toml --locations centre,edge   # one gain row per detected strike
 """
 
 from __future__ import annotations
