@@ -385,7 +385,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("-o", "--output", required=True, help="model file (.toml or .npz)")
     p.add_argument("--modes", type=int, default=60, help="at most this many modes (default 60)")
     p.add_argument("--fmin", type=float, default=20.0, help="lowest frequency in Hz (default 20)")
-    p.add_argument("--fmax", type=float, help="highest frequency in Hz (default: 0.98 Nyquist)")
+    p.add_argument("--fmax", type=float, help="highest frequency in Hz (default: 20000 or 0.98 Nyquist)")
     p.add_argument(
         "--margin",
         type=float,

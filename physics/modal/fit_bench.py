@@ -264,6 +264,8 @@ def fem_recovery(
 
 
 def print_fem(rows: list[dict]) -> None:
+    if not rows:
+        return
     print("shipped FEM models struck once, room RT60 0.3 s at 20 dB DRR, noise 50 dB below the peak:")
     heads = ("modes", "counted", "found", "decay 5%", "gain 1dB", "fitted", "CPU s")
     print(f"{'model':<18} " + " ".join(f"{h:>8}" for h in heads))
