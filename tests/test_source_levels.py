@@ -23,8 +23,8 @@ SHIPPED = sorted(set(shipped_models()) | {info.file for info in OBJECTS.values()
 DURATION = 1.0
 #: RathRoll's micro-impacts are one-sample take-offs whose force sums to zero over every
 #: flight (momentum balance), so its spectrum rises towards the take-off rate (~12 kHz at
-#: 0.2 m/s) and low modes hear almost nothing: -70..-30 dBFS over the shipped models, a
-#: 40 dB spread no single default scale fits into the 24 dB window.
+#: 0.2 m/s) and low modes hear almost nothing: -86..-30 dBFS over the shipped models, a
+#: 55 dB spread no single default scale fits into the 24 dB window.
 SPECTRAL = ("RathRoll",)
 
 
