@@ -20,10 +20,15 @@ import numpy as np
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES
+from jassy.levels import FORCE_SOURCES, calibrated
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ("tin_sheet_model.toml", "wine_glass_model.toml", "pot_model.toml", "bar_model.toml")
+
+
+def once_calibrated(model: ModalModel) -> ModalModel:
+    """The model with its reference gain stored (computed here once, not by every bank)."""
+    return model if model.reference_gain is not None else calibrated(model)
 
 
 def peak_dbfs(model: ModalModel, source: str) -> float:
@@ -39,7 +44,7 @@ def main() -> None:
     files = sys.argv[1:] or [str(ROOT / "patches" / name) for name in MODELS]
     print("model | " + " | ".join(FORCE_SOURCES))
     for file in files:
-        model = ModalModel.load(file)
+        model = once_calibrated(ModalModel.load(file))
         print(
             f"{model.name} | " + " | ".join(f"{peak_dbfs(model, s):.1f}" for s in FORCE_SOURCES), flush=True
         )
