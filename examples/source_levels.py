@@ -5,8 +5,9 @@
 
 Each source drives a ModalBank with ``level = "calibrated"`` (the default 1e-3 N s strike at
 the model's loudest point peaks at -18 dBFS) at the model's first location for 1 s: the
-sources output forces in N, so their level follows from their physical defaults (a 10 g
-ball dropped 0.2 m exchanges 0.034 N s, 30.5 dB over the reference strike).
+sources output forces in N, so their level follows from their physical defaults (a 0.5 g
+button dropped 10 cm exchanges 1.2e-3 N s, 1.5 dB over the reference strike; the events
+are jassy.levels.FORCE_SOURCES).
 """
 
 from __future__ import annotations
@@ -19,24 +20,19 @@ import numpy as np
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
+from jassy.levels import FORCE_SOURCES, calibrated
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ("tin_sheet_model.toml", "wine_glass_model.toml", "pot_model.toml", "bar_model.toml")
-#: source -> the event that sets it going (defaults otherwise).
-SOURCES = {
-    "ImpactForce": ("impact", {}),
-    "ImpactTrain": ("impact", {}),
-    "Crumple": ("start", {}),
-    "Break": ("break", {}),
-    "Bounce": ("drop", {"height": 0.2}),
-    "Scrape": ("set", {"speed": 0.2}),
-    "Roll": ("set", {"speed": 0.2}),
-    "RathRoll": ("set", {"speed": 0.2}),
-}
+
+
+def once_calibrated(model: ModalModel) -> ModalModel:
+    """The model with its reference gain stored (computed here once, not by every bank)."""
+    return model if model.reference_gain is not None else calibrated(model)
 
 
 def peak_dbfs(model: ModalModel, source: str) -> float:
-    action, args = SOURCES[source]
+    action, args = FORCE_SOURCES[source]
     src = getattr(ugens, source)(name="src")
     bank = ugens.ModalBank(model, name="bank", level="calibrated")(src)
     events = [Event(0.01, "src", action, args)]
@@ -46,10 +42,12 @@ def peak_dbfs(model: ModalModel, source: str) -> float:
 
 def main() -> None:
     files = sys.argv[1:] or [str(ROOT / "patches" / name) for name in MODELS]
-    print("model | " + " | ".join(SOURCES))
+    print("model | " + " | ".join(FORCE_SOURCES))
     for file in files:
-        model = ModalModel.load(file)
-        print(f"{model.name} | " + " | ".join(f"{peak_dbfs(model, s):.1f}" for s in SOURCES), flush=True)
+        model = once_calibrated(ModalModel.load(file))
+        print(
+            f"{model.name} | " + " | ".join(f"{peak_dbfs(model, s):.1f}" for s in FORCE_SOURCES), flush=True
+        )
 
 
 if __name__ == "__main__":

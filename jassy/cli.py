@@ -406,11 +406,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
     if args.name == "fit":
         from physics.modal._blas import single_threaded
-        from physics.modal.fit_bench import bench_fit, print_fit
+        from physics.modal.fit_bench import bench_fit, fem_recovery, print_fem, print_fit
 
         with single_threaded():
             result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
-        print(json.dumps(result, indent=2)) if args.json else print_fit(result)
+            fem = [] if args.quick else fem_recovery()
+        print(json.dumps({**result, "fem": fem}, indent=2)) if args.json else (
+            print_fit(result),
+            print_fem(fem),
+        )
     if args.name == "anytime":
         from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
 

@@ -22,6 +22,8 @@ exponentials), so the calibration does not depend on the resonator code it calib
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from jassy.modal_model import ModalModel
@@ -107,6 +109,28 @@ def calibrated(model: ModalModel, sample_rate: float = 48000.0) -> ModalModel:
         model.driving,
     )  # fmt: skip
 
+
+class Drive(NamedTuple):
+    """The score event that sets a force source going at its default parameters."""
+
+    action: str
+    args: dict
+
+
+#: Force sources and how level checks set them going: the default parameters are everyday
+#: contacts (a 1e-3 N s tap, 0.2 g fragments at 1 m/s, a 0.5 g button dropped 10 cm, an 8 g
+#: ball rolled at 0.2 m/s), so through a calibrated bank with unit gains they peak within
+#: -30..-6 dBFS (tests/test_source_levels.py, examples/source_levels.py).
+FORCE_SOURCES = {
+    "ImpactForce": Drive("impact", {}),
+    "ImpactTrain": Drive("impact", {}),
+    "Crumple": Drive("start", {}),
+    "Break": Drive("break", {}),
+    "Bounce": Drive("drop", {"height": 0.1}),
+    "Scrape": Drive("set", {"speed": 0.2}),
+    "Roll": Drive("set", {"speed": 0.2}),
+    "RathRoll": Drive("set", {"speed": 0.2}),
+}
 
 #: Reference sound pressure of dB SPL (Pa).
 P_REF = 20e-6

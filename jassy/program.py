@@ -27,21 +27,23 @@ from jassy import params
 from jassy.graph import Graph
 from jassy.jit import drop_stale_cache
 from jassy.params import ramp_fill
-from ugens import cells, filters, impact, mix, modal, noise, radiation, scrape
+from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
 from ugens.modal import ModalBank, bank_step, resonate_ramp
+from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
 from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
 
 #: The modules whose kernels the program calls (a change there drops its numba cache).
-KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, radiation, scrape]
+KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
 drop_stale_cache(__file__, KERNEL_MODULES)
 
 #: int64 slots per node record.
 RECORD = 16
 GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD, RADIATION = range(1, 10)
+SOUND_PRESSURE = 10
 #: Ugen classes with a kernel in the program, by kind.
 PROGRAM_UGENS = {
     Gain: GAIN,
@@ -53,6 +55,7 @@ PROGRAM_UGENS = {
     ResonantScrape: RESONANT_SCRAPE,
     Biquad: BIQUAD,
     Radiation: RADIATION,
+    SoundPressure: SOUND_PRESSURE,
 }
 
 
@@ -175,6 +178,9 @@ def run_node(prog, base, start, n):
                 design_biquad(mode, freq[0], q[0], setup[1], coef)
     elif kind == RADIATION:  # [input, coef, state]
         radiate(_f64(prog[base + 3], size), out, n, _f64(prog[base + 4], 4), _f64(prog[base + 5], 3))
+    elif kind == SOUND_PRESSURE:  # [input, coef, state, setup]
+        x = _f64(prog[base + 3], size)
+        sound_pressure(x, out, n, _f64(prog[base + 4], 3), _f64(prog[base + 5], 3), _f64(prog[base + 6], 3))
 
 
 @nb.njit(cache=True, nogil=True)
@@ -282,6 +288,8 @@ class Program:
             ]
         if isinstance(node, Radiation):
             return [node.out, node.sources["input"].out, node.coef, node.state]
+        if isinstance(node, SoundPressure):
+            return [node.out, node.sources["input"].out, node.coef, node.state, node.setup]
         if isinstance(node, Biquad):
             setup = np.array([float(node.mode), 1.0 / node.sample_rate])
             ramps = [node.freq.ramp, node.q.ramp, node._freqs, node._qs]

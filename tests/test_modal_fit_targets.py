@@ -99,3 +99,13 @@ def test_a_recording_clipped_to_its_end_exits_2_quickly(tmp_path, capsys):
     assert "clipped" in err[0] and "warning" in err[0]
     assert "clipped until" in err[1] and len(err) == 2
     assert not (tmp_path / "m.toml").exists()
+
+
+def test_stereo_gives_one_gain_row_per_channel():
+    f, d = [350.0, 1200.0, 4100.0], [2.0, 15.0, 120.0]
+    rows = np.array([[1.0, 0.3, 0.5], [0.2, 0.8, 0.4]])
+    x = np.stack([strike(f, d, a, 1.0, sigma=1e-4, seed=i) for i, a in enumerate(rows)], axis=1)
+    model = fit_recordings(x, RATE, points=("mic",)).model
+    assert model.points == ("mic:0", "mic:1")
+    for row in range(2):
+        assert_recovered(model, f, d, rows[row], row=row)

@@ -235,7 +235,7 @@ def test_single_bubble_is_the_closed_form():
 
 @pytest.mark.parametrize("radius", [1e-3, 2e-3, 4e-3])
 def test_bubble_spectrum_peak_is_minnaert_and_decay_matches(radius):
-    b = Bubble(name="b", rise=0.0, floor=1e-9)
+    b = Bubble(name="b", gain=1.0, rise=0.0, floor=1e-9)
     y = run(b, [Event(0.0, "b", "bubble", {"radius": radius, "depth": 1.0})], 0.3)[0]
     d = bubble_decay(radius)
     seg = y[: int(2.0 / d * FS)]  # initial segment: two time constants
@@ -255,7 +255,7 @@ def test_bubble_spectrum_peak_is_minnaert_and_decay_matches(radius):
 
 def test_bubble_frequency_glides_up_as_f0_1_plus_sigma_d_t():
     radius, rise = 3e-3, 0.3
-    b = Bubble(name="b", rise=rise, floor=1e-9)
+    b = Bubble(name="b", gain=1.0, rise=rise, floor=1e-9)
     y = run(b, [Event(0.0, "b", "bubble", {"radius": radius, "depth": 1.0})], 0.2)[0]
     f0, d = 3.0 / radius, bubble_decay(radius)
     # upward zero crossings (linear interpolation) must fall where the phase is 2 pi k
@@ -274,7 +274,9 @@ def test_bubble_frequency_glides_up_as_f0_1_plus_sigma_d_t():
 def test_stream_birth_rate_and_radius_power_law():
     lo, hi, rate, seconds = 2e-4, 4e-3, 800.0, 10.0
     for exponent in (2.5, 1.0):
-        s = BubbleStream(name="s", rate=rate, min_radius=lo, max_radius=hi, exponent=exponent, seed=6)
+        s = BubbleStream(
+            gain=1.0, name="s", rate=rate, min_radius=lo, max_radius=hi, exponent=exponent, seed=6
+        )
         s.log_capacity = 20000
         run(s, [], seconds)
         mean = rate * seconds
@@ -291,7 +293,7 @@ def test_stream_birth_rate_and_radius_power_law():
 
 
 def test_polyphony_cap_and_single_voice_closed_form():
-    s = BubbleStream(name="s", rate=3000.0, min_radius=1e-3, max_radius=3e-3, max_voices=3, seed=2)
+    s = BubbleStream(name="s", gain=1.0, rate=3000.0, min_radius=1e-3, max_radius=3e-3, max_voices=3, seed=2)
     s.prepare(FS, 64)
     most = 0
     for start in range(0, FS // 4, 64):
@@ -299,7 +301,9 @@ def test_polyphony_cap_and_single_voice_closed_form():
         most = max(most, s.active_voices)
     assert most == 3  # full, never above the cap
     # one voice: between births the output is exactly the latest bubble
-    one = BubbleStream(name="s", rate=200.0, min_radius=1e-3, max_radius=3e-3, max_voices=1, rise=0.1, seed=4)
+    one = BubbleStream(
+        gain=1.0, name="s", rate=200.0, min_radius=1e-3, max_radius=3e-3, max_voices=1, rise=0.1, seed=4
+    )
     one.log_capacity = 1000
     y = run(one, [], 0.5)[0]
     log = one.birth_log()
@@ -315,7 +319,7 @@ def test_polyphony_cap_and_single_voice_closed_form():
 
 
 def test_the_quietest_voice_is_reused():
-    b = Bubble(name="b", max_voices=2, rise=0.1, floor=1e-12)
+    b = Bubble(name="b", gain=1.0, max_voices=2, rise=0.1, floor=1e-12)
     big, small, third = (0.01, 5e-3), (0.02, 0.5e-3), (0.03, 2e-3)
     events = [Event(t, "b", "bubble", {"radius": r, "depth": 1.0}) for t, r in (big, small, third)]
     y = run(b, events, 0.1)[0]
@@ -330,7 +334,7 @@ def test_the_quietest_voice_is_reused():
 @pytest.mark.parametrize("kind", ["Bubble", "BubbleStream"])
 def test_bubbles_block_size_invariant(kind):
     if kind == "Bubble":
-        node = Bubble(name="n", max_voices=4)
+        node = Bubble(name="n", gain=1.0, max_voices=4)
         score = [
             Event(t, "n", "bubble", {"radius": r, "depth": 1.0})
             for t, r in [
@@ -344,7 +348,7 @@ def test_bubbles_block_size_invariant(kind):
         ]
         taps = ()
     else:
-        node = BubbleStream(name="n", rate=500.0, max_voices=8, seed=7)
+        node = BubbleStream(name="n", gain=1.0, rate=500.0, max_voices=8, seed=7)
         score = [Event(0.1, "n", "set", {"rate": 4000.0}), Event(0.3, "n", "set", {"rate": 0.0}, jump=True)]
         taps = ("radius",)
     outs = [run(node, score, 0.5, block, taps) for block in BLOCKS]

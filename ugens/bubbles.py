@@ -14,7 +14,11 @@ rises linearly (the bubble rising towards the surface), with
                                             normalised to 1 for a 1 mm bubble at depth 1)
 
 and sigma the rise factor (``rise``, about 0.1). The output is this sound pressure,
-normalised as above (a pressure at an arbitrary reference distance), not a force.
+normalised as above (a pressure at an arbitrary reference distance), not a force, in
+full-scale units: ``gain`` is the peak of a 1 mm bubble at depth 1. Its default follows the
+level convention of calibrated modal models (jassy.levels): a single 1 mm Bubble peaks at
+-18 dBFS like the reference strike (0.125); a default BubbleStream, whose 5 mm bubbles are
+5^1.5 = 11 times louder and overlap, takes 0.02 and peaks near -12 dBFS.
 
 Each bubble is a voice of a numba kernel, all voices updated together per sample. A
 voice's phase accumulator is kept as a phasor z = a e^{i phi}: per sample z <- z c with
@@ -202,7 +206,15 @@ def bubbles(out, radius_out, start, n, fs, voices, meta, pending, rate, par, st,
 
 
 _RISE = ParamSpec("float", 0.1, low=0.0, high=10.0, doc="rise factor sigma: frequency f0 (1 + sigma d t)")
-_GAIN = ParamSpec("float", 1.0, doc="amplitude of a 1 mm bubble at depth 1 (bubbles born after a change)")
+
+
+def _gain(default: float) -> ParamSpec:
+    """The ``gain`` of Bubble and BubbleStream with its default (module docstring)."""
+    return ParamSpec(
+        "float", default, doc="full-scale amplitude of a 1 mm bubble at depth 1 (bubbles born after a change)"
+    )
+
+
 _VOICES = ParamSpec("int", 32, low=1, high=4096, fixed=True, doc="maximum number of sounding bubbles")
 _FLOOR = ParamSpec(
     "float",
@@ -334,7 +346,7 @@ class Bubble(_Bubbles):
     """
 
     type_name = "Bubble"
-    param_specs = {"rise": _RISE, "gain": _GAIN, "max_voices": _VOICES, "floor": _FLOOR}
+    param_specs = {"rise": _RISE, "gain": _gain(0.125), "max_voices": _VOICES, "floor": _FLOOR}
     actions = {
         "bubble": {
             "radius": ParamSpec(
@@ -387,7 +399,7 @@ class BubbleStream(_Bubbles):
         "min_depth": ParamSpec("float", 0.5, low=0.0, high=1e6, doc="smallest depth factor"),
         "max_depth": ParamSpec("float", 1.0, low=0.0, high=1e6, doc="largest depth factor"),
         "rise": _RISE,
-        "gain": _GAIN,
+        "gain": _gain(0.02),
         "max_voices": ParamSpec(
             "int", 64, low=1, high=4096, fixed=True, doc="maximum number of sounding bubbles"
         ),

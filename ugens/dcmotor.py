@@ -22,7 +22,9 @@ Sound, from the rotor angle phi (revolutions) and the rotation rate f_r = w / 2 
 * gears: the mesh at ``teeth`` f_r and its 2nd and 3rd harmonics (amplitudes 1, 1/2,
   1/3), ~ w (the tooth-passing impacts).
 
-Levels are relative to 3000 rpm and 1 A. Extra output ``rpm``: the rotor speed.
+Levels are full-scale amplitudes at 3000 rpm and 1 A; their defaults put the default motor
+(12 V: 5460 rpm) near -10 dBFS peak, within the -30..-6 dBFS of the level convention of
+jassy.levels. Extra output ``rpm``: the rotor speed.
 SDT's counterpart: ``dcmotor~`` (Baldan et al. 2017, rotor, brushes and gears).
 """
 
@@ -154,10 +156,10 @@ class DCMotor(UGen):
         ),
         "segments": ParamSpec("int", 12, low=1, high=256, fixed=True, doc="commutator segments per turn"),
         "teeth": ParamSpec("int", 14, low=1, high=1000, fixed=True, doc="teeth of the pinion on the shaft"),
-        "rotor_level": ParamSpec("float", 0.3, low=0.0, high=100.0, doc="unbalance tone at 3000 rpm"),
-        "ripple_level": ParamSpec("float", 0.05, low=0.0, high=100.0, doc="torque-ripple tone at 1 A"),
-        "brush_level": ParamSpec("float", 0.2, low=0.0, high=100.0, doc="brush noise at 1 A, 3000 rpm"),
-        "gear_level": ParamSpec("float", 0.15, low=0.0, high=100.0, doc="gear-mesh whine at 3000 rpm"),
+        "rotor_level": ParamSpec("float", 0.06, low=0.0, high=100.0, doc="unbalance tone at 3000 rpm"),
+        "ripple_level": ParamSpec("float", 0.01, low=0.0, high=100.0, doc="torque-ripple tone at 1 A"),
+        "brush_level": ParamSpec("float", 0.04, low=0.0, high=100.0, doc="brush noise at 1 A, 3000 rpm"),
+        "gear_level": ParamSpec("float", 0.03, low=0.0, high=100.0, doc="gear-mesh whine at 3000 rpm"),
         "seed": seed_spec(),
     }
     _LEVELS = {"rotor_level": _ROTOR, "ripple_level": _RIPPLE, "brush_level": _BRUSH, "gear_level": _GEAR}

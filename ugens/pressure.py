@@ -36,6 +36,8 @@ around the corner the frequency axis is warped by 2 fs tan(omega T / 2) / omega:
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -89,6 +91,26 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
     state[2] = y1
 
 
+class PressureSetup(NamedTuple):
+    """The fixed float64 setup array of a SoundPressure node (``setup``), by index."""
+
+    differentiate: float  # fs for a displacement input, else 0
+    scale: float  # 1 / (pressure of full scale), 1/Pa
+    spreading: float  # a pressure input: radius / distance * scale; else -1
+
+
+@nb.njit(cache=True)
+def sound_pressure(x, out, n, coef, state, setup):
+    """SoundPressure over x[:n]: a pressure input (setup[2] >= 0) is only spread, out = x
+    setup[2]; otherwise radiated by :func:`radiate_pressure` (setup as PressureSetup)."""
+    if setup[2] >= 0.0:
+        spreading = setup[2]
+        for i in range(n):
+            out[i] = x[i] * spreading
+    else:
+        radiate_pressure(x, out, n, coef, state, setup[0], setup[1])
+
+
 @register
 class SoundPressure(UGen):
     """Sound pressure at a listening distance from a vibrating body, re a full scale in dB SPL.
@@ -135,20 +157,17 @@ class SoundPressure(UGen):
                 f"got {v['distance']}"
             )
         self.coef = pressure_coefficients(v["radius"], v["distance"], v["density"], v["c"], self.sample_rate)
-        self.differentiate = float(self.sample_rate) if v["input_kind"] == "displacement" else 0.0
-        self.spreading = v["radius"] / v["distance"] if v["input_kind"] == "pressure" else None
+        differentiate = float(self.sample_rate) if v["input_kind"] == "displacement" else 0.0
+        scale = 1.0 / (P_REF * 10.0 ** (v["full_scale_spl"] / 20.0))
+        spreading = v["radius"] / v["distance"] * scale if v["input_kind"] == "pressure" else -1.0
+        self.setup = np.array(PressureSetup(differentiate, scale, spreading))
         self.state = np.zeros(3)
 
     def _reset(self) -> None:
         self.state[:] = 0.0
 
     def process(self, start: int, n: int) -> None:
-        scale = 1.0 / (P_REF * 10.0 ** (self.values["full_scale_spl"] / 20.0))
-        source = self.sources["input"].out
-        if self.spreading is not None:  # already a pressure: spherical spreading only
-            np.multiply(source[:n], self.spreading * scale, out=self.out[:n])
-            return
-        radiate_pressure(source, self.out, n, self.coef, self.state, self.differentiate, scale)
+        sound_pressure(self.sources["input"].out, self.out, n, self.coef, self.state, self.setup)
 
     def state_arrays(self):
         return {"state": self.state, "coef": self.coef}

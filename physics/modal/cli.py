@@ -10,6 +10,7 @@ Examples::
     jassy modes part.stl --scale 0.001 --material aluminium --modes 40 -o part.toml --surface part_surface.ply
     jassy fit strike.wav -o strike.toml --plot strike.png
     jassy fit a.wav b.wav c.wav -o plate.toml --fmax 12000     # one gain row per recording
+    jassy fit taps.wav -o plate.toml --locations centre,edge   # one gain row per detected strike
 """
 
 from __future__ import annotations
@@ -384,7 +385,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("-o", "--output", required=True, help="model file (.toml or .npz)")
     p.add_argument("--modes", type=int, default=60, help="at most this many modes (default 60)")
     p.add_argument("--fmin", type=float, default=20.0, help="lowest frequency in Hz (default 20)")
-    p.add_argument("--fmax", type=float, help="highest frequency in Hz (default: 0.98 Nyquist)")
+    p.add_argument("--fmax", type=float, help="highest frequency in Hz (default: 20000 or 0.98 Nyquist)")
     p.add_argument(
         "--margin",
         type=float,
