@@ -174,8 +174,10 @@ def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mod
     assert 0.4 * FS / 48 < len(body) <= stats.frames_played / 48
     # the device time of a frame is when its first sample plays: frames 1 ms apart on it
     device = np.array([f.device_time for f in body])
-    # (a smoothed estimate: the callbacks' own DAC times jitter by a fraction of a block)
-    np.testing.assert_allclose(np.diff(device), 1e-3, atol=1e-4)
+    # (a smoothed estimate: the callbacks' own DAC times jitter by a fraction of a block, and
+    # the estimate re-locks in one step when the host's cycle comes late on a loaded machine)
+    steps_off = np.abs(np.diff(device) - 1e-3)
+    assert np.mean(steps_off > 1e-4) <= 0.01 and steps_off.max() < 5e-4, steps_off.max()
     assert (device[-1] - device[0]) / (device.size - 1) == pytest.approx(1e-3, rel=0.01)
     # each frame's force is the mean of what the device played over its 48 samples
     played = heard[1]
