@@ -1,6 +1,7 @@
 """The demo window under Xvfb: driven by the UDP probe input along a scripted path, its
 screenshots show the plate (not a blank canvas) and change where the probe moved."""
 
+import contextlib
 import math
 import os
 import shutil
@@ -60,15 +61,17 @@ def send_path(sock, port, points, seconds_each=0.3, rate=200.0):
             time.sleep(1.0 / rate)
 
 
-def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp_path):
-    from patches.demo_view import HEIGHT, WIDTH, DemoView
-
+@contextlib.contextmanager
+def demo_window(mode: str, display: str):
+    """``jassy demo --mode MODE`` on ``display`` with its probe on a free UDP port, its
+    window open on entry; yields ``move(points, seconds_each)`` (see :func:`send_path`).
+    Leaving the block normally, the demo must end on SIGTERM with exit code 143."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "jassy", "demo", "--mode", "scrape", "--probe-udp", f"127.0.0.1:{port}"],
-        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
+        [sys.executable, "-m", "jassy", "demo", "--mode", mode, "--probe-udp", f"127.0.0.1:{port}"],
+        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": display},
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -77,23 +80,30 @@ def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp
     try:
         line = proc.stdout.readline()
         assert "window open" in line, line + proc.stdout.read()
-        send_path(sock, port, [(0.1, 0.01)], seconds_each=0.5)  # hovering at 20 % of the track
-        hover = screenshot(xvfb)
-        # touch down there, slide to 80 % and stay pressed
-        send_path(sock, port, [(0.1, -0.001)] + [(0.1 + 0.02 * k, -0.001) for k in range(1, 16)], 0.02)
-        send_path(sock, port, [(0.4, -0.001)], seconds_each=0.3)
-        pressed = screenshot(xvfb)
-        arrows = []  # scraping to and fro on the spot (+-3 mm at 5 Hz): the force vector shows
-        wiggle = [(0.4 + 0.003 * np.sin(2 * np.pi * k / 40), -0.001) for k in range(40)]
-        for _ in range(4):
-            send_path(sock, port, wiggle, seconds_each=0.005)
-            arrows.append(screenshot(xvfb))
+        yield lambda points, seconds_each=0.3: send_path(sock, port, points, seconds_each)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) == 143
     finally:
         sock.close()
         if proc.poll() is None:
             proc.kill()
+
+
+def test_the_window_draws_the_plate_and_the_probe_where_it_moves(jack, xvfb, tmp_path):
+    from patches.demo_view import HEIGHT, WIDTH, DemoView
+
+    with demo_window("scrape", xvfb) as move:
+        move([(0.1, 0.01)], seconds_each=0.5)  # hovering at 20 % of the track
+        hover = screenshot(xvfb)
+        # touch down there, slide to 80 % and stay pressed
+        move([(0.1, -0.001)] + [(0.1 + 0.02 * k, -0.001) for k in range(1, 16)], 0.02)
+        move([(0.4, -0.001)], seconds_each=0.3)
+        pressed = screenshot(xvfb)
+        arrows = []  # scraping to and fro on the spot (+-3 mm at 5 Hz): the force vector shows
+        wiggle = [(0.4 + 0.003 * np.sin(2 * np.pi * k / 40), -0.001) for k in range(40)]
+        for _ in range(4):
+            move(wiggle, seconds_each=0.005)
+            arrows.append(screenshot(xvfb))
     from PIL import Image
 
     Image.fromarray(hover.astype(np.uint8)).save(tmp_path / "hover.png")
@@ -135,33 +145,14 @@ def lens_area(R: float, r: float, d: float) -> float:
 def test_poke_window_dents_the_ball_where_the_probe_presses(jack, xvfb, tmp_path):
     from patches.demo_view import BALL_CENTRE, BALL_SCALE, HEIGHT, WIDTH
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "jassy", "demo", "--mode", "poke", "--probe-udp", f"127.0.0.1:{port}"],
-        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     top = 0.25  # m: the middle of the 0.5 m the probe input maps to -45..45 degrees: the top
-    try:
-        line = proc.stdout.readline()
-        assert "window open" in line, line + proc.stdout.read()
-        send_path(sock, port, [(top, 0.01)], seconds_each=0.5)  # hovering over the top
+    with demo_window("poke", xvfb) as move:
+        move([(top, 0.01)], seconds_each=0.5)  # hovering over the top
         hover = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        send_path(sock, port, [(top, -0.001)], seconds_each=0.8)  # pressed: sinks 8 mm at 5 cm/s
+        move([(top, -0.001)], seconds_each=0.8)  # pressed: sinks 8 mm at 5 cm/s
         pressed = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        send_path(sock, port, [(top, 0.01)], seconds_each=0.8)  # lifted: the ball is round again
+        move([(top, 0.01)], seconds_each=0.8)  # lifted: the ball is round again
         lifted = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=30) == 143
-    finally:
-        sock.close()
-        if proc.poll() is None:
-            proc.kill()
 
     from PIL import Image
 
@@ -193,33 +184,14 @@ def test_poke_window_dents_the_ball_where_the_probe_presses(jack, xvfb, tmp_path
 def test_drill_window_removes_bone_under_the_burr(jack, xvfb, tmp_path):
     from patches.demo_view import HEIGHT, WIDTH
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "jassy", "demo", "--mode", "drill", "--probe-udp", f"127.0.0.1:{port}"],
-        env={**os.environ, "PYTHONPATH": str(ROOT), "DISPLAY": xvfb},
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     middle = 0.25  # m: the middle of the 0.5 m the probe input maps across the bone slice
-    try:
-        line = proc.stdout.readline()
-        assert "window open" in line, line + proc.stdout.read()
-        send_path(sock, port, [(middle, 0.01)], seconds_each=0.5)  # hovering
+    with demo_window("drill", xvfb) as move:
+        move([(middle, 0.01)], seconds_each=0.5)  # hovering
         hover = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)  # drilling
+        move([(middle, -0.001)], seconds_each=1.5)  # drilling
         early = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        send_path(sock, port, [(middle, -0.001)], seconds_each=1.5)
+        move([(middle, -0.001)], seconds_each=1.5)
         late = screenshot(xvfb)[:HEIGHT, :WIDTH]
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=30) == 143
-    finally:
-        sock.close()
-        if proc.poll() is None:
-            proc.kill()
     from PIL import Image
 
     for name, shot in (("hover", hover), ("early", early), ("late", late)):

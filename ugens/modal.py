@@ -54,6 +54,10 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
+from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state
+
+#: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
+TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -163,9 +167,6 @@ def flush_silent(y1, y2, active, floor):
     return last
 
 
-#: Longest ring-out (s, to -60 dB) of a mode that a retune moves to or above Nyquist.
-LEAVING_FADE = 1e-3
-
 #: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
@@ -262,11 +263,6 @@ def design(frequencies, decays, sample_rate):
     return c1, c2, s
 
 
-#: Normalised frequencies (rad per sample) where ``direct = "band"`` matches each mode's
-#: continuous response: 16 midpoints of the top third of the band, [2 pi / 3, pi).
-TOP_BAND = 2.0 * np.pi / 3.0 + (np.arange(16) + 0.5) * (np.pi / 3.0) / 16
-
-
 def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     """Per mode, the direct gain over the resonator's input gain, d / g (0 for silent modes).
 
@@ -286,20 +282,12 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     frequencies of about 0.5 theta^2 / 12 of a mode's static response (0.03 % at 1 kHz,
     3 % at 8 kHz, at 48 kHz).
     """
-    R = np.exp(-decays / sample_rate)
-    theta = 2.0 * np.pi * frequencies / sample_rate
-    ok = frequencies < sample_rate / 2
-    s = np.where(ok, R * np.sin(theta), 1.0)
-    if fit == "taylor":
-        return np.where(ok, theta / (12.0 * s), 0.0)
-    z1 = np.exp(-1j * TOP_BAND)[:, None]
-    w = 2.0 * np.pi * frequencies
-    g = s / sample_rate  # input gain per unit modal gain a
-    discrete = g * z1 / (1.0 - 2.0 * R * np.cos(theta) * z1 + R * R * z1 * z1)
-    continuous = w / ((1j * TOP_BAND[:, None] * sample_rate + decays) ** 2 + w * w)
-    weight = 1.0 / np.abs(continuous) ** 2
-    d = (weight * (continuous - discrete).real).sum(axis=0) / weight.sum(axis=0)
-    return np.where(ok, d / g, 0.0)
+    freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
+    poles = np.empty((4, freqs.size))
+    sin2, inv = np.empty(freqs.size), np.empty(freqs.size)
+    decays = np.ascontiguousarray(decays, dtype=np.float64)
+    pole_rows(freqs, decays, float(sample_rate), fit == "band", *TOP_BAND_ROWS, poles, sin2, inv)
+    return poles[3]
 
 
 class MixedSplit(NamedTuple):
@@ -484,6 +472,7 @@ class ModalBank(ModelParams, UGen):
         self.order = np.argsort(model.decays, kind="stable")
         self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
         self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
+        self._location_rows = {}  # location -> the model's gains there, internal order
         k = model.n_modes
         self.bank = line_aligned_zeros((6, k))  # c1, c2, g, d (current coefficients), y1, y2 (state)
         self.coef, self.y = self.bank[:4], self.bank[4:]
@@ -527,12 +516,11 @@ class ModalBank(ModelParams, UGen):
                 self.model.frequencies[o] * (v["freq_scale"] * retune),
                 self.model.decays[o] * (v["decay_scale"] * retune),
             )
-            c1, c2, s = design(freqs, decays, self.sample_rate)
-            sounding = c2 > 0
-            sin2 = np.maximum(1.0 - c1 * c1 / (4 * np.where(sounding, c2, 1.0)), 1e-12)
-            inv = np.where(sounding, 1.0 / (np.where(sounding, c2, 1.0) * sin2), 0.0)
-            direct = direct_ratio(freqs, decays, self.sample_rate, v["direct"])
-            self._poles = (key, np.stack([c1, c2, s, direct]), np.where(sounding, sin2, 1.0), inv)
+            k = o.size
+            poles, sin2, inv = np.empty((4, k)), np.empty(k), np.empty(k)
+            band = v["direct"] == "band"
+            pole_rows(freqs, decays, float(self.sample_rate), band, *TOP_BAND_ROWS, poles, sin2, inv)
+            self._poles = (key, poles, sin2, inv)
         return self._poles[1], self._poles[3]
 
     def _design(self) -> np.ndarray:
@@ -546,13 +534,23 @@ class ModalBank(ModelParams, UGen):
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
-            gains = poles[2] * scale * self.model.gains_at(v["location"])[self.order]
+            gains = poles[2] * scale * self._location_row(v["location"])
             self._gain_rows[key] = gains
         out = np.empty_like(poles)
         out[:2] = poles[:2]
         out[2] = gains
         out[3] = gains * poles[3]
         return out
+
+    def _location_row(self, location: Any) -> np.ndarray:
+        """The model's gains at ``location`` in internal mode order, kept per location (a
+        retune at every crumple event redesigns the gains, not the location)."""
+        row = self._location_rows.get(location)
+        if row is None:
+            if len(self._location_rows) > 256:
+                self._location_rows.clear()
+            row = self._location_rows[location] = self.model.gains_at(location)[self.order]
+        return row
 
     def _settle(self) -> None:
         """Mixed precision: move the split's state back into ``self.bank`` (float64), before
@@ -683,47 +681,16 @@ class ModalBank(ModelParams, UGen):
         if size == self._size:
             return 0.0
         self._settle()
-        c1, c2, g_old = self.coef[0].copy(), self.coef[1].copy(), self.coef[2].copy()
-        poles = self._pole_design()[0]
-        kink_old = poles[3] * poles[2]
+        old_poles = self._pole_design()[0]
         self._size = size
         self._refresh_design_cache()
-        self.target[:] = self._fresh
-        self.coef[:] = self._fresh
         self.meta[1] = 0
         self._ramping = False
-        kink_new = self._poles[1][3] * self._poles[1][2]
-        old = c2 > 0.0
-        r = np.sqrt(np.where(old, c2, 1.0))
-        cos_t = np.where(old, c1 / (2.0 * r), 1.0)
-        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 1e-24))
-        leaving = old & (self.coef[1] <= 0.0)
-        if leaving.any():
-            shrink = np.minimum(1.0, np.exp(-np.log(1000.0) / (LEAVING_FADE * self.sample_rate)) / r)
-            self.coef[0] = np.where(leaving, c1 * shrink, self.coef[0])
-            self.coef[1] = np.where(leaving, c2 * shrink * shrink, self.coef[1])
-            kink_new = np.where(leaving, kink_old, kink_new)
-        self.target[:] = self.coef
-        keep = old & (self.coef[1] > 0.0)
-        r_new = np.sqrt(np.where(keep, self.coef[1], 1.0))
-        cos_n = np.where(keep, self.coef[0] / (2.0 * r_new), 1.0)
-        sin_n = np.sqrt(np.maximum(1.0 - cos_n * cos_n, 1e-24))
         y1, y2 = self.y
-        fp = self.last[0]
-        # complex state Z = A R^k e^{i (k theta + phi)}, y = Im Z; a force sample F enters
-        # a step as Z <- p (Z + F g / (R sin theta)), p = R e^{i theta}
-        pole = r * (cos_t + 1j * sin_t)
-        pole_new = r_new * (cos_n + 1j * sin_n)
-        z = (y1 * cos_t - r * y2) / sin_t + 1j * y1  # at the last output sample
-        z0 = pole * (z + fp * g_old / (r * sin_t))  # frame n0 at the old tuning
-        virtual = z0 / pole_new - fp * self.coef[2] / (r_new * sin_n)  # new tuning's state before n0
-        y1[:] = np.where(keep, virtual.imag, 0.0)
-        y2[:] = np.where(keep, (virtual / pole_new).imag, 0.0)
-        theta, theta_new = np.arctan2(sin_t, cos_t), np.arctan2(sin_n, cos_n)
-        delta, delta_new = -np.log(r), -np.log(r_new)
-        sine = kink_new - kink_old
-        cosine = delta_new * kink_new / theta_new - delta * kink_old / theta
-        return float(np.sum(np.where(keep, z0.real * sine - z0.imag * cosine, 0.0)))
+        fp, rate = float(self.last[0]), float(self.sample_rate)
+        correction = retune_state(self.coef, self._fresh, old_poles, self._poles[1], y1, y2, fp, rate)
+        self.target[:] = self.coef
+        return correction
 
     def _span(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """Frames start .. start + n - 1 from force ``inp[:n]`` into ``out[:n]``."""
@@ -854,6 +821,7 @@ class ModalBank(ModelParams, UGen):
         for arr in (self.bank, self.delta, self.target):
             arr[:] = arr[:, perm]
         self.order = self.order[perm]
+        self._location_rows = {}
         key, poles, sin2, inv = self._poles
         self._poles = (key, poles[:, perm], sin2[perm], inv[perm])
         self._gain_rows = {None: self._poles[1]}  # gain rows were in the old order

@@ -1,0 +1,157 @@
+"""Compiled pole design and retune of a ModalBank (ugens.modal), one loop per mode.
+
+:func:`pole_rows` designs each mode's resonator (c1, c2, R sin theta, the direct ratio
+d / g) for given frequencies (Hz) and decay rates (1/s); :func:`retune_state` moves a
+ringing bank to a new design keeping every mode's amplitude and phase and returns the
+kink's end correction. A fragment-size input (Crumple) retunes the bank at every event,
+thousands of times a second of sound, so neither allocates or leaves the loop.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+#: Normalised frequencies (rad per sample) where the ``"band"`` direct ratio matches each
+#: mode's continuous response: 16 midpoints of the top third of the band, [2 pi / 3, pi).
+TOP_BAND = 2.0 * np.pi / 3.0 + (np.arange(16) + 0.5) * (np.pi / 3.0) / 16
+
+#: cos and sin of TOP_BAND (z = e^{i omega} on the unit circle).
+TOP_BAND_COS = np.cos(TOP_BAND)
+TOP_BAND_SIN = np.sin(TOP_BAND)
+
+#: Longest ring-out (s, to -60 dB) of a mode that a retune moves to or above Nyquist.
+LEAVING_FADE = 1e-3
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath={"reassoc", "contract"})
+def band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin):
+    """The ``"band"`` direct ratio d / g of one sounding mode (ugens.modal.direct_ratio):
+    the constant d minimising sum over TOP_BAND of |H_c|^-2 Re(H_c - H_d - d)^2, with the
+    continuous response H_c = w / ((i omega fs + decay)^2 + w^2) = w / q and the discrete
+    one H_d = g z / A(z), z = e^{-i omega}, A = 1 - c1 z + c2 z^2, g = s / fs. With
+    weight |q|^2 / w^2: d = (w sum Re q - g sum |q|^2 Re(z conj A) / |A|^2) / sum |q|^2."""
+    w = 2.0 * math.pi * f
+    g = s / fs
+    num_c = 0.0
+    num_d = 0.0
+    den = 0.0
+    for j in range(band.size):
+        zr = band_cos[j]
+        zi = -band_sin[j]
+        z2r = zr * zr - zi * zi
+        z2i = 2.0 * zr * zi
+        ar = 1.0 - c1 * zr + c2 * z2r
+        ai = -c1 * zi + c2 * z2i
+        x = band[j] * fs
+        qr = decay * decay - x * x + w * w
+        qi = 2.0 * x * decay
+        q2 = qr * qr + qi * qi
+        num_c += qr
+        num_d += q2 * (zr * ar + zi * ai) / (ar * ar + ai * ai)
+        den += q2
+    return (w * num_c - g * num_d) / den / g
+
+
+@nb.njit(cache=True, error_model="numpy")
+def pole_rows(freqs, decays, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv):
+    """Per mode into poles (4, K): c1 = 2 R cos theta, c2 = R^2, s = R sin theta and the
+    direct ratio d / g (theta / (12 s), or :func:`band_ratio` if ``fit_band``); sin2 =
+    sin^2 theta (1 for silent modes), inv = 1 / (R^2 sin^2 theta) (0 for silent modes).
+    R = e^{-decay / fs}, theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
+    for k in range(freqs.size):
+        f = freqs[k]
+        decay = decays[k]
+        r = math.exp(-decay / fs)
+        theta = 2.0 * math.pi * f / fs
+        c1 = c2 = s = ratio = 0.0
+        if f < fs / 2:
+            c1 = 2.0 * r * math.cos(theta)
+            c2 = r * r
+            s = r * math.sin(theta)
+        if c2 > 0.0:  # R underflows for decays beyond ~700 fs: silent
+            if fit_band:
+                ratio = band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin)
+            else:
+                ratio = theta / (12.0 * s)
+        poles[0, k] = c1
+        poles[1, k] = c2
+        poles[2, k] = s
+        poles[3, k] = ratio
+        if c2 > 0.0:
+            sn = max(1.0 - c1 * c1 / (4.0 * c2), 1e-12)
+            sin2[k] = sn
+            inv[k] = 1.0 / (c2 * sn)
+        else:
+            sin2[k] = 1.0
+            inv[k] = 0.0
+
+
+@nb.njit(cache=True, error_model="numpy")
+def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
+    """Retune a bank from its current coefficients ``coef`` (4, K: c1, c2, g, d) to the
+    design ``fresh`` (4, K) at the next frame n0, in place on coef and the state (y1, y2),
+    keeping each ringing mode's amplitude and phase; fp: the force sample before n0.
+    Returns the kink's end correction for frame n0 (ugens.modal.ModalBank._retune).
+
+    Per mode, complex state Z = A R^k e^{i (k theta + phi)}, y = Im Z; a force sample F
+    enters a step as Z <- p (Z + F g / (R sin theta)), p = R e^{i theta}. Frame n0 rings at
+    the old tuning; the new tuning's state before n0 is the one that reaches the same Z
+    there. The kink correction per mode is the direct gain per unit initial slope, K /
+    theta with K = (d / g) R sin theta, for the sine part (Re Z, slope theta) and the
+    cosine part (Im Z, slope -delta, delta = -ln R) of the slope jump. A mode moved to or
+    above Nyquist keeps ringing at its old pole, damped to -60 dB within LEAVING_FADE s."""
+    fade = math.exp(-math.log(1000.0) / (LEAVING_FADE * fs))
+    correction = 0.0
+    for k in range(coef.shape[1]):
+        c1 = coef[0, k]
+        c2 = coef[1, k]
+        g_old = coef[2, k]
+        kink_old = old_poles[3, k] * old_poles[2, k]
+        kink_new = new_poles[3, k] * new_poles[2, k]
+        n1 = fresh[0, k]
+        n2 = fresh[1, k]
+        coef[2, k] = fresh[2, k]
+        coef[3, k] = fresh[3, k]
+        if not c2 > 0.0:  # silent before: stays silent until the next force
+            coef[0, k] = n1
+            coef[1, k] = n2
+            y1[k] = 0.0
+            y2[k] = 0.0
+            continue
+        r = math.sqrt(c2)
+        if not n2 > 0.0:  # leaving: ring out at the old pole
+            shrink = min(1.0, fade / r)
+            n1 = c1 * shrink
+            n2 = c2 * shrink * shrink
+            kink_new = kink_old
+        coef[0, k] = n1
+        coef[1, k] = n2
+        if not n2 > 0.0:  # the fade itself underflowed
+            y1[k] = 0.0
+            y2[k] = 0.0
+            continue
+        cos_t = c1 / (2.0 * r)
+        sin_t = math.sqrt(max(1.0 - cos_t * cos_t, 1e-24))
+        r_new = math.sqrt(n2)
+        cos_n = n1 / (2.0 * r_new)
+        sin_n = math.sqrt(max(1.0 - cos_n * cos_n, 1e-24))
+        u1 = y1[k]
+        # Z at the last output sample, then frame n0 at the old tuning
+        zr = (u1 * cos_t - r * y2[k]) / sin_t + fp * g_old / (r * sin_t)
+        zi = u1
+        z0r = r * (cos_t * zr - sin_t * zi)
+        z0i = r * (cos_t * zi + sin_t * zr)
+        # divide by the new pole, remove the force's entry at the new tuning
+        vr = (cos_n * z0r + sin_n * z0i) / r_new - fp * coef[2, k] / (r_new * sin_n)
+        vi = (cos_n * z0i - sin_n * z0r) / r_new
+        y1[k] = vi
+        y2[k] = (cos_n * vi - sin_n * vr) / r_new
+        theta = math.atan2(sin_t, cos_t)
+        theta_new = math.atan2(sin_n, cos_n)
+        sine = kink_new - kink_old
+        cosine = -math.log(r_new) * kink_new / theta_new + math.log(r) * kink_old / theta
+        correction += z0r * sine - z0i * cosine
+    return correction
