@@ -54,7 +54,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
-from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state
+from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state, size_changes
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -462,6 +462,7 @@ class ModalBank(ModelParams, UGen):
         self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
         self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
         self._location_rows = {}  # location -> the model's gains there, internal order
+        self._tuning = np.full((6, model.n_modes), np.nan)  # the last retune's new tuning (retune_state)
         k = model.n_modes
         self.bank = np.zeros((6, k))  # c1, c2, g, d (current coefficients), y1, y2 (state)
         self.coef, self.y = self.bank[:4], self.bank[4:]
@@ -644,11 +645,7 @@ class ModalBank(ModelParams, UGen):
 
     def _size_changes(self, n: int) -> np.ndarray:
         """Offsets in this block where the size input differs from the size before it."""
-        s = self._size_input.out[:n]
-        prev = np.empty(n)
-        prev[0] = self._size if s[0] > 0.0 else s[0]
-        prev[1:] = s[:-1]
-        return np.flatnonzero((s != prev) & (s > 0.0))
+        return size_changes(self._size_input.out, n, self._size)
 
     def _retune(self, size: float) -> float:
         """Retune to fragment size ``size`` from the next frame n0 on, keeping every
@@ -677,7 +674,8 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         y1, y2 = self.y
         fp, rate = float(self.last[0]), float(self.sample_rate)
-        correction = retune_state(self.coef, self._fresh, old_poles, self._poles[1], y1, y2, fp, rate)
+        new_poles, tuning = self._poles[1], self._tuning
+        correction = retune_state(self.coef, self._fresh, old_poles, new_poles, y1, y2, fp, rate, tuning)
         self.target[:] = self.coef
         return correction
 
