@@ -185,6 +185,17 @@ PSD_MEMORY = 0.75
 FLAT_SPECTRUM_MODES = 8
 
 
+def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
+    """A C-contiguous float64 array of zeros starting on a 64-byte cache-line boundary.
+
+    The mode loop's vector loads then never straddle cache lines: a bank 16 bytes off the
+    boundary ran the 1000-mode bell about 13 % slower (``jassy bench modal``)."""
+    size = int(np.prod(shape))
+    raw = np.zeros(size + 8)
+    skip = (-raw.ctypes.data % 64) // 8
+    return raw[skip : skip + size].reshape(shape)
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
     """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta[0] = active mode
@@ -464,7 +475,7 @@ class ModalBank(ModelParams, UGen):
         self._location_rows = {}  # location -> the model's gains there, internal order
         self._tuning = np.full((6, model.n_modes), np.nan)  # the last retune's new tuning (retune_state)
         k = model.n_modes
-        self.bank = np.zeros((6, k))  # c1, c2, g, d (current coefficients), y1, y2 (state)
+        self.bank = line_aligned_zeros((6, k))  # c1, c2, g, d (current coefficients), y1, y2 (state)
         self.coef, self.y = self.bank[:4], self.bank[4:]
         self.delta = np.zeros((4, k))
         self.target = np.zeros((4, k))

@@ -267,6 +267,8 @@ def _reference_face(a, sa, b, sb, pos, rot, geo):
         sep = math.inf
         for v in range(vstart[sa], vstart[sa + 1]):
             sep = min(sep, nx * verts[v, 0] + ny * verts[v, 1] + nz * verts[v, 2] - offset)
+            if sep <= best:
+                break  # this plane cannot beat the best one found
         if sep > best:
             best, face = sep, j
     return face, best
@@ -382,25 +384,31 @@ def _edge_separation(a, sa, b, sb, pos, rot, geo):
     estart, edges = geo[23], geo[24]
     best, bnx, bny, bnz, best_a, best_b = -math.inf, 0.0, 0.0, 1.0, -1, -1
     for eb in range(estart[sb], estart[sb + 1]):
-        px, py, pz = _b_in_a(a, b, pos, rot, edges[eb, 0], edges[eb, 1], edges[eb, 2])
-        qx, qy, qz = _b_in_a(a, b, pos, rot, edges[eb, 3], edges[eb, 4], edges[eb, 5])
         # b's negated face normals c, d (A - B's Gauss map), a's frame
         cx, cy, cz = _b_dir_in_a(a, b, rot, -edges[eb, 6], -edges[eb, 7], -edges[eb, 8])
         dx, dy, dz = _b_dir_in_a(a, b, rot, -edges[eb, 9], -edges[eb, 10], -edges[eb, 11])
         dcx, dcy, dcz = dy * cz - dz * cy, dz * cx - dx * cz, dx * cy - dy * cx  # d x c
-        fx, fy, fz = qx - px, qy - py, qz - pz
-        f2 = fx * fx + fy * fy + fz * fz
+        posed = False  # b's edge in a's frame, computed once a pair qualifies
+        px = py = pz = fx = fy = fz = f2 = 0.0
         for ea in range(estart[sa], estart[sa + 1]):
+            # a2 x a1, stored with the hull: the arc test is two dot products before any other load
+            cba = cx * edges[ea, 12] + cy * edges[ea, 13] + cz * edges[ea, 14]
+            dba = dx * edges[ea, 12] + dy * edges[ea, 13] + dz * edges[ea, 14]
+            if cba * dba >= 0.0:
+                continue  # b's arc lies on one side of a's arc plane: they do not cross
             a1x, a1y, a1z = edges[ea, 6], edges[ea, 7], edges[ea, 8]
             a2x, a2y, a2z = edges[ea, 9], edges[ea, 10], edges[ea, 11]
-            bax, bay, baz = a2y * a1z - a2z * a1y, a2z * a1x - a2x * a1z, a2x * a1y - a2y * a1x  # a2 x a1
-            cba = cx * bax + cy * bay + cz * baz
-            dba = dx * bax + dy * bay + dz * baz
             adc = a1x * dcx + a1y * dcy + a1z * dcz
             bdc = a2x * dcx + a2y * dcy + a2z * dcz
-            if cba * dba >= 0.0 or adc * bdc >= 0.0 or cba * bdc <= 0.0:
+            if adc * bdc >= 0.0 or cba * bdc <= 0.0:
                 continue  # the arcs do not cross: not a face of A - B
-            ex, ey, ez = edges[ea, 3] - edges[ea, 0], edges[ea, 4] - edges[ea, 1], edges[ea, 5] - edges[ea, 2]
+            if not posed:
+                px, py, pz = _b_in_a(a, b, pos, rot, edges[eb, 0], edges[eb, 1], edges[eb, 2])
+                qx, qy, qz = _b_in_a(a, b, pos, rot, edges[eb, 3], edges[eb, 4], edges[eb, 5])
+                fx, fy, fz = qx - px, qy - py, qz - pz
+                f2 = fx * fx + fy * fy + fz * fz
+                posed = True
+            ex, ey, ez = edges[ea, 15], edges[ea, 16], edges[ea, 17]
             nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
             length = math.sqrt(nx * nx + ny * ny + nz * nz)
             if length < 1e-6 * math.sqrt((ex * ex + ey * ey + ez * ez) * f2):
@@ -442,6 +450,8 @@ def _polytopes(a, sa, b, sb, pieces, pos, rot, geo, margin, buf, count):
     than margin; one edge-edge contact when an edge axis separates (or overlaps) them by
     EDGE_PREFERENCE more than every face axis; else the face manifolds of each on the other."""
     face_ab, sep_ab = _reference_face(a, sa, b, sb, pos, rot, geo)
+    if sep_ab > margin:
+        return count  # separated by one of b's face planes: no need for a's
     face_ba, sep_ba = _reference_face(b, sb, a, sa, pos, rot, geo)
     face_sep = max(sep_ab, sep_ba)
     if face_sep > margin:

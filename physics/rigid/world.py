@@ -256,9 +256,10 @@ def _principal_pose(position, quaternion, com, rotation):
 
 def _polytope(mesh, com, rotation):
     """Polytope tables of a convex trimesh (shape frame) in the principal frame: (vertices,
-    face planes (n, d), hull triangles, edges (E, 12): for each edge of the hull between two
-    faces that are not coplanar, its end points and the outward unit normals of those two
-    faces (the edge's arc on the Gauss map, for narrow._edge_separation))."""
+    face planes (n, d), hull triangles, edges (E, 18): for each edge of the hull between two
+    faces that are not coplanar, its end points p, q, the outward unit normals n1, n2 of those
+    two faces (the edge's arc on the Gauss map, for narrow._edge_separation), n2 x n1 (the
+    normal of the arc's plane) and q - p)."""
     verts = (np.asarray(mesh.vertices) - com) @ rotation
     tris = verts[np.asarray(mesh.faces)]
     normals = np.asarray(mesh.face_normals) @ rotation
@@ -267,7 +268,13 @@ def _polytope(mesh, com, rotation):
     folded = np.asarray(mesh.face_adjacency_angles) > 1e-9
     ends = np.asarray(mesh.face_adjacency_edges)[folded]
     faces = np.asarray(mesh.face_adjacency)[folded]
-    edges = np.c_[verts[ends[:, 0]], verts[ends[:, 1]], normals[faces[:, 0]], normals[faces[:, 1]]]
+    p, q, n1, n2 = verts[ends[:, 0]], verts[ends[:, 1]], normals[faces[:, 0]], normals[faces[:, 1]]
+    arc = np.c_[
+        n2[:, 1] * n1[:, 2] - n2[:, 2] * n1[:, 1],
+        n2[:, 2] * n1[:, 0] - n2[:, 0] * n1[:, 2],
+        n2[:, 0] * n1[:, 1] - n2[:, 1] * n1[:, 0],
+    ]  # written out as narrow._edge_separation would compute it, to the same bits
+    edges = np.c_[p, q, n1, n2, arc, q - p]
     return verts, planes, tris, edges
 
 
@@ -365,7 +372,7 @@ def _build_arrays(bodies: list[Body]):
 def _slot_table(slots, k):
     """(starts (S + 1,), rows concatenated) of table k of each geometry slot's polytope
     (_polytope; k = None: slots holds the tables themselves); an empty slot has no rows."""
-    shapes = ((0, 3), (0, 4), (0, 3, 3), (0, 12))
+    shapes = ((0, 3), (0, 4), (0, 3, 3), (0, 18))
     rows = []
     for slot in slots:
         if k is None:
