@@ -56,14 +56,17 @@ def band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def pole_rows(freqs, decays, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv):
+def pole_rows(
+    freqs, decays, freq_scale, decay_scale, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv
+):
     """Per mode into poles (4, K): c1 = 2 R cos theta, c2 = R^2, s = R sin theta and the
     direct ratio d / g (theta / (12 s), or :func:`band_ratio` if ``fit_band``); sin2 =
     sin^2 theta (1 for silent modes), inv = 1 / (R^2 sin^2 theta) (0 for silent modes).
-    R = e^{-decay / fs}, theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
+    f = freqs * freq_scale (Hz), decay = decays * decay_scale (1/s), R = e^{-decay / fs},
+    theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
     for k in range(freqs.size):
-        f = freqs[k]
-        decay = decays[k]
+        f = freqs[k] * freq_scale
+        decay = decays[k] * decay_scale
         r = math.exp(-decay / fs)
         theta = 2.0 * math.pi * f / fs
         c1 = c2 = s = ratio = 0.0
