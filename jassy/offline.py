@@ -22,7 +22,7 @@ from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
-from jassy.safety import CEILING, LimiterMeter, count_nonfinite, limit, release_coefficient, zero_nonfinite
+from jassy.safety import CEILING, LimiterMeter, peak_abs, release_coefficient, scan_chunk, zero_nonfinite
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
@@ -147,12 +147,12 @@ class OfflineEngine:
         self.scheduler.run(n, buf)
         n_audio = len(self.graph.audio)
         a, h = buf[:n_audio, :n], buf[n_audio:, :n]
-        if count_nonfinite(a) or count_nonfinite(h):
+        bad, peak = scan_chunk(a, h)
+        if bad:
             self._quarantine(a, h)
+            peak = peak_abs(a)
         if self.limiter:
-            self.limiter_meter.before(a)
-            limit(a, n, self._limiter_state, CEILING, self._release)
-            self.limiter_meter.after(a, n)
+            self.limiter_meter.limit(a, n, self._limiter_state, self._release, peak)
         if self.haptic_safety is not None and h.shape[0]:
             s = self.haptic_safety
             self.haptic_flags |= limit_force(h, n, self._haptic_last, s.max_force, s.step(self.sample_rate))

@@ -12,14 +12,23 @@ CEILING = 10 ** (-0.1 / 20)
 
 
 @nb.njit(cache=True)
-def count_nonfinite(buf):
-    """Number of NaN/Inf samples in a 2-D buffer."""
-    count = 0
-    for c in range(buf.shape[0]):
-        for i in range(buf.shape[1]):
-            if not math.isfinite(buf[c, i]):
-                count += 1
-    return count
+def scan_chunk(audio, haptic):
+    """One read pass over an output chunk: (number of NaN/Inf samples in both 2-D buffers,
+    largest |finite audio sample|)."""
+    bad = 0
+    peak = 0.0
+    for c in range(audio.shape[0]):
+        for i in range(audio.shape[1]):
+            x = audio[c, i]
+            if not math.isfinite(x):
+                bad += 1
+            elif abs(x) > peak:
+                peak = abs(x)
+    for c in range(haptic.shape[0]):
+        for i in range(haptic.shape[1]):
+            if not math.isfinite(haptic[c, i]):
+                bad += 1
+    return bad, peak
 
 
 @nb.njit(cache=True)
@@ -130,9 +139,22 @@ class LimiterMeter:
 
     def after(self, buf: np.ndarray, n: int) -> None:
         """Count the frames of a limited chunk held at the ceiling."""
-        count, self.longest, self._run = pinned_samples(buf, n, self.ceiling, self._run)
+        count, longest, self._run = pinned_samples(buf, n, self.ceiling, self._run)
+        self.longest = max(self.longest, longest)
         self.pinned += count
         self.frames += n
+
+    def limit(self, buf: np.ndarray, n: int, state: np.ndarray, release_coeff: float, peak: float) -> None:
+        """Limit buf[:, :n] in place (see :func:`limit`) and meter it, given its finite input
+        peak. A fully released limiter (gain exactly 1) passes a chunk whose peak is below
+        the pinned threshold unchanged, so such a chunk is not read again."""
+        self.input_peak = max(self.input_peak, peak)
+        if state[0] == 1.0 and peak < self.ceiling * (1.0 - 1e-9):
+            self._run = 0
+            self.frames += n
+            return
+        limit(buf, n, state, self.ceiling, release_coeff)
+        self.after(buf, n)
 
     @property
     def reduction_db(self) -> float:

@@ -68,7 +68,7 @@ def reference_retune(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
 def compiled_poles(freqs, decays, band):
     k = freqs.size
     poles, sin2, inv = np.empty((4, k)), np.empty(k), np.empty(k)
-    pole_rows(freqs, decays, FS, band, *TOP_BAND_ROWS, poles, sin2, inv)
+    pole_rows(freqs, decays, 1.0, 1.0, FS, band, *TOP_BAND_ROWS, poles, sin2, inv)
     return poles, sin2, inv
 
 
@@ -110,9 +110,24 @@ def test_retune_state_matches_numpy_for_leaving_entering_and_kept_modes():
             leaving = (coef[1] > 0) & (fresh[1] <= 0)
             entering = (coef[1] <= 0) & (fresh[1] > 0)
             assert leaving.any() if size < 1 else entering.any()
-            correction = retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, FS)
-            np.testing.assert_allclose(coef, want[0], rtol=1e-12, atol=0.0)
-            scale = np.abs(want[1]).max()
-            np.testing.assert_allclose(y1, want[1], rtol=1e-12, atol=1e-13 * scale)
-            np.testing.assert_allclose(y2, want[2], rtol=1e-12, atol=1e-13 * scale)
-            assert abs(correction - want[3]) <= 1e-12 * abs(want[3]) + 1e-15
+            tuning = np.full((6, freqs.size), np.nan)
+            correction = retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, FS, tuning)
+            assert_retuned(coef, y1, y2, correction, want)
+            # back to size 1 from the retuned state: the kept tuning is reused
+            want = reference_retune(
+                coef, fresh_1 := fresh_at(old_poles, gains), new_poles, old_poles, y1, y2, fp, FS
+            )
+            correction = retune_state(coef, fresh_1, new_poles, old_poles, y1, y2, fp, FS, tuning)
+            assert_retuned(coef, y1, y2, correction, want)
+
+
+def fresh_at(poles, gains):
+    return np.stack([poles[0], poles[1], poles[2] * gains, poles[2] * gains * poles[3]])
+
+
+def assert_retuned(coef, y1, y2, correction, want):
+    np.testing.assert_allclose(coef, want[0], rtol=1e-12, atol=0.0)
+    scale = np.abs(want[1]).max()
+    np.testing.assert_allclose(y1, want[1], rtol=1e-12, atol=1e-13 * scale)
+    np.testing.assert_allclose(y2, want[2], rtol=1e-12, atol=1e-13 * scale)
+    assert abs(correction - want[3]) <= 1e-12 * abs(want[3]) + 1e-15

@@ -215,3 +215,25 @@ def test_limiter_passes_quiet_stretches_untouched_and_matches_the_reference_bit_
             limit(piece, piece.shape[1], state, CEILING, release)
         np.testing.assert_array_equal(y, expected)
     np.testing.assert_array_equal(expected[:, :1000], x[:, :1000])  # before the first burst: as it was
+
+
+def test_engine_limiter_over_chunks_matches_the_reference_and_meters_the_longest_run():
+    """The engine skips limiting chunks that are quiet and fully released; the audio must
+    still equal the plain limiter bit for bit, and the meter's longest held run must be the
+    longest over the whole render (a later, shorter run must not replace it)."""
+    from jassy.offline import CHUNK_FRAMES
+    from jassy.safety import release_coefficient
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal(4 * CHUNK_FRAMES) * 0.1
+    x[100:400] = 5.0  # a long run at the ceiling in the first chunk
+    x[2 * CHUNK_FRAMES + 50 : 2 * CHUNK_FRAMES + 60] = -5.0  # a short one two chunks later
+    engine = OfflineEngine(Graph(ArraySource(x)), [], FS, 64)
+    r = engine.render(x.size / FS)
+    expected = reference_limiter(x[None, :], CEILING, release_coefficient(0.05, FS))
+    np.testing.assert_array_equal(r.audio, expected)
+    held = np.abs(expected[0]) >= CEILING * (1 - 1e-9)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
+    runs = edges[1::2] - edges[::2]
+    assert engine.limiter_meter.longest == runs.max() >= 300
+    assert engine.limiter_meter.pinned == held.sum()

@@ -56,14 +56,17 @@ def band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def pole_rows(freqs, decays, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv):
+def pole_rows(
+    freqs, decays, freq_scale, decay_scale, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv
+):
     """Per mode into poles (4, K): c1 = 2 R cos theta, c2 = R^2, s = R sin theta and the
     direct ratio d / g (theta / (12 s), or :func:`band_ratio` if ``fit_band``); sin2 =
     sin^2 theta (1 for silent modes), inv = 1 / (R^2 sin^2 theta) (0 for silent modes).
-    R = e^{-decay / fs}, theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
+    f = freqs * freq_scale (Hz), decay = decays * decay_scale (1/s), R = e^{-decay / fs},
+    theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
     for k in range(freqs.size):
-        f = freqs[k]
-        decay = decays[k]
+        f = freqs[k] * freq_scale
+        decay = decays[k] * decay_scale
         r = math.exp(-decay / fs)
         theta = 2.0 * math.pi * f / fs
         c1 = c2 = s = ratio = 0.0
@@ -90,7 +93,15 @@ def pole_rows(freqs, decays, fs, fit_band, band, band_cos, band_sin, poles, sin2
 
 
 @nb.njit(cache=True, error_model="numpy")
-def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
+def tuning_of(c1, r):
+    """(cos theta, sin theta, theta, ln R) of a resonator with c1 = 2 R cos theta, R = r."""
+    cos_t = c1 / (2.0 * r)
+    sin_t = math.sqrt(max(1.0 - cos_t * cos_t, 1e-24))
+    return cos_t, sin_t, math.atan2(sin_t, cos_t), math.log(r)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs, tuning):
     """Retune a bank from its current coefficients ``coef`` (4, K: c1, c2, g, d) to the
     design ``fresh`` (4, K) at the next frame n0, in place on coef and the state (y1, y2),
     keeping each ringing mode's amplitude and phase; fp: the force sample before n0.
@@ -102,7 +113,12 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
     there. The kink correction per mode is the direct gain per unit initial slope, K /
     theta with K = (d / g) R sin theta, for the sine part (Re Z, slope theta) and the
     cosine part (Im Z, slope -delta, delta = -ln R) of the slope jump. A mode moved to or
-    above Nyquist keeps ringing at its old pole, damped to -60 dB within LEAVING_FADE s."""
+    above Nyquist keeps ringing at its old pole, damped to -60 dB within LEAVING_FADE s.
+
+    tuning (6, K): per mode, the (c1, c2) of the last new tuning and its cos theta,
+    sin theta, theta and ln R (:func:`tuning_of`); the next retune starts from those
+    coefficients unless a ramp or a parameter changed them, so it reuses them (they are a
+    function of (c1, c2) alone, so the reuse is exact); NaN rows match nothing."""
     fade = math.exp(-math.log(1000.0) / (LEAVING_FADE * fs))
     correction = 0.0
     for k in range(coef.shape[1]):
@@ -133,11 +149,21 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
             y1[k] = 0.0
             y2[k] = 0.0
             continue
-        cos_t = c1 / (2.0 * r)
-        sin_t = math.sqrt(max(1.0 - cos_t * cos_t, 1e-24))
+        if c1 == tuning[0, k] and c2 == tuning[1, k]:
+            cos_t = tuning[2, k]
+            sin_t = tuning[3, k]
+            theta = tuning[4, k]
+            log_r = tuning[5, k]
+        else:
+            cos_t, sin_t, theta, log_r = tuning_of(c1, r)
         r_new = math.sqrt(n2)
-        cos_n = n1 / (2.0 * r_new)
-        sin_n = math.sqrt(max(1.0 - cos_n * cos_n, 1e-24))
+        cos_n, sin_n, theta_new, log_r_new = tuning_of(n1, r_new)
+        tuning[0, k] = n1
+        tuning[1, k] = n2
+        tuning[2, k] = cos_n
+        tuning[3, k] = sin_n
+        tuning[4, k] = theta_new
+        tuning[5, k] = log_r_new
         u1 = y1[k]
         # Z at the last output sample, then frame n0 at the old tuning
         zr = (u1 * cos_t - r * y2[k]) / sin_t + fp * g_old / (r * sin_t)
@@ -149,9 +175,23 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
         vi = (cos_n * z0i - sin_n * z0r) / r_new
         y1[k] = vi
         y2[k] = (cos_n * vi - sin_n * vr) / r_new
-        theta = math.atan2(sin_t, cos_t)
-        theta_new = math.atan2(sin_n, cos_n)
         sine = kink_new - kink_old
-        cosine = -math.log(r_new) * kink_new / theta_new + math.log(r) * kink_old / theta
+        cosine = -log_r_new * kink_new / theta_new + log_r * kink_old / theta
         correction += z0r * sine - z0i * cosine
     return correction
+
+
+@nb.njit(cache=True)
+def size_changes(sizes, n, current):
+    """Offsets in sizes[:n] where the size is positive and differs from the one before it
+    (``current`` before sizes[0]); a size <= 0 means no event yet and changes nothing."""
+    count = 0
+    out = np.empty(n, dtype=np.int64)
+    before = current
+    for i in range(n):
+        s = sizes[i]
+        if s > 0.0 and s != before:
+            out[count] = i
+            count += 1
+        before = s
+    return out[:count]
