@@ -228,15 +228,8 @@ def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
     assert flags[-1] == FLAG_FINAL and force[-1] == 0
 
 
-WARM_CHECK = """
-import numpy as np
-from numba.core.dispatcher import Dispatcher
-from jassy.live import LiveEngine
-from jassy.patchfile import load_patch
-
-patch = load_patch("wall_tap")
-live = LiveEngine(patch.graph, patch.score, 48000, 64, 2.5, offsets_ms={"audio": 2.0, "haptic": 0.0})
-engine = live._warm_engine()
+#: Script lines that record, in ``loaded``, every numba kernel loaded or compiled from there on.
+RECORD_KERNEL_LOADS = """
 loaded = []
 original = Dispatcher.add_overload
 
@@ -247,11 +240,26 @@ def add_overload(self, cres):
 
 
 Dispatcher.add_overload = add_overload
-buf = np.zeros((len(patch.graph.bus_rows), 64))
+"""
+
+WARM_CHECK = (
+    """
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+from jassy.live import LiveEngine
+from jassy.patchfile import load_patch
+
+patch = load_patch("wall_tap")
+live = LiveEngine(patch.graph, patch.score, 48000, 64, 2.5, offsets_ms={"audio": 2.0, "haptic": 0.0})
+engine = live._warm_engine()
+"""
+    + RECORD_KERNEL_LOADS
+    + """buf = np.zeros((len(patch.graph.bus_rows), 64))
 for _ in range(int(patch.duration * 48000 / 64)):
     engine.produce(buf, 64)
 print(loaded)
 """
+)
 
 
 def test_warm_up_loads_every_kernel_the_score_needs_before_the_stream_starts():
@@ -266,7 +274,8 @@ def test_warm_up_loads_every_kernel_the_score_needs_before_the_stream_starts():
     assert run.stdout.strip() == "[]", run.stdout
 
 
-POST_WARM_CHECK = """
+POST_WARM_CHECK = (
+    """
 import sys
 import numpy as np
 from numba.core.dispatcher import Dispatcher
@@ -289,23 +298,16 @@ else:  # the ring producer's engine after its warm-up
     play = lambda: engine.produce(device, 64)
     post = engine.scheduler.insert
 play()
-loaded = []
-original = Dispatcher.add_overload
-
-
-def add_overload(self, cres):
-    loaded.append(self.py_func.__qualname__)
-    original(self, cres)
-
-
-Dispatcher.add_overload = add_overload
-post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
+"""
+    + RECORD_KERNEL_LOADS
+    + """post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
 heard = 0.0
 for _ in range(10):
     play()
     heard = max(heard, float(np.abs(device).max()))
 print(loaded, heard > 0)
 """
+)
 
 
 @pytest.mark.parametrize("mode", ["callback", "ring"])
