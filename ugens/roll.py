@@ -11,13 +11,11 @@ import math
 import numba as nb
 import numpy as np
 
-from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
-from ugens.profile import ProfileError, fractal_profile
 from ugens.scrape import (
     NYQUIST_FRACTION,
     STIFFNESS_SPEC,
@@ -95,15 +93,7 @@ class Turning:
         v = self.values
         dx = self.loop_dx()
         n = round(2.0 * math.pi * v["radius"] / dx)
-        rms = 1.0 if self.unit_rms else v["roughness"]
-        key = (n, v["beta"], rms, v["seed"], dx, v["k_low"])
-        if self._generated is None or self._generated[0] != key:
-            try:
-                heights = fractal_profile(*key[:5], k_low=v["k_low"] or None)
-            except ProfileError as exc:
-                raise PatchError(f"{where or f'nodes.{self.name}'}: {exc}") from None
-            self._generated = (key, heights)
-        return self._generated[1]
+        return self._fractal(n, 1.0 if self.unit_rms else v["roughness"], dx, where)
 
 
 def rotation_specs() -> dict[str, ParamSpec]:

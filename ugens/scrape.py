@@ -483,7 +483,13 @@ class ProfileContact(ContactControls):
             return self._shape(v["profile"], "profile") * rms
         if v["profile_file"]:
             return self._loaded[v["profile_file"]] * rms
-        key = (v["length"], v["beta"], rms, v["seed"], v["dx"], v["k_low"])
+        return self._fractal(v["length"], rms, v["dx"], where)
+
+    def _fractal(self, points: int, rms: float, dx: float, where: str | None) -> np.ndarray:
+        """The generated fractal profile of ``points`` points ``dx`` m apart, RMS ``rms``
+        (m), made again only when one of its parameters changed."""
+        v = self.values
+        key = (points, v["beta"], rms, v["seed"], dx, v["k_low"])
         if self._generated is None or self._generated[0] != key:
             try:
                 heights = fractal_profile(*key[:5], k_low=v["k_low"] or None)
