@@ -55,6 +55,7 @@ from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
+    any_nonzero,
     apply_kept,
     gather_kept,
     hear,
@@ -244,6 +245,18 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
+    """One sub-block of a budgeted bank's kept modes (the compact bank, rows as
+    :func:`bank_step`'s and whole vectors of ``lanes`` modes: its padding and flushed modes
+    hold exact zeros, so the active count is rounded up); the force also goes to the
+    budget period's ring ``heard``. Returns whether the force has a non-zero sample."""
+    width = meta[2]
+    meta[0] = min((meta[0] + lanes - 1) // lanes * lanes, width)
+    bank_step(force, out, start, n, compact, meta, floor, last)
+    return hear(force, n, heard, start)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -751,19 +764,19 @@ class ModalBank(ModelParams, UGen):
         """As :meth:`_span` for a budgeted bank: only the kept modes, in a compact bank;
         the force goes to the budget period's ring (continuous excitation)."""
         compact, meta = self._gathered(), self._compact_meta
-        width = meta[2]
         if self._ramping:
-            meta[0] = width
+            meta[0] = meta[2]
             self.meta[1] = resonate_ramp(
                 inp, out, n, compact[:4], compact[4], compact[5], compact[6:10], compact[10:],
-                self.meta[1], width, self.last,
+                self.meta[1], meta[2], self.last,
             )  # fmt: skip
             self._ramping = self.meta[1] > 0
-        else:  # whole vectors of modes: the padding and the modes flushed hold exact zeros
-            meta[0] = min(-(-meta[0] // KEPT_LANES) * KEPT_LANES, width)
-            self._step(inp, out, start, n, compact[:6], meta, self._floor, self.last)
+            self._heard_now |= hear(inp, n, self._heard, start)
+        else:
+            self._heard_now |= self._kept_step(
+                inp, out, start, n, self._compact_bank, meta, self._floor, self.last, self._heard, KEPT_LANES
+            )
         self.meta[0] = min(meta[0], self._kept_count)
-        self._heard_now |= hear(inp, n, self._heard, start)
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -788,7 +801,7 @@ class ModalBank(ModelParams, UGen):
             compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
             gather_kept(self.bank, self.delta, self.target, self._kept, count, compact)
             self._compact_meta[:] = (self.meta[0], 0, width)
-            self._compact = compact
+            self._compact, self._compact_bank = compact, compact[:6]
         return compact
 
     def anytime_attach(self, period: int, horizon: float, weighting: str, scores: np.ndarray) -> None:
@@ -808,6 +821,11 @@ class ModalBank(ModelParams, UGen):
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
         self._horizon = horizon
         self._forcing_key = None
+        compact = np.zeros((COMPACT_ROWS, KEPT_LANES))
+        self._kept_step = specialise(
+            kept_step, self.out, self.out, 0, 0, compact[:6], self._compact_meta, self._floor, self.last,
+            self._heard, KEPT_LANES,
+        )  # fmt: skip
         self._refresh_forcing()
 
     def anytime_period(self, kicked: bool) -> bool:
@@ -821,7 +839,7 @@ class ModalBank(ModelParams, UGen):
         """Whether the bank, silent for a period and struck by nothing scheduled, hears a
         force in the next ``n`` frames (its input is rendered before the budget decides).
         Its importance then counts that force's power (flat over frequency)."""
-        if self._expected or self._heard_now or self._heard_before or not self._input.out[:n].any():
+        if self._expected or self._heard_now or self._heard_before or not any_nonzero(self._input.out, n):
             self._onset = None
             return False
         self._onset = self._input.out[:n].copy()

@@ -51,17 +51,25 @@ def scatter_kept(compact, kept, count, bank):
 
 
 @nb.njit(cache=True)
+def any_nonzero(force, n):
+    """Whether force[:n] has a non-zero sample."""
+    i = 0
+    while i < n and force[i] == 0.0:
+        i += 1
+    return i < n
+
+
+@nb.njit(cache=True)
 def hear(force, n, heard, start):
     """Copy force[:n] into the ring ``heard`` (one budget period) at ``start`` modulo its
     length; return whether any sample is non-zero."""
     size = heard.size
     at = start % size
-    loud = False
-    for i in range(n):
-        f = force[i]
-        heard[(at + i) % size] = f
-        if f != 0.0:
-            loud = True
+    loud = any_nonzero(force, n)
+    first = min(n, size - at)  # a sub-block crosses no period boundary, but be safe
+    heard[at : at + first] = force[:first]
+    if first < n:
+        heard[: n - first] = force[first:n]
     return loud
 
 
