@@ -16,16 +16,16 @@ _ENTRY_POINTS: dict[tuple, Callable] = {}
 
 def _type_key(value: Any) -> Any:
     """A key that determines numba's type of ``value`` (arrays, small ints, floats, bools and
-    tuples of them), or None for anything else."""
+    tuples or NamedTuple records of them), or None for anything else."""
     kind = type(value)
     if kind is np.ndarray:
         f = value.flags
         return (value.dtype, value.ndim, f.c_contiguous, f.f_contiguous, f.writeable, f.aligned)
     if kind is float or kind is bool or (kind is int and -(2**62) < value < 2**62):
         return kind
-    if kind is tuple:
+    if kind is tuple or (isinstance(value, tuple) and hasattr(kind, "_fields")):  # NamedTuple records too
         keys = tuple(_type_key(v) for v in value)
-        return None if None in keys else (tuple, keys)
+        return None if None in keys else (kind, keys)
     return None
 
 

@@ -119,8 +119,9 @@ class Drive(NamedTuple):
 
 #: Force sources and how level checks set them going: the default parameters are everyday
 #: contacts (a 1e-3 N s tap, 0.2 g fragments at 1 m/s, a 0.5 g button dropped 10 cm, an 8 g
-#: ball rolled at 0.2 m/s), so through a calibrated bank with unit gains they peak within
-#: -30..-6 dBFS (tests/test_source_levels.py, examples/source_levels.py).
+#: ball rolled at 0.2 m/s, a 30 g ball hopping over a wooden table's asperities), so through
+#: a calibrated bank with unit gains they peak within -30..-6 dBFS (tests/test_source_levels.py,
+#: examples/source_levels.py).
 FORCE_SOURCES = {
     "ImpactForce": Drive("impact", {}),
     "ImpactTrain": Drive("impact", {}),
