@@ -55,10 +55,8 @@ from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
-    any_nonzero,
     apply_kept,
     gather_kept,
-    hear,
     mode_importance,
     scatter_kept,
 )
@@ -245,6 +243,29 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
+
+
+@nb.njit(cache=True)
+def any_nonzero(force, n):
+    """Whether force[:n] has a non-zero sample."""
+    i = 0
+    while i < n and force[i] == 0.0:
+        i += 1
+    return i < n
+
+
+@nb.njit(cache=True)
+def hear(force, n, heard, start):
+    """Copy force[:n] into the ring ``heard`` (one budget period) at ``start`` modulo its
+    length; return whether any sample is non-zero."""
+    size = heard.size
+    at = start % size
+    loud = any_nonzero(force, n)
+    first = min(n, size - at)  # a sub-block crosses no period boundary, but be safe
+    heard[at : at + first] = force[:first]
+    if first < n:
+        heard[: n - first] = force[first:n]
+    return loud
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

@@ -50,29 +50,6 @@ def scatter_kept(compact, kept, count, bank):
             bank[r, k] = compact[r, j]
 
 
-@nb.njit(cache=True)
-def any_nonzero(force, n):
-    """Whether force[:n] has a non-zero sample."""
-    i = 0
-    while i < n and force[i] == 0.0:
-        i += 1
-    return i < n
-
-
-@nb.njit(cache=True)
-def hear(force, n, heard, start):
-    """Copy force[:n] into the ring ``heard`` (one budget period) at ``start`` modulo its
-    length; return whether any sample is non-zero."""
-    size = heard.size
-    at = start % size
-    loud = any_nonzero(force, n)
-    first = min(n, size - at)  # a sub-block crosses no period boundary, but be safe
-    heard[at : at + first] = force[:first]
-    if first < n:
-        heard[: n - first] = force[first:n]
-    return loud
-
-
 @nb.njit(fastmath=True, cache=True)
 def mode_importance(
     compact, kept, count, target_gain, delta_gain, ramp_left, sin2, inv, sample_rate, spectrum, bins, flat,
