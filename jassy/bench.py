@@ -417,7 +417,7 @@ def live_bench(
         busy = live.callback_stats() if stats.mode == "callback" else None
         recorder.wait_final()
         frames = recorder.stop()
-        haptic = frame_stats(live, frames)
+        haptic = frame_stats(live, frames, recorder.dropped)
         haptic.update(loop_latency(sample_rate=SAMPLE_RATE, block=block, ring_blocks=ring_blocks))
     heard, rendered = live.monitor()  # the last 6 s the device received: silence, then the tap
     audio_on, haptic_on = tap_onsets(heard, rendered, int((quiet_at + 1.5) * SAMPLE_RATE))
@@ -429,6 +429,7 @@ def live_bench(
         from jassy.bench_floor import floor_run
 
         haptic.update(floor_run(seconds, SAMPLE_RATE, block, _busy_python))
+        haptic.update(over_floor(stats.underrun_callbacks, seconds, haptic))
     return {
         "seconds": seconds,
         "modes": n_modes,
@@ -454,6 +455,18 @@ def live_bench(
         "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,
         "tap_onset_vs_score_samples": int(rendered[haptic_on]) - tap_frame if haptic_on >= 0 else None,
         **haptic,
+    }
+
+
+def over_floor(underruns: int, seconds: float, floor: dict) -> dict:
+    """jassy's underruns per minute against the silent callback's of the same bench run,
+    and the excess: the underruns the host would not have caused on its own."""
+    per_minute = 60.0 * underruns / seconds
+    floor_per_minute = 60.0 * floor["floor_underruns"] / floor["floor_seconds"]
+    return {
+        "underruns_per_min": per_minute,
+        "floor_underruns_per_min": floor_per_minute,
+        "underruns_over_floor_per_min": per_minute - floor_per_minute,
     }
 
 
@@ -516,7 +529,11 @@ def print_live(r: dict) -> None:
         + "\n"
         f"  UDP haptic frames: tap stamp - audio onset {r['udp_tap_stamp_minus_audio_onset']} samples "
         f"(frames of {r.get('udp_frame_samples')}), force as played: {r['udp_tap_force_matches_device']}; "
-        f"{r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost, "
+        f"{r['udp_frames_sent']} sent, {r['udp_frames_lost']} lost "
+        f"({r['udp_frames_skipped_by_sender']} skipped "
+        f"by the sender, {r['udp_frames_refused_at_send']} refused by its socket, "
+        f"{r['udp_frames_dropped_at_receiver_socket']} dropped at the receiver's socket, "
+        f"{r['udp_frames_lost_otherwise']} otherwise), "
         f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
         f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
         f"(max {r['frame_interval_max_ms']:.3f}); final frame "
@@ -531,7 +548,10 @@ def print_live(r: dict) -> None:
             f"\n  floor (a callback writing silence, {r['floor_seconds']:.0f} s, same server settings and "
             f"busy main thread): {r['floor_callbacks']} callbacks, {r['floor_underruns']} underruns; "
             f"jackd's late cycles: {r['floor_driver_xruns']} of its own timer, "
-            f"{r['floor_client_xruns']} waiting for a client"
+            f"{r['floor_client_xruns']} waiting for a client\n"
+            f"  underruns per minute: jassy {r['underruns_per_min']:.1f}, "
+            f"floor {r['floor_underruns_per_min']:.1f}, "
+            f"over the floor {r['underruns_over_floor_per_min']:+.1f}"
             if "floor_underruns" in r
             else ""
         )

@@ -7,8 +7,13 @@ named t0, t1, ... (and t{i}_{j} between them) form a track, whose locations are
 interpolated with its linear shape functions (jassy.tracks).
 
 Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
-``name``, ``reference_gain`` and ``driving``), NPZ (same keys) and JASS ``.sy`` text files
-(read only).
+``name``, ``reference_gain``, ``driving``, ``attack`` and ``attack_rate``), NPZ (same keys)
+and JASS ``.sy`` text files (read only).
+
+``attack``: the strike's broadband start that no mode explains (the contact, the mallet, the
+unresolved high modes), as samples at ``attack_rate`` Hz of the response to a unit impulse
+(the gains' units times N s): a fitted model keeps the first strike's residual (recording
+minus modal resynthesis, a few ms) and plays it with every strike (StrikeAttack).
 ``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
 jassy.levels); without it the bank computes it from the model by the same rule.
 
@@ -89,6 +94,8 @@ class ModalModel:
     source: str = field(default="", compare=False)
     reference_gain: float | None = None  # for level = "calibrated" (jassy.levels)
     driving: np.ndarray | None = field(default=None, compare=False)  # driving-point gains [p, k]
+    attack: np.ndarray | None = field(default=None, compare=False)  # unit-impulse residual samples
+    attack_rate: float | None = None  # Hz, the sample rate of ``attack``
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -110,6 +117,11 @@ class ModalModel:
                 raise ModelError(
                     f"{where}: driving: expected numeric rows shaped like gains {gains.shape}"
                 ) from None
+        if self.attack is not None:
+            try:
+                self.attack = np.asarray(self.attack, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError, OverflowError):
+                raise ModelError(f"{where}: attack: expected a list of numbers (samples)") from None
         self.points = tuple(self.points)
         self.validate()
 
@@ -159,6 +171,18 @@ class ModalModel:
             raise ModelError(f"{where}: reference_gain: expected a number > 0, got {self.reference_gain!r}")
         if self.driving is not None and (not np.all(np.isfinite(self.driving)) or np.any(self.driving < 0)):
             raise ModelError(f"{where}: driving: expected finite driving-point gains >= 0")
+        if self.attack is not None:
+            if not np.all(np.isfinite(self.attack)):
+                raise ModelError(f"{where}: attack: expected finite samples, found NaN or Inf")
+            rate = self.attack_rate
+            if (
+                isinstance(rate, bool)
+                or not isinstance(rate, (int, float))
+                or not (math.isfinite(rate) and rate > 0)
+            ):
+                raise ModelError(
+                    f"{where}: attack_rate: expected the attack's sample rate > 0 Hz, got {rate!r}"
+                )
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -220,6 +244,7 @@ class ModalModel:
         return ModalModel(
             self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(keep),
+            attack=self.attack, attack_rate=self.attack_rate,
         )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
@@ -227,6 +252,7 @@ class ModalModel:
         return ModalModel(
             self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(slice(0, n)),
+            attack=self.attack, attack_rate=self.attack_rate,
         )  # fmt: skip
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
@@ -272,7 +298,8 @@ class ModalModel:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving", "attack",
+                   "attack_rate"}  # fmt: skip
         for key in data:
             if key not in allowed:
                 raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
@@ -296,6 +323,11 @@ class ModalModel:
             raise ModelError(f"{source}: reference_gain: expected a number > 0, got {reference!r}")
         reference = None if reference is None else float(reference)
         driving = data.get("driving")
+        attack, attack_rate = data.get("attack"), data.get("attack_rate")
+        if isinstance(attack_rate, np.ndarray) and attack_rate.ndim == 0:
+            attack_rate = attack_rate.item()
+        if attack is not None and attack_rate is None:
+            raise ModelError(f"{source}: attack: needs attack_rate (its sample rate in Hz)")
         return cls(
             data["frequencies"],
             data["decays"],
@@ -305,6 +337,8 @@ class ModalModel:
             source,
             reference,
             driving,
+            attack,
+            attack_rate,
         )
 
     @classmethod
@@ -348,6 +382,9 @@ class ModalModel:
                     extra = {} if ref is None else {"reference_gain": np.array(ref)}
                     if self.driving is not None:
                         extra["driving"] = self.driving
+                    if self.attack is not None:
+                        extra["attack"] = self.attack
+                        extra["attack_rate"] = np.array(float(self.attack_rate))
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -380,6 +417,9 @@ class ModalModel:
             lines.append("driving = [")
             lines.extend(f"  {arr(row)}," for row in self.driving)
             lines.append("]")
+        if self.attack is not None:
+            lines.append(f"attack_rate = {float(self.attack_rate)!r}")
+            lines.append(f"attack = {arr(self.attack)}")
         return "\n".join(lines) + "\n"
 
 
