@@ -65,10 +65,15 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
     """Run modes [0, active) over force[:n] into out[:n] (overwrites out).
 
     last[0]: the force sample before force[0] (each resonator hears F[n-1]); left at
-    force[n-1]. The direct term sum(d) F[n] is added once per sample."""
+    force[n-1]. The direct term sum(d) F[n] is added once per sample; the sum is formed
+    only if some F[n] is non-zero (a pass over the modes, per call: most blocks of an
+    impact's ringing have no force)."""
     direct = 0.0
-    for k in range(active):
-        direct += d[k]
+    for i in range(n):
+        if force[i] != 0.0:
+            for k in range(active):
+                direct += d[k]
+            break
     fp = last[0]
     i = 0
     while i + 4 <= n:
