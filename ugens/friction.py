@@ -85,6 +85,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import two_pole
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams, design
@@ -218,7 +219,7 @@ def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, p
         xh = 0.0
         fe = strikes[i]
         for k in range(nm):
-            hk = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fe
+            hk = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fe)
             h[k] = hk
             xh += hk
         s, u = uniform(s)
