@@ -268,7 +268,11 @@ def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
             rate=args.rate,
             on_tick=ticks.append if args.log else None,
         )
-        print(f"{counts['ticks']} ticks, {counts['frames']} frames, {counts['finals']} final", flush=True)
+        print(
+            f"{counts['ticks']} ticks, {counts['frames']} frames ({counts['lost']} lost), "
+            f"{counts['finals']} final",
+            flush=True,
+        )
     finally:
         if args.log:
             write_log(args.log, ticks)

@@ -1,13 +1,16 @@
 """A patch graph compiled into one numba function: the graph's *program*.
 
 :class:`Program` turns a prepared graph's topological order into an int64 table with one
-record per node: its kind, and the addresses and sizes of its output buffer, its inputs'
-buffers and its own state arrays. One numba function, :func:`run_program`, walks the table
-and calls each node's kernel on the node's own arrays for a sub-block: the same kernels,
-on the same arrays, as the ugens' ``process`` (so the same output bits). Because the table
-holds raw addresses, the same function runs inside the PortAudio callback (a ``@cfunc``
-that never takes the GIL, see jassy.callback) and offline, where :func:`run_blocks` renders
-every whole block up to the next event in one call (no Python per block).
+record per node: its kind, the address of its kind's compiled node function, and the
+addresses and sizes of its output buffer, its inputs' buffers and its own state arrays. One
+numba function, :func:`run_program`, walks the table and calls each node's function, which
+runs the node's kernel on the node's own arrays for a sub-block. Node functions are compiled
+per kind when a program first holds that kind, so a first render compiles only the kernels
+of the kinds its graph uses. They call the same kernels, on the same arrays, as the ugens'
+``process`` (so the same output bits). Because the table holds raw addresses, the same
+function runs inside the PortAudio callback (a ``@cfunc`` that never takes the GIL, see
+jassy.callback) and offline, where :func:`run_blocks` renders every whole block up to the
+next event in one call (no Python per block).
 
 Ugens with a kernel here: :data:`PROGRAM_UGENS`. A graph holding any other node, a feedback
 delay, an anytime budget or a contact that follows physics curves keeps the per-node Python
@@ -22,6 +25,7 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from llvmlite import ir as llvmir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 from numba.np.unsafe.ndarray import to_fixed_tuple
@@ -43,8 +47,10 @@ from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
 KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
 drop_stale_cache(__file__, KERNEL_MODULES)
 
-#: int64 slots per node record: a Header, then its kind's slots record, zero-padded.
+#: int64 slots per node record: a Header, its kind's slots record (zero-padded), and last the
+#: address of its kind's compiled function.
 RECORD = 16
+FUNCTION = RECORD - 1
 GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD, RADIATION = range(1, 10)
 SOUND_PRESSURE = 10
 
@@ -59,8 +65,8 @@ class Header(NamedTuple):
 
 #: Slots of the Header; a kind's slots follow it.
 HEADER = len(Header._fields)
-#: Slots a kind's record may use.
-KIND_SLOTS = RECORD - HEADER
+#: Slots a kind's record may use (between the Header and the FUNCTION slot).
+KIND_SLOTS = FUNCTION - HEADER
 
 # The kinds' slots records. In the table an array is its address, an int itself; the
 # comments give the arrays' float64 lengths (size: the header's).
@@ -205,113 +211,206 @@ def kind_slots(prog, base):
     """The KIND_SLOTS slots after the Header of the record at prog[base], as a tuple: its
     kind's record is the tuple's first fields (``ModalSlots(*kind_slots(prog, base)[:8])``;
     a wrong count does not compile)."""
-    return to_fixed_tuple(prog[base + HEADER : base + RECORD], KIND_SLOTS)
+    return to_fixed_tuple(prog[base + HEADER : base + FUNCTION], KIND_SLOTS)
 
 
-@nb.njit(cache=True, nogil=True)
-def run_node(prog, base, start, n):
-    """Run the node whose record starts at prog[base] for frames start .. start + n - 1."""
-    kind, out_at, size = header(prog, base)
+# One function per node kind, compiled (as a C-callable function) only when a program holds
+# that kind: a graph compiles the kernels it uses, not every kind's. Each reads its record
+# from the table at address ``table`` (see Program), for frames start .. start + n - 1.
+
+
+def _gain(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out_at, size = header(prog, base)
+    gain = GainSlots(*kind_slots(prog, base)[:3])
     out = _f64(out_at, size)
-    raw = kind_slots(prog, base)
-    if kind == GAIN:
-        gain = GainSlots(*raw[:3])
-        x = _f64(gain.input, size)
-        ramp = _f64(gain.ramp, 4)
-        if ramp[3] == 0:
-            scale(x, out, n, ramp[0])
-        else:
-            gains = _f64(gain.gains, size)
-            ramp_fill(ramp, gains, n)
-            scale_ramp(x, out, n, gains)
-    elif kind == MIXER:
-        mixer = MixerSlots(*raw[:3])
-        m = mixer.count
-        sources = _i64(mixer.sources, m)
-        gains = _f64(mixer.gains, m)
-        scale(_f64(sources[0], size), out, n, gains[0])
-        for j in range(1, m):
-            accumulate(_f64(sources[j], size), out, n, gains[j])
-    elif kind == MULTIPLY:
-        product = MultiplySlots(*raw[:2])
-        multiply(_f64(product.a, size), _f64(product.b, size), out, n)
-    elif kind == IMPACT:
-        impact_ = ImpactSlots(*raw[:3])
-        pulses = _f64_rows(impact_.pulses, impact_.capacity, 3)
-        count = _i64(impact_.count, 1)
-        count[0] = render_pulses(out, start, n, pulses, count[0])
-    elif kind == MODAL:
-        bank_ = ModalSlots(*raw[:8])
-        k = bank_.modes
-        force = _f64(bank_.input, size)
-        bank = _f64_rows(bank_.bank, 6, k)
-        meta = _i64(bank_.meta, 3)
-        last = _f64(bank_.last, 1)
-        if meta[1] > 0:  # ramping
-            meta[0] = meta[2]
-            delta = _f64_rows(bank_.delta, 4, k)
-            target = _f64_rows(bank_.target, 4, k)
-            meta[1] = resonate_ramp(
-                force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
-            )
-        else:
-            bank_step(force, out, start, n, bank, meta, _f64(bank_.floor, 1)[0], last)
-    elif kind == SCRAPE:
-        needle = ScrapeSlots(*raw[:9])
-        forces = _f64(needle.forces, size)
-        speeds = _f64(needle.speeds, size)
-        ramp_fill(_f64(needle.force_ramp, 4), forces, n)
-        ramp_fill(_f64(needle.speed_ramp, 4), speeds, n)
-        profile_contact(
-            out,
-            n,
-            forces,
-            speeds,
-            _f64(needle.profile, needle.length),
-            _f64(needle.state, 4),
-            _f64(needle.coef, 5),
-            _f64(needle.cfg, 9),
+    x = _f64(gain.input, size)
+    ramp = _f64(gain.ramp, 4)
+    if ramp[3] == 0:
+        scale(x, out, n, ramp[0])
+    else:
+        gains = _f64(gain.gains, size)
+        ramp_fill(ramp, gains, n)
+        scale_ramp(x, out, n, gains)
+
+
+def _mixer(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out_at, size = header(prog, base)
+    mixer = MixerSlots(*kind_slots(prog, base)[:3])
+    out = _f64(out_at, size)
+    m = mixer.count
+    sources = _i64(mixer.sources, m)
+    gains = _f64(mixer.gains, m)
+    scale(_f64(sources[0], size), out, n, gains[0])
+    for j in range(1, m):
+        accumulate(_f64(sources[j], size), out, n, gains[j])
+
+
+def _multiply(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    product = MultiplySlots(*kind_slots(prog, base)[:2])
+    multiply(_f64(product.a, size), _f64(product.b, size), _f64(out, size), n)
+
+
+def _impact(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    impact_ = ImpactSlots(*kind_slots(prog, base)[:3])
+    pulses = _f64_rows(impact_.pulses, impact_.capacity, 3)
+    count = _i64(impact_.count, 1)
+    count[0] = render_pulses(_f64(out, size), start, n, pulses, count[0])
+
+
+def _modal(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out_at, size = header(prog, base)
+    bank_ = ModalSlots(*kind_slots(prog, base)[:8])
+    out = _f64(out_at, size)
+    k = bank_.modes
+    force = _f64(bank_.input, size)
+    bank = _f64_rows(bank_.bank, 6, k)
+    meta = _i64(bank_.meta, 3)
+    last = _f64(bank_.last, 1)
+    if meta[1] > 0:  # ramping
+        meta[0] = meta[2]
+        delta = _f64_rows(bank_.delta, 4, k)
+        target = _f64_rows(bank_.target, 4, k)
+        meta[1] = resonate_ramp(
+            force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
         )
-    elif kind == RESONANT_SCRAPE:
-        noisy = ResonantScrapeSlots(*raw[:7])
-        forces = _f64(noisy.forces, size)
-        speeds = _f64(noisy.speeds, size)
-        ramp_fill(_f64(noisy.force_ramp, 4), forces, n)
-        ramp_fill(_f64(noisy.speed_ramp, 4), speeds, n)
-        resonant_noise(out, n, forces, speeds, _u64(noisy.rng, 1), _f64(noisy.state, 8), _f64(noisy.cfg, 10))
-    elif kind == BIQUAD:
-        filt = BiquadSlots(*raw[:8])
-        x = _f64(filt.input, size)
-        freq = _f64(filt.freq_ramp, 4)
-        q = _f64(filt.q_ramp, 4)
-        coef = _f64(filt.coef, 5)
-        state = _f64(filt.state, 2)
-        setup = _f64(filt.setup, 2)
-        mode = int(setup[0])
-        if freq[3] == 0 and q[3] == 0:
-            biquad(x, out, n, coef, state)
-        else:
-            freqs = _f64(filt.freqs, size)
-            qs = _f64(filt.qs, size)
-            ramp_fill(freq, freqs, n)
-            ramp_fill(q, qs, n)
-            biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
-            if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
-                design_biquad(mode, freq[0], q[0], setup[1], coef)
-    elif kind == RADIATION:
-        rad = RadiationSlots(*raw[:3])
-        radiate(_f64(rad.input, size), out, n, _f64(rad.coef, 4), _f64(rad.state, 3))
-    elif kind == SOUND_PRESSURE:
-        sp = SoundPressureSlots(*raw[:4])
-        x = _f64(sp.input, size)
-        sound_pressure(x, out, n, _f64(sp.coef, 3), _f64(sp.state, 3), _f64(sp.setup, 3))
+    else:
+        bank_step(force, out, start, n, bank, meta, _f64(bank_.floor, 1)[0], last)
+
+
+def _scrape(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    needle = ScrapeSlots(*kind_slots(prog, base)[:9])
+    forces = _f64(needle.forces, size)
+    speeds = _f64(needle.speeds, size)
+    ramp_fill(_f64(needle.force_ramp, 4), forces, n)
+    ramp_fill(_f64(needle.speed_ramp, 4), speeds, n)
+    profile_contact(
+        _f64(out, size),
+        n,
+        forces,
+        speeds,
+        _f64(needle.profile, needle.length),
+        _f64(needle.state, 4),
+        _f64(needle.coef, 5),
+        _f64(needle.cfg, 9),
+    )
+
+
+def _resonant_scrape(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    noisy = ResonantScrapeSlots(*kind_slots(prog, base)[:7])
+    forces = _f64(noisy.forces, size)
+    speeds = _f64(noisy.speeds, size)
+    ramp_fill(_f64(noisy.force_ramp, 4), forces, n)
+    ramp_fill(_f64(noisy.speed_ramp, 4), speeds, n)
+    resonant_noise(
+        _f64(out, size),
+        n,
+        forces,
+        speeds,
+        _u64(noisy.rng, 1),
+        _f64(noisy.state, 8),
+        _f64(noisy.cfg, 10),
+    )
+
+
+def _biquad(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out_at, size = header(prog, base)
+    filt = BiquadSlots(*kind_slots(prog, base)[:8])
+    out = _f64(out_at, size)
+    x = _f64(filt.input, size)
+    freq = _f64(filt.freq_ramp, 4)
+    q = _f64(filt.q_ramp, 4)
+    coef = _f64(filt.coef, 5)
+    state = _f64(filt.state, 2)
+    setup = _f64(filt.setup, 2)
+    mode = int(setup[0])
+    if freq[3] == 0 and q[3] == 0:
+        biquad(x, out, n, coef, state)
+    else:
+        freqs = _f64(filt.freqs, size)
+        qs = _f64(filt.qs, size)
+        ramp_fill(freq, freqs, n)
+        ramp_fill(q, qs, n)
+        biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
+        if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
+            design_biquad(mode, freq[0], q[0], setup[1], coef)
+
+
+def _radiation(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    rad = RadiationSlots(*kind_slots(prog, base)[:3])
+    radiate(_f64(rad.input, size), _f64(out, size), n, _f64(rad.coef, 4), _f64(rad.state, 3))
+
+
+def _sound_pressure(table, base, start, n):
+    prog = _i64(table, base + RECORD)
+    _, out, size = header(prog, base)
+    sp = SoundPressureSlots(*kind_slots(prog, base)[:4])
+    x = _f64(sp.input, size)
+    sound_pressure(x, _f64(out, size), n, _f64(sp.coef, 3), _f64(sp.state, 3), _f64(sp.setup, 3))
+
+
+#: Each kind's node function, by kind.
+NODE_FUNCTIONS = {
+    GAIN: _gain,
+    MIXER: _mixer,
+    MULTIPLY: _multiply,
+    IMPACT: _impact,
+    MODAL: _modal,
+    SCRAPE: _scrape,
+    RESONANT_SCRAPE: _resonant_scrape,
+    BIQUAD: _biquad,
+    RADIATION: _radiation,
+    SOUND_PRESSURE: _sound_pressure,
+}
+#: The C signature of a compiled node function: (table address, record start, start, n).
+NODE_SIGNATURE = types.void(types.int64, types.int64, types.int64, types.int64)
+_compiled_nodes: dict[int, object] = {}
+
+
+def node_function_address(kind: int) -> int:
+    """The address of kind's compiled node function (compiled, or loaded from numba's cache,
+    on first use)."""
+    compiled = _compiled_nodes.get(kind)
+    if compiled is None:
+        compiled = nb.cfunc(NODE_SIGNATURE, cache=True, nogil=True)(NODE_FUNCTIONS[kind])
+        _compiled_nodes[kind] = compiled
+    return compiled.address
+
+
+@intrinsic
+def call_node(typingctx, function, table, base, start, n):
+    """Call the compiled node function at address ``function`` (see NODE_SIGNATURE)."""
+    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvmir.IntType(64)
+        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
+        builder.call(pointer, args[1:])
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @nb.njit(cache=True, nogil=True)
 def run_program(prog, start, n):
     """Run every node of the program, in order, for frames start .. start + n - 1."""
+    table = prog.ctypes.data
     for i in range(prog[0]):
-        run_node(prog, 1 + i * RECORD, start, n)
+        base = 1 + i * RECORD
+        call_node(prog[base + FUNCTION], table, base, start, n)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -372,6 +471,7 @@ class Program:
         record = self.table[base : base + RECORD]
         record[:] = 0
         record[:HEADER] = Header(PROGRAM_UGENS[type(node)], node.out.ctypes.data, node.max_block)
+        record[FUNCTION] = node_function_address(record[0])
         for j, value in enumerate(slots):
             record[HEADER + j] = value.ctypes.data if isinstance(value, np.ndarray) else value
         self._arrays[i] = [node.out, *(a for a in slots if isinstance(a, np.ndarray))]

@@ -1,0 +1,114 @@
+"""The level convention of sources (jassy.levels): every source is classified, and the
+level rules of the sources that sound by themselves hold on rendered output (closed forms:
+Campbell's theorem for a bubble stream, the v^3 law of flow noise, the jet band at a
+cavity's resonance)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import ugens
+from jassy import Graph, render
+from jassy.levels import (
+    CALIBRATED_LOOPS,
+    FORCE_SOURCES,
+    SIGNALS,
+    SOUND_SOURCES,
+    TONAL_FORCE_SOURCES,
+    bubble_stream_rms,
+    cavity_tone_rms,
+)
+from jassy.registry import ugen_types
+from ugens.wind import END_CORRECTION
+
+FS = 48000
+
+
+def rendered(ugen, duration):
+    return render(Graph(ugen), [], duration=duration, sample_rate=FS, limiter=False).audio[0]
+
+
+def test_every_source_has_a_level_convention():
+    """Each ugen that needs no input is in exactly one class of jassy.levels."""
+    classes = [set(FORCE_SOURCES), set(TONAL_FORCE_SOURCES), set(CALIBRATED_LOOPS), set(SIGNALS)]
+    classes.append(set(SOUND_SOURCES))
+    sources = {
+        name
+        for name, cls in ugen_types().items()
+        if not set(cls.inputs) - set(getattr(cls, "optional_inputs", ()))
+    }
+    counts = {name: sum(name in c for c in classes) for name in sources}
+    assert {n: k for n, k in counts.items() if k != 1} == {}
+    assert set().union(*classes) <= sources
+
+
+def power_law_radii(rng, n, lo, hi, exponent):
+    """Radii with density ~ r^-exponent on [lo, hi] by rejection from a uniform draw."""
+    out = np.empty(0)
+    while out.size < n:
+        r = rng.uniform(lo, hi, 4 * n)
+        keep = rng.uniform(0.0, 1.0, r.size) < (r / lo) ** -exponent
+        out = np.concatenate([out, r[keep]])
+    return out[:n]
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "params, overlap",
+    [
+        ({}, 0.0),  # the defaults: 100 /s, 1-5 mm, r^-1.5, depth 0.5-1: bubbles rarely overlap
+        ({"rate": 2000.0, "min_radius": 2e-3, "max_radius": 3e-3, "exponent": 0.0, "max_voices": 256}, 1.0),
+    ],
+)
+def test_bubble_stream_rms_is_campbells_theorem(params, overlap):
+    node = ugens.BubbleStream(name="b", seed=3, **params)
+    v = node.values
+    args = [v[k] for k in ("rate", "min_radius", "max_radius", "exponent", "min_depth", "max_depth", "gain")]
+    predicted = bubble_stream_rms(*args)
+    duration = 40.0
+    x = rendered(node, duration)
+    # the estimate's spread: mean square over T of a shot noise ~ sqrt(E[e^2] / (rate T)) / E[e],
+    # e a bubble's energy, from Monte Carlo radii and depths (independent of the quadrature)
+    rng = np.random.default_rng(0)
+    r = power_law_radii(rng, 200_000, v["min_radius"], v["max_radius"], v["exponent"])
+    depth = rng.uniform(v["min_depth"], v["max_depth"], r.size)
+    d = 0.13 / r + 0.0072 * r**-1.5
+    a = v["gain"] * depth * (r / 1e-3) ** 1.5
+    e = a**2 / (4 * d)  # energy of a e^{-dt} sin(w0 t), w0 >> d
+    dc = v["rate"] * np.mean(a * r / (2 * math.pi * 3.0))  # rate E[int p dt] = rate E[a / w0]
+    assert math.sqrt(v["rate"] * e.mean() + dc**2) == pytest.approx(predicted, rel=0.01)
+    # plus, where bubbles overlap, a Gaussian noise's 1 / sqrt(d T) (its power estimated over
+    # T with correlation time 1 / d; the slowest decay taken: conservative)
+    spread = math.hypot(
+        math.sqrt(np.mean(e**2) / (v["rate"] * duration)) / e.mean(), overlap / math.sqrt(d.min() * duration)
+    )
+    measured = float(np.mean(x**2))
+    assert abs(measured / predicted**2 - 1) < 4 * spread, (measured, predicted**2, spread)
+
+
+@pytest.mark.timeout(60)
+def test_wind_rms_is_its_level_at_10_m_s_and_grows_as_speed_cubed():
+    for speed in (10.0, 20.0):
+        x = rendered(ugens.Wind(name="w", speed=speed, gustiness=0.0, level=0.05), 4.0)
+        assert np.sqrt(np.mean(x**2)) == pytest.approx(0.05 * (speed / 10.0) ** 3, rel=0.03)
+
+
+def helmholtz(volume, neck_length, neck_radius, c=343.0):
+    area = math.pi * neck_radius**2
+    return c / (2 * math.pi) * math.sqrt(area / (volume * (neck_length + END_CORRECTION * neck_radius)))
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("on_resonance", [True, False])
+def test_cavity_tone_rms_is_the_jet_band_at_the_resonance(on_resonance):
+    """Default bottle (f_H 110 Hz); the jet either centred on it or at the default 6 m/s
+    (60 Hz: |H| 0.62). A broader cavity (Q 20) than the default so 30 s pin the RMS."""
+    f_h = helmholtz(7.5e-4, 0.08, 0.0095)
+    speed = f_h * 0.02 / 0.2 if on_resonance else 6.0
+    node = ugens.CavityTone(name="c", speed=speed, resonance_q=20.0, level=0.1)
+    x = rendered(node, 30.0)[FS:]
+    predicted = cavity_tone_rms(0.1, speed, 0.02, f_h)
+    assert np.sqrt(np.mean(x**2)) == pytest.approx(predicted, rel=0.08)
