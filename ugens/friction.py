@@ -260,15 +260,18 @@ def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, p
         fn = normals[i]
         vb = speeds[i]
         if fn > MIN_CONTACT:
-            f_s = prm.static * fn
-            f_c = prm.dynamic * fn
-            z_ba = prm.breakaway * f_c / s0
+            # the friction laws' settings are read in the loop: read once before it, fastmath
+            # may fold breakaway / s0 and the renders change in their last bits
+            laws = friction_params(par)
+            f_s = laws.static * fn
+            f_c = laws.dynamic * fn
+            z_ba = laws.breakaway * f_c / s0
             w = s3 * u * math.sqrt(abs(v_prev) * fn)
             z0 = z
             D = 1.0 + Gv * s2
             K = Gv * (s0 + s1 * fs)
             A = vb - (xh - x_prev) * fs + Gv * (s1 * fs * z0 - w)
-            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, prm.stribeck, z_ba)
+            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, laws.stribeck, z_ba)
             v = (A - K * z) / D
             f = s0 * z + s1 * fs * (z - z0) + s2 * v + w
         else:
