@@ -9,6 +9,9 @@ Ugens with ``inline_events`` (ImpactForce, ModalBank) apply an event at its own 
 inside a sub-block, so their events do not split it: they are handed over at the start
 of the sub-block that contains their frame (parameter changes through ``set_param_at``).
 A rigid scene's hundreds of impacts then cost no extra sub-blocks of the whole graph.
+
+A location ramp along a model's texture track becomes a chain of ramps through the
+track's points (jassy.tracks.walk_score) before the render starts.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from jassy.errors import PatchError, suggest
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.jit import specialise
+from jassy.tracks import walk_score
 
 if TYPE_CHECKING:  # the program imports the ugens: not at import time of the core
     from jassy.program import Program
@@ -130,7 +134,7 @@ class Scheduler:
         self.sample_rate = float(sample_rate)
         checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
         order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
-        self.events = [checked[i] for i in order]
+        self.events = walk_score(graph, [checked[i] for i in order], self.sample_rate)
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
         self.apply_frames = [math.ceil(t - _SAMPLE_SLACK) for t in self.sample_times]
         self.inline = [self._is_inline(ev) for ev in self.events]
