@@ -227,18 +227,19 @@ class UGen:
         are capped to it when the delay closes a loop."""
         raise NotImplementedError(f"{self.type_name} is not a delay")
 
-    def anytime_attach(self, period: int, horizon: float, weighting: str) -> None:
-        """Budgeted banks: start a budgeted render (decisions every ``period`` frames)."""
+    def anytime_attach(self, period: int, horizon: float, weighting: str, scores) -> None:
+        """Budgeted banks: start a budgeted render (decisions every ``period`` frames,
+        importance written to ``scores``)."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_driven(self) -> bool:
-        """Budgeted banks: whether any force was heard in the last budget period."""
+    def anytime_period(self, kicked: bool) -> bool:
+        """Budgeted banks, at each budget period: whether any force was heard in the last."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int) -> None:
         """Budgeted banks (``supports_budget``): per-mode importance for the coming
         ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
-        the next period."""
+        the next period, into the scores given at attach."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events
