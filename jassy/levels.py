@@ -189,6 +189,26 @@ SOUND_SOURCES = {
 }
 
 
+def level_convention(type_name: str) -> str:
+    """One line on how a ugen's output level is set (for ``jassy doc``), "" for processors."""
+    if type_name in FORCE_SOURCES:
+        return (
+            "a force in N: through a calibrated ModalBank with unit gain its defaults peak within "
+            "-30..-6 dBFS on every shipped model"
+        )
+    if type_name in TONAL_FORCE_SOURCES:
+        return "a force in N with a line or narrow-band spectrum: its level depends on the modes it meets"
+    if type_name in CALIBRATED_LOOPS:
+        return "level = 'calibrated' scales what it outputs by the model's reference gain (as ModalBank)"
+    if type_name in SOUND_SOURCES:
+        level = SOUND_SOURCES[type_name]
+        scale = "1.0 = 105 dB SPL" if level.unit == "full scale" else "Pa"
+        return f"sound pressure at the listener ({scale}), {level.statistic}: {level.rule}"
+    if type_name in SIGNALS:
+        return "a signal, not a sound: unit scale (Sampler: its file as it is)"
+    return ""
+
+
 def bubble_stream_rms(rate, min_radius, max_radius, exponent, min_depth, max_depth, gain, points=4096):
     """RMS of a BubbleStream's output (full scale) at a steady ``rate`` (1/s), by Campbell's
     theorem for a Poisson shot noise: mean square = rate E[int p^2 dt] + (rate E[int p dt])^2.

@@ -112,3 +112,14 @@ def test_cavity_tone_rms_is_the_jet_band_at_the_resonance(on_resonance):
     x = rendered(node, 30.0)[FS:]
     predicted = cavity_tone_rms(0.1, speed, 0.02, f_h)
     assert np.sqrt(np.mean(x**2)) == pytest.approx(predicted, rel=0.08)
+
+
+def test_jassy_doc_states_each_sources_level_convention():
+    from jassy.doc import describe_ugen
+
+    for name, cls in ugen_types().items():
+        if not set(cls.inputs) - set(getattr(cls, "optional_inputs", ())):
+            line = next((ln for ln in describe_ugen(cls).splitlines() if ln.startswith("level: ")), "")
+            assert len(line) > 20, name
+    assert "1.0 = 105 dB SPL" in describe_ugen(ugen_types()["Wind"])
+    assert "(Pa)" in describe_ugen(ugen_types()["Explosion"])
