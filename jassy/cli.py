@@ -377,9 +377,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         def say(message: str) -> None:
             print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
 
+        from patches.wok_bench import wok_rows
         from physics.rigid.pile_bench import bench_piles, print_piles
 
         rows = bench_rigid(quick=args.quick, progress=say)
+        say("wok scene: physics alone and the full render")
+        rows += wok_rows(2.0 if args.quick else 6.0)
         piles = bench_piles((10, 100) if args.quick else (100, 1000), progress=say)
         say("solvers: ABA, Lemke, PGS")
         solvers = bench_solvers(quick=args.quick)
