@@ -9,22 +9,31 @@ import time
 import numpy as np
 
 from jassy.hapticframes import FLAG_FINAL, FrameRecorder, HapticFrame
-from jassy.hapticsender import CLOCK_OFFSET, LATE, LOGGED_SENDS, LOST, SENT, jitter
+from jassy.hapticsender import CLOCK_OFFSET, LATE, LOGGED_SENDS, LOST, REALTIME, SEND_DROPPED, SENT, jitter
 
 
-def frame_stats(live, frames: list[HapticFrame]) -> dict:
+def frame_stats(live, frames: list[HapticFrame], receiver_dropped: int | None = None) -> dict:
     """Inter-frame send times (p1/p50/p99, ms) from the sender's own log, frames sent,
-    frames lost (skipped by the sender plus sequence gaps at the receiver) and frames
-    sent more than 0.5 ms after their samples began to play."""
+    frames lost and where: skipped by the sender (it fell a haptic ring behind), refused
+    by its socket (send buffer full), dropped by the kernel at the receiving socket
+    (``receiver_dropped``, its buffer full) and any other sequence gap at the receiver;
+    and frames sent more than 0.5 ms after their samples began to play."""
     control = live.tap.control
     spacing = jitter(live.tap.send_times, int(control[LOGGED_SENDS]))
     sequence = np.array([f.sequence for f in frames if not f.flags & FLAG_FINAL])
     gaps = int(np.sum(np.diff(sequence) - 1)) if sequence.size > 1 else 0
+    skipped, refused = int(control[LOST]), int(control[SEND_DROPPED])
+    # every lost frame is a sequence gap at the receiver, whatever the cause
     return {
         "udp_frames_sent": int(control[SENT]),
         "udp_frames_received": len(frames),
-        "udp_frames_lost": int(control[LOST]) + gaps,
+        "udp_frames_lost": gaps,
+        "udp_frames_skipped_by_sender": skipped,
+        "udp_frames_refused_at_send": refused,
+        "udp_frames_dropped_at_receiver_socket": receiver_dropped,
+        "udp_frames_lost_otherwise": gaps - skipped - refused - (receiver_dropped or 0),
         "udp_frames_late": int(control[LATE]),
+        "udp_sender_realtime": bool(control[REALTIME]),
         "udp_final_frame": bool(frames and frames[-1].flags & FLAG_FINAL),
         "frame_interval_p1_ms": spacing["p1_ms"],
         "frame_interval_p50_ms": spacing["p50_ms"],

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jassy.errors import JassyError
-from jassy.hapticframes import FLAG_FINAL, decode, parse_address
+from jassy.hapticframes import FLAG_FINAL, decode, open_receiver, parse_address
 from jassy.hapticsender import request_realtime_priority
 from jassy.probeinput import BUTTON_MAIN, encode_pose
 
@@ -94,13 +94,13 @@ def run_bridge(
     host, port = parse_address(listen, "--listen")
     if not 0 < rate <= 10000:
         raise JassyError(f"--rate: expected Hz in (0, 10000], got {rate}")
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind((host, port))
+    rx, _ = open_receiver(host, port)
     rx.setblocking(False)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     request_realtime_priority()  # a servo loop must wake on time
     output = ForceOutput()
-    counts = {"ticks": 0, "frames": 0, "finals": 0, "rejected": 0}
+    counts = {"ticks": 0, "frames": 0, "finals": 0, "rejected": 0, "lost": 0}
+    expected = None  # the next frame's sequence number: a jump is frames lost on the way
     start = time.monotonic()
     tick = 0
     try:
@@ -120,6 +120,9 @@ def run_bridge(
                     continue
                 counts["frames"] += 1
                 counts["finals"] += bool(frame.flags & FLAG_FINAL)
+                if expected is not None and frame.sequence > expected:
+                    counts["lost"] += frame.sequence - expected
+                expected = frame.sequence + 1
                 output.take(frame.force, frame.flags, time.monotonic())
             now = time.monotonic()
             force, letting_go = output(now)

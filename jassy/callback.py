@@ -58,6 +58,7 @@ from jassy.program import (
 )
 from jassy.safety import CEILING, limit, release_coefficient
 from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from jassy.tracks import walk_score
 from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
 from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
@@ -556,7 +557,7 @@ class CallbackRenderer:
                 self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
         self._staged = 0
         checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        self.score = sorted(checked, key=lambda ev: ev.time)
+        self.score = walk_score(graph, sorted(checked, key=lambda ev: ev.time), self.sample_rate)
         self._next_score = 0
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played

@@ -19,7 +19,7 @@ from jassy.cli_checks import (
     scene_options,
     signals_stop,
 )
-from jassy.errors import JassyError
+from jassy.errors import JassyError, suggest
 from jassy.offline import OFFLINE_BLOCK
 from patches.scenes import SCENES
 
@@ -268,7 +268,11 @@ def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
             rate=args.rate,
             on_tick=ticks.append if args.log else None,
         )
-        print(f"{counts['ticks']} ticks, {counts['frames']} frames, {counts['finals']} final", flush=True)
+        print(
+            f"{counts['ticks']} ticks, {counts['frames']} frames ({counts['lost']} lost), "
+            f"{counts['finals']} final",
+            flush=True,
+        )
     finally:
         if args.log:
             write_log(args.log, ticks)
@@ -337,115 +341,6 @@ def _cmd_info(args: argparse.Namespace) -> int:
                 f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s)"
                 + (f" ({', '.join(model.points)})" if model.points else "")
             )
-    return 0
-
-
-def _cmd_bench(args: argparse.Namespace) -> int:
-    from jassy import bench
-
-    if args.name == "batch":
-        from jassy.batch import bench_batch, print_bench
-
-        result = bench_batch(duration=1.0, repeats=1) if args.quick else bench_batch()
-        print(json.dumps(result, indent=2)) if args.json else print_bench(result)
-    if args.name == "burr":
-        from physics.burr.bench import bench_burr, print_burr
-
-        rows = bench_burr(n=128 if args.quick else 256)
-        print(json.dumps(rows, indent=2)) if args.json else print_burr(rows)
-    if args.name == "live":
-        result = bench.live_bench(
-            seconds=args.seconds or 60.0,
-            block=args.block,
-            ring_blocks=args.ring,
-            mode=args.mode,
-            floor=args.floor,
-        )
-        print(json.dumps(result, indent=2) if args.json else "", end="")
-        if not args.json:
-            bench.print_live(result)
-    if args.name == "contact":
-        rows = bench.contact_bench()
-        if args.json:
-            print(json.dumps(rows, indent=2))
-        else:
-            bench.print_contact(rows)
-    if args.name == "rigid":
-        from physics.rigid.bench import bench_rigid, print_rigid
-        from physics.rigid.solver_bench import bench_solvers, print_solvers
-
-        def say(message: str) -> None:
-            print(f"bench rigid: {message} ...", file=sys.stderr, flush=True)
-
-        from patches.wok_bench import wok_rows
-        from physics.rigid.pile_bench import bench_piles, print_piles
-
-        rows = bench_rigid(quick=args.quick, progress=say)
-        say("wok scene: physics alone and the full render")
-        rows += wok_rows(2.0 if args.quick else 6.0)
-        piles = bench_piles((10, 100) if args.quick else (100, 1000), progress=say)
-        say("solvers: ABA, Lemke, PGS")
-        solvers = bench_solvers(quick=args.quick)
-        print(json.dumps({"world": rows, "mujoco": piles, "solvers": solvers}, indent=2)) if args.json else (
-            print_rigid(rows), print_piles(piles), print_solvers(solvers))  # fmt: skip
-    if args.name == "deform":
-        from physics.deform.bench import bench_deform, print_deform
-        from physics.deform.cataract_bench import bench_cataract, print_cataract
-
-        rows, cataract = bench_deform(quick=args.quick), bench_cataract(quick=args.quick)
-        print(json.dumps({"bem": rows, "cataract": cataract}, indent=2)) if args.json else (
-            print_deform(rows), print_cataract(cataract))  # fmt: skip
-    if args.name == "rod":
-        from physics.modal._blas import single_threaded
-        from physics.rod.bench import bench_rod, print_rod
-        from physics.rod.contact_bench import bench_rod_contact, print_rod_contact
-        from physics.rod.dfcp_bench import bench_dfcp, print_dfcp
-
-        with single_threaded():
-            rows = bench_rod(quick=args.quick)
-            contact = bench_rod_contact(quick=args.quick)
-            dfcp = bench_dfcp()
-        print(json.dumps({"models": rows, "contact": contact, "dfcp": dfcp}, indent=2)) if args.json else (
-            print_rod(rows), print_rod_contact(contact), print_dfcp(dfcp))  # fmt: skip
-    if args.name == "fit":
-        from physics.modal._blas import single_threaded
-        from physics.modal.fit_bench import bench_fit, fem_recovery, print_fem, print_fit
-
-        with single_threaded():
-            result = bench_fit(cases=6 if args.quick else 40, progress=not args.json)
-            fem = [] if args.quick else fem_recovery()
-        print(json.dumps({**result, "fem": fem}, indent=2)) if args.json else (
-            print_fit(result),
-            print_fem(fem),
-        )
-    if args.name == "anytime":
-        from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
-
-        if args.plot:
-            from jassy.preview import check_png, require_matplotlib
-
-            require_matplotlib("--plot")
-            check_png(args.plot, "--plot")
-        result = bench_anytime(quick=args.quick)
-        print(json.dumps(result, indent=2)) if args.json else print_anytime(result)
-        if args.plot:
-            plot_anytime(result, args.plot)
-    if args.name == "startup":
-        from jassy.startup import bench_startup, print_startup
-
-        scenes = ("bell",) if args.quick else ("bell", "wok")
-        rows = bench_startup(
-            scenes, progress=lambda m: print(f"bench startup: {m} ...", file=sys.stderr, flush=True)
-        )
-        print(json.dumps(rows, indent=2)) if args.json else print_startup(rows)
-    if args.name == "modal":
-        counts = (64, 1024) if args.quick else (64, 1024, 16384)
-        rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
-        graph = bench.graph_bench(seconds=2.0 if args.quick else 10.0)
-        if args.json:
-            print(json.dumps({"modal": rows, "graph": graph}, indent=2))
-        else:
-            bench.print_modal(rows, graph)
     return 0
 
 
@@ -589,33 +484,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE")
     p.set_defaults(func=_cmd_info)
 
+    from jassy.benches import BENCHES, bench_help, run_bench
+
     p = sub.add_parser("bench", help="measure throughput against references")
-    p.add_argument(
-        "name",
-        choices=[
-            "modal",
-            "contact",
-            "live",
-            "batch",
-            "burr",
-            "rigid",
-            "deform",
-            "rod",
-            "startup",
-            "anytime",
-            "fit",
-        ],
-        help="modal: ModalBank vs plain numba and scipy, and the graph; "
-        "contact: real-time factor of every built-in patch; "
-        "live: underruns, latency and skew on a JACK dummy server; "
-        "batch: variants per minute serial vs 2 workers; burr: haptic update time on a 256^3 phantom; "
-        "rigid: world steps/s at 10-1000 bodies, wok real-time factor, ABA/Lemke/PGS; "
-        "deform: Green's function precompute and capacitance-matrix haptic update, cataract steps; "
-        "rod: step time vs n (chained, mixed) and 1000 elements with 100 contacts; "
-        "startup: first render in a fresh process, empty and filled kernel cache (bell, wok); "
-        "anytime: error and CPU of mode budgets vs the full bank (bell, scrape, wok); "
-        "fit: jassy fit's recall and errors on random synthetic recordings, and its speed",
-    )
+    p.add_argument("name", choices=list(BENCHES), help=bench_help())
     p.add_argument("--plot", metavar="PNG", help="anytime: plot the error against the budget")
     p.add_argument("--seconds", type=float, help="live: duration (default 60)")
     p.add_argument("--ring", type=float, default=2.5, help="live: blocks rendered ahead (default 2.5)")
@@ -633,7 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--quick", action="store_true", help="smaller sizes (for CI smoke runs)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.set_defaults(func=_cmd_bench)
+    p.set_defaults(func=run_bench)
 
     p = sub.add_parser("warm", help="compile the numba kernels of scenes ahead of their first render")
     p.add_argument("scenes", nargs="*", default=["bell", "wok"], help="patches or scenes (default: bell wok)")
@@ -673,6 +545,7 @@ def _cmd_rod(args: argparse.Namespace) -> int:
     if args.name not in EXPERIMENTS:
         raise JassyError(
             f"rod: unknown experiment {args.name!r}; expected one of {', '.join(sorted(EXPERIMENTS))}"
+            f"{suggest(args.name, EXPERIMENTS)}"
         )
     if args.plot and not args.plot.lower().endswith(".png"):
         raise JassyError(f"--plot: expected a .png file name, got {args.plot!r}")

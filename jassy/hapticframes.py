@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import socket
 import struct
+import sys
 import time
 from typing import NamedTuple
 
@@ -102,23 +103,65 @@ def parse_address(address: str, what: str = "--haptic-udp") -> tuple[str, int]:
     return host, int(port)
 
 
+#: Receive buffer asked for (bytes; capped by net.core.rmem_max): at the default 208 KiB a
+#: receiver held off the CPU for ~0.2 s (a loaded machine) lost frames in the kernel.
+RECEIVE_BUFFER = 4 << 20
+#: Linux's socket option that reports, with each datagram, how many the socket dropped.
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+#: Linux's SO_RCVBUF beyond net.core.rmem_max, allowed with CAP_NET_ADMIN (Python lacks the name).
+SO_RCVBUFFORCE = 33
+_DROPS = struct.Struct("=I")
+
+
+def open_receiver(host: str, port: int) -> tuple[socket.socket, bool]:
+    """A bound UDP socket with a large receive buffer, and whether it reports the
+    datagrams the kernel dropped because that buffer was full (SO_RXQ_OVFL, Linux)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:  # where allowed, past a low rmem_max (a container's default 208 KiB)
+        if not sys.platform.startswith("linux"):
+            raise OSError("SO_RCVBUFFORCE is Linux's")
+        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, RECEIVE_BUFFER)
+    except OSError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+        counts_drops = True
+    except OSError:
+        counts_drops = False
+    sock.bind((host, port))
+    return sock, counts_drops
+
+
+def kernel_drops(ancillary: list) -> int | None:
+    """The socket's running count of dropped datagrams from recvmsg's ancillary data."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(data) >= _DROPS.size:
+            return _DROPS.unpack_from(data)[0]
+    return None
+
+
 class FrameReceiver:
-    """Receives haptic frames on a UDP port (device bridges, tests, the bench)."""
+    """Receives haptic frames on a UDP port (device bridges, tests, the bench).
+    ``dropped``: datagrams the kernel dropped at this socket (its buffer full) before
+    the last one received; None where the OS does not report it."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, timeout: float = 0.5):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind((host, port))
+        self.sock, counts = open_receiver(host, port)
         self.sock.settimeout(timeout)
         self.address = f"{host}:{self.sock.getsockname()[1]}"
+        self.dropped: int | None = 0 if counts else None
 
     def receive(self, timeout: float | None = None) -> HapticFrame | None:
         """The next frame, or None when none arrives within the timeout (s)."""
         if timeout is not None:
             self.sock.settimeout(timeout)
         try:
-            data, _ = self.sock.recvfrom(65536)
+            data, ancillary, _, _ = self.sock.recvmsg(65536, socket.CMSG_SPACE(_DROPS.size))
         except (TimeoutError, BlockingIOError):
             return None
+        drops = kernel_drops(ancillary)
+        if drops is not None and self.dropped is not None:
+            self.dropped = max(self.dropped, drops)
         return decode(data, time.monotonic())
 
     def close(self) -> None:
@@ -138,6 +181,7 @@ class FrameRecorder:
         self.receiver = FrameReceiver(host, port, timeout=0.05)
         self.address = self.receiver.address
         self.frames: list[HapticFrame] = []
+        self._dropped: int | None = None
         if process:
             context = multiprocessing.get_context("fork")
             self._stop, self._final = context.Event(), context.Event()
@@ -158,16 +202,22 @@ class FrameRecorder:
                     self._final.set()
                     break
         if results is not None:
-            results.send(self.frames)
+            results.send((self.frames, self.receiver.dropped))
 
     def wait_final(self, timeout: float = 2.0) -> bool:
         """True once the final frame has arrived (waits at most ``timeout`` s)."""
         return self._final.wait(timeout)
 
+    @property
+    def dropped(self) -> int | None:
+        """Datagrams the kernel dropped at the receiving socket (known after :meth:`stop`
+        in process mode)."""
+        return self._dropped if self._results is not None else self.receiver.dropped
+
     def stop(self) -> list[HapticFrame]:
         self._stop.set()
         if self._results is not None:
-            self.frames = self._results.recv()
+            self.frames, self._dropped = self._results.recv()
         self._worker.join()
         self.receiver.close()
         return self.frames

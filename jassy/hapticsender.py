@@ -26,9 +26,11 @@ import numpy as np
 
 from jassy.hapticframes import FLAG_FINAL, encode
 
-#: Control slots (float64) shared between the engine and the sender.
-CLOCK_OFFSET, STOP_AT, SENT, LOST, DONE, LOGGED_SENDS, LATE, REALTIME = range(8)
-CONTROL_SLOTS = 8
+#: Control slots (float64) shared between the engine and the sender. LOST: frames skipped
+#: because the sender fell a haptic ring behind; SEND_DROPPED: frames the socket refused
+#: (its send buffer full, or an error), counted instead of blocking the sender.
+CLOCK_OFFSET, STOP_AT, SENT, LOST, DONE, LOGGED_SENDS, LATE, REALTIME, SEND_DROPPED = range(9)
+CONTROL_SLOTS = 9
 #: Callback log columns.
 LOG_START, LOG_FRAMES, LOG_DAC, LOG_FLAGS = range(4)
 #: Seconds between polls while waiting for the callback to hand over more samples.
@@ -38,6 +40,8 @@ POLL = 0.0002
 REALTIME_PRIORITY = 45
 #: Weight of each callback's DAC time in the smoothed device clock (see _Callbacks).
 CLOCK_SMOOTHING = 0.02
+#: Socket buffer asked for (bytes; the kernel caps it at net.core.wmem_max / rmem_max).
+SOCKET_BUFFER = 1 << 20
 
 
 class StreamTap(NamedTuple):
@@ -136,6 +140,21 @@ class _Callbacks:
         return dac, flags
 
 
+#: Attempts at sending the final frame while the socket's send buffer is full (POLL apart).
+FINAL_TRIES = 50
+
+
+def _send(sock: socket.socket, datagram: bytes, address: tuple[str, int], control: np.ndarray) -> bool:
+    """Send without blocking; count the frame as SENT, or as SEND_DROPPED if refused."""
+    try:
+        sock.sendto(datagram, address)
+    except OSError:  # BlockingIOError (buffer full), ENOBUFS, an unreachable address...
+        control[SEND_DROPPED] += 1
+        return False
+    control[SENT] += 1
+    return True
+
+
 def run_sender(
     tap: StreamTap,
     address: tuple[str, int],
@@ -149,6 +168,8 @@ def run_sender(
     n_force = channels - n_torque
     per_frame = int(round(sample_rate / frame_rate))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER)
+    sock.setblocking(False)  # a full send buffer drops (and counts) a frame, never stalls the clock
     control[REALTIME] = request_realtime_priority()
     callbacks = _Callbacks(tap, sample_rate)
     sequence = 0
@@ -176,23 +197,26 @@ def run_sender(
                 control[LATE] += 1
             rows_of = np.arange(start, start + per_frame) % rows
             mean = tap.played[rows_of].mean(axis=0)
-            sock.sendto(
-                encode(sequence, start, dac, flags, mean[:n_force], mean[n_force:], sample_rate), address
+            _send(
+                sock,
+                encode(sequence, start, dac, flags, mean[:n_force], mean[n_force:], sample_rate),
+                address,
+                control,
             )
             now = time.monotonic()
             if tap.send_times.size:
                 tap.send_times[int(control[LOGGED_SENDS]) % tap.send_times.size] = now
                 control[LOGGED_SENDS] += 1
-            control[SENT] += 1
             sequence += 1
         start = sequence * per_frame
         if callbacks.origin is not None:
             dac = callbacks.origin + start / sample_rate
         zeros = np.zeros(channels)
-        sock.sendto(
-            encode(sequence, start, dac, FLAG_FINAL, zeros[:n_force], zeros[n_force:], sample_rate), address
-        )
-        control[SENT] += 1
+        final = encode(sequence, start, dac, FLAG_FINAL, zeros[:n_force], zeros[n_force:], sample_rate)
+        for _ in range(FINAL_TRIES):  # the final frame must not be the one a full buffer drops
+            if _send(sock, final, address, control):
+                break
+            time.sleep(POLL)
     finally:
         sock.close()
         control[DONE] = 1
@@ -203,7 +227,8 @@ def jitter(send_times: np.ndarray, count: int) -> dict:
     size = send_times.size
     n = min(count, size)
     if n < 3:
-        return {"frames": n, "p50_ms": float("nan"), "p99_ms": float("nan"), "max_ms": float("nan")}
+        nan = float("nan")
+        return {"frames": n, "p50_ms": nan, "p99_ms": nan, "p1_ms": nan, "max_ms": nan}
     order = np.arange(count - n, count) % size
     gaps = np.diff(send_times[order]) * 1e3
     return {

@@ -2,11 +2,18 @@
 
 One impulse of unit strength at location p sounds as sum_k a[p, k] e^{-d_k t} sin(2 pi f_k t).
 Gains between locations are interpolated barycentrically (the sound texture map): a
-location is a vertex index, a point name, or up to three vertices with weights.
+location is a vertex index, a point name, or up to three vertices with weights. Points
+named t0, t1, ... (and t{i}_{j} between them) form a track, whose locations are
+interpolated with its linear shape functions (jassy.tracks).
 
 Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
-``name``, ``reference_gain`` and ``driving``), NPZ (same keys) and JASS ``.sy`` text files
-(read only).
+``name``, ``reference_gain``, ``driving``, ``attack`` and ``attack_rate``), NPZ (same keys)
+and JASS ``.sy`` text files (read only).
+
+``attack``: the strike's broadband start that no mode explains (the contact, the mallet, the
+unresolved high modes), as samples at ``attack_rate`` Hz of the response to a unit impulse
+(the gains' units times N s): a fitted model keeps the first strike's residual (recording
+minus modal resynthesis, a few ms) and plays it with every strike (StrikeAttack).
 ``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
 jassy.levels); without it the bank computes it from the model by the same rule.
 
@@ -22,12 +29,14 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jassy.errors import ModelError, PatchError
+from jassy.errors import ModelError, PatchError, suggest
+from jassy.tracks import Track, find_track, track_gains
 
 
 @dataclass(frozen=True)
@@ -85,6 +94,8 @@ class ModalModel:
     source: str = field(default="", compare=False)
     reference_gain: float | None = None  # for level = "calibrated" (jassy.levels)
     driving: np.ndarray | None = field(default=None, compare=False)  # driving-point gains [p, k]
+    attack: np.ndarray | None = field(default=None, compare=False)  # unit-impulse residual samples
+    attack_rate: float | None = None  # Hz, the sample rate of ``attack``
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -106,6 +117,11 @@ class ModalModel:
                 raise ModelError(
                     f"{where}: driving: expected numeric rows shaped like gains {gains.shape}"
                 ) from None
+        if self.attack is not None:
+            try:
+                self.attack = np.asarray(self.attack, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError, OverflowError):
+                raise ModelError(f"{where}: attack: expected a list of numbers (samples)") from None
         self.points = tuple(self.points)
         self.validate()
 
@@ -155,6 +171,18 @@ class ModalModel:
             raise ModelError(f"{where}: reference_gain: expected a number > 0, got {self.reference_gain!r}")
         if self.driving is not None and (not np.all(np.isfinite(self.driving)) or np.any(self.driving < 0)):
             raise ModelError(f"{where}: driving: expected finite driving-point gains >= 0")
+        if self.attack is not None:
+            if not np.all(np.isfinite(self.attack)):
+                raise ModelError(f"{where}: attack: expected finite samples, found NaN or Inf")
+            rate = self.attack_rate
+            if (
+                isinstance(rate, bool)
+                or not isinstance(rate, (int, float))
+                or not (math.isfinite(rate) and rate > 0)
+            ):
+                raise ModelError(
+                    f"{where}: attack_rate: expected the attack's sample rate > 0 Hz, got {rate!r}"
+                )
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -165,7 +193,10 @@ class ModalModel:
         if isinstance(vertex, str):
             if vertex not in self.points:
                 names = ", ".join(self.points) or "none (use vertex indices)"
-                raise PatchError(f"{where}: unknown point {vertex!r}; the model's points are {names}")
+                raise PatchError(
+                    f"{where}: unknown point {vertex!r}; the model's points are {names}"
+                    f"{suggest(vertex, self.points)}"
+                )
             return self.points.index(vertex)
         if not 0 <= vertex < self.n_points:
             raise PatchError(
@@ -181,10 +212,19 @@ class ModalModel:
         """Per-mode gains at a location (barycentric blend of its vertices' rows)."""
         return self._blend(self.gains, location)
 
+    @cached_property
+    def track(self) -> Track | None:
+        """The texture track of the points t0, t1, ... (jassy.tracks), or None."""
+        return find_track(self.points)
+
     def _blend(self, rows: np.ndarray, location: Location | int | str | None) -> np.ndarray:
         if location is None:
             return rows[0].copy()
         loc = parse_location(location, "location")
+        if self.track is not None:
+            on_track = track_gains(self, rows, loc)
+            if on_track is not None:
+                return on_track
         out = np.zeros(self.n_modes)
         for v, w in zip(loc.vertices, loc.weights, strict=True):
             out += w * rows[self.point_index(v, "location")]
@@ -207,6 +247,7 @@ class ModalModel:
         return ModalModel(
             self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(keep),
+            attack=self.attack, attack_rate=self.attack_rate,
         )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
@@ -214,6 +255,7 @@ class ModalModel:
         return ModalModel(
             self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(slice(0, n)),
+            attack=self.attack, attack_rate=self.attack_rate,
         )  # fmt: skip
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
@@ -259,10 +301,14 @@ class ModalModel:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
-        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving"}
+        allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving", "attack",
+                   "attack_rate"}  # fmt: skip
         for key in data:
             if key not in allowed:
-                raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
+                raise ModelError(
+                    f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}"
+                    f"{suggest(key, allowed)}"
+                )
         for key in ("frequencies", "decays", "gains"):
             if key not in data:
                 raise ModelError(f"{source}: missing key {key!r}")
@@ -283,6 +329,11 @@ class ModalModel:
             raise ModelError(f"{source}: reference_gain: expected a number > 0, got {reference!r}")
         reference = None if reference is None else float(reference)
         driving = data.get("driving")
+        attack, attack_rate = data.get("attack"), data.get("attack_rate")
+        if isinstance(attack_rate, np.ndarray) and attack_rate.ndim == 0:
+            attack_rate = attack_rate.item()
+        if attack is not None and attack_rate is None:
+            raise ModelError(f"{source}: attack: needs attack_rate (its sample rate in Hz)")
         return cls(
             data["frequencies"],
             data["decays"],
@@ -292,6 +343,8 @@ class ModalModel:
             source,
             reference,
             driving,
+            attack,
+            attack_rate,
         )
 
     @classmethod
@@ -335,6 +388,9 @@ class ModalModel:
                     extra = {} if ref is None else {"reference_gain": np.array(ref)}
                     if self.driving is not None:
                         extra["driving"] = self.driving
+                    if self.attack is not None:
+                        extra["attack"] = self.attack
+                        extra["attack_rate"] = np.array(float(self.attack_rate))
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -367,6 +423,9 @@ class ModalModel:
             lines.append("driving = [")
             lines.extend(f"  {arr(row)}," for row in self.driving)
             lines.append("]")
+        if self.attack is not None:
+            lines.append(f"attack_rate = {float(self.attack_rate)!r}")
+            lines.append(f"attack = {arr(self.attack)}")
         return "\n".join(lines) + "\n"
 
 

@@ -1,13 +1,16 @@
 """A patch graph compiled into one numba function: the graph's *program*.
 
 :class:`Program` turns a prepared graph's topological order into an int64 table with one
-record per node: its kind, and the addresses and sizes of its output buffer, its inputs'
-buffers and its own state arrays. One numba function, :func:`run_program`, walks the table
-and calls each node's kernel on the node's own arrays for a sub-block: the same kernels,
-on the same arrays, as the ugens' ``process`` (so the same output bits). Because the table
-holds raw addresses, the same function runs inside the PortAudio callback (a ``@cfunc``
-that never takes the GIL, see jassy.callback) and offline, where :func:`run_blocks` renders
-every whole block up to the next event in one call (no Python per block).
+record per node: its kind, the address of its kind's compiled node function, and the
+addresses and sizes of its output buffer, its inputs' buffers and its own state arrays. One
+numba function, :func:`run_program`, walks the table and calls each node's function, which
+runs the node's kernel on the node's own arrays for a sub-block. Node functions are compiled
+per kind when a program first holds that kind, so a first render compiles only the kernels
+of the kinds its graph uses. They call the same kernels, on the same arrays, as the ugens'
+``process`` (so the same output bits). Because the table holds raw addresses, the same
+function runs inside the PortAudio callback (a ``@cfunc`` that never takes the GIL, see
+jassy.callback) and offline, where :func:`run_blocks` renders every whole block up to the
+next event in one call (no Python per block).
 
 Ugens with a kernel here: :data:`PROGRAM_UGENS`. A graph holding any other node, a feedback
 delay, an anytime budget or a contact that follows physics curves keeps the per-node Python
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from llvmlite import ir as llvmir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
@@ -40,8 +44,9 @@ from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
 KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
 drop_stale_cache(__file__, KERNEL_MODULES)
 
-#: int64 slots per node record.
+#: int64 slots per node record; the last holds the address of its kind's compiled function.
 RECORD = 16
+FUNCTION = RECORD - 1
 GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD, RADIATION = range(1, 10)
 SOUND_PRESSURE = 10
 #: Ugen classes with a kernel in the program, by kind.
@@ -92,102 +97,202 @@ def _u64(address, size):
     return nb.carray(void_pointer(address), (size,), np.uint64)
 
 
-@nb.njit(cache=True, nogil=True)
-def run_node(prog, base, start, n):
-    """Run the node whose record starts at prog[base] for frames start .. start + n - 1."""
-    kind = prog[base]
+# One function per node kind, compiled (as a C-callable function) only when a program holds
+# that kind: a graph compiles the kernels it uses, not every kind's. Each reads its record
+# from the table at address ``table`` (see Program), for frames start .. start + n - 1.
+
+
+def _gain(table, base, start, n):  # [input, ramp, per-sample gains]
+    prog = _i64(table, base + RECORD)
     size = prog[base + 2]
     out = _f64(prog[base + 1], size)
-    if kind == GAIN:  # [input, ramp, per-sample gains]
-        x = _f64(prog[base + 3], size)
-        ramp = _f64(prog[base + 4], 4)
-        if ramp[3] == 0:
-            scale(x, out, n, ramp[0])
-        else:
-            gains = _f64(prog[base + 5], size)
-            ramp_fill(ramp, gains, n)
-            scale_ramp(x, out, n, gains)
-    elif kind == MIXER:  # [count, input addresses, gains]
-        m = prog[base + 3]
-        sources = _i64(prog[base + 4], m)
-        gains = _f64(prog[base + 5], m)
-        scale(_f64(sources[0], size), out, n, gains[0])
-        for j in range(1, m):
-            accumulate(_f64(sources[j], size), out, n, gains[j])
-    elif kind == MULTIPLY:  # [a, b]
-        multiply(_f64(prog[base + 3], size), _f64(prog[base + 4], size), out, n)
-    elif kind == IMPACT:  # [pulses, pulse capacity, count]
-        pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
-        count = _i64(prog[base + 5], 1)
-        count[0] = render_pulses(out, start, n, pulses, count[0])
-    elif kind == MODAL:  # [input, bank, modes, delta, target, meta, last, floor]
-        k = prog[base + 5]
-        force = _f64(prog[base + 3], size)
-        bank = _f64_rows(prog[base + 4], 6, k)
-        meta = _i64(prog[base + 8], 3)
-        last = _f64(prog[base + 9], 1)
-        if meta[1] > 0:  # ramping
-            meta[0] = meta[2]
-            delta = _f64_rows(prog[base + 6], 4, k)
-            target = _f64_rows(prog[base + 7], 4, k)
-            meta[1] = resonate_ramp(
-                force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
-            )
-        else:
-            bank_step(force, out, start, n, bank, meta, _f64(prog[base + 10], 1)[0], last)
-    elif kind == SCRAPE:  # [force ramp, speed ramp, forces, speeds, profile, length, state, coef, cfg]
-        forces = _f64(prog[base + 5], size)
-        speeds = _f64(prog[base + 6], size)
-        ramp_fill(_f64(prog[base + 3], 4), forces, n)
-        ramp_fill(_f64(prog[base + 4], 4), speeds, n)
-        profile_contact(
-            out,
-            n,
-            forces,
-            speeds,
-            _f64(prog[base + 7], prog[base + 8]),
-            _f64(prog[base + 9], 4),
-            _f64(prog[base + 10], 5),
-            _f64(prog[base + 11], 9),
+    x = _f64(prog[base + 3], size)
+    ramp = _f64(prog[base + 4], 4)
+    if ramp[3] == 0:
+        scale(x, out, n, ramp[0])
+    else:
+        gains = _f64(prog[base + 5], size)
+        ramp_fill(ramp, gains, n)
+        scale_ramp(x, out, n, gains)
+
+
+def _mixer(table, base, start, n):  # [count, input addresses, gains]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    out = _f64(prog[base + 1], size)
+    m = prog[base + 3]
+    sources = _i64(prog[base + 4], m)
+    gains = _f64(prog[base + 5], m)
+    scale(_f64(sources[0], size), out, n, gains[0])
+    for j in range(1, m):
+        accumulate(_f64(sources[j], size), out, n, gains[j])
+
+
+def _multiply(table, base, start, n):  # [a, b]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    multiply(_f64(prog[base + 3], size), _f64(prog[base + 4], size), _f64(prog[base + 1], size), n)
+
+
+def _impact(table, base, start, n):  # [pulses, pulse capacity, count]
+    prog = _i64(table, base + RECORD)
+    out = _f64(prog[base + 1], prog[base + 2])
+    pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
+    count = _i64(prog[base + 5], 1)
+    count[0] = render_pulses(out, start, n, pulses, count[0])
+
+
+def _modal(table, base, start, n):  # [input, bank, modes, delta, target, meta, last, floor]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    out = _f64(prog[base + 1], size)
+    k = prog[base + 5]
+    force = _f64(prog[base + 3], size)
+    bank = _f64_rows(prog[base + 4], 6, k)
+    meta = _i64(prog[base + 8], 3)
+    last = _f64(prog[base + 9], 1)
+    if meta[1] > 0:  # ramping
+        meta[0] = meta[2]
+        delta = _f64_rows(prog[base + 6], 4, k)
+        target = _f64_rows(prog[base + 7], 4, k)
+        meta[1] = resonate_ramp(
+            force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
         )
-    elif kind == RESONANT_SCRAPE:  # [force ramp, speed ramp, forces, speeds, rng, state, cfg]
-        forces = _f64(prog[base + 5], size)
-        speeds = _f64(prog[base + 6], size)
-        ramp_fill(_f64(prog[base + 3], 4), forces, n)
-        ramp_fill(_f64(prog[base + 4], 4), speeds, n)
-        resonant_noise(
-            out, n, forces, speeds, _u64(prog[base + 7], 1), _f64(prog[base + 8], 8), _f64(prog[base + 9], 10)
-        )
-    elif kind == BIQUAD:  # [input, freq ramp, q ramp, freqs, qs, coef, state, (mode, 1/fs)]
-        x = _f64(prog[base + 3], size)
-        freq = _f64(prog[base + 4], 4)
-        q = _f64(prog[base + 5], 4)
-        coef = _f64(prog[base + 8], 5)
-        state = _f64(prog[base + 9], 2)
-        setup = _f64(prog[base + 10], 2)
-        mode = int(setup[0])
-        if freq[3] == 0 and q[3] == 0:
-            biquad(x, out, n, coef, state)
-        else:
-            freqs = _f64(prog[base + 6], size)
-            qs = _f64(prog[base + 7], size)
-            ramp_fill(freq, freqs, n)
-            ramp_fill(q, qs, n)
-            biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
-            if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
-                design_biquad(mode, freq[0], q[0], setup[1], coef)
-    elif kind == RADIATION:  # [input, coef, state]
-        radiate(_f64(prog[base + 3], size), out, n, _f64(prog[base + 4], 4), _f64(prog[base + 5], 3))
-    elif kind == SOUND_PRESSURE:  # [input, coef, state, setup]
-        x = _f64(prog[base + 3], size)
-        sound_pressure(x, out, n, _f64(prog[base + 4], 3), _f64(prog[base + 5], 3), _f64(prog[base + 6], 3))
+    else:
+        bank_step(force, out, start, n, bank, meta, _f64(prog[base + 10], 1)[0], last)
+
+
+def _scrape(
+    table, base, start, n
+):  # [force ramp, speed ramp, forces, speeds, profile, length, state, coef, cfg]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    forces = _f64(prog[base + 5], size)
+    speeds = _f64(prog[base + 6], size)
+    ramp_fill(_f64(prog[base + 3], 4), forces, n)
+    ramp_fill(_f64(prog[base + 4], 4), speeds, n)
+    profile_contact(
+        _f64(prog[base + 1], size),
+        n,
+        forces,
+        speeds,
+        _f64(prog[base + 7], prog[base + 8]),
+        _f64(prog[base + 9], 4),
+        _f64(prog[base + 10], 5),
+        _f64(prog[base + 11], 9),
+    )
+
+
+def _resonant_scrape(table, base, start, n):  # [force ramp, speed ramp, forces, speeds, rng, state, cfg]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    forces = _f64(prog[base + 5], size)
+    speeds = _f64(prog[base + 6], size)
+    ramp_fill(_f64(prog[base + 3], 4), forces, n)
+    ramp_fill(_f64(prog[base + 4], 4), speeds, n)
+    resonant_noise(
+        _f64(prog[base + 1], size),
+        n,
+        forces,
+        speeds,
+        _u64(prog[base + 7], 1),
+        _f64(prog[base + 8], 8),
+        _f64(prog[base + 9], 10),
+    )
+
+
+def _biquad(table, base, start, n):  # [input, freq ramp, q ramp, freqs, qs, coef, state, (mode, 1/fs)]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    out = _f64(prog[base + 1], size)
+    x = _f64(prog[base + 3], size)
+    freq = _f64(prog[base + 4], 4)
+    q = _f64(prog[base + 5], 4)
+    coef = _f64(prog[base + 8], 5)
+    state = _f64(prog[base + 9], 2)
+    setup = _f64(prog[base + 10], 2)
+    mode = int(setup[0])
+    if freq[3] == 0 and q[3] == 0:
+        biquad(x, out, n, coef, state)
+    else:
+        freqs = _f64(prog[base + 6], size)
+        qs = _f64(prog[base + 7], size)
+        ramp_fill(freq, freqs, n)
+        ramp_fill(q, qs, n)
+        biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
+        if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
+            design_biquad(mode, freq[0], q[0], setup[1], coef)
+
+
+def _radiation(table, base, start, n):  # [input, coef, state]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    radiate(
+        _f64(prog[base + 3], size),
+        _f64(prog[base + 1], size),
+        n,
+        _f64(prog[base + 4], 4),
+        _f64(prog[base + 5], 3),
+    )
+
+
+def _sound_pressure(table, base, start, n):  # [input, coef, state, setup]
+    prog = _i64(table, base + RECORD)
+    size = prog[base + 2]
+    x = _f64(prog[base + 3], size)
+    out = _f64(prog[base + 1], size)
+    sound_pressure(x, out, n, _f64(prog[base + 4], 3), _f64(prog[base + 5], 3), _f64(prog[base + 6], 3))
+
+
+#: Each kind's node function, by kind.
+NODE_FUNCTIONS = {
+    GAIN: _gain,
+    MIXER: _mixer,
+    MULTIPLY: _multiply,
+    IMPACT: _impact,
+    MODAL: _modal,
+    SCRAPE: _scrape,
+    RESONANT_SCRAPE: _resonant_scrape,
+    BIQUAD: _biquad,
+    RADIATION: _radiation,
+    SOUND_PRESSURE: _sound_pressure,
+}
+#: The C signature of a compiled node function: (table address, record start, start, n).
+NODE_SIGNATURE = types.void(types.int64, types.int64, types.int64, types.int64)
+_compiled_nodes: dict[int, object] = {}
+
+
+def node_function_address(kind: int) -> int:
+    """The address of kind's compiled node function (compiled, or loaded from numba's cache,
+    on first use)."""
+    compiled = _compiled_nodes.get(kind)
+    if compiled is None:
+        compiled = nb.cfunc(NODE_SIGNATURE, cache=True, nogil=True)(NODE_FUNCTIONS[kind])
+        _compiled_nodes[kind] = compiled
+    return compiled.address
+
+
+@intrinsic
+def call_node(typingctx, function, table, base, start, n):
+    """Call the compiled node function at address ``function`` (see NODE_SIGNATURE)."""
+    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvmir.IntType(64)
+        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
+        builder.call(pointer, args[1:])
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @nb.njit(cache=True, nogil=True)
 def run_program(prog, start, n):
     """Run every node of the program, in order, for frames start .. start + n - 1."""
+    table = prog.ctypes.data
     for i in range(prog[0]):
-        run_node(prog, 1 + i * RECORD, start, n)
+        base = 1 + i * RECORD
+        call_node(prog[base + FUNCTION], table, base, start, n)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -248,6 +353,7 @@ class Program:
         record[:] = 0
         record[0] = PROGRAM_UGENS[type(node)]
         record[2] = node.max_block
+        record[FUNCTION] = node_function_address(record[0])
         for j, value in enumerate(arrays, start=1):
             record[j if j == 1 else j + 1] = value.ctypes.data if isinstance(value, np.ndarray) else value
         self._arrays[i] = [a for a in arrays if isinstance(a, np.ndarray)]

@@ -245,10 +245,44 @@ def test_radiation_and_normalisation():
         fem.modes_from_mesh(bar, ALU, n_modes=3, pitch=0.003, radiation="loud")
 
 
-def test_merge_degenerate_sums_gains():
-    f, a = fem.merge_degenerate(np.array([100.0, 100.0 + 1e-6, 200.0]), np.array([[1.0, 2.0, 3.0]]))
-    np.testing.assert_allclose(f, [100.0 + 5e-7, 200.0])
-    np.testing.assert_allclose(a, [[3.0, 3.0]])
+def test_square_bar_keeps_degenerate_bending_pairs_with_their_own_gains():
+    """A 300 x 10 x 10 mm bar bends alike across y and z: each bending frequency is a pair
+    (multiplicity 2) within 2 % of Euler-Bernoulli, kept as two modes. Struck on the top
+    face at the end, only the pair's z-bending mode rings, with the Euler-Bernoulli
+    driving-point gain W(0)^2 / (m omega) = 4 / (m omega); on the side face at the end only
+    the other (y-bending) mode rings, with the same gain."""
+    length, h = 0.3, 0.01
+    pts = {"top": (length / 2, 0.0, h / 2), "side": (length / 2, h / 2, 0.0)}
+    model, report, _ = fem.modes_from_mesh(meshes.bar(length, h, h), ALU, n_modes=6, pitch=h / 2, points=pts)
+    expected = analytic.free_free_beam_frequencies(length, h, h, ALU.youngs, ALU.density)
+    groups = fem.degenerate_groups(model.frequencies)
+    pairs = [g for g in groups if g.size == 2]
+    assert len(pairs) >= 2 and report.multiplicity[pairs[0][0]] == 2
+    assert "2 pairs" in report.families() or "3 pairs" in report.families()
+    mass = ALU.density * length * h * h
+    for g, f_eb in zip(pairs[:2], expected[:2], strict=True):
+        f = model.frequencies[g]
+        assert abs(f[1] / f[0] - 1) < 1e-6 and abs(f[0] / f_eb - 1) < 0.02
+        top, side = model.gains[0, g], model.gains[1, g]
+        ref = 4 / (mass * 2 * np.pi * f[0])
+        assert abs(top[0] / ref - 1) < 0.03 and top[1] < 1e-9 * top[0]
+        assert abs(side[1] / ref - 1) < 0.03 and side[0] < 1e-6 * side[1]
+
+
+def test_align_degenerate_rotates_only_families():
+    """A family's normal displacements are rotated (orthogonally) so the first point moves
+    one mode; sums of squares per point are unchanged, single modes untouched."""
+    rng = np.random.default_rng(1)
+    un = rng.standard_normal((4, 5))
+    groups = fem.degenerate_groups(
+        np.array([100.0, 200.0, 200.0 * (1 + 1e-9), 200.0 * (1 - 1e-10) + 1e-7, 300.0])
+    )
+    assert [g.tolist() for g in groups] == [[0], [1, 2, 3], [4]]
+    out = fem.align_degenerate(un, groups)
+    np.testing.assert_allclose(out[:, [0, 4]], un[:, [0, 4]])
+    np.testing.assert_allclose(out[0, 2:4], 0.0, atol=1e-12)
+    assert out[0, 1] > 0
+    np.testing.assert_allclose((out[:, 1:4] ** 2).sum(axis=1), (un[:, 1:4] ** 2).sum(axis=1), rtol=1e-12)
 
 
 # ----------------------------------------------------------------------------- texture maps
@@ -368,6 +402,13 @@ def test_add_commands_and_describe_model(tmp_path):
     text = describe_model(tmp_path / "demo.toml")
     assert "2 modes" in text and "100.00" in text and "250.00" in text and "T60" in text
     assert f"{np.log(1000) / 2.0:.3f}" in text  # T60 of the second mode
+    pair = ModalModel(
+        [100.0, 100.0, 250.0], [1.0, 1.0, 2.0], [[1.0, 0.0, 0.5]], attack=np.ones(48), attack_rate=48000.0
+    )
+    pair.save(tmp_path / "pair.toml")
+    rows = describe_model(tmp_path / "pair.toml").splitlines()
+    assert "attack: 48 samples (1.0 ms at 48000 Hz)" in rows
+    assert [r.split()[2] for r in rows if r.split()[0] in ("0", "1")] == ["2", "2"]  # a pair: multiplicity 2
     with pytest.raises(JassyError):
         describe_model(tmp_path / "missing.toml")
 

@@ -13,7 +13,7 @@ import pytest
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES, calibrated
+from jassy.levels import FORCE_SOURCES, SOUND_SOURCES, calibrated
 from patches.objects import OBJECTS
 from patches.shipped import shipped_models
 
@@ -21,11 +21,6 @@ PATCHES = Path(__file__).resolve().parents[1] / "patches"
 SHIPPED = sorted(set(shipped_models()) | {info.file for info in OBJECTS.values()})
 #: Seconds rendered: a stochastic source's peak is that of ~100 micro-impacts.
 DURATION = 1.0
-#: RathRoll's micro-impacts are one-sample take-offs whose force sums to zero over every
-#: flight (momentum balance), so its spectrum rises towards the take-off rate (~12 kHz at
-#: 0.2 m/s) and low modes hear almost nothing: -86..-30 dBFS over the shipped models, a
-#: 55 dB spread no single default scale fits into the 24 dB window.
-SPECTRAL = ("RathRoll",)
 
 
 def once_calibrated(model: ModalModel) -> ModalModel:
@@ -46,36 +41,22 @@ def peak_dbfs(model: ModalModel, source: str) -> float:
 @pytest.mark.parametrize("filename", SHIPPED)
 def test_every_default_force_source_on_a_shipped_model_peaks_between_minus_30_and_minus_6_dbfs(filename):
     model = once_calibrated(ModalModel.load(PATCHES / filename))
-    levels = {s: peak_dbfs(model, s) for s in FORCE_SOURCES if s not in SPECTRAL}
+    levels = {s: peak_dbfs(model, s) for s in FORCE_SOURCES}
     outside = {s: round(db, 1) for s, db in levels.items() if not -30.0 <= db <= -6.0}
     assert not outside, f"{filename}: {outside} dBFS"
 
 
-@pytest.mark.timeout(60)
-@pytest.mark.xfail(strict=True, reason="RathRoll's default force has no energy at low modes (see SPECTRAL)")
-@pytest.mark.parametrize("filename", ["pot_model.toml", "paper_sheet_model.toml"])
-def test_rath_roll_on_a_model_with_low_modes_peaks_within_the_window(filename):
-    level = peak_dbfs(ModalModel.load(PATCHES / filename), "RathRoll")
-    assert -30.0 <= level <= -6.0, f"{filename}: {level:.1f} dBFS"
-
-
-#: Sources that output sound themselves (full scale) and the events that start them. Not
-#: here: Explosion, whose output is a pressure in Pa (a firecracker's 50 Pa peak at 10 m is
+#: Sources that sound by themselves in full scale (jassy.levels.SOUND_SOURCES). Not here:
+#: Explosion, whose output is a pressure in Pa (a firecracker's 50 Pa peak at 10 m is
 #: 128 dB SPL, above any full scale meant for everyday sounds; see SoundPressure).
-STANDALONE = {
-    "Bubble": [Event(0.01, "src", "bubble", {})],
-    "BubbleStream": [],
-    "Engine": [],
-    "Wind": [],
-    "CavityTone": [],
-    "DCMotor": [],
-}
+FULL_SCALE = sorted(name for name, level in SOUND_SOURCES.items() if level.unit == "full scale")
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("source", sorted(STANDALONE))
+@pytest.mark.parametrize("source", FULL_SCALE)
 def test_a_standalone_source_at_its_defaults_peaks_between_minus_30_and_minus_6_dbfs(source):
     src = getattr(ugens, source)(name="src")
-    y = render(Graph(src), STANDALONE[source], duration=2.0, sample_rate=48000, limiter=False).audio[0]
+    events = [Event(0.01, "src", action, args) for action, args in SOUND_SOURCES[source].events]
+    y = render(Graph(src), events, duration=2.0, sample_rate=48000, limiter=False).audio[0]
     level = 20 * math.log10(max(float(np.abs(y).max()), 1e-30))
     assert -30.0 <= level <= -6.0, f"{source}: {level:.1f} dBFS"

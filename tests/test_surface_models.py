@@ -319,7 +319,9 @@ def sdt_takeoffs(x, speed, load, mass, grain, depth):
 
 def test_rath_roll_matches_the_rolling_filter_on_an_input_signal():
     x = np.random.default_rng(0).uniform(-1, 1, 3000)
-    node = RathRoll(ArraySource(x), name="r", speed=0.7, force=0.3, mass=0.05, grain=0.1, depth=3000.0)
+    node = RathRoll(
+        ArraySource(x), name="r", speed=0.7, force=0.3, mass=0.05, grain=0.1, depth=3000.0, contact_cutoff=0.0
+    )
     y = run(node, duration=3000 / FS, block=64)
     ref, takeoffs = rath_reference(x, 0.7, 0.05 * GRAVITY + 0.3, 0.05, 0.1, 3000.0)
     assert np.max(np.abs(y - ref)) < 1e-9 * np.max(np.abs(ref))
@@ -330,10 +332,15 @@ def test_rath_roll_matches_the_rolling_filter_on_an_input_signal():
     np.testing.assert_array_equal(takeoffs, sdt)
 
 
+#: Dense micro-impacts (a take-off every few samples at 0.5 m/s): a 50 g ball, the trace
+#: falling fast, shallow bumps, no contact low-pass.
+DENSE = {"mass": 0.05, "grain": 0.5, "depth": 50.0, "contact_cutoff": 0.0}
+
+
 def test_rath_roll_impact_rate_grows_with_speed_and_force_is_dc_free():
     rates = []
     for v in (0.4, 0.55, 0.75):
-        node = RathRoll(name="r", speed=v, mass=0.05)
+        node = RathRoll(name="r", speed=v, **DENSE)
         y, (contact,) = run(node, duration=1.0, haptic=node.tap("contact"))
         air = contact == 0.0
         rates.append(int(np.sum(air[1:] & ~air[:-1])))  # take-offs that leave the surface
@@ -345,14 +352,14 @@ def test_rath_roll_impact_rate_grows_with_speed_and_force_is_dc_free():
     assert rates[0] < rates[1] < rates[2]
     assert rates[0] > 100
     # no speed: no bumps, the ball rests on the surface
-    node = RathRoll(name="r", speed=0.0)
+    node = RathRoll(name="r", speed=0.0, **DENSE)
     y, (contact,) = run(node, duration=0.1, haptic=node.tap("contact"))
     assert np.all(y == 0.0) and np.allclose(contact, 0.05 * GRAVITY)
 
 
 def test_rath_roll_contact_low_pass_keeps_it_dc_free():
-    y = run(RathRoll(name="r", speed=0.6, contact_cutoff=2000.0), duration=1.0)
-    bare = run(RathRoll(name="r", speed=0.6), duration=1.0)
+    y = run(RathRoll(name="r", speed=0.6, **{**DENSE, "contact_cutoff": 2000.0}), duration=1.0)
+    bare = run(RathRoll(name="r", speed=0.6, **DENSE), duration=1.0)
     assert abs(np.mean(y)) < 1e-3 * rms(y)
     f, p = signal.welch(y, FS, nperseg=1024)
     _, p0 = signal.welch(bare, FS, nperseg=1024)

@@ -1,6 +1,7 @@
 """Unit generators. Importing this package registers every built-in ugen type."""
 
 from ugens.analysis import EnvelopeFollower, Onset, Pitch, SpectralFeatures, ZeroCrossings
+from ugens.attack import StrikeAttack
 from ugens.bubbles import Bubble, BubbleStream
 from ugens.dcmotor import DCMotor
 from ugens.delay import Delay
@@ -68,6 +69,7 @@ __all__ = [
     "Scrape",
     "Sine",
     "SoundPressure",
+    "StrikeAttack",
     "Spatialiser",
     "SpectralFeatures",
     "WhiteNoise",

@@ -9,7 +9,9 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 * :func:`with_room`: a table that doubles its rows when full (pulse tables);
 * :func:`decay_sums`, :func:`add_onset`, :func:`drop_row`: exponential pulses r^x and x r^x
   (x samples after their onsets) kept as two running sums and a queue of pending onsets
-  (the blast waves of Explosion, the firings of Engine).
+  (the blast waves of Explosion, the firings of Engine);
+* :func:`store`: a kernel's named state record written back to the float64 array that holds
+  it (its fields in order; the record's reader is the inverse).
 """
 
 from __future__ import annotations
@@ -76,3 +78,10 @@ def drop_row(queue, k, count):
     queue[k, 0] = queue[count, 0]
     queue[k, 1] = queue[count, 1]
     return count
+
+
+@nb.njit(inline="always", cache=True)
+def store(array, record):
+    """Write the fields of ``record`` (a NamedTuple of floats) to array[0], array[1], ..."""
+    for k in range(len(record)):
+        array[k] = record[k]

@@ -52,7 +52,7 @@ engine-block (mechanical) noise are added from that pulse train (``intake_level`
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -63,7 +63,7 @@ from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import engine_noise
-from ugens.cells import add_onset, decay_sums, drop_row
+from ugens.cells import add_onset, decay_sums, drop_row, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -111,10 +111,70 @@ def blamp_table(half: int = BLAMP_HALF, cutoff: float = BLAMP_CUTOFF, beta: floa
 
 _BLAMP = blamp_table()
 
-# parameter vector layout
-_FS, _PER_REV, _IRR, _MIS, _R, _NORM, _DELAY, _PORT, _POLE, _GAIN = range(10)
-# float state layout
-_PHASE, _S1, _S2, _LP_BACK, _LP_OUT = range(5)
+
+class EngineParams(NamedTuple):
+    """Settings of :func:`engine_run`, stored in this order in the float64 array ``par``."""
+
+    fs: float  #: sample rate (Hz)
+    per_rev: float  #: firings per crankshaft revolution
+    irregularity: float  #: per-firing jitter of timing and amplitude (0: periodic)
+    misfire: float  #: probability that a firing fails
+    r: float  #: per-sample decay of a pulse, e^{-1/(tau fs)}
+    norm: float  #: e / (tau fs): a pulse's peak 1 at tau
+    delay: float  #: one-way travel time of the pipe (samples)
+    port: float  #: reflection coefficient at the port end
+    pole: float  #: pole of the open end's reflection low-pass
+    gain: float  #: output scale
+
+
+@nb.njit(inline="always", cache=True)
+def engine_params(par):
+    """The EngineParams record held in ``par``."""
+    return EngineParams(par[0], par[1], par[2], par[3], par[4], par[5], par[6], par[7], par[8], par[9])
+
+
+class EngineState(NamedTuple):
+    """Float state of :func:`engine_run`, stored in this order in the float64 array ``st``."""
+
+    phase: float  #: firing phase (fraction of the firing interval)
+    s1: float  #: sum of the pulses' A r^x
+    s2: float  #: sum of the pulses' x A r^x
+    lp_back: float  #: open-end low-pass of the backward wave
+    lp_out: float  #: open-end low-pass of the radiated wave
+
+
+@nb.njit(inline="always", cache=True)
+def engine_state(st):
+    """The EngineState record held in ``st``."""
+    return EngineState(st[0], st[1], st[2], st[3], st[4])
+
+
+class EngineData(NamedTuple):
+    """The arrays :func:`engine_run` updates."""
+
+    st: np.ndarray  #: an EngineState
+    queue: np.ndarray  #: (QUEUE, 2): onset sample time and amplitude of the queued firings
+    ist: np.ndarray  #: int64 [queued firings, ring write slot]
+    rng: np.ndarray  #: uint64 [splitmix64 state]
+    ring: np.ndarray  #: the exhaust pipe's delay line
+    lead: np.ndarray  #: the pulse train with its band-limiting corrections, by frame modulo its length
+
+
+def engine_data(delay: float) -> EngineData:
+    """Zeroed EngineData for a pipe of ``delay`` samples one way."""
+    return EngineData(
+        np.zeros(len(EngineState._fields)),
+        np.zeros((QUEUE, 2)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros(1, dtype=np.uint64),
+        np.zeros(int(math.ceil(2.0 * delay)) + 2),
+        np.zeros(2 * BLAMP_HALF + 2),
+    )
+
+
+_IRREGULARITY, _MISFIRE, _PORT, _GAIN = (
+    EngineParams._fields.index(k) for k in ("irregularity", "misfire", "port", "gain")
+)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -133,26 +193,28 @@ def _tap(ring, w, delay):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, ring, par, blamp, lead):
-    """n samples from absolute frame ``start``. st: float state (_PHASE..); queue rows:
-    (onset sample time, amplitude); ist = [queued firings, ring write slot]; blamp: the
-    residual table (:func:`blamp_table`); lead: the pulse train with its corrections, by
-    frame modulo its length (2 BLAMP_HALF + 2), read BLAMP_HALF frames late."""
-    fs = par[_FS]
-    per_rev = par[_PER_REV]
-    irr = par[_IRR]
-    mis = par[_MIS]
-    r = par[_R]
-    norm = par[_NORM]
-    delay = par[_DELAY]
-    port = par[_PORT]
-    pole = par[_POLE]
-    gain = par[_GAIN]
-    phase = st[_PHASE]
-    s1 = st[_S1]
-    s2 = st[_S2]
-    lp_back = st[_LP_BACK]
-    lp_out = st[_LP_OUT]
+def engine_run(out, pulses_out, start, n, rpms, throttles, data, par, blamp):
+    """n samples from absolute frame ``start``; data: an EngineData, par holds an
+    EngineParams; blamp: the residual table (:func:`blamp_table`); the pulse train
+    data.lead (length 2 BLAMP_HALF + 2) is read BLAMP_HALF frames late."""
+    st, queue, ist, rng, ring, lead = data
+    prm = engine_params(par)
+    fs = prm.fs
+    per_rev = prm.per_rev
+    irr = prm.irregularity
+    mis = prm.misfire
+    r = prm.r
+    norm = prm.norm
+    delay = prm.delay
+    port = prm.port
+    pole = prm.pole
+    gain = prm.gain
+    state = engine_state(st)
+    phase = state.phase
+    s1 = state.s1
+    s2 = state.s2
+    lp_back = state.lp_back
+    lp_out = state.lp_out
     count = ist[0]
     w = ist[1]
     s = rng[0]
@@ -215,11 +277,7 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, st, queue, ist, rng, 
         lp_out += (1.0 - pole) * (front - lp_out)
         out[i] = gain * (front - lp_out)
         pulses_out[i] = gain * p
-    st[_PHASE] = phase
-    st[_S1] = s1
-    st[_S2] = s2
-    st[_LP_BACK] = lp_back
-    st[_LP_OUT] = lp_out
+    store(st, EngineState(phase, s1, s2, lp_back, lp_out))
     ist[0] = count
     ist[1] = w
     rng[0] = s
@@ -298,13 +356,8 @@ class Engine(UGen):
                 f"nodes.{self.name}.exhaust_length: the pipe must be at least one sample long "
                 f"(c / fs = {v['c'] / fs:.3g} m at {fs:g} Hz), got {v['exhaust_length']!r} m"
             )
-        self.st = np.zeros(5)
-        self.queue = np.zeros((QUEUE, 2))
-        self.ist = np.zeros(2, dtype=np.int64)
-        self.rng = np.zeros(1, dtype=np.uint64)
-        self.ring = np.zeros(int(math.ceil(2.0 * delay)) + 2)
-        self.lead = np.zeros(2 * BLAMP_HALF + 2)
-        self.par = np.zeros(10)
+        self.data = engine_data(delay)
+        self.par = np.zeros(len(EngineParams._fields))
         self.noise_coef = engine_noise.design(v, fs)
         self.noise_state = np.zeros((3, 2))
         self.noise_rng = np.zeros(1, dtype=np.uint64)
@@ -325,34 +378,28 @@ class Engine(UGen):
             0,
             self._rpms.buffer,
             self._throttles.buffer,
-            self.st,
-            self.queue,
-            self.ist,
-            self.rng,
-            self.ring,
+            self.data,
             self.par,
             _BLAMP,
-            self.lead,
         )
 
     def _kernel_parameters(self, fs: float) -> np.ndarray:
         """The kernel's parameter vector at rate fs (gain 1)."""
         v = self.values
         tau = v["pulse"] * fs
-        return np.array(
-            [
-                fs,
-                v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
-                v["irregularity"],
-                v["misfire"],
-                math.exp(-1.0 / tau),
-                math.e / tau,
-                v["exhaust_length"] / v["c"] * fs,
-                v["port_reflection"],
-                math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
-                1.0,
-            ]
+        params = EngineParams(
+            fs=fs,
+            per_rev=v["cylinders"] / (2.0 if v["strokes"] == 4 else 1.0),
+            irregularity=v["irregularity"],
+            misfire=v["misfire"],
+            r=math.exp(-1.0 / tau),
+            norm=math.e / tau,
+            delay=v["exhaust_length"] / v["c"] * fs,
+            port=v["port_reflection"],
+            pole=math.exp(-v["c"] / (v["radius"] * fs)),  # cut-off c / (2 pi radius)
+            gain=1.0,
         )
+        return np.array(params, dtype=np.float64)
 
     def _reference_peak(self) -> float:
         """Steady peak of the unscaled output at throttle 1, REFERENCE_RPM, no irregularity,
@@ -364,8 +411,8 @@ class Engine(UGen):
             else self.sample_rate
         )
         par = self._kernel_parameters(fs)
-        par[_IRR] = 0.0
-        par[_MIS] = 0.0
+        par[_IRREGULARITY] = 0.0
+        par[_MISFIRE] = 0.0
         n = int(0.6 * fs)
         out, pulses = np.zeros(n), np.zeros(n)
         engine_run(
@@ -375,25 +422,17 @@ class Engine(UGen):
             n,
             np.full(n, REFERENCE_RPM),
             np.ones(n),
-            np.zeros(5),
-            np.zeros((QUEUE, 2)),
-            np.zeros(2, dtype=np.int64),
-            np.zeros(1, dtype=np.uint64),
-            np.zeros(int(math.ceil(2.0 * par[_DELAY])) + 2),
+            engine_data(par[EngineParams._fields.index("delay")]),
             par,
             _BLAMP,
-            np.zeros_like(self.lead),
         )
         peak = float(np.max(np.abs(out[n // 2 :])))
         return peak if peak > 0.0 else 1.0
 
     def _reset(self) -> None:
-        self.st[:] = 0.0
-        self.queue[:] = 0.0
-        self.ist[:] = 0
-        self.rng[0] = self.values["seed"]
-        self.ring[:] = 0.0
-        self.lead[:] = 0.0
+        for array in self.data:
+            array[:] = 0
+        self.data.rng[0] = self.values["seed"]
         self.noise_state[:] = 0.0
         self.noise_rng[0] = self.values["seed"] ^ NOISE_STREAM
         for ramp in (self.rpm, self.throttle):
@@ -403,9 +442,9 @@ class Engine(UGen):
         if key in ("rpm", "throttle"):
             getattr(self, key).set(value, self.ramp_samples(), jump)
         elif key == "irregularity":
-            self.par[_IRR] = value
+            self.par[_IRREGULARITY] = value
         elif key == "misfire":
-            self.par[_MIS] = value
+            self.par[_MISFIRE] = value
         elif key == "port_reflection":
             self.par[_PORT] = value
         elif key in _NOISE_LEVELS:
@@ -422,14 +461,9 @@ class Engine(UGen):
             n,
             self._rpms.values(n),
             self._throttles.values(n),
-            self.st,
-            self.queue,
-            self.ist,
-            self.rng,
-            self.ring,
+            self.data,
             self.par,
             _BLAMP,
-            self.lead,
         )
         if self.noise_levels[0] > 0.0 or self.noise_levels[2] > 0.0:
             engine_noise.engine_noise(
@@ -451,12 +485,7 @@ class Engine(UGen):
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
-            "st": self.st,
-            "queue": self.queue,
-            "ist": self.ist,
-            "rng": self.rng,
-            "ring": self.ring,
-            "lead": self.lead,
+            **self.data._asdict(),
             "par": self.par,
             "noise_state": self.noise_state,
             "noise_rng": self.noise_rng,

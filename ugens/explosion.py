@@ -34,7 +34,7 @@ wave). Output: pressure in Pa. SDT ``explosion~`` (Baldan et al., 2017).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -43,7 +43,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import add_onset, decay_sums, drop_row, with_room
+from ugens.cells import add_onset, decay_sums, drop_row, store, with_room
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -54,10 +54,42 @@ QUEUE = 32
 ABSORPTION_CUTOFF = 20000.0
 _LOWPASS = 0
 
-# parameter vector layout
-_R, _INV_TP, _SCATTER, _DISPERSION, _TAIL_GAIN = range(5)
-# float state layout: S1, S2, tail energy, absorption DF2T, rumble DF2T
-_S1, _S2, _ENERGY, _A1, _A2, _T1, _T2 = range(7)
+
+class ExplosionParams(NamedTuple):
+    """Settings of :func:`explosion_run`, stored in this order in the float64 array ``par``."""
+
+    r: float  #: per-sample decay of the blast pulse, e^{-b / (t+ fs)}
+    inv_tp: float  #: 1 / (t+ fs), inverse positive phase in samples
+    scatter: float  #: per-sample factor of the tail's energy integrator
+    dispersion: float  #: share of the scattered tail in the output
+    tail_gain: float  #: scale of the uniform draws to unit variance after the rumble low-pass
+
+
+@nb.njit(inline="always", cache=True)
+def explosion_params(par):
+    """The ExplosionParams record held in ``par``."""
+    return ExplosionParams(par[0], par[1], par[2], par[3], par[4])
+
+
+class ExplosionState(NamedTuple):
+    """State of :func:`explosion_run`, stored in this order in the float64 array ``st``."""
+
+    s1: float  #: sum of the blasts' A r^x
+    s2: float  #: sum of the blasts' x A r^x
+    energy: float  #: the tail's energy envelope (Pa^2)
+    a1: float  #: air-absorption low-pass, first DF2T state
+    a2: float  #: air-absorption low-pass, second DF2T state
+    t1: float  #: rumble low-pass, first DF2T state
+    t2: float  #: rumble low-pass, second DF2T state
+
+
+@nb.njit(inline="always", cache=True)
+def explosion_state(st):
+    """The ExplosionState record held in ``st``."""
+    return ExplosionState(st[0], st[1], st[2], st[3], st[4], st[5], st[6])
+
+
+_DISPERSION = ExplosionParams._fields.index("dispersion")
 
 
 def friedlander(t: np.ndarray, peak: float, blast_time: float, decay: float = 1.0) -> np.ndarray:
@@ -73,23 +105,26 @@ def positive_impulse(peak: float, blast_time: float, decay: float = 1.0) -> floa
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
-    """n samples from absolute frame ``start``; queue rows (arrival sample time, peak),
-    count[0] blasts queued; absorb/rumble: low-pass coefficients [b0, b1, b2, a1, a2]."""
-    r = par[_R]
-    inv_tp = par[_INV_TP]
-    scatter = par[_SCATTER]
-    dispersion = par[_DISPERSION]
+    """n samples from absolute frame ``start``; st holds an ExplosionState, par an
+    ExplosionParams; queue rows (arrival sample time, peak), count[0] blasts queued;
+    absorb/rumble: low-pass coefficients [b0, b1, b2, a1, a2]."""
+    c = explosion_params(par)
+    r = c.r
+    inv_tp = c.inv_tp
+    scatter = c.scatter
+    dispersion = c.dispersion
     log_r = math.log(r)
-    s1 = st[_S1]
-    s2 = st[_S2]
-    energy = st[_ENERGY]
-    a1 = st[_A1]
-    a2 = st[_A2]
-    t1 = st[_T1]
-    t2 = st[_T2]
+    state = explosion_state(st)
+    s1 = state.s1
+    s2 = state.s2
+    energy = state.energy
+    a1 = state.a1
+    a2 = state.a2
+    t1 = state.t1
+    t2 = state.t2
     s = rng[0]
     k_count = count[0]
-    tail_gain = par[_TAIL_GAIN]
+    tail_gain = c.tail_gain
     for i in range(n):
         t = float(start + i)
         s1, s2 = decay_sums(s1, s2, r)
@@ -113,13 +148,7 @@ def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
         a1 = absorb[1] * x - absorb[3] * y + a2
         a2 = absorb[2] * x - absorb[4] * y
         out[i] = y
-    st[_S1] = s1
-    st[_S2] = s2
-    st[_ENERGY] = energy
-    st[_A1] = a1
-    st[_A2] = a2
-    st[_T1] = t1
-    st[_T2] = t2
+    store(st, ExplosionState(s1, s2, energy, a1, a2, t1, t2))
     rng[0] = s
     count[0] = k_count
 
@@ -173,15 +202,6 @@ class Explosion(UGen):
         v, fs = self.values, self.sample_rate
         tp = v["blast_time"] * fs
         self.delay = v["distance"] / v["c"] * fs
-        self.par = np.array(
-            [
-                math.exp(-v["decay"] / tp),
-                1.0 / tp,
-                10.0 ** (-6.0 / (v["scatter_time"] * fs)),
-                v["dispersion"],
-                0.0,
-            ]
-        )
         self.absorb = np.zeros(5)
         cutoff = min(ABSORPTION_CUTOFF / math.sqrt(v["distance"]), 0.45 * fs)
         design_biquad(_LOWPASS, cutoff, 1.0 / math.sqrt(2.0), 1.0 / fs, self.absorb)
@@ -193,8 +213,15 @@ class Explosion(UGen):
         from scipy import signal  # imported here: scipy.signal adds about a second to every start
 
         h = signal.lfilter(self.rumble[:3], [1.0, *self.rumble[3:]], impulse)
-        self.par[_TAIL_GAIN] = math.sqrt(3.0 / float(np.dot(h, h)))
-        self.st = np.zeros(7)
+        params = ExplosionParams(
+            r=math.exp(-v["decay"] / tp),
+            inv_tp=1.0 / tp,
+            scatter=10.0 ** (-6.0 / (v["scatter_time"] * fs)),
+            dispersion=v["dispersion"],
+            tail_gain=math.sqrt(3.0 / float(np.dot(h, h))),
+        )
+        self.par = np.array(params, dtype=np.float64)
+        self.st = np.zeros(len(ExplosionState._fields))
         self.queue = np.zeros((QUEUE, 2))
         self.count = np.zeros(1, dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)

@@ -166,8 +166,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
         print(report.summary())
         if report.dropped_voxels:
             print(f"note: {report.dropped_voxels} voxel(s) not face-connected to the body were dropped")
-        if report.merged:
-            print(f"note: {report.merged} exactly degenerate mode(s) merged (gains summed)")
+        if report.families():
+            print(report.families())
         if model.n_points > 2000 and args.output.lower().endswith(".toml"):
             print(
                 f"note: {model.n_points} locations x {model.n_modes} modes; .npz is more compact than .toml"
@@ -286,10 +286,12 @@ def _check_recording(path: str, duration: float | None) -> None:
 
 def describe_model(path: str | os.PathLike) -> str:
     """A table of a model file's modes (for ``jassy info MODEL.toml``): frequency, decay rate,
-    T60, Q, and the gains at up to six locations (else their maximum and mean magnitude)."""
+    T60, Q, the multiplicity of degenerate families (m modes of one frequency), and the gains
+    at up to six locations (else their maximum and mean magnitude); the stored attack."""
     import numpy as np
 
     from jassy.modal_model import ModalModel
+    from physics.modal.fem import degenerate_groups
 
     m = ModalModel.load(path)
     lines = [
@@ -298,13 +300,22 @@ def describe_model(path: str | os.PathLike) -> str:
         + (f" ({', '.join(m.points)})" if m.points else ""),
         f"source: {path}",
     ]
+    if m.attack is not None:
+        lines.append(
+            f"attack: {m.attack.size} samples "
+            f"({1e3 * m.attack.size / m.attack_rate:.1f} ms at {m.attack_rate:g} Hz)"
+        )
+    order = np.argsort(m.frequencies, kind="stable")
+    multiplicity = np.ones(m.n_modes, dtype=int)
+    for g in degenerate_groups(m.frequencies[order]):
+        multiplicity[order[g]] = g.size
     few = m.n_points <= 6
     if few:
         heads = [p for p in m.points] if m.points else [f"v{i}" for i in range(m.n_points)]
         gain_head = " ".join(f"{h[:10]:>10}" for h in heads)
     else:
         gain_head = f"{'max|a|':>10} {'mean|a|':>10}"
-    lines.append(f"{'#':>4} {'f (Hz)':>10} {'d (1/s)':>9} {'T60 (s)':>8} {'Q':>8}  {gain_head}")
+    lines.append(f"{'#':>4} {'f (Hz)':>10} {'m':>2} {'d (1/s)':>9} {'T60 (s)':>8} {'Q':>8}  {gain_head}")
     for k in range(m.n_modes):
         f, d = m.frequencies[k], m.decays[k]
         t60 = math.log(1000) / d if d > 0 else float("inf")
@@ -315,7 +326,8 @@ def describe_model(path: str | os.PathLike) -> str:
             if few
             else f"{np.max(np.abs(col)):>10.4g} {np.mean(np.abs(col)):>10.4g}"
         )
-        lines.append(f"{k:>4} {f:>10.2f} {d:>9.3f} {t60:>8.3f} {q:>8.0f}  {gains}")
+        mult = f"{multiplicity[k]:>2}" if multiplicity[k] > 1 else "  "
+        lines.append(f"{k:>4} {f:>10.2f} {mult} {d:>9.3f} {t60:>8.3f} {q:>8.0f}  {gains}")
     return "\n".join(lines)
 
 

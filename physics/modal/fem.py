@@ -421,36 +421,57 @@ def sample_displacements(fem: FEModel, shapes: np.ndarray, points: np.ndarray) -
     return np.einsum("pa,paim->pim", w, u[node])
 
 
-def gains_from_shapes(
-    fem: FEModel, modes: Modes, points: np.ndarray, normals: np.ndarray, radiation: str = "displacement"
+def normal_displacements(fem: FEModel, modes: Modes, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """n_p . phi_k(p) (m per sqrt(kg)), shape (n_points, n_modes)."""
+    disp = sample_displacements(fem, modes.shapes, points)
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    return np.einsum("pi,pim->pm", n, disp)
+
+
+def gains_from_displacements(
+    un: np.ndarray, frequencies: np.ndarray, radiation: str = "displacement"
 ) -> np.ndarray:
     """a[p, k] = (n_p . phi_k(p))^2 / omega_k, times omega_k^r for radiation r = 0, 1, 2."""
     if radiation not in RADIATION:
         raise JassyError(f"--radiation: expected one of {', '.join(RADIATION)}, got {radiation!r}")
-    disp = sample_displacements(fem, modes.shapes, points)
-    n = np.asarray(normals, dtype=np.float64)
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
-    un = np.einsum("pi,pim->pm", n, disp)
-    omega = 2 * np.pi * modes.frequencies
+    omega = 2 * np.pi * np.asarray(frequencies)
     return un**2 * omega ** (RADIATION.index(radiation) - 1)
 
 
-def merge_degenerate(
-    frequencies: np.ndarray, gains: np.ndarray, rtol: float = 1e-6
-) -> tuple[np.ndarray, np.ndarray]:
-    """Merge modes whose frequencies agree within ``rtol`` (exactly degenerate pairs, e.g. of
-    a symmetric voxel model): mean frequency, summed gains. Within a degenerate eigenspace
-    the solver's basis is arbitrary, but the summed driving-point gain sum_k (n.phi_k)^2 is
-    not, and at one frequency the modes sound as their sum."""
-    groups = [[0]]
+def degenerate_groups(frequencies: np.ndarray, rtol: float = 1e-6) -> list[np.ndarray]:
+    """Indices of the modes (frequencies ascending) grouped by equal frequency within
+    ``rtol``: a group of m > 1 is a degenerate family of multiplicity m (a sphere's 2l + 1
+    modes of degree l, the mode pairs of anything with a symmetry axis)."""
+    groups = [[0]] if len(frequencies) else []
     for i in range(1, len(frequencies)):
         if frequencies[i] - frequencies[groups[-1][0]] <= rtol * frequencies[i]:
             groups[-1].append(i)
         else:
             groups.append([i])
-    f = np.array([frequencies[g].mean() for g in groups])
-    a = np.stack([gains[:, g].sum(axis=1) for g in groups], axis=1)
-    return f, a
+    return [np.array(g) for g in groups]
+
+
+def align_degenerate(un: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
+    """Normal displacements (n_points, n_modes) with each degenerate family's basis rotated so
+    that at the first point only the family's first mode moves along the normal.
+
+    Within a degenerate eigenspace any orthonormal basis is an equally valid set of mode
+    shapes, and a solver returns an arbitrary one; this basis is reproducible and physical:
+    struck at the first point, one mode of the family rings and the others (orthogonal
+    shapes, their own gains elsewhere) stay silent there."""
+    out = np.array(un, dtype=np.float64, copy=True)
+    for g in groups:
+        if g.size < 2:
+            continue
+        u = out[0, g]
+        norm = float(np.linalg.norm(u))
+        if norm <= 1e-12 * max(float(np.abs(out[:, g]).max()), 1e-300):
+            continue
+        q = np.linalg.qr(np.column_stack([u / norm, np.eye(g.size)]))[0][:, : g.size]
+        q[:, 0] *= np.sign(q[:, 0] @ u)
+        out[:, g] = out[:, g] @ q
+    return out
 
 
 # ------------------------------------------------------------------------------- whole pipeline
@@ -467,7 +488,7 @@ class ModesReport:
     dropped_voxels: int
     n_surface_points: int
     gain_scale: float
-    merged: int
+    multiplicity: tuple[int, ...]  # per kept mode: the size of its degenerate family (1 = simple)
     timings: dict
     voxel_volume: float
     mesh_volume: float
@@ -480,6 +501,22 @@ class ModesReport:
             f"{self.n_dofs} dofs (voxel volume {self.voxel_volume / self.mesh_volume:.3f} of the mesh's); "
             f"{self.n_surface_points} surface points; {steps}"
         )
+
+    def families(self) -> str:
+        """The degenerate families kept, e.g. "4 pairs, 1 family of 5 (kept as separate modes)"."""
+        sizes = []
+        k = 0
+        while k < len(self.multiplicity):
+            m = self.multiplicity[k]
+            if m > 1:
+                sizes.append(m)
+            k += max(m, 1)
+        if not sizes:
+            return ""
+        counts = {m: sizes.count(m) for m in sorted(set(sizes))}
+        parts = [f"{c} pair{'s' if c > 1 else ''}" if m == 2 else f"{c} famil{'ies' if c > 1 else 'y'} of {m}"
+                 for m, c in counts.items()]  # fmt: skip
+        return "degenerate modes: " + ", ".join(parts) + " (kept as separate modes, each with its own gains)"
 
 
 def modes_from_mesh(
@@ -507,8 +544,10 @@ def modes_from_mesh(
     triangles interpolate gains barycentrically (:class:`physics.modal.subdivision.SurfaceMap`).
     With ``points`` (name -> x, y, z in m), the model has one named row per point, sampled
     directly from the finite element solution at the closest surface point (third value None).
-    Decays follow the material's damping law. Exactly degenerate modes are merged (see
-    :func:`merge_degenerate`); modes at or above ``f_max`` Hz are dropped.
+    Decays follow the material's damping law. Degenerate families (equal frequencies) are
+    kept as separate modes, each with its own shape and gains, in the basis of
+    :func:`align_degenerate`; the report lists their multiplicities. Modes at or above
+    ``f_max`` Hz are dropped.
     """
     import trimesh
 
@@ -528,19 +567,23 @@ def modes_from_mesh(
     point_names: tuple[str, ...] = ()
     if points:
         where, normals = surface_frames(mesh, np.array([tuple(p) for p in points.values()], dtype=float))
-        gains = gains_from_shapes(fem, modes, where, normals, radiation)
+        un = normal_displacements(fem, modes, where, normals)
         point_names = tuple(points)
         surface = None
     else:
         refined = loop_subdivide(mesh, subdivide)[0] if subdivide else mesh
         where, normals = surface_frames(mesh, np.asarray(refined.vertices))
-        gains = gains_from_shapes(fem, modes, where, normals, radiation)
+        un = normal_displacements(fem, modes, where, normals)
         surface = trimesh.Trimesh(where, np.asarray(refined.faces), process=False)
-    freqs, gains = merge_degenerate(modes.frequencies, gains)
-    merged = modes.frequencies.size - freqs.size
+    groups = degenerate_groups(modes.frequencies)
+    freqs = modes.frequencies
+    gains = gains_from_displacements(align_degenerate(un, groups), freqs, radiation)
+    multiplicity = np.zeros(freqs.size, dtype=np.int64)
+    for g in groups:
+        multiplicity[g] = g.size
     if f_max is not None:
         keep = freqs < f_max
-        freqs, gains = freqs[keep], gains[:, keep]
+        freqs, gains, multiplicity = freqs[keep], gains[:, keep], multiplicity[keep]
         if freqs.size == 0:
             raise JassyError(
                 f"--fmax: no mode below {f_max:g} Hz (the lowest is {modes.frequencies[0]:g} Hz)"
@@ -568,7 +611,7 @@ def modes_from_mesh(
         dropped_voxels=grid.dropped,
         n_surface_points=gains.shape[0],
         gain_scale=scale,
-        merged=merged,
+        multiplicity=tuple(int(m) for m in multiplicity),
         timings=timings,
         voxel_volume=grid.n_elements * pitch**3,
         mesh_volume=float(abs(mesh.volume)),

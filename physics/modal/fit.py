@@ -18,8 +18,10 @@ frequency resolutions, each on what the previous ones left:
    rows to one Gram matrix per band, so poles are pooled over all of them.
 3. **Wide bands** (2 kHz apart, the first 0.3 s of the hit minus the modes found so far):
    modes of 20-800 /s, which are too broad and too short for a narrow band's filter.
-4. **Full rate** (the first 40 ms, minus everything found so far): modes up to several
-   thousand /s (wood, small objects, high frequencies), with no band filter in the way.
+4. **Full rate** (the first 40 ms, minus everything found so far): modes up to 3000 /s
+   (wood, small objects, high frequencies), with no band filter in the way. Faster
+   "modes" (T60 < 2.3 ms) are the contact itself: a noise burst fits as dozens of them,
+   so they are left to the attack.
 5. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
    linear least squares at the full rate (closed-form Gram matrix), minus what the previous
    hits still ring; gain = |amplitude| at the onset.
@@ -77,7 +79,7 @@ STAGES = (
     Stage("zoom bands", 50.0, 50.0, 6.0, 0.0, 10.0, 2000.0),
     Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
     Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
-    Stage("full rate", 0.0, 0.0, 0.04, 200.0, 6000.0),
+    Stage("full rate", 0.0, 0.0, 0.04, 200.0, 3000.0),
 )
 
 
@@ -101,11 +103,15 @@ class FitResult:
     sample_rate: float
     onsets: list[list[float]]
     residual_db: list[float]
-    phases: np.ndarray
+    phases: np.ndarray  # per hit and channel: phi_k of a_k e^{-d_k t} sin(2 pi f_k t + phi_k) (rad)
     levels_db: np.ndarray
     noise_db: float
     notes: list[str] = field(default_factory=list)
-    attack: np.ndarray = field(default_factory=lambda: np.zeros(0))  # first hit's residual
+
+    @property
+    def attack(self) -> np.ndarray:
+        """The stored attack (``ModalModel.attack``; empty if none)."""
+        return np.zeros(0) if self.model.attack is None else self.model.attack
 
     @property
     def onset(self) -> float:
@@ -504,13 +510,22 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
         residual.append(
             10 * math.log10(max(np.sum(err[own] ** 2) / max(np.sum(seg.x[own] ** 2), 1e-300), 1e-30))
         )
-    attack = _attack(segments[0], z, amps[0], rate, attack_ms)
+    first = segments[0]
+    sigma = math.sqrt(float(np.median(first.noise)) / first.x.size)
+    onset_x = recs[first.recording][first.hit.onset : first.hit.end, first.channel]
+    attack = _attack(onset_x, z, c0[0], sigma, rate, attack_ms)
+    strong = mags[0] >= 0.1 * mags[0].max()
+    attack *= float(np.median(rows[0][strong] / mags[0][strong]))  # on gain row 0's scale
     work.step("done")
     work.close()
     levels = 10 * np.log10(energy / energy.max())
-    model = ModalModel(freqs, decays, rows, names, name)
+    kept = attack if attack.size else None
+    model = ModalModel(
+        freqs, decays, rows, names, name, attack=kept, attack_rate=float(rate) if attack.size else None
+    )
     noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
-    return FitResult(model, float(rate), onsets_s, residual, np.angle(c0), levels, noise_db, notes, attack)
+    # Re(c z^n) = |c| sin(omega n + arg(c) + pi / 2)
+    return FitResult(model, float(rate), onsets_s, residual, np.angle(1j * c0), levels, noise_db, notes)
 
 
 def _gain_rows(segments, mags, recs, locations, points):
@@ -543,27 +558,24 @@ def _gain_rows(segments, mags, recs, locations, points):
     return np.array(rows), tuple(names)
 
 
-def _attack(seg: Segment, z: np.ndarray, c: np.ndarray, rate: float, attack_ms: float) -> np.ndarray:
-    """The first hit's residual from its onset over up to ``attack_ms`` (until it falls to the
-    noise), faded out over its last quarter: the contact and what no mode explains."""
-    if attack_ms <= 0:
+def _attack(
+    x: np.ndarray, z: np.ndarray, c: np.ndarray, sigma: float, rate: float, attack_ms: float
+) -> np.ndarray:
+    """The first hit's residual from its onset (``x`` starts there; ``c`` = the modes'
+    complex amplitudes at the onset) over up to ``attack_ms``, until its 0.5 ms peaks stay
+    below 4 ``sigma`` (the noise's standard deviation), faded out over its last quarter: the
+    contact and what no mode explains. Clipped samples stay in (the residual there is the
+    clipped recording minus the modes)."""
+    n = min(int(attack_ms * 1e-3 * rate), x.size)
+    if n <= 0:
         return np.zeros(0)
-    n = int(attack_ms * 1e-3 * rate)
-    # from the onset (the clipped/contact samples before ``first`` included), modes back-propagated
-    lead = seg.hit.first - seg.hit.onset
-    x = seg.x[: max(n - lead, 0)]
-    res = x - esprit.resynthesis(x.size, z, c)
-    sigma = math.sqrt(float(np.median(seg.noise)) / seg.x.size)
+    res = x[:n] - esprit.resynthesis(n, z, c)
     hop = max(int(rate / 2000), 1)
-    env = (
-        np.array([np.max(np.abs(res[i : i + hop])) for i in range(0, res.size, hop)])
-        if res.size
-        else np.zeros(0)
-    )
+    env = np.abs(np.pad(res, (0, -n % hop))).reshape(-1, hop).max(axis=1)
     loud = np.flatnonzero(env > 4 * sigma)
     if loud.size == 0:
         return np.zeros(0)
-    m = min(res.size, (loud[-1] + 1) * hop)
+    m = min(n, (loud[-1] + 1) * hop)
     out = res[:m].copy()
     fade = max(m // 4, 1)
     out[m - fade :] *= 0.5 + 0.5 * np.cos(np.linspace(0, np.pi, fade))
@@ -574,10 +586,12 @@ def _attack(seg: Segment, z: np.ndarray, c: np.ndarray, rate: float, attack_ms: 
 
 
 def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0.0, row: int = 0,
-                 phases=None, attack=None) -> np.ndarray:  # fmt: skip
+                 phases=None, attack: bool = True) -> np.ndarray:  # fmt: skip
     """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt)
-    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus ``attack`` samples
-    (e.g. ``FitResult.attack``, at the same rate) from the onset."""
+    with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus, with ``attack``,
+    the model's stored attack (resampled to ``sample_rate``) from the onset."""
+    from ugens.attack import attack_at_rate
+
     t = np.arange(n) / sample_rate - onset
     live = t >= 0
     tt = t[live]
@@ -589,10 +603,11 @@ def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0
             * np.exp(-model.decays[k] * tt)
             * np.sin(2 * np.pi * model.frequencies[k] * tt + ph[k])
         )
-    if attack is not None and attack.size:
+    if attack and model.attack is not None and model.attack.size:
+        samples = attack_at_rate(model.attack, float(model.attack_rate), float(sample_rate))
         i0 = int(np.argmax(live)) if live.any() else n
-        m = min(attack.size, n - i0)
-        out[i0 : i0 + m] += attack[:m]
+        m = min(samples.size, n - i0)
+        out[i0 : i0 + m] += samples[:m]
     return out
 
 
@@ -641,7 +656,7 @@ def plot_fit(result: FitResult, recording: np.ndarray, path: str | os.PathLike, 
     rate = result.sample_rate
     x = np.asarray(recording, dtype=np.float64)
     x = x[:, 0] if x.ndim == 2 else x
-    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row], attack=result.attack)
+    y = resynthesise(result.model, x.size, rate, result.onset, row, result.phases[row])
     nper = 1024 if rate > 30000 else 512
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, sharey=True)
     ref = None

@@ -69,10 +69,11 @@ def subdivide_values(mesh, values, iterations: int = 1) -> np.ndarray:
 def closest_points(mesh, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(closest points (n, 3), triangle ids (n,), barycentric weights (n, 3)) on the mesh.
 
-    Exact without an R-tree: the triangle whose centroid is nearest (distance d0) bounds
-    the answer, so only triangles with centroids within d0 + 2 R (R = the largest
-    centroid-to-vertex distance) can hold the closest point; those are found with a k-d tree
-    and tested exactly.
+    Exact without an R-tree: the exact distance u to the triangles of the few nearest
+    centroids bounds the answer, and a triangle of radius r (largest centroid-to-vertex
+    distance) can be closer only if its centroid lies within u + r. Triangles are grouped
+    by radius (each group within a factor 2), one k-d tree per group, so a few large
+    triangles (the fan of a bowl's base) do not widen every point's search to the whole mesh.
     """
     from scipy.spatial import cKDTree
     from trimesh.triangles import closest_point, points_to_barycentric
@@ -82,19 +83,30 @@ def closest_points(mesh, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise JassyError(f"point: expected x, y, z coordinates, got shape {pts.shape}")
     centroids = tris.mean(axis=1)
-    reach = float(np.max(np.linalg.norm(tris - centroids[:, None, :], axis=2)))
-    tree = cKDTree(centroids)
-    d0, _ = tree.query(pts)
-    cand = tree.query_ball_point(pts, d0 + 2 * reach + 1e-12)
-    counts = np.array([len(c) for c in cand])
-    flat = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand])
-    owner = np.repeat(np.arange(len(pts)), counts)
+    radius = np.linalg.norm(tris - centroids[:, None, :], axis=2).max(axis=1)
+    n_pts = len(pts)
+    near = min(8, len(tris))
+    _, first = cKDTree(centroids).query(pts, k=near)
+    first = np.asarray(first).reshape(n_pts, near)
+    owner = np.repeat(np.arange(n_pts), near)
+    cp = closest_point(tris[first.ravel()], pts[owner])
+    bound = np.sqrt(np.einsum("ij,ij->i", cp - pts[owner], cp - pts[owner]).reshape(n_pts, near).min(axis=1))
+    level = np.floor(np.log2(np.maximum(radius, 1e-300) / max(float(radius.max()), 1e-300))).astype(np.int64)
+    flat, owners = [first.ravel()], [owner]
+    for lv in np.unique(level):
+        group = np.flatnonzero(level == lv)
+        cand = cKDTree(centroids[group]).query_ball_point(
+            pts, bound + radius[group].max() * (1 + 1e-9) + 1e-12
+        )
+        counts = np.array([len(c) for c in cand])
+        if counts.sum():
+            flat.append(group[np.concatenate([np.asarray(c, dtype=np.int64) for c in cand if len(c)])])
+            owners.append(np.repeat(np.arange(n_pts), counts))
+    flat, owner = np.concatenate(flat), np.concatenate(owners)
     cp = closest_point(tris[flat], pts[owner])
     d = np.einsum("ij,ij->i", cp - pts[owner], cp - pts[owner])
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    best = np.empty(len(pts), dtype=np.int64)
-    for i, (s0, c) in enumerate(zip(starts, counts, strict=True)):
-        best[i] = s0 + int(np.argmin(d[s0 : s0 + c]))
+    order = np.lexsort((flat, d, owner))  # per point, nearest first (ties: the lowest triangle id)
+    best = order[np.searchsorted(owner[order], np.arange(n_pts))]
     tri_id = flat[best]
     close = cp[best]
     bary = points_to_barycentric(tris[tri_id], close)
