@@ -565,7 +565,14 @@ def print_live(r: dict) -> None:
         f"by the sender, {r['udp_frames_refused_at_send']} refused by its socket, "
         f"{r['udp_frames_dropped_at_receiver_socket']} dropped at the receiver's socket, "
         f"{r['udp_frames_lost_otherwise']} otherwise), "
-        f"{r['udp_frames_late']} late; interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
+        f"{r['udp_frames_late']} late"
+        + (
+            {True: " (sender SCHED_FIFO)", False: " (sender not real-time)"}.get(
+                r.get("udp_sender_realtime"), ""
+            )
+        )
+        + "; "
+        f"interval p1/p50/p99 {r['frame_interval_p1_ms']:.3f}/"
         f"{r['frame_interval_p50_ms']:.3f}/{r['frame_interval_p99_ms']:.3f} ms "
         f"(max {r['frame_interval_max_ms']:.3f}); final frame "
         f"{'sent' if r['udp_final_frame'] else 'MISSING'}\n"

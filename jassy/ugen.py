@@ -134,6 +134,7 @@ class UGen:
         if not self.variadic and input_name not in self.inputs:
             raise PatchError(
                 f"{self.type_name}: no input {input_name!r}; inputs are {', '.join(self.inputs) or 'none'}"
+                f"{suggest(input_name, self.inputs)}"
             )
         self.sources[input_name] = source
 
@@ -245,7 +246,9 @@ class UGen:
     def configure(self, key: str, value: Any) -> None:
         """Set a parameter's initial value (the value every render starts from)."""
         if key not in self.all_specs():
-            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+            raise PatchError(
+                f"{self.type_name} {self.name!r}: unknown parameter {key!r}{suggest(key, self.all_specs())}"
+            )
         value = self.check_param(key, value, f"{self.name}.{key}")
         self.initial[key] = value
         self.values[key] = value
@@ -255,7 +258,9 @@ class UGen:
         seconds if given, else the ``smooth`` time) unless ``jump``."""
         spec = self.all_specs().get(key)
         if spec is None:
-            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+            raise PatchError(
+                f"{self.type_name} {self.name!r}: unknown parameter {key!r}{suggest(key, self.all_specs())}"
+            )
         if spec.fixed and self.sample_rate is not None:
             raise PatchError(
                 f"{self.type_name} {self.name!r}: parameter {key!r} cannot change during a render"
