@@ -169,7 +169,10 @@ class SoundLevel(NamedTuple):
 #: the defaults peak within -30..-6 dBFS (tests/test_source_levels.py).
 SOUND_SOURCES = {
     "Bubble": SoundLevel(
-        "full scale", "peak", "one bubble peaks at gain * depth * (radius / 1 mm)^1.5", (("bubble", {}),)
+        "full scale",
+        "peak",
+        "one bubble peaks at gain * depth * (radius / 1 mm)^1.5; Pa in water: bubble_gain",
+        (("bubble", {}),),
     ),
     "BubbleStream": SoundLevel("full scale", "rms", "bubble_stream_rms (Campbell's theorem)", ()),
     "Wind": SoundLevel("full scale", "rms", "level * (speed / 10 m/s)^3 without gusts", ()),
@@ -187,6 +190,44 @@ SOUND_SOURCES = {
         "Pa", "peak", "overpressure (Pa at 1 m) / distance, Friedlander wave", (("blast", {}),)
     ),
 }
+
+
+def level_convention(type_name: str) -> str:
+    """One line on how a ugen's output level is set (for ``jassy doc``), "" for processors."""
+    if type_name in FORCE_SOURCES:
+        return (
+            "a force in N: through a calibrated ModalBank with unit gain its defaults peak within "
+            "-30..-6 dBFS on every shipped model"
+        )
+    if type_name in TONAL_FORCE_SOURCES:
+        return "a force in N with a line or narrow-band spectrum: its level depends on the modes it meets"
+    if type_name in CALIBRATED_LOOPS:
+        return "level = 'calibrated' scales what it outputs by the model's reference gain (as ModalBank)"
+    if type_name in SOUND_SOURCES:
+        level = SOUND_SOURCES[type_name]
+        scale = "1.0 = 105 dB SPL" if level.unit == "full scale" else "Pa"
+        return f"sound pressure at the listener ({scale}), {level.statistic}: {level.rule}"
+    if type_name in SIGNALS:
+        return "a signal, not a sound: unit scale (Sampler: its file as it is)"
+    return ""
+
+
+#: Density of water (kg/m^3), the medium of bubble_gain.
+WATER_DENSITY = 998.0
+
+
+def bubble_gain(wall_amplitude: float, distance: float, full_scale_spl: float = 105.0) -> float:
+    """The Bubble/BubbleStream ``gain`` that makes their output a physical pressure in water:
+    a bubble of radius R whose wall oscillates by ``wall_amplitude`` x R (at R = 1 mm and
+    depth 1; van den Doel's amplitude law r^1.5 makes it grow as sqrt(R), Longuet-Higgins's
+    scaling) radiates as a pulsating sphere, p = rho w0^2 R^3 epsilon / r at ``distance`` r
+    (Kinsler et al., *Fundamentals of Acoustics*, 7.4; w0 = 2 pi 3 / R), here in full scale
+    (1.0 = ``full_scale_spl`` dB SPL; 93.98 gives Pa). The default gain 0.125 (105 dB full
+    scale) is epsilon / r = 1.25e-3 per m: a 1 mm bubble ringing at 0.125 % of its radius,
+    1 m away. What is heard in air from bubbles at a surface is weaker (not modelled)."""
+    omega = 2.0 * np.pi * 3.0 / 1e-3
+    pascal = WATER_DENSITY * omega**2 * 1e-9 * wall_amplitude / distance
+    return pascal / (P_REF * 10 ** (full_scale_spl / 20.0))
 
 
 def bubble_stream_rms(rate, min_radius, max_radius, exponent, min_depth, max_depth, gain, points=4096):

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from jassy.errors import ModelError, PatchError
+from jassy.errors import ModelError, PatchError, suggest
 from jassy.tracks import Track, find_track, track_gains
 
 
@@ -193,7 +193,10 @@ class ModalModel:
         if isinstance(vertex, str):
             if vertex not in self.points:
                 names = ", ".join(self.points) or "none (use vertex indices)"
-                raise PatchError(f"{where}: unknown point {vertex!r}; the model's points are {names}")
+                raise PatchError(
+                    f"{where}: unknown point {vertex!r}; the model's points are {names}"
+                    f"{suggest(vertex, self.points)}"
+                )
             return self.points.index(vertex)
         if not 0 <= vertex < self.n_points:
             raise PatchError(
@@ -302,7 +305,10 @@ class ModalModel:
                    "attack_rate"}  # fmt: skip
         for key in data:
             if key not in allowed:
-                raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
+                raise ModelError(
+                    f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}"
+                    f"{suggest(key, allowed)}"
+                )
         for key in ("frequencies", "decays", "gains"):
             if key not in data:
                 raise ModelError(f"{source}: missing key {key!r}")

@@ -106,16 +106,13 @@ class OfflineEngine:
         """Frames rendered so far (the sample clock)."""
         return self.scheduler.frame
 
-    def chunks(
-        self, frames: int, progress: bool = False, into: np.ndarray | None = None
-    ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Yield (audio, haptic) chunks covering the next ``frames`` frames; ``into``: an
-        array (audio rows, then haptic rows; ``frames`` columns) the chunks are rendered
-        in place in (views of it are yielded), instead of one reused chunk buffer."""
+    def chunks(self, frames: int, progress: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Yield (audio, haptic) chunks covering the next ``frames`` frames."""
         graph = self.graph
         n_audio = len(graph.audio)
         size = min(CHUNK_FRAMES, max(frames, 1))
-        buf = np.zeros((len(graph.bus_rows), size)) if into is None else None
+        buf = np.zeros((len(graph.bus_rows), size))
+        abuf, hbuf = buf[:n_audio], buf[n_audio:]
 
         bar = None
         if progress:
@@ -134,9 +131,8 @@ class OfflineEngine:
             while done < frames:
                 stopflag.check()  # a SIGTERM whose KeyboardInterrupt was lost still stops here
                 n = min(size, frames - done)
-                chunk = buf if into is None else into[:, done : done + n]
-                self.produce(chunk, n)
-                a, h = chunk[:n_audio, :n], chunk[n_audio:, :n]
+                self.produce(buf, n)
+                a, h = abuf[:, :n], hbuf[:, :n]
                 done += n
                 if bar is not None:
                     bar.update(round(n / self.sample_rate, 6))
@@ -178,11 +174,15 @@ class OfflineEngine:
     def render(self, duration: float, progress: bool = False) -> Rendering:
         """Render ``duration`` seconds into arrays."""
         frames = frames_for(duration, self.sample_rate)
-        n_audio = len(self.graph.audio)
-        signals = np.empty((len(self.graph.bus_rows), frames))  # every frame is rendered into it
-        for _ in self.chunks(frames, progress, into=signals):
-            pass
-        return Rendering(signals[:n_audio], signals[n_audio:], self.sample_rate, self._final_warnings())
+        audio = np.empty((len(self.graph.audio), frames))  # every frame is copied in below
+        haptic = np.empty((len(self.graph.haptic), frames))
+        pos = 0
+        for a, h in self.chunks(frames, progress):
+            n = a.shape[1]
+            audio[:, pos : pos + n] = a
+            haptic[:, pos : pos + n] = h
+            pos += n
+        return Rendering(audio, haptic, self.sample_rate, self._final_warnings())
 
     def _final_warnings(self) -> list[str]:
         """The render's warnings, with the limiter's report if it cut peaks."""

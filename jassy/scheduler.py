@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numba as nb
 import numpy as np
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.jit import specialise
@@ -43,7 +43,10 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
         raise PatchError(f"{where}.time: expected a time in seconds >= 0, got {event.time!r}")
     node = graph.nodes.get(event.node)
     if node is None:
-        raise PatchError(f"{where}.node: unknown node {event.node!r}; nodes are {', '.join(graph.nodes)}")
+        raise PatchError(
+            f"{where}.node: unknown node {event.node!r}; nodes are {', '.join(graph.nodes)}"
+            f"{suggest(event.node, graph.nodes)}"
+        )
     args: dict[str, Any] = {}
     ramp = event.ramp
     if ramp is not None and (
@@ -61,7 +64,7 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
             if spec is None:
                 raise PatchError(
                     f"{where}.set.{key}: {node.type_name} has no parameter {key!r}; "
-                    f"expected one of {', '.join(specs)}"
+                    f"expected one of {', '.join(specs)}{suggest(key, specs)}"
                 )
             if spec.fixed:
                 raise PatchError(f"{where}.set.{key}: parameter {key!r} cannot change during a render")
@@ -69,14 +72,16 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
     else:
         specs = node.actions.get(event.action)
         if specs is None:
-            acts = ", ".join(["set", *node.actions])
+            acts = ["set", *node.actions]
             raise PatchError(
-                f"{where}: {node.type_name} has no action {event.action!r}; expected one of {acts}"
+                f"{where}: {node.type_name} has no action {event.action!r}; expected one of {', '.join(acts)}"
+                f"{suggest(event.action, acts)}"
             )
         for key in event.args:
             if key not in specs:
                 raise PatchError(
                     f"{where}.{event.action}.{key}: unknown argument; expected one of {', '.join(specs)}"
+                    f"{suggest(key, specs)}"
                 )
         for key, spec in specs.items():
             if key in event.args:

@@ -9,15 +9,18 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
 
 import ugens
-from jassy import Graph, render
+from jassy import Event, Graph, render
 from jassy.levels import (
     CALIBRATED_LOOPS,
     FORCE_SOURCES,
     SIGNALS,
     SOUND_SOURCES,
     TONAL_FORCE_SOURCES,
+    WATER_DENSITY,
+    bubble_gain,
     bubble_stream_rms,
     cavity_tone_rms,
 )
@@ -112,3 +115,34 @@ def test_cavity_tone_rms_is_the_jet_band_at_the_resonance(on_resonance):
     x = rendered(node, 30.0)[FS:]
     predicted = cavity_tone_rms(0.1, speed, 0.02, f_h)
     assert np.sqrt(np.mean(x**2)) == pytest.approx(predicted, rel=0.08)
+
+
+def test_jassy_doc_states_each_sources_level_convention():
+    from jassy.doc import describe_ugen
+
+    for name, cls in ugen_types().items():
+        if not set(cls.inputs) - set(getattr(cls, "optional_inputs", ())):
+            line = next((ln for ln in describe_ugen(cls).splitlines() if ln.startswith("level: ")), "")
+            assert len(line) > 20, name
+    assert "1.0 = 105 dB SPL" in describe_ugen(ugen_types()["Wind"])
+    assert "(Pa)" in describe_ugen(ugen_types()["Explosion"])
+
+
+@pytest.mark.parametrize("radius", [1e-3, 3e-3])
+def test_a_bubble_at_its_physical_gain_is_a_pulsating_sphere_in_water(radius):
+    """gain = bubble_gain(epsilon, r) in Pa (93.98 dB full scale): the rendered bubble's
+    envelope at its birth is rho w^2 R^3 epsilon(R) / r with w its measured frequency and
+    epsilon(R) = epsilon sqrt(R / 1 mm)."""
+    epsilon, distance, t0 = 2e-3, 0.5, 0.01
+    node = ugens.Bubble(name="b", gain=bubble_gain(epsilon, distance, full_scale_spl=93.98))
+    score = [Event(t0, "b", "bubble", {"radius": radius, "depth": 1.0})]
+    x = render(Graph(node), score, duration=0.06, sample_rate=FS, limiter=False).audio[0]
+    first = math.ceil(t0 * FS)
+    z = signal.hilbert(x[first:])
+    t = (first + np.arange(z.size)) / FS - t0
+    fit = slice(int(0.002 * FS), int(0.012 * FS))  # away from the analytic signal's ends
+    slope, intercept = np.polyfit(t[fit], np.log(np.abs(z[fit])), 1)
+    omega = np.polyfit(t[fit], np.unwrap(np.angle(z[fit])), 1)[0]
+    omega_birth = omega / (1 + 0.1 * -slope * 0.007)  # the rise: w (1 + sigma d t), fit centre 7 ms
+    predicted = WATER_DENSITY * omega_birth**2 * radius**3 * epsilon * math.sqrt(radius / 1e-3) / distance
+    assert math.exp(intercept) == pytest.approx(predicted, rel=0.02)
