@@ -14,7 +14,10 @@ the output's error energy) or, with ``weighting = "A"``, the A-weighting power g
 force of that spectrum builds in a mode over the horizon tau, so continuous contacts
 (scraping, rolling, friction) compete with impacts and ringing modes on one scale. The
 top ``max_modes`` modes are computed for the next period; the rest are silenced and cost
-nothing (the bank runs only its first, kept, modes).
+nothing: each bank runs its kept modes gathered into a compact bank, so its cost is
+proportional to them. Importance, ranking and the change of the kept set are compiled
+(ugens.modal_budget, jassy.anytime_rank); per decision each bank adds a few Python calls
+and, when it heard a force, a periodogram (numpy FFT).
 
 A decision is taken only where something may change the ranking: an impact scheduled in
 this or the next period, a force heard in the last period, or a mode fading out. Between

@@ -52,6 +52,7 @@ from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
@@ -98,10 +99,10 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
             gk = g[k]
             u1 = y1[k]
             u2 = y2[k]
-            v0 = p * u1 - q * u2 + gk * fp
-            v1 = p * v0 - q * u1 + gk * f0
-            v2 = p * v1 - q * v0 + gk * f1
-            v3 = p * v2 - q * v1 + gk * f2
+            v0 = two_pole(p, q, u1, u2, gk * fp)
+            v1 = two_pole(p, q, v0, u1, gk * f0)
+            v2 = two_pole(p, q, v1, v0, gk * f1)
+            v3 = two_pole(p, q, v2, v1, gk * f2)
             y2[k] = v2
             y1[k] = v3
             s0 += v0
@@ -118,7 +119,7 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
         f = force[i]
         s = 0.0
         for k in range(active):
-            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp
+            v = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fp)
             y2[k] = y1[k]
             y1[k] = v
             s += v
@@ -145,7 +146,7 @@ def resonate_ramp(force, out, n, coef, y1, y2, delta, target, remaining, active,
         s = 0.0
         direct = 0.0
         for k in range(K):
-            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp
+            v = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fp)
             y2[k] = y1[k]
             y1[k] = v
             s += v
@@ -171,7 +172,7 @@ def flush_silent(y1, y2, active, floor):
     """Zero modes below ``floor``; return the new active count (last audible mode + 1)."""
     last = 0
     for k in range(active):
-        if abs(y1[k]) < floor and abs(y2[k]) < floor:
+        if silent(y1[k], y2[k], floor):
             y1[k] = 0.0
             y2[k] = 0.0
         else:

@@ -65,6 +65,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import silent, state_step
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
@@ -282,8 +283,7 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
         for j in range(kmodes):
             q = qs[j] + g1[j] * fp
             p = ps[j] + g2[j] * fp
-            qn = a11[j] * q + a12[j] * p
-            pn = a21[j] * q + a22[j] * p
+            qn, pn = state_step(a11[j], a12[j], a21[j], a22[j], q, p)
             qs[j] = qn
             ps[j] = pn
             sq += qn
@@ -344,7 +344,7 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
             if not active:
                 last = 0
                 for j in range(kmodes):
-                    if abs(qs[j]) < floor and abs(ps[j]) * inv_w[j] < floor:
+                    if silent(qs[j], ps[j] * inv_w[j], floor):  # velocity / w: a displacement
                         qs[j] = 0.0
                         ps[j] = 0.0
                     else:
