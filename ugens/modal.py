@@ -38,6 +38,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, NamedTuple
 
@@ -57,6 +58,7 @@ from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
     apply_kept,
+    centred_power,
     gather_kept,
     mode_importance,
     scatter_kept,
@@ -203,6 +205,10 @@ KEPT_LANES = 8
 
 #: Anytime budget: no force heard (an empty spectrum), no impacts elsewhere.
 NO_SPECTRUM = np.zeros(0)
+
+#: Anytime budget: what no impact adds (ModalBank._kicked), and no compact bank.
+NOT_KICKED = (0.0, NO_SPECTRUM)
+NO_COMPACT = np.zeros((COMPACT_ROWS, 0))
 
 
 def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
@@ -899,13 +905,12 @@ class ModalBank(ModelParams, UGen):
         if not (kick_now or kick_next or self.meta[0] or self._onset is not None or heard):
             self._scores[:] = 0.0  # nothing rings, nothing comes
             return
-        spectrum, flat = NO_SPECTRUM, True
+        spectrum, flat_psd = NO_SPECTRUM, 0.0
         if self._onset is not None:
-            force, self._onset = self._onset - self._onset.mean(), None
-            spectrum = np.array([np.dot(force, force) / (force.size * self.sample_rate)])
+            flat_psd, self._onset = centred_power(self._onset) / self.sample_rate, None
         elif heard:
-            force = self._heard - self._heard.mean()  # a steady load makes no sound
             if self.model.n_modes > FLAT_SPECTRUM_MODES:
+                force = self._heard - self._heard.mean()  # a steady load makes no sound
                 psd = np.abs(np.fft.rfft(force * self._window)) ** 2 / self._window_power
                 # a periodogram of noise scatters by its own size from bin to bin: smooth
                 # it over neighbouring bins and over periods (it is the trend that ranks)
@@ -913,17 +918,16 @@ class ModalBank(ModelParams, UGen):
                 if self._psd is not None:
                     psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
                 self._psd = spectrum = psd
-                flat = False
             else:  # a few modes: the force's power spread flat (no transform)
-                spectrum = np.array([np.dot(force, force) / (force.size * self.sample_rate)])
-        here_now, elsewhere_now = self._kicked(kick_now)
-        here_next, elsewhere_next = self._kicked(kick_next)
+                flat_psd = centred_power(self._heard) / self.sample_rate
+        here_now, elsewhere_now = self._kicked(kick_now) if kick_now else NOT_KICKED
+        here_next, elsewhere_next = self._kicked(kick_next) if kick_next else NOT_KICKED
         if self._decay_period[0] != period:
             self._decay_period = (period, self._fresh_c2**period)
         mode_importance(
             self._gathered(), self._kept, self._kept_count, self.target[2], self.delta[2],
             float(self.meta[1]), self._poles[2], self._poles[3], float(self.sample_rate), spectrum,
-            self._bins, flat, self._growth,
+            self._bins, flat_psd, self._growth,
             here_now, here_next, elsewhere_now, elsewhere_next, self._decay_period[1], self._weights,
             self._kept_mask, self._faded, KEPT_BONUS, self._floor * self._floor, self._scores,
         )  # fmt: skip
@@ -946,13 +950,11 @@ class ModalBank(ModelParams, UGen):
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
         rest (ugens.modal_budget.apply_kept). Returns how many are computed."""
-        shrink = np.exp(-np.log(1000.0) / period)  # -60 dB over one period
-        compact = self._compact
-        if compact is not None:  # the kept modes' state, for apply_kept to read and change
-            scatter_kept(compact, self._kept, self._kept_count, self.bank)
+        shrink = math.exp(-math.log(1000.0) / period)  # -60 dB over one period
+        compact, held = (NO_COMPACT, 0) if self._compact is None else (self._compact, self._kept_count)
         count = apply_kept(
-            keep, fade, self._kept_mask, self._faded, self.coef, self.target, self.delta, self._fresh, self.y,
-            float(self.meta[1]), shrink, self._kept,
+            keep, fade, self._kept_mask, self._faded, self.bank, self.target, self.delta, self._fresh,
+            float(self.meta[1]), shrink, self._kept, compact, held,
         )  # fmt: skip
         if count < 0:
             return self._kept_count  # the same modes as now (the compact bank stays)
