@@ -5,6 +5,7 @@ patch files and the CLI. It does not import ``ugens``, ``physics`` or ``patches`
 import time.
 """
 
+from jassy import jit  # noqa: F401 (first: every kernel runs its own compiled code, see jit)
 from jassy.errors import JassyError, ModelError, PatchError, RenderError
 from jassy.events import ContactTrack, Event, HapticFrame, Impact
 from jassy.graph import Graph

@@ -14,7 +14,10 @@ the output's error energy) or, with ``weighting = "A"``, the A-weighting power g
 force of that spectrum builds in a mode over the horizon tau, so continuous contacts
 (scraping, rolling, friction) compete with impacts and ringing modes on one scale. The
 top ``max_modes`` modes are computed for the next period; the rest are silenced and cost
-nothing (the bank runs only its first, kept, modes).
+nothing: each bank runs its kept modes gathered into a compact bank, so its cost is
+proportional to them. Importance, ranking and the change of the kept set are compiled
+(ugens.modal_budget, jassy.anytime_rank); per decision each bank adds a few Python calls
+and, when it heard a force, a periodogram (numpy FFT).
 
 A decision is taken only where something may change the ranking: an impact scheduled in
 this or the next period, a force heard in the last period, or a mode fading out. Between
@@ -39,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from jassy.anytime_rank import rank_modes
 from jassy.errors import PatchError
 
 #: the impacts (impulse N s, location) on a bank no impact strikes
@@ -89,7 +93,7 @@ class ModeBudget:
             raise PatchError(f"budget horizon: expected seconds in (0, 60], got {self.horizon!r}")
 
     def attach(self, banks: list, sample_rate: float, upcoming) -> None:
-        """Start a render: ``banks`` expose anytime_importance/anytime_apply;
+        """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
         ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
         scheduled in [start, end)."""
         self.banks = banks
@@ -103,10 +107,19 @@ class ModeBudget:
         self._fading = False
         #: a budget that holds every mode never decides (full synthesis)
         self.active = self.cpu_fraction is not None or self.limit < total
+        #: every bank's importance now, next period, and whether it sounds (one row each);
+        #: the modes to compute and to fade (ugens.modal_budget.rank_modes)
+        self._scores = np.zeros((3, total))
+        self._keep, self._fade, self._later = (np.zeros(total, dtype=bool) for _ in range(3))
+        self._slices = []
+        offset = 0
         for bank in banks:
             bank.budgeted = self.active
+            cut = slice(offset, offset + bank.model.n_modes)
+            self._slices.append(cut)
             if self.active:
-                bank.anytime_attach(self.period, self.horizon, self.weighting)
+                bank.anytime_attach(self.period, self.horizon, self.weighting, self._scores[:, cut])
+            offset = cut.stop
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -118,16 +131,6 @@ class ModeBudget:
                     predicted.setdefault(id(bank), []).append((impulse, location))
         return predicted
 
-    def _top(self, score: np.ndarray) -> np.ndarray:
-        """Mask of the ``limit`` highest positive scores."""
-        keep = np.zeros(score.size, dtype=bool)
-        positive = np.flatnonzero(score > 0)
-        if positive.size <= self.limit:
-            keep[positive] = True
-        else:
-            keep[positive[np.argpartition(score[positive], -self.limit)[-self.limit :]]] = True
-        return keep
-
     def step(self, start: int, n: int) -> None:
         """Graph step, before the banks render frames [start, start + n): decide at
         multiples of ``period`` where the ranking may change, and at once where a bank
@@ -135,43 +138,29 @@ class ModeBudget:
         contact starting), so that its modes sound from the contact's first sample."""
         if not self.active:
             return
-        boundary = start % self.period == 0
-        kicks = self.upcoming(start, start + 2 * self.period) if boundary else []
-        now = self._predicted(kicks, start, start + self.period)
-        if boundary:
-            for bank in self.banks:
-                bank.anytime_expect(id(bank) in now)
-        onset = any([b.anytime_onset(n) for b in self.banks])
-        if not (
-            onset
-            or (
-                boundary
-                and (
-                    kicks
-                    or self._fading
-                    or self.cpu_fraction is not None
-                    or any(b.anytime_driven() for b in self.banks)
-                )
-            )
-        ):
+        kicks, now, driven = NO_KICK, {}, False
+        if start % self.period == 0:
+            kicks = self.upcoming(start, start + 2 * self.period)
+            if kicks:
+                now = self._predicted(kicks, start, start + self.period)
+            for bank in self.banks:  # every bank: each rotates its record of forces heard
+                driven |= bank.anytime_period(id(bank) in now)
+            driven |= self._fading or bool(kicks) or self.cpu_fraction is not None
+            if self.cpu_fraction is not None:
+                self._adapt()
+        onset = False
+        for bank in self.banks:
+            onset |= bank.anytime_onset(n)
+        if not (driven or onset):
             return
-        if boundary and self.cpu_fraction is not None:
-            self._adapt()
-        later = self._predicted(kicks, start + self.period, start + 2 * self.period)
-        parts = [
-            b.anytime_importance(now.get(id(b), NO_KICK), later.get(id(b), NO_KICK), self.period)
-            for b in self.banks
-        ]
-        keep = self._top(np.concatenate([p[0] for p in parts]))
-        fade = (
-            keep & ~self._top(np.concatenate([p[1] for p in parts])) & np.concatenate([p[2] for p in parts])
-        )
-        total, offset = 0, 0
-        for bank, part in zip(self.banks, parts, strict=True):
-            sl = slice(offset, offset + part[0].size)
-            total += bank.anytime_apply(keep[sl] & ~fade[sl], fade[sl], self.period)
-            offset += part[0].size
-        self._fading = bool(fade.any())
+        later = self._predicted(kicks, start + self.period, start + 2 * self.period) if kicks else {}
+        for bank in self.banks:
+            bank.anytime_importance(now.get(id(bank), NO_KICK), later.get(id(bank), NO_KICK), self.period)
+        keep, fade = self._keep, self._fade
+        self._fading = rank_modes(self._scores, self.limit, keep, fade, self._later)
+        total = 0
+        for bank, cut in zip(self.banks, self._slices, strict=True):
+            total += bank.anytime_apply(keep[cut], fade[cut], self.period)
         self.peak_modes = max(self.peak_modes, total)
         self.decisions += 1
 

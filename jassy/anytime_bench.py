@@ -7,8 +7,10 @@ renders the full synthesis and budgets of 10, 25, 50 and 100 % of the graph's mo
 - error: 10 log10 of the energy of (budgeted - full) over the energy of full, on the
   rendered audio (dB; exact synthesis gives about -300 dB);
 - CPU: thread CPU time spent in the ModalBanks plus the budget's decisions, divided by the
-  CPU time of the ModalBanks of the full render; the best of ``repeats`` runs of each,
-  interleaved in the same process.
+  CPU time of the ModalBanks of the full render (which skip silent modes); the best of
+  ``repeats`` runs of each, interleaved in the same process;
+- mode-samples: the modes computed per sample (active at each sub-block's end), summed,
+  over the full render's: the CPU ratio the bank kernel alone would reach.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ def wok_scene(seconds: float):
 
 
 def _timed_render(build, seconds: float, fraction: float | None):
-    """(audio, bank CPU s, decision CPU s, modes) of one render."""
+    """(audio, bank CPU s, decision CPU s, modes, mode-samples computed) of one render."""
     from jassy.anytime import ModeBudget
     from jassy.offline import OfflineEngine
 
@@ -58,41 +60,43 @@ def _timed_render(build, seconds: float, fraction: float | None):
     total = sum(b.model.n_modes for b in banks)
     if fraction is not None:
         graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
-    spent = [0, 0]
+    spent = [0, 0, 0]  # bank ns, decision ns, mode-samples
 
-    def clocked(fn, slot):
+    def clocked(fn, slot, bank=None):
         def run(start, n):
             t = time.thread_time_ns()
             fn(start, n)
             spent[slot] += time.thread_time_ns() - t
+            if bank is not None:  # modes active at the sub-block's end (after flushing)
+                spent[2] += n * int(bank.meta[0])
 
         return run
 
     for bank in banks:
-        bank.process = clocked(bank.process, 0)
+        bank.process = clocked(bank.process, 0, bank)
     if graph.budget is not None:
         graph.budget.step = clocked(graph.budget.step, 1)
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
-    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total
+    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total, spent[2]
 
 
 def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:
     """Rows (fraction, modes, error dB, bank CPU ratio, decision share) for one scene."""
-    full_audio, _, _, total = _timed_render(build, seconds, None)  # also compiles
+    full_audio, _, _, total, full_work = _timed_render(build, seconds, None)  # also compiles
     full_cpu = []
     best = {f: None for f in fractions}
     for _ in range(repeats):
         full_cpu.append(_timed_render(build, seconds, None)[1])
         for f in fractions:
-            audio, bank, decide, _ = _timed_render(build, seconds, f)
+            audio, bank, decide, _, work = _timed_render(build, seconds, f)
             if best[f] is None or bank + decide < best[f][1] + best[f][2]:
-                best[f] = (audio, bank, decide)
+                best[f] = (audio, bank, decide, work)
     reference = min(full_cpu)
     energy = float(np.sum(full_audio**2))
     rows = []
     for f in fractions:
-        audio, bank, decide = best[f]
+        audio, bank, decide, work = best[f]
         error = float(np.sum((audio - full_audio) ** 2)) / energy
         rows.append(
             {
@@ -101,6 +105,7 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
                 "error_db": round(10 * np.log10(max(error, 1e-30)), 1),
                 "cpu_ratio": round((bank + decide) / reference, 3),
                 "decisions_ratio": round(decide / reference, 3),
+                "work_ratio": round(work / max(full_work, 1), 3),
             }
         )
     return {"modes": total, "seconds": seconds, "full_bank_cpu_s": round(reference, 4), "rows": rows}
@@ -121,11 +126,12 @@ def print_anytime(result: dict) -> None:
     for name, scene in result.items():
         full_ms = scene["full_bank_cpu_s"] * 1e3
         print(f"\n{name}: {scene['modes']} modes, {scene['seconds']:g} s, full bank {full_ms:.1f} ms CPU")
-        print("  budget   modes   error dB   CPU / full bank   (of which decisions)")
+        print("  budget   modes   error dB   CPU / full bank   (of which decisions)   mode-samples / full")
         for r in scene["rows"]:
-            cpu, share = r["cpu_ratio"], r["decisions_ratio"]
+            cpu, share, work = r["cpu_ratio"], r["decisions_ratio"], r["work_ratio"]
             print(
-                f"  {r['fraction']:6.0%}  {r['modes']:6d}  {r['error_db']:9.1f}   {cpu:15.2f}   {share:10.2f}"
+                f"  {r['fraction']:6.0%}  {r['modes']:6d}  {r['error_db']:9.1f}   {cpu:15.2f}"
+                f"   {share:20.2f}   {work:19.2f}"
             )
 
 

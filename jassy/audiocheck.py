@@ -242,13 +242,16 @@ def format_report(r: AudioReport) -> str:
 
 
 def _cmd_check_audio(args) -> int:
-    from jassy.errors import JassyError
+    from jassy.errors import JassyError, suggest
 
     known = shipped_names()
     names = args.patch or known
     for name in names:
         if name not in known:
-            raise JassyError(f"check-audio: unknown patch {name!r}; expected one of {', '.join(known)}")
+            raise JassyError(
+                f"check-audio: unknown patch {name!r}; expected one of {', '.join(known)}"
+                f"{suggest(name, known)}"
+            )
     if args.duration is not None and not args.duration > 0:
         raise JassyError(f"--duration: expected seconds > 0, got {args.duration}")
     bad = 0

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from jassy.hapticframes import FLAG_FINAL, FrameRecorder, HapticFrame
-from jassy.hapticsender import CLOCK_OFFSET, LATE, LOGGED_SENDS, LOST, SEND_DROPPED, SENT, jitter
+from jassy.hapticsender import CLOCK_OFFSET, LATE, LOGGED_SENDS, LOST, REALTIME, SEND_DROPPED, SENT, jitter
 
 
 def frame_stats(live, frames: list[HapticFrame], receiver_dropped: int | None = None) -> dict:
@@ -33,6 +33,7 @@ def frame_stats(live, frames: list[HapticFrame], receiver_dropped: int | None = 
         "udp_frames_dropped_at_receiver_socket": receiver_dropped,
         "udp_frames_lost_otherwise": gaps - skipped - refused - (receiver_dropped or 0),
         "udp_frames_late": int(control[LATE]),
+        "udp_sender_realtime": bool(control[REALTIME]),
         "udp_final_frame": bool(frames and frames[-1].flags & FLAG_FINAL),
         "frame_interval_p1_ms": spacing["p1_ms"],
         "frame_interval_p50_ms": spacing["p50_ms"],

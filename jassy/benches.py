@@ -77,12 +77,15 @@ def _burr(args: argparse.Namespace) -> None:
 
 
 def _rigid(args: argparse.Namespace) -> None:
+    from patches.wok_bench import wok_rows
     from physics.rigid.bench import bench_rigid, print_rigid
     from physics.rigid.pile_bench import bench_piles, print_piles
     from physics.rigid.solver_bench import bench_solvers, print_solvers
 
     say = _say("rigid")
     rows = bench_rigid(quick=args.quick, progress=say)
+    say("wok scene: physics alone and the full render")
+    rows += wok_rows(2.0 if args.quick else 6.0)
     piles = bench_piles((10, 100) if args.quick else (100, 1000), progress=say)
     say("solvers: ABA, Lemke, PGS")
     solvers = bench_solvers(quick=args.quick)

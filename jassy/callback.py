@@ -46,18 +46,27 @@ from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import drop_stale_cache
 from jassy.memlock import resident
 from jassy.program import (
+    HEADER,
     KERNEL_MODULES,
     RECORD,
+    BiquadSlots,
+    GainSlots,
+    ImpactSlots,
+    ModalSlots,
     Program,
+    ResonantScrapeSlots,
+    ScrapeSlots,
     _f64,
     _f64_rows,
     _i64,
+    kind_slots,
     run_program,
     void_pointer,
     why_not_compiled,
 )
 from jassy.safety import CEILING, limit, release_coefficient
 from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from jassy.tracks import walk_score
 from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
 from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
@@ -145,13 +154,15 @@ def apply_event(prog, ev, control):
             ramp[2] = (value - cur) / m
             ramp[3] = m
         if op == SET_BIQUAD:
-            setup = _f64(prog[base + 10], 2)
-            freq = _f64(prog[base + 4], 4)
-            q = _f64(prog[base + 5], 4)
-            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(prog[base + 8], 5))
+            filt = BiquadSlots(*kind_slots(prog, base)[:8])
+            setup = _f64(filt.setup, 2)
+            freq = _f64(filt.freq_ramp, 4)
+            q = _f64(filt.q_ramp, 4)
+            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(filt.coef, 5))
     elif op == STRIKE:
-        pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
-        count = _i64(prog[base + 5], 1)
+        impact = ImpactSlots(*kind_slots(prog, base)[:3])
+        pulses = _f64_rows(impact.pulses, impact.capacity, 3)
+        count = _i64(impact.count, 1)
         c = count[0]
         if c < pulses.shape[0]:
             pulses[c, 0] = ev[3]
@@ -161,11 +172,12 @@ def apply_event(prog, ev, control):
         else:
             control[DROPPED] += 1
     elif op == MODAL_TARGET:
-        k = prog[base + 5]
-        bank = _f64_rows(prog[base + 4], 6, k)
-        delta = _f64_rows(prog[base + 6], 4, k)
-        target = _f64_rows(prog[base + 7], 4, k)
-        meta = _i64(prog[base + 8], 3)
+        modal = ModalSlots(*kind_slots(prog, base)[:8])
+        k = modal.modes
+        bank = _f64_rows(modal.bank, 6, k)
+        delta = _f64_rows(modal.delta, 4, k)
+        target = _f64_rows(modal.target, 4, k)
+        meta = _i64(modal.meta, 3)
         staged = _f64_rows(int(ev[3]), 4, k)
         m = int(ev[4])
         for r in range(4):
@@ -370,13 +382,16 @@ _RAMPED = {
 }
 #: Record slot of each ramped parameter (see jassy.program's records).
 _RAMP_SLOT = {
-    (Gain, "gain"): 4,
-    (Scrape, "force"): 3,
-    (Scrape, "speed"): 4,
-    (ResonantScrape, "force"): 3,
-    (ResonantScrape, "speed"): 4,
-    (Biquad, "freq"): 4,
-    (Biquad, "q"): 5,
+    (node, key): HEADER + slots._fields.index(field)
+    for node, slots, key, field in (
+        (Gain, GainSlots, "gain", "ramp"),
+        (Scrape, ScrapeSlots, "force", "force_ramp"),
+        (Scrape, ScrapeSlots, "speed", "speed_ramp"),
+        (ResonantScrape, ResonantScrapeSlots, "force", "force_ramp"),
+        (ResonantScrape, ResonantScrapeSlots, "speed", "speed_ramp"),
+        (Biquad, BiquadSlots, "freq", "freq_ramp"),
+        (Biquad, BiquadSlots, "q", "q_ramp"),
+    )
 }
 
 
@@ -556,7 +571,7 @@ class CallbackRenderer:
                 self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
         self._staged = 0
         checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        self.score = sorted(checked, key=lambda ev: ev.time)
+        self.score = walk_score(graph, sorted(checked, key=lambda ev: ev.time), self.sample_rate)
         self._next_score = 0
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played

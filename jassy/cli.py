@@ -19,7 +19,7 @@ from jassy.cli_checks import (
     scene_options,
     signals_stop,
 )
-from jassy.errors import JassyError
+from jassy.errors import JassyError, suggest
 from jassy.offline import OFFLINE_BLOCK
 from patches.scenes import SCENES
 
@@ -545,6 +545,7 @@ def _cmd_rod(args: argparse.Namespace) -> int:
     if args.name not in EXPERIMENTS:
         raise JassyError(
             f"rod: unknown experiment {args.name!r}; expected one of {', '.join(sorted(EXPERIMENTS))}"
+            f"{suggest(args.name, EXPERIMENTS)}"
         )
     if args.plot and not args.plot.lower().endswith(".png"):
         raise JassyError(f"--plot: expected a .png file name, got {args.plot!r}")

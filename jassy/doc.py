@@ -14,6 +14,7 @@ import argparse
 import inspect
 
 from jassy.errors import JassyError
+from jassy.levels import level_convention
 from jassy.params import ParamSpec
 
 
@@ -101,7 +102,9 @@ def describe_ugen(cls, markdown: bool = False) -> str:
             ", ".join(n + (" (optional)" if n in cls.optional_inputs else "") for n in cls.inputs) or "none"
         )
     outputs = "out" + "".join(f", {n}" for n in cls.outputs)
-    lines += [f"inputs: {inputs}", f"outputs: {outputs}", ""]
+    lines += [f"inputs: {inputs}", f"outputs: {outputs}"]
+    level = level_convention(cls.type_name)
+    lines += [f"level: {level}", ""] if level else [""]
     heads = ("parameter", "kind", "unit", "range", "default", "what it does")
     lines += _table(_spec_rows(cls.all_specs()), heads, markdown)
     for action, specs in cls.actions.items():

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jassy.errors import RenderError
+from jassy.errors import RenderError, suggest
 
 AUDIO_FORMATS = {".wav": "WAV", ".flac": "FLAC"}
 AUDIO_SUBTYPES = {"float32": "FLOAT", "pcm16": "PCM_16", "pcm24": "PCM_24"}
@@ -218,7 +218,10 @@ def audio_format(path: str | os.PathLike, sample_format: str = "float32") -> tup
     if ext not in AUDIO_FORMATS:
         raise RenderError(f"{path}: expected a .wav or .flac file name")
     if sample_format not in AUDIO_SUBTYPES:
-        raise RenderError(f"--format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {sample_format!r}")
+        raise RenderError(
+            f"--format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {sample_format!r}"
+            f"{suggest(sample_format, AUDIO_SUBTYPES)}"
+        )
     fmt, subtype = AUDIO_FORMATS[ext], AUDIO_SUBTYPES[sample_format]
     if fmt == "FLAC" and subtype == "FLOAT":
         raise RenderError(f"{path}: FLAC stores integers; use --format pcm16 or pcm24")

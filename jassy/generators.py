@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 from jassy.inputs import number, seconds, text_value
 
 #: Most events one generator may produce (a patch with more is refused, not rendered).
@@ -49,6 +49,7 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
         if name not in models:
             raise PatchError(
                 f"{where}.random_point: unknown model {name!r}; models are {', '.join(models) or 'none'}"
+                f"{suggest(name, models)}"
             )
         n = models[name].n_points
         return lambda: int(rng.integers(n))
@@ -60,6 +61,7 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
         raise PatchError(
             f"{where}: unknown distribution {kind!r}; "
             "expected uniform, loguniform, normal, choice or random_point"
+            f"{suggest(kind, ('uniform', 'loguniform', 'normal', 'choice', 'random_point'))}"
         )
     if not isinstance(value, list) or len(value) != 2:
         raise PatchError(f"{where}.{kind}: expected two numbers, got {value!r}")
@@ -113,6 +115,7 @@ def expand(entries: Any, models: dict, duration: float | None, where: str) -> li
             if name not in GENERATOR_KEYS:
                 raise PatchError(
                     f"{key}.{name}: unknown key; expected one of {', '.join(sorted(GENERATOR_KEYS))}"
+                    f"{suggest(name, GENERATOR_KEYS)}"
                 )
         for name in ("node", "action", "times"):
             if name not in table:

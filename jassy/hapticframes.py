@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import socket
 import struct
+import sys
 import time
 from typing import NamedTuple
 
@@ -107,6 +108,8 @@ def parse_address(address: str, what: str = "--haptic-udp") -> tuple[str, int]:
 RECEIVE_BUFFER = 4 << 20
 #: Linux's socket option that reports, with each datagram, how many the socket dropped.
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+#: Linux's SO_RCVBUF beyond net.core.rmem_max, allowed with CAP_NET_ADMIN (Python lacks the name).
+SO_RCVBUFFORCE = 33
 _DROPS = struct.Struct("=I")
 
 
@@ -114,7 +117,12 @@ def open_receiver(host: str, port: int) -> tuple[socket.socket, bool]:
     """A bound UDP socket with a large receive buffer, and whether it reports the
     datagrams the kernel dropped because that buffer was full (SO_RXQ_OVFL, Linux)."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+    try:  # where allowed, past a low rmem_max (a container's default 208 KiB)
+        if not sys.platform.startswith("linux"):
+            raise OSError("SO_RCVBUFFORCE is Linux's")
+        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, RECEIVE_BUFFER)
+    except OSError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
     try:
         sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
         counts_drops = True

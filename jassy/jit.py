@@ -9,6 +9,8 @@ from typing import Any
 
 import numba as nb
 import numpy as np
+from llvmlite import binding as llvm
+from numba.core import codegen
 
 #: Entry points found by :func:`specialise`, by (kernel, type key of the arguments).
 _ENTRY_POINTS: dict[tuple, Callable] = {}
@@ -84,3 +86,33 @@ def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
             fh.write(stamp)
     except OSError:
         return  # no cache folder (or not writable): numba does not cache there either
+
+
+def _keep_linked_copies_private() -> None:
+    """Make every kernel run the machine code compiled with it, whether this process compiled
+    it or loaded it from numba's cache.
+
+    numba links a copy of each called kernel into its caller's module, re-optimised there
+    (with ``reassoc`` a reduction can be vectorised differently, which rounds differently),
+    and leaves the copy a weak symbol. The JIT resolves a weak symbol to the first definition
+    it has seen: in a process that compiles, the callee's own code (compiled first); in a
+    process that loads from the cache, the copy in whichever caller was loaded first. Renders
+    then differed at 1e-15 between a fresh install and later runs, and with the order in which
+    a process first called its kernels. Internal linkage after linking binds every call to
+    the caller's own copy, which is in its cached object too."""
+    library = getattr(codegen, "CPUCodeLibrary", None)
+    optimise = getattr(library, "_optimize_final_module", None)
+    if optimise is None or getattr(optimise, "keeps_copies_private", False):
+        return
+
+    def optimise_with_private_copies(self):
+        for function in self._final_module.functions:
+            if not function.is_declaration and function.linkage == llvm.Linkage.linkonce_odr:
+                function.linkage = llvm.Linkage.internal
+        optimise(self)
+
+    optimise_with_private_copies.keeps_copies_private = True
+    library._optimize_final_module = optimise_with_private_copies
+
+
+_keep_linked_copies_private()

@@ -133,6 +133,142 @@ FORCE_SOURCES = {
     "RathRoll": Drive("set", {"speed": 0.2}),
 }
 
+#: Force sources whose force is a line spectrum or a narrow band (ResonantScrape's resonance
+#: at 700 Hz at 0.2 m/s, the drill burr's rotation harmonics of 500 Hz): their level on a
+#: model depends on whether a line meets a mode, so no default fits every model within
+#: -30..-6 dBFS (measured over the 17 shipped models: -28.5..+6.1 and -35.7..-1.3 dBFS).
+TONAL_FORCE_SOURCES = {
+    "ResonantScrape": Drive("set", {"speed": 0.2}),
+    "DrillSource": Drive("set", {"force": 1.0, "removal": 1.0}),
+}
+#: Sources that own their resonator: ``level = "calibrated"`` scales what they output by the
+#: model's reference gain, as a calibrated ModalBank does (the loop stays in N and m).
+CALIBRATED_LOOPS = ("Friction", "HuntCrossleyImpact")
+#: Signals, not sounds: unit-scale oscillators, noises and envelopes, a mixer, and a sample
+#: player that plays its file as it is.
+SIGNALS = ("Envelope", "FractalNoise", "Mixer", "Sampler", "Sine", "WhiteNoise")
+
+
+class SoundLevel(NamedTuple):
+    """How a source that sounds by itself (no resonator) sets its level."""
+
+    unit: str  #: "full scale" (1.0 = 105 dB SPL at the listener, as SoundPressure) or "Pa"
+    statistic: str  #: "peak" or "rms"
+    rule: str  #: the level in terms of the parameters, at a stated operating point
+    events: tuple  #: (action, args) pairs, at 0.01 s, that make it sound at its defaults
+
+
+#: Sources that sound by themselves. Their output is a sound pressure at the listener: in
+#: full scale, 1.0 = 105 dB SPL (SoundPressure's default ``full_scale_spl``, so dB SPL =
+#: dBFS + 105, the same reading as a heard modal model), or in Pa (Explosion: a blast is far
+#: louder than any full scale meant for everyday sounds; feed it to SoundPressure with
+#: ``input_kind = "pressure"`` and a raised ``full_scale_spl``). Each has one level parameter
+#: defined at an operating point; the rules are tested on rendered output against closed
+#: forms (tests/test_sound_source_levels.py, tests/test_gases.py,
+#: tests/test_stochastic_models.py, tests/test_friction_engine.py, tests/test_dcmotor.py) and
+#: the defaults peak within -30..-6 dBFS (tests/test_source_levels.py).
+SOUND_SOURCES = {
+    "Bubble": SoundLevel(
+        "full scale",
+        "peak",
+        "one bubble peaks at gain * depth * (radius / 1 mm)^1.5; Pa in water: bubble_gain",
+        (("bubble", {}),),
+    ),
+    "BubbleStream": SoundLevel("full scale", "rms", "bubble_stream_rms (Campbell's theorem)", ()),
+    "Wind": SoundLevel("full scale", "rms", "level * (speed / 10 m/s)^3 without gusts", ()),
+    "KarmanWhistle": SoundLevel(
+        "full scale", "rms", "level * (speed / 10 m/s)^3; with a span: Pa at distance (aeolian_pressure)", ()
+    ),
+    "CavityTone": SoundLevel(
+        "full scale", "rms", "cavity_tone_rms: the jet noise's share at the resonance", ()
+    ),
+    "Engine": SoundLevel("full scale", "peak", "0.5 * throttle at 3000 rpm without irregularity", ()),
+    "DCMotor": SoundLevel(
+        "full scale", "peak", "each component's level at 3000 rpm and 1 A (rotor ~ w^2, gears ~ w, ...)", ()
+    ),
+    "Explosion": SoundLevel(
+        "Pa", "peak", "overpressure (Pa at 1 m) / distance, Friedlander wave", (("blast", {}),)
+    ),
+}
+
+
+def level_convention(type_name: str) -> str:
+    """One line on how a ugen's output level is set (for ``jassy doc``), "" for processors."""
+    if type_name in FORCE_SOURCES:
+        return (
+            "a force in N: through a calibrated ModalBank with unit gain its defaults peak within "
+            "-30..-6 dBFS on every shipped model"
+        )
+    if type_name in TONAL_FORCE_SOURCES:
+        return "a force in N with a line or narrow-band spectrum: its level depends on the modes it meets"
+    if type_name in CALIBRATED_LOOPS:
+        return "level = 'calibrated' scales what it outputs by the model's reference gain (as ModalBank)"
+    if type_name in SOUND_SOURCES:
+        level = SOUND_SOURCES[type_name]
+        scale = "1.0 = 105 dB SPL" if level.unit == "full scale" else "Pa"
+        return f"sound pressure at the listener ({scale}), {level.statistic}: {level.rule}"
+    if type_name in SIGNALS:
+        return "a signal, not a sound: unit scale (Sampler: its file as it is)"
+    return ""
+
+
+#: Density of water (kg/m^3), the medium of bubble_gain.
+WATER_DENSITY = 998.0
+
+
+def bubble_gain(wall_amplitude: float, distance: float, full_scale_spl: float = 105.0) -> float:
+    """The Bubble/BubbleStream ``gain`` that makes their output a physical pressure in water:
+    a bubble of radius R whose wall oscillates by ``wall_amplitude`` x R (at R = 1 mm and
+    depth 1; van den Doel's amplitude law r^1.5 makes it grow as sqrt(R), Longuet-Higgins's
+    scaling) radiates as a pulsating sphere, p = rho w0^2 R^3 epsilon / r at ``distance`` r
+    (Kinsler et al., *Fundamentals of Acoustics*, 7.4; w0 = 2 pi 3 / R), here in full scale
+    (1.0 = ``full_scale_spl`` dB SPL; 93.98 gives Pa). The default gain 0.125 (105 dB full
+    scale) is epsilon / r = 1.25e-3 per m: a 1 mm bubble ringing at 0.125 % of its radius,
+    1 m away. What is heard in air from bubbles at a surface is weaker (not modelled)."""
+    omega = 2.0 * np.pi * 3.0 / 1e-3
+    pascal = WATER_DENSITY * omega**2 * 1e-9 * wall_amplitude / distance
+    return pascal / (P_REF * 10 ** (full_scale_spl / 20.0))
+
+
+def bubble_stream_rms(rate, min_radius, max_radius, exponent, min_depth, max_depth, gain, points=4096):
+    """RMS of a BubbleStream's output (full scale) at a steady ``rate`` (1/s), by Campbell's
+    theorem for a Poisson shot noise: mean square = rate E[int p^2 dt] + (rate E[int p dt])^2.
+    A bubble p = a e^{-d t} sin(w0 t) has int p^2 dt = a^2 (1 / (4 d) - d / (4 (d^2 + w0^2)))
+    and int p dt = a w0 / (d^2 + w0^2), with van den Doel's a = gain depth (r / 1 mm)^1.5,
+    w0 = 2 pi 3 / r, d = 0.13 / r + 0.0072 r^-1.5 (its rising pitch changes only the
+    w0-dependent terms, themselves < 0.1 % of the energy); radius r drawn with density
+    ~ r^-exponent on [min_radius, max_radius], depth uniform. The stream's voice limit is
+    not modelled."""
+    u = (np.arange(points) + 0.5) / points  # midpoints of the radius CDF
+    lo, hi = min(min_radius, max_radius), max(min_radius, max_radius)
+    q = 1.0 - exponent
+    if hi <= lo:
+        r = np.full(points, lo)
+    elif abs(q) < 1e-12:
+        r = lo * (hi / lo) ** u
+    else:
+        r = (lo**q + u * (hi**q - lo**q)) ** (1.0 / q)
+    d = 0.13 / r + 0.0072 * r**-1.5
+    w0 = 2.0 * np.pi * 3.0 / r
+    energy = (r / 1e-3) ** 3 * (1.0 / (4.0 * d) - d / (4.0 * (d * d + w0 * w0)))
+    area = (r / 1e-3) ** 1.5 * w0 / (d * d + w0 * w0)
+    depth2 = (min_depth**2 + min_depth * max_depth + max_depth**2) / 3.0
+    mean = rate * gain * (min_depth + max_depth) / 2.0 * area.mean()
+    return float(np.sqrt(rate * gain**2 * depth2 * energy.mean() + mean**2))
+
+
+def cavity_tone_rms(level, speed, mouth, resonance, strouhal=0.2, q=1.0):
+    """RMS (full scale) of a steady CavityTone without gusts: the jet noise has RMS level (v /
+    10 m/s)^3 in a band-pass of quality q at f_j = St v / w; the cavity passes the jet's
+    spectral density at its resonance f_H over its own noise bandwidth, and the tone is
+    scaled so that a jet centred on f_H keeps its RMS: level (v / 10)^3 |H(f_H)|, |H(f)| =
+    1 / sqrt(1 + q^2 (f / f_j - f_j / f)^2) (the second-order band-pass with 0 dB peak; a
+    cavity much narrower than the jet band)."""
+    f_jet = strouhal * speed / mouth
+    ratio = resonance / f_jet
+    return level * (speed / 10.0) ** 3 / float(np.sqrt(1.0 + q * q * (ratio - 1.0 / ratio) ** 2))
+
+
 #: Reference sound pressure of dB SPL (Pa).
 P_REF = 20e-6
 

@@ -2,7 +2,9 @@
 
 One impulse of unit strength at location p sounds as sum_k a[p, k] e^{-d_k t} sin(2 pi f_k t).
 Gains between locations are interpolated barycentrically (the sound texture map): a
-location is a vertex index, a point name, or up to three vertices with weights.
+location is a vertex index, a point name, or up to three vertices with weights. Points
+named t0, t1, ... (and t{i}_{j} between them) form a track, whose locations are
+interpolated with its linear shape functions (jassy.tracks).
 
 Files: TOML (``frequencies``, ``decays``, ``gains`` = list of rows, optional ``points``,
 ``name``, ``reference_gain``, ``driving``, ``attack`` and ``attack_rate``), NPZ (same keys)
@@ -27,12 +29,14 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jassy.errors import ModelError, PatchError
+from jassy.errors import ModelError, PatchError, suggest
+from jassy.tracks import Track, find_track, track_gains
 
 
 @dataclass(frozen=True)
@@ -189,7 +193,10 @@ class ModalModel:
         if isinstance(vertex, str):
             if vertex not in self.points:
                 names = ", ".join(self.points) or "none (use vertex indices)"
-                raise PatchError(f"{where}: unknown point {vertex!r}; the model's points are {names}")
+                raise PatchError(
+                    f"{where}: unknown point {vertex!r}; the model's points are {names}"
+                    f"{suggest(vertex, self.points)}"
+                )
             return self.points.index(vertex)
         if not 0 <= vertex < self.n_points:
             raise PatchError(
@@ -205,10 +212,19 @@ class ModalModel:
         """Per-mode gains at a location (barycentric blend of its vertices' rows)."""
         return self._blend(self.gains, location)
 
+    @cached_property
+    def track(self) -> Track | None:
+        """The texture track of the points t0, t1, ... (jassy.tracks), or None."""
+        return find_track(self.points)
+
     def _blend(self, rows: np.ndarray, location: Location | int | str | None) -> np.ndarray:
         if location is None:
             return rows[0].copy()
         loc = parse_location(location, "location")
+        if self.track is not None:
+            on_track = track_gains(self, rows, loc)
+            if on_track is not None:
+                return on_track
         out = np.zeros(self.n_modes)
         for v, w in zip(loc.vertices, loc.weights, strict=True):
             out += w * rows[self.point_index(v, "location")]
@@ -289,7 +305,10 @@ class ModalModel:
                    "attack_rate"}  # fmt: skip
         for key in data:
             if key not in allowed:
-                raise ModelError(f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}")
+                raise ModelError(
+                    f"{source}: unknown key {key!r}; expected {', '.join(sorted(allowed))}"
+                    f"{suggest(key, allowed)}"
+                )
         for key in ("frequencies", "decays", "gains"):
             if key not in data:
                 raise ModelError(f"{source}: missing key {key!r}")

@@ -174,8 +174,8 @@ class OfflineEngine:
     def render(self, duration: float, progress: bool = False) -> Rendering:
         """Render ``duration`` seconds into arrays."""
         frames = frames_for(duration, self.sample_rate)
-        audio = np.zeros((len(self.graph.audio), frames))
-        haptic = np.zeros((len(self.graph.haptic), frames))
+        audio = np.empty((len(self.graph.audio), frames))  # every frame is copied in below
+        haptic = np.empty((len(self.graph.haptic), frames))
         pos = 0
         for a, h in self.chunks(frames, progress):
             n = a.shape[1]

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from pythonosc import osc_bundle, osc_message
 from pythonosc.parsing import osc_types
 
-from jassy.errors import JassyError, PatchError
+from jassy.errors import JassyError, PatchError, suggest
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.scheduler import validate_event
@@ -79,7 +79,10 @@ def message_event(graph: Graph, address: str, args: list, time: float) -> Event:
     node_name, name = parts
     node = graph.nodes.get(node_name)
     if node is None:
-        raise PatchError(f"{where}: unknown node {node_name!r}; nodes are {', '.join(graph.nodes)}")
+        raise PatchError(
+            f"{where}: unknown node {node_name!r}; nodes are {', '.join(graph.nodes)}"
+            f"{suggest(node_name, graph.nodes)}"
+        )
     if name in node.actions:
         return validate_event(graph, Event(time, node_name, name, _pairs(args, where)), where)
     if len(args) not in (1, 2):

@@ -86,6 +86,7 @@ def resolve_patch(spec: str) -> Path:
     if spec not in builtins:
         raise PatchError(
             f"{spec}: not a patch file or built-in patch; built-ins are {', '.join(sorted(builtins))}"
+            f"{suggest(spec, builtins)}"
         )
     return builtins[spec]
 
@@ -207,7 +208,7 @@ def _reference(nodes: dict[str, UGen], ref: str, key: str) -> UGen:
     """The node named ``ref``, or for ``node.output`` a tap of that node's extra output."""
     name, _, output = ref.partition(".")
     if name not in nodes:
-        raise PatchError(f"{key}: unknown node {name!r}; nodes are {', '.join(nodes)}")
+        raise PatchError(f"{key}: unknown node {name!r}; nodes are {', '.join(nodes)}{suggest(name, nodes)}")
     if not output:
         return nodes[name]
     try:
@@ -232,11 +233,15 @@ def build_patch(
         if key not in TOP_KEYS:
             raise PatchError(
                 f"{where}: unknown top-level key {key!r}; expected {', '.join(sorted(TOP_KEYS))}"
+                f"{suggest(key, TOP_KEYS)}"
             )
     meta = _table(data, "patch", where)
     for key in meta:
         if key not in PATCH_KEYS:
-            raise PatchError(f"{where}: patch.{key}: unknown key; expected {', '.join(sorted(PATCH_KEYS))}")
+            raise PatchError(
+                f"{where}: patch.{key}: unknown key; expected {', '.join(sorted(PATCH_KEYS))}"
+                f"{suggest(key, PATCH_KEYS)}"
+            )
     models = _load_models(_table(data, "models", where), where, base)
     tables = _table(data, "nodes", where)
     if not tables:
@@ -245,7 +250,9 @@ def build_patch(
     for text in overrides:
         node, param, value = parse_override(text)
         if node not in tables:
-            raise PatchError(f"--set {text}: unknown node {node!r}; nodes are {', '.join(tables)}")
+            raise PatchError(
+                f"--set {text}: unknown node {node!r}; nodes are {', '.join(tables)}{suggest(node, tables)}"
+            )
         if param in ("type", "input", "inputs"):
             raise PatchError(f"--set {text}: only parameters can be overridden, not {param!r}")
         tables[node][param] = value
@@ -283,7 +290,9 @@ def build_patch(
                 ref = params[pkey]
                 if not isinstance(ref, str) or ref not in models:
                     known = ", ".join(models) or "none (add [models.NAME])"
-                    raise PatchError(f"{key}.{pkey}: unknown model {ref!r}; models are {known}")
+                    raise PatchError(
+                        f"{key}.{pkey}: unknown model {ref!r}; models are {known}{suggest(ref, models)}"
+                    )
                 params[pkey] = models[ref]
         nodes[name] = cls(name=name, where=key, **params)
         wiring[name] = connect
@@ -295,7 +304,10 @@ def build_patch(
     outputs = _table(data, "outputs", where)
     for key in outputs:
         if key not in ("audio", "haptic"):
-            raise PatchError(f"{where}: outputs.{key}: unknown output; expected audio or haptic")
+            raise PatchError(
+                f"{where}: outputs.{key}: unknown output; expected audio or haptic"
+                f"{suggest(key, ('audio', 'haptic'))}"
+            )
     if "audio" not in outputs:
         raise PatchError(f"{where}: outputs.audio: missing (name the node(s) to hear)")
     picked = {}

@@ -9,6 +9,9 @@ Ugens with ``inline_events`` (ImpactForce, ModalBank) apply an event at its own 
 inside a sub-block, so their events do not split it: they are handed over at the start
 of the sub-block that contains their frame (parameter changes through ``set_param_at``).
 A rigid scene's hundreds of impacts then cost no extra sub-blocks of the whole graph.
+
+A location ramp along a model's texture track becomes a chain of ramps through the
+track's points (jassy.tracks.walk_score) before the render starts.
 """
 
 from __future__ import annotations
@@ -21,10 +24,11 @@ from typing import TYPE_CHECKING, Any
 import numba as nb
 import numpy as np
 
-from jassy.errors import PatchError
+from jassy.errors import PatchError, suggest
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.jit import specialise
+from jassy.tracks import walk_score
 
 if TYPE_CHECKING:  # the program imports the ugens: not at import time of the core
     from jassy.program import Program
@@ -39,7 +43,10 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
         raise PatchError(f"{where}.time: expected a time in seconds >= 0, got {event.time!r}")
     node = graph.nodes.get(event.node)
     if node is None:
-        raise PatchError(f"{where}.node: unknown node {event.node!r}; nodes are {', '.join(graph.nodes)}")
+        raise PatchError(
+            f"{where}.node: unknown node {event.node!r}; nodes are {', '.join(graph.nodes)}"
+            f"{suggest(event.node, graph.nodes)}"
+        )
     args: dict[str, Any] = {}
     ramp = event.ramp
     if ramp is not None and (
@@ -57,7 +64,7 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
             if spec is None:
                 raise PatchError(
                     f"{where}.set.{key}: {node.type_name} has no parameter {key!r}; "
-                    f"expected one of {', '.join(specs)}"
+                    f"expected one of {', '.join(specs)}{suggest(key, specs)}"
                 )
             if spec.fixed:
                 raise PatchError(f"{where}.set.{key}: parameter {key!r} cannot change during a render")
@@ -65,14 +72,16 @@ def validate_event(graph: Graph, event: Event, where: str) -> Event:
     else:
         specs = node.actions.get(event.action)
         if specs is None:
-            acts = ", ".join(["set", *node.actions])
+            acts = ["set", *node.actions]
             raise PatchError(
-                f"{where}: {node.type_name} has no action {event.action!r}; expected one of {acts}"
+                f"{where}: {node.type_name} has no action {event.action!r}; expected one of {', '.join(acts)}"
+                f"{suggest(event.action, acts)}"
             )
         for key in event.args:
             if key not in specs:
                 raise PatchError(
                     f"{where}.{event.action}.{key}: unknown argument; expected one of {', '.join(specs)}"
+                    f"{suggest(key, specs)}"
                 )
         for key, spec in specs.items():
             if key in event.args:
@@ -125,7 +134,7 @@ class Scheduler:
         self.sample_rate = float(sample_rate)
         checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
         order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
-        self.events = [checked[i] for i in order]
+        self.events = walk_score(graph, [checked[i] for i in order], self.sample_rate)
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
         self.apply_frames = [math.ceil(t - _SAMPLE_SLACK) for t in self.sample_times]
         self.inline = [self._is_inline(ev) for ev in self.events]

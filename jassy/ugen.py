@@ -134,6 +134,7 @@ class UGen:
         if not self.variadic and input_name not in self.inputs:
             raise PatchError(
                 f"{self.type_name}: no input {input_name!r}; inputs are {', '.join(self.inputs) or 'none'}"
+                f"{suggest(input_name, self.inputs)}"
             )
         self.sources[input_name] = source
 
@@ -226,25 +227,28 @@ class UGen:
         are capped to it when the delay closes a loop."""
         raise NotImplementedError(f"{self.type_name} is not a delay")
 
-    def anytime_attach(self, period: int, horizon: float, weighting: str) -> None:
-        """Budgeted banks: start a budgeted render (decisions every ``period`` frames)."""
+    def anytime_attach(self, period: int, horizon: float, weighting: str, scores) -> None:
+        """Budgeted banks: start a budgeted render (decisions every ``period`` frames,
+        importance written to ``scores``)."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_driven(self) -> bool:
-        """Budgeted banks: whether any force was heard in the last budget period."""
+    def anytime_period(self, kicked: bool) -> bool:
+        """Budgeted banks, at each budget period: whether any force was heard in the last."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_importance(self, kick_now: list, kick_next: list, period: int):
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int) -> None:
         """Budgeted banks (``supports_budget``): per-mode importance for the coming
         ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
-        the next period."""
+        the next period, into the scores given at attach."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events
     def configure(self, key: str, value: Any) -> None:
         """Set a parameter's initial value (the value every render starts from)."""
         if key not in self.all_specs():
-            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+            raise PatchError(
+                f"{self.type_name} {self.name!r}: unknown parameter {key!r}{suggest(key, self.all_specs())}"
+            )
         value = self.check_param(key, value, f"{self.name}.{key}")
         self.initial[key] = value
         self.values[key] = value
@@ -254,7 +258,9 @@ class UGen:
         seconds if given, else the ``smooth`` time) unless ``jump``."""
         spec = self.all_specs().get(key)
         if spec is None:
-            raise PatchError(f"{self.type_name} {self.name!r}: unknown parameter {key!r}")
+            raise PatchError(
+                f"{self.type_name} {self.name!r}: unknown parameter {key!r}{suggest(key, self.all_specs())}"
+            )
         if spec.fixed and self.sample_rate is not None:
             raise PatchError(
                 f"{self.type_name} {self.name!r}: parameter {key!r} cannot change during a render"

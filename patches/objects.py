@@ -78,7 +78,8 @@ OBJECTS: dict[str, ObjectInfo] = {
         "wine_glass_model.toml",
         "soda-lime wine glass, 155 mm tall, bowl 76 mm across (62 mm at the rim), 2.2 mm wall, "
         "70 mm stem on a 64 mm foot",
-        "finite elements (jassy modes) of a revolved profile, free (held lightly), 18 modes to 13 kHz; "
+        "finite elements (jassy modes) of a revolved profile, free (held lightly), 24 modes to 13 kHz "
+        "(degenerate pairs kept apart); "
         "reference gain stored",
         {"rim": "3 mm below the rim, outside", "bowl": "the widest point of the bowl",
          "stem": "half way up the stem", "foot": "the edge of the foot"},

@@ -1,6 +1,9 @@
 """The graph's program (one numba function over the nodes' own arrays) renders the same bits
 as running the nodes one by one, and says why a graph cannot run as a program."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -72,3 +75,33 @@ def test_a_graph_with_a_node_without_kernel_says_which():
     engine = OfflineEngine(graph, [], FS, 64)
     assert engine.program is None and "echo" in engine.why_not_program
     assert why_not_compiled(contact_graph()) is None
+
+
+UNUSED_KINDS_STAY_UNCOMPILED = """
+import numpy as np
+from jassy import Event, Graph, ModalModel
+from jassy.offline import OfflineEngine
+from jassy import program
+from ugens import Gain, ImpactForce, ModalBank
+from ugens import filters, pressure, radiation, scrape
+
+model = ModalModel(np.array([440.0, 1250.0]), np.array([3.0, 8.0]), np.ones((1, 2)))
+tap = ImpactForce(name="tap", duration=0.0007)
+out = Gain(ModalBank(model, name="bank")(tap), gain=0.5, name="out")
+engine = OfflineEngine(Graph(out), [Event(0.01, "tap", "impact", {"impulse": 0.01})], 48000)
+assert engine.program is not None
+assert np.any(engine.render(0.05).audio != 0)
+assert sorted(program._compiled_nodes) == sorted([program.IMPACT, program.MODAL, program.GAIN])
+for kernel in (scrape.profile_contact, scrape.resonant_noise, filters.biquad, filters.biquad_ramp,
+               radiation.radiate, pressure.sound_pressure):
+    assert not kernel.signatures and not kernel.overloads, kernel
+"""
+
+
+def test_a_program_compiles_only_the_kinds_its_graph_holds():
+    """A first render compiles the kernels of its own node kinds, not every kind's (in a fresh
+    process: this module's other tests compile every kind)."""
+    done = subprocess.run(
+        [sys.executable, "-c", UNUSED_KINDS_STAY_UNCOMPILED], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]

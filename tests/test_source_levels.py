@@ -13,7 +13,7 @@ import pytest
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES, calibrated
+from jassy.levels import FORCE_SOURCES, SOUND_SOURCES, calibrated
 from patches.objects import OBJECTS
 from patches.shipped import shipped_models
 
@@ -46,23 +46,17 @@ def test_every_default_force_source_on_a_shipped_model_peaks_between_minus_30_an
     assert not outside, f"{filename}: {outside} dBFS"
 
 
-#: Sources that output sound themselves (full scale) and the events that start them. Not
-#: here: Explosion, whose output is a pressure in Pa (a firecracker's 50 Pa peak at 10 m is
+#: Sources that sound by themselves in full scale (jassy.levels.SOUND_SOURCES). Not here:
+#: Explosion, whose output is a pressure in Pa (a firecracker's 50 Pa peak at 10 m is
 #: 128 dB SPL, above any full scale meant for everyday sounds; see SoundPressure).
-STANDALONE = {
-    "Bubble": [Event(0.01, "src", "bubble", {})],
-    "BubbleStream": [],
-    "Engine": [],
-    "Wind": [],
-    "CavityTone": [],
-    "DCMotor": [],
-}
+FULL_SCALE = sorted(name for name, level in SOUND_SOURCES.items() if level.unit == "full scale")
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("source", sorted(STANDALONE))
+@pytest.mark.parametrize("source", FULL_SCALE)
 def test_a_standalone_source_at_its_defaults_peaks_between_minus_30_and_minus_6_dbfs(source):
     src = getattr(ugens, source)(name="src")
-    y = render(Graph(src), STANDALONE[source], duration=2.0, sample_rate=48000, limiter=False).audio[0]
+    events = [Event(0.01, "src", action, args) for action, args in SOUND_SOURCES[source].events]
+    y = render(Graph(src), events, duration=2.0, sample_rate=48000, limiter=False).audio[0]
     level = 20 * math.log10(max(float(np.abs(y).max()), 1e-30))
     assert -30.0 <= level <= -6.0, f"{source}: {level:.1f} dBFS"

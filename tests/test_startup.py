@@ -11,8 +11,8 @@ import pytest
 
 from jassy.startup import cached_kernels, render_argv, run_fresh
 
-#: Bounds well above this code's first bell render (26 functions, 36 specialisations, about 16 s
-#: of CPU on the shared 2-core VM): a regression that doubles either fails.
+#: Bounds well above this code's first bell render (22 functions, 22 specialisations, 7.5-8.2 s
+#: of CPU on the shared 2-core VM at load 13): a regression that doubles either fails.
 MAX_KERNELS, MAX_SPECIALISATIONS, MAX_COLD_CPU_S = 45, 65, 90.0
 
 

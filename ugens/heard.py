@@ -15,6 +15,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ugens.cells import state_step
 from ugens.kernels import FASTMATH
 
 
@@ -26,12 +27,11 @@ def heard_run(force, out, n, coef, state):
         f = force[i]
         total = 0.0
         for k in range(k_modes):
-            q = state[0, k]
-            p = state[1, k]
-            q_new = coef[0, k] * q + coef[1, k] * p + coef[4, k] * f
-            state[1, k] = coef[2, k] * q + coef[3, k] * p + coef[5, k] * f
-            state[0, k] = q_new
-            total += q_new
+            q, p = state_step(coef[0, k], coef[1, k], coef[2, k], coef[3, k], state[0, k], state[1, k])
+            q += coef[4, k] * f
+            state[0, k] = q
+            state[1, k] = p + coef[5, k] * f
+            total += q
         out[i] = total
 
 

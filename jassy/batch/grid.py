@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from jassy.errors import JassyError, PatchError
+from jassy.errors import JassyError, PatchError, suggest
 from jassy.files import AUDIO_SUBTYPES
 from jassy.inputs import decode, load_toml, parse_toml, read_bytes, regular_file, seconds
 from jassy.limits import check_seconds, check_variants
@@ -195,7 +195,10 @@ def _render_options(table: Any, where: str, base: RenderOptions | None = None) -
         raise GridError(f"{where}: expected a table")
     for key in table:
         if key not in RENDER_KEYS:
-            raise GridError(f"{where}.{key}: unknown key; expected {', '.join(sorted(RENDER_KEYS))}")
+            raise GridError(
+                f"{where}.{key}: unknown key; expected {', '.join(sorted(RENDER_KEYS))}"
+                f"{suggest(key, RENDER_KEYS)}"
+            )
     values = (base or RenderOptions()).as_dict()
     values.update(table)
     opts = RenderOptions(**values)
@@ -216,13 +219,19 @@ def _check_render(opts: RenderOptions, where: str) -> None:
     if isinstance(b, bool) or not isinstance(b, int) or not 1 <= b <= 2**20:
         raise GridError(f"{where}.block: expected an integer in [1, {2**20}], got {b!r}")
     if opts.format not in AUDIO_SUBTYPES:
-        raise GridError(f"{where}.format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {opts.format!r}")
+        raise GridError(
+            f"{where}.format: expected one of {', '.join(AUDIO_SUBTYPES)}, got {opts.format!r}"
+            f"{suggest(opts.format, AUDIO_SUBTYPES)}"
+        )
     if opts.container not in ("wav", "flac"):
         raise GridError(f"{where}.container: expected 'wav' or 'flac', got {opts.container!r}")
     if opts.container == "flac" and opts.format == "float32":
         raise GridError(f"{where}.format: FLAC stores integers; use 'pcm16' or 'pcm24'")
     if opts.haptic is not None and opts.haptic not in HAPTIC_FORMATS:
-        raise GridError(f"{where}.haptic: expected one of {', '.join(HAPTIC_FORMATS)}, got {opts.haptic!r}")
+        raise GridError(
+            f"{where}.haptic: expected one of {', '.join(HAPTIC_FORMATS)}, got {opts.haptic!r}"
+            f"{suggest(opts.haptic, HAPTIC_FORMATS)}"
+        )
 
 
 def _load_patch_source(spec: Any, inline: dict, grid_path: Path, where: str) -> PatchSource:
@@ -290,7 +299,9 @@ def check_key(key: str, patch: PatchSource, where: str) -> None:
             raise GridError(f"{where}: expected models.NAME.file (a model file, relative to the grid file)")
         if parts[1] not in models:
             known = ", ".join(models) or "none"
-            raise GridError(f"{at}: unknown model {parts[1]!r}; models are {known}")
+            raise GridError(
+                f"{at}: unknown model {parts[1]!r}; models are {known}{suggest(parts[1], models)}"
+            )
         return
     match = _SCORE_KEY.match(key)
     if match:
@@ -324,7 +335,9 @@ def check_key(key: str, patch: PatchSource, where: str) -> None:
         )
     nodes = patch.data.get("nodes", {})
     if node_name not in nodes:
-        raise GridError(f"{at}: unknown node {node_name!r}; nodes are {', '.join(nodes)}")
+        raise GridError(
+            f"{at}: unknown node {node_name!r}; nodes are {', '.join(nodes)}{suggest(node_name, nodes)}"
+        )
     node = patch.param_nodes[node_name]
     if param in ("type", "input", "inputs") or param in node.inputs:
         raise GridError(f"{at}: only parameters can vary, not {param!r}")
@@ -624,13 +637,17 @@ def load_grid(path: str | os.PathLike) -> Grid:
         if key not in GRID_KEYS:
             raise GridError(
                 f"{where}: unknown top-level key {key!r}; expected {', '.join(sorted(GRID_KEYS))}"
+                f"{suggest(key, GRID_KEYS)}"
             )
     meta = data.get("batch", {})
     if not isinstance(meta, dict):
         raise GridError(f"{where}: batch: expected a table")
     for key in meta:
         if key not in BATCH_KEYS:
-            raise GridError(f"{where}: batch.{key}: unknown key; expected {', '.join(sorted(BATCH_KEYS))}")
+            raise GridError(
+                f"{where}: batch.{key}: unknown key; expected {', '.join(sorted(BATCH_KEYS))}"
+                f"{suggest(key, BATCH_KEYS)}"
+            )
     manifest = meta.get("manifest", "csv")
     if manifest not in ("csv", "parquet"):
         raise GridError(f"{where}: batch.manifest: expected 'csv' or 'parquet', got {manifest!r}")
@@ -652,6 +669,7 @@ def load_grid(path: str | os.PathLike) -> Grid:
                 if key not in SWEEP_KEYS:
                     raise GridError(
                         f"{where}: sweep[{i}].{key}: unknown key; expected {', '.join(sorted(SWEEP_KEYS))}"
+                        f"{suggest(key, SWEEP_KEYS)}"
                     )
             sweeps.append(_parse_sweep(table, f"{where}: sweep[{i}]", grid_path, inline, render))
     else:

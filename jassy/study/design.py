@@ -83,7 +83,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from jassy.errors import JassyError
+from jassy.errors import JassyError, suggest
 from jassy.study.methods import ConstantTrack, QuestPlusTrack, QuestTrack, Staircase, quest_plus_grid
 from jassy.study.models import FUNCTIONS, TASKS, Model, make_model
 
@@ -525,7 +525,10 @@ def _number(value: Any, key: str, where: str, low: float, high: float, integer: 
 def _unknown(table: dict, allowed: set[str], where: str) -> None:
     for key in table:
         if key not in allowed:
-            raise DesignError(f"{where}: unknown key {key!r}; expected one of {', '.join(sorted(allowed))}")
+            raise DesignError(
+                f"{where}: unknown key {key!r}; expected one of {', '.join(sorted(allowed))}"
+                f"{suggest(key, allowed)}"
+            )
 
 
 def _table(data: dict, key: str, where: str) -> dict:
@@ -564,11 +567,14 @@ def parse_design(data: dict[str, Any], where: str = "design", base: Path | None 
         "task", QUESTION_ALIASES.get(study.get("question", "which_first"), study.get("question"))
     )
     if task not in TASKS:
-        raise DesignError(f"{w}: task: expected one of {', '.join(TASKS)}, got {task!r}")
+        raise DesignError(
+            f"{w}: task: expected one of {', '.join(TASKS)}, got {task!r}{suggest(task, TASKS)}"
+        )
     function = _string(study, "function", w, FUNCTIONS[task][0])
     if function not in FUNCTIONS[task]:
         raise DesignError(
             f"{w}: function: expected one of {', '.join(FUNCTIONS[task])} for {task}, got {function!r}"
+            f"{suggest(function, FUNCTIONS[task])}"
         )
     design = Design(
         name=_string(study, "name", w, Path(where).stem),
@@ -616,7 +622,10 @@ def _parse_method(method: Any, where: str, task: str) -> dict[str, Any]:
         )
     kind = method.get("kind", "constant")
     if kind not in METHOD_KEYS:
-        raise DesignError(f"{where}: kind: expected one of {', '.join(METHOD_KEYS)}, got {kind!r}")
+        raise DesignError(
+            f"{where}: kind: expected one of {', '.join(METHOD_KEYS)}, got {kind!r}"
+            f"{suggest(kind, METHOD_KEYS)}"
+        )
     _unknown(method, METHOD_KEYS[kind], where)
     out: dict[str, Any] = {"kind": kind}
     if kind in ("constant", "quest_plus"):
@@ -630,7 +639,9 @@ def _parse_method(method: Any, where: str, task: str) -> dict[str, Any]:
     elif kind == "staircase":
         rule = method.get("rule", "2down1up")
         if rule not in RULES:
-            raise DesignError(f"{where}: rule: expected one of {', '.join(RULES)}, got {rule!r}")
+            raise DesignError(
+                f"{where}: rule: expected one of {', '.join(RULES)}, got {rule!r}{suggest(rule, RULES)}"
+            )
         tracks = method.get("tracks", ["audio_first", "haptic_first"])
         if not isinstance(tracks, list) or not tracks or any(t not in TRACKS for t in tracks):
             raise DesignError(f"{where}: tracks: expected a list of {', '.join(TRACKS)}, got {tracks!r}")
@@ -670,7 +681,9 @@ def _parse_method(method: Any, where: str, task: str) -> dict[str, Any]:
         names = make_model(task).names
         stop = _string(method, "stop_param", where)
         if stop and stop not in names:
-            raise DesignError(f"{where}: stop_param: expected one of {', '.join(names)}, got {stop!r}")
+            raise DesignError(
+                f"{where}: stop_param: expected one of {', '.join(names)}, got {stop!r}{suggest(stop, names)}"
+            )
         out.update(
             max_trials=_number(method.get("max_trials", 100), "max_trials", where, 1, 100000, integer=True),
             stop_param=stop,

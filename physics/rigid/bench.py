@@ -1,5 +1,6 @@
-"""``bench_rigid``: world steps per second with 10, 100 and 1000 bodies in contact, and the
-wok scene's physics and full render against real time."""
+"""``bench_rigid``: world steps per second of settled piles of 10, 100 and 1000 bodies in
+contact (the wok scene's rows are added by patches.wok_bench: physics does not import
+patches)."""
 
 from __future__ import annotations
 
@@ -40,9 +41,8 @@ def pile(n: int, seed: int = 0, h: float = 1e-3):
 def bench_rigid(
     sizes=(10, 100, 1000), seconds: float = 0.5, quick: bool = False, progress=lambda message: None
 ) -> list[dict]:
-    """Rows: bodies, contacts per step, steps/s and real-time factor of the settled pile; then
-    the wok scene (physics only, and physics + events + audio render) against real time.
-    ``progress(message)`` is told which case starts."""
+    """Rows: bodies, contacts per step, PGS sweeps per solve, steps/s and real-time factor of
+    each settled pile. ``progress(message)`` is told which case starts."""
     from physics.rigid.world import simulate
 
     if quick:
@@ -65,59 +65,6 @@ def bench_rigid(
                 "real_time_factor": seconds / wall,
             }
         )
-    progress("wok scene: physics alone and the full render")
-    rows += _wok_rows(2.0 if quick else 6.0)
-    return rows
-
-
-def _wok_rows(duration: float, repeats: int = 3) -> list[dict]:
-    """The wok's physics alone and its full render (physics, events, sound, haptic and CSV
-    files) at the CLI's default block (OFFLINE_BLOCK) and at 64 frames, the best of
-    ``repeats`` runs, pinned to one core."""
-    import os
-    import tempfile
-
-    from jassy.offline import OFFLINE_BLOCK
-    from patches.wok import render_wok, simulate_wok
-
-    cores = os.sched_getaffinity(0)
-    os.sched_setaffinity(0, {min(cores)})
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            wav, force = os.path.join(tmp, "wok.wav"), os.path.join(tmp, "force.csv")
-            render_wok(wav, force, duration=0.3)  # warm-up (JIT cache load)
-            physics = []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                simulate_wok(duration)
-                physics.append(time.perf_counter() - t0)
-            rows = [
-                {
-                    "case": "wok physics",
-                    "bodies": 15,
-                    "steps_per_s": duration / min(physics) * 1000,
-                    "real_time_factor": duration / min(physics),
-                }
-            ]
-            for block in (OFFLINE_BLOCK, 64):
-                best = None
-                for _ in range(repeats):
-                    t0 = time.perf_counter()
-                    summary = render_wok(wav, force, duration=duration, block=block)
-                    wall = time.perf_counter() - t0
-                    if best is None or wall < best[0]:
-                        best = (wall, summary["physics_seconds"])
-                rows.append(
-                    {
-                        "case": f"wok render, block {block}",
-                        "bodies": 15,
-                        "real_time_factor": duration / best[0],
-                        "physics_s": best[1],
-                        "sound_s": best[0] - best[1],
-                    }
-                )
-    finally:
-        os.sched_setaffinity(0, cores)
     return rows
 
 

@@ -33,6 +33,7 @@ import math
 import numba as nb
 import numpy as np
 
+from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.codes import (
     DYNAMIC,
     IMPULSE,
@@ -76,8 +77,8 @@ from physics.rigid.impulses import (
     world_velocities,
 )
 from physics.rigid.integrate import SEMI_IMPLICIT, advance_body_into, semi_implicit_into
-from physics.rigid.narrow import new_mesh_memory, pair_contacts, sweep_and_prune
-from physics.rigid.shapes import PLANE
+from physics.rigid.narrow import new_mesh_memory, pair_contacts
+from physics.rigid.shapes import PLANE, SPHERE
 from physics.rigid.spatial import cross, dot3, mtv, mv, quat_log, quat_mul, quat_to_mat
 
 MAX_CONTACTS = 1 << 16
@@ -344,6 +345,17 @@ def _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia):
 
 
 @nb.njit(cache=True)
+def _gap_spin(spin, geo):
+    """The part of each body's spin bound (_speeds) that can change a gap: none for a sphere
+    (turning about its centre moves no point of it nearer to anything), all of it otherwise.
+    In place."""
+    btype = geo[0]
+    for i in range(spin.shape[0]):
+        if btype[i] == SPHERE:
+            spin[i] = 0.0
+
+
+@nb.njit(cache=True)
 def _pair_reach(pairs, vel, spin, kind, g, dt, out):
     """out[p]: a bound (m) on how much pair p's gap can shrink in dt seconds of free motion:
     dt (|v_a - v_b| + spin_a + spin_b), plus g dt^2 when only one of them falls."""
@@ -387,6 +399,34 @@ def _apart(a, b, pos, geo, margin):
     return d0 * d0 + d1 * d1 + d2 * d2 > reach * reach
 
 
+@nb.njit(cache=True, inline="always")
+def _beyond_plane(a, b, pos, rot, geo, margin):
+    """Whether body a lies wholly more than ``margin`` (m) beyond plane b: its centre's height
+    over the plane less its bounding radius (every one of its contact points lies within that
+    radius of its centre, narrow._against_plane), with a relative guard of 1e-9 against
+    rounding. A plane pair that passes gives no contact, so the narrow phase is not called."""
+    param, bound = geo[2], geo[3]
+    nx = rot[b, 0, 0] * param[b, 0] + rot[b, 0, 1] * param[b, 1] + rot[b, 0, 2] * param[b, 2]
+    ny = rot[b, 1, 0] * param[b, 0] + rot[b, 1, 1] * param[b, 1] + rot[b, 1, 2] * param[b, 2]
+    nz = rot[b, 2, 0] * param[b, 0] + rot[b, 2, 1] * param[b, 1] + rot[b, 2, 2] * param[b, 2]
+    height = nx * (pos[a, 0] - pos[b, 0]) + ny * (pos[a, 1] - pos[b, 1]) + nz * (pos[a, 2] - pos[b, 2])
+    height -= param[b, 3]
+    clear = height - bound[a]
+    return clear > margin + 1e-9 * (1.0 + bound[a] + abs(height))
+
+
+@nb.njit(cache=True, inline="always")
+def _cannot_touch(a, b, pos, rot, geo, margin):
+    """Cheap rejects before the narrow phase: bounding spheres apart, or a body wholly beyond
+    a plane (both exact: such a pair has no contact within margin)."""
+    btype = geo[0]
+    if btype[b] == PLANE and btype[a] != PLANE:
+        return _beyond_plane(a, b, pos, rot, geo, margin)
+    if btype[a] == PLANE and btype[b] != PLANE:
+        return _beyond_plane(b, a, pos, rot, geo, margin)
+    return _apart(a, b, pos, geo, margin)
+
+
 @nb.njit(cache=True, _nrt=False)
 def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
     """Contacts of all pairs within margin = slop + reach[p] (m, how far the pair can close in
@@ -399,7 +439,7 @@ def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
         margin = slop + reach[p]
         gap[p] = margin
         touching[p] = False
-        if _apart(a, b, pos, geo, margin):
+        if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
         count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
@@ -472,6 +512,7 @@ def run_steps(
     rot, new_rot = np.empty((n, 3, 3)), np.empty((n, 3, 3))
     solver = new_solver(np.int64(256), n, warm[0].shape[0])
     moved = (np.empty_like(pos), np.empty_like(quat), np.empty_like(phi))
+    sweep = new_sweep(n)
     slop = prm[P_SLOP]
     model = int(prm[P_MODEL])
     max_events = int(prm[P_MAX_EVENTS]) if model == IMPULSE else 0
@@ -498,7 +539,8 @@ def run_steps(
             _rotations(quat, rot)
             vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
             lo, hi, movable = _boxes(pos, _motion(vel, spin, kind, gravity_norm, dt), kind, geo, slop)
-            pairs = sweep_and_prune(lo, hi, movable)
+            pairs, sweep = sweep_pairs(lo, hi, movable, sweep)
+            _gap_spin(spin, geo)  # after the boxes, whose order on x sets the contacts' order
             reach = np.zeros(pairs.shape[0])
             _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
             gap0 = np.empty(pairs.shape[0])
@@ -547,12 +589,13 @@ def run_steps(
             if subs < max_events:
                 _rotations(new_quat, new_rot)
                 vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)  # after the solve
+                _gap_spin(spin, geo)
                 _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
                 for p in range(pairs.shape[0]):
                     a, b = pairs[p, 0], pairs[p, 1]
                     if touching[p] or gap0[p] - reach[p] >= -slop or reach[p] < prm[P_BOUNCE] * dt:
                         continue  # touching (the solve handles it), cannot close past -slop, or too slow
-                    if _apart(a, b, new_pos, geo, slop):
+                    if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
                         continue
                     stats[5] += 1
                     g1 = _pair_gap(a, b, new_pos, new_rot, geo, slop, scratch)

@@ -1,0 +1,21 @@
+"""The bare ModalBank kernel called per block from compiled code: the reference that
+``jassy bench modal``'s graph figure is compared with (what a graph does per block,
+without the graph)."""
+
+import numba as nb
+
+from jassy.jit import drop_stale_cache
+from ugens import modal
+from ugens.modal import resonate
+
+drop_stale_cache(__file__, [modal])  # the cache holds a copy of resonate
+
+
+@nb.njit(cache=True)
+def resonate_blocks(force, out, bank, block, last):
+    """:func:`ugens.modal.resonate` over ``force`` into ``out`` in calls of ``block``
+    frames; bank rows c1, c2, g, d, y1, y2; last[0] as in resonate."""
+    k = bank.shape[1]
+    for s in range(0, force.size, block):
+        n = min(block, force.size - s)
+        resonate(force[s:], out[s:], n, bank[0], bank[1], bank[2], bank[3], bank[4], bank[5], k, last)
