@@ -333,10 +333,14 @@ def test_a_tap_posted_as_the_callback_stream_starts_plays_at_its_stamp(jack):
     live.start()
     stamped = live._callback.renderer.post(Event(0.0, "hit", "impact", {"impulse": 0.01}))
     time.sleep(0.3)
+    late = live._callback.renderer.stats().late_strikes
     live.stop()
     heard, rendered = live.monitor()
     onset = first_onset(heard[1])
-    assert rendered[onset] == stamped + 1  # an impact's first non-zero sample follows its time
+    if late == 0:  # an impact's first non-zero sample follows its time
+        assert rendered[onset] == stamped + 1
+    else:  # this thread was preempted between stamping and pushing (a loaded host): at once
+        assert late == 1 and rendered[onset] > stamped + 1
     assert first_onset(heard[0]) == onset  # sound and force on the same frame
 
 
