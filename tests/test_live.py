@@ -300,7 +300,9 @@ def test_warm_up_loads_every_kernel_the_score_needs_before_the_stream_starts():
     import subprocess
     import sys
 
-    run = subprocess.run([sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, check=True)
+    run = subprocess.run(
+        [sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, check=True, timeout=300
+    )
     assert run.stdout.strip() == "[]", run.stdout
 
 
