@@ -117,9 +117,10 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     BUFFER_NS,
     BUSY_OVER,
     BUSY_MAX_AT,
-) = range(39)
+    LATE_STRIKES,
+) = range(40)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_MAX_AT + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = LATE_STRIKES + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -208,6 +209,12 @@ def _next_cut(control, queue_index, pos, stop, prog):
         ev = records[r % cap]
         frame = int(ev[0])
         if frame <= pos or (frame < stop and int(ev[2]) == STRIKE):
+            if frame < pos and int(ev[2]) == STRIKE:
+                # stamped with a frame already played (its poster was preempted between
+                # reading the frame and pushing): the whole pulse starts now instead of
+                # being cut or lost; a whole-frame shift keeps its fractional onset
+                ev[3] += pos - frame
+                control[LATE_STRIKES] += 1
             apply_event(prog, ev, control)
             r += 1
         else:
@@ -456,6 +463,7 @@ class CallbackStats(NamedTuple):
     busy_mean: float  # s
     busy_over: int  # callbacks that took longer than a buffer lasts
     busy_max_at: int  # which callback was the longest (1 = the first)
+    late_strikes: int = 0  # strikes that reached the callback after their frame: played at once
 
 
 class EventQueue:
@@ -703,6 +711,7 @@ class CallbackRenderer:
             c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
             int(c[BUSY_OVER]),
             int(c[BUSY_MAX_AT]),
+            int(c[LATE_STRIKES]),
         )
 
     def levels_now(self) -> np.ndarray:
