@@ -1,7 +1,8 @@
 """Anytime synthesis: one mode budget shared by every ModalBank of a graph.
 
-At multiples of ``period`` frames on the clock (the scheduler splits sub-blocks there, so
-the result does not depend on the block size) the budget ranks all modes of all banks by
+At multiples of ``period`` frames on the clock (the banks' sub-blocks are split there when
+a decision is taken, so the result does not depend on the block size) the budget ranks
+all modes of all banks by
 
     I_k = w(f_k) * (A_k^2 + (a_k J_b)^2 + a_k^2 S_b(f_k) (1 - e^{-2 d_k tau}) / (2 d_k))
 
@@ -14,13 +15,19 @@ the output's error energy) or, with ``weighting = "A"``, the A-weighting power g
 force of that spectrum builds in a mode over the horizon tau, so continuous contacts
 (scraping, rolling, friction) compete with impacts and ringing modes on one scale. The
 top ``max_modes`` modes are computed for the next period; the rest are silenced and cost
-nothing (the bank runs only its first, kept, modes).
+nothing: each bank runs its kept modes gathered into a compact bank, so its cost is
+proportional to them. Importance, ranking and the change of the kept set are compiled
+(ugens.modal_budget, jassy.anytime_rank); per decision each bank adds a few Python calls
+and, when it heard a force, a periodogram (numpy FFT).
 
 A decision is taken only where something may change the ranking: an impact scheduled in
 this or the next period, a force heard in the last period, or a mode fading out. Between
 them the kept set only loses modes (ringing modes decay, silent ones are skipped), which
 the banks do by themselves. A budget that covers every mode never decides: the render is
-the full synthesis.
+the full synthesis. Whether a bank hears a force is read from its input before the banks
+run (one compiled pass over every bank's input), and when no bank hears another bank the
+budget renders the banks itself: a sub-block is split only at the frames where it
+decides, so a budgeted bank is called no more often than a full one between decisions.
 
 Leaving without clicks: the scheduler knows the score, so the budget also ranks the modes
 for the *following* period (amplitudes decayed by one period, impacts scheduled then). A
@@ -39,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jassy.anytime_rank import rank_modes
+from jassy.anytime_rank import rank_modes, scan_forces
 from jassy.errors import PatchError
 
 #: the impacts (impulse N s, location) on a bank no impact strikes
@@ -89,10 +96,18 @@ class ModeBudget:
         if not 0 < self.horizon <= 60:
             raise PatchError(f"budget horizon: expected seconds in (0, 60], got {self.horizon!r}")
 
-    def attach(self, banks: list, sample_rate: float, upcoming) -> None:
+    def decides(self, total_modes: int) -> bool:
+        """Whether the budget decides anything on banks of ``total_modes`` modes (one that
+        holds every mode never does: the render is the full synthesis)."""
+        return self.cpu_fraction is not None or (self.max_modes or total_modes) < total_modes
+
+    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False) -> None:
         """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
         ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
-        scheduled in [start, end)."""
+        scheduled in [start, end). ``renders``: :meth:`step` also renders the banks (their
+        inputs are rendered before it), splitting their sub-block only at the frames where
+        it decides; otherwise the scheduler cuts sub-blocks at every period and a bank's
+        force counts as heard in every period (it may be rendered after the step)."""
         self.banks = banks
         self.sample_rate = sample_rate
         self.upcoming = upcoming
@@ -102,8 +117,8 @@ class ModeBudget:
         self.decisions = 0
         self._clock = None
         self._fading = False
-        #: a budget that holds every mode never decides (full synthesis)
-        self.active = self.cpu_fraction is not None or self.limit < total
+        self.active = self.decides(total)
+        self.renders = renders and self.active
         #: every bank's importance now, next period, and whether it sounds (one row each);
         #: the modes to compute and to fade (ugens.modal_budget.rank_modes)
         self._scores = np.zeros((3, total))
@@ -117,6 +132,21 @@ class ModeBudget:
             if self.active:
                 bank.anytime_attach(self.period, self.horizon, self.weighting, self._scores[:, cut])
             offset = cut.stop
+        count = len(banks)
+        #: per bank: an impact foreseen in this period, a force heard in this / the last
+        #: period, a force in the current stretch, and its scores already all zero
+        #: and a force since it was last rendered
+        flags = (np.zeros(count, dtype=bool) for _ in range(7))
+        self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._zeroed = (
+            next(flags) for _ in range(6)
+        )
+        self._pending_force = next(flags)
+        self._inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
+        self._addresses = np.array([x.ctypes.data for x in self._inputs], dtype=np.intp)
+        self._input_size = min(x.size for x in self._inputs)
+        self._unseen = np.array([not renders for _ in banks], dtype=bool)
+        self._processes = [bank.process for bank in banks]
+        self._kicks, self._now = NO_KICK, {}
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -129,35 +159,86 @@ class ModeBudget:
         return predicted
 
     def step(self, start: int, n: int) -> None:
-        """Graph step, before the banks render frames [start, start + n): decide at
-        multiples of ``period`` where the ranking may change, and at once where a bank
-        that heard nothing for a period starts to hear a force nobody scheduled (a
-        contact starting), so that its modes sound from the contact's first sample."""
+        """Graph step for frames [start, start + n), after every node the banks hear:
+        decide at multiples of ``period`` where the ranking may change, and at once where
+        a bank that heard nothing for a period starts to hear a force nobody scheduled (a
+        contact starting), so that its modes sound from the contact's first sample. When
+        the budget renders the banks, it runs them up to each decision and after the last
+        one: a sub-block is split only where a decision changes the kept sets."""
         if not self.active:
             return
-        kicks, now, driven = NO_KICK, {}, False
-        if start % self.period == 0:
-            kicks = self.upcoming(start, start + 2 * self.period)
-            if kicks:
-                now = self._predicted(kicks, start, start + self.period)
-            for bank in self.banks:  # every bank: each rotates its record of forces heard
-                driven |= bank.anytime_period(id(bank) in now)
-            driven |= self._fading or bool(kicks) or self.cpu_fraction is not None
-            if self.cpu_fraction is not None:
-                self._adapt()
-        onset = False
-        for bank in self.banks:
-            onset |= bank.anytime_onset(n)
-        if not (driven or onset):
-            return
-        later = self._predicted(kicks, start + self.period, start + 2 * self.period) if kicks else {}
-        for bank in self.banks:
-            bank.anytime_importance(now.get(id(bank), NO_KICK), later.get(id(bank), NO_KICK), self.period)
+        end, period, rendered, at = start + n, self.period, start, start
+        while at < end:
+            stop = min(end, (at // period + 1) * period)
+            onset = self._due(at, stop - at, at - start)
+            if onset is not None:
+                if self.renders and at > rendered:
+                    self._render(rendered, at - rendered, rendered - start)
+                    rendered = at
+                self._decide(at, onset, at - start, stop - at)
+            self._heard_now |= self._forced
+            self._pending_force |= self._forced
+            at = stop
+        if self.renders:
+            self._render(rendered, end - rendered, rendered - start)
+
+    def _render(self, start: int, n: int, offset: int) -> None:
+        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block;
+        a bank with nothing to compute (no mode sounding, no force in this or the last
+        period, nothing pending) only writes silence."""
+        forced = self._pending_force
+        forced |= self._heard_now | self._heard_before  # its ring holds a force
+        for i, process in enumerate(self._processes):
+            if forced[i] or not self.banks[i].anytime_silent(offset, n):
+                process(start, n, offset)
+        forced[:] = False
+
+    def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
+        """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
+        frames (inputs at ``offset`` of the sub-block); the banks woken by a force nobody
+        scheduled (a mask) if the budget decides at ``at``, else None."""
+        rotate = at % self.period == 0
+        if rotate:
+            kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
+            now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
+            self._expected[:] = False
+            if now:
+                for i, bank in enumerate(self.banks):
+                    self._expected[i] = id(bank) in now
+        else:
+            self._kicks, self._now = NO_KICK, {}
+        heard, woken = scan_forces(
+            self._addresses, self._input_size, offset, offset + n, rotate, self._unseen, self._expected,
+            self._heard_now, self._heard_before, self._forced, self._onset,
+        )  # fmt: skip
+        driven = rotate and (self._fading or bool(self._kicks) or heard)
+        if rotate and self.cpu_fraction is not None:
+            driven = True
+            self._adapt()
+        return self._onset if driven or woken else None
+
+    def _decide(self, at: int, onset: np.ndarray, offset: int, n: int) -> None:
+        """Rank every mode at frame ``at`` and apply the kept sets; ``onset``: the banks
+        woken by the force in the sub-block's frames [offset, offset + n)."""
+        kicks, now, period = self._kicks, self._now, self.period
+        later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
+        heard = self._heard_now | self._heard_before
+        idle = []
+        for i, bank in enumerate(self.banks):
+            kick_now, kick_next = now.get(id(bank), NO_KICK), later.get(id(bank), NO_KICK)
+            woken = bank.sources["input"].out[offset : offset + n] if onset[i] else None
+            quiet = not (kick_now or kick_next or heard[i] or woken is not None or bank.meta[0])
+            if quiet and self._zeroed[i]:  # nothing rings, nothing comes: scores stay zero
+                idle.append(bank._kept_count == 0)
+                continue
+            self._zeroed[i] = quiet
+            bank.anytime_importance(kick_now, kick_next, period, bool(heard[i]), woken)
+            idle.append(False)
         keep, fade = self._keep, self._fade
         self._fading = rank_modes(self._scores, self.limit, keep, fade, self._later)
         total = 0
-        for bank, cut in zip(self.banks, self._slices, strict=True):
-            total += bank.anytime_apply(keep[cut], fade[cut], self.period)
+        for bank, cut, skip in zip(self.banks, self._slices, idle, strict=True):
+            total += 0 if skip else bank.anytime_apply(keep[cut], fade[cut], period)
         self.peak_modes = max(self.peak_modes, total)
         self.decisions += 1
 

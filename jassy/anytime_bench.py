@@ -2,15 +2,18 @@
 
 For each scene (the ``bell`` and ``scrape`` patches and the ``wok`` scene's sound graph),
 renders the full synthesis and budgets of 10, 25, 50 and 100 % of the graph's modes, at
-48 kHz in blocks of 4096 frames, node by node (the budget decides between sub-blocks).
+48 kHz in blocks of 4096 frames, node by node (the budget splits a sub-block where it
+decides).
 
 - error: 10 log10 of the energy of (budgeted - full) over the energy of full, on the
   rendered audio (dB; exact synthesis gives about -300 dB);
-- CPU: thread CPU time spent in the ModalBanks plus the budget's decisions, divided by the
-  CPU time of the ModalBanks of the full render (which skip silent modes); the best of
-  ``repeats`` runs of each, interleaved in the same process;
-- mode-samples: the modes computed per sample (active at each sub-block's end), summed,
-  over the full render's: the CPU ratio the bank kernel alone would reach.
+- CPU: thread CPU time spent in the ModalBanks plus the budget's steps (decisions and
+  bookkeeping, without the banks they run), divided by the CPU time of the ModalBanks of
+  the full render (which skip silent modes); the best of ``repeats`` runs of each,
+  interleaved in the same process;
+- mode-samples: the modes computed per sample (active at the end of each span a bank
+  renders), summed, over the full render's: the CPU ratio the bank kernel alone would
+  reach.
 """
 
 from __future__ import annotations
@@ -60,22 +63,31 @@ def _timed_render(build, seconds: float, fraction: float | None):
     total = sum(b.model.n_modes for b in banks)
     if fraction is not None:
         graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
-    spent = [0, 0, 0]  # bank ns, decision ns, mode-samples
+    spent = [0, 0, 0]  # bank ns, decision ns (budget steps without the banks they render), mode-samples
 
-    def clocked(fn, slot, bank=None):
-        def run(start, n):
+    def clocked_bank(bank):
+        process = bank.process
+
+        def run(start, n, offset=0):
             t = time.thread_time_ns()
-            fn(start, n)
-            spent[slot] += time.thread_time_ns() - t
-            if bank is not None:  # modes active at the sub-block's end (after flushing)
-                spent[2] += n * int(bank.meta[0])
+            process(start, n, offset)
+            spent[0] += time.thread_time_ns() - t
+            spent[2] += n * int(bank.meta[0])  # modes active at the span's end (after flushing)
+
+        return run
+
+    def clocked_step(step):
+        def run(start, n):
+            t, inside = time.thread_time_ns(), spent[0]
+            step(start, n)
+            spent[1] += time.thread_time_ns() - t - (spent[0] - inside)
 
         return run
 
     for bank in banks:
-        bank.process = clocked(bank.process, 0, bank)
+        bank.process = clocked_bank(bank)
     if graph.budget is not None:
-        graph.budget.step = clocked(graph.budget.step, 1)
+        graph.budget.step = clocked_step(graph.budget.step)
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
     return audio, spent[0] * 1e-9, spent[1] * 1e-9, total, spent[2]

@@ -1,9 +1,12 @@
-"""Ranking of a mode budget, compiled: the modes to compute and to fade out per period."""
+"""Ranking of a mode budget, compiled: the modes to compute and to fade out per period,
+and which banks hear a force."""
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba import types
+from numba.extending import intrinsic
 
 
 @nb.njit(cache=True)
@@ -45,3 +48,44 @@ def rank_modes(scores, limit, keep, fade, later_top):
             keep[k] = False
             any_fade = True
     return any_fade
+
+
+@intrinsic
+def _float64_pointer(typingctx, address):
+    """The float64 pointer at integer ``address`` (a numpy array's ``ctypes.data``)."""
+    signature = types.CPointer(types.float64)(types.intp)
+
+    def codegen(context, builder, sig, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+
+    return signature, codegen
+
+
+@nb.njit(cache=True)
+def scan_forces(
+    addresses, size, begin, end, rotate, unseen, expected, heard_now, heard_before, forced, onset
+):  # fmt: skip
+    """Which banks hear a force in samples [begin, end) of their inputs (float64 arrays of
+    ``size`` at ``addresses``, kept alive by their nodes) into ``forced``; banks ``unseen``
+    (rendered after the budget) count as forced. ``rotate`` (a period starts): the last
+    period's ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected
+    no impact and heard nothing in this or the last period. Returns (any heard_before,
+    any onset). A bank that heard a force in this period already is not scanned."""
+    any_before = False
+    any_onset = False
+    for b in range(addresses.size):
+        if rotate:
+            heard_before[b] = heard_now[b]
+            heard_now[b] = False
+        any_before |= heard_before[b]
+        loud = unseen[b]
+        if not loud and not heard_now[b]:
+            x = nb.carray(_float64_pointer(addresses[b]), size)
+            for i in range(begin, end):
+                if x[i] != 0.0:
+                    loud = True
+                    break
+        forced[b] = loud
+        onset[b] = loud and not (expected[b] or heard_now[b] or heard_before[b] or unseen[b])
+        any_onset |= onset[b]
+    return any_before, any_onset

@@ -46,12 +46,20 @@ from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import drop_stale_cache
 from jassy.memlock import resident
 from jassy.program import (
+    HEADER,
     KERNEL_MODULES,
     RECORD,
+    BiquadSlots,
+    GainSlots,
+    ImpactSlots,
+    ModalSlots,
     Program,
+    ResonantScrapeSlots,
+    ScrapeSlots,
     _f64,
     _f64_rows,
     _i64,
+    kind_slots,
     run_program,
     void_pointer,
     why_not_compiled,
@@ -109,9 +117,10 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     BUFFER_NS,
     BUSY_OVER,
     BUSY_MAX_AT,
-) = range(39)
+    LATE_STRIKES,
+) = range(40)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = BUSY_MAX_AT + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = LATE_STRIKES + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -146,13 +155,15 @@ def apply_event(prog, ev, control):
             ramp[2] = (value - cur) / m
             ramp[3] = m
         if op == SET_BIQUAD:
-            setup = _f64(prog[base + 10], 2)
-            freq = _f64(prog[base + 4], 4)
-            q = _f64(prog[base + 5], 4)
-            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(prog[base + 8], 5))
+            filt = BiquadSlots(*kind_slots(prog, base)[:8])
+            setup = _f64(filt.setup, 2)
+            freq = _f64(filt.freq_ramp, 4)
+            q = _f64(filt.q_ramp, 4)
+            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(filt.coef, 5))
     elif op == STRIKE:
-        pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
-        count = _i64(prog[base + 5], 1)
+        impact = ImpactSlots(*kind_slots(prog, base)[:3])
+        pulses = _f64_rows(impact.pulses, impact.capacity, 3)
+        count = _i64(impact.count, 1)
         c = count[0]
         if c < pulses.shape[0]:
             pulses[c, 0] = ev[3]
@@ -162,11 +173,12 @@ def apply_event(prog, ev, control):
         else:
             control[DROPPED] += 1
     elif op == MODAL_TARGET:
-        k = prog[base + 5]
-        bank = _f64_rows(prog[base + 4], 6, k)
-        delta = _f64_rows(prog[base + 6], 4, k)
-        target = _f64_rows(prog[base + 7], 4, k)
-        meta = _i64(prog[base + 8], 3)
+        modal = ModalSlots(*kind_slots(prog, base)[:8])
+        k = modal.modes
+        bank = _f64_rows(modal.bank, 6, k)
+        delta = _f64_rows(modal.delta, 4, k)
+        target = _f64_rows(modal.target, 4, k)
+        meta = _i64(modal.meta, 3)
         staged = _f64_rows(int(ev[3]), 4, k)
         m = int(ev[4])
         for r in range(4):
@@ -197,6 +209,12 @@ def _next_cut(control, queue_index, pos, stop, prog):
         ev = records[r % cap]
         frame = int(ev[0])
         if frame <= pos or (frame < stop and int(ev[2]) == STRIKE):
+            if frame < pos and int(ev[2]) == STRIKE:
+                # stamped with a frame already played (its poster was preempted between
+                # reading the frame and pushing): the whole pulse starts now instead of
+                # being cut or lost; a whole-frame shift keeps its fractional onset
+                ev[3] += pos - frame
+                control[LATE_STRIKES] += 1
             apply_event(prog, ev, control)
             r += 1
         else:
@@ -371,13 +389,16 @@ _RAMPED = {
 }
 #: Record slot of each ramped parameter (see jassy.program's records).
 _RAMP_SLOT = {
-    (Gain, "gain"): 4,
-    (Scrape, "force"): 3,
-    (Scrape, "speed"): 4,
-    (ResonantScrape, "force"): 3,
-    (ResonantScrape, "speed"): 4,
-    (Biquad, "freq"): 4,
-    (Biquad, "q"): 5,
+    (node, key): HEADER + slots._fields.index(field)
+    for node, slots, key, field in (
+        (Gain, GainSlots, "gain", "ramp"),
+        (Scrape, ScrapeSlots, "force", "force_ramp"),
+        (Scrape, ScrapeSlots, "speed", "speed_ramp"),
+        (ResonantScrape, ResonantScrapeSlots, "force", "force_ramp"),
+        (ResonantScrape, ResonantScrapeSlots, "speed", "speed_ramp"),
+        (Biquad, BiquadSlots, "freq", "freq_ramp"),
+        (Biquad, BiquadSlots, "q", "q_ramp"),
+    )
 }
 
 
@@ -442,6 +463,7 @@ class CallbackStats(NamedTuple):
     busy_mean: float  # s
     busy_over: int  # callbacks that took longer than a buffer lasts
     busy_max_at: int  # which callback was the longest (1 = the first)
+    late_strikes: int = 0  # strikes that reached the callback after their frame: played at once
 
 
 class EventQueue:
@@ -689,6 +711,7 @@ class CallbackRenderer:
             c[BUSY_TOTAL_NS] * 1e-9 / max(int(c[CALLBACKS]), 1),
             int(c[BUSY_OVER]),
             int(c[BUSY_MAX_AT]),
+            int(c[LATE_STRIKES]),
         )
 
     def levels_now(self) -> np.ndarray:

@@ -175,6 +175,7 @@ class Graph:
         #: a budget, its decision runs just before the first ModalBank.
         self.steps = [node.process for node in self.order] + [node.commit for node in self.delays]
         self.budgeted = [node for node in self.order if node.supports_budget]
+        self.budget_renders = False  # the budget's step renders the banks (below)
         if self.budget is not None and self.budgeted:
             for node in self.budgeted:
                 node.budgeted = True
@@ -184,6 +185,14 @@ class Graph:
             fed = {id(node) for bank in self.budgeted for node in [bank, *self.downstream(bank.name)]}
             early = [node.process for node in self.order if id(node) not in fed]
             late = [node.process for node in self.order if id(node) in fed]
+            # when no bank hears a bank, the budget renders the banks itself, split only
+            # where it decides (jassy.anytime.ModeBudget.step)
+            total = sum(bank.model.n_modes for bank in self.budgeted)
+            self.budget_renders = self.budget.decides(total) and not any(
+                id(src) in fed for bank in self.budgeted for src in bank.sources.values()
+            )
+            if self.budget_renders:
+                late = [node.process for node in self.order if id(node) in fed and not node.supports_budget]
             self.steps = early + [self.budget.step] + late + [node.commit for node in self.delays]
 
     def reset(self) -> None:

@@ -496,7 +496,7 @@ class LiveEngine:
                 c.status_flags,
                 0.0,
                 c.device_latency,
-                self._callback.renderer.late,
+                self._callback.renderer.late + c.late_strikes,
                 c.realtime,
                 "callback",
                 c.xruns,

@@ -21,11 +21,14 @@ leaves every other node's output unchanged: their kernels are sample by sample.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 from llvmlite import ir as llvmir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
+from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from jassy import params
 from jassy.graph import Graph
@@ -44,11 +47,111 @@ from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
 KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
 drop_stale_cache(__file__, KERNEL_MODULES)
 
-#: int64 slots per node record; the last holds the address of its kind's compiled function.
+#: int64 slots per node record: a Header, its kind's slots record (zero-padded), and last the
+#: address of its kind's compiled function.
 RECORD = 16
 FUNCTION = RECORD - 1
 GAIN, MIXER, MULTIPLY, IMPACT, MODAL, SCRAPE, RESONANT_SCRAPE, BIQUAD, RADIATION = range(1, 10)
 SOUND_PRESSURE = 10
+
+
+class Header(NamedTuple):
+    """The first slots of every node record."""
+
+    kind: int  #: GAIN .. SOUND_PRESSURE
+    out: int  #: the output buffer
+    size: int  #: its length (the node's max_block)
+
+
+#: Slots of the Header; a kind's slots follow it.
+HEADER = len(Header._fields)
+#: Slots a kind's record may use (between the Header and the FUNCTION slot).
+KIND_SLOTS = FUNCTION - HEADER
+
+# The kinds' slots records. In the table an array is its address, an int itself; the
+# comments give the arrays' float64 lengths (size: the header's).
+
+
+class GainSlots(NamedTuple):
+    input: int  #: (size,)
+    ramp: int  #: the gain's ramp (4,)
+    gains: int  #: per-sample gains while it ramps (size,)
+
+
+class MixerSlots(NamedTuple):
+    count: int  #: inputs
+    sources: int  #: int64 addresses of the inputs' buffers (count,)
+    gains: int  #: (count,)
+
+
+class MultiplySlots(NamedTuple):
+    a: int  #: (size,)
+    b: int  #: (size,)
+
+
+class ImpactSlots(NamedTuple):
+    pulses: int  #: pulse table (capacity, 3)
+    capacity: int  #: its rows
+    count: int  #: int64 pulses queued (1,)
+
+
+class ModalSlots(NamedTuple):
+    input: int  #: force (size,)
+    bank: int  #: rows c1, c2, g, d, y1, y2 (6, modes)
+    modes: int  #: modes in the bank
+    delta: int  #: per-sample coefficient steps of a ramp (4, modes)
+    target: int  #: the ramp's target coefficients (4, modes)
+    meta: int  #: int64 [active modes, ramp samples left, allowed modes] (3,)
+    last: int  #: the force sample before the sub-block (1,)
+    floor: int  #: silent-mode floor (1,)
+
+
+class ScrapeSlots(NamedTuple):
+    force_ramp: int  #: (4,)
+    speed_ramp: int  #: (4,)
+    forces: int  #: (size,)
+    speeds: int  #: (size,)
+    profile: int  #: (length,)
+    length: int  #: profile points
+    state: int  #: (4,)
+    coef: int  #: (5,)
+    cfg: int  #: a ProfileConfig (9,)
+
+
+class ResonantScrapeSlots(NamedTuple):
+    force_ramp: int  #: (4,)
+    speed_ramp: int  #: (4,)
+    forces: int  #: (size,)
+    speeds: int  #: (size,)
+    rng: int  #: uint64 (1,)
+    state: int  #: (8,)
+    cfg: int  #: a NoiseConfig (10,)
+
+
+class BiquadSlots(NamedTuple):
+    input: int  #: (size,)
+    freq_ramp: int  #: (4,)
+    q_ramp: int  #: (4,)
+    freqs: int  #: (size,)
+    qs: int  #: (size,)
+    coef: int  #: (5,)
+    state: int  #: (2,)
+    setup: int  #: [mode, 1/fs] (2,)
+
+
+class RadiationSlots(NamedTuple):
+    input: int  #: (size,)
+    coef: int  #: (4,)
+    state: int  #: (3,)
+
+
+class SoundPressureSlots(NamedTuple):
+    input: int  #: (size,)
+    coef: int  #: (3,)
+    state: int  #: (3,)
+    setup: int  #: (3,)
+
+
 #: Ugen classes with a kernel in the program, by kind.
 PROGRAM_UGENS = {
     Gain: GAIN,
@@ -97,126 +200,146 @@ def _u64(address, size):
     return nb.carray(void_pointer(address), (size,), np.uint64)
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def header(prog, base):
+    """The Header of the record at prog[base]."""
+    return Header(prog[base], prog[base + 1], prog[base + 2])
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def kind_slots(prog, base):
+    """The KIND_SLOTS slots after the Header of the record at prog[base], as a tuple: its
+    kind's record is the tuple's first fields (``ModalSlots(*kind_slots(prog, base)[:8])``;
+    a wrong count does not compile)."""
+    return to_fixed_tuple(prog[base + HEADER : base + FUNCTION], KIND_SLOTS)
+
+
 # One function per node kind, compiled (as a C-callable function) only when a program holds
 # that kind: a graph compiles the kernels it uses, not every kind's. Each reads its record
 # from the table at address ``table`` (see Program), for frames start .. start + n - 1.
 
 
-def _gain(table, base, start, n):  # [input, ramp, per-sample gains]
+def _gain(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    out = _f64(prog[base + 1], size)
-    x = _f64(prog[base + 3], size)
-    ramp = _f64(prog[base + 4], 4)
+    _, out_at, size = header(prog, base)
+    gain = GainSlots(*kind_slots(prog, base)[:3])
+    out = _f64(out_at, size)
+    x = _f64(gain.input, size)
+    ramp = _f64(gain.ramp, 4)
     if ramp[3] == 0:
         scale(x, out, n, ramp[0])
     else:
-        gains = _f64(prog[base + 5], size)
+        gains = _f64(gain.gains, size)
         ramp_fill(ramp, gains, n)
         scale_ramp(x, out, n, gains)
 
 
-def _mixer(table, base, start, n):  # [count, input addresses, gains]
+def _mixer(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    out = _f64(prog[base + 1], size)
-    m = prog[base + 3]
-    sources = _i64(prog[base + 4], m)
-    gains = _f64(prog[base + 5], m)
+    _, out_at, size = header(prog, base)
+    mixer = MixerSlots(*kind_slots(prog, base)[:3])
+    out = _f64(out_at, size)
+    m = mixer.count
+    sources = _i64(mixer.sources, m)
+    gains = _f64(mixer.gains, m)
     scale(_f64(sources[0], size), out, n, gains[0])
     for j in range(1, m):
         accumulate(_f64(sources[j], size), out, n, gains[j])
 
 
-def _multiply(table, base, start, n):  # [a, b]
+def _multiply(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    multiply(_f64(prog[base + 3], size), _f64(prog[base + 4], size), _f64(prog[base + 1], size), n)
+    _, out, size = header(prog, base)
+    product = MultiplySlots(*kind_slots(prog, base)[:2])
+    multiply(_f64(product.a, size), _f64(product.b, size), _f64(out, size), n)
 
 
-def _impact(table, base, start, n):  # [pulses, pulse capacity, count]
+def _impact(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    out = _f64(prog[base + 1], prog[base + 2])
-    pulses = _f64_rows(prog[base + 3], prog[base + 4], 3)
-    count = _i64(prog[base + 5], 1)
-    count[0] = render_pulses(out, start, n, pulses, count[0])
+    _, out, size = header(prog, base)
+    impact_ = ImpactSlots(*kind_slots(prog, base)[:3])
+    pulses = _f64_rows(impact_.pulses, impact_.capacity, 3)
+    count = _i64(impact_.count, 1)
+    count[0] = render_pulses(_f64(out, size), start, n, pulses, count[0])
 
 
-def _modal(table, base, start, n):  # [input, bank, modes, delta, target, meta, last, floor]
+def _modal(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    out = _f64(prog[base + 1], size)
-    k = prog[base + 5]
-    force = _f64(prog[base + 3], size)
-    bank = _f64_rows(prog[base + 4], 6, k)
-    meta = _i64(prog[base + 8], 3)
-    last = _f64(prog[base + 9], 1)
+    _, out_at, size = header(prog, base)
+    bank_ = ModalSlots(*kind_slots(prog, base)[:8])
+    out = _f64(out_at, size)
+    k = bank_.modes
+    force = _f64(bank_.input, size)
+    bank = _f64_rows(bank_.bank, 6, k)
+    meta = _i64(bank_.meta, 3)
+    last = _f64(bank_.last, 1)
     if meta[1] > 0:  # ramping
         meta[0] = meta[2]
-        delta = _f64_rows(prog[base + 6], 4, k)
-        target = _f64_rows(prog[base + 7], 4, k)
+        delta = _f64_rows(bank_.delta, 4, k)
+        target = _f64_rows(bank_.target, 4, k)
         meta[1] = resonate_ramp(
             force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
         )
     else:
-        bank_step(force, out, start, n, bank, meta, _f64(prog[base + 10], 1)[0], last)
+        bank_step(force, out, start, n, bank, meta, _f64(bank_.floor, 1)[0], last)
 
 
-def _scrape(
-    table, base, start, n
-):  # [force ramp, speed ramp, forces, speeds, profile, length, state, coef, cfg]
+def _scrape(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    forces = _f64(prog[base + 5], size)
-    speeds = _f64(prog[base + 6], size)
-    ramp_fill(_f64(prog[base + 3], 4), forces, n)
-    ramp_fill(_f64(prog[base + 4], 4), speeds, n)
+    _, out, size = header(prog, base)
+    needle = ScrapeSlots(*kind_slots(prog, base)[:9])
+    forces = _f64(needle.forces, size)
+    speeds = _f64(needle.speeds, size)
+    ramp_fill(_f64(needle.force_ramp, 4), forces, n)
+    ramp_fill(_f64(needle.speed_ramp, 4), speeds, n)
     profile_contact(
-        _f64(prog[base + 1], size),
+        _f64(out, size),
         n,
         forces,
         speeds,
-        _f64(prog[base + 7], prog[base + 8]),
-        _f64(prog[base + 9], 4),
-        _f64(prog[base + 10], 5),
-        _f64(prog[base + 11], 9),
+        _f64(needle.profile, needle.length),
+        _f64(needle.state, 4),
+        _f64(needle.coef, 5),
+        _f64(needle.cfg, 9),
     )
 
 
-def _resonant_scrape(table, base, start, n):  # [force ramp, speed ramp, forces, speeds, rng, state, cfg]
+def _resonant_scrape(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    forces = _f64(prog[base + 5], size)
-    speeds = _f64(prog[base + 6], size)
-    ramp_fill(_f64(prog[base + 3], 4), forces, n)
-    ramp_fill(_f64(prog[base + 4], 4), speeds, n)
+    _, out, size = header(prog, base)
+    noisy = ResonantScrapeSlots(*kind_slots(prog, base)[:7])
+    forces = _f64(noisy.forces, size)
+    speeds = _f64(noisy.speeds, size)
+    ramp_fill(_f64(noisy.force_ramp, 4), forces, n)
+    ramp_fill(_f64(noisy.speed_ramp, 4), speeds, n)
     resonant_noise(
-        _f64(prog[base + 1], size),
+        _f64(out, size),
         n,
         forces,
         speeds,
-        _u64(prog[base + 7], 1),
-        _f64(prog[base + 8], 8),
-        _f64(prog[base + 9], 10),
+        _u64(noisy.rng, 1),
+        _f64(noisy.state, 8),
+        _f64(noisy.cfg, 10),
     )
 
 
-def _biquad(table, base, start, n):  # [input, freq ramp, q ramp, freqs, qs, coef, state, (mode, 1/fs)]
+def _biquad(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    out = _f64(prog[base + 1], size)
-    x = _f64(prog[base + 3], size)
-    freq = _f64(prog[base + 4], 4)
-    q = _f64(prog[base + 5], 4)
-    coef = _f64(prog[base + 8], 5)
-    state = _f64(prog[base + 9], 2)
-    setup = _f64(prog[base + 10], 2)
+    _, out_at, size = header(prog, base)
+    filt = BiquadSlots(*kind_slots(prog, base)[:8])
+    out = _f64(out_at, size)
+    x = _f64(filt.input, size)
+    freq = _f64(filt.freq_ramp, 4)
+    q = _f64(filt.q_ramp, 4)
+    coef = _f64(filt.coef, 5)
+    state = _f64(filt.state, 2)
+    setup = _f64(filt.setup, 2)
     mode = int(setup[0])
     if freq[3] == 0 and q[3] == 0:
         biquad(x, out, n, coef, state)
     else:
-        freqs = _f64(prog[base + 6], size)
-        qs = _f64(prog[base + 7], size)
+        freqs = _f64(filt.freqs, size)
+        qs = _f64(filt.qs, size)
         ramp_fill(freq, freqs, n)
         ramp_fill(q, qs, n)
         biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
@@ -224,24 +347,19 @@ def _biquad(table, base, start, n):  # [input, freq ramp, q ramp, freqs, qs, coe
             design_biquad(mode, freq[0], q[0], setup[1], coef)
 
 
-def _radiation(table, base, start, n):  # [input, coef, state]
+def _radiation(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    radiate(
-        _f64(prog[base + 3], size),
-        _f64(prog[base + 1], size),
-        n,
-        _f64(prog[base + 4], 4),
-        _f64(prog[base + 5], 3),
-    )
+    _, out, size = header(prog, base)
+    rad = RadiationSlots(*kind_slots(prog, base)[:3])
+    radiate(_f64(rad.input, size), _f64(out, size), n, _f64(rad.coef, 4), _f64(rad.state, 3))
 
 
-def _sound_pressure(table, base, start, n):  # [input, coef, state, setup]
+def _sound_pressure(table, base, start, n):
     prog = _i64(table, base + RECORD)
-    size = prog[base + 2]
-    x = _f64(prog[base + 3], size)
-    out = _f64(prog[base + 1], size)
-    sound_pressure(x, out, n, _f64(prog[base + 4], 3), _f64(prog[base + 5], 3), _f64(prog[base + 6], 3))
+    _, out, size = header(prog, base)
+    sp = SoundPressureSlots(*kind_slots(prog, base)[:4])
+    x = _f64(sp.input, size)
+    sound_pressure(x, _f64(out, size), n, _f64(sp.coef, 3), _f64(sp.state, 3), _f64(sp.setup, 3))
 
 
 #: Each kind's node function, by kind.
@@ -338,6 +456,7 @@ class Program:
         self.table = np.zeros(1 + RECORD * len(graph.order), dtype=np.int64)
         self.table[0] = len(graph.order)
         self._arrays: dict[int, list[np.ndarray]] = {}
+        self._slots: dict[int, NamedTuple] = {}
         self._impacts: list[tuple[int, ImpactForce]] = []
         for i, node in enumerate(graph.order):
             if isinstance(node, ModalBank):
@@ -347,69 +466,88 @@ class Program:
             self._write(i, node)
 
     def _write(self, i: int, node) -> None:
-        arrays = self._record_arrays(node)
+        slots = self._node_slots(node)
         base = 1 + i * RECORD
         record = self.table[base : base + RECORD]
         record[:] = 0
-        record[0] = PROGRAM_UGENS[type(node)]
-        record[2] = node.max_block
+        record[:HEADER] = Header(PROGRAM_UGENS[type(node)], node.out.ctypes.data, node.max_block)
         record[FUNCTION] = node_function_address(record[0])
-        for j, value in enumerate(arrays, start=1):
-            record[j if j == 1 else j + 1] = value.ctypes.data if isinstance(value, np.ndarray) else value
-        self._arrays[i] = [a for a in arrays if isinstance(a, np.ndarray)]
+        for j, value in enumerate(slots):
+            record[HEADER + j] = value.ctypes.data if isinstance(value, np.ndarray) else value
+        self._arrays[i] = [node.out, *(a for a in slots if isinstance(a, np.ndarray))]
+        self._slots[i] = slots
 
     @staticmethod
-    def _record_arrays(node) -> list:
-        """The output buffer, then the kind's slots (arrays by address, ints as they are)."""
+    def _node_slots(node) -> NamedTuple:
+        """The kind's slots record of ``node`` (arrays, written by address, and ints)."""
         if isinstance(node, Gain):
-            return [node.out, node.sources["input"].out, node.gain.ramp, node.gains]
+            return GainSlots(node.sources["input"].out, node.gain.ramp, node.gains)
         if isinstance(node, Mixer):
             names = node.input_names()
             sources = np.array([node.sources[k].out.ctypes.data for k in names], dtype=np.int64)
             gains = np.array([g for _, g in node._terms], dtype=np.float64)
-            return [node.out, len(names), sources, gains]
+            return MixerSlots(len(names), sources, gains)
         if isinstance(node, Multiply):
-            return [node.out, node.sources["a"].out, node.sources["b"].out]
+            return MultiplySlots(node.sources["a"].out, node.sources["b"].out)
         if isinstance(node, ImpactForce):
-            return [node.out, node.pulses, node.pulses.shape[0], node.count]
+            return ImpactSlots(node.pulses, node.pulses.shape[0], node.count)
         if isinstance(node, ModalBank):
-            floor = np.array([node._floor])
-            k = node.bank.shape[1]
-            inp = node.sources["input"].out
-            return [node.out, inp, node.bank, k, node.delta, node.target, node.meta, node.last, floor]
+            return ModalSlots(
+                input=node.sources["input"].out,
+                bank=node.bank,
+                modes=node.bank.shape[1],
+                delta=node.delta,
+                target=node.target,
+                meta=node.meta,
+                last=node.last,
+                floor=np.array([node._floor]),
+            )
         if isinstance(node, Scrape):
             prof = np.ascontiguousarray(node.prof, dtype=np.float64)
             node.prof = prof
-            return [
-                node.out,
-                node._force.ramp,
-                node._speed.ramp,
-                node._forces,
-                node._speeds,
-                prof,
-                prof.size,
-                node.state,
-                node.coef,
-                node.cfg,
-            ]
+            return ScrapeSlots(
+                force_ramp=node._force.ramp,
+                speed_ramp=node._speed.ramp,
+                forces=node._forces,
+                speeds=node._speeds,
+                profile=prof,
+                length=prof.size,
+                state=node.state,
+                coef=node.coef,
+                cfg=node.cfg,
+            )
         if isinstance(node, Radiation):
-            return [node.out, node.sources["input"].out, node.coef, node.state]
+            return RadiationSlots(node.sources["input"].out, node.coef, node.state)
         if isinstance(node, SoundPressure):
-            return [node.out, node.sources["input"].out, node.coef, node.state, node.setup]
+            return SoundPressureSlots(node.sources["input"].out, node.coef, node.state, node.setup)
         if isinstance(node, Biquad):
-            setup = np.array([float(node.mode), 1.0 / node.sample_rate])
-            ramps = [node.freq.ramp, node.q.ramp, node._freqs, node._qs]
-            return [node.out, node.sources["input"].out, *ramps, node.coef, node.state, setup]
+            return BiquadSlots(
+                input=node.sources["input"].out,
+                freq_ramp=node.freq.ramp,
+                q_ramp=node.q.ramp,
+                freqs=node._freqs,
+                qs=node._qs,
+                coef=node.coef,
+                state=node.state,
+                setup=np.array([float(node.mode), 1.0 / node.sample_rate]),
+            )
         if isinstance(node, ResonantScrape):
-            controls = [node._force.ramp, node._speed.ramp, node._forces, node._speeds]
-            return [node.out, *controls, node.rng, node.state, node.cfg]
+            return ResonantScrapeSlots(
+                force_ramp=node._force.ramp,
+                speed_ramp=node._speed.ramp,
+                forces=node._forces,
+                speeds=node._speeds,
+                rng=node.rng,
+                state=node.state,
+                cfg=node.cfg,
+            )
         raise ValueError(f"{node.type_name}: no program kernel")
 
     def sync(self) -> None:
         """Re-point the records of ImpactForce nodes whose pulse table grew (a strike may
         reallocate it)."""
         for i, node in self._impacts:
-            if self._arrays[i][1] is not node.pulses:
+            if self._slots[i].pulses is not node.pulses:
                 self._write(i, node)
 
     def run(self, start: int, n: int) -> None:

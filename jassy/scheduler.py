@@ -143,9 +143,9 @@ class Scheduler:
         budget = graph.budget
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
-            budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses)
-            if not budget.active:  # it holds every mode: no decisions, no sub-block cuts
-                self.period = None
+            budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders)
+            if not budget.active or budget.renders:  # it holds every mode, or splits the banks'
+                self.period = None  # sub-blocks itself where it decides: no sub-block cuts
 
     def insert(self, event: Event) -> None:
         """Add a validated event during a render (live input). An event whose time has

@@ -139,7 +139,8 @@ def walk_score(graph: Graph, events: Sequence[Event], sample_rate: float) -> lis
     ramp) stops a walk under way. Other parameters set by the same event are set with the
     chain's first link (a ModalBank ramps all its coefficients together). Events apply at
     ceil(time * sample_rate) and ramps end at ceil((time + ramp) * sample_rate), as in
-    jassy.scheduler."""
+    jassy.scheduler. Events posted during a render (live input) are neither expanded nor
+    stop a walk of the score."""
     from jassy.scheduler import _SAMPLE_SLACK
 
     def frame_of(t: float) -> int:

@@ -232,14 +232,11 @@ class UGen:
         importance written to ``scores``)."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
-    def anytime_period(self, kicked: bool) -> bool:
-        """Budgeted banks, at each budget period: whether any force was heard in the last."""
-        raise NotImplementedError(f"{self.type_name} takes no mode budget")
-
-    def anytime_importance(self, kick_now: list, kick_next: list, period: int) -> None:
+    def anytime_importance(self, kick_now: list, kick_next: list, period: int, heard: bool, onset) -> None:
         """Budgeted banks (``supports_budget``): per-mode importance for the coming
         ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
-        the next period, into the scores given at attach."""
+        the next period, whether a force was heard lately and the force that wakes the
+        bank (or None), into the scores given at attach."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events

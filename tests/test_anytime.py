@@ -197,3 +197,22 @@ def test_a_contact_nobody_scheduled_sounds_from_its_first_sample():
     y = render(graph(budget), score, 0.6, FS, 64, limiter=False).audio[0]
     assert error_db(y[start : start + 480], full[start : start + 480]) < -10.0  # its first 10 ms
     assert error_db(y[start : start + 4800], full[start : start + 4800]) < -10.0  # and 0.1 s
+
+
+def test_ranking_keeps_exactly_the_highest_positive_scores():
+    """The compiled ranking against a sort: the ``limit`` highest positive scores (ties at
+    the threshold filled up to the limit), all positive ones when fewer."""
+    from jassy.anytime_rank import top_mask
+
+    rng = np.random.default_rng(1)
+    for size, limit in ((835, 209), (40, 7), (12, 30)):
+        score = np.where(rng.random(size) < 0.3, 0.0, rng.random(size))
+        score[:5] = score[5]  # ties
+        keep = np.zeros(size, dtype=bool)
+        top_mask(score, limit, keep)
+        positive = np.sort(score[score > 0])[::-1]
+        assert keep.sum() == min(limit, positive.size)
+        assert np.all(score[keep] > 0)
+        if positive.size > limit:
+            assert score[keep].min() == positive[limit - 1]
+            assert score[~keep].max() <= positive[limit - 1]

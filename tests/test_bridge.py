@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import read_line, rest_of_output
 
 from jassy.bridge import FADE, GAP, ForceOutput
 from jassy.errors import JassyError
@@ -80,14 +81,14 @@ def test_kill_9_of_the_engine_bridge_force_reaches_zero_within_10_ms(jack, tmp_p
     )  # fmt: skip
     bridge = None
     try:
-        ready = engine.stdout.readline()
-        assert "running headless" in ready, ready + engine.stdout.read()
+        ready = read_line(engine)
+        assert "running headless" in ready, ready + rest_of_output(engine)
         bridge = subprocess.Popen(
             [sys.executable, "-m", "jassy", "haptic-bridge", "--engine", f"127.0.0.1:{probe_port}",
              "--listen", f"127.0.0.1:{frame_port}", "--log", str(log)],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         )  # fmt: skip
-        assert "haptic bridge" in bridge.stdout.readline()
+        assert "haptic bridge" in read_line(bridge)
         time.sleep(1.0)  # the scripted stroke touches the plate from 0.2 s to 1.4 s
         killed_at = time.monotonic()
         engine.kill()

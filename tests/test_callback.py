@@ -67,6 +67,24 @@ def test_posted_events_apply_at_the_next_buffer():
     assert np.flatnonzero(heard[1])[0] == 1  # the pulse's first non-zero frame: 641
 
 
+def test_a_strike_stamped_with_a_frame_already_played_plays_whole_at_once():
+    """A poster preempted between reading the frame and pushing (a loaded machine) stamps
+    a frame the callback has played meanwhile: the pulse then starts at the next frame,
+    whole, instead of being cut short or, a pulse length late, lost."""
+    hit = ImpactForce(name="hit", duration=0.001)
+    graph = Graph(Gain(hit, gain=0.0), haptic=hit)
+    on_time, late = CallbackRenderer(graph, [], FS, 64), CallbackRenderer(graph, [], FS, 64)
+    play(on_time, 640, 64)
+    play(late, 840, 64)  # 200 frames (4 pulse lengths) played while the poster was away
+    late.frame = lambda: 640  # the frame it read before it was preempted
+    assert on_time.post(Event(0.0, "hit", "impact", {"impulse": 0.01})) == 640
+    assert late.post(Event(0.0, "hit", "impact", {"impulse": 0.01})) == 640
+    expected, heard = play(on_time, 128, 64)[1], play(late, 128, 64)[1]
+    assert np.flatnonzero(heard)[0] == 1  # frame 841: the first after the one it was applied at
+    np.testing.assert_array_equal(heard, expected)  # the whole pulse, shifted by 200 frames
+    assert (late.stats().late_strikes, on_time.stats().late_strikes) == (1, 0)
+
+
 def test_mode_falls_back_to_the_ring_and_says_why():
     hit = ImpactForce(name="hit")
     delayed = Graph(Delay(hit, name="echo", time=0.01), haptic=hit)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import read_line, rest_of_output
 
 from jassy.probeinput import encode_pose
 
@@ -78,8 +79,8 @@ def demo_window(mode: str, display: str):
     )
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        line = proc.stdout.readline()
-        assert "window open" in line, line + proc.stdout.read()
+        line = read_line(proc)
+        assert "window open" in line, line + rest_of_output(proc)
         yield lambda points, seconds_each=0.3: send_path(sock, port, points, seconds_each)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) == 143

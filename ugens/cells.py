@@ -10,6 +10,10 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 * :func:`decay_sums`, :func:`add_onset`, :func:`drop_row`: exponential pulses r^x and x r^x
   (x samples after their onsets) kept as two running sums and a queue of pending onsets
   (the blast waves of Explosion, the firings of Engine);
+* :func:`two_pole`: one sample of a mode's impulse-invariant two-pole recursion (ModalBank,
+  Friction); :func:`state_step`: a mode's (displacement, velocity) pair through its 2x2
+  transition over a step (HuntCrossleyImpact, the heard output of closed loops);
+  :func:`silent`: the test by which silent modes are zeroed;
 * :func:`store`: a kernel's named state record written back to the float64 array that holds
   it (its fields in order; the record's reader is the inverse).
 """
@@ -78,6 +82,27 @@ def drop_row(queue, k, count):
     queue[k, 0] = queue[count, 0]
     queue[k, 1] = queue[count, 1]
     return count
+
+
+@nb.njit(inline="always", cache=True)
+def two_pole(c1, c2, y1, y2, x):
+    """y[n] = c1 y[n-1] - c2 y[n-2] + x: a mode with c1 = 2 R cos(theta), c2 = R^2 driven by
+    its scaled input x (ModalBank's recursion, module docstring of ugens.modal)."""
+    return c1 * y1 - c2 * y2 + x
+
+
+@nb.njit(inline="always", cache=True)
+def state_step(a11, a12, a21, a22, q, p):
+    """A mode's displacement q and velocity p one step on through its transition matrix
+    [[a11, a12], [a21, a22]] (without the force's share)."""
+    return a11 * q + a12 * p, a21 * q + a22 * p
+
+
+@nb.njit(inline="always", cache=True)
+def silent(a, b, floor):
+    """Whether a mode whose two states (in one unit) are a and b is below ``floor`` (it is
+    then zeroed and no longer computed)."""
+    return abs(a) < floor and abs(b) < floor
 
 
 @nb.njit(inline="always", cache=True)

@@ -31,7 +31,7 @@ SDT's counterpart: ``dcmotor~`` (Baldan et al. 2017, rotor, brushes and gears).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -40,6 +40,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -49,30 +50,70 @@ REFERENCE_CURRENT = 1.0
 #: Relative amplitude of the rotor's second harmonic (misalignment).
 SECOND_HARMONIC = 0.3
 
-# parameter vector layout
-_FS, _R, _K, _J, _B, _ON, _SEGMENTS, _TEETH, _ROTOR, _RIPPLE, _BRUSH, _GEAR = range(12)
-# float state layout
-_W, _PHI = range(2)
+
+class MotorParams(NamedTuple):
+    """Settings of :func:`motor_run`, stored in this order in the float64 array ``par``."""
+
+    fs: float  #: sample rate (Hz)
+    resistance: float  #: armature resistance R (ohm)
+    motor_constant: float  #: k (V s/rad = N m/A)
+    inertia: float  #: J (kg m^2)
+    friction: float  #: viscous friction b (N m s/rad)
+    on: float  #: 1.0 while switched on
+    segments: float  #: commutator segments
+    teeth: float  #: gear teeth
+    rotor_level: float  #: rotor harmonics at the reference speed
+    ripple_level: float  #: torque-ripple tone at 1 A
+    brush_level: float  #: brush noise at 1 A and the reference speed
+    gear_level: float  #: gear-mesh whine at the reference speed
+
+
+@nb.njit(inline="always", cache=True)
+def motor_params(par):
+    """The MotorParams record held in ``par``."""
+    return MotorParams(
+        par[0], par[1], par[2], par[3], par[4], par[5], par[6], par[7], par[8], par[9], par[10], par[11]
+    )
+
+
+class MotorState(NamedTuple):
+    """State of :func:`motor_run`, stored in this order in the float64 array ``st``."""
+
+    w: float  #: rotor speed (rad/s)
+    phi: float  #: rotor angle (turns, in [0, 1))
+
+
+@nb.njit(inline="always", cache=True)
+def motor_state(st):
+    """The MotorState record held in ``st``."""
+    return MotorState(st[0], st[1])
+
+
+def _slot(name: str) -> int:
+    return MotorParams._fields.index(name)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def motor_run(out, rpm_out, n, volts, loads, st, rng, par):
-    """n samples: speed step, sound from the rotor angle at the start of the sample."""
-    fs = par[_FS]
-    res = par[_R]
-    k = par[_K]
-    inertia = par[_J]
-    friction = par[_B]
-    on = par[_ON] != 0.0
-    segments = par[_SEGMENTS]
-    teeth = par[_TEETH]
-    rotor_level = par[_ROTOR]
-    ripple_level = par[_RIPPLE]
-    brush_level = par[_BRUSH]
-    gear_level = par[_GEAR]
+    """n samples: speed step, sound from the rotor angle at the start of the sample; par
+    holds a MotorParams, st a MotorState."""
+    prm = motor_params(par)
+    fs = prm.fs
+    res = prm.resistance
+    k = prm.motor_constant
+    inertia = prm.inertia
+    friction = prm.friction
+    on = prm.on != 0.0
+    segments = prm.segments
+    teeth = prm.teeth
+    rotor_level = prm.rotor_level
+    ripple_level = prm.ripple_level
+    brush_level = prm.brush_level
+    gear_level = prm.gear_level
     two_pi = 2.0 * math.pi
-    w = st[_W]
-    phi = st[_PHI]
+    held = motor_state(st)
+    w = held.w
+    phi = held.phi
     s = rng[0]
     g = k * k / res + friction if on else friction
     a = math.exp(-g / (inertia * fs))
@@ -108,8 +149,7 @@ def motor_run(out, rpm_out, n, volts, loads, st, rng, par):
             w_next = 0.0
         w = w_next
         phi -= math.floor(phi)
-    st[_W] = w
-    st[_PHI] = phi
+    store(st, MotorState(w, phi))
     rng[0] = s
 
 
@@ -162,22 +202,17 @@ class DCMotor(UGen):
         "gear_level": ParamSpec("float", 0.03, low=0.0, high=100.0, doc="gear-mesh whine at 3000 rpm"),
         "seed": seed_spec(),
     }
-    _LEVELS = {"rotor_level": _ROTOR, "ripple_level": _RIPPLE, "brush_level": _BRUSH, "gear_level": _GEAR}
+    _LEVELS = {key: _slot(key) for key in ("rotor_level", "ripple_level", "brush_level", "gear_level")}
 
     def _prepare(self) -> None:
         v = self.values
-        self.st = np.zeros(2)
+        self.st = np.zeros(len(MotorState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.par = np.zeros(12)
-        self.par[[_FS, _R, _K, _J, _B, _SEGMENTS, _TEETH]] = (
-            self.sample_rate,
-            v["resistance"],
-            v["motor_constant"],
-            v["inertia"],
-            v["friction"],
-            v["segments"],
-            v["teeth"],
-        )
+        self.par = np.zeros(len(MotorParams._fields))
+        fixed = ("resistance", "motor_constant", "inertia", "friction", "segments", "teeth")
+        self.par[_slot("fs")] = self.sample_rate
+        for key in fixed:
+            self.par[_slot(key)] = v[key]
         for key in (*self._LEVELS, "switched_on"):
             self._param_changed(key, v[key], True)
         self.voltage = self.smoothed("voltage")
@@ -206,7 +241,7 @@ class DCMotor(UGen):
         if key in ("voltage", "load"):
             getattr(self, key).set(value, self.ramp_samples(), jump)
         elif key == "switched_on":
-            self.par[_ON] = 1.0 if value else 0.0
+            self.par[_slot("on")] = 1.0 if value else 0.0
         else:
             self.par[self._LEVELS[key]] = value
 

@@ -76,7 +76,7 @@ per period (higher partials): Schelleng's diagram for the bowed string.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -85,6 +85,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import store, two_pole
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams, design
@@ -99,8 +100,40 @@ NEWTON_ITERATIONS = 8
 #: Residual tolerance, relative to the deflection scale (f_s + f_c) / sigma0 + |z|.
 RELATIVE_TOLERANCE = 1e-11
 
-# layout of the parameter vector passed to the kernel
-_FS, _S0, _S1, _S2, _S3, _MUS, _MUD, _VS, _KBA, _G = range(10)
+
+class FrictionParams(NamedTuple):
+    """Settings of :func:`friction_run`, stored in this order in the float64 array ``par``."""
+
+    fs: float  #: sample rate (Hz)
+    sigma0: float  #: bristle stiffness (N/m)
+    sigma1: float  #: bristle damping (N s/m)
+    sigma2: float  #: viscous friction (N s/m)
+    sigma3: float  #: noise coefficient (sqrt(N s/m))
+    static: float  #: static friction coefficient
+    dynamic: float  #: Coulomb (dynamic) friction coefficient
+    stribeck: float  #: Stribeck velocity v_s (m/s)
+    breakaway: float  #: break-away deflection as a share of f_c / sigma0
+    gain_sum: float  #: G = sum_k g_k: the contact displacement per newton within the sample (m/N)
+
+
+@nb.njit(inline="always", cache=True)
+def friction_params(par):
+    """The FrictionParams record held in ``par``."""
+    return FrictionParams(par[0], par[1], par[2], par[3], par[4], par[5], par[6], par[7], par[8], par[9])
+
+
+class FrictionState(NamedTuple):
+    """State of :func:`friction_run`, stored in this order in the float64 array ``state``."""
+
+    z: float  #: mean bristle deflection (m)
+    x_prev: float  #: contact displacement of the last sample (m)
+    v_prev: float  #: relative velocity of the last sample (m/s)
+
+
+@nb.njit(inline="always", cache=True)
+def friction_state(state):
+    """The FrictionState record held in ``state``."""
+    return FrictionState(state[0], state[1], state[2])
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -195,14 +228,15 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
 def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, par):
     """n samples of the closed loop. strikes: an external force (N) on the contact point,
     added to the resonator's free motion before the bristle is solved; modes rows: c1, c2,
-    g, y1, y2; h: scratch per mode; state = [z, x_prev, v_prev]; par: see the _FS.. indices."""
-    fs = par[_FS]
+    g, y1, y2; h: scratch per mode; state holds a FrictionState, par a FrictionParams."""
+    prm = friction_params(par)
+    fs = prm.fs
     T = 1.0 / fs
-    s0 = par[_S0]
-    s1 = par[_S1]
-    s2 = par[_S2]
-    s3 = par[_S3]
-    G = par[_G]
+    s0 = prm.sigma0
+    s1 = prm.sigma1
+    s2 = prm.sigma2
+    s3 = prm.sigma3
+    G = prm.gain_sum
     Gv = G * fs
     c1 = modes[0]
     c2 = modes[1]
@@ -210,30 +244,34 @@ def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, p
     y1 = modes[3]
     y2 = modes[4]
     nm = c1.shape[0]
-    z = state[0]
-    x_prev = state[1]
-    v_prev = state[2]
+    held = friction_state(state)
+    z = held.z
+    x_prev = held.x_prev
+    v_prev = held.v_prev
     s = rng[0]
     for i in range(n):
         xh = 0.0
         fe = strikes[i]
         for k in range(nm):
-            hk = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fe
+            hk = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fe)
             h[k] = hk
             xh += hk
         s, u = uniform(s)
         fn = normals[i]
         vb = speeds[i]
         if fn > MIN_CONTACT:
-            f_s = par[_MUS] * fn
-            f_c = par[_MUD] * fn
-            z_ba = par[_KBA] * f_c / s0
+            # the friction laws' settings are read in the loop: read once before it, fastmath
+            # may fold breakaway / s0 and the renders change in their last bits
+            laws = friction_params(par)
+            f_s = laws.static * fn
+            f_c = laws.dynamic * fn
+            z_ba = laws.breakaway * f_c / s0
             w = s3 * u * math.sqrt(abs(v_prev) * fn)
             z0 = z
             D = 1.0 + Gv * s2
             K = Gv * (s0 + s1 * fs)
             A = vb - (xh - x_prev) * fs + Gv * (s1 * fs * z0 - w)
-            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, par[_VS], z_ba)
+            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, laws.stribeck, z_ba)
             v = (A - K * z) / D
             f = s0 * z + s1 * fs * (z - z0) + s2 * v + w
         else:
@@ -248,9 +286,7 @@ def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, p
         fout[i] = f
         x_prev = x
         v_prev = v
-    state[0] = z
-    state[1] = x_prev
-    state[2] = v_prev
+    store(state, FrictionState(z, x_prev, v_prev))
     rng[0] = s
 
 
@@ -306,9 +342,9 @@ class Friction(ModelParams, UGen):
         self.check_param("location", self.values["location"], f"nodes.{self.name}.location")  # gains >= 0
         self.modes = np.zeros((5, self.model.n_modes))  # c1, c2, g, y1, y2
         self.scratch = np.zeros(self.model.n_modes)
-        self.state = np.zeros(3)  # z, x_prev, v_prev
+        self.state = np.zeros(len(FrictionState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.par = np.zeros(10)
+        self.par = np.zeros(len(FrictionParams._fields))
         self.signed = self.model.driving is not None  # heard through the signed gains
         self.heard_coef = np.zeros((6, self.model.n_modes))
         self.heard_state = np.zeros((2, self.model.n_modes))
@@ -344,17 +380,17 @@ class Friction(ModelParams, UGen):
         if self.signed:
             heard = s / fs * self.model.gains_at(v["location"]) * self._level_gain
             self.heard_coef[:] = impulse_invariant(c1, c2, heard)
-        self.par[:] = (
-            fs,
-            v["sigma0"],
-            v["sigma1"],
-            v["sigma2"],
-            v["noise"],
-            v["static"],
-            v["dynamic"],
-            v["stribeck"],
-            v["breakaway"],
-            float(np.sum(self.modes[2])),
+        self.par[:] = FrictionParams(
+            fs=fs,
+            sigma0=v["sigma0"],
+            sigma1=v["sigma1"],
+            sigma2=v["sigma2"],
+            sigma3=v["noise"],
+            static=v["static"],
+            dynamic=v["dynamic"],
+            stribeck=v["stribeck"],
+            breakaway=v["breakaway"],
+            gain_sum=float(np.sum(self.modes[2])),
         )
 
     def _reset(self) -> None:

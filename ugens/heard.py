@@ -2,9 +2,10 @@
 the model's signed strike-to-pickup gains.
 
 A contact ugen (HuntCrossleyImpact, Friction) solves its loop with the driving-point gains
-a_k = phi_k(c)^2 / M_k (ModalModel.driving); what a pickup at p hears is the same modes
-driven by the same force with the gains b_k = phi_k(c) phi_k(p) / M_k, i.e. each mode's
-displacement times b_k / a_k. Being linear in the force, it is computed after the loop,
+a_k = phi_k(c)^2 / (M_k w_k) (ModalModel.driving: displacement per N s, m/(N s)); what a
+pickup at p hears is the same modes driven by the same force with the model's signed gains
+b_k (e.g. phi_k(c) phi_k(p) / (M_k w_k), or a velocity's phi_k(c) phi_k(p) / M_k), i.e.
+each mode's displacement times b_k / a_k. Being linear in the force, it is computed after the loop,
 mode by mode, with the loop's own discretisation: a two-state recursion per mode,
 
     q' = c0 q + c1 p + c4 f,   p' = c2 q + c3 p + c5 f,   heard = sum_k q'.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ugens.cells import state_step
 from ugens.kernels import FASTMATH
 
 
@@ -26,12 +28,11 @@ def heard_run(force, out, n, coef, state):
         f = force[i]
         total = 0.0
         for k in range(k_modes):
-            q = state[0, k]
-            p = state[1, k]
-            q_new = coef[0, k] * q + coef[1, k] * p + coef[4, k] * f
-            state[1, k] = coef[2, k] * q + coef[3, k] * p + coef[5, k] * f
-            state[0, k] = q_new
-            total += q_new
+            q, p = state_step(coef[0, k], coef[1, k], coef[2, k], coef[3, k], state[0, k], state[1, k])
+            q += coef[4, k] * f
+            state[0, k] = q
+            state[1, k] = p + coef[5, k] * f
+            total += q
         out[i] = total
 
 

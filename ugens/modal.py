@@ -38,6 +38,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, NamedTuple
 
@@ -52,10 +53,12 @@ from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
     apply_kept,
+    centred_power,
     gather_kept,
     mode_importance,
     scatter_kept,
@@ -98,10 +101,10 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
             gk = g[k]
             u1 = y1[k]
             u2 = y2[k]
-            v0 = p * u1 - q * u2 + gk * fp
-            v1 = p * v0 - q * u1 + gk * f0
-            v2 = p * v1 - q * v0 + gk * f1
-            v3 = p * v2 - q * v1 + gk * f2
+            v0 = two_pole(p, q, u1, u2, gk * fp)
+            v1 = two_pole(p, q, v0, u1, gk * f0)
+            v2 = two_pole(p, q, v1, v0, gk * f1)
+            v3 = two_pole(p, q, v2, v1, gk * f2)
             y2[k] = v2
             y1[k] = v3
             s0 += v0
@@ -118,7 +121,7 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
         f = force[i]
         s = 0.0
         for k in range(active):
-            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp
+            v = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fp)
             y2[k] = y1[k]
             y1[k] = v
             s += v
@@ -145,7 +148,7 @@ def resonate_ramp(force, out, n, coef, y1, y2, delta, target, remaining, active,
         s = 0.0
         direct = 0.0
         for k in range(K):
-            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp
+            v = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fp)
             y2[k] = y1[k]
             y1[k] = v
             s += v
@@ -171,7 +174,7 @@ def flush_silent(y1, y2, active, floor):
     """Zero modes below ``floor``; return the new active count (last audible mode + 1)."""
     last = 0
     for k in range(active):
-        if abs(y1[k]) < floor and abs(y2[k]) < floor:
+        if silent(y1[k], y2[k], floor):
             y1[k] = 0.0
             y2[k] = 0.0
         else:
@@ -202,6 +205,10 @@ KEPT_LANES = 8
 
 #: Anytime budget: no force heard (an empty spectrum), no impacts elsewhere.
 NO_SPECTRUM = np.zeros(0)
+
+#: Anytime budget: what no impact adds (ModalBank._kicked), and no compact bank.
+NOT_KICKED = (0.0, NO_SPECTRUM)
+NO_COMPACT = np.zeros((COMPACT_ROWS, 0))
 
 
 def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
@@ -261,16 +268,17 @@ def any_nonzero(force, n):
 
 @nb.njit(cache=True)
 def hear(force, n, heard, start):
-    """Copy force[:n] into the ring ``heard`` (one budget period) at ``start`` modulo its
-    length; return whether any sample is non-zero."""
+    """Copy force[:n] (frames start ..) into the ring ``heard`` (one budget period, frame
+    t at t modulo its length; only the last period of a longer sub-block stays); return
+    whether any sample is non-zero."""
     size = heard.size
-    at = start % size
-    loud = any_nonzero(force, n)
-    first = min(n, size - at)  # a sub-block crosses no period boundary, but be safe
-    heard[at : at + first] = force[:first]
-    if first < n:
-        heard[: n - first] = force[first:n]
-    return loud
+    i = max(0, n - size)
+    while i < n:
+        at = (start + i) % size
+        m = min(n - i, size - at)
+        heard[at : at + m] = force[i : i + m]
+        i += m
+    return any_nonzero(force, n)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -652,8 +660,7 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
-            self._expected, self._onset, self._psd = False, None, None
-            self._heard_now = self._heard_before = False
+            self._heard_dirty, self._psd = False, None
 
     def _refresh_design_cache(self) -> None:
         """Keep the design for the current parameters (``fresh``) and, for the anytime
@@ -722,12 +729,18 @@ class ModalBank(ModelParams, UGen):
         jump at each impact of a rigid scene need not split the graph's sub-block)."""
         self._pending.append((frame, key, value, jump, ramp))
 
-    def process(self, start: int, n: int) -> None:
-        sizes = self._size_changes(n) if self._size_input is not None else ()
+    def process(self, start: int, n: int, offset: int = 0) -> None:
+        """Frames [start, start + n) from the inputs' samples [offset, offset + n) of this
+        sub-block into out[offset : offset + n] (an anytime budget renders a sub-block in
+        pieces split where it decides)."""
+        inp, out = self._input.out, self.out
+        if offset:
+            inp, out = inp[offset:], out[offset:]
+        sizes = self._size_changes(n, offset) if self._size_input is not None else ()
         if not self._pending and not len(sizes):
-            self._span(self._input.out, self.out, start, n)
+            self._span(inp, out, start, n)
             return
-        inp, out, pending, done, k = self._input.out, self.out, self._pending, 0, 0
+        pending, done, k = self._pending, 0, 0
         kinks = []  # (frame offset, end correction) of the retunes
         while True:
             at_event = pending[0][0] - start if pending and pending[0][0] < start + n else n
@@ -739,7 +752,7 @@ class ModalBank(ModelParams, UGen):
                 self._span(inp[done:], out[done:], start + done, at - done)
                 done = at
             if at_size <= at_event:
-                kinks.append((at_size, self._retune(float(self._size_input.out[at_size]))))
+                kinks.append((at_size, self._retune(float(self._size_input.out[offset + at_size]))))
                 k += 1
             else:
                 frame, key, value, jump, ramp = pending.popleft()
@@ -749,9 +762,10 @@ class ModalBank(ModelParams, UGen):
         for at, correction in kinks:
             out[at] += correction
 
-    def _size_changes(self, n: int) -> np.ndarray:
-        """Offsets in this block where the size input differs from the size before it."""
-        return size_changes(self._size_input.out, n, self._size)
+    def _size_changes(self, n: int, offset: int = 0) -> np.ndarray:
+        """Offsets from ``offset`` in this block where the size input differs from the size
+        before it."""
+        return size_changes(self._size_input.out[offset:], n, self._size)
 
     def _retune(self, size: float) -> float:
         """Retune to fragment size ``size`` from the next frame n0 on, keeping every
@@ -814,9 +828,9 @@ class ModalBank(ModelParams, UGen):
                 self.meta[1], meta[2], self.last,
             )  # fmt: skip
             self._ramping = self.meta[1] > 0
-            self._heard_now |= hear(inp, n, self._heard, start)
+            self._heard_dirty |= hear(inp, n, self._heard, start)
         else:
-            self._heard_now |= self._kept_step(
+            self._heard_dirty |= self._kept_step(
                 inp, out, start, n, self._compact_bank, meta, self._floor, self.last, self._heard, KEPT_LANES
             )
         self.meta[0] = min(meta[0], self._kept_count)
@@ -856,9 +870,7 @@ class ModalBank(ModelParams, UGen):
         self._weights = a_weighting_power(freqs) if weighting == "A" else np.ones(freqs.size)
         self._scores = scores
         self._heard = np.zeros(period)
-        self._heard_now = self._heard_before = False  # any force in this / the last period
-        self._expected = False
-        self._onset = None  # the force that wakes a silent bank (anytime_onset)
+        self._heard_dirty = False  # the ring may hold a non-zero force
         self._psd = None
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
@@ -871,40 +883,45 @@ class ModalBank(ModelParams, UGen):
         )  # fmt: skip
         self._refresh_forcing()
 
-    def anytime_period(self, kicked: bool) -> bool:
-        """At a budget period's start: the budget foresaw (``kicked``) or not an impact on
-        this bank in the period; returns whether the bank heard a force in the last one."""
-        self._expected = kicked
-        self._heard_before, self._heard_now = self._heard_now, False
-        return self._heard_before
-
-    def anytime_onset(self, n: int) -> bool:
-        """Whether the bank, silent for a period and struck by nothing scheduled, hears a
-        force in the next ``n`` frames (its input is rendered before the budget decides).
-        Its importance then counts that force's power (flat over frequency)."""
-        if self._expected or self._heard_now or self._heard_before or not any_nonzero(self._input.out, n):
-            self._onset = None
+    def anytime_silent(self, offset: int, n: int) -> bool:
+        """For a budgeted bank whose force is zero over the next ``n`` frames: if none of its
+        modes sounds and nothing is pending (no force sample before, ramp, parameter
+        change or size input), write silence to out[offset : offset + n] and return True
+        (its state, and its ring of the period's force, hold zeros already)."""
+        if (
+            self.meta[0]
+            or self.last[0] != 0.0
+            or self._ramping
+            or self._pending
+            or self._size_input is not None
+        ):
             return False
-        self._onset = self._input.out[:n].copy()
+        self.out[offset : offset + n] = 0.0
+        if self._heard_dirty:
+            self._heard[:] = 0.0
+            self._heard_dirty = False
         return True
 
-    def anytime_importance(self, kick_now: list, kick_next: list, period: int) -> None:
+    def anytime_importance(
+        self, kick_now: list, kick_next: list, period: int, heard: bool, onset: np.ndarray | None
+    ) -> None:
         """Per mode, in internal order, into the scores given at attach: importance for
         this period, importance for the next one (amplitude decayed by a period, the
         impulses scheduled then), and whether it sounds now. ``kick_*``: (impulse N s,
-        location or None) of each impact scheduled in this and the next period. See
-        jassy.anytime and ugens.modal_budget.mode_importance."""
-        heard = self._heard_now or self._heard_before
-        if not (kick_now or kick_next or self.meta[0] or self._onset is not None or heard):
+        location or None) of each impact scheduled in this and the next period; ``heard``:
+        a force was heard in this or the last period (the ring of the last period's force
+        ranks the modes); ``onset``: the force that wakes the bank, silent for a period and
+        struck by nothing scheduled, in the coming frames (its power counts, flat over
+        frequency). See jassy.anytime and ugens.modal_budget.mode_importance."""
+        if not (kick_now or kick_next or self.meta[0] or onset is not None or heard):
             self._scores[:] = 0.0  # nothing rings, nothing comes
             return
-        spectrum, flat = NO_SPECTRUM, True
-        if self._onset is not None:
-            force, self._onset = self._onset - self._onset.mean(), None
-            spectrum = np.array([np.dot(force, force) / (force.size * self.sample_rate)])
+        spectrum, flat_psd = NO_SPECTRUM, 0.0
+        if onset is not None:
+            flat_psd = centred_power(onset) / self.sample_rate
         elif heard:
-            force = self._heard - self._heard.mean()  # a steady load makes no sound
             if self.model.n_modes > FLAT_SPECTRUM_MODES:
+                force = self._heard - self._heard.mean()  # a steady load makes no sound
                 psd = np.abs(np.fft.rfft(force * self._window)) ** 2 / self._window_power
                 # a periodogram of noise scatters by its own size from bin to bin: smooth
                 # it over neighbouring bins and over periods (it is the trend that ranks)
@@ -912,17 +929,16 @@ class ModalBank(ModelParams, UGen):
                 if self._psd is not None:
                     psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
                 self._psd = spectrum = psd
-                flat = False
             else:  # a few modes: the force's power spread flat (no transform)
-                spectrum = np.array([np.dot(force, force) / (force.size * self.sample_rate)])
-        here_now, elsewhere_now = self._kicked(kick_now)
-        here_next, elsewhere_next = self._kicked(kick_next)
+                flat_psd = centred_power(self._heard) / self.sample_rate
+        here_now, elsewhere_now = self._kicked(kick_now) if kick_now else NOT_KICKED
+        here_next, elsewhere_next = self._kicked(kick_next) if kick_next else NOT_KICKED
         if self._decay_period[0] != period:
             self._decay_period = (period, self._fresh_c2**period)
         mode_importance(
             self._gathered(), self._kept, self._kept_count, self.target[2], self.delta[2],
             float(self.meta[1]), self._poles[2], self._poles[3], float(self.sample_rate), spectrum,
-            self._bins, flat, self._growth,
+            self._bins, flat_psd, self._growth,
             here_now, here_next, elsewhere_now, elsewhere_next, self._decay_period[1], self._weights,
             self._kept_mask, self._faded, KEPT_BONUS, self._floor * self._floor, self._scores,
         )  # fmt: skip
@@ -945,13 +961,11 @@ class ModalBank(ModelParams, UGen):
     def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
         """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
         rest (ugens.modal_budget.apply_kept). Returns how many are computed."""
-        shrink = np.exp(-np.log(1000.0) / period)  # -60 dB over one period
-        compact = self._compact
-        if compact is not None:  # the kept modes' state, for apply_kept to read and change
-            scatter_kept(compact, self._kept, self._kept_count, self.bank)
+        shrink = math.exp(-math.log(1000.0) / period)  # -60 dB over one period
+        compact, held = (NO_COMPACT, 0) if self._compact is None else (self._compact, self._kept_count)
         count = apply_kept(
-            keep, fade, self._kept_mask, self._faded, self.coef, self.target, self.delta, self._fresh, self.y,
-            float(self.meta[1]), shrink, self._kept,
+            keep, fade, self._kept_mask, self._faded, self.bank, self.target, self.delta, self._fresh,
+            float(self.meta[1]), shrink, self._kept, compact, held,
         )  # fmt: skip
         if count < 0:
             return self._kept_count  # the same modes as now (the compact bank stays)

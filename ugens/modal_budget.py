@@ -50,10 +50,25 @@ def scatter_kept(compact, kept, count, bank):
             bank[r, k] = compact[r, j]
 
 
+@nb.njit(cache=True)
+def centred_power(force):
+    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2."""
+    n = force.size
+    mean = 0.0
+    for i in range(n):
+        mean += force[i]
+    mean /= n
+    total = 0.0
+    for i in range(n):
+        f = force[i] - mean
+        total += f * f
+    return total / n
+
+
 @nb.njit(fastmath=True, cache=True)
 def mode_importance(
-    compact, kept, count, target_gain, delta_gain, ramp_left, sin2, inv, sample_rate, spectrum, bins, flat,
-    growth, kick_here_now, kick_here_next, elsewhere_now, elsewhere_next, decay_period, weights,
+    compact, kept, count, target_gain, delta_gain, ramp_left, sin2, inv, sample_rate, spectrum, bins,
+    flat_psd, growth, kick_here_now, kick_here_next, elsewhere_now, elsewhere_next, decay_period, weights,
     kept_mask, faded, bonus, floor2, scores,
 ):  # fmt: skip
     """Importance of every mode for this period (scores[0]) and the next (scores[1], the
@@ -61,10 +76,9 @@ def mode_importance(
     (scores[2]: 1.0 or 0.0). Modes kept and not fading get ``bonus`` (no churn at the
     margin).
 
-    ``spectrum``: the force's PSD per DFT bin (``bins[k]`` the mode's bin), or with
-    ``flat`` its power spectral density spread flat (spectrum[0]); an empty spectrum
-    means no force was heard. ``elsewhere_*``: squared amplitudes of impacts at other
-    locations (empty: none)."""
+    ``spectrum``: the force's PSD per DFT bin (``bins[k]`` the mode's bin); if empty,
+    ``flat_psd``: its power spectral density spread flat (0: no force heard).
+    ``elsewhere_*``: squared amplitudes of impacts at other locations (empty: none)."""
     n = inv.size
     for k in range(n):
         scores[2, k] = 0.0
@@ -78,16 +92,14 @@ def mode_importance(
             amp2[k] = a
             if a > floor2:
                 scores[2, k] = 1.0
-    heard = spectrum.size > 0
+    binned = spectrum.size > 0
     has_now = elsewhere_now.size > 0
     has_next = elsewhere_next.size > 0
     for k in range(n):
         g = (target_gain[k] - ramp_left * delta_gain[k]) * sample_rate
         unit2 = g * g * inv[k]
-        forced = 0.0
-        if heard:
-            s = spectrum[0] if flat else spectrum[bins[k]]
-            forced = unit2 * s * growth[k]
+        s = spectrum[bins[k]] if binned else flat_psd
+        forced = unit2 * s * growth[k]
         now = max(amp2[k], forced) + unit2 * kick_here_now
         later = max(amp2[k] * decay_period[k], forced) + unit2 * kick_here_next
         if has_now:
@@ -102,9 +114,13 @@ def mode_importance(
 
 
 @nb.njit(cache=True)
-def apply_kept(keep, fade, kept_mask, faded, coef, target, delta, fresh, y, ramp_left, shrink, kept):
+def apply_kept(
+    keep, fade, kept_mask, faded, bank, target, delta, fresh, ramp_left, shrink, kept, compact, count
+):
     """Make ``keep`` | ``fade`` the computed set; return its size (its modes, ascending, in
-    ``kept``), or -1 if nothing changes (same set, no fades then or now).
+    ``kept``), or -1 if nothing changes (same set, no fades then or now). bank rows: c1,
+    c2, g, d, y1, y2 (ModalBank.bank); ``compact[:, :count]``: the kept modes' rows, written
+    back to ``bank`` first if the set changes.
 
     Modes back from a fade take their fresh design (their ramp is lost); entering modes
     take the coefficients their ramp has reached (target - left * delta); fading modes
@@ -118,6 +134,8 @@ def apply_kept(keep, fade, kept_mask, faded, coef, target, delta, fresh, y, ramp
             break
     if same:
         return -1
+    scatter_kept(compact, kept, count, bank)
+    coef = bank[:4]
     count = 0
     for k in range(n):
         if faded[k]:
@@ -137,8 +155,8 @@ def apply_kept(keep, fade, kept_mask, faded, coef, target, delta, fresh, y, ramp
                 target[r, k] = coef[r, k]
                 delta[r, k] = 0.0
         else:
-            y[0, k] = 0.0
-            y[1, k] = 0.0
+            bank[4, k] = 0.0
+            bank[5, k] = 0.0
         faded[k] = fade[k]
         kept_mask[k] = keep[k] or fade[k]
         if kept_mask[k]:

@@ -65,6 +65,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import silent, state_step
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
@@ -78,13 +79,39 @@ _XH, _VH, _XN, _FP, _EN, _ACTIVE, _VN, _FPP, _SP = range(9)
 # frames), approach speed, compression velocity after the first contact (negative:
 # separating), peak force, contacts ended, energy corrections, in contact, first contact over
 _START, _END, _VIN, _VOUT, _PEAK, _CONTACTS, _CORR, _IN, _MEASURED = range(9)
-# coefficient rows: transition phi11, phi12, phi21, phi22, force response g1 (position), g2
-# (velocity), energy weights wq = M (w^2 + d^2) / 2, wp = M / 2, decay d, 1 / w
-_NCOEF = 10
+
+
+class ModeSteps(NamedTuple):
+    """Rows of the (10, K) coefficient array of :func:`design`: per mode, its step over T."""
+
+    phi11: np.ndarray  #: transition matrix [[phi11, phi12], [phi21, phi22]] of (q, q')
+    phi12: np.ndarray
+    phi21: np.ndarray
+    phi22: np.ndarray
+    g_q: np.ndarray  #: force response of the position (m/N)
+    g_p: np.ndarray  #: force response of the velocity (m/(N s))
+    w_q: np.ndarray  #: energy weight M (w^2 + d^2) / 2 of q^2
+    w_p: np.ndarray  #: energy weight M / 2 of q'^2
+    decay: np.ndarray  #: d (1/s)
+    inv_w: np.ndarray  #: 1 / w (s)
+
+
+@nb.njit(inline="always", cache=True)
+def mode_steps(coef):
+    """The ModeSteps record of the rows of ``coef``."""
+    return ModeSteps(coef[0], coef[1], coef[2], coef[3], coef[4], coef[5], coef[6], coef[7], coef[8], coef[9])
+
+
 #: Silent modes are looked for once per this many frames of the clock (as ModalBank).
 FLUSH_PERIOD = 1024
 #: Sub-steps per sample while the hammer touches or may touch within the sample.
 SUBSTEPS = 8
+#: Default approach speed of ``strike`` (m/s): the default 10 g hammer then carries 1e-3 N s,
+#: the reference impulse of the level convention (jassy.levels), and delivers up to twice that
+#: as it bounces off, so with ``level = "calibrated"`` a default strike on a model whose gains
+#: are driving-point receptances (m per N s) peaks near the default ImpactForce tap's level.
+#: 1 m/s (a 10 g object dropped 5 cm) would be 20 dB louder: above 0 dBFS on most models.
+DEFAULT_STRIKE_SPEED = 0.1
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -259,16 +286,17 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
     mass, k, alpha, lam, tt = p.mass, p.stiffness, p.alpha, p.dissipation, p.step
     kk, gg, s2, floor = p.compliance, p.gain_sum, p.energy_gain, p.floor
     inv_t = 1.0 / tt
-    a11 = coef[0]
-    a12 = coef[1]
-    a21 = coef[2]
-    a22 = coef[3]
-    g1 = coef[4]
-    g2 = coef[5]
-    wq = coef[6]
-    wp = coef[7]
-    dec = coef[8]
-    inv_w = coef[9]
+    steps = mode_steps(coef)
+    a11 = steps.phi11
+    a12 = steps.phi12
+    a21 = steps.phi21
+    a22 = steps.phi22
+    g1 = steps.g_q
+    g2 = steps.g_p
+    wq = steps.w_q
+    wp = steps.w_p
+    dec = steps.decay
+    inv_w = steps.inv_w
     qs = state[0]
     ps = state[1]
     active = hammer[_ACTIVE] != 0.0
@@ -282,8 +310,7 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
         for j in range(kmodes):
             q = qs[j] + g1[j] * fp
             p = ps[j] + g2[j] * fp
-            qn = a11[j] * q + a12[j] * p
-            pn = a21[j] * q + a22[j] * p
+            qn, pn = state_step(a11[j], a12[j], a21[j], a22[j], q, p)
             qs[j] = qn
             ps[j] = pn
             sq += qn
@@ -344,7 +371,7 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
             if not active:
                 last = 0
                 for j in range(kmodes):
-                    if abs(qs[j]) < floor and abs(ps[j]) * inv_w[j] < floor:
+                    if silent(qs[j], ps[j] * inv_w[j], floor):  # velocity / w: a displacement
                         qs[j] = 0.0
                         ps[j] = 0.0
                     else:
@@ -358,9 +385,10 @@ def commit_force(state, hammer, coef):
     the step (coef) that produced it."""
     fp = hammer[_FP]
     if fp != 0.0:
+        steps = mode_steps(coef)
         for j in range(state.shape[1]):
-            state[0, j] += coef[4, j] * fp
-            state[1, j] += coef[5, j] * fp
+            state[0, j] += steps.g_q[j] * fp
+            state[1, j] += steps.g_p[j] * fp
         hammer[_FP] = 0.0
     hammer[_FPP] = 0.0
 
@@ -405,7 +433,7 @@ def hc_run_substeps(out, force_out, energy_out, start, n, coef, coef_sub, state,
 
 
 def design(frequencies, decays, gains, sample_rate):
-    """Step-invariant (exact zero-order-hold) coefficients per mode, shape (_NCOEF, K).
+    """Step-invariant (exact zero-order-hold) coefficients per mode: a ModeSteps as a (10, K) array.
 
     Transition over T = 1/fs of q'' + 2 d q' + (w^2 + d^2) q = b f (b = a w), with
     E = e^{-dT}, c = cos wT, s = sin wT:
@@ -422,21 +450,26 @@ def design(frequencies, decays, gains, sample_rate):
     E = np.exp(-d * T)
     c = np.cos(w * T)
     s = np.sin(w * T)
-    coef = np.zeros((_NCOEF, w.size))
-    coef[0] = E * (c + d * s / w)
-    coef[1] = E * s / w
-    coef[2] = -E * om2 * s / w
-    coef[3] = E * (c - d * s / w)
+    phi11 = E * (c + d * s / w)
+    phi12 = E * s / w
+    phi21 = -E * om2 * s / w
+    phi22 = E * (c - d * s / w)
     one_minus = -np.expm1(-d * T) + 2.0 * E * np.sin(0.5 * w * T) ** 2 - E * d * s / w
-    coef[4] = a * w * one_minus / om2
-    coef[5] = a * E * s
     coupled = a > 0
     mass = np.where(coupled, 1.0 / np.where(coupled, a * w, 1.0), 0.0)  # modal mass M = 1/(a w)
-    coef[6] = 0.5 * mass * om2
-    coef[7] = 0.5 * mass
-    coef[8] = d
-    coef[9] = 1.0 / w
-    return coef
+    steps = ModeSteps(
+        phi11=phi11,
+        phi12=phi12,
+        phi21=phi21,
+        phi22=phi22,
+        g_q=a * w * one_minus / om2,
+        g_p=a * E * s,
+        w_q=0.5 * mass * om2,
+        w_p=0.5 * mass,
+        decay=d,
+        inv_w=1.0 / w,
+    )
+    return np.array(steps, dtype=np.float64)
 
 
 @register
@@ -488,13 +521,13 @@ class HuntCrossleyImpact(ModelParams, UGen):
         "strike": {
             "speed": ParamSpec(
                 "float",
-                None,
+                DEFAULT_STRIKE_SPEED,
                 low=0.0,
                 low_open=True,
                 high=1e4,
                 unit="m/s",
-                required=True,
-                doc="approach speed of the hammer at contact",
+                doc="approach speed of the hammer at contact (default: the default hammer's momentum is "
+                "the reference impulse 1e-3 N s, so a calibrated strike sounds like ImpactForce's default)",
             ),
             "location": ParamSpec("location", None, doc="contact location (default: the current one)"),
         }
@@ -507,8 +540,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.check_param("location", self.values["location"], f"nodes.{self.name}.location")
         self.order = np.argsort(model.decays, kind="stable")  # slowest first: silent modes last
         k = model.n_modes
-        self.coef = np.zeros((_NCOEF, k))
-        self.coef_sub = np.zeros((_NCOEF, k))
+        self.coef = np.zeros((len(ModeSteps._fields), k))
+        self.coef_sub = np.zeros((len(ModeSteps._fields), k))
         self.state = np.zeros((2, k))
         self.hammer = np.zeros(9)
         self.stats = np.zeros(9)
@@ -552,7 +585,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
             coef[:] = design(model.frequencies[o], model.decays[o], gains, rate)
             T = 1.0 / rate
             m = v["mass"]
-            g1, g2, wq, wp = coef[4], coef[5], coef[6], coef[7]
+            steps = ModeSteps(*coef)
+            g1, g2, wq, wp = steps.g_q, steps.g_p, steps.w_q, steps.w_p
             G = float(np.sum(g1))
             S2 = float(np.sum(wq * g1 * g1 + wp * g2 * g2))
             prm[:] = HammerParams(
@@ -620,9 +654,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         """E (J) of the current state: m v_h^2/2 + sum_k M_k (q'^2 + (w^2 + d^2) q^2)/2 + V(x),
         computed here in Python from the state arrays (independent of the kernel's sums)."""
         fp = self.hammer[_FP]
-        q = self.state[0] + self.coef[4] * fp
-        p = self.state[1] + self.coef[5] * fp
-        modal = float(np.sum(self.coef[6] * q * q + self.coef[7] * p * p))
+        steps = ModeSteps(*self.coef)
+        q = self.state[0] + steps.g_q * fp
+        p = self.state[1] + steps.g_p * fp
+        modal = float(np.sum(steps.w_q * q * q + steps.w_p * p * p))
         x = self.hammer[_XH] - float(np.sum(q))
         m, k, alpha = self.params.mass, self.params.stiffness, self.params.alpha
         return 0.5 * m * self.hammer[_VH] ** 2 + modal + float(potential(x, k, alpha))

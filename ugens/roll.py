@@ -7,6 +7,7 @@ smoothed contact parameters ``force`` (N) and ``speed`` (rolling speed, m/s).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -14,6 +15,7 @@ import numpy as np
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
+from ugens.cells import store
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.scrape import (
@@ -221,14 +223,52 @@ def highest(prof, start, span):
     return top
 
 
+class RollingConfig(NamedTuple):
+    """Settings of :func:`rolling_filter`, stored in this order in the float64 array ``cfg``."""
+
+    inv_dxfs: float  #: 1/(dx fs): profile points per (m/s) per sample
+    mass: float  #: mass of the ball (kg)
+    grain: float  #: the trace falls 2 grain |v| per sample (at most 2)
+    depth: float  #: bump scale (1/m)
+    has_input: float  #: 1.0 when an audio-rate surface signal replaces the profile
+    cubic: float  #: 1.0 for cubic profile interpolation, 0.0 for linear
+    smoothed: float  #: 1.0 when the output is low-passed (coef)
+    per_metre: float  #: 1/(2 pi r fs): revolutions per (m/s) per sample (0 = no rotation)
+    unevenness: float  #: load factor w = 1 + unevenness g(phase) of the ball's unevenness table
+
+
+@nb.njit(inline="always", cache=True)
+def rolling_config(cfg):
+    """The RollingConfig record held in ``cfg``."""
+    return RollingConfig(cfg[0], cfg[1], cfg[2], cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8])
+
+
+class RollingState(NamedTuple):
+    """State of :func:`rolling_filter`, stored in this order in the float64 array ``state``."""
+
+    pos: float  #: profile position (points)
+    trace: float  #: the ground trace
+    airborne: float  #: 1.0 while the ball flies
+    flight: float  #: flight counter c (N samples)
+    bump: float  #: bump force B (N)
+    s1: float  #: contact low-pass, first DF2T state
+    s2: float  #: contact low-pass, second DF2T state
+    phase: float  #: rotation phase (revolutions)
+
+
+@nb.njit(inline="always", cache=True)
+def rolling_state(state):
+    """The RollingState record held in ``state``."""
+    return RollingState(state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7])
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg, ball):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
 
-    cfg = [1/(dx fs), mass, grain, depth, has_input, cubic, smoothed, 1/(2 pi r fs),
-    unevenness]; state = [pos, trace, airborne, flight counter c (N samples), bump B (N),
-    s1, s2, rotation phase (revolutions)]; coef = [b0, b1, b2, a1, a2] of the optional
-    contact low-pass (DF2T, states s1, s2); ball: the unevenness table (ball_unevenness).
+    cfg holds a RollingConfig, state a RollingState; coef = [b0, b1, b2, a1, a2] of the
+    optional contact low-pass (DF2T, states s1, s2); ball: the unevenness table
+    (ball_unevenness).
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -238,24 +278,26 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
     """
-    inv_dxfs = cfg[0]
-    mass = cfg[1]
-    grain = cfg[2]
-    depth = cfg[3]
-    has_input = cfg[4] != 0.0
-    cubic = cfg[5] != 0.0
-    smoothed = cfg[6] != 0.0
-    per_metre = cfg[7]
-    uneven = cfg[8]
+    config = rolling_config(cfg)
+    inv_dxfs = config.inv_dxfs
+    mass = config.mass
+    grain = config.grain
+    depth = config.depth
+    has_input = config.has_input != 0.0
+    cubic = config.cubic != 0.0
+    smoothed = config.smoothed != 0.0
+    per_metre = config.per_metre
+    uneven = config.unevenness
     L = prof.shape[0]
-    pos = state[0]
-    trace = state[1]
-    airborne = state[2] != 0.0
-    c = state[3]
-    bump = state[4]
-    s1 = state[5]
-    s2 = state[6]
-    phase = state[7]
+    held = rolling_state(state)
+    pos = held.pos
+    trace = held.trace
+    airborne = held.airborne != 0.0
+    c = held.flight
+    bump = held.bump
+    s1 = held.s1
+    s2 = held.s2
+    phase = held.phase
     weight = mass * GRAVITY
     turning = per_metre > 0.0 and not has_input
     for i in range(n):
@@ -306,14 +348,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
         contact[i] = y + load
         if not has_input:
             pos = wrap(pos + v * inv_dxfs, L)
-    state[0] = pos
-    state[1] = trace
-    state[2] = 1.0 if airborne else 0.0
-    state[3] = c
-    state[4] = bump
-    state[5] = s1
-    state[6] = s2
-    state[7] = phase
+    store(state, RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase))
 
 
 @register
@@ -421,21 +456,20 @@ class RathRoll(Turning, ProfileContact):
     def _prepare(self) -> None:
         super()._prepare()
         v = self.values
-        self.cfg = np.array(
-            [
-                1.0 / (self.loop_dx() * self.sample_rate),
-                v["mass"],
-                v["grain"],
-                v["depth"],
-                float("input" in self.sources),
-                float(v["interp"] == "cubic"),
-                float(v["contact_cutoff"] > 0),
-                1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0,
-                v["unevenness"],
-            ]
+        config = RollingConfig(
+            inv_dxfs=1.0 / (self.loop_dx() * self.sample_rate),
+            mass=v["mass"],
+            grain=v["grain"],
+            depth=v["depth"],
+            has_input=float("input" in self.sources),
+            cubic=float(v["interp"] == "cubic"),
+            smoothed=float(v["contact_cutoff"] > 0),
+            per_metre=1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0,
+            unevenness=v["unevenness"],
         )
+        self.cfg = np.array(config, dtype=np.float64)
         self.ball = ball_unevenness(v["seed"] + 1)
-        self.state = np.zeros(8)
+        self.state = np.zeros(len(RollingState._fields))
         self.coef = np.zeros(5)
         if v["contact_cutoff"] > 0:
             fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
@@ -457,10 +491,9 @@ class RathRoll(Turning, ProfileContact):
 
     def _reset(self) -> None:
         super()._reset()
-        self.state[:] = 0.0
         # start on the ground with the trace at the surface
-        x0 = self.prof[0] if "input" not in self.sources else 0.0
-        self.state[1] = x0
+        trace = self.prof[0] if "input" not in self.sources else 0.0
+        self.state[:] = RollingState(0.0, trace, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def process(self, start: int, n: int) -> None:
         forces, speeds = self._controls(start, n)

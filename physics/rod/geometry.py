@@ -24,12 +24,54 @@ gap = |p_a - p_b| - r_a - r_b (m, negative when penetrating).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
 _STRAIGHT = 1e-4
+
+
+class Arc(NamedTuple):
+    """One element, a row (x, y, theta, kappa, l) of an arcs array."""
+
+    x: float  #: start point x (m)
+    y: float  #: start point y (m)
+    theta: float  #: tangent angle at the start (rad)
+    kappa: float  #: curvature (1/m)
+    length: float  #: arc length l (m)
+
+
+@numba.njit(inline="always", cache=True)
+def as_arc(row):
+    """The Arc record of a row of an arcs array."""
+    return Arc(row[0], row[1], row[2], row[3], row[4])
+
+
+class ContactRow(NamedTuple):
+    """Columns of a contact row (the arrays returned by arc_disk, arc_plane and arc_arc)."""
+
+    s_a: float  #: arc length of the closest point on a (m; 0 for a disk)
+    s_b: float  #: arc length of the closest point on b (m; 0 for a disk or a plane)
+    pa_x: float  #: closest centre-line point of a (m)
+    pa_y: float
+    pb_x: float  #: closest centre-line point (or centre, or plane point) of b (m)
+    pb_y: float
+    n_x: float  #: unit normal from b to a
+    n_y: float
+    gap: float  #: |p_a - p_b| - r_a - r_b (m, negative when penetrating)
+
+
+#: Column of each ContactRow field in a contacts array.
+S_A, S_B, PA_X, PA_Y, PB_X, PB_Y, N_X, N_Y, GAP = range(len(ContactRow._fields))
+
+
+@numba.njit(inline="always", cache=True)
+def _put(out, m, row):
+    """Write the ContactRow ``row`` to out[m]."""
+    for k in range(len(row)):
+        out[m, k] = row[k]
 
 
 @numba.njit(cache=True)
@@ -42,9 +84,9 @@ def _sinc(u):
 @numba.njit(cache=True)
 def arc_point(arc, s):
     """Centre-line point (x, y) at arc length s (stable sinc form)."""
-    h = arc[3] * s * 0.5
+    h = arc.kappa * s * 0.5
     c = s * _sinc(h)
-    return arc[0] + c * math.cos(arc[2] + h), arc[1] + c * math.sin(arc[2] + h)
+    return arc.x + c * math.cos(arc.theta + h), arc.y + c * math.sin(arc.theta + h)
 
 
 @numba.njit(cache=True)
@@ -56,35 +98,35 @@ def _wrap(s, k):
 @numba.njit(cache=True)
 def _circle_s(arc, dx, dy):
     """Arc length of the circle point in direction (dx, dy) from the circle centre (in [0, period))."""
-    k = arc[3]
+    k = arc.kappa
     alpha = math.atan2(dx, -dy) if k > 0 else math.atan2(-dx, dy)
-    return _wrap((alpha - arc[2]) / k, k)
+    return _wrap((alpha - arc.theta) / k, k)
 
 
 @numba.njit(cache=True)
 def _centre(arc):
-    k = arc[3]
-    return arc[0] - math.sin(arc[2]) / k, arc[1] + math.cos(arc[2]) / k
+    k = arc.kappa
+    return arc.x - math.sin(arc.theta) / k, arc.y + math.cos(arc.theta) / k
 
 
 @numba.njit(cache=True)
 def closest_on_arc(arc, cx, cy):
     """(s, squared distance) of the arc point closest to (cx, cy)."""
-    ln = arc[4]
-    best_s, best_d = 0.0, (arc[0] - cx) ** 2 + (arc[1] - cy) ** 2
+    ln = arc.length
+    best_s, best_d = 0.0, (arc.x - cx) ** 2 + (arc.y - cy) ** 2
     ex, ey = arc_point(arc, ln)
     d = (ex - cx) ** 2 + (ey - cy) ** 2
     if d < best_d:
         best_s, best_d = ln, d
-    k = arc[3]
+    k = arc.kappa
     if abs(k) * ln >= _STRAIGHT:
         ox, oy = _centre(arc)
         s = _circle_s(arc, cx - ox, cy - oy) if cx != ox or cy != oy else 2.0 * ln
     else:
-        s = min(max((cx - arc[0]) * math.cos(arc[2]) + (cy - arc[1]) * math.sin(arc[2]), 0.0), ln)
+        s = min(max((cx - arc.x) * math.cos(arc.theta) + (cy - arc.y) * math.sin(arc.theta), 0.0), ln)
         for _ in range(3):
             px, py = arc_point(arc, s)
-            th = arc[2] + k * s
+            th = arc.theta + k * s
             tx, ty = math.cos(th), math.sin(th)
             g = (px - cx) * tx + (py - cy) * ty
             dg = 1.0 + k * (-(px - cx) * ty + (py - cy) * tx)
@@ -98,17 +140,17 @@ def closest_on_arc(arc, cx, cy):
 
 
 @numba.njit(cache=True)
-def _fill(out, m, sa, sb, pax, pay, pbx, pby, fallback_nx, fallback_ny, gap_offset):
+def _fill(out, m, sa, sb, pa, pb, fallback, gap_offset):
+    """out[m] = the ContactRow of closest points pa, pb (x, y); the normal is ``fallback``
+    (x, y) when they coincide; gap = |pa - pb| - gap_offset."""
+    (pax, pay), (pbx, pby) = pa, pb
     dx, dy = pax - pbx, pay - pby
     dist = math.sqrt(dx * dx + dy * dy)
     if dist > 1e-300:
         nx, ny = dx / dist, dy / dist
     else:
-        nx, ny = fallback_nx, fallback_ny
-    out[m, 0], out[m, 1] = sa, sb
-    out[m, 2], out[m, 3], out[m, 4], out[m, 5] = pax, pay, pbx, pby
-    out[m, 6], out[m, 7] = nx, ny
-    out[m, 8] = dist - gap_offset
+        nx, ny = fallback
+    _put(out, m, ContactRow(sa, sb, pax, pay, pbx, pby, nx, ny, dist - gap_offset))
 
 
 @numba.njit(cache=True)
@@ -117,12 +159,12 @@ def arc_disk(arcs, elems, centres, radii, r):
     (s, 0, p_arc, p_centre, n from disk to arc, gap)."""
     out = np.empty((elems.size, 9))
     for m in range(elems.size):
-        arc = arcs[elems[m]]
+        arc = as_arc(arcs[elems[m]])
         cx, cy = centres[m, 0], centres[m, 1]
         s, _ = closest_on_arc(arc, cx, cy)
         px, py = arc_point(arc, s)
-        th = arc[2] + arc[3] * s
-        _fill(out, m, s, 0.0, px, py, cx, cy, -math.sin(th), math.cos(th), radii[m] + r[m])
+        th = arc.theta + arc.kappa * s
+        _fill(out, m, s, 0.0, (px, py), (cx, cy), (-math.sin(th), math.cos(th)), radii[m] + r[m])
     return out
 
 
@@ -133,10 +175,10 @@ def arc_plane(arcs, elems, point, normal, r):
     out = np.empty((elems.size, 9))
     nx, ny = normal[0], normal[1]
     for m in range(elems.size):
-        arc = arcs[elems[m]]
-        ln, k = arc[4], arc[3]
+        arc = as_arc(arcs[elems[m]])
+        ln, k = arc.length, arc.kappa
         best_s = 0.0
-        best = (arc[0] - point[0]) * nx + (arc[1] - point[1]) * ny
+        best = (arc.x - point[0]) * nx + (arc.y - point[1]) * ny
         ex, ey = arc_point(arc, ln)
         d = (ex - point[0]) * nx + (ey - point[1]) * ny
         if d < best:
@@ -150,16 +192,13 @@ def arc_plane(arcs, elems, point, normal, r):
                     best_s, best = s, d
         px, py = arc_point(arc, best_s)
         qx, qy = px - best * nx, py - best * ny
-        out[m, 0], out[m, 1] = best_s, 0.0
-        out[m, 2], out[m, 3], out[m, 4], out[m, 5] = px, py, qx, qy
-        out[m, 6], out[m, 7] = nx, ny
-        out[m, 8] = best - r
+        _put(out, m, ContactRow(best_s, 0.0, px, py, qx, qy, nx, ny, best - r))
     return out
 
 
 @numba.njit(cache=True)
 def _try_pair(a1, a2, s1, s2, best):
-    if 0.0 <= s1 <= a1[4] and 0.0 <= s2 <= a2[4]:
+    if 0.0 <= s1 <= a1.length and 0.0 <= s2 <= a2.length:
         p1x, p1y = arc_point(a1, s1)
         p2x, p2y = arc_point(a2, s2)
         d = (p1x - p2x) ** 2 + (p1y - p2y) ** 2
@@ -172,14 +211,14 @@ def closest_arc_arc(a1, a2):
     """(s1, s2, squared distance) of the closest centre-line points of two arcs."""
     best = np.array([0.0, 0.0, np.inf])
     for e in range(2):
-        px, py = arc_point(a1, e * a1[4])
+        px, py = arc_point(a1, e * a1.length)
         s, _ = closest_on_arc(a2, px, py)
-        _try_pair(a1, a2, e * a1[4], s, best)
-        px, py = arc_point(a2, e * a2[4])
+        _try_pair(a1, a2, e * a1.length, s, best)
+        px, py = arc_point(a2, e * a2.length)
         s, _ = closest_on_arc(a1, px, py)
-        _try_pair(a1, a2, s, e * a2[4], best)
-    c1 = abs(a1[3]) * a1[4] >= _STRAIGHT
-    c2 = abs(a2[3]) * a2[4] >= _STRAIGHT
+        _try_pair(a1, a2, s, e * a2.length, best)
+    c1 = abs(a1.kappa) * a1.length >= _STRAIGHT
+    c2 = abs(a2.kappa) * a2.length >= _STRAIGHT
     if c1 and c2:
         o1x, o1y = _centre(a1)
         o2x, o2y = _centre(a2)
@@ -192,10 +231,10 @@ def closest_arc_arc(a1, a2):
                     )
     elif c1 or c2:
         ca, sa = (a1, a2) if c1 else (a2, a1)
-        tx, ty = math.cos(sa[2]), math.sin(sa[2])
+        tx, ty = math.cos(sa.theta), math.sin(sa.theta)
         for sg in (1.0, -1.0):
             sc = _circle_s(ca, sg * -ty, sg * tx)
-            if sc <= ca[4]:
+            if sc <= ca.length:
                 px, py = arc_point(ca, sc)
                 ss, _ = closest_on_arc(sa, px, py)
                 if c1:
@@ -219,12 +258,12 @@ def arc_arc(arcs, ia, ib, ra, rb):
     (s_a, s_b, p_a, p_b, n from b to a, gap)."""
     out = np.empty((ia.size, 9))
     for m in range(ia.size):
-        a1, a2 = arcs[ia[m]], arcs[ib[m]]
+        a1, a2 = as_arc(arcs[ia[m]]), as_arc(arcs[ib[m]])
         s1, s2, _ = closest_arc_arc(a1, a2)
         p1x, p1y = arc_point(a1, s1)
         p2x, p2y = arc_point(a2, s2)
-        th = a2[2] + a2[3] * s2
-        _fill(out, m, s1, s2, p1x, p1y, p2x, p2y, -math.sin(th), math.cos(th), ra[m] + rb[m])
+        th = a2.theta + a2.kappa * s2
+        _fill(out, m, s1, s2, (p1x, p1y), (p2x, p2y), (-math.sin(th), math.cos(th)), ra[m] + rb[m])
     return out
 
 

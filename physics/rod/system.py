@@ -50,6 +50,11 @@ from physics.rod.delassus import BandKKT, DirectDelassus, SchurDelassus, SparseK
 from physics.rod.dfcp import solve_dfcp
 from physics.rod.mixed import BAND, MixedRod
 
+#: Contact-row columns (geometry.ContactRow) of the closest points on a and on b and of the normal.
+_PA = slice(geometry.PA_X, geometry.PA_Y + 1)
+_PB = slice(geometry.PB_X, geometry.PB_Y + 1)
+_N = slice(geometry.N_X, geometry.N_Y + 1)
+
 
 @dataclass(frozen=True)
 class RigidBody:
@@ -294,7 +299,7 @@ class RodSystem:
             near = np.nonzero((ac - pt) @ nrm - ar - rr < self.margin)[0] if na else np.zeros(0, np.int64)
             if near.size:
                 out = geometry.arc_plane(arcs, near, pt, nrm, 0.0)
-                out[:, 8] -= rr[near]
+                out[:, geometry.GAP] -= rr[near]
                 rows.append(out)
                 meta.append(
                     np.column_stack(
@@ -320,9 +325,12 @@ class RodSystem:
                     )
                 )
         if not rows:
-            return {"meta": np.zeros((0, 4), np.int64), "geo": np.zeros((0, 9))}
+            return {
+                "meta": np.zeros((0, 4), np.int64),
+                "geo": np.zeros((0, len(geometry.ContactRow._fields))),
+            }
         geo, meta = np.concatenate(rows), np.concatenate(meta).astype(np.int64)
-        keep = geo[:, 8] < self.margin
+        keep = geo[:, geometry.GAP] < self.margin
         if self.ignore:
             keep &= np.array([tuple(sorted(p)) not in self.ignore for p in meta[:, :2].tolist()], dtype=bool)
         meta, geo = meta[keep], geo[keep]
@@ -340,7 +348,7 @@ class RodSystem:
         n_other = self.nb + len(self.obstacles)
         lmin = np.array([f.model.length / f.model.n for f in self.rods] + [np.inf] * n_other)
         pair = meta[:, 0] * (self.nr + self.nb + len(self.obstacles)) + meta[:, 1]
-        order = np.lexsort((geo[:, 8], pair))
+        order = np.lexsort((geo[:, geometry.GAP], pair))
         ps = pair[order]
         starts = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
         stops = np.r_[starts[1:], len(order)]
@@ -352,7 +360,7 @@ class RodSystem:
             d = 0.0 if np.isinf(d) else d  # rigid-only pairs: distinct disks touch at distinct points
             kept = []
             for i in idx:
-                if all(np.hypot(*(geo[i, 2:4] - geo[j, 2:4])) >= d for j in kept):
+                if all(np.hypot(*(geo[i, _PA] - geo[j, _PA])) >= d for j in kept):
                     kept.append(i)
             keep[kept] = True
         return keep
@@ -393,7 +401,7 @@ class RodSystem:
         x = solver.x_free
         t3 = time.perf_counter()
         if nc:
-            gap = geo[:, 8]
+            gap = geo[:, geometry.GAP]
             w = H @ x[: self.ndof]
             u_free = w[0::2].copy()
             w[0::2] += np.where(gap >= 0, gap, self.stab * gap) / h
@@ -423,15 +431,15 @@ class RodSystem:
         ]
         vb = v[self.offsets[self.nr] :].reshape(self.nb, 3)
         new = SystemState(rods, state.q + h * vb, vb.copy(), state.time + h, cache)
-        surface = geo[:, 2:4] - self._radius_of(meta[:, 0], meta[:, 2])[:, None] * geo[:, 6:8]
+        surface = geo[:, _PA] - self._radius_of(meta[:, 0], meta[:, 2])[:, None] * geo[:, _N]
         rolling = np.abs(G @ v)
         times = {"detect": t1 - t0, "assemble": t2 - t1, "delassus": t3 - t2, "solve": t4 - t3}
         info = StepInfo(
             state.time + h,
             meta[:, :2].copy(),
             surface,
-            geo[:, 6:8].copy(),
-            geo[:, 8].copy(),
+            geo[:, _N].copy(),
+            geo[:, geometry.GAP].copy(),
             r,
             u,
             u_free,
@@ -517,11 +525,11 @@ class RodSystem:
         nc = len(meta)
         if nc == 0:
             return sp.csr_matrix((0, self.ndof)), sp.csr_matrix((0, self.ndof))
-        nrm = geo[:, 6:8]
+        nrm = geo[:, _N]
         tng = np.column_stack([-nrm[:, 1], nrm[:, 0]])
         rows, cols, vals, grows, gcols, gvals = [], [], [], [], [], []
         for side, sign in ((0, 1.0), (1, -1.0)):
-            body, feat, s = meta[:, side], meta[:, 2 + side], geo[:, side]
+            body, feat, s = meta[:, side], meta[:, 2 + side], geo[:, geometry.S_A + side]
             for k in np.unique(body[body < self.nr]):
                 f, sel = self.rods[k], np.nonzero(body == k)[0]
                 q = state.rods[k].q
@@ -546,7 +554,7 @@ class RodSystem:
                 disk = feat[sel]
                 kb = self._disk_body[disk]
                 radius = self._disk_local[disk, 2]
-                arm = geo[sel, 2 + 2 * side : 4 + 2 * side] - sign * radius[:, None] * nrm[sel]
+                arm = geo[sel, _PB if side else _PA] - sign * radius[:, None] * nrm[sel]
                 arm -= state.q[kb, :2]
                 dofs = self.offsets[self.nr + kb]
                 for row, d in ((2 * sel, nrm[sel]), (2 * sel + 1, tng[sel])):
