@@ -16,8 +16,11 @@ f_mn = (pi / 2) sqrt(D / (rho h)) ((m/a)^2 + (n/b)^2).
 
 Gains: the velocity at a fixed pickup point q (a contact microphone) per N s of impulse
 at contact point p, a[p, k] = phi_k(p) phi_k(q) / M (m/s per N s; ModalBank renders each
-mode as sin instead of cos, same magnitude). Decay d = d0 + pi f eta (1/s) for a loss
-factor eta (internal friction) plus a constant d0 (air and supports).
+mode as sin instead of cos, same magnitude). Driving-point rows (what a closed-loop contact
+such as HuntCrossleyImpact or Friction pushes against): the displacement at p itself per
+N s at p, phi_k(p)^2 / (M w_k) (m per N s), the convention of every closed loop. Decay
+d = d0 + pi f eta (1/s) for a loss factor eta (internal friction) plus a constant d0 (air
+and supports).
 
 Sound texture along a track: besides the named track points t0 .. t{n-1}, a track may carry
 ``between`` further points in each of its intervals (``t{i}_{j}``, the fraction j / (between
@@ -90,7 +93,8 @@ def ss_plate_model(
         names = tuple(points)
     listen = shape(np.array([pickup[0]]), np.array([pickup[1]]))[0]
     gains = at * listen / mass  # strike to pickup: signed
-    driving = at * at / mass  # at the strike point itself, for contacts in a closed loop
+    # at the strike point itself, for contacts in a closed loop: a displacement receptance
+    driving = at * at / (mass * 2 * np.pi * freqs)
     if digits is not None:
         gains, driving = (
             np.array([float(f"{x:.{digits}g}") for x in g.flat]).reshape(g.shape) for g in (gains, driving)

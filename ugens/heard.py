@@ -2,9 +2,10 @@
 the model's signed strike-to-pickup gains.
 
 A contact ugen (HuntCrossleyImpact, Friction) solves its loop with the driving-point gains
-a_k = phi_k(c)^2 / M_k (ModalModel.driving); what a pickup at p hears is the same modes
-driven by the same force with the gains b_k = phi_k(c) phi_k(p) / M_k, i.e. each mode's
-displacement times b_k / a_k. Being linear in the force, it is computed after the loop,
+a_k = phi_k(c)^2 / (M_k w_k) (ModalModel.driving: displacement per N s, m/(N s)); what a
+pickup at p hears is the same modes driven by the same force with the model's signed gains
+b_k (e.g. phi_k(c) phi_k(p) / (M_k w_k), or a velocity's phi_k(c) phi_k(p) / M_k), i.e.
+each mode's displacement times b_k / a_k. Being linear in the force, it is computed after the loop,
 mode by mode, with the loop's own discretisation: a two-state recursion per mode,
 
     q' = c0 q + c1 p + c4 f,   p' = c2 q + c3 p + c5 f,   heard = sum_k q'.

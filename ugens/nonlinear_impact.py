@@ -106,6 +106,12 @@ def mode_steps(coef):
 FLUSH_PERIOD = 1024
 #: Sub-steps per sample while the hammer touches or may touch within the sample.
 SUBSTEPS = 8
+#: Default approach speed of ``strike`` (m/s): the default 10 g hammer then carries 1e-3 N s,
+#: the reference impulse of the level convention (jassy.levels), and delivers up to twice that
+#: as it bounces off, so with ``level = "calibrated"`` a default strike on a model whose gains
+#: are driving-point receptances (m per N s) peaks near the default ImpactForce tap's level.
+#: 1 m/s (a 10 g object dropped 5 cm) would be 20 dB louder: above 0 dBFS on most models.
+DEFAULT_STRIKE_SPEED = 0.1
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -515,13 +521,13 @@ class HuntCrossleyImpact(ModelParams, UGen):
         "strike": {
             "speed": ParamSpec(
                 "float",
-                None,
+                DEFAULT_STRIKE_SPEED,
                 low=0.0,
                 low_open=True,
                 high=1e4,
                 unit="m/s",
-                required=True,
-                doc="approach speed of the hammer at contact",
+                doc="approach speed of the hammer at contact (default: the default hammer's momentum is "
+                "the reference impulse 1e-3 N s, so a calibrated strike sounds like ImpactForce's default)",
             ),
             "location": ParamSpec("location", None, doc="contact location (default: the current one)"),
         }

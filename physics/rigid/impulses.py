@@ -7,9 +7,9 @@ normal rows with Newton restitution for approaching contacts faster than ``bounc
 gravity's velocity increment over the sub-step folded in); tangent rows projected onto the
 Coulomb disk |r_T| <= mu r_N; rolling-resistance rows (a torque impulse bounded by
 rolling * r_N, m). Resting contacts found in the previous solve (same bodies and features)
-start from its force times dt (warm start); sweeps stop when no impulse changes by more than
-``tolerance`` times the largest normal impulse, and a contact whose bodies have settled is
-skipped meanwhile (_sweeps). The solve allocates nothing: its scratch
+start from its force times dt (warm start); sweeps stop when no body's momentum changes over
+a sweep by more than ``tolerance`` times the largest normal impulse, and a contact whose
+bodies have settled is skipped meanwhile (_sweeps). The solve allocates nothing: its scratch
 (new_solver) lives for the whole run.
 """
 
@@ -103,9 +103,11 @@ def new_warm_start(size):
 # targets (m/s: n, t1, t2) and the same with a fixed body b's velocity folded in (5 rows),
 # friction and rolling coefficients, approach speed (m/s), impact flag, impulses (N s; N m s).
 # Per body: world velocities v, w, inverse inertia, warm-start list head, the last sweep that
-# changed it. Per warm-start entry: list links, use marks.
+# changed it, its velocities before the sweep's first update of it, the last sweep that
+# updated it, the bodies a sweep updated. Per warm-start entry: list links, use marks.
 (S_IDX, S_RA, S_RB, S_FRAME, S_ANG_A, S_ANG_B, S_RES_A, S_RES_B, S_MASS, S_TARGET, S_BIAS) = range(11)
 (S_MU, S_ROLL, S_SPEED, S_IMPACT, S_R, S_V, S_W, S_IW, S_HEAD, S_NEXT, S_USED, S_SWEPT) = range(11, 23)
+(S_V0, S_W0, S_SEEN, S_TOUCHED) = range(23, 27)
 
 
 @nb.njit(cache=True)
@@ -135,6 +137,10 @@ def new_solver(rows, n_bodies, warm_rows):
         np.empty(n_bodies, np.int64),
         np.empty(warm_rows, np.int64),
         np.empty(warm_rows, np.bool_),
+        np.empty(n_bodies, np.int64),
+        np.empty((n_bodies, 3)),
+        np.empty((n_bodies, 3)),
+        np.empty(n_bodies, np.int64),
         np.empty(n_bodies, np.int64),
     )
 
@@ -369,35 +375,66 @@ def _apply_impulses(pair, nc, inv_mass, solver):
 
 
 @nb.njit(cache=True)
-def _sweeps(pair, nc, inv_mass, iters, tol, solver):
+def _sweeps(pair, nc, rot, body, iters, tol, solver):
     """Projected Gauss-Seidel sweeps (normal row, friction disk, rolling disk of each contact)
-    until no impulse changes by more than tol times the largest normal impulse so far; returns
-    the sweeps done (at most iters). A contact is updated only while one of its bodies moves:
-    it is skipped when neither body got such a change since the contact's last update (then
-    its update would change nothing beyond tol). So a settled island (food on a fixed wok)
-    stops sweeping while a busier one goes on."""
+    until no body's momentum changes over a sweep by more than tol times the largest normal
+    impulse so far; returns the sweeps done (at most iters).
+
+    The test is on the bodies, not on the impulses: where a body rests on more contacts than
+    its motion needs (a box on four corners), the sweeps may shift impulse from one contact to
+    another at a steady rate without changing any velocity, and such a drift would never fall
+    below a tolerance on the impulses. A contact is updated only while one of its bodies moves:
+    it is skipped when neither body changed over the last sweep. So a settled island
+    (food on a fixed wok) stops sweeping while a busier one goes on."""
+    inv_mass, inv_inertia = body[0], body[1]
     idx, mu, roll, r, changed = solver[S_IDX], solver[S_MU], solver[S_ROLL], solver[S_R], solver[S_SWEPT]
+    v, w, v0, w0 = solver[S_V], solver[S_W], solver[S_V0], solver[S_W0]
+    seen, touched = solver[S_SEEN], solver[S_TOUCHED]
     for i in range(changed.size):
         changed[i] = -1  # as if every body had just changed: the first sweep visits all
+        seen[i] = -1
     scale = 1e-30
     for k in range(nc):
         scale = max(scale, abs(r[k, 0]))
     for sweep in range(iters):
-        settled = True
+        n_touched = 0
         for k in range(nc):
             a, b = pair[idx[k], 0], pair[idx[k], 1]
             if changed[a] < sweep - 1 and changed[b] < sweep - 1:
                 continue
-            change = _contact_update(k, a, b, inv_mass, mu[k], roll[k], solver)
+            for i in (a, b):
+                if inv_mass[i] > 0.0 and seen[i] != sweep:  # its velocity before this sweep
+                    seen[i] = sweep
+                    touched[n_touched] = i
+                    n_touched += 1
+                    for x in range(3):
+                        v0[i, x], w0[i, x] = v[i, x], w[i, x]
+            _contact_update(k, a, b, inv_mass, mu[k], roll[k], solver)
             scale = max(scale, abs(r[k, 0]))
-            if change > tol * scale:
+        settled = True
+        for t in range(n_touched):
+            i = touched[t]
+            if _momentum_change2(i, rot, inv_mass, inv_inertia, solver) > (tol * scale) ** 2 * inv_mass[i]:
+                changed[i] = sweep
                 settled = False
-                for body in (a, b):
-                    if inv_mass[body] > 0.0:  # a fixed body's velocity never changes
-                        changed[body] = sweep
         if settled:
             return sweep + 1
     return iters
+
+
+@nb.njit(cache=True, inline="always")
+def _momentum_change2(i, rot, inv_mass, inv_inertia, solver):
+    """Body i's change of velocity over the sweep in the kinetic-energy norm, m |dv|^2 +
+    dw^T I dw (kg m^2/s^2): the squared momentum change an impulse J gives it is about
+    J^2 / m in this norm."""
+    v, w, v0, w0 = solver[S_V], solver[S_W], solver[S_V0], solver[S_W0]
+    dv2 = (v[i, 0] - v0[i, 0]) ** 2 + (v[i, 1] - v0[i, 1]) ** 2 + (v[i, 2] - v0[i, 2]) ** 2
+    out = dv2 / inv_mass[i]
+    dx, dy, dz = w[i, 0] - w0[i, 0], w[i, 1] - w0[i, 1], w[i, 2] - w0[i, 2]
+    for k in range(3):  # principal components of dw, over the principal inverse inertia
+        c = rot[i, 0, k] * dx + rot[i, 1, k] * dy + rot[i, 2, k] * dz
+        out += c * c / inv_inertia[i, k]
+    return out
 
 
 @nb.njit(cache=True, inline="always")
@@ -422,7 +459,7 @@ def _row_arrays(solver):
 @nb.njit(cache=True, inline="always")
 def _contact_update(k, a, b, inv_mass, mu, roll, solver):
     """One Gauss-Seidel update of contact k: normal row, then the friction disk |r_T| <= mu r_N
-    and the rolling disk (rolling r_N); returns the largest change of r_N, r_T (N s)."""
+    and the rolling disk (rolling r_N)."""
     frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
     ima, imb = inv_mass[a], inv_mass[b]
     both = imb > 0.0  # else b's velocity is fixed, and in the bias
@@ -432,18 +469,16 @@ def _contact_update(k, a, b, inv_mass, mu, roll, solver):
     if dn != 0.0:
         _row_apply(k, 0, a, b, dn, frame, res_a, res_b, ima, imb, v, w, True)
         r[k, 0] = rn
-    biggest = abs(dn)
     if mu > 0.0:
-        biggest = max(biggest, _disk_update(k, 1, a, b, ima, imb, mu * rn, True, both, solver))
+        _disk_update(k, 1, a, b, ima, imb, mu * rn, True, both, solver)
     if roll > 0.0:
         _disk_update(k, 3, a, b, ima, imb, roll * rn, False, both, solver)
-    return biggest
 
 
 @nb.njit(cache=True, inline="always")
 def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
     """Gauss-Seidel update of rows j, j + 1 of contact k (friction: linear; rolling: angular
-    only) projected onto the disk of radius ``limit``; returns the larger change."""
+    only) projected onto the disk of radius ``limit``."""
     frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
     u1 = _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both)
     u2 = _row_velocity(k, j + 1, a, b, frame, ang_a, ang_b, v, w, linear, both)
@@ -452,9 +487,7 @@ def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
     )
     _row_apply(k, j, a, b, x1 - r[k, j], frame, res_a, res_b, ima, imb, v, w, linear)
     _row_apply(k, j + 1, a, b, x2 - r[k, j + 1], frame, res_a, res_b, ima, imb, v, w, linear)
-    change = max(abs(x1 - r[k, j]), abs(x2 - r[k, j + 1]))
     r[k, j], r[k, j + 1] = x1, x2
-    return change
 
 
 @nb.njit(cache=True)
@@ -584,7 +617,7 @@ def resolve(
     _targets(buf, nc, kind, body, prm, h, dt, gscale, solver)
     _warm_impulses(buf, nc, dt, warm, inv_mass, solver)
     stats[2] += nc
-    stats[4] += _sweeps(buf[3], nc, inv_mass, int(prm[P_ITER]), prm[P_TOL], solver)
+    stats[4] += _sweeps(buf[3], nc, rot, body, int(prm[P_ITER]), prm[P_TOL], solver)
     _keep_warm(buf, nc, dt, warm, solver)
     store_twists(kind, rot, solver[S_V], solver[S_W], phi)
     return _records(buf, nc, rot, time, step, rec, nrec, solver)
