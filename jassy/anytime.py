@@ -48,6 +48,7 @@ import numpy as np
 
 from jassy.anytime_rank import rank_modes, scan_forces
 from jassy.errors import PatchError
+from jassy.jit import specialise
 
 #: the impacts (impulse N s, location) on a bank no impact strikes
 NO_KICK: list[tuple[float, object]] = []
@@ -134,17 +135,21 @@ class ModeBudget:
             offset = cut.stop
         count = len(banks)
         #: per bank: an impact foreseen in this period, a force heard in this / the last
-        #: period, a force in the current stretch, and its scores already all zero
-        #: and a force since it was last rendered
-        flags = (np.zeros(count, dtype=bool) for _ in range(7))
-        self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._zeroed = (
-            next(flags) for _ in range(6)
-        )
-        self._pending_force = next(flags)
+        #: period (folded in after each stretch), a force in the current stretch, woken by
+        #: it, its scores already all zero, a force since the bank was last rendered
+        (
+            self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._zeroed,
+            self._unrendered,
+        ) = (np.zeros(count, dtype=bool) for _ in range(7))  # fmt: skip
+        self._any_expected = False
         self._inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
         self._addresses = np.array([x.ctypes.data for x in self._inputs], dtype=np.intp)
         self._input_size = min(x.size for x in self._inputs)
         self._unseen = np.array([not renders for _ in banks], dtype=bool)
+        self._scan = specialise(
+            scan_forces, self._addresses, self._input_size, 0, 0, True, self._unseen, self._expected,
+            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
+        )  # fmt: skip
         self._processes = [bank.process for bank in banks]
         self._kicks, self._now = NO_KICK, {}
 
@@ -176,8 +181,6 @@ class ModeBudget:
                     self._render(rendered, at - rendered, rendered - start)
                     rendered = at
                 self._decide(at, onset, at - start, stop - at)
-            self._heard_now |= self._forced
-            self._pending_force |= self._forced
             at = stop
         if self.renders:
             self._render(rendered, end - rendered, rendered - start)
@@ -186,12 +189,11 @@ class ModeBudget:
         """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block;
         a bank with nothing to compute (no mode sounding, no force in this or the last
         period, nothing pending) only writes silence."""
-        forced = self._pending_force
-        forced |= self._heard_now | self._heard_before  # its ring holds a force
-        for i, process in enumerate(self._processes):
-            if forced[i] or not self.banks[i].anytime_silent(offset, n):
+        forced, earlier, now, before = self._forced, self._unrendered, self._heard_now, self._heard_before
+        for i, process in enumerate(self._processes):  # (a force heard lately: its ring holds it)
+            if forced[i] or earlier[i] or now[i] or before[i] or not self.banks[i].anytime_silent(offset, n):
                 process(start, n, offset)
-        forced[:] = False
+        earlier[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
@@ -201,15 +203,17 @@ class ModeBudget:
         if rotate:
             kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
             now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
-            self._expected[:] = False
+            if self._any_expected:
+                self._expected[:] = False
+            self._any_expected = bool(now)
             if now:
                 for i, bank in enumerate(self.banks):
                     self._expected[i] = id(bank) in now
         else:
             self._kicks, self._now = NO_KICK, {}
-        heard, woken = scan_forces(
+        heard, woken = self._scan(
             self._addresses, self._input_size, offset, offset + n, rotate, self._unseen, self._expected,
-            self._heard_now, self._heard_before, self._forced, self._onset,
+            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
         )  # fmt: skip
         driven = rotate and (self._fading or bool(self._kicks) or heard)
         if rotate and self.cpu_fraction is not None:
@@ -222,7 +226,7 @@ class ModeBudget:
         woken by the force in the sub-block's frames [offset, offset + n)."""
         kicks, now, period = self._kicks, self._now, self.period
         later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
-        heard = self._heard_now | self._heard_before
+        heard = self._heard_now | self._heard_before  # before the stretch from ``at``
         idle = []
         for i, bank in enumerate(self.banks):
             kick_now, kick_next = now.get(id(bank), NO_KICK), later.get(id(bank), NO_KICK)

@@ -63,17 +63,20 @@ def _float64_pointer(typingctx, address):
 
 @nb.njit(cache=True)
 def scan_forces(
-    addresses, size, begin, end, rotate, unseen, expected, heard_now, heard_before, forced, onset
+    addresses, size, begin, end, rotate, unseen, expected, heard_now, heard_before, forced, onset, unrendered
 ):  # fmt: skip
     """Which banks hear a force in samples [begin, end) of their inputs (float64 arrays of
     ``size`` at ``addresses``, kept alive by their nodes) into ``forced``; banks ``unseen``
-    (rendered after the budget) count as forced. ``rotate`` (a period starts): the last
+    (rendered after the budget) count as forced. First the stretch scanned before is
+    folded into ``heard_now`` and ``unrendered``. ``rotate`` (a period starts): the last
     period's ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected
     no impact and heard nothing in this or the last period. Returns (any heard_before,
     any onset). A bank that heard a force in this period already is not scanned."""
     any_before = False
     any_onset = False
     for b in range(addresses.size):
+        heard_now[b] |= forced[b]
+        unrendered[b] |= forced[b]
         if rotate:
             heard_before[b] = heard_now[b]
             heard_now[b] = False

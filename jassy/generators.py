@@ -19,8 +19,11 @@ bubbles, parameter sets) and render the same at any block size. ::
 
 Distributions: ``{uniform = [lo, hi]}``, ``{loguniform = [lo, hi]}`` (0 < lo), ``{normal =
 [mean, sd]}``, ``{choice = [a, b, ...]}``, ``{random_point = MODEL}`` (a vertex index of that
-[models] entry, uniform over its locations). Poisson times: intervals drawn from an
-exponential distribution of mean 1/rate (a homogeneous Poisson process).
+[models] entry, uniform over its locations), ``{random_on_track = MODEL}`` (a point uniform
+in distance along the model's texture track t0, t1, ... (jassy.tracks), anywhere between its
+points: the barycentric location of the two track points around it, whose gains are then
+interpolated with the track's linear shape functions). Poisson times: intervals drawn from
+an exponential distribution of mean 1/rate (a homogeneous Poisson process).
 """
 
 from __future__ import annotations
@@ -35,6 +38,33 @@ from jassy.inputs import number, seconds, text_value
 #: Most events one generator may produce (a patch with more is refused, not rendered).
 MAX_GENERATED = 200_000
 GENERATOR_KEYS = {"node", "action", "times", "start", "stop", "seed", "args"}
+DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice", "random_point", "random_on_track")
+
+
+def _on_track(value: Any, rng: np.random.Generator, models: dict, where: str):
+    """A function drawing a location uniform in distance along a model's track: the two
+    track points around a uniform coordinate s, weighted by the linear shape functions."""
+    name = text_value(value, f"{where}.random_on_track", "the name of a [models] entry")
+    if name not in models:
+        raise PatchError(
+            f"{where}.random_on_track: unknown model {name!r}; models are {', '.join(models) or 'none'}"
+            f"{suggest(name, models)}"
+        )
+    track = models[name].track
+    if track is None:
+        raise PatchError(
+            f"{where}.random_on_track: model {name!r} has no track (points t0, t1, ... along a line); "
+            "random_point draws among its points"
+        )
+    coords, names = track.coordinates, track.names
+
+    def draw() -> dict:
+        s = float(rng.uniform(coords[0], coords[-1]))
+        i = min(int(np.searchsorted(coords, s, side="right")) - 1, coords.size - 2)
+        x = (s - coords[i]) / (coords[i + 1] - coords[i])
+        return {"vertices": [names[i], names[i + 1]], "weights": [1.0 - x, x]}
+
+    return draw
 
 
 def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
@@ -53,6 +83,8 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
             )
         n = models[name].n_points
         return lambda: int(rng.integers(n))
+    if kind == "random_on_track":
+        return _on_track(value, rng, models, where)
     if kind == "choice":
         if not isinstance(value, list) or not value:
             raise PatchError(f"{where}.choice: expected a non-empty list")
@@ -60,8 +92,8 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
     if kind not in ("uniform", "loguniform", "normal"):
         raise PatchError(
             f"{where}: unknown distribution {kind!r}; "
-            "expected uniform, loguniform, normal, choice or random_point"
-            f"{suggest(kind, ('uniform', 'loguniform', 'normal', 'choice', 'random_point'))}"
+            f"expected uniform, loguniform, normal, choice, random_point or random_on_track"
+            f"{suggest(kind, DISTRIBUTIONS)}"
         )
     if not isinstance(value, list) or len(value) != 2:
         raise PatchError(f"{where}.{kind}: expected two numbers, got {value!r}")

@@ -180,6 +180,20 @@ class DrillProbe:
         self.removed = 0.0
         self.x = 0.5
         self.force = 0.0
+        self._warm()
+
+    def _warm(self) -> None:
+        """Step a copy of the simulation once with the burr a radius into the bone and once
+        clear: the first contact loads the burr's kernels (3 s measured with numba's cache
+        warm), which would freeze the first press."""
+        import copy
+
+        from physics.burr.loop import BurrSim
+
+        scratch = BurrSim(copy.deepcopy(self.volume))
+        centre, omega, velocity = self._descent(self._world(0.5), rpm=self.rpm)(0.0, None)
+        for depth in (2.0 * self.sim.params.radius, 0.0):
+            scratch.step(centre - [0.0, 0.0, depth], omega, velocity, 1.0 / self.rate)
 
     @property
     def touching(self) -> bool:

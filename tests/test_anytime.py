@@ -216,3 +216,36 @@ def test_ranking_keeps_exactly_the_highest_positive_scores():
         if positive.size > limit:
             assert score[keep].min() == positive[limit - 1]
             assert score[~keep].max() <= positive[limit - 1]
+
+
+def test_a_budgeted_bank_is_split_only_where_the_budget_decides():
+    """Six bells struck 30 times, blocks of 4096 and decisions every 2048 frames: each
+    bank renders one span per sub-block plus one per decision inside a sub-block (not
+    one per budget period), and the output equals a render whose sub-blocks are all cut
+    at every period (block 2048) within rounding."""
+    graph, score = scene(ModeBudget(max_modes=120), seconds=2.0)
+    budget, bank = graph.budget, graph.nodes["b0"]
+    starts, decided, spans = [], [], [0]
+    step, decide, process = budget.step, budget._decide, bank.process
+
+    def counted_step(start, n):
+        starts.append(start)
+        step(start, n)
+
+    def counted_decide(at, *args):
+        decided.append(at)
+        decide(at, *args)
+
+    def counted_process(start, n, offset=0):
+        spans[0] += 1
+        process(start, n, offset)
+
+    budget.step, budget._decide, bank.process = counted_step, counted_decide, counted_process
+    y = render(graph, score, 2.0, FS, 4096, limiter=False).audio
+    inside = sum(1 for at in decided if at not in set(starts))
+    silent = len(starts) + inside - spans[0]  # spans a silent, unforced bank skips
+    assert inside > 0 and silent >= 0
+    assert spans[0] <= len(starts) + inside < 2.0 * FS / 2048  # fewer than one per period
+    graph, score = scene(ModeBudget(max_modes=120), seconds=2.0)
+    cut = render(graph, score, 2.0, FS, 2048, limiter=False).audio
+    assert max_abs_diff(y, cut) < 1e-6

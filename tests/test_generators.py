@@ -93,3 +93,78 @@ def test_object_library_points_are_the_models_points():
     for name, info in OBJECTS.items():
         model = ModalModel.load(os.path.join(os.path.dirname(patches.__file__), info.file))
         assert list(model.points) == list(info.points), name
+
+
+#: A model with a track t0 .. t2 and three points between t0 and t1 (t0_1 .. t0_3 at s = 0.25,
+#: 0.5, 0.75), stored out of order; its gains are linear in the track coordinate s, so the
+#: track's linear shape functions reproduce them exactly anywhere along it.
+TRACK_S = {"t0": 0.0, "t2": 2.0, "t0_2": 0.5, "t1": 1.0, "t0_1": 0.25, "t0_3": 0.75}
+SLOPES = np.array([1.0, -2.0, 0.5])
+
+
+def linear_gains(s):
+    return 3.0 + np.multiply.outer(s, SLOPES)
+
+
+TRACKED = ModalModel(
+    np.array([300.0, 500.0, 900.0]), np.full(3, 5.0), linear_gains(np.array(list(TRACK_S.values()))),
+    tuple(TRACK_S), "plank",
+)  # fmt: skip
+
+
+def test_random_on_track_draws_points_uniform_along_the_track_with_interpolated_gains():
+    from scipy.stats import kstest
+
+    table = {"node": "hit", "action": "impact", "times": {"every": 0.001}, "stop": 3.0, "seed": 5,
+             "args": {"location": {"random_on_track": "plank"}}}  # fmt: skip
+    locations = [e["impact"]["location"] for _, e in expand([table], {"plank": TRACKED}, None, "p.toml")]
+    assert len(locations) == 3000
+    s = np.array(
+        [
+            sum(w * TRACK_S[v] for v, w in zip(loc["vertices"], loc["weights"], strict=True))
+            for loc in locations
+        ]
+    )
+    assert kstest(s / 2.0, "uniform").pvalue > 1e-3  # uniform in distance over the whole track
+    hit = {tuple(loc["vertices"]) for loc in locations}
+    assert hit == {("t0", "t0_1"), ("t0_1", "t0_2"), ("t0_2", "t0_3"), ("t0_3", "t1"), ("t1", "t2")}
+    for loc, at in zip(locations[:200], s[:200], strict=True):
+        assert min(loc["weights"]) >= 0 and sum(loc["weights"]) == pytest.approx(1.0)
+        np.testing.assert_allclose(TRACKED.gains_at(loc), linear_gains(at), rtol=1e-12)
+
+
+def test_random_on_track_needs_a_model_with_a_track():
+    table = {"node": "hit", "action": "impact", "times": {"every": 0.5}, "stop": 1.0,
+             "args": {"location": {"random_on_track": "m"}}}  # fmt: skip
+    with pytest.raises(JassyError, match=r"args\.location\.random_on_track: model 'm' has no track"):
+        expand([table], {"m": MODEL}, None, "p.toml")
+
+
+def test_a_patch_scatters_hail_along_the_steel_plate_track():
+    from pathlib import Path
+
+    from jassy import render
+    from jassy.patchfile import build_patch
+
+    data = {
+        "patch": {"name": "hail", "duration": 0.3},
+        "models": {"plate": {"file": "steel_plate_model.toml"}},
+        "nodes": {"stones": {"type": "ImpactForce"},
+                  "plate": {"type": "ModalBank", "model": "plate", "input": "stones"}},
+        "outputs": {"audio": "plate"},
+        "generate": [{"node": "stones", "action": "impact", "times": {"poisson": 100.0}, "seed": 3,
+                      "args": {"impulse": 1e-4, "location": {"random_on_track": "plate"}}}],
+    }  # fmt: skip
+    patch = build_patch(data, "hail.toml", Path(__file__).resolve().parents[1] / "patches")
+    impacts = [e for e in patch.score if e.action == "impact"]
+    assert len(impacts) > 10
+    plate = patch.graph.nodes["plate"].values["model"]
+    on_track = set(plate.track.names)
+    assert all(
+        len(e.args["location"].vertices) == 2 and set(e.args["location"].vertices) <= on_track
+        for e in impacts
+    )
+    between = {v for e in impacts for v in e.args["location"].vertices if "_" in v}
+    assert between  # the points between the named ones are reached, not only t0 .. t8
+    audio = render(patch.graph, patch.score, 0.3, limiter=False).audio[0]
+    assert np.all(np.isfinite(audio)) and np.abs(audio).max() > 0

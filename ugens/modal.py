@@ -871,6 +871,7 @@ class ModalBank(ModelParams, UGen):
         self._scores = scores
         self._heard = np.zeros(period)
         self._heard_dirty = False  # the ring may hold a non-zero force
+        self._importance = self._apply = None  # typed entry points, made at first use
         self._psd = None
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
@@ -935,13 +936,16 @@ class ModalBank(ModelParams, UGen):
         here_next, elsewhere_next = self._kicked(kick_next) if kick_next else NOT_KICKED
         if self._decay_period[0] != period:
             self._decay_period = (period, self._fresh_c2**period)
-        mode_importance(
+        args = (
             self._gathered(), self._kept, self._kept_count, self.target[2], self.delta[2],
             float(self.meta[1]), self._poles[2], self._poles[3], float(self.sample_rate), spectrum,
             self._bins, flat_psd, self._growth,
             here_now, here_next, elsewhere_now, elsewhere_next, self._decay_period[1], self._weights,
             self._kept_mask, self._faded, KEPT_BONUS, self._floor * self._floor, self._scores,
         )  # fmt: skip
+        if self._importance is None:  # the typed entry point (a numba call of 24 arguments
+            self._importance = specialise(mode_importance, *args)  # costs several us to type)
+        self._importance(*args)
 
     def _kicked(self, kicks: list) -> tuple[float, np.ndarray]:
         """(sum of squared impulses at the current location, squared amplitudes per mode
@@ -963,10 +967,13 @@ class ModalBank(ModelParams, UGen):
         rest (ugens.modal_budget.apply_kept). Returns how many are computed."""
         shrink = math.exp(-math.log(1000.0) / period)  # -60 dB over one period
         compact, held = (NO_COMPACT, 0) if self._compact is None else (self._compact, self._kept_count)
-        count = apply_kept(
+        args = (
             keep, fade, self._kept_mask, self._faded, self.bank, self.target, self.delta, self._fresh,
             float(self.meta[1]), shrink, self._kept, compact, held,
         )  # fmt: skip
+        if self._apply is None:
+            self._apply = specialise(apply_kept, *args)
+        count = self._apply(*args)
         if count < 0:
             return self._kept_count  # the same modes as now (the compact bank stays)
         self._compact = None
