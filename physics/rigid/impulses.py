@@ -16,6 +16,7 @@ bodies have settled is skipped meanwhile (_sweeps). The solve allocates nothing:
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -97,24 +98,44 @@ def new_warm_start(size):
     return np.empty((size, 4), np.int64), np.empty((size, 6)), np.zeros(1, np.int64)
 
 
-# The contact solve's scratch (new_solver): per contact (rows): its row in the contact buffers,
-# lever arms ra, rb (m), frame (n, t1, t2), angular Jacobian rows of a and b and their responses
-# I^-1 J^T (5 rows: n, t1, t2, then rolling about t1 and t2), effective masses 1 / (J M^-1 J^T),
-# targets (m/s: n, t1, t2) and the same with a fixed body b's velocity folded in (5 rows),
-# friction and rolling coefficients, approach speed (m/s), impact flag, impulses (N s; N m s).
-# Per body: world velocities v, w, inverse inertia, warm-start list head, the last sweep that
-# changed it, its velocities before the sweep's first update of it, the last sweep that
-# updated it, the bodies a sweep updated. Per warm-start entry: list links, use marks.
-(S_IDX, S_RA, S_RB, S_FRAME, S_ANG_A, S_ANG_B, S_RES_A, S_RES_B, S_MASS, S_TARGET, S_BIAS) = range(11)
-(S_MU, S_ROLL, S_SPEED, S_IMPACT, S_R, S_V, S_W, S_IW, S_HEAD, S_NEXT, S_USED, S_SWEPT) = range(11, 23)
-(S_V0, S_W0, S_SEEN, S_TOUCHED) = range(23, 27)
+class SolverScratch(NamedTuple):
+    """The contact solve's scratch (new_solver), rows per contact, per body and per warm-start
+    entry; allocated once per run."""
+
+    idx: np.ndarray  # (rows,) the contact's row in the contact buffers
+    ra: np.ndarray  # (rows, 3) lever arm on a, m
+    rb: np.ndarray  # (rows, 3) lever arm on b, m
+    frame: np.ndarray  # (rows, 3, 3) rows n, t1, t2
+    ang_a: np.ndarray  # (rows, 5, 3) angular Jacobian rows of a: n, t1, t2, rolling about t1, t2
+    ang_b: np.ndarray  # (rows, 5, 3) the same for b
+    res_a: np.ndarray  # (rows, 5, 3) responses I^-1 J^T of a
+    res_b: np.ndarray  # (rows, 5, 3) responses I^-1 J^T of b
+    mass: np.ndarray  # (rows, 5) effective masses 1 / (J M^-1 J^T)
+    target: np.ndarray  # (rows, 3) velocity targets along n, t1, t2, m/s
+    bias: np.ndarray  # (rows, 5) targets with a fixed body b's velocity folded in
+    mu: np.ndarray  # (rows,) friction coefficient
+    roll: np.ndarray  # (rows,) rolling resistance length, m
+    speed: np.ndarray  # (rows,) approach speed, m/s
+    impact: np.ndarray  # (rows,) bool: approach faster than the bounce threshold
+    r: np.ndarray  # (rows, 5) impulses, N s (rolling rows N m s)
+    v: np.ndarray  # (bodies, 3) world linear velocity being solved, m/s
+    w: np.ndarray  # (bodies, 3) world angular velocity being solved, rad/s
+    iw: np.ndarray  # (bodies, 3, 3) world inverse inertia
+    head: np.ndarray  # (bodies,) warm-start list head
+    next: np.ndarray  # (warm rows,) warm-start list link
+    used: np.ndarray  # (warm rows,) bool: warm-start entry taken
+    swept: np.ndarray  # (bodies,) the last sweep that changed the body
+    v0: np.ndarray  # (bodies, 3) linear velocity at the start of the sweep
+    w0: np.ndarray  # (bodies, 3) angular velocity at the start of the sweep
+    seen: np.ndarray  # (bodies,) the last sweep that updated the body
+    touched: np.ndarray  # (bodies,) the bodies the sweep updated
 
 
 @nb.njit(cache=True)
 def new_solver(rows, n_bodies, warm_rows):
-    """The contact solve's scratch (S_* above) for up to ``rows`` contacts, allocated once per
-    run and grown with the contacts."""
-    return (
+    """The contact solve's scratch (SolverScratch) for up to ``rows`` contacts, allocated once
+    per run and grown with the contacts."""
+    return SolverScratch(
         np.empty(rows, np.int64),
         np.empty((rows, 3)),
         np.empty((rows, 3)),
@@ -150,8 +171,8 @@ def _contact_frames(buf, nc, pos, inv_mass, solver):
     """Per contact k < nc: frame rows (n, t1, t2), lever arms, Jacobian rows (angular parts;
     rows 3, 4 roll about t1, t2), responses I^-1 J^T and effective masses."""
     pts, nrm, _, pair, _, _, _ = buf
-    idx, ra, rb, frame = solver[S_IDX], solver[S_RA], solver[S_RB], solver[S_FRAME]
-    ang_a, ang_b = solver[S_ANG_A], solver[S_ANG_B]
+    idx, ra, rb, frame = solver.idx, solver.ra, solver.rb, solver.frame
+    ang_a, ang_b = solver.ang_a, solver.ang_b
     for k in range(nc):
         c = idx[k]
         a, b = pair[c, 0], pair[c, 1]
@@ -192,11 +213,11 @@ def _response(k, j, a, b, linear, solver):
     """Responses I^-1 J^T (angular) of row j of contact k on a and b, and the row's effective
     mass: 1 / (``linear`` (1/m_a + 1/m_b, or 0 for a rolling row) + the angular terms)."""
     ang_a, ang_b, res_a, res_b, iw = (
-        solver[S_ANG_A],
-        solver[S_ANG_B],
-        solver[S_RES_A],
-        solver[S_RES_B],
-        solver[S_IW],
+        solver.ang_a,
+        solver.ang_b,
+        solver.res_a,
+        solver.res_b,
+        solver.iw,
     )
     inverse = linear
     for x in range(3):
@@ -207,7 +228,7 @@ def _response(k, j, a, b, linear, solver):
             iw[b, x, 0] * ang_b[k, j, 0] + iw[b, x, 1] * ang_b[k, j, 1] + iw[b, x, 2] * ang_b[k, j, 2]
         )
         inverse += ang_a[k, j, x] * res_a[k, j, x] + ang_b[k, j, x] * res_b[k, j, x]
-    solver[S_MASS][k, j] = 1.0 / inverse
+    solver.mass[k, j] = 1.0 / inverse
 
 
 @nb.njit(cache=True, inline="always")
@@ -274,20 +295,20 @@ def _targets(buf, nc, kind, body, prm, h, dt, gscale, solver):
     fixed body b's (constant) velocity along each row to the target, so sweeps need not read it."""
     _, _, gaps, pair, _, _, _ = buf
     inv_mass, _, restitution, friction, rolling = body
-    idx, frame, ang_a, ang_b = solver[S_IDX], solver[S_FRAME], solver[S_ANG_A], solver[S_ANG_B]
-    target, bias, v, w = solver[S_TARGET], solver[S_BIAS], solver[S_V], solver[S_W]
+    idx, frame, ang_a, ang_b = solver.idx, solver.frame, solver.ang_a, solver.ang_b
+    target, bias, v, w = solver.target, solver.bias, solver.v, solver.w
     slop, thr, beta = prm[P_SLOP], prm[P_BOUNCE], prm[P_BETA]
     gx, gy, gz = prm[P_GX] * gscale * dt, prm[P_GY] * gscale * dt, prm[P_GZ] * gscale * dt
     for k in range(nc):
         c = idx[k]
         a, b = pair[c, 0], pair[c, 1]
-        solver[S_MU][k] = math.sqrt(friction[a] * friction[b])
-        solver[S_ROLL][k] = max(rolling[a], rolling[b])
+        solver.mu[k] = math.sqrt(friction[a] * friction[b])
+        solver.roll[k] = max(rolling[a], rolling[b])
         un = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, True)
-        solver[S_SPEED][k] = -un
-        solver[S_IMPACT][k] = -un > thr
+        solver.speed[k] = -un
+        solver.impact[k] = -un > thr
         target[k, 0] = target[k, 1] = target[k, 2] = 0.0
-        if solver[S_IMPACT][k]:
+        if solver.impact[k]:
             target[k, 0] = -math.sqrt(restitution[a] * restitution[b]) * un
         else:
             dyn = (1.0 if kind[a] == DYNAMIC else 0.0) - (1.0 if kind[b] == DYNAMIC else 0.0)
@@ -308,8 +329,8 @@ def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
     force and rolling torque times dt, projected on the new frame and cones, and applied."""
     _, _, _, pair, feat, _, _ = buf
     keys, vals, size = warm
-    idx, frame, impact, r = solver[S_IDX], solver[S_FRAME], solver[S_IMPACT], solver[S_R]
-    head, nxt, used = solver[S_HEAD], solver[S_NEXT], solver[S_USED]
+    idx, frame, impact, r = solver.idx, solver.frame, solver.impact, solver.r
+    head, nxt, used = solver.head, solver.next, solver.used
     m = size[0]
     for i in range(head.shape[0]):
         head[i] = -1
@@ -347,8 +368,8 @@ def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
                 + vals[e, 5] * frame[k, 1 + j, 2]
             )
         r[k, 0] = max(r[k, 0], 0.0)
-        r[k, 1], r[k, 2] = _disk(r[k, 1], r[k, 2], solver[S_MU][k] * r[k, 0])
-        r[k, 3], r[k, 4] = _disk(r[k, 3], r[k, 4], solver[S_ROLL][k] * r[k, 0])
+        r[k, 1], r[k, 2] = _disk(r[k, 1], r[k, 2], solver.mu[k] * r[k, 0])
+        r[k, 3], r[k, 4] = _disk(r[k, 3], r[k, 4], solver.roll[k] * r[k, 0])
     _apply_impulses(pair, nc, inv_mass, solver)
 
 
@@ -356,13 +377,13 @@ def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
 def _apply_impulses(pair, nc, inv_mass, solver):
     """Apply every contact's impulses r to its bodies' velocities."""
     idx, frame, res_a, res_b, r = (
-        solver[S_IDX],
-        solver[S_FRAME],
-        solver[S_RES_A],
-        solver[S_RES_B],
-        solver[S_R],
+        solver.idx,
+        solver.frame,
+        solver.res_a,
+        solver.res_b,
+        solver.r,
     )
-    v, w = solver[S_V], solver[S_W]
+    v, w = solver.v, solver.w
     for k in range(nc):
         a, b = pair[idx[k], 0], pair[idx[k], 1]
         ima, imb = inv_mass[a], inv_mass[b]
@@ -387,9 +408,9 @@ def _sweeps(pair, nc, rot, body, iters, tol, solver):
     it is skipped when neither body changed over the last sweep. So a settled island
     (food on a fixed wok) stops sweeping while a busier one goes on."""
     inv_mass, inv_inertia = body[0], body[1]
-    idx, mu, roll, r, changed = solver[S_IDX], solver[S_MU], solver[S_ROLL], solver[S_R], solver[S_SWEPT]
-    v, w, v0, w0 = solver[S_V], solver[S_W], solver[S_V0], solver[S_W0]
-    seen, touched = solver[S_SEEN], solver[S_TOUCHED]
+    idx, mu, roll, r, changed = solver.idx, solver.mu, solver.roll, solver.r, solver.swept
+    v, w, v0, w0 = solver.v, solver.w, solver.v0, solver.w0
+    seen, touched = solver.seen, solver.touched
     for i in range(changed.size):
         changed[i] = -1  # as if every body had just changed: the first sweep visits all
         seen[i] = -1
@@ -427,7 +448,7 @@ def _momentum_change2(i, rot, inv_mass, inv_inertia, solver):
     """Body i's change of velocity over the sweep in the kinetic-energy norm, m |dv|^2 +
     dw^T I dw (kg m^2/s^2): the squared momentum change an impulse J gives it is about
     J^2 / m in this norm."""
-    v, w, v0, w0 = solver[S_V], solver[S_W], solver[S_V0], solver[S_W0]
+    v, w, v0, w0 = solver.v, solver.w, solver.v0, solver.w0
     dv2 = (v[i, 0] - v0[i, 0]) ** 2 + (v[i, 1] - v0[i, 1]) ** 2 + (v[i, 2] - v0[i, 2]) ** 2
     out = dv2 / inv_mass[i]
     dx, dy, dz = w[i, 0] - w0[i, 0], w[i, 1] - w0[i, 1], w[i, 2] - w0[i, 2]
@@ -443,16 +464,16 @@ def _row_arrays(solver):
     Jacobian rows of a and b, their inverse-inertia responses, effective masses, targets,
     impulses, and the body velocities being solved."""
     return (
-        solver[S_FRAME],
-        solver[S_ANG_A],
-        solver[S_ANG_B],
-        solver[S_RES_A],
-        solver[S_RES_B],
-        solver[S_MASS],
-        solver[S_BIAS],
-        solver[S_R],
-        solver[S_V],
-        solver[S_W],
+        solver.frame,
+        solver.ang_a,
+        solver.ang_b,
+        solver.res_a,
+        solver.res_b,
+        solver.mass,
+        solver.bias,
+        solver.r,
+        solver.v,
+        solver.w,
     )
 
 
@@ -497,7 +518,7 @@ def _keep_warm(buf, nc, dt, warm, solver):
     through resting contacts, and over a short sub-step it would read as a huge force."""
     _, _, _, pair, feat, _, _ = buf
     keys, vals, size = warm
-    idx, frame, impact, r = solver[S_IDX], solver[S_FRAME], solver[S_IMPACT], solver[S_R]
+    idx, frame, impact, r = solver.idx, solver.frame, solver.impact, solver.r
     m = 0
     for k in range(nc):
         if impact[k]:
@@ -521,20 +542,20 @@ def _records(buf, nc, rot, time, step, rec, nrec, solver):
     order; returns the record count, -1 when rec is full."""
     pts, _, _, pair, feat, bar, _ = buf
     idx, ra, rb, frame, ang_a, ang_b = (
-        solver[S_IDX],
-        solver[S_RA],
-        solver[S_RB],
-        solver[S_FRAME],
-        solver[S_ANG_A],
-        solver[S_ANG_B],
+        solver.idx,
+        solver.ra,
+        solver.rb,
+        solver.frame,
+        solver.ang_a,
+        solver.ang_b,
     )
     target, speed0, impact, r, v, w = (
-        solver[S_TARGET],
-        solver[S_SPEED],
-        solver[S_IMPACT],
-        solver[S_R],
-        solver[S_V],
-        solver[S_W],
+        solver.target,
+        solver.speed,
+        solver.impact,
+        solver.r,
+        solver.v,
+        solver.w,
     )
     for k in range(nc):
         if r[k, 0] <= 0.0 and not impact[k]:
@@ -606,18 +627,18 @@ def resolve(
     ``solver`` (new_solver, rows >= count), warm-started from ``warm`` (updated); updates phi;
     appends records; adds the contacts and PGS sweeps to stats[2] and stats[4]. It allocates
     nothing and is compiled without reference counting, with all it calls."""
-    nc = _select(buf[2], count, prm[P_SLOP], solver[S_IDX])
+    nc = _select(buf[2], count, prm[P_SLOP], solver.idx)
     if nc == 0:
         warm[2][0] = 0
         return nrec
     inv_mass, inv_inertia = body[0], body[1]
-    world_velocities(kind, rot, phi, kin_v, kin_w, solver[S_V], solver[S_W])
-    inv_inertia_world(kind, rot, inv_inertia, solver[S_IW])
+    world_velocities(kind, rot, phi, kin_v, kin_w, solver.v, solver.w)
+    inv_inertia_world(kind, rot, inv_inertia, solver.iw)
     _contact_frames(buf, nc, pos, inv_mass, solver)
     _targets(buf, nc, kind, body, prm, h, dt, gscale, solver)
     _warm_impulses(buf, nc, dt, warm, inv_mass, solver)
     stats[2] += nc
     stats[4] += _sweeps(buf[3], nc, rot, body, int(prm[P_ITER]), prm[P_TOL], solver)
     _keep_warm(buf, nc, dt, warm, solver)
-    store_twists(kind, rot, solver[S_V], solver[S_W], phi)
+    store_twists(kind, rot, solver.v, solver.w, phi)
     return _records(buf, nc, rot, time, step, rec, nrec, solver)

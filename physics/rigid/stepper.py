@@ -69,7 +69,6 @@ from physics.rigid.codes import (
     REC_TIME,
 )
 from physics.rigid.impulses import (
-    S_IDX,
     inv_inertia_world,
     new_solver,
     resolve,
@@ -547,7 +546,7 @@ def run_steps(
             touching = np.empty(pairs.shape[0], np.bool_)
             count = _detect(pairs, pos, rot, geo, slop, reach, buf, gap0, touching)
             last_count = max(last_count, count)
-            if count > solver[S_IDX].shape[0]:
+            if count > solver.idx.shape[0]:
                 solver = new_solver(2 * count, n, warm[0].shape[0])
             time = (first + s) * h + t_local
             solved = nrec
