@@ -14,6 +14,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import os
+import time
 
 from jassy.errors import JassyError
 
@@ -143,9 +144,22 @@ def default_output_device() -> int:
     :mod:`jassy.devices`, through sounddevice)."""
     lib = library()
     index = lib.Pa_GetDefaultOutputDevice()
+    for _ in range(NO_DEVICE_TRIES):
+        if index != PA_NO_DEVICE or lib.Pa_GetDeviceCount() > 0:
+            break
+        # no device at all (so no stream open here): a sound server that refused the
+        # connection as PortAudio started (seen with JACK on a loaded machine); start again
+        release()
+        time.sleep(NO_DEVICE_PAUSE)
+        lib = library()
+        index = lib.Pa_GetDefaultOutputDevice()
     if index == PA_NO_DEVICE:
         raise LiveError("no default output device (see 'jassy devices')")
     return index
+
+
+#: Restarts of PortAudio, NO_DEVICE_PAUSE s apart, while it finds no device at all.
+NO_DEVICE_TRIES, NO_DEVICE_PAUSE = 10, 0.2
 
 
 class OutputStream:
