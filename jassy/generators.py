@@ -41,15 +41,20 @@ GENERATOR_KEYS = {"node", "action", "times", "start", "stop", "seed", "args"}
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice", "random_point", "random_on_track")
 
 
+def _model_name(value: Any, models: dict, key: str) -> str:
+    """The name of a [models] entry given at ``key``, checked against the patch's models."""
+    name = text_value(value, key, "the name of a [models] entry")
+    if name not in models:
+        raise PatchError(
+            f"{key}: unknown model {name!r}; models are {', '.join(models) or 'none'}{suggest(name, models)}"
+        )
+    return name
+
+
 def _on_track(value: Any, rng: np.random.Generator, models: dict, where: str):
     """A function drawing a location uniform in distance along a model's track: the two
     track points around a uniform coordinate s, weighted by the linear shape functions."""
-    name = text_value(value, f"{where}.random_on_track", "the name of a [models] entry")
-    if name not in models:
-        raise PatchError(
-            f"{where}.random_on_track: unknown model {name!r}; models are {', '.join(models) or 'none'}"
-            f"{suggest(name, models)}"
-        )
+    name = _model_name(value, models, f"{where}.random_on_track")
     track = models[name].track
     if track is None:
         raise PatchError(
@@ -75,13 +80,7 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
         raise PatchError(f"{where}: expected one distribution ({{uniform = [lo, hi]}}, ...), got {spec!r}")
     ((kind, value),) = spec.items()
     if kind == "random_point":
-        name = text_value(value, f"{where}.random_point", "the name of a [models] entry")
-        if name not in models:
-            raise PatchError(
-                f"{where}.random_point: unknown model {name!r}; models are {', '.join(models) or 'none'}"
-                f"{suggest(name, models)}"
-            )
-        n = models[name].n_points
+        n = models[_model_name(value, models, f"{where}.random_point")].n_points
         return lambda: int(rng.integers(n))
     if kind == "random_on_track":
         return _on_track(value, rng, models, where)

@@ -9,9 +9,10 @@ import trimesh
 from jassy.errors import JassyError
 from physics.rigid import codes
 from physics.rigid import stepper as st
+from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
 from physics.rigid.meshgrid import build_grid, grid_closest, grid_within
-from physics.rigid.narrow import _mesh_closest, new_mesh_memory, segment_params, sweep_and_prune
+from physics.rigid.narrow import _mesh_closest, new_mesh_memory, segment_params
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
@@ -420,16 +421,26 @@ def test_closest_segments_against_dense_sampling():
 
 
 def test_sweep_and_prune_equals_all_pairs():
+    """The broad phase against every pair tested by brute force, with a scratch reused across
+    sweeps and a dense set that makes its pair buffer grow."""
     rng = np.random.default_rng(5)
-    lo = rng.uniform(0, 1, (300, 3))
-    hi = lo + rng.uniform(0, 0.1, (300, 3))
-    movable = rng.uniform(size=300) < 0.8
-    got = {tuple(p) for p in sweep_and_prune(lo, hi, movable)}
-    overlap = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
-    expected = {
-        (i, j) for i in range(300) for j in range(i + 1, 300) if overlap[i, j] and (movable[i] or movable[j])
-    }
-    assert got == expected
+    scratch = new_sweep(300)
+    for size in (0.1, 0.6):
+        lo = rng.uniform(0, 1, (300, 3))
+        hi = lo + rng.uniform(0, size, (300, 3))
+        movable = rng.uniform(size=300) < 0.8
+        pairs, scratch = sweep_pairs(lo, hi, movable, scratch)
+        got = [tuple(p) for p in pairs]
+        overlap = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
+        expected = {
+            (i, j)
+            for i in range(300)
+            for j in range(i + 1, 300)
+            if overlap[i, j] and (movable[i] or movable[j])
+        }
+        assert len(got) == len(set(got))
+        assert set(got) == expected
+    assert len(expected) > 8 * 300  # the dense set outgrew the first pair buffer
 
 
 def test_mass_properties_against_trimesh():

@@ -670,37 +670,3 @@ def _with_compound(a, b, pos, rot, geo, margin, buf, count):
             sa, pa = slots[i], i - first[a]
             count = _polytopes(a, sa, b, sb, (pa, pb), pos, rot, geo, margin, buf, count)
     return count
-
-
-@nb.njit(cache=True)
-def sweep_and_prune(lo, hi, movable):
-    """Pairs (i, j) whose boxes [lo, hi] overlap and of which at least one is movable.
-    Sorted on x, swept; O(n log n + pairs)."""
-    n = lo.shape[0]
-    order = np.argsort(lo[:, 0])
-    pairs = np.empty((max(16, 8 * n), 2), np.int64)
-    count = 0
-    active = np.empty(n, np.int64)
-    n_active = 0
-    for oi in range(n):
-        i = order[oi]
-        keep = 0
-        for k in range(n_active):
-            j = active[k]
-            if hi[j, 0] >= lo[i, 0]:
-                active[keep] = j
-                keep += 1
-                overlap_y = hi[j, 1] >= lo[i, 1] and hi[i, 1] >= lo[j, 1]
-                overlap_z = hi[j, 2] >= lo[i, 2] and hi[i, 2] >= lo[j, 2]
-                if (movable[i] or movable[j]) and overlap_y and overlap_z:
-                    if count == pairs.shape[0]:
-                        grown = np.empty((2 * count, 2), np.int64)
-                        grown[:count] = pairs
-                        pairs = grown
-                    pairs[count, 0] = min(i, j)
-                    pairs[count, 1] = max(i, j)
-                    count += 1
-        n_active = keep
-        active[n_active] = i
-        n_active += 1
-    return pairs[:count]
