@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from numba import types
-from numba.extending import intrinsic
+
+from jassy.jit import void_pointer
 
 
 @nb.njit(cache=True)
@@ -50,17 +50,6 @@ def rank_modes(scores, limit, keep, fade, later_top):
     return any_fade
 
 
-@intrinsic
-def _float64_pointer(typingctx, address):
-    """The float64 pointer at integer ``address`` (a numpy array's ``ctypes.data``)."""
-    signature = types.CPointer(types.float64)(types.intp)
-
-    def codegen(context, builder, sig, args):
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
-
-    return signature, codegen
-
-
 @nb.njit(cache=True)
 def scan_forces(
     addresses, size, begin, end, rotate, unseen, expected, heard_now, heard_before, forced, onset, unrendered
@@ -83,7 +72,7 @@ def scan_forces(
         any_before |= heard_before[b]
         loud = unseen[b]
         if not loud and not heard_now[b]:
-            x = nb.carray(_float64_pointer(addresses[b]), size)
+            x = nb.carray(void_pointer(addresses[b]), (size,), np.float64)
             for i in range(begin, end):
                 if x[i] != 0.0:
                     loud = True

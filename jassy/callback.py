@@ -43,7 +43,7 @@ from jassy.events import Event
 from jassy.graph import Graph
 from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
-from jassy.jit import drop_stale_cache
+from jassy.jit import drop_stale_cache, void_pointer
 from jassy.memlock import resident
 from jassy.program import (
     HEADER,
@@ -61,11 +61,10 @@ from jassy.program import (
     _i64,
     kind_slots,
     run_program,
-    void_pointer,
     why_not_compiled,
 )
 from jassy.safety import CEILING, limit, release_coefficient
-from jassy.scheduler import _SAMPLE_SLACK, validate_event
+from jassy.scheduler import apply_frame, validate_event
 from jassy.tracks import walk_score
 from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
 from ugens.filters import Biquad, design_biquad
@@ -614,14 +613,14 @@ class CallbackRenderer:
         to be pushed, in order, into ``queue``."""
         self._queue = queue
         self._pending = 0
-        frame = math.ceil(sample_time - _SAMPLE_SLACK)
+        frame = apply_frame(sample_time)
         node = self.graph.nodes[event.node]
         base = self._bases[event.node]
         out: list[list[float]] = []
         if event.action == "set":
             ramp = event.ramp
             if ramp is not None:
-                end = math.ceil((event.time + ramp) * self.sample_rate - _SAMPLE_SLACK)
+                end = apply_frame((event.time + ramp) * self.sample_rate)
                 ramp = (end - frame) / self.sample_rate
             for key, value in event.args.items():
                 out.extend(self._set_records(node, base, frame, key, value, event.jump, ramp))

@@ -10,7 +10,21 @@ from typing import Any
 import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
-from numba.core import codegen
+from numba.core import cgutils, codegen, types
+from numba.extending import intrinsic
+
+
+@intrinsic
+def void_pointer(typingctx, address):
+    """The int64 ``address`` (an array's ``ctypes.data``) as a ``void *``, for numba.carray
+    views of arrays kept alive elsewhere."""
+    sig = types.voidptr(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], cgutils.voidptr_t)
+
+    return sig, codegen
+
 
 #: Entry points found by :func:`specialise`, by (kernel, type key of the arguments).
 _ENTRY_POINTS: dict[tuple, Callable] = {}

@@ -26,13 +26,13 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 from llvmlite import ir as llvmir
-from numba.core import cgutils, types
+from numba.core import types
 from numba.extending import intrinsic
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from jassy import params
 from jassy.graph import Graph
-from jassy.jit import drop_stale_cache
+from jassy.jit import drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
 from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
@@ -165,17 +165,6 @@ PROGRAM_UGENS = {
     Radiation: RADIATION,
     SoundPressure: SOUND_PRESSURE,
 }
-
-
-@intrinsic
-def void_pointer(typingctx, address):
-    """The int64 ``address`` as a ``void *`` (for numba.carray)."""
-    sig = types.voidptr(types.int64)
-
-    def codegen(context, builder, signature, args):
-        return builder.inttoptr(args[0], cgutils.voidptr_t)
-
-    return sig, codegen
 
 
 # The array views below are inlined into the program: called with literal sizes they would
