@@ -64,9 +64,7 @@ def _on_track(value: Any, rng: np.random.Generator, models: dict, where: str):
     coords, names = track.coordinates, track.names
 
     def draw() -> dict:
-        s = float(rng.uniform(coords[0], coords[-1]))
-        i = min(int(np.searchsorted(coords, s, side="right")) - 1, coords.size - 2)
-        x = (s - coords[i]) / (coords[i + 1] - coords[i])
+        i, x = track.segment(float(rng.uniform(coords[0], coords[-1])))
         return {"vertices": [names[i], names[i + 1]], "weights": [1.0 - x, x]}
 
     return draw

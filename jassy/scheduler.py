@@ -37,6 +37,12 @@ if TYPE_CHECKING:  # the program imports the ugens: not at import time of the co
 _SAMPLE_SLACK = 1e-6
 
 
+def apply_frame(sample_time: float) -> int:
+    """The frame at which an event at ``sample_time`` (in samples) applies: the first frame
+    at or after it, allowing _SAMPLE_SLACK of rounding in the time's conversion."""
+    return math.ceil(sample_time - _SAMPLE_SLACK)
+
+
 def validate_event(graph: Graph, event: Event, where: str) -> Event:
     """Check an event against the graph; return it with validated, coerced args."""
     if not isinstance(event.time, (int, float)) or not math.isfinite(event.time) or event.time < 0:
@@ -136,7 +142,7 @@ class Scheduler:
         order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
         self.events = walk_score(graph, [checked[i] for i in order], self.sample_rate)
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
-        self.apply_frames = [math.ceil(t - _SAMPLE_SLACK) for t in self.sample_times]
+        self.apply_frames = [apply_frame(t) for t in self.sample_times]
         self.inline = [self._is_inline(ev) for ev in self.events]
         self.next_event = 0
         self.frame = 0
@@ -151,7 +157,7 @@ class Scheduler:
         """Add a validated event during a render (live input). An event whose time has
         passed applies at the next frame to be rendered."""
         sample_time = max(event.time * self.sample_rate, float(self.frame))
-        frame = max(math.ceil(sample_time - _SAMPLE_SLACK), self.frame)
+        frame = max(apply_frame(sample_time), self.frame)
         i = bisect.bisect_right(self.apply_frames, frame, lo=self.next_event)
         self.events.insert(i, event)
         self.sample_times.insert(i, sample_time)
@@ -195,7 +201,7 @@ class Scheduler:
         if ev.action == "set":
             ramp = ev.ramp
             if ramp is not None:  # end on the frame where time + ramp applies: tracks join exactly
-                end = math.ceil((ev.time + ramp) * self.sample_rate - _SAMPLE_SLACK)
+                end = apply_frame((ev.time + ramp) * self.sample_rate)
                 ramp = (end - frame) / self.sample_rate
             for key, value in ev.args.items():
                 _set(node, frame, key, value, ev.jump, ramp)

@@ -19,7 +19,6 @@ along the way instead of cross-fading the two end rows.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 from dataclasses import replace
@@ -42,6 +41,14 @@ class Track(NamedTuple):
     coordinates: np.ndarray  # s of each point, ascending (t{i} at s = i)
     rows: np.ndarray  # the model's row index of each point
     names: tuple[str, ...]
+
+    def segment(self, s: float) -> tuple[int, float]:
+        """(i, x): coordinate s (clamped to the track) lies between its points i and i + 1,
+        a fraction x of the way."""
+        c = self.coordinates
+        s = min(max(s, c[0]), c[-1])
+        i = min(int(np.searchsorted(c, s, side="right")) - 1, c.size - 2)
+        return i, (s - c[i]) / (c[i + 1] - c[i])
 
 
 def find_track(points: Sequence[str]) -> Track | None:
@@ -95,21 +102,16 @@ def track_coordinate(model: ModalModel, location: Location) -> float | None:
 
 def track_gains(model: ModalModel, rows: np.ndarray, location: Location) -> np.ndarray | None:
     """Rows (gains or driving gains, one per point) interpolated at ``location`` with the
-    track's linear shape functions; None if ``location`` is not on the model's track."""
+    track's linear shape functions; None if ``location`` is not on the model's track, or is
+    one point or two neighbours on it (their barycentric blend, as given, is the same)."""
     s = track_coordinate(model, location)
     if s is None:
         return None
-    coords, track_rows = model.track.coordinates, model.track.rows
-    s = min(max(s, coords[0]), coords[-1])
-    i = min(int(np.searchsorted(coords, s, side="right")) - 1, coords.size - 2)
-    a, b = int(track_rows[i]), int(track_rows[i + 1])
+    i, x = model.track.segment(s)
+    a, b = int(model.track.rows[i]), int(model.track.rows[i + 1])
     own = {model.point_index(v, "location") for v in location.vertices}
-    if own <= {a, b}:  # one point or two neighbours: their barycentric blend, as given
-        out = np.zeros(model.n_modes)
-        for v, w in zip(location.vertices, location.weights, strict=True):
-            out += w * rows[model.point_index(v, "location")]
-        return out
-    x = (s - coords[i]) / (coords[i + 1] - coords[i])
+    if own <= {a, b}:
+        return None
     return (1.0 - x) * rows[a] + x * rows[b]
 
 
@@ -141,10 +143,10 @@ def walk_score(graph: Graph, events: Sequence[Event], sample_rate: float) -> lis
     ceil(time * sample_rate) and ramps end at ceil((time + ramp) * sample_rate), as in
     jassy.scheduler. Events posted during a render (live input) are neither expanded nor
     stop a walk of the score."""
-    from jassy.scheduler import _SAMPLE_SLACK
+    from jassy.scheduler import apply_frame
 
     def frame_of(t: float) -> int:
-        return math.ceil(t * sample_rate - _SAMPLE_SLACK)
+        return apply_frame(t * sample_rate)
 
     out: list[_Scored] = []
     walks: dict[str, _Walk] = {}  # node -> where its contact is (or goes) on its track
