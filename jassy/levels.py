@@ -239,6 +239,8 @@ def bubble_stream_rms(rate, min_radius, max_radius, exponent, min_depth, max_dep
     w0-dependent terms, themselves < 0.1 % of the energy); radius r drawn with density
     ~ r^-exponent on [min_radius, max_radius], depth uniform. The stream's voice limit is
     not modelled."""
+    from ugens.bubbles import R_REF, bubble_decay, minnaert_frequency  # ugens import jassy
+
     u = (np.arange(points) + 0.5) / points  # midpoints of the radius CDF
     lo, hi = min(min_radius, max_radius), max(min_radius, max_radius)
     q = 1.0 - exponent
@@ -248,10 +250,10 @@ def bubble_stream_rms(rate, min_radius, max_radius, exponent, min_depth, max_dep
         r = lo * (hi / lo) ** u
     else:
         r = (lo**q + u * (hi**q - lo**q)) ** (1.0 / q)
-    d = 0.13 / r + 0.0072 * r**-1.5
-    w0 = 2.0 * np.pi * 3.0 / r
-    energy = (r / 1e-3) ** 3 * (1.0 / (4.0 * d) - d / (4.0 * (d * d + w0 * w0)))
-    area = (r / 1e-3) ** 1.5 * w0 / (d * d + w0 * w0)
+    d = bubble_decay(r)
+    w0 = 2.0 * np.pi * minnaert_frequency(r)
+    energy = (r / R_REF) ** 3 * (1.0 / (4.0 * d) - d / (4.0 * (d * d + w0 * w0)))
+    area = (r / R_REF) ** 1.5 * w0 / (d * d + w0 * w0)
     depth2 = (min_depth**2 + min_depth * max_depth + max_depth**2) / 3.0
     mean = rate * gain * (min_depth + max_depth) / 2.0 * area.mean()
     return float(np.sqrt(rate * gain**2 * depth2 * energy.mean() + mean**2))

@@ -129,7 +129,6 @@ _GUSTINESS_SPEC = ParamSpec(
 _GUST_TIME_SPEC = ParamSpec(
     "float", 1.5, low=0.01, high=100.0, unit="s", fixed=True, doc="correlation time of the gusts"
 )
-_SEED_SPEC = seed_spec()
 
 
 class _Flow(UGen):

@@ -3,7 +3,7 @@
 The boxes are sorted on x and swept once, keeping the boxes still open (Baraff, "Dynamic
 simulation of non-penetrating rigid bodies", 1992, sec. 7.2). The pair buffer, the sorted
 copies of the boxes and the open list live in a :func:`new_sweep` scratch kept for a whole run,
-so a step allocates nothing but the sort's order.
+so a sweep allocates nothing but the sort's order.
 """
 
 from __future__ import annotations

@@ -269,12 +269,7 @@ def _polytope(mesh, com, rotation):
     ends = np.asarray(mesh.face_adjacency_edges)[folded]
     faces = np.asarray(mesh.face_adjacency)[folded]
     p, q, n1, n2 = verts[ends[:, 0]], verts[ends[:, 1]], normals[faces[:, 0]], normals[faces[:, 1]]
-    arc = np.c_[
-        n2[:, 1] * n1[:, 2] - n2[:, 2] * n1[:, 1],
-        n2[:, 2] * n1[:, 0] - n2[:, 0] * n1[:, 2],
-        n2[:, 0] * n1[:, 1] - n2[:, 1] * n1[:, 0],
-    ]  # written out as narrow._edge_separation would compute it, to the same bits
-    edges = np.c_[p, q, n1, n2, arc, q - p]
+    edges = np.c_[p, q, n1, n2, np.cross(n2, n1), q - p]
     return verts, planes, tris, edges
 
 
