@@ -6,6 +6,7 @@ loads its tree's cached kernels with a short warm-up and then times every scene 
     git worktree add --detach /tmp/old <commit>
     python benchmarks/rigid_vs_commit.py --old /tmp/old --warm   # compile the old kernels once
     python benchmarks/rigid_vs_commit.py --old /tmp/old --rounds 5
+    python benchmarks/rigid_vs_commit.py --old /tmp/old --rounds 5 --only wok --repeat 3
 
 Only the public API both trees share is used (World, Body, shapes, simulate, the bench pile
 and the wok patch)."""
@@ -93,23 +94,32 @@ def _scenes():
     ]
 
 
-def child(warm_only: bool) -> None:
-    """Run in a tree (its root first on sys.path): print {scene: CPU seconds} as JSON."""
+def child(warm_only: bool, only: str = "", repeat: int = 1) -> None:
+    """Run in a tree (its root first on sys.path): print {scene: CPU seconds} as JSON, the
+    best of ``repeat`` runs of each scene whose name contains ``only``."""
     times = {}
     for name, warm, factory in _scenes():
+        if only not in name:
+            continue
         warm()
         if warm_only:
             continue
-        call = factory()
-        t0 = time.process_time()
-        call()
-        times[name] = time.process_time() - t0
+        best = math.inf
+        for _ in range(repeat):
+            call = factory()
+            t0 = time.process_time()
+            call()
+            best = min(best, time.process_time() - t0)
+        times[name] = best
     print(json.dumps(times))
 
 
-def _run_tree(tree: str, warm_only: bool = False, timeout: float = 1800) -> dict:
+def _run_tree(
+    tree: str, warm_only: bool = False, timeout: float = 1800, only: str = "", repeat: int = 1
+) -> dict:
     env = dict(os.environ, PYTHONPATH=tree, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1")
-    args = [sys.executable, os.path.abspath(__file__), "--child"] + (["--warm"] if warm_only else [])
+    args = [sys.executable, os.path.abspath(__file__), "--child", "--only", only, "--repeat", str(repeat)]
+    args += ["--warm"] if warm_only else []
     out = subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
     if out.returncode != 0:
         raise SystemExit(f"{tree}: child failed:\n{out.stderr[-2000:]}")
@@ -122,10 +132,12 @@ def main() -> None:
     p.add_argument("--new", default=HERE, help="root of the new checkout (default: this tree)")
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--warm", action="store_true", help="only compile/load both trees' kernels")
+    p.add_argument("--only", default="", help="time only the scenes whose name contains this")
+    p.add_argument("--repeat", type=int, default=1, help="best of this many runs per scene and round")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
-        child(args.warm)
+        child(args.warm, args.only, args.repeat)
         return
     if not args.old or not os.path.isdir(os.path.join(args.old, "physics", "rigid")):
         print("--old: expected the root of a jassy checkout (with physics/rigid)", file=sys.stderr)
@@ -134,14 +146,14 @@ def main() -> None:
     if args.warm:
         for label, tree in trees.items():
             t0 = time.perf_counter()
-            _run_tree(tree, warm_only=True)
+            _run_tree(tree, warm_only=True, only=args.only)
             print(f"{label}: kernels ready in {time.perf_counter() - t0:.0f} s", flush=True)
         return
     samples = {"old": [], "new": []}
     for r in range(args.rounds):
         order = ("old", "new") if r % 2 == 0 else ("new", "old")
         for label in order:
-            samples[label].append(_run_tree(trees[label]))
+            samples[label].append(_run_tree(trees[label], only=args.only, repeat=args.repeat))
         print(f"round {r + 1}: " + json.dumps({k: samples[k][-1] for k in order}), flush=True)
     print(f"\nCPU seconds, median of {args.rounds} interleaved rounds")
     print(f"{'scene':32s} {'old':>8s} {'new':>8s} {'new/old':>8s}  (new/old per round)")

@@ -6,7 +6,8 @@ to ``--states`` so that two checkouts time the same geometry:
     PYTHONPATH=NEW python benchmarks/wok_narrow_phase.py --states /tmp/wok_states.npz
     PYTHONPATH=OLD python benchmarks/wok_narrow_phase.py --states /tmp/wok_states.npz
 
-Only API both sides share is used (pair_contacts, new_mesh_memory, the stepper's buffers)."""
+Both layouts of the model are read: the Model record with its contact buffers
+(``World.model``, ``narrow.new_contacts``) and the older geometry tuple (``World.arrays``)."""
 
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ def _pairs(pos, rot, geo, margin, buf, repeats, first, last, pair_contacts):
 
 def main() -> None:
     from patches.wok import build_world, simulate_wok
-    from physics.rigid import stepper
+    from physics.rigid import narrow
     from physics.rigid.narrow import new_mesh_memory, pair_contacts
     from physics.rigid.spatial import rotation_matrices
 
@@ -46,10 +47,16 @@ def main() -> None:
         np.savez(args.states, pos=result.pos[::5], quat=result.quat[::5])
     data = np.load(args.states)
     world, _ = build_world(14, 0)
-    geo = world.arrays()[0]
     pos = np.ascontiguousarray(data["pos"])
     rot = np.stack([rotation_matrices(q) for q in data["quat"]])
-    buf = stepper._new_buffers(4096, new_mesh_memory(geo[21][-1]))
+    if hasattr(world, "model"):
+        geo = world.model()
+        buf = narrow.new_contacts(4096, new_mesh_memory(int(geo.point_start[-1])))
+    else:  # a tree from before the Model record
+        from physics.rigid import stepper
+
+        geo = world.arrays()[0]
+        buf = stepper._new_buffers(4096, new_mesh_memory(geo[21][-1]))
     _pairs(pos[:1], rot[:1], geo, 0.002, buf, 1, 0, 1000, pair_contacts)  # compile
     for name, first, last in (("wok mesh vs food", 0, 1), ("food vs food", 1, 1000)):
         best = np.inf

@@ -40,12 +40,12 @@ def patch_scene(name: str, seconds: float):
 
 def wok_scene(seconds: float):
     """A builder of the wok scene's sound graph (physics simulated once)."""
-    from patches.rigid_sound import scene_graph
+    from patches.rigid_sound import contact_locator, scene_graph
     from patches.wok import simulate_wok
     from physics.rigid.events import contact_tracks, impacts
 
     world, voices, result = simulate_wok(seconds)
-    hits, tracks = impacts(result), contact_tracks(result, with_locations=False)
+    hits, tracks = impacts(result, locate=contact_locator(world, voices)), contact_tracks(result)
 
     def build():
         return scene_graph(world.bodies, hits, tracks, voices)

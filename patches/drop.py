@@ -20,7 +20,7 @@ import trimesh
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
 from jassy.offline import OFFLINE_BLOCK
-from patches.rigid_sound import IMPACT_HEADER, Voice, impact_rows, scene_graph
+from patches.rigid_sound import IMPACT_HEADER, Voice, contact_locator, impact_rows, scene_graph
 from patches.scene_io import render_normalised, write_csv
 
 TABLE_TOP = 0.0  # m
@@ -56,11 +56,13 @@ def build_world(seed: int = 0, h: float = 1e-3):
     board = ModalModel.load(Path(__file__).with_name("wood_board_model.toml"))
     table_top = Material("varnished wood", 650.0, 0.45, 0.45, rolling=1e-3)  # rolling stops a ball in ~1 s
     world.add(
-        Body("table", Box((0.6, 0.4, 0.02)), table_top, kind="static", sound=board),
+        Body("table", Box((0.6, 0.4, 0.02)), table_top, kind="static"),
         Placement(position=(0.0, 0.0, TABLE_TOP - 0.02)),
     )
     voices = {
-        0: Voice(hit_duration=8e-4, scrape_roughness=3e-6, roll_roughness=1.5e-5, stiffness=500.0, level=1.0)
+        0: Voice(
+            board, hit_duration=8e-4, scrape_roughness=3e-6, roll_roughness=1.5e-5, stiffness=500.0, level=1.0
+        )
     }
     objects = [  # name, shape, rigid material, (modal material, overrides), size m, position, velocity, hit s
         (
@@ -144,10 +146,15 @@ def build_world(seed: int = 0, h: float = 1e-3):
             angular_velocity=tuple(rng.normal(size=3) * 4.0),
         )
         model = bar_model(name, size, mass, *modal)
-        idx = world.add(Body(name, shape, mat, sound=model), place)
+        idx = world.add(Body(name, shape, mat), place)
         if model is not None:
             voices[idx] = Voice(
-                hit_duration=hit, scrape_roughness=2e-6, roll_roughness=1e-5, stiffness=300.0, level=0.5
+                model,
+                hit_duration=hit,
+                scrape_roughness=2e-6,
+                roll_roughness=1e-5,
+                stiffness=300.0,
+                level=0.5,
             )
     return world, voices
 
@@ -180,8 +187,8 @@ def render_drop(
     t0 = time.perf_counter()
     world, voices, result = simulate_drop(duration, seed)
     t_phys = time.perf_counter() - t0
-    hits = impacts(result)
-    tracks = contact_tracks(result, with_locations=False)
+    hits = impacts(result, locate=contact_locator(world, voices))
+    tracks = contact_tracks(result)
     graph, score = scene_graph(world.bodies, hits, tracks, voices)
     audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block)
     if haptic_path:

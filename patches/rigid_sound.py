@@ -12,25 +12,72 @@ The generators of one contact feed both bodies' banks.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from jassy.events import ContactTrack, Event, Impact
 from jassy.graph import Graph
-from jassy.modal_model import Location
+from jassy.modal_model import Location, ModalModel
 
 
 @dataclass(frozen=True)
 class Voice:
-    """How one body sounds: hit duration (s, its contact stiffness), sliding and rolling
-    roughness (m RMS) and the stiffness that turns the profile into force (N/m)."""
+    """How one body sounds: the ModalModel its contacts strike (``model``); where each of the
+    model's gain rows sits in the body's shape frame (``points`` (P, 3) m: the row nearest the
+    contact is struck; None: row 0; "vertices": the rows are a TriangleMesh body's vertices,
+    struck with the barycentric weights of the hit triangle); hit duration (s, its contact
+    stiffness), sliding and rolling roughness (m RMS) and the stiffness that turns the profile
+    into force (N/m)."""
 
+    model: ModalModel
+    points: np.ndarray | str | None = field(default=None, compare=False)
     hit_duration: float = 1e-3
     scrape_roughness: float = 2e-6
     roll_roughness: float = 1e-5
     stiffness: float = 300.0
     level: float = 1.0
+
+
+def contact_locator(world, voices: dict[int, Voice]):
+    """``locate(bodies, local, feature, bary)`` for physics.rigid.events.impacts and
+    contact_tracks: the Location on each body's ModalModel of contacts at the points ``local``
+    (K, 3) (m, each body's principal frame) with features and barycentric weights (see
+    :class:`Voice`'s ``points``); row 0 for a body without a voice or points. Vectorised per
+    body."""
+    from physics.rigid.shapes import MESH
+
+    frames = world.frames()
+
+    def locate(bodies, local, feature, bary) -> list[Location]:
+        out: list[Location | None] = [None] * len(bodies)
+        for body in np.unique(bodies).tolist():
+            at = np.flatnonzero(bodies == body)
+            voice = voices.get(body)
+            points = voice.points if voice is not None else None
+            shape = world.bodies[body].shape
+            if isinstance(points, str) and points == "vertices" and shape.kind == MESH:
+                on_face = feature[at] >= 0
+                faces = shape.surface.faces[feature[at[on_face]]].tolist()
+                for k, face, weights in zip(
+                    at[on_face].tolist(), faces, bary[at[on_face]].tolist(), strict=True
+                ):
+                    out[k] = Location(tuple(face), tuple(weights))
+                at = at[~on_face]
+                points = None
+            if points is None or isinstance(points, str):
+                for k in at.tolist():
+                    out[k] = Location((0,), (1.0,))
+                continue
+            com, rotation = frames[body]
+            shape_points = local[at] @ rotation.T + com
+            candidates = np.asarray(points, float)
+            d2 = ((shape_points[:, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
+            for k, nearest in zip(at.tolist(), np.argmin(d2, axis=1).tolist(), strict=True):
+                out[k] = Location((nearest,), (1.0,))
+        return out
+
+    return locate
 
 
 def _slug(name: str) -> str:
@@ -60,7 +107,8 @@ def scene_graph(
     voices: dict[int, Voice],
     max_contacts: int = 8,
 ):
-    """(Graph, score) for ``bodies`` (list of physics.rigid.world.Body) and their events.
+    """(Graph, score) for ``bodies`` (list of physics.rigid.world.Body) and their events; the
+    bodies with a voice (``voices``: body number -> Voice) sound.
     Only the ``max_contacts`` pairs with the longest sustained contact get sliding/rolling
     generators (the rest are too brief to hear as sliding); the generators follow the pair's
     tracks at their full rate as control curves (ContactControls.follow), so the score holds
@@ -71,7 +119,7 @@ def scene_graph(
     from ugens.roll import Roll
     from ugens.scrape import Scrape
 
-    sounding = [i for i, b in enumerate(bodies) if b.sound is not None]
+    sounding = [i for i in range(len(bodies)) if i in voices]
     names = {i: _slug(bodies[i].name) for i in sounding}
     inputs = {i: [] for i in sounding}
     hits = {}
@@ -83,7 +131,7 @@ def scene_graph(
     for ev in sorted(impacts, key=lambda e: e.time):
         for body, loc in zip(ev.bodies, ev.locations, strict=False):
             if body in hits:
-                if loc != where[body]:  # a jump only where the location changes
+                if loc is not None and loc != where[body]:  # a jump only where the location changes
                     score.append(Event(ev.time, f"bank_{names[body]}", "set", {"location": loc}, jump=True))
                     where[body] = loc
                 score.append(Event(ev.time, hits[body].name, "impact", {"impulse": ev.impulse}))
@@ -113,7 +161,7 @@ def scene_graph(
     banks = []
     for i in sounding:
         drive = inputs[i][0] if len(inputs[i]) == 1 else Mixer(*inputs[i], name=f"drive_{names[i]}")
-        banks.append(ModalBank(bodies[i].sound, name=f"bank_{names[i]}")(drive))
+        banks.append(ModalBank(voices[i].model, name=f"bank_{names[i]}")(drive))
     mix = Mixer(*banks, gains=[voices[i].level for i in sounding], name="mix")
     return Graph(mix), sorted(score, key=lambda e: e.time)
 

@@ -22,7 +22,7 @@ import trimesh
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
 from jassy.offline import OFFLINE_BLOCK
-from patches.rigid_sound import IMPACT_HEADER, Voice, impact_rows, scene_graph
+from patches.rigid_sound import IMPACT_HEADER, Voice, contact_locator, impact_rows, scene_graph
 from patches.scene_io import render_normalised, write_csv
 
 WOK_RIM = 0.18  # m
@@ -106,12 +106,20 @@ def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
             TriangleMesh(wok_surface()),
             steel,
             kind="kinematic",
-            sound=ModalModel.load(Path(__file__).with_name("wok_deep_model.toml")),
-            sound_points=points,
             path=hand_path,
         )
     )
-    voices = {0: Voice(hit_duration=4e-4, scrape_roughness=1.5e-6, roll_roughness=6e-6, stiffness=400.0)}
+    wok_model = ModalModel.load(Path(__file__).with_name("wok_deep_model.toml"))
+    voices = {
+        0: Voice(
+            wok_model,
+            points,
+            hit_duration=4e-4,
+            scrape_roughness=1.5e-6,
+            roll_roughness=6e-6,
+            stiffness=400.0,
+        )
+    }
     for k in range(n_food):
         kind = k % 4
         if kind == 0:
@@ -131,8 +139,8 @@ def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
             quaternion=tuple(rng.normal(size=4)),
             angular_velocity=tuple(rng.normal(size=3) * 3.0),
         )
-        idx = world.add(Body(f"food{k}", shape, food, sound=food_model(size, seed * 1000 + k)), place)
-        voices[idx] = Voice(hit_duration=3e-3, level=1.0)
+        idx = world.add(Body(f"food{k}", shape, food), place)
+        voices[idx] = Voice(food_model(size, seed * 1000 + k), hit_duration=3e-3, level=1.0)
     return world, voices
 
 
@@ -167,8 +175,8 @@ def render_wok(
     t0 = time.perf_counter()
     world, voices, result = simulate_wok(duration, n_food, seed)
     t_phys = time.perf_counter() - t0
-    hits = impacts(result)
-    tracks = contact_tracks(result, with_locations=False)
+    hits = impacts(result, locate=contact_locator(world, voices))
+    tracks = contact_tracks(result)
     graph, score = scene_graph(world.bodies, hits, tracks, voices)
     audio, warnings = render_normalised(graph, score, duration, out_wav, sample_rate, block, radius=0.18)
 

@@ -31,7 +31,6 @@ WIDER = {
     ("physics/deform/shape_matching.py", "_goals"),  # 15
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
-    ("physics/rigid/impulses.py", "resolve"),  # 20
     ("physics/rigid/integrate.py", "_solve3"),  # 12
     ("physics/rigid/integrate.py", "advance_body_into"),  # 13
     ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
@@ -43,10 +42,6 @@ WIDER = {
     ("physics/rigid/narrow.py", "_push"),  # 16
     ("physics/rigid/narrow.py", "_push_face"),  # 14
     ("physics/rigid/narrow.py", "_push_point"),  # 17
-    ("physics/rigid/stepper.py", "_gap_at"),  # 12
-    ("physics/rigid/stepper.py", "_penalty"),  # 15
-    ("physics/rigid/stepper.py", "_time_of_impact"),  # 14
-    ("physics/rigid/stepper.py", "run_steps"),  # 22
     ("physics/rod/mixed.py", "_element_terms"),  # 14
     ("ugens/bubbles.py", "bubbles"),  # 13
     ("ugens/drill.py", "drill_kernel"),  # 14

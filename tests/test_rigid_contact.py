@@ -11,8 +11,9 @@ from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
+from physics.rigid.impulses import new_warm_start
 from physics.rigid.meshgrid import build_grid, grid_closest, grid_within
-from physics.rigid.narrow import _mesh_closest, new_mesh_memory, segment_params
+from physics.rigid.narrow import _mesh_closest, new_contacts, new_mesh_memory, segment_params
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
@@ -257,13 +258,12 @@ def test_impact_location_on_a_mesh_is_the_hit_triangle():
     floor = trimesh.creation.box(extents=(1.0, 1.0, 0.1))
     floor.apply_translation((0, 0, -0.05))
     w = World(StepParams(h=1e-3))
-    w.add(
-        Body(
-            "floor", TriangleMesh(floor), Material("g", 1000, 0.5, 0), kind="static", sound_points="vertices"
-        )
-    )
+    from patches.rigid_sound import Voice, contact_locator
+
+    w.add(Body("floor", TriangleMesh(floor), Material("g", 1000, 0.5, 0), kind="static"))
     w.add(Body("ball", Sphere(0.02), Material("b", 1000, 0.5, 0)), Placement(position=(0.13, -0.21, 0.3)))
-    hit = impacts(simulate(w, 0.3, sample_every=0))[0]
+    voices = {0: Voice(None, "vertices")}  # the floor's model rows are its vertices
+    hit = impacts(simulate(w, 0.3, sample_every=0), locate=contact_locator(w, voices))[0]
     loc = hit.locations[0] if hit.bodies[0] == 0 else hit.locations[1]
     verts = np.asarray(floor.vertices)[list(loc.vertices)]
     point = np.asarray(loc.weights) @ verts
@@ -359,10 +359,10 @@ def test_remembered_mesh_queries_equal_a_search_of_every_triangle():
     w = World(StepParams(h=1e-3))
     w.add(Body("bowl", TriangleMesh(_bumpy_bowl()), Material("g", 1000, 0.5, 0), kind="static"))
     w.add(Body("ball", Sphere(0.01), Material("b", 1000, 0.5, 0)))
-    geo = w.arrays()[0]
-    m, k = geo[10][0], geo[21][1]
-    tris = geo[12][geo[11][m] : geo[11][m + 1]]
-    near = new_mesh_memory(geo[21][-1])
+    geo = w.model()
+    m, k = geo.mesh_of[0], geo.point_start[1]
+    tris = geo.tris[geo.tri_start[m] : geo.tri_start[m + 1]]
+    near = new_mesh_memory(geo.point_start[-1])
     reach = 0.02
     rng = np.random.default_rng(10)
     p = np.array([0.0, 0.0, -0.28])
@@ -466,7 +466,7 @@ def test_bad_input_is_named():
     with pytest.raises(JassyError, match="cannot be dynamic"):
         Body("p", Plane(), Material("x", 1000, 0.5, 0.3))
     with pytest.raises(JassyError, match="integrator"):
-        StepParams(integrator="euler").vector()
+        StepParams(integrator="euler").options()
     with pytest.raises(JassyError, match="Sphere.radius"):
         Sphere(-1.0)
     with pytest.raises(JassyError, match="duration"):
@@ -570,7 +570,7 @@ def test_spin_bound_covers_a_tumbling_body_over_a_step():
     inertia = np.array([1.0, 4.0, 4.5]) * 1e-5
     radius, h = 0.04, 1e-3
     rng = np.random.default_rng(11)
-    geo = (None, None, None, np.array([radius]))
+    bound = np.array([radius])
     kind = np.array([codes.DYNAMIC])
     for _ in range(200):
         phi = np.r_[rng.normal(size=3) * 50.0, 0.0, 0.0, 0.0]
@@ -580,14 +580,17 @@ def test_spin_bound_covers_a_tumbling_body_over_a_step():
         points = rng.normal(size=(50, 3))
         points *= radius / np.linalg.norm(points, axis=1, keepdims=True)
         moved = points @ (rotation_matrices(q1[None])[0] - rotation_matrices(q[None])[0]).T
-        _, spin = st._speeds(
+        spin = np.zeros(1)
+        st._speeds(
+            kind,
+            bound,
+            inertia[None],
             phi[None],
             rotation_matrices(q[None]),
-            kind,
             np.zeros((1, 3)),
             np.zeros((1, 3)),
-            geo,
-            inertia[None],
+            np.zeros((1, 3)),
+            spin,
         )
         assert np.max(np.linalg.norm(moved, axis=1)) <= h * spin[0] * (1 + 1e-9)
 
@@ -597,11 +600,11 @@ def _pair_gaps(world, state, margin=0.1):
     from physics.rigid.narrow import pair_contacts
     from physics.rigid.spatial import rotation_matrices
 
-    geo = world.arrays()[0]
-    buf = st._new_buffers(64, new_mesh_memory(geo[21][-1]))
+    geo = world.model()
+    buf = new_contacts(64, new_mesh_memory(geo.point_start[-1]))
     rot = rotation_matrices(state.quat)
     count = pair_contacts(0, 1, state.pos, rot, geo, margin, buf, 0)
-    return buf[0][:count], buf[1][:count], buf[2][:count], buf[3][:count]
+    return buf.points[:count], buf.normals[:count], buf.gaps[:count], buf.pairs[:count]
 
 
 @pytest.mark.parametrize("gap", [0.01, 0.002, -0.001])
@@ -725,3 +728,52 @@ def test_convex_decomposition_covers_a_concave_mesh():
 
     assert inside(mesh.convex_hull)
     assert not any(inside(h) for h in u.hulls)
+
+
+def test_concave_body_rests_on_another_crosswise():
+    """Two U-blocks (compounds): the lower one on the floor, the upper one turned a quarter
+    turn about z and dropped from 1 mm onto the lower one's prongs: it comes to rest with its
+    bottom at the prongs' height h, level (compound against compound goes piece by piece)."""
+    from physics.rigid.shapes import Compound
+
+    w_, s_, t_, h_, d_ = 0.03, 0.015, 0.01, 0.04, 0.025
+    mesh, pieces = _u_block(w_, s_, t_, h_, d_)
+    world = World(StepParams(h=1e-3, bounce_threshold=0.05))
+    world.add(Body("floor", Plane(), Material("g", 1000, 0.0, 0.5), kind="static"))
+    u = Compound(mesh, pieces)
+    world.add(Body("lower", u, Material("wood", 600, 0.0, 0.5)), Placement(position=(0, 0, 0)))
+    quarter = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))
+    world.add(
+        Body("upper", u, Material("wood", 600, 0.0, 0.5)),
+        Placement(position=(0, 0, h_ + 1e-3), quaternion=quarter),
+    )
+    result = simulate(world, 0.4, sample_every=10)
+    com = mass_properties(u, 600).com
+    assert np.max(np.abs(result.pos[-10:, 1] - [0, 0, com[2]])) < 2e-5
+    rest = np.array([-com[1], com[0], h_ + com[2]])  # the com turned a quarter about z
+    assert np.max(np.abs(result.pos[-10:, 2] - rest)) < 2e-5
+
+
+def test_unknown_contact_model_code_is_an_error():
+    """The stepper's contact stage accepts the codes of StepParams.contact only; any other code
+    raises instead of running some model."""
+    world = _ball_world(0.5)
+    model, opt = world.model(), world.params.options()._replace(contact=7)
+    state = world.initial_state()
+    data = st.new_data(
+        model,
+        opt,
+        state.pos,
+        state.quat,
+        state.phi,
+        np.zeros((2, 0, 3)),
+        np.zeros((2, 0, 4)),
+        np.empty((4096, codes.REC_WIDTH)),
+        st.new_stats(),
+        np.zeros((0, len(world.bodies), 13)),
+        1,
+        0,
+        new_warm_start(16),
+    )
+    with pytest.raises(ValueError, match="unknown contact model"):
+        st.run_steps(model, opt, data, 0, 1, 0)

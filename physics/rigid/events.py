@@ -1,8 +1,10 @@
 """From contact records to what sound and haptics consume: Impacts, ContactTracks, haptic frames.
 
 - Impact: the records flagged as impacts at one time between one pair of bodies, merged:
-  normal impulse summed (N s), approach speed the largest (m/s), location on each body the
-  one nearest the impulse-weighted contact point (see :func:`locations_on`).
+  normal impulse summed (N s), approach speed the largest (m/s), location on each body where
+  its strongest record landed, given by the caller's ``locate`` (physics knows the contact
+  point, feature and barycentric weights, not the bodies' sound models: patches.rigid_sound
+  maps them to modal model rows).
 - ContactTrack: sustained (non-impact) contact of a pair, per outer step: normal force =
   normal impulse / h (N), slip and rolling speed weighted by impulse (m/s), location of the
   strongest contact; runs of at least ``min_steps`` consecutive steps.
@@ -16,7 +18,6 @@ import numba as nb
 import numpy as np
 
 from jassy.events import ContactTrack, HapticFrame, Impact
-from jassy.modal_model import Location
 from physics.rigid.codes import (
     REC_A,
     REC_B,
@@ -35,50 +36,16 @@ from physics.rigid.codes import (
     REC_STEP,
     REC_TIME,
 )
-from physics.rigid.shapes import MESH
 from physics.rigid.world import RunResult
 
 
-def locations_on(
-    result: RunResult, bodies: np.ndarray, local: np.ndarray, feature: np.ndarray, bary: np.ndarray
-) -> list[Location]:
-    """Location of each contact k on body bodies[k]'s ModalModel: the triangle's vertices with
-    barycentric weights bary[k] on a mesh whose model rows are its vertices
-    (``sound_points="vertices"``), else the model row whose ``sound_points`` entry is nearest
-    the contact point local[k] (m, body frame), else row 0. Vectorised per body."""
-    bodies = np.asarray(bodies, np.int64)
-    out: list[Location | None] = [None] * len(bodies)
-    frames = result.world.arrays()[5]
-    for body in np.unique(bodies).tolist():
-        at = np.flatnonzero(bodies == body)
-        spec = result.world.bodies[body]
-        points = spec.sound_points
-        if isinstance(points, str) and points == "vertices" and spec.shape.kind == MESH:
-            on_face = feature[at] >= 0
-            faces = spec.shape.surface.faces[feature[at[on_face]]].tolist()
-            for k, face, weights in zip(at[on_face].tolist(), faces, bary[at[on_face]].tolist(), strict=True):
-                out[k] = Location(tuple(face), tuple(weights))
-            at = at[~on_face]
-            points = None
-        if points is None or isinstance(points, str):
-            for k in at.tolist():
-                out[k] = Location((0,), (1.0,))
-            continue
-        com, rotation = frames[body]
-        shape_points = local[at] @ rotation.T + com
-        candidates = np.asarray(points, float)
-        d2 = ((shape_points[:, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
-        for k, nearest in zip(at.tolist(), np.argmin(d2, axis=1).tolist(), strict=True):
-            out[k] = Location((nearest,), (1.0,))
-    return out
-
-
-def _contact_locations(result: RunResult, rows: np.ndarray) -> list[tuple[Location, Location]]:
-    """(location on body a, location on body b) of each record row."""
+def _contact_locations(rows: np.ndarray, locate) -> list[tuple]:
+    """(location on body a, location on body b) of each record row, by ``locate(bodies, local,
+    feature, bary)`` (body numbers (K,), contact points in the bodies' frames (K, 3) m, features
+    (K,), barycentric weights on b (K, 3)) -> one location per row."""
     bary = rows[:, REC_BARY : REC_BARY + 3]
     sides = [
-        locations_on(
-            result,
+        locate(
             rows[:, col].astype(np.int64),
             rows[:, local : local + 3],
             rows[:, feat].astype(np.int64),
@@ -89,8 +56,9 @@ def _contact_locations(result: RunResult, rows: np.ndarray) -> list[tuple[Locati
     return list(zip(*sides, strict=True))
 
 
-def impacts(result: RunResult) -> list[Impact]:
-    """Impact events in time order (see module doc)."""
+def impacts(result: RunResult, locate=None) -> list[Impact]:
+    """Impact events in time order (see module doc); their locations by ``locate`` (as in
+    :func:`_contact_locations`; e.g. patches.rigid_sound.contact_locator), None without it."""
     rec = result.records
     rows = np.flatnonzero(rec[:, REC_IMPACT] > 0)
     if rows.size == 0:
@@ -99,7 +67,7 @@ def impacts(result: RunResult) -> list[Impact]:
     order = rows[np.lexsort((rec[rows, REC_B], rec[rows, REC_A], rec[rows, REC_TIME]))]
     first, impulse, speed, strongest = _impact_groups(rec, order)
     heads = order[first]  # each group's first record row
-    locations = _contact_locations(result, rec[strongest])
+    locations = _contact_locations(rec[strongest], locate) if locate else [(None, None)] * len(heads)
     return [
         Impact(time, (int(a), int(b)), jn, vn, None, where)
         for time, a, b, jn, vn, where in zip(
@@ -145,9 +113,10 @@ def _impact_groups(rec, order):
     return first[:g].copy(), impulse[:g].copy(), speed[:g].copy(), strongest[:g].copy()
 
 
-def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool = True) -> list[ContactTrack]:
-    """Sustained contacts per pair (see module doc); times are the steps' start times (s).
-    ``with_locations=False`` leaves the tracks' locations empty (faster)."""
+def contact_tracks(result: RunResult, min_steps: int = 5, locate=None) -> list[ContactTrack]:
+    """Sustained contacts per pair (see module doc); times are the steps' start times (s);
+    the locations of each step's strongest contact by ``locate`` (as for :func:`impacts`),
+    empty without it."""
     h = result.world.params.h
     rec = result.records
     n_bodies = len(result.world.bodies)
@@ -161,7 +130,7 @@ def contact_tracks(result: RunResult, min_steps: int = 5, with_locations: bool =
     times, force = gstep * h, total / h
     tracks = []
     for lo, hi in zip(starts[long_enough].tolist(), stops[long_enough].tolist(), strict=True):
-        locs = _contact_locations(result, rec[strongest[lo:hi]]) if with_locations else []
+        locs = _contact_locations(rec[strongest[lo:hi]], locate) if locate else []
         a, b = divmod(int(gpair[lo]), n_bodies)
         tracks.append(ContactTrack((a, b), times[lo:hi], force[lo:hi], slip[lo:hi], roll[lo:hi], locs))
     return sorted(tracks, key=lambda t: t.times[0])

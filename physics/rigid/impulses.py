@@ -24,14 +24,6 @@ import numpy as np
 from physics.rigid.codes import (
     DYNAMIC,
     KINEMATIC,
-    P_BETA,
-    P_BOUNCE,
-    P_GX,
-    P_GY,
-    P_GZ,
-    P_ITER,
-    P_SLOP,
-    P_TOL,
     REC_A,
     REC_B,
     REC_BARY,
@@ -49,6 +41,7 @@ from physics.rigid.codes import (
     REC_STEP,
     REC_TIME,
 )
+from physics.rigid.integrate import SEMI_IMPLICIT
 
 
 @nb.njit(cache=True)
@@ -91,11 +84,17 @@ def inv_inertia_world(kind, rot, inv_inertia, out):
                 )
 
 
-@nb.njit(cache=True)
-def new_warm_start(size):
-    """Contact impulses of the last solve for warm starting the next: keys (a, b, feature a,
-    feature b), world force (N) and rolling torque (N m), and the count in use."""
-    return np.empty((size, 4), np.int64), np.empty((size, 6)), np.zeros(1, np.int64)
+class WarmStart(NamedTuple):
+    """Contact forces of the last solve for warm starting the next (new_warm_start)."""
+
+    keys: np.ndarray  # (W, 4) body a, body b, feature of a, feature of b
+    forces: np.ndarray  # (W, 6) world force (N) and rolling torque (N m)
+    size: np.ndarray  # (1,) rows in use
+
+
+def new_warm_start(size: int) -> WarmStart:
+    """An empty WarmStart of ``size`` rows."""
+    return WarmStart(np.empty((size, 4), np.int64), np.empty((size, 6)), np.zeros(1, np.int64))
 
 
 class SolverScratch(NamedTuple):
@@ -170,7 +169,7 @@ def new_solver(rows, n_bodies, warm_rows):
 def _contact_frames(buf, nc, pos, inv_mass, solver):
     """Per contact k < nc: frame rows (n, t1, t2), lever arms, Jacobian rows (angular parts;
     rows 3, 4 roll about t1, t2), responses I^-1 J^T and effective masses."""
-    pts, nrm, _, pair, _, _, _ = buf
+    pts, nrm, pair = buf.points, buf.normals, buf.pairs
     idx, ra, rb, frame = solver.idx, solver.ra, solver.rb, solver.frame
     ang_a, ang_b = solver.ang_a, solver.ang_b
     for k in range(nc):
@@ -286,19 +285,20 @@ def _select(gaps, count, slop, idx):
 
 
 @nb.njit(cache=True)
-def _targets(buf, nc, kind, body, prm, h, dt, gscale, solver):
+def _targets(m, opt, buf, nc, dt, solver):
     """Per contact: friction and rolling coefficients, approach speed, and the velocity targets:
     Newton restitution for an impact (approach faster than the bounce threshold), else resting:
     penetration recovery at beta * depth / h (the outer step: a short sub-step dt after an
     impact must not turn a small penetration into a launch), a touching gap closed within dt,
     gravity's velocity increment over dt folded in. The bias adds a
     fixed body b's (constant) velocity along each row to the target, so sweeps need not read it."""
-    _, _, gaps, pair, _, _, _ = buf
-    inv_mass, _, restitution, friction, rolling = body
+    gaps, pair = buf.gaps, buf.pairs
+    kind, inv_mass, restitution, friction, rolling = m.kind, m.inv_mass, m.restitution, m.friction, m.rolling
     idx, frame, ang_a, ang_b = solver.idx, solver.frame, solver.ang_a, solver.ang_b
     target, bias, v, w = solver.target, solver.bias, solver.v, solver.w
-    slop, thr, beta = prm[P_SLOP], prm[P_BOUNCE], prm[P_BETA]
-    gx, gy, gz = prm[P_GX] * gscale * dt, prm[P_GY] * gscale * dt, prm[P_GZ] * gscale * dt
+    slop, thr, beta, h = opt.slop, opt.bounce_threshold, opt.beta, opt.h
+    gscale = 1.0 if opt.integrator == SEMI_IMPLICIT else 0.5  # the integrators' gravity share
+    gx, gy, gz = opt.gx * gscale * dt, opt.gy * gscale * dt, opt.gz * gscale * dt
     for k in range(nc):
         c = idx[k]
         a, b = pair[c, 0], pair[c, 1]
@@ -327,8 +327,8 @@ def _targets(buf, nc, kind, body, prm, h, dt, gscale, solver):
 def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
     """Initial impulses r from the last solve's contacts with the same (a, b, features): its
     force and rolling torque times dt, projected on the new frame and cones, and applied."""
-    _, _, _, pair, feat, _, _ = buf
-    keys, vals, size = warm
+    pair, feat = buf.pairs, buf.features
+    keys, vals, size = warm.keys, warm.forces, warm.size
     idx, frame, impact, r = solver.idx, solver.frame, solver.impact, solver.r
     head, nxt, used = solver.head, solver.next, solver.used
     m = size[0]
@@ -396,7 +396,7 @@ def _apply_impulses(pair, nc, inv_mass, solver):
 
 
 @nb.njit(cache=True)
-def _sweeps(pair, nc, rot, body, iters, tol, solver):
+def _sweeps(m, opt, pair, nc, rot, solver):
     """Projected Gauss-Seidel sweeps (normal row, friction disk, rolling disk of each contact)
     until no body's momentum changes over a sweep by more than tol times the largest normal
     impulse so far; returns the sweeps done (at most iters).
@@ -407,7 +407,7 @@ def _sweeps(pair, nc, rot, body, iters, tol, solver):
     below a tolerance on the impulses. A contact is updated only while one of its bodies moves:
     it is skipped when neither body changed over the last sweep. So a settled island
     (food on a fixed wok) stops sweeping while a busier one goes on."""
-    inv_mass, inv_inertia = body[0], body[1]
+    inv_mass, inv_inertia, iters, tol = m.inv_mass, m.inv_inertia, opt.iterations, opt.tolerance
     idx, mu, roll, r, changed = solver.idx, solver.mu, solver.roll, solver.r, solver.swept
     v, w, v0, w0 = solver.v, solver.w, solver.v0, solver.w0
     seen, touched = solver.seen, solver.touched
@@ -516,8 +516,8 @@ def _keep_warm(buf, nc, dt, warm, solver):
     """Store the solved contacts pushing (r_N > 0) as the next solve's warm start, as forces
     r / dt, in detection order. Not after a solve with an impact: the impact's impulse spreads
     through resting contacts, and over a short sub-step it would read as a huge force."""
-    _, _, _, pair, feat, _, _ = buf
-    keys, vals, size = warm
+    pair, feat = buf.pairs, buf.features
+    keys, vals, size = warm.keys, warm.forces, warm.size
     idx, frame, impact, r = solver.idx, solver.frame, solver.impact, solver.r
     m = 0
     for k in range(nc):
@@ -540,7 +540,7 @@ def _keep_warm(buf, nc, dt, warm, solver):
 def _records(buf, nc, rot, time, step, rec, nrec, solver):
     """Append a record row per contact pushing (or impacting) after the solve, in detection
     order; returns the record count, -1 when rec is full."""
-    pts, _, _, pair, feat, bar, _ = buf
+    pts, pair, feat, bar = buf.points, buf.pairs, buf.features, buf.bary
     idx, ra, rb, frame, ang_a, ang_b = (
         solver.idx,
         solver.ra,
@@ -601,44 +601,25 @@ def _records(buf, nc, rot, time, step, rec, nrec, solver):
 
 
 @nb.njit(cache=True, _nrt=False)
-def resolve(
-    buf,
-    count,
-    pos,
-    rot,
-    phi,
-    kind,
-    kin_v,
-    kin_w,
-    body,
-    prm,
-    h,
-    dt,
-    gscale,
-    time,
-    step,
-    rec,
-    nrec,
-    warm,
-    stats,
-    solver,
-):
-    """Impulse-level contact solve (module doc) of the contacts buf[:count] in the scratch
-    ``solver`` (new_solver, rows >= count), warm-started from ``warm`` (updated); updates phi;
-    appends records; adds the contacts and PGS sweeps to stats[2] and stats[4]. It allocates
-    nothing and is compiled without reference counting, with all it calls."""
-    nc = _select(buf[2], count, prm[P_SLOP], solver.idx)
+def resolve(m, opt, d, solver, count, dt, time, step, nrec):
+    """Impulse-level contact solve (module doc) of the contacts d.contacts[:count] at time
+    ``time`` (s) of outer step ``step``, over a (sub-)step of dt seconds, in the scratch
+    ``solver`` (new_solver, rows >= count), warm-started from d.warm (updated); updates
+    d.phi; appends records to d.rec from row nrec (returns the new count, -1 when full);
+    counts contacts and PGS sweeps in d.stats. It allocates nothing and is compiled without
+    reference counting, with all it calls."""
+    buf, warm = d.contacts, d.warm
+    nc = _select(buf.gaps, count, opt.slop, solver.idx)
     if nc == 0:
-        warm[2][0] = 0
+        warm.size[0] = 0
         return nrec
-    inv_mass, inv_inertia = body[0], body[1]
-    world_velocities(kind, rot, phi, kin_v, kin_w, solver.v, solver.w)
-    inv_inertia_world(kind, rot, inv_inertia, solver.iw)
-    _contact_frames(buf, nc, pos, inv_mass, solver)
-    _targets(buf, nc, kind, body, prm, h, dt, gscale, solver)
-    _warm_impulses(buf, nc, dt, warm, inv_mass, solver)
-    stats[2] += nc
-    stats[4] += _sweeps(buf[3], nc, rot, body, int(prm[P_ITER]), prm[P_TOL], solver)
+    world_velocities(m.kind, d.rot, d.phi, d.kin_v, d.kin_w, solver.v, solver.w)
+    inv_inertia_world(m.kind, d.rot, m.inv_inertia, solver.iw)
+    _contact_frames(buf, nc, d.pos, m.inv_mass, solver)
+    _targets(m, opt, buf, nc, dt, solver)
+    _warm_impulses(buf, nc, dt, warm, m.inv_mass, solver)
+    d.stats.contacts[0] += nc
+    d.stats.sweeps[0] += _sweeps(m, opt, buf.pairs, nc, d.rot, solver)
     _keep_warm(buf, nc, dt, warm, solver)
-    store_twists(kind, rot, solver.v, solver.w, phi)
-    return _records(buf, nc, rot, time, step, rec, nrec, solver)
+    store_twists(m.kind, d.rot, solver.v, solver.w, d.phi)
+    return _records(buf, nc, d.rot, time, step, d.rec, nrec, solver)

@@ -1,4 +1,4 @@
-"""Narrow phase: contact points between two posed shapes, and a sweep-and-prune broad phase.
+"""Narrow phase: contact points between two posed shapes.
 
 Every contact is (point, normal, gap, feature of a, feature of b, barycentric weights on b)
 with the normal pointing from b to a (pushing a along +n) and gap < 0 meaning penetration.
@@ -20,19 +20,21 @@ mesh < compound). Methods:
   vertices reach least deep behind): its vertices over that face, and the points where its
   hull edges cross the face's side planes (a face-face manifold: a cube on a cube turned or
   aligned gets the corners of the overlap);
-- compound (concave) bodies: each of their convex pieces as a polytope, against planes and
-  meshes their surface vertices;
+- compound (concave) bodies: each of their convex pieces as a polytope (against another
+  compound, piece by piece), against planes and meshes their surface vertices;
 - anything vs plane: the sphere centres or vertices against the plane;
 - anything vs triangle mesh: the same points against the mesh's triangle grid, keeping the
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
 
-``geo`` is the tuple of flat model arrays built by physics.rigid.world._build_arrays; the
-contact buffers carry what each body point last met of a mesh (_mesh_closest).
+``model`` is the world's :class:`physics.rigid.model.Model`; the method of each pair of shape
+types comes from one table (PAIR_METHOD); the contact buffers (:class:`Contacts`) carry
+what each body point last met of a mesh (_mesh_closest).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -46,6 +48,7 @@ from physics.rigid.meshgrid import (
 )
 from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
 
+NO_BARY = (0.0, 0.0, 0.0)  # barycentric weights of a contact not on a mesh triangle
 PIECE = 100000  # features of a compound's k-th convex piece are offset by PIECE * k
 EDGE = 2000  # feature of an edge-edge contact: EDGE + the edge's row among its polytope's edges
 EDGE_PREFERENCE = 1e-5  # m: an edge axis must beat every face axis by this to give the contact
@@ -54,10 +57,43 @@ EDGE_PREFERENCE = 1e-5  # m: an edge axis must beat every face axis by this to g
 # contact or per vertex.
 
 
+class Contacts(NamedTuple):
+    """Contact buffers (C rows) filled by the narrow phase, and the memory of the body points
+    near meshes (_mesh_closest)."""
+
+    points: np.ndarray  # (C, 3) world contact points, m
+    normals: np.ndarray  # (C, 3) unit normals from b to a
+    gaps: np.ndarray  # (C,) m, < 0 when penetrating
+    pairs: np.ndarray  # (C, 2) bodies a, b
+    features: np.ndarray  # (C, 2) feature of a, feature of b (vertex, face, edge row; -1 none)
+    bary: np.ndarray  # (C, 3) barycentric weights on b's mesh triangle
+    near: MeshMemory
+
+
+def new_contacts(size: int, near: MeshMemory) -> Contacts:
+    """Contact buffers of ``size`` rows sharing the mesh memory ``near`` (new_mesh_memory)."""
+    return Contacts(
+        np.empty((size, 3)),
+        np.empty((size, 3)),
+        np.empty(size),
+        np.empty((size, 2), np.int64),
+        np.empty((size, 2), np.int64),
+        np.empty((size, 3)),
+        near,
+    )
+
+
 @nb.njit(cache=True, inline="always")
-def _push(buf, count, a, b, px, py, pz, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w=0.0):
-    """Append one contact to the buffers; returns the new count (drops when full)."""
-    pts, nrm, gaps, pair, feat, bar, _ = buf
+def _push(buf, count, pair, point, normal, gap, features, bary):
+    """Append one contact to the buffers: bodies (a, b), world point (x, y, z), unit normal from
+    b to a, gap (m), features (of a, of b), barycentric weights on b; returns the new count
+    (drops when full)."""
+    a, b = pair
+    px, py, pz = point
+    nx, ny, nz = normal
+    fa, fb = features
+    u, v, w = bary
+    pts, nrm, gaps, pair, feat, bar = buf.points, buf.normals, buf.gaps, buf.pairs, buf.features, buf.bary
     if count >= gaps.size:
         return count
     pts[count, 0], pts[count, 1], pts[count, 2] = px, py, pz
@@ -70,11 +106,13 @@ def _push(buf, count, a, b, px, py, pz, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w
 
 
 @nb.njit(cache=True, inline="always")
-def _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, fa, fb, u=0.0, v=0.0, w=0.0):
+def _push_point(buf, count, pair, point, r, normal, gap, features, bary):
     """Append the contact of a's point (x, y, z) of radius r (m) at the middle of the overlap,
-    (x, y, z) - n (r + gap / 2)."""
+    (x, y, z) - n (r + gap / 2) (the other arguments as _push's)."""
     off = r + 0.5 * gap
-    return _push(buf, count, a, b, x - nx * off, y - ny * off, z - nz * off, nx, ny, nz, gap, fa, fb, u, v, w)
+    x, y, z = point
+    nx, ny, nz = normal
+    return _push(buf, count, pair, (x - nx * off, y - ny * off, z - nz * off), normal, gap, features, bary)
 
 
 @nb.njit(cache=True, inline="always")
@@ -110,9 +148,10 @@ def _rotate(i, rot, x, y, z):
 
 @nb.njit(cache=True, inline="always")
 def body_point(k, a, pos, rot, points):
-    """World position and radius (m) of body a's point k: row k of the point table geo[22]
-    (body-frame position and radius; body a's points are rows geo[21][a] to geo[21][a + 1]:
-    a sphere's centre, a capsule's axis ends and middle, a polytope's vertices)."""
+    """World position and radius (m) of body a's point k: row k of the point table
+    (Model.points: body-frame position and radius; body a's points are rows
+    Model.point_start[a] to point_start[a + 1]: a sphere's centre, a capsule's axis ends and
+    middle, a polytope's vertices)."""
     x, y, z = to_world(a, pos, rot, points[k, 0], points[k, 1], points[k, 2])
     return x, y, z, points[k, 3]
 
@@ -147,20 +186,20 @@ def segment_params(p1, q1, p2, q2):
 
 
 @nb.njit(cache=True, inline="always")
-def _axis_ends(a, pos, rot, geo):
+def _axis_ends(a, pos, rot, model):
     """World end points of a sphere (a degenerate segment) or a capsule axis."""
-    if geo[0][a] == SPHERE:
+    if model.shape_type[a] == SPHERE:
         p = (pos[a, 0], pos[a, 1], pos[a, 2])
         return p, p
-    half = geo[2][a, 1]
+    half = model.param[a, 1]
     return to_world(a, pos, rot, 0.0, 0.0, -half), to_world(a, pos, rot, 0.0, 0.0, half)
 
 
 @nb.njit(cache=True, inline="always")
-def _segment_segment(a, b, pos, rot, geo, margin, buf, count):
-    param = geo[2]
-    pa, qa = _axis_ends(a, pos, rot, geo)
-    pb, qb = _axis_ends(b, pos, rot, geo)
+def _segment_segment(a, b, pos, rot, model, margin, buf, count):
+    param = model.param
+    pa, qa = _axis_ends(a, pos, rot, model)
+    pb, qb = _axis_ends(b, pos, rot, model)
     s, t = segment_params(pa, qa, pb, qb)
     cax, cay, caz = pa[0] + s * (qa[0] - pa[0]), pa[1] + s * (qa[1] - pa[1]), pa[2] + s * (qa[2] - pa[2])
     cbx, cby, cbz = pb[0] + t * (qb[0] - pb[0]), pb[1] + t * (qb[1] - pb[1]), pb[2] + t * (qb[2] - pb[2])
@@ -174,13 +213,14 @@ def _segment_segment(a, b, pos, rot, geo, margin, buf, count):
     else:
         nx, ny, nz = 0.0, 0.0, 1.0
     off = param[b, 0] + 0.5 * gap
-    return _push(buf, count, a, b, cbx + nx * off, cby + ny * off, cbz + nz * off, nx, ny, nz, gap, -1, -1)
+    point = (cbx + nx * off, cby + ny * off, cbz + nz * off)
+    return _push(buf, count, (a, b), point, (nx, ny, nz), gap, (-1, -1), NO_BARY)
 
 
 @nb.njit(cache=True, inline="always")
 def _deepest_plane(lx, ly, lz, b, pstart, planes):
     """(largest signed distance of the body-frame point (lx, ly, lz) over polytope b's face
-    planes (geo[6], geo[7]), index of that plane): negative inside, an under-estimate of the
+    planes (Model.plane_start, planes), index of that plane): negative inside, an under-estimate of the
     distance outside."""
     best = -math.inf
     face = -1
@@ -193,11 +233,11 @@ def _deepest_plane(lx, ly, lz, b, pstart, planes):
 
 
 @nb.njit(cache=True, inline="always")
-def _polytope_distance(x, y, z, b, sb, pos, rot, geo):
+def _polytope_distance(x, y, z, b, sb, pos, rot, model):
     """Signed distance from the world point (x, y, z) to polytope b (geometry slot sb), the
     outward world normal at the closest point, and the index of the face plane or hull
     triangle reached."""
-    pstart, planes, hstart, htris = geo[6], geo[7], geo[8], geo[9]
+    pstart, planes, hstart, htris = model.plane_start, model.planes, model.hull_start, model.hull_tris
     lx, ly, lz = to_local(b, pos, rot, x, y, z)
     best, face = _deepest_plane(lx, ly, lz, sb, pstart, planes)
     if best <= 0.0:
@@ -221,38 +261,39 @@ def _polytope_distance(x, y, z, b, sb, pos, rot, geo):
     return dist, nx, ny, nz, tri - hstart[sb]
 
 
-@nb.njit(cache=True, inline="always")  # a call would pass all of geo's arrays: 2x the time
-def _spheres_polytope(a, b, sb, piece, pos, rot, geo, margin, buf, count):
+@nb.njit(cache=True, inline="always")  # a call would pass all of model's arrays: 2x the time
+def _spheres_polytope(a, b, sb, piece, pos, rot, model, margin, buf, count):
     """Contacts of sphere or capsule a with polytope b's geometry slot sb (its piece number
     ``piece``: features are offset by PIECE times it)."""
-    pstart, planes, offsets, points = geo[6], geo[7], geo[21], geo[22]
+    pstart, planes, offsets, points = model.plane_start, model.planes, model.point_start, model.points
     for k in range(offsets[a], offsets[a + 1]):
         x, y, z, r = body_point(k, a, pos, rot, points)
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
         if _deepest_plane(lx, ly, lz, sb, pstart, planes)[0] > r + margin:
             continue  # a face plane separates: the distance is larger still
-        sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, sb, pos, rot, geo)
+        sd, nx, ny, nz, feature = _polytope_distance(x, y, z, b, sb, pos, rot, model)
         gap = sd - r
         if gap <= margin:
-            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, -1, feature + PIECE * piece)
+            features = (-1, feature + PIECE * piece)
+            count = _push_point(buf, count, (a, b), (x, y, z), r, (nx, ny, nz), gap, features, NO_BARY)
     return count
 
 
 @nb.njit(cache=True, inline="always")
-def _plane_separates(a, b, sb, pos, rot, geo, margin):
+def _plane_separates(a, b, sb, pos, rot, model, margin):
     """Whether one of the face planes of polytope b's geometry slot sb has all of a's bounding
     sphere more than ``margin`` beyond it (then the two are further apart than margin)."""
     lx, ly, lz = to_local(b, pos, rot, pos[a, 0], pos[a, 1], pos[a, 2])
-    return _deepest_plane(lx, ly, lz, sb, geo[6], geo[7])[0] > geo[3][a] + margin
+    return _deepest_plane(lx, ly, lz, sb, model.plane_start, model.planes)[0] > model.bound[a] + margin
 
 
 @nb.njit(cache=True, inline="always")
-def _reference_face(a, sa, b, sb, pos, rot, geo):
+def _reference_face(a, sa, b, sb, pos, rot, model):
     """Polytope b's face plane that polytope a's vertices reach least deep behind (separating
     axes over b's face normals; sa, sb: their geometry slots): (plane index, separation = the
     smallest signed distance of a's vertices beyond it, m; above 0 the plane separates the
     two)."""
-    vstart, verts, pstart, planes = geo[4], geo[5], geo[6], geo[7]
+    vstart, verts, pstart, planes = model.vert_start, model.verts, model.plane_start, model.planes
     best, face = -math.inf, pstart[sb]
     for j in range(pstart[sb], pstart[sb + 1]):
         # plane j in a's frame (one transform per plane, not per plane and vertex)
@@ -285,24 +326,38 @@ def _beyond_sides(lx, ly, lz, b, face, pstart, planes):
 
 
 @nb.njit(cache=True, inline="always")
-def _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip):
+def _push_face(buf, count, pair, point, sd, normal, features, flip):
     """Append a's point (x, y, z) lying ``sd`` (m) beyond b's face of world normal n: the
-    contact at the middle of the overlap, normal from b to a (reversed if flip)."""
+    contact at the middle of the overlap, normal from b to a (reversed if flip). pair: (a, b);
+    features: (of a, of b)."""
+    a, b = pair
+    x, y, z = point
+    nx, ny, nz = normal
+    fa, fb = features
     px, py, pz = x - 0.5 * sd * nx, y - 0.5 * sd * ny, z - 0.5 * sd * nz
     if flip:
-        return _push(buf, count, b, a, px, py, pz, -nx, -ny, -nz, sd, fb, fa)
-    return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sd, fa, fb)
+        return _push(buf, count, (b, a), (px, py, pz), (-nx, -ny, -nz), sd, (fb, fa), NO_BARY)
+    return _push(buf, count, (a, b), (px, py, pz), (nx, ny, nz), sd, (fa, fb), NO_BARY)
 
 
 @nb.njit(cache=True, _nrt=False)
-def _polytope_on_face(a, sa, b, sb, face, pieces, pos, rot, geo, margin, buf, count, flip):
+def _polytope_on_face(slots, face, pieces, pos, rot, model, margin, buf, count, flip):
     """Contacts of polytope a (geometry slot sa) on polytope b's (slot sb) reference face
     (_reference_face; normal from b to a, reversed if flip): a's vertices within margin of the
     face plane and over the face (within margin of b's other face planes), and the points
     where a's hull edges cross b's other face planes while within margin of the face plane
     (the corners of the overlap of two faces, where no vertex of either lies over the other).
-    pieces: the piece numbers of a and b (features offset by PIECE times them)."""
-    vstart, verts, pstart, planes, hstart, htris = geo[4], geo[5], geo[6], geo[7], geo[8], geo[9]
+    slots: (a, sa, b, sb); pieces: the piece numbers of a and b (features offset by PIECE
+    times them)."""
+    a, sa, b, sb = slots
+    vstart, verts, pstart, planes, hstart, htris = (
+        model.vert_start,
+        model.verts,
+        model.plane_start,
+        model.planes,
+        model.hull_start,
+        model.hull_tris,
+    )
     fnx, fny, fnz, fd = planes[face, 0], planes[face, 1], planes[face, 2], planes[face, 3]
     nx, ny, nz = _rotate(b, rot, fnx, fny, fnz)
     fb = face - pstart[sb] + PIECE * pieces[1]
@@ -312,7 +367,7 @@ def _polytope_on_face(a, sa, b, sb, face, pieces, pos, rot, geo, margin, buf, co
         sd = fnx * lx + fny * ly + fnz * lz - fd
         if sd <= margin and _beyond_sides(lx, ly, lz, sb, face, pstart, planes) <= margin:
             fa = v - vstart[sa] + PIECE * pieces[0]
-            count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip)
+            count = _push_face(buf, count, (a, b), (x, y, z), sd, (nx, ny, nz), (fa, fb), flip)
     for t in range(hstart[sa], hstart[sa + 1]):
         for e in range(3):
             f = (e + 1) % 3
@@ -345,7 +400,7 @@ def _polytope_on_face(a, sa, b, sb, face, pieces, pos, rot, geo, margin, buf, co
                 sd = fnx * lx + fny * ly + fnz * lz - fd
                 x, y, z = to_world(b, pos, rot, lx, ly, lz)
                 fa = 1000 + 6 * (t - hstart[sa]) + 2 * e + end + PIECE * pieces[0]
-                count = _push_face(buf, count, a, b, x, y, z, sd, nx, ny, nz, fa, fb, flip)
+                count = _push_face(buf, count, (a, b), (x, y, z), sd, (nx, ny, nz), (fa, fb), flip)
     return count
 
 
@@ -368,11 +423,11 @@ def _b_dir_in_a(a, b, rot, x, y, z):
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_separation(a, sa, b, sb, pos, rot, geo):
+def _edge_separation(a, sa, b, sb, pos, rot, model):
     """The best separating axis among the cross products of an edge of polytope a and an
     edge of polytope b (geometry slots sa, sb): (separation, m: b's smallest projection minus
     a's largest, the distance of the two edges when they are the nearest features; world
-    axis from b to a; the two edge rows in geo[24]); -inf if no pair qualifies.
+    axis from b to a; the two edge rows in model.edges); -inf if no pair qualifies.
 
     Only edge pairs that form a face of the Minkowski difference A - B are tested: the arc
     between an edge's two face normals on the Gauss map of a crosses the arc between the
@@ -381,7 +436,7 @@ def _edge_separation(a, sa, b, sb, pos, rot, geo):
     qualifying pair's edges are the support features along its axis, so its separation is
     the difference of the edges' projections (O(1) per pair, no vertex loop). Computed in
     a's frame."""
-    estart, edges = geo[23], geo[24]
+    estart, edges = model.edge_start, model.edges
     best, bnx, bny, bnz, best_a, best_b = -math.inf, 0.0, 0.0, 1.0, -1, -1
     for eb in range(estart[sb], estart[sb + 1]):
         # b's negated face normals c, d (A - B's Gauss map), a's frame
@@ -424,11 +479,15 @@ def _edge_separation(a, sa, b, sb, pos, rot, geo):
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, buf, count):
+def _edge_contact(slots, axis, rows, pieces, pos, rot, model, buf, count):
     """One contact where a's edge row ea and b's edge row eb (_edge_separation, facing each
     other across the axis n from b to a) come closest: the middle of their closest points, gap
-    ``sep``, features EDGE + the edge rows (offset by PIECE times the piece numbers)."""
-    estart, edges = geo[23], geo[24]
+    ``sep``, features EDGE + the edge rows (offset by PIECE times the piece numbers).
+    slots: (a, sa, b, sb); axis: (sep, world axis n); rows: (ea, eb)."""
+    a, sa, b, sb = slots
+    sep, nx, ny, nz = axis
+    ea, eb = rows
+    estart, edges = model.edge_start, model.edges
     pa = to_world(a, pos, rot, edges[ea, 0], edges[ea, 1], edges[ea, 2])
     qa = to_world(a, pos, rot, edges[ea, 3], edges[ea, 4], edges[ea, 5])
     pb = to_world(b, pos, rot, edges[eb, 0], edges[eb, 1], edges[eb, 2])
@@ -439,65 +498,65 @@ def _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, 
     pz = 0.5 * (pa[2] + s * (qa[2] - pa[2]) + pb[2] + t * (qb[2] - pb[2]))
     fa = EDGE + ea - estart[sa] + PIECE * pieces[0]
     fb = EDGE + eb - estart[sb] + PIECE * pieces[1]
-    return _push(buf, count, a, b, px, py, pz, nx, ny, nz, sep, fa, fb)
+    return _push(buf, count, (a, b), (px, py, pz), (nx, ny, nz), sep, (fa, fb), NO_BARY)
 
 
-@nb.njit(cache=True, inline="always")  # a call would pass all of geo's arrays
-def _polytopes(a, sa, b, sb, pieces, pos, rot, geo, margin, buf, count):
+@nb.njit(cache=True, inline="always")  # a call would pass all of model's arrays
+def _polytopes(slots, pieces, pos, rot, model, margin, buf, count):
     """Contacts of two polytopes (geometry slots sa, sb; piece numbers ``pieces``) by
     separating axes: the face normals of each (_reference_face) and the cross products of
     their edge directions (_edge_separation). No contact when an axis separates them by more
     than margin; one edge-edge contact when an edge axis separates (or overlaps) them by
-    EDGE_PREFERENCE more than every face axis; else the face manifolds of each on the other."""
-    face_ab, sep_ab = _reference_face(a, sa, b, sb, pos, rot, geo)
+    EDGE_PREFERENCE more than every face axis; else the face manifolds of each on the other.
+    slots: (a, sa, b, sb)."""
+    a, sa, b, sb = slots
+    face_ab, sep_ab = _reference_face(a, sa, b, sb, pos, rot, model)
     if sep_ab > margin:
         return count  # separated by one of b's face planes: no need for a's
-    face_ba, sep_ba = _reference_face(b, sb, a, sa, pos, rot, geo)
+    face_ba, sep_ba = _reference_face(b, sb, a, sa, pos, rot, model)
     face_sep = max(sep_ab, sep_ba)
     if face_sep > margin:
         return count
-    sep, nx, ny, nz, ea, eb = _edge_separation(a, sa, b, sb, pos, rot, geo)
+    sep, nx, ny, nz, ea, eb = _edge_separation(a, sa, b, sb, pos, rot, model)
     if sep > margin:
         return count
     if sep > face_sep + EDGE_PREFERENCE:
-        return _edge_contact(a, sa, b, sb, sep, nx, ny, nz, ea, eb, pieces, pos, rot, geo, buf, count)
+        return _edge_contact(slots, (sep, nx, ny, nz), (ea, eb), pieces, pos, rot, model, buf, count)
     # flags and zeros as np types: a literal argument would compile a callee once per value
-    count = _polytope_on_face(
-        a, sa, b, sb, face_ab, pieces, pos, rot, geo, margin, buf, count, np.bool_(False)
-    )
+    count = _polytope_on_face(slots, face_ab, pieces, pos, rot, model, margin, buf, count, np.bool_(False))
     flipped = (pieces[1], pieces[0])
     return _polytope_on_face(
-        b, sb, a, sa, face_ba, flipped, pos, rot, geo, margin, buf, count, np.bool_(True)
+        (b, sb, a, sa), face_ba, flipped, pos, rot, model, margin, buf, count, np.bool_(True)
     )
 
 
 @nb.njit(cache=True, inline="always")
-def _against_plane(a, b, pos, rot, geo, margin, buf, count):
-    param, offsets, points = geo[2], geo[21], geo[22]
+def _against_plane(a, b, pos, rot, model, margin, buf, count):
+    param, offsets, points = model.param, model.point_start, model.points
     nx, ny, nz = _rotate(b, rot, param[b, 0], param[b, 1], param[b, 2])
     d = param[b, 3] + nx * pos[b, 0] + ny * pos[b, 1] + nz * pos[b, 2]
-    vertices = geo[0][a] > CAPSULE
+    vertices = model.shape_type[a] > CAPSULE
     for k in range(offsets[a], offsets[a + 1]):
         x, y, z, r = body_point(k, a, pos, rot, points)
         gap = nx * x + ny * y + nz * z - d - r
         if gap <= margin:
             feature = k - offsets[a] if vertices else -1
-            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, feature, -1)
+            count = _push_point(buf, count, (a, b), (x, y, z), r, (nx, ny, nz), gap, (feature, -1), NO_BARY)
     return count
 
 
 @nb.njit(cache=True, inline="always")
-def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
-    tris, nrms, offsets, points = geo[12], geo[13], geo[21], geo[22]
-    m = geo[10][b]
-    t0 = geo[11][m]
-    thick, depth = geo[2][b, 0], geo[2][b, 1]
-    vertices = geo[0][a] > CAPSULE
+def _against_mesh(a, b, pos, rot, model, margin, buf, count):
+    tris, nrms, offsets, points = model.tris, model.tri_normals, model.point_start, model.points
+    m = model.mesh_of[b]
+    t0 = model.tri_start[m]
+    thick, depth = model.param[b, 0], model.param[b, 1]
+    vertices = model.shape_type[a] > CAPSULE
     for k in range(offsets[a], offsets[a + 1]):
         x, y, z, r = body_point(k, a, pos, rot, points)
         lx, ly, lz = to_local(b, pos, rot, x, y, z)
         reach = r + thick + max(margin, 0.0) + depth
-        tri, d2, u, v, w = _mesh_closest(k, m, lx, ly, lz, reach, geo, buf[6])
+        tri, d2, u, v, w = _mesh_closest(k, m, lx, ly, lz, reach, model, buf.near)
         if tri < 0:
             continue
         qx, qy, qz = triangle_point(tris, t0 + tri, u, v, w)
@@ -515,7 +574,9 @@ def _against_mesh(a, b, pos, rot, geo, margin, buf, count):
         gap = sd - r - thick
         if gap <= margin:
             feature = k - offsets[a] if vertices else -1
-            count = _push_point(buf, count, a, b, x, y, z, r, nx, ny, nz, gap, feature, tri, u, v, w)
+            count = _push_point(
+                buf, count, (a, b), (x, y, z), r, (nx, ny, nz), gap, (feature, tri), (u, v, w)
+            )
     return count
 
 
@@ -524,12 +585,20 @@ SKIN = 0.25  # a point's list of triangles holds those up to this many grid cell
 LISTED = 32  # at most this many triangles in a point's list (more: no list, the grid is searched)
 
 
-@nb.njit(cache=True)
-def new_mesh_memory(n_points):
-    """What each body point remembers of the meshes it was near (_mesh_closest): the triangle
-    it was nearest, where it was last searched with a lower bound of its distance there, and
-    its list of the triangles that can be nearest around where the list was made."""
-    return (
+class MeshMemory(NamedTuple):
+    """What each body point (P rows) remembers of the meshes it was near (_mesh_closest)."""
+
+    hint: np.ndarray  # (P,) the triangle it was nearest
+    clear: np.ndarray  # (P, 5) where it was last searched (m), a lower bound of its distance
+    #   to the mesh there (m), the mesh number + 1
+    listed: np.ndarray  # (P, LISTED) its list of the triangles that can be nearest
+    listed_dist: np.ndarray  # (P, LISTED) their distances when listed, m
+    anchor: np.ndarray  # (P, 5) where the list was made (m), its length, the mesh number + 1
+
+
+def new_mesh_memory(n_points: int) -> MeshMemory:
+    """An empty MeshMemory of n_points body points."""
+    return MeshMemory(
         np.zeros(n_points, np.int64),
         np.zeros((n_points, 5)),
         np.zeros((n_points, LISTED), np.int64),
@@ -555,7 +624,7 @@ def _closest_listed(k, n, lx, ly, lz, t0, tris, spheres, listed):
 
 
 @nb.njit(cache=True, inline="always")
-def _mesh_closest(k, m, lx, ly, lz, reach, geo, near):
+def _mesh_closest(k, m, lx, ly, lz, reach, model, near):
     """Closest triangle of mesh m within ``reach`` (m) of body point k at (lx, ly, lz) in the
     mesh's frame: (triangle of the mesh or -1, squared distance, barycentric weights).
 
@@ -569,9 +638,21 @@ def _mesh_closest(k, m, lx, ly, lz, reach, geo, near):
       grid cells): while it stays within s / 2 of where the list was made, its nearest
       triangle is on the list (any other is further than d0 + s / 2 from it, its old nearest
       nearer), so only the list is searched (a Verlet list)."""
-    hint, clear, listed, listed_dist, anchor = near
-    tri_off, tris, grid_f, grid_i, cell_off, starts, item_off, items = geo[11:13] + geo[14:20]
-    spheres = geo[20]
+    hint, clear, listed, listed_dist, anchor = (
+        near.hint,
+        near.clear,
+        near.listed,
+        near.listed_dist,
+        near.anchor,
+    )
+    tri_off, tris, grid_f, grid_i = model.tri_start, model.tris, model.grid_origin_cell, model.grid_dims
+    cell_off, starts, item_off, items = (
+        model.cell_start,
+        model.cell_items_start,
+        model.item_start,
+        model.cell_items,
+    )
+    spheres = model.tri_spheres
     t0, n_tris = tri_off[m], tri_off[m + 1] - tri_off[m]
     if clear[k, 4] == m + 1:
         moved = math.sqrt((lx - clear[k, 0]) ** 2 + (ly - clear[k, 1]) ** 2 + (lz - clear[k, 2]) ** 2)
@@ -625,48 +706,79 @@ def _mesh_closest(k, m, lx, ly, lz, reach, geo, near):
     return tri, d2, u, v, w
 
 
+# Shape-pair methods, one per entry of PAIR_METHOD (the dispatch table of pair_contacts)
+NO_CONTACT, SEGMENTS, SPHERES_POLYTOPE, POLYTOPES, POINTS_PLANE, POINTS_MESH, PIECES = range(7)
+
+
+def _pair_methods() -> np.ndarray:
+    """PAIR_METHOD[type a, type b] (shapes.SPHERE ... COMPOUND) for type a <= type b: sphere
+    and capsule axes as segments; spheres against a polytope; two polytopes; a body's points
+    against a plane or a mesh (a compound's surface points too); a compound's convex pieces
+    against a sphere, capsule, polytope or compound; planes and meshes are both environment."""
+    table = np.full((COMPOUND + 1, COMPOUND + 1), NO_CONTACT, np.int64)
+    for ta in range(COMPOUND + 1):
+        for tb in range(ta, COMPOUND + 1):
+            if tb == COMPOUND:
+                method = {PLANE: POINTS_PLANE, MESH: POINTS_MESH}.get(ta, PIECES)
+            elif ta >= PLANE:
+                method = NO_CONTACT
+            elif tb >= PLANE:
+                method = POINTS_PLANE if tb == PLANE else POINTS_MESH
+            elif tb <= CAPSULE:
+                method = SEGMENTS
+            else:
+                method = SPHERES_POLYTOPE if ta <= CAPSULE else POLYTOPES
+            table[ta, tb] = method
+    return table
+
+
+PAIR_METHOD = _pair_methods()
+
+
 @nb.njit(cache=True, _nrt=False)
-def pair_contacts(a, b, pos, rot, geo, margin, buf, count):
+def pair_contacts(a, b, pos, rot, model, margin, buf, count):
     """Append the contacts of bodies a and b (any order) within ``margin`` (m); returns count.
-    Compiled without reference counting (_nrt=False: it allocates nothing), which would
-    otherwise touch every array of geo and buf at each call."""
-    btype = geo[0]
+    The method comes from PAIR_METHOD. Compiled without reference counting (_nrt=False: it
+    allocates nothing), which would otherwise touch every array of model and buf at each call."""
+    btype = model.shape_type
     if btype[a] > btype[b]:
         a, b = b, a
-    ta, tb = btype[a], btype[b]
-    if tb == COMPOUND and ta < PLANE:
-        return _with_compound(a, b, pos, rot, geo, margin, buf, count)
-    if tb == COMPOUND:
-        a, b, tb = b, a, ta  # the compound's surface points against the plane or mesh
-    elif ta >= PLANE:
-        return count  # plane/mesh against plane/mesh: both environment
-    if tb == PLANE:
-        return _against_plane(a, b, pos, rot, geo, margin, buf, count)
-    if tb == MESH:
-        return _against_mesh(a, b, pos, rot, geo, margin, buf, count)
-    if tb <= CAPSULE:
-        return _segment_segment(a, b, pos, rot, geo, margin, buf, count)
-    if ta <= CAPSULE:
-        return _spheres_polytope(a, b, b, np.int64(0), pos, rot, geo, margin, buf, count)
-    if _plane_separates(a, b, b, pos, rot, geo, margin) or _plane_separates(b, a, a, pos, rot, geo, margin):
-        return count
-    return _polytopes(a, a, b, b, (np.int64(0), np.int64(0)), pos, rot, geo, margin, buf, count)
+    method = PAIR_METHOD[btype[a], btype[b]]
+    if btype[a] >= PLANE:
+        a, b = b, a  # a compound's surface points against a plane or mesh
+    if method == POINTS_PLANE:
+        return _against_plane(a, b, pos, rot, model, margin, buf, count)
+    if method == POINTS_MESH:
+        return _against_mesh(a, b, pos, rot, model, margin, buf, count)
+    if method == SEGMENTS:
+        return _segment_segment(a, b, pos, rot, model, margin, buf, count)
+    if method == SPHERES_POLYTOPE:
+        return _spheres_polytope(a, b, b, np.int64(0), pos, rot, model, margin, buf, count)
+    if method == POLYTOPES:
+        if _plane_separates(a, b, b, pos, rot, model, margin) or _plane_separates(
+            b, a, a, pos, rot, model, margin
+        ):
+            return count
+        return _polytopes((a, a, b, b), (np.int64(0), np.int64(0)), pos, rot, model, margin, buf, count)
+    if method == PIECES:
+        return _with_compound(a, b, pos, rot, model, margin, buf, count)
+    return count  # NO_CONTACT
 
 
 @nb.njit(cache=True, _nrt=False)
-def _with_compound(a, b, pos, rot, geo, margin, buf, count):
+def _with_compound(a, b, pos, rot, model, margin, buf, count):
     """Contacts of body a (a sphere, capsule, polytope or compound) with compound b: with each
-    convex piece of b (geometry slots geo[26][geo[25][b]:geo[25][b + 1]]), piece by piece for
-    a compound a too."""
-    ta, first, slots = geo[0][a], geo[25], geo[26]
+    convex piece of b (geometry slots Model.piece_slots[piece_start[b]:piece_start[b + 1]]),
+    piece by piece for a compound a too."""
+    ta, first, slots = model.shape_type[a], model.piece_start, model.piece_slots
     for j in range(first[b], first[b + 1]):
         sb, pb = slots[j], j - first[b]
-        if _plane_separates(a, b, sb, pos, rot, geo, margin):
+        if _plane_separates(a, b, sb, pos, rot, model, margin):
             continue  # a's bounding sphere is beyond this piece of b
         if ta <= CAPSULE:
-            count = _spheres_polytope(a, b, sb, pb, pos, rot, geo, margin, buf, count)
+            count = _spheres_polytope(a, b, sb, pb, pos, rot, model, margin, buf, count)
             continue
         for i in range(first[a], first[a + 1]):
             sa, pa = slots[i], i - first[a]
-            count = _polytopes(a, sa, b, sb, (pa, pb), pos, rot, geo, margin, buf, count)
+            count = _polytopes((a, sa, b, sb), (pa, pb), pos, rot, model, margin, buf, count)
     return count

@@ -1,34 +1,40 @@
 """The rigid-world time step (numba): free motion, contacts, impact times inside the step.
 
-One outer step of h seconds:
+The step works on three records, after MuJoCo's: the world's static :class:`Model` and step
+:class:`Options` (physics.rigid.model) and the run's :class:`Data` (state, kinematic paths,
+records, statistics and scratch); each stage is a function ``stage(m, opt, d, ...)``. One
+outer step of h seconds (:func:`outer_step`) is:
 
-1. contacts of the current configuration (gap <= slop) are resolved at the impulse level
+1. kinematic_stage: kinematic bodies to their path's pose, with its velocity;
+2. broad_stage: bounding boxes grown by how far each body can move, sweep and prune;
+3. narrow_stage: contacts of the pairs within slop plus how far each pair can close in the
+   step (narrow.pair_contacts);
+4. contact_stage: contacts touching (gap <= slop) resolved by the contact model, impulse
    (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
-   rolling resistance, penetration recovery and a warm start);
-2. every body moves freely to the end of the step (integrate.advance_body_into). With the
-   default integrator a body in flight follows the exact ballistic path (so impact times and
-   speeds of a bouncing body are those of the closed form); a body held by a resting contact
-   of the solve (a recorded non-impact contact) drifts with its new velocity instead, the
-   solve having folded the step's gravity increment into it, and so stays put at rest;
-3. a pair that was apart at the start (slop < gap <= how far the two can close in the step,
-   from their relative velocity and spins) and penetrates at the end, having closed
-   faster than ``bounce_threshold`` on average, has hit inside the step: its time of impact
-   is the root of its gap along the free motion (Illinois regula falsi to 1e-12 s), and
-   the whole world moves to the earliest such time and goes
-   back to 1. At most ``max_events`` such sub-steps per step; later impacts are resolved at
-   the step end.
+   rolling resistance, penetration recovery and a warm start) or a penalty force
+   (physics.rigid.penalty); an unknown model code is an error;
+5. advance_stage: every body moves freely to the end of the step (integrate.advance_body_into).
+   With the default integrator a body in flight follows the exact ballistic path (so impact
+   times and speeds of a bouncing body are those of the closed form); a body held by a resting
+   contact of the solve (a recorded non-impact contact) drifts with its new velocity instead,
+   the solve having folded the step's gravity increment into it, and so stays put at rest;
+6. impact_stage: a pair that was apart at the start (slop < gap <= how far the two can close in
+   the step, from their relative velocity and spins) and penetrates at the end, having closed
+   faster than ``bounce_threshold`` on average, has hit inside the step: its time of impact is
+   the root of its gap along the free motion (Illinois regula falsi to 1e-12 s), and the whole
+   world moves to the earliest such time and goes back to 2. At most ``max_events`` such
+   sub-steps per step; later impacts are resolved at the step end.
 
-Penalty models replace 1 by forces: linear f = k x + c xdot, Hunt-Crossley f = k x^p + c x^p
-xdot (zero at first touch), both clamped at f >= 0, with regularised Coulomb friction.
-
-Each resolved contact appends a record row (columns ``codes.REC_*``): time, step, bodies, world
-point, impulse on a (N s, world), approach speed, slip and rolling speed after the solve,
-impact flag, features, barycentric weights on b, and the contact point in each body's frame.
+Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
+bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
+the solve, impact flag, features, barycentric weights on b, the contact point in each body's
+frame, and the normal.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -36,51 +42,134 @@ import numpy as np
 from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.codes import (
     DYNAMIC,
+    HUNT_CROSSLEY,
     IMPULSE,
     KINEMATIC,
     LINEAR,
-    P_ADAPT_TOL,
-    P_BOUNCE,
-    P_C,
-    P_EXP,
-    P_GX,
-    P_GY,
-    P_GZ,
-    P_K,
-    P_MAX_EVENTS,
-    P_METHOD,
-    P_MODEL,
-    P_SLOP,
-    P_VEPS,
     REC_A,
     REC_B,
-    REC_BARY,
-    REC_FEAT_A,
-    REC_FEAT_B,
     REC_IMPACT,
-    REC_IMPULSE,
-    REC_LOCAL_A,
-    REC_LOCAL_B,
-    REC_NORMAL,
-    REC_POINT,
-    REC_SLIP,
-    REC_SPEED,
-    REC_STEP,
-    REC_TIME,
 )
-from physics.rigid.impulses import (
-    inv_inertia_world,
-    new_solver,
-    resolve,
-    store_twists,
-    world_velocities,
-)
+from physics.rigid.impulses import WarmStart, new_solver, resolve
 from physics.rigid.integrate import SEMI_IMPLICIT, advance_body_into, semi_implicit_into
-from physics.rigid.narrow import new_mesh_memory, pair_contacts
+from physics.rigid.model import Model, Options
+from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
+from physics.rigid.penalty import penalty
 from physics.rigid.shapes import PLANE, SPHERE
-from physics.rigid.spatial import cross, dot3, mtv, mv, quat_log, quat_mul, quat_to_mat
+from physics.rigid.spatial import quat_log, quat_mul, quat_to_mat
 
 MAX_CONTACTS = 1 << 16
+PROBE_CONTACTS = 256  # contact rows of one pair's gap probe (impact times)
+
+
+class RunStats(NamedTuple):
+    """Counters of a run (each a (1,) int64 array, added to by the stages)."""
+
+    impact_substeps: np.ndarray  # sub-steps taken at impacts inside a step
+    late_impacts: np.ndarray  # steps whose impacts outnumbered max_events
+    contacts: np.ndarray  # contacts solved
+    solves: np.ndarray  # contact solves
+    sweeps: np.ndarray  # PGS sweeps
+    impact_checks: np.ndarray  # pairs checked for an impact inside the step
+
+
+def new_stats() -> RunStats:
+    return RunStats(*(np.zeros(1, np.int64) for _ in RunStats._fields))
+
+
+class Data(NamedTuple):
+    """A run's state, inputs, outputs and scratch (N bodies, K kinematic bodies)."""
+
+    pos: np.ndarray  # (N, 3) centre-of-mass positions, m
+    quat: np.ndarray  # (N, 4) unit quaternions of the principal frames
+    phi: np.ndarray  # (N, 6) body-frame twists (rad/s, m/s)
+    kin_pos: np.ndarray  # (S + 1, K, 3) kinematic bodies' positions at the run's steps, m
+    kin_quat: np.ndarray  # (S + 1, K, 4) their quaternions
+    rec: np.ndarray  # (R, codes.REC_WIDTH) contact records
+    stats: RunStats
+    traj: np.ndarray  # (T, N, 13) sampled poses and twists
+    every: int  # sample after every ``every``-th step counted from step ``origin``
+    origin: int
+    warm: WarmStart  # the last solve's contact forces
+    contacts: Contacts  # the step's contacts (MAX_CONTACTS rows)
+    probe: Contacts  # one pair's contacts (PROBE_CONTACTS rows), for impact times
+    kin_v: np.ndarray  # (N, 3) kinematic bodies' velocities over the step, m/s
+    kin_w: np.ndarray  # (N, 3) their angular velocities, rad/s
+    rot: np.ndarray  # (N, 3, 3) rotation matrices of quat
+    new_pos: np.ndarray  # (N, 3) poses and twists after free motion
+    new_quat: np.ndarray  # (N, 4)
+    new_phi: np.ndarray  # (N, 6)
+    new_rot: np.ndarray  # (N, 3, 3)
+    moved_pos: np.ndarray  # (N, 3) poses of a pair moved to a trial time (impact times)
+    moved_quat: np.ndarray  # (N, 4)
+    moved_phi: np.ndarray  # (N, 6)
+    resting: np.ndarray  # (N,) bool: held by a resting contact of the last solve
+    vel: np.ndarray  # (N, 3) world velocity of each centre, m/s
+    spin: np.ndarray  # (N,) bound on its points' speed about the centre, m/s
+    motion: np.ndarray  # (N,) bound on how far any of its points moves in the step, m
+    lo: np.ndarray  # (N, 3) bounding box grown by margin and motion, m
+    hi: np.ndarray  # (N, 3)
+    movable: np.ndarray  # (N,) bool: dynamic
+    gravity: np.ndarray  # (3,) m/s^2
+    no_wrench: np.ndarray  # (6,) the free motion's body wrench: none
+
+
+def new_data(
+    m: Model, opt: Options, pos, quat, phi, kin_pos, kin_quat, rec, stats, traj, every, origin, warm
+):
+    """Data of a run from the state arrays (updated in place), the kinematic bodies' path
+    samples, the record buffer, statistics, sample buffer and warm start (kept by the caller
+    across runs); fresh scratch, and a fresh memory of the body points near meshes."""
+    n = pos.shape[0]
+    near = new_mesh_memory(int(m.point_start[-1]))
+    return Data(
+        pos,
+        quat,
+        phi,
+        kin_pos,
+        kin_quat,
+        rec,
+        stats,
+        traj,
+        int(every),
+        int(origin),
+        warm,
+        new_contacts(MAX_CONTACTS, near),
+        new_contacts(PROBE_CONTACTS, near),
+        np.zeros((n, 3)),
+        np.zeros((n, 3)),
+        np.empty((n, 3, 3)),
+        np.empty_like(pos),
+        np.empty_like(quat),
+        np.empty_like(phi),
+        np.empty((n, 3, 3)),
+        np.empty_like(pos),
+        np.empty_like(quat),
+        np.empty_like(phi),
+        np.zeros(n, np.bool_),
+        np.zeros((n, 3)),
+        np.zeros(n),
+        np.zeros(n),
+        np.empty((n, 3)),
+        np.empty((n, 3)),
+        np.zeros(n, np.bool_),
+        np.array([opt.gx, opt.gy, opt.gz]),
+        np.zeros(6),
+    )
+
+
+class PairScratch(NamedTuple):
+    """Per broad-phase pair (grown with the pairs): how far its gap can shrink in the step (m),
+    a lower bound of its gap (m), and whether it touches (gap <= slop)."""
+
+    reach: np.ndarray
+    gap: np.ndarray
+    touching: np.ndarray
+
+
+@nb.njit(cache=True)
+def new_pair_scratch(size):
+    return PairScratch(np.empty(size), np.empty(size), np.empty(size, np.bool_))
 
 
 @nb.njit(cache=True)
@@ -106,73 +195,6 @@ def _rotations(quat, rot):
 
 
 @nb.njit(cache=True)
-def _apply(i, imp, r, inv_mass, iw, v, w, sign):
-    v[i] += sign * inv_mass[i] * imp
-    w[i] += sign * mv(iw[i], cross(r, imp))
-
-
-@nb.njit(cache=True)
-def _rel_velocity(a, b, ra, rb, v, w):
-    return v[a] + cross(w[a], ra) - v[b] - cross(w[b], rb)
-
-
-@nb.njit(cache=True)
-def _penalty(buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, time, step, rec, nrec):
-    """Penalty contact forces over dt (symplectic: velocities now, positions after)."""
-    pts, nrm, gaps, pair, feat, bar, _ = buf
-    inv_mass, inv_inertia, restitution, friction, rolling = body
-    n = kind.shape[0]
-    v, w, iw = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3))
-    world_velocities(kind, rot, phi, kin_v, kin_w, v, w)
-    inv_inertia_world(kind, rot, inv_inertia, iw)
-    model, k_s, c_d, p_exp, veps = int(prm[P_MODEL]), prm[P_K], prm[P_C], prm[P_EXP], prm[P_VEPS]
-    for c in range(count):
-        x = -gaps[c]
-        if x <= 0.0:
-            continue
-        a, b = pair[c, 0], pair[c, 1]
-        n = nrm[c]
-        ra = pts[c] - pos[a]
-        rb = pts[c] - pos[b]
-        u = _rel_velocity(a, b, ra, rb, v, w)
-        xdot = -(dot3(u, n))
-        if model == LINEAR:
-            fn = k_s * x + c_d * xdot
-        else:
-            xp = x**p_exp
-            fn = k_s * xp + c_d * xp * xdot
-        fn = max(fn, 0.0)
-        ut = u - (dot3(u, n)) * n
-        slip = math.sqrt(dot3(ut, ut))
-        mu = math.sqrt(friction[a] * friction[b])
-        ft = -mu * fn * ut / max(slip, veps)
-        imp = (fn * n + ft) * dt
-        _apply(a, imp, ra, inv_mass, iw, v, w, 1.0)
-        _apply(b, imp, rb, inv_mass, iw, v, w, -1.0)
-        if nrec >= rec.shape[0]:
-            return -1
-        row = rec[nrec]
-        row[:] = 0.0
-        row[REC_TIME] = time
-        row[REC_STEP] = step
-        row[REC_A] = a
-        row[REC_B] = b
-        row[REC_POINT : REC_POINT + 3] = pts[c]
-        row[REC_IMPULSE : REC_IMPULSE + 3] = imp
-        row[REC_SPEED] = xdot
-        row[REC_SLIP] = slip
-        row[REC_FEAT_A] = feat[c, 0]
-        row[REC_FEAT_B] = feat[c, 1]
-        row[REC_BARY : REC_BARY + 3] = bar[c]
-        row[REC_LOCAL_A : REC_LOCAL_A + 3] = mtv(rot[a], ra)
-        row[REC_LOCAL_B : REC_LOCAL_B + 3] = mtv(rot[b], rb)
-        row[REC_NORMAL : REC_NORMAL + 3] = n
-        nrec += 1
-    store_twists(kind, rot, v, w, phi)
-    return nrec
-
-
-@nb.njit(cache=True)
 def _mark_resting(rec, first, last, kind, resting):
     """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
     (those of the solve just done)."""
@@ -185,39 +207,38 @@ def _mark_resting(rec, first, last, kind, resting):
 
 
 @nb.njit(cache=True)
-def _move(i, tau, pos, quat, phi, mover, out_p, out_q, out_phi):
-    """Pose and twist of body i after tau seconds of free motion, into row i of out_p, out_q,
-    out_phi. mover: (kind, kinematic v, kinematic w, mass, inertia, prm, gravity (3,), zero
-    wrench (6,), resting (N,): held by a resting contact of the last solve)."""
-    kind, kin_v, kin_w, mass, inertia, prm, gravity, ext, resting = mover
-    method = int(prm[P_METHOD])
+def _move(m, opt, d, i, tau, out_p, out_q, out_phi):
+    """Pose and twist of body i after tau seconds of free motion from d's state, into row i of
+    out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: d.resting)."""
+    kind, pos, quat, phi = m.kind, d.pos, d.quat, d.phi
+    method = opt.integrator
     if kind[i] == DYNAMIC and method == SEMI_IMPLICIT and tau > 0.0:
         semi_implicit_into(
             pos[i],
             quat[i],
             phi[i],
-            inertia[i],
-            mass[i],
-            gravity,
-            ext,
+            m.inertia[i],
+            m.mass[i],
+            d.gravity,
+            d.no_wrench,
             tau,
             out_p[i],
             out_q[i],
             out_phi[i],
-            not resting[i],
+            not d.resting[i],
         )
     elif kind[i] == DYNAMIC:
         advance_body_into(
             pos[i],
             quat[i],
             phi[i],
-            inertia[i],
-            mass[i],
-            gravity,
-            ext,
+            m.inertia[i],
+            m.mass[i],
+            d.gravity,
+            d.no_wrench,
             tau,
             method,
-            prm[P_ADAPT_TOL],
+            opt.adaptive_tolerance,
             out_p[i],
             out_q[i],
             out_phi[i],
@@ -226,9 +247,9 @@ def _move(i, tau, pos, quat, phi, mover, out_p, out_q, out_phi):
         for x in range(6):
             out_phi[i, x] = phi[i, x]
         for x in range(3):
-            out_p[i, x] = pos[i, x] + kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
+            out_p[i, x] = pos[i, x] + d.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
         if kind[i] == KINEMATIC:
-            _turn(i, tau, quat, kin_w, out_q)
+            _turn(i, tau, quat, d.kin_w, out_q)
         else:
             for x in range(4):
                 out_q[i, x] = quat[i, x]
@@ -253,34 +274,34 @@ def _turn(i, tau, quat, kin_w, out_q):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _pair_gap(a, b, pos, rot, geo, margin, scratch):
-    """Smallest gap (m) of pair (a, b), at most margin (no reference counting, like
-    narrow.pair_contacts)."""
-    count = pair_contacts(a, b, pos, rot, geo, margin, scratch, np.int64(0))  # not a literal 0: one compile
+def _pair_gap(m, a, b, pos, rot, margin, probe):
+    """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
+    buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
+    count = pair_contacts(a, b, pos, rot, m, margin, probe, np.int64(0))  # not a literal 0: one compile
     best = margin
     for c in range(count):
-        best = min(best, scratch[2][c])
+        best = min(best, probe.gaps[c])
     return best
 
 
 @nb.njit(cache=True)
-def _gap_at(a, b, tau, pos, quat, phi, rot, mover, geo, margin, scratch, moved):
-    """Smallest gap of pair (a, b) after tau seconds of free motion of both (``moved``: pose
-    arrays like pos, quat, phi to move them in)."""
-    mp, mq, mf = moved
+def _gap_at(m, opt, d, a, b, tau, margin):
+    """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
+    moved_* scratch; d.pos and d.rot are restored)."""
+    pos, rot, mp, mq, mf = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi
     keep_pa, keep_pb = pos[a].copy(), pos[b].copy()
     keep_ra, keep_rb = rot[a].copy(), rot[b].copy()
     for i in (a, b):
-        _move(i, tau, pos, quat, phi, mover, mp, mq, mf)
+        _move(m, opt, d, i, tau, mp, mq, mf)
     for i in (a, b):
         pos[i], rot[i] = mp[i], quat_to_mat(mq[i])
-    gap = _pair_gap(a, b, pos, rot, geo, margin, scratch)
+    gap = _pair_gap(m, a, b, pos, rot, margin, d.probe)
     pos[a], pos[b], rot[a], rot[b] = keep_pa, keep_pb, keep_ra, keep_rb
     return gap
 
 
 @nb.njit(cache=True)
-def _time_of_impact(a, b, dt, g0, g1, pos, quat, phi, rot, mover, geo, margin, scratch, moved):
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
@@ -289,7 +310,7 @@ def _time_of_impact(a, b, dt, g0, g1, pos, quat, phi, rot, mover, geo, margin, s
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(a, b, t, pos, quat, phi, rot, mover, geo, margin, scratch, moved)
+        f = _gap_at(m, opt, d, a, b, t, margin)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -305,28 +326,28 @@ def _time_of_impact(a, b, dt, g0, g1, pos, quat, phi, rot, mover, geo, margin, s
     return hi
 
 
+@nb.njit(cache=True, inline="always")
+def _norm3(x):
+    """|x| of a 3-vector."""
+    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+
+
 @nb.njit(cache=True)
-def _motion(vel, spin, kind, g, dt):
-    """Per body, a bound (m) on how far any of its points moves in dt seconds of free motion,
+def _motion(vel, spin, kind, g, dt, motion):
+    """motion[i]: a bound (m) on how far any point of body i moves in dt seconds of free motion,
     from its centre's speed and spin bound (_speeds), plus g dt^2 if it falls."""
-    n = vel.shape[0]
-    motion = np.zeros(n)
-    for i in range(n):
+    for i in range(vel.shape[0]):
         speed = math.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2)
         motion[i] = dt * (speed + spin[i]) + (g * dt * dt if kind[i] == DYNAMIC else 0.0)
-    return motion
 
 
 @nb.njit(cache=True)
-def _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia):
-    """(world velocity (N, 3) of each body's centre, m/s; bound on its points' speed about the
-    centre, bounding radius * largest |omega| of the step, m/s). A free body's |omega| can grow
-    within a step (Euler's equations keep |L|, not |omega|): |L| / I_min bounds it."""
-    bound = geo[3]
-    n = phi.shape[0]
-    vel = np.zeros((n, 3))
-    spin = np.zeros(n)
-    for i in range(n):
+def _speeds(kind, bound, inertia, phi, rot, kin_v, kin_w, vel, spin):
+    """vel[i]: world velocity of body i's centre (m/s); spin[i]: a bound on its points' speed
+    about the centre, bounding radius ``bound[i]`` * the largest |omega| of the step (m/s). A
+    free body's |omega| can grow within a step (Euler's equations keep |L|, not |omega|):
+    |L| / I_min bounds it."""
+    for i in range(phi.shape[0]):
         if kind[i] == DYNAMIC:
             r = rot[i]
             for x in range(3):
@@ -338,26 +359,26 @@ def _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia):
             vel[i] = kin_v[i]
             w = math.sqrt(kin_w[i, 0] ** 2 + kin_w[i, 1] ** 2 + kin_w[i, 2] ** 2)
         else:
+            vel[i] = 0.0
             w = 0.0
         spin[i] = bound[i] * w if w > 0.0 else 0.0  # a plane's infinite bound only if it turns
-    return vel, spin
 
 
 @nb.njit(cache=True)
-def _gap_spin(spin, geo):
+def _gap_spin(spin, shape_type):
     """The part of each body's spin bound (_speeds) that can change a gap: none for a sphere
     (turning about its centre moves no point of it nearer to anything), all of it otherwise.
     In place."""
-    btype = geo[0]
     for i in range(spin.shape[0]):
-        if btype[i] == SPHERE:
+        if shape_type[i] == SPHERE:
             spin[i] = 0.0
 
 
 @nb.njit(cache=True)
 def _pair_reach(pairs, vel, spin, kind, g, dt, out):
     """out[p]: a bound (m) on how much pair p's gap can shrink in dt seconds of free motion:
-    dt (|v_a - v_b| + spin_a + spin_b), plus g dt^2 when only one of them falls."""
+    dt (|v_a - v_b| + spin_a + spin_b), plus g dt^2 when only one of them falls (the larger of
+    this and out[p])."""
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
         dv = math.sqrt(
@@ -370,41 +391,35 @@ def _pair_reach(pairs, vel, spin, kind, g, dt, out):
 
 
 @nb.njit(cache=True)
-def _boxes(pos, motion, kind, geo, margin):
-    """Bounding boxes (lo, hi) grown by margin and motion, and which bodies move (dynamic)."""
-    btype, bound = geo[0], geo[3]
-    n = pos.shape[0]
-    lo = np.empty((n, 3))
-    hi = np.empty((n, 3))
-    movable = np.zeros(n, np.bool_)
-    for i in range(n):
-        movable[i] = kind[i] == DYNAMIC
-        if btype[i] == PLANE:
+def _boxes(m, d, margin):
+    """d.lo, d.hi: bounding boxes grown by margin and d.motion; d.movable: the dynamic bodies."""
+    shape_type, bound, pos, motion, lo, hi = m.shape_type, m.bound, d.pos, d.motion, d.lo, d.hi
+    for i in range(pos.shape[0]):
+        d.movable[i] = m.kind[i] == DYNAMIC
+        if shape_type[i] == PLANE:
             lo[i] = -np.inf
             hi[i] = np.inf
             continue
         reach = bound[i] + margin + motion[i]
         lo[i] = pos[i] - reach
         hi[i] = pos[i] + reach
-    return lo, hi, movable
 
 
 @nb.njit(cache=True)
-def _apart(a, b, pos, geo, margin):
+def _apart(a, b, pos, bound, margin):
     """Whether the bounding spheres of a and b are more than ``margin`` apart (cheap reject)."""
-    bound = geo[3]
     reach = bound[a] + bound[b] + margin  # inf for a plane: never apart
     d0, d1, d2 = pos[a, 0] - pos[b, 0], pos[a, 1] - pos[b, 1], pos[a, 2] - pos[b, 2]
     return d0 * d0 + d1 * d1 + d2 * d2 > reach * reach
 
 
 @nb.njit(cache=True, inline="always")
-def _beyond_plane(a, b, pos, rot, geo, margin):
+def _beyond_plane(a, b, pos, rot, m, margin):
     """Whether body a lies wholly more than ``margin`` (m) beyond plane b: its centre's height
     over the plane less its bounding radius (every one of its contact points lies within that
     radius of its centre, narrow._against_plane), with a relative guard of 1e-9 against
     rounding. A plane pair that passes gives no contact, so the narrow phase is not called."""
-    param, bound = geo[2], geo[3]
+    param, bound = m.param, m.bound
     nx = rot[b, 0, 0] * param[b, 0] + rot[b, 0, 1] * param[b, 1] + rot[b, 0, 2] * param[b, 2]
     ny = rot[b, 1, 0] * param[b, 0] + rot[b, 1, 1] * param[b, 1] + rot[b, 1, 2] * param[b, 2]
     nz = rot[b, 2, 0] * param[b, 0] + rot[b, 2, 1] * param[b, 1] + rot[b, 2, 2] * param[b, 2]
@@ -415,219 +430,228 @@ def _beyond_plane(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _cannot_touch(a, b, pos, rot, geo, margin):
+def _cannot_touch(a, b, pos, rot, m, margin):
     """Cheap rejects before the narrow phase: bounding spheres apart, or a body wholly beyond
     a plane (both exact: such a pair has no contact within margin)."""
-    btype = geo[0]
+    btype = m.shape_type
     if btype[b] == PLANE and btype[a] != PLANE:
-        return _beyond_plane(a, b, pos, rot, geo, margin)
+        return _beyond_plane(a, b, pos, rot, m, margin)
     if btype[a] == PLANE and btype[b] != PLANE:
-        return _beyond_plane(b, a, pos, rot, geo, margin)
-    return _apart(a, b, pos, geo, margin)
+        return _beyond_plane(b, a, pos, rot, m, margin)
+    return _apart(a, b, pos, m.bound, margin)
 
 
 @nb.njit(cache=True, _nrt=False)
-def _detect(pairs, pos, rot, geo, slop, reach, buf, gap, touching):
-    """Contacts of all pairs within margin = slop + reach[p] (m, how far the pair can close in
-    the step). gap[p]: a lower bound of pair p's gap (its smallest contact gap, polytope face
-    planes standing in for the distance; ``margin`` when none is that close); touching[p]: it
-    has a contact within slop. The solve skips contacts beyond slop."""
+def _detect(m, opt, d, pairs, near):
+    """Contacts (into d.contacts; returns their count) of all pairs within margin = slop +
+    near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
+    pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
+    ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
+    solve skips contacts beyond slop."""
+    slop, pos, rot, buf = opt.slop, d.pos, d.rot, d.contacts
+    reach, gap, touching = near.reach, near.gap, near.touching
     count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
         margin = slop + reach[p]
         gap[p] = margin
         touching[p] = False
-        if _cannot_touch(a, b, pos, rot, geo, margin):
+        if _cannot_touch(a, b, pos, rot, m, margin):
             continue
         before = count
-        count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
+        count = pair_contacts(a, b, pos, rot, m, margin, buf, count)
         for c in range(before, count):
-            gap[p] = min(gap[p], buf[2][c])
+            gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
     return count
 
 
 @nb.njit(cache=True)
-def _new_buffers(size, near):
-    """Contact buffers of ``size`` rows (points, normals, gaps, pairs, features, barycentric
-    weights) and the shared memory of the body points near meshes (narrow._mesh_closest)."""
-    return (
-        np.empty((size, 3)),
-        np.empty((size, 3)),
-        np.empty(size),
-        np.empty((size, 2), np.int64),
-        np.empty((size, 2), np.int64),
-        np.empty((size, 3)),
-        near,
-    )
+def kinematic_stage(m, opt, d, s):
+    """Kinematic bodies to their path's pose at the run's step s, with the velocity and angular
+    velocity (finite differences over the step) that take them to the next."""
+    h = opt.h
+    for j in range(m.kinematic.shape[0]):
+        i = m.kinematic[j]
+        d.pos[i] = d.kin_pos[s, j]
+        d.quat[i] = d.kin_quat[s, j]
+        d.kin_v[i] = (d.kin_pos[s + 1, j] - d.kin_pos[s, j]) / h
+        d.kin_w[i] = (
+            quat_log(quat_mul(d.kin_quat[s + 1, j], np.array([1.0, -1.0, -1.0, -1.0]) * d.kin_quat[s, j])) / h
+        )
 
 
 @nb.njit(cache=True)
-def run_steps(
-    first,
-    n_steps,
-    h,
-    pos,
-    quat,
-    phi,
-    kind,
-    kin_index,
-    kin_pos,
-    kin_quat,
-    mass,
-    inertia,
-    body,
-    geo,
-    prm,
-    rec,
-    nrec,
-    stats,
-    traj,
-    every,
-    origin,
-    warm,
-):
-    """Advance n_steps outer steps from step ``first`` (time first*h). Kinematic body
-    kin_index[j] follows kin_pos/kin_quat[s, j] at step s (relative to ``first``). After
-    every ``every``-th step counted from step ``origin``, the poses go to traj[k] = (pos,
-    quat, phi) (N, 13) if traj has room. Returns (steps done, records); stops before a step when
-    ``rec`` may not hold its records (the caller grows it and calls again).
-    stats: [sub-steps at impacts, impacts resolved late, contacts solved, solves, PGS sweeps,
-    pairs checked for an impact inside the step]; warm: the last solve's contact impulses
-    (new_warm_start), read and updated."""
-    n = pos.shape[0]
-    kin_v = np.zeros((n, 3))
-    kin_w = np.zeros((n, 3))
-    near = new_mesh_memory(geo[21][-1])
+def broad_stage(m, opt, d, dt, sweep):
+    """Rotations, speed bounds and the pairs of bodies that can come within slop in dt seconds
+    of free motion (sweep and prune of bounding boxes grown by how far each can move); d.spin
+    keeps only what can change a gap (_gap_spin). Returns (pairs, the sweep scratch)."""
+    _rotations(d.quat, d.rot)
+    _speeds(m.kind, m.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)
+    gravity_norm = _norm3(d.gravity)
+    _motion(d.vel, d.spin, m.kind, gravity_norm, dt, d.motion)
+    _boxes(m, d, opt.slop)
+    pairs, sweep = sweep_pairs(d.lo, d.hi, d.movable, sweep)
+    _gap_spin(d.spin, m.shape_type)  # after the boxes, whose order on x sets the contacts' order
+    return pairs, sweep
+
+
+@nb.njit(cache=True)
+def narrow_stage(m, opt, d, pairs, near, dt):
+    """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
+    come within slop (_detect); returns their count."""
+    gravity_norm = _norm3(d.gravity)
+    near.reach[: pairs.shape[0]] = 0.0
+    _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, near.reach)
+    return _detect(m, opt, d, pairs, near)
+
+
+@nb.njit(cache=True)
+def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
+    """The contact model's response to the contacts d.contacts[:count] over dt (s): the one
+    dispatch of contact models on opt.contact (an unknown code is an error). Returns the
+    record count, -1 when d.rec is full."""
+    d.stats.solves[0] += 1
+    if opt.contact == IMPULSE:
+        return resolve(m, opt, d, solver, count, dt, time, step, nrec)
+    if opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
+        d.stats.contacts[0] += count
+        return penalty(m, opt, d, count, dt, time, step, nrec)
+    raise ValueError("stepper.contact_stage: unknown contact model code")
+
+
+@nb.njit(cache=True)
+def _mark_resting(rec, first, last, kind, resting):
+    """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
+    (those of the solve just done)."""
+    resting[:] = False
+    for r in range(first, last):
+        if rec[r, REC_IMPACT] == 0.0:
+            for col in (REC_A, REC_B):
+                i = int(rec[r, col])
+                resting[i] = kind[i] == DYNAMIC
+
+
+@nb.njit(cache=True)
+def advance_stage(m, opt, d, tau):
+    """Every body's pose and twist after tau seconds of free motion into d.new_*."""
+    for i in range(m.kind.shape[0]):
+        _move(m, opt, d, i, tau, d.new_pos, d.new_quat, d.new_phi)
+
+
+@nb.njit(cache=True)
+def impact_stage(m, opt, d, pairs, near, dt):
+    """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
+    the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
+    threshold (module doc, step 6); dt when none."""
+    slop, bounce = opt.slop, opt.bounce_threshold
+    gravity_norm = _norm3(d.gravity)
+    reach, gap0, touching = near.reach, near.gap, near.touching
+    _rotations(d.new_quat, d.new_rot)
+    _speeds(m.kind, m.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)  # after the solve
+    _gap_spin(d.spin, m.shape_type)
+    _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, reach)
+    first_hit = dt
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        if touching[p] or gap0[p] - reach[p] >= -slop or reach[p] < bounce * dt:
+            continue  # touching (the solve handles it), cannot close past -slop, or too slow
+        if _cannot_touch(a, b, d.new_pos, d.new_rot, m, slop):
+            continue
+        d.stats.impact_checks[0] += 1
+        g1 = _pair_gap(m, a, b, d.new_pos, d.new_rot, slop, d.probe)
+        if g1 >= -slop:
+            continue
+        within = reach[p] + 4.0 * slop
+        g0 = _pair_gap(m, a, b, d.pos, d.rot, within, d.probe)
+        if g0 <= slop or g0 - g1 < bounce * dt:
+            continue  # touching already, or closing too slowly to bounce
+        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within))
+    return first_hit
+
+
+@nb.njit(cache=True)
+def _commit(d):
+    """The state after the free motion (d.new_*) becomes the state."""
+    d.pos[:] = d.new_pos
+    d.quat[:] = d.new_quat
+    d.phi[:] = d.new_phi
+
+
+@nb.njit(cache=True)
+def sample_stage(d, step):
+    """After every d.every-th step counted from step d.origin, the poses and twists go to
+    d.traj[k] (N, 13) if it has room."""
+    done = step + 1 - d.origin
+    if done % d.every == 0 and done // d.every - 1 < d.traj.shape[0]:
+        k = done // d.every - 1
+        d.traj[k, :, :3] = d.pos
+        d.traj[k, :, 3:7] = d.quat
+        d.traj[k, :, 7:] = d.phi
+
+
+@nb.njit(cache=True)
+def outer_step(m, opt, d, step, scratch, nrec):
+    """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
+    impact sub-steps. ``scratch``: (solver, sweep, pair scratch), grown as needed. Returns
+    (record count, scratch, the most contacts of a (sub-)step)."""
+    solver, sweep, near = scratch
+    h = opt.h
+    max_events = opt.max_events if opt.contact == IMPULSE else 0
+    most = 0
+    t_local = 0.0
+    subs = 0
+    while True:
+        dt = h - t_local
+        if dt <= 1e-15:
+            break
+        pairs, sweep = broad_stage(m, opt, d, dt, sweep)
+        if pairs.shape[0] > near.reach.shape[0]:
+            near = new_pair_scratch(2 * pairs.shape[0])
+        count = narrow_stage(m, opt, d, pairs, near, dt)
+        most = max(most, count)
+        if count > solver.idx.shape[0]:
+            solver = new_solver(2 * count, m.kind.shape[0], d.warm.keys.shape[0])
+        solved = nrec
+        nrec = contact_stage(m, opt, d, solver, count, dt, step * h + t_local, step, nrec)
+        if nrec < 0:
+            raise RuntimeError("run_steps: contact record buffer overflow")
+        _mark_resting(d.rec, solved, nrec, m.kind, d.resting)
+        advance_stage(m, opt, d, dt)
+        first_hit = impact_stage(m, opt, d, pairs, near, dt) if subs < max_events else dt
+        if first_hit < dt:
+            advance_stage(m, opt, d, first_hit)
+            _commit(d)
+            t_local += first_hit
+            subs += 1
+            d.stats.impact_substeps[0] += 1
+            continue
+        _commit(d)
+        if subs >= max_events and max_events > 0:
+            d.stats.late_impacts[0] += 1
+        break
+    return nrec, (solver, sweep, near), most
+
+
+@nb.njit(cache=True)
+def run_steps(m, opt, d, first, n_steps, nrec):
+    """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
+    follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
+    before a step when d.rec may not hold its records (the caller grows it and calls again)."""
+    n = m.kind.shape[0]
     # sizes as np.int64: literal sizes would compile the function once per value
-    buf = _new_buffers(np.int64(MAX_CONTACTS), near)
-    scratch = _new_buffers(np.int64(256), near)
-    gravity = np.array([prm[P_GX], prm[P_GY], prm[P_GZ]])
-    gravity_norm = math.sqrt(dot3(gravity, gravity))
-    resting = np.zeros(n, np.bool_)
-    mover = (kind, kin_v, kin_w, mass, inertia, prm, gravity, np.zeros(6), resting)
-    new_pos, new_quat, new_phi = np.empty_like(pos), np.empty_like(quat), np.empty_like(phi)
-    rot, new_rot = np.empty((n, 3, 3)), np.empty((n, 3, 3))
-    solver = new_solver(np.int64(256), n, warm[0].shape[0])
-    moved = (np.empty_like(pos), np.empty_like(quat), np.empty_like(phi))
-    sweep = new_sweep(n)
-    slop = prm[P_SLOP]
-    model = int(prm[P_MODEL])
-    max_events = int(prm[P_MAX_EVENTS]) if model == IMPULSE else 0
-    gscale = 1.0 if int(prm[P_METHOD]) == 0 else 0.5
+    scratch = (
+        new_solver(np.int64(256), n, d.warm.keys.shape[0]),
+        new_sweep(n),
+        new_pair_scratch(np.int64(8 * n + 16)),
+    )
+    max_events = opt.max_events if opt.contact == IMPULSE else 0
     last_count = 64
     for s in range(n_steps):
-        step = first + s
-        if rec.shape[0] - nrec < (max_events + 2) * last_count + 64:
+        if d.rec.shape[0] - nrec < (max_events + 2) * last_count + 64:
             return s, nrec
-        for j in range(kin_index.shape[0]):
-            i = kin_index[j]
-            pos[i] = kin_pos[s, j]
-            quat[i] = kin_quat[s, j]
-            kin_v[i] = (kin_pos[s + 1, j] - kin_pos[s, j]) / h
-            kin_w[i] = (
-                quat_log(quat_mul(kin_quat[s + 1, j], np.array([1.0, -1.0, -1.0, -1.0]) * kin_quat[s, j])) / h
-            )
-        t_local = 0.0
-        subs = 0
-        while True:
-            dt = h - t_local
-            if dt <= 1e-15:
-                break
-            _rotations(quat, rot)
-            vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)
-            lo, hi, movable = _boxes(pos, _motion(vel, spin, kind, gravity_norm, dt), kind, geo, slop)
-            pairs, sweep = sweep_pairs(lo, hi, movable, sweep)
-            _gap_spin(spin, geo)  # after the boxes, whose order on x sets the contacts' order
-            reach = np.zeros(pairs.shape[0])
-            _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
-            gap0 = np.empty(pairs.shape[0])
-            touching = np.empty(pairs.shape[0], np.bool_)
-            count = _detect(pairs, pos, rot, geo, slop, reach, buf, gap0, touching)
-            last_count = max(last_count, count)
-            if count > solver.idx.shape[0]:
-                solver = new_solver(2 * count, n, warm[0].shape[0])
-            time = (first + s) * h + t_local
-            solved = nrec
-            if model == IMPULSE:
-                nrec = resolve(
-                    buf,
-                    count,
-                    pos,
-                    rot,
-                    phi,
-                    kind,
-                    kin_v,
-                    kin_w,
-                    body,
-                    prm,
-                    h,
-                    dt,
-                    gscale,
-                    time,
-                    step,
-                    rec,
-                    nrec,
-                    warm,
-                    stats,
-                    solver,
-                )
-            else:
-                stats[2] += count
-                nrec = _penalty(
-                    buf, count, pos, rot, phi, kind, kin_v, kin_w, body, prm, dt, time, step, rec, nrec
-                )
-            stats[3] += 1
-            if nrec < 0:
-                raise RuntimeError("run_steps: contact record buffer overflow")
-            _mark_resting(rec, solved, nrec, kind, resting)
-            for i in range(n):
-                _move(i, dt, pos, quat, phi, mover, new_pos, new_quat, new_phi)
-            first_hit = dt
-            if subs < max_events:
-                _rotations(new_quat, new_rot)
-                vel, spin = _speeds(phi, rot, kind, kin_v, kin_w, geo, inertia)  # after the solve
-                _gap_spin(spin, geo)
-                _pair_reach(pairs, vel, spin, kind, gravity_norm, dt, reach)
-                for p in range(pairs.shape[0]):
-                    a, b = pairs[p, 0], pairs[p, 1]
-                    if touching[p] or gap0[p] - reach[p] >= -slop or reach[p] < prm[P_BOUNCE] * dt:
-                        continue  # touching (the solve handles it), cannot close past -slop, or too slow
-                    if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
-                        continue
-                    stats[5] += 1
-                    g1 = _pair_gap(a, b, new_pos, new_rot, geo, slop, scratch)
-                    if g1 >= -slop:
-                        continue
-                    within = reach[p] + 4.0 * slop
-                    g0 = _pair_gap(a, b, pos, rot, geo, within, scratch)
-                    if g0 <= slop or g0 - g1 < prm[P_BOUNCE] * dt:
-                        continue  # touching already, or closing too slowly to bounce
-                    t_hit = _time_of_impact(
-                        a, b, dt, g0, g1, pos, quat, phi, rot, mover, geo, within, scratch, moved
-                    )
-                    first_hit = min(first_hit, t_hit)
-            if first_hit < dt:
-                for i in range(n):
-                    _move(i, first_hit, pos, quat, phi, mover, new_pos, new_quat, new_phi)
-                pos[:] = new_pos
-                quat[:] = new_quat
-                phi[:] = new_phi
-                t_local += first_hit
-                subs += 1
-                stats[0] += 1
-                continue
-            pos[:] = new_pos
-            quat[:] = new_quat
-            phi[:] = new_phi
-            if subs >= max_events and max_events > 0:
-                stats[1] += 1
-            break
-        done = step + 1 - origin
-        if done % every == 0 and done // every - 1 < traj.shape[0]:
-            k = done // every - 1
-            traj[k, :, :3] = pos
-            traj[k, :, 3:7] = quat
-            traj[k, :, 7:] = phi
+        kinematic_stage(m, opt, d, s)
+        nrec, scratch, most = outer_step(m, opt, d, first + s, scratch, nrec)
+        last_count = max(last_count, most)
+        sample_stage(d, first + s)
     return n_steps, nrec

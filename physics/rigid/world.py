@@ -1,8 +1,8 @@
 """Rigid worlds: the model (bodies, materials, parameters), the state, and simulation runs.
 
 Model/state separation: a :class:`World` holds what does not change (shapes, materials,
-masses, modal models, kinematic paths, step parameters) as frozen data and the flat arrays
-the numba stepper reads; a :class:`WorldState` holds time, poses (position of each centre
+masses, kinematic paths, step parameters) as frozen data and the stepper's compiled records
+(physics.rigid.model: Model, Options); a :class:`WorldState` holds time, poses (position of each centre
 of mass in m, unit quaternion of its principal frame) and body-frame twists (rad/s, m/s).
 :func:`simulate` runs a world from a state and returns the contact records
 (physics.rigid.stepper) plus sampled poses; physics.rigid.events turns records into Impact
@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy.errors import JassyError
-from jassy.modal_model import ModalModel
 from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.impulses import new_warm_start
 from physics.rigid.integrate import METHODS
 from physics.rigid.meshgrid import build_grid
+from physics.rigid.model import Model, Options, empty_model_tables
 from physics.rigid.shapes import (
     BOX,
     CAPSULE,
@@ -78,17 +78,13 @@ MATERIALS = {
 class Body:
     """A body of the model. ``kind``: "dynamic", "static" or "kinematic" (follows ``path``, a
     vectorised function of times (T,) s -> (positions (T, 3) m, quaternions (T, 4)), e.g. a
-    hand-held wok). ``sound``:
-    the ModalModel struck by this body's contacts; ``sound_points`` (P, 3): where each of its
-    gain rows sits in the shape's frame (nearest row is struck), or None for row 0 (or
-    mesh vertices for a TriangleMesh whose model rows are its vertices: "vertices")."""
+    hand-held wok). How a body sounds is not physics: scenes keep it beside the world
+    (patches.rigid_sound.Voice)."""
 
     name: str
     shape: Shape
     material: Material
     kind: str = "dynamic"
-    sound: ModalModel | None = None
-    sound_points: np.ndarray | str | None = None
     path: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
 
     def __post_init__(self):
@@ -129,29 +125,38 @@ class StepParams:
     exponent: float = 1.5
     friction_speed: float = 1e-3
 
-    def vector(self) -> np.ndarray:
+    def options(self) -> Options:
+        """The step settings as the stepper's :class:`model.Options` record (codes for names)."""
         if self.integrator not in METHODS:
             raise JassyError(
                 f"StepParams.integrator: expected one of {sorted(METHODS)}, got {self.integrator!r}"
             )
-        models = {"impulse": codes.IMPULSE, "linear": codes.LINEAR, "hunt-crossley": codes.HUNT_CROSSLEY}
-        if self.contact not in models:
-            raise JassyError(f"StepParams.contact: expected one of {sorted(models)}, got {self.contact!r}")
+        if self.contact not in codes.CONTACT_MODELS:
+            raise JassyError(
+                f"StepParams.contact: expected one of {sorted(codes.CONTACT_MODELS)}, got {self.contact!r}"
+            )
         if not (self.h > 0 and np.isfinite(self.h)):
             raise JassyError(f"StepParams.h: expected a positive step in s, got {self.h!r}")
-        p = np.zeros(codes.N_PARAMS)
-        p[codes.P_GX : codes.P_GZ + 1] = self.gravity
-        p[codes.P_SLOP], p[codes.P_BOUNCE], p[codes.P_BETA] = self.slop, self.bounce_threshold, self.beta
-        p[codes.P_ITER], p[codes.P_TOL] = self.iterations, self.tolerance
-        p[codes.P_METHOD], p[codes.P_ADAPT_TOL] = METHODS[self.integrator], self.adaptive_tolerance
-        p[codes.P_MODEL], p[codes.P_K], p[codes.P_C], p[codes.P_EXP] = (
-            models[self.contact],
-            self.stiffness,
-            self.damping,
-            self.exponent,
+        gx, gy, gz = (float(g) for g in self.gravity)
+        return Options(
+            h=float(self.h),
+            gx=gx,
+            gy=gy,
+            gz=gz,
+            slop=float(self.slop),
+            bounce_threshold=float(self.bounce_threshold),
+            beta=float(self.beta),
+            iterations=int(self.iterations),
+            tolerance=float(self.tolerance),
+            integrator=METHODS[self.integrator],
+            adaptive_tolerance=float(self.adaptive_tolerance),
+            contact=codes.CONTACT_MODELS[self.contact],
+            stiffness=float(self.stiffness),
+            damping=float(self.damping),
+            exponent=float(self.exponent),
+            max_events=int(self.max_events),
+            friction_speed=float(self.friction_speed),
         )
-        p[codes.P_MAX_EVENTS], p[codes.P_VEPS] = self.max_events, self.friction_speed
-        return p
 
 
 @dataclass
@@ -181,7 +186,7 @@ class Placement:
 
 
 class World:
-    """The model: bodies with their shapes, materials and sound models, and step parameters."""
+    """The model: bodies with their shapes and materials, and step parameters."""
 
     def __init__(self, params: StepParams | None = None):
         self.params = params or StepParams()
@@ -204,17 +209,23 @@ class World:
                 return i
         raise JassyError(f"World: no body named {name!r} (have {[b.name for b in self.bodies]})")
 
-    # -- model arrays ---------------------------------------------------------------------
-    def arrays(self):
-        """(geometry tuple, kind, mass, inertia, body tuple, frames) for the stepper;
-        frames[i] = (com, rotation) of body i's principal frame in its shape frame."""
+    # -- compiled model ---------------------------------------------------------------------
+    def model(self) -> Model:
+        """The stepper's :class:`model.Model` of the bodies (built once, rebuilt after add)."""
+        return self._compiled()[0]
+
+    def frames(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """frames[i] = (com, rotation) of body i's principal frame in its shape frame."""
+        return self._compiled()[1]
+
+    def _compiled(self):
         if self._geo is None:
-            self._geo = _build_arrays(self.bodies)
+            self._geo = _build_model(self.bodies)
         return self._geo
 
     def initial_state(self) -> WorldState:
         """WorldState of the placements (shape-frame poses moved to the principal frames)."""
-        _, kind, _, _, _, frames = self.arrays()
+        frames = self.frames()
         n = len(self.bodies)
         pos, quat, phi = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 6))
         for i, (body, pl) in enumerate(zip(self.bodies, self.placements, strict=False)):
@@ -288,7 +299,7 @@ def _shape_polytopes(shape, com, rotation):
     return [_polytope(hull, com, rotation) for hull in shape.hulls]
 
 
-def _build_arrays(bodies: list[Body]):
+def _build_model(bodies: list[Body]) -> tuple[Model, list]:
     n = len(bodies)
     btype = np.zeros(n, np.int64)
     kind = np.zeros(n, np.int64)
@@ -342,26 +353,38 @@ def _build_arrays(bodies: list[Body]):
             grids.append(
                 build_grid(np.asarray(shape.surface.vertices, float), np.asarray(shape.surface.faces))
             )
-    mesh_tables = _mesh_tables(grids)
     tables = [_slot_table(slots, k) for k in range(4)]
-    vstart, verts = tables[0]
-    geo = (
-        btype,
-        kind,
-        param,
-        bound,
-        vstart,
-        verts,
-        *tables[1],
-        *tables[2],
-        mesh_id,
-        *mesh_tables,
-        *_point_table(bodies, frames, slots),
-        *tables[3],
-        *_slot_table([np.asarray(p, np.int64) for p in pieces], None),
+    point_start, points = _point_table(bodies, frames, slots)
+    piece_start, piece_slots = _slot_table([np.asarray(p, np.int64) for p in pieces], None)
+    model = Model(
+        shape_type=btype,
+        kind=kind,
+        param=param,
+        bound=bound,
+        vert_start=tables[0][0],
+        verts=tables[0][1],
+        plane_start=tables[1][0],
+        planes=tables[1][1],
+        hull_start=tables[2][0],
+        hull_tris=tables[2][1],
+        mesh_of=mesh_id,
+        **_mesh_tables(grids),
+        point_start=point_start,
+        points=points,
+        edge_start=tables[3][0],
+        edges=tables[3][1],
+        piece_start=piece_start,
+        piece_slots=piece_slots,
+        mass=mass,
+        inertia=inertia,
+        inv_mass=inv_mass,
+        inv_inertia=inv_inertia,
+        restitution=rest,
+        friction=fric,
+        rolling=roll,
+        kinematic=np.flatnonzero(kind == codes.KINEMATIC).astype(np.int64),
     )
-    body_arrays = (inv_mass, inv_inertia, rest, fric, roll)
-    return geo, kind, mass, inertia, body_arrays, frames
+    return model, frames
 
 
 def _slot_table(slots, k):
@@ -406,38 +429,22 @@ def _point_table(bodies, frames, slots) -> tuple[np.ndarray, np.ndarray]:
     return offsets, np.concatenate([np.asarray(r, float).reshape(-1, 4) for r in rows])
 
 
-def _mesh_tables(grids):
-    """Concatenated triangle grids: tri_off, tris, normals, grid_f (origin, cell), grid_i (dims),
-    cell_off, starts, item_off, items, spheres."""
+def _mesh_tables(grids) -> dict[str, np.ndarray]:
+    """The mesh fields of :class:`model.Model`: the triangle grids concatenated."""
     if not grids:
-        z3 = np.zeros((0, 3))
-        return (
-            np.zeros(1, np.int64),
-            np.zeros((0, 3, 3)),
-            z3,
-            np.zeros((0, 4)),
-            np.zeros((0, 3), np.int64),
-            np.zeros(1, np.int64),
-            np.zeros(1, np.int64),
-            np.zeros(1, np.int64),
-            np.zeros(0, np.int64),
-            np.zeros((0, 4)),
-        )
-    tri_off = np.cumsum([0] + [len(g.triangles) for g in grids]).astype(np.int64)
-    cell_off = np.cumsum([0] + [len(g.start) for g in grids]).astype(np.int64)
-    item_off = np.cumsum([0] + [len(g.items) for g in grids]).astype(np.int64)
-    return (
-        tri_off,
-        np.concatenate([g.triangles for g in grids]),
-        np.concatenate([g.normals for g in grids]),
-        np.array([[*g.origin, g.cell] for g in grids]),
-        np.array([g.dims for g in grids], np.int64),
-        cell_off,
-        np.concatenate([g.start for g in grids]),
-        item_off,
-        np.concatenate([g.items for g in grids]),
-        np.concatenate([g.spheres for g in grids]),
-    )
+        return empty_model_tables()
+    return {
+        "tri_start": np.cumsum([0] + [len(g.triangles) for g in grids]).astype(np.int64),
+        "tris": np.concatenate([g.triangles for g in grids]),
+        "tri_normals": np.concatenate([g.normals for g in grids]),
+        "grid_origin_cell": np.array([[*g.origin, g.cell] for g in grids]),
+        "grid_dims": np.array([g.dims for g in grids], np.int64),
+        "cell_start": np.cumsum([0] + [len(g.start) for g in grids]).astype(np.int64),
+        "cell_items_start": np.concatenate([g.start for g in grids]),
+        "item_start": np.cumsum([0] + [len(g.items) for g in grids]).astype(np.int64),
+        "cell_items": np.concatenate([g.items for g in grids]),
+        "tri_spheres": np.concatenate([g.spheres for g in grids]),
+    }
 
 
 @dataclass
@@ -462,54 +469,45 @@ def simulate(
 ) -> RunResult:
     """Run ``world`` for ``duration`` seconds (a whole number of steps of world.params.h),
     sampling the poses after every ``sample_every`` steps (0: only the final state)."""
-    prm = world.params.vector()
-    h = world.params.h
+    opt = world.params.options()
+    h = opt.h
     if not (duration > 0 and np.isfinite(duration)):
         raise JassyError(f"simulate: duration: expected a positive time in s, got {duration!r}")
     if sample_every < 0:
         raise JassyError(f"simulate: sample_every: expected an integer >= 0, got {sample_every!r}")
-    geo, kind, mass, inertia, body, _ = world.arrays()
+    model = world.model()
     state = (state or world.initial_state()).copy()
     n = len(world.bodies)
     n_steps = int(round(duration / h))
     first = int(round(state.time / h))
-    kin_index = np.array([i for i, b in enumerate(world.bodies) if b.kind == "kinematic"], np.int64)
     every = sample_every or n_steps + 1
     traj = np.zeros((n_steps // every, n, 13))
     # records: a few per body and step reserved up front (address space only: the memory of a
     # row comes when the stepper writes it), so that the buffer seldom grows by copying
     rec = np.empty((min(max(4096, 4 * n * n_steps), 1 << 20), codes.REC_WIDTH))
     nrec = 0
-    stats = np.zeros(6, np.int64)
+    stats = st.new_stats()
     warm = new_warm_start(st.MAX_CONTACTS)
     done = 0
     while done < n_steps:
         todo = min(chunk, n_steps - done)
-        kin_pos, kin_quat = _kinematic_samples(world, kin_index, first + done, todo, h)
-        steps, nrec = st.run_steps(
-            first + done,
-            todo,
-            h,
+        kin_pos, kin_quat = _kinematic_samples(world, model.kinematic, first + done, todo, h)
+        data = st.new_data(
+            model,
+            opt,
             state.pos,
             state.quat,
             state.phi,
-            kind,
-            kin_index,
             kin_pos,
             kin_quat,
-            mass,
-            inertia,
-            body,
-            geo,
-            prm,
             rec,
-            nrec,
             stats,
             traj,
             every,
             first,
             warm,
         )
+        steps, nrec = st.run_steps(model, opt, data, first + done, todo, nrec)
         if steps < todo:  # the record buffer might not hold the next step: grow it
             grown = np.empty((2 * rec.shape[0], codes.REC_WIDTH))  # the stepper writes whole rows
             grown[:nrec] = rec[:nrec]
@@ -518,8 +516,7 @@ def simulate(
         if not (np.all(np.isfinite(state.pos)) and np.all(np.isfinite(state.phi))):
             raise JassyError(f"simulate: the state became non-finite near t = {(first + done) * h:.6f} s")
     state.time = (first + n_steps) * h
-    names = ("impact_substeps", "late_impacts", "contacts", "solves", "sweeps", "impact_checks")
-    info = {name: int(x) for name, x in zip(names, stats, strict=True)}
+    info = {name: int(count[0]) for name, count in zip(stats._fields, stats, strict=True)}
     times = (first + every * np.arange(1, traj.shape[0] + 1)) * h
     return RunResult(
         world,
