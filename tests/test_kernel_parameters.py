@@ -36,12 +36,6 @@ WIDER = {
     ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
     ("physics/rigid/meshgrid.py", "grid_closest"),  # 12
     ("physics/rigid/meshgrid.py", "grid_within"),  # 15
-    ("physics/rigid/narrow.py", "_edge_contact"),  # 16
-    ("physics/rigid/narrow.py", "_polytope_on_face"),  # 13
-    ("physics/rigid/narrow.py", "_polytopes"),  # 11
-    ("physics/rigid/narrow.py", "_push"),  # 16
-    ("physics/rigid/narrow.py", "_push_face"),  # 14
-    ("physics/rigid/narrow.py", "_push_point"),  # 17
     ("physics/rod/mixed.py", "_element_terms"),  # 14
     ("ugens/bubbles.py", "bubbles"),  # 13
     ("ugens/drill.py", "drill_kernel"),  # 14
