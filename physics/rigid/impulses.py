@@ -175,6 +175,7 @@ def _contact_frames(buf, nc, pos, inv_mass, solver):
     for k in range(nc):
         c = idx[k]
         a, b = pair[c, 0], pair[c, 1]
+        fixed_b = inv_mass[b] == 0.0
         n0, n1, n2 = nrm[c, 0], nrm[c, 1], nrm[c, 2]
         if abs(n0) < 0.57:
             s0, s1, s2 = 0.0, -n2, n1
@@ -200,17 +201,19 @@ def _contact_frames(buf, nc, pos, inv_mass, solver):
             ang_b[k, j, 0] = rb[k, 1] * d2 - rb[k, 2] * d1
             ang_b[k, j, 1] = rb[k, 2] * d0 - rb[k, 0] * d2
             ang_b[k, j, 2] = rb[k, 0] * d1 - rb[k, 1] * d0
-            _response(k, j, a, b, inv_mass[a] + inv_mass[b], solver)
+            _response(k, j, a, b, inv_mass[a] + inv_mass[b], fixed_b, solver)
         for j in range(3, 5):  # rolling rows: angular only, about t1 and t2
             for x in range(3):
                 ang_a[k, j, x] = ang_b[k, j, x] = frame[k, j - 2, x]
-            _response(k, j, a, b, 0.0, solver)
+            _response(k, j, a, b, 0.0, fixed_b, solver)
 
 
 @nb.njit(cache=True, inline="always")
-def _response(k, j, a, b, linear, solver):
+def _response(k, j, a, b, linear, fixed_b, solver):
     """Responses I^-1 J^T (angular) of row j of contact k on a and b, and the row's effective
-    mass: 1 / (``linear`` (1/m_a + 1/m_b, or 0 for a rolling row) + the angular terms)."""
+    mass: 1 / (``linear`` (1/m_a + 1/m_b, or 0 for a rolling row) + the angular terms). A
+    fixed b (``fixed_b``: static or kinematic, zero inverse inertia) adds nothing, and its
+    response is never read (_row_apply skips it), so neither is computed."""
     ang_a, ang_b, res_a, res_b, iw = (
         solver.ang_a,
         solver.ang_b,
@@ -223,6 +226,9 @@ def _response(k, j, a, b, linear, solver):
         res_a[k, j, x] = (
             iw[a, x, 0] * ang_a[k, j, 0] + iw[a, x, 1] * ang_a[k, j, 1] + iw[a, x, 2] * ang_a[k, j, 2]
         )
+        if fixed_b:
+            inverse += ang_a[k, j, x] * res_a[k, j, x]
+            continue
         res_b[k, j, x] = (
             iw[b, x, 0] * ang_b[k, j, 0] + iw[b, x, 1] * ang_b[k, j, 1] + iw[b, x, 2] * ang_b[k, j, 2]
         )

@@ -25,6 +25,10 @@ outer step of h seconds (:func:`outer_step`) is:
    world moves to the earliest such time and goes back to 2. At most ``max_events`` such
    sub-steps per step; later impacts are resolved at the step end.
 
+The stages are inlined into run_steps (numba inline="always"): a called kernel is linked
+into its caller's module and optimised again there, so a chain of stage calls above the
+narrow phase would compile it once per level.
+
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
 the solve, impact flag, features, barycentric weights on b, the contact point in each body's
@@ -466,7 +470,7 @@ def _detect(m, opt, d, pairs, near):
     return count
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def kinematic_stage(m, opt, d, s):
     """Kinematic bodies to their path's pose at the run's step s, with the velocity and angular
     velocity (finite differences over the step) that take them to the next."""
@@ -481,7 +485,7 @@ def kinematic_stage(m, opt, d, s):
         )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def broad_stage(m, opt, d, dt, sweep):
     """Rotations, speed bounds and the pairs of bodies that can come within slop in dt seconds
     of free motion (sweep and prune of bounding boxes grown by how far each can move); d.spin
@@ -496,7 +500,7 @@ def broad_stage(m, opt, d, dt, sweep):
     return pairs, sweep
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def narrow_stage(m, opt, d, pairs, near, dt):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
     come within slop (_detect); returns their count."""
@@ -506,7 +510,7 @@ def narrow_stage(m, opt, d, pairs, near, dt):
     return _detect(m, opt, d, pairs, near)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
     """The contact model's response to the contacts d.contacts[:count] over dt (s): the one
     dispatch of contact models on opt.contact (an unknown code is an error). Returns the
@@ -532,14 +536,14 @@ def _mark_resting(rec, first, last, kind, resting):
                 resting[i] = kind[i] == DYNAMIC
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def advance_stage(m, opt, d, tau):
     """Every body's pose and twist after tau seconds of free motion into d.new_*."""
     for i in range(m.kind.shape[0]):
         _move(m, opt, d, i, tau, d.new_pos, d.new_quat, d.new_phi)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def impact_stage(m, opt, d, pairs, near, dt):
     """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
     the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
@@ -570,7 +574,7 @@ def impact_stage(m, opt, d, pairs, near, dt):
     return first_hit
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _commit(d):
     """The state after the free motion (d.new_*) becomes the state."""
     d.pos[:] = d.new_pos
@@ -578,7 +582,7 @@ def _commit(d):
     d.phi[:] = d.new_phi
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def sample_stage(d, step):
     """After every d.every-th step counted from step d.origin, the poses and twists go to
     d.traj[k] (N, 13) if it has room."""
@@ -590,7 +594,7 @@ def sample_stage(d, step):
         d.traj[k, :, 7:] = d.phi
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def outer_step(m, opt, d, step, scratch, nrec):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps. ``scratch``: (solver, sweep, pair scratch), grown as needed. Returns

@@ -310,7 +310,8 @@ def _build_model(bodies: list[Body]) -> tuple[Model, list]:
     inv_mass = np.zeros(n)
     inv_inertia = np.zeros((n, 3))
     rest, fric, roll = (
-        np.array([getattr(b.material, k) for b in bodies]) for k in ("restitution", "friction", "rolling")
+        np.array([getattr(b.material, k) for b in bodies], float)
+        for k in ("restitution", "friction", "rolling")
     )
     frames = []
     slots = [None] * n  # geometry slot i: body i's polytope; compound pieces after the bodies
