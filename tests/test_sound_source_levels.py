@@ -118,7 +118,7 @@ def test_cavity_tone_rms_is_the_jet_band_at_the_resonance(on_resonance):
 
 
 def test_jassy_doc_states_each_sources_level_convention():
-    from jassy.doc import describe_ugen
+    from jassy.ugendoc import describe_ugen
 
     for name, cls in ugen_types().items():
         if not set(cls.inputs) - set(getattr(cls, "optional_inputs", ())):
