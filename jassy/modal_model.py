@@ -258,6 +258,21 @@ class ModalModel:
             attack=self.attack, attack_rate=self.attack_rate,
         )  # fmt: skip
 
+    def attack_at(self, rate: float) -> np.ndarray:
+        """The stored attack resampled to ``rate`` Hz (polyphase, Kaiser window; the same
+        samples when the rates agree); empty for a model without an attack."""
+        if self.attack is None or self.attack.size == 0:
+            return np.zeros(0)
+        attack_rate = float(self.attack_rate or rate)
+        if attack_rate == rate:
+            return np.asarray(self.attack, dtype=np.float64)
+        from fractions import Fraction
+
+        from scipy.signal import resample_poly
+
+        ratio = Fraction(rate / attack_rate).limit_denominator(1000)
+        return resample_poly(self.attack, ratio.numerator, ratio.denominator)
+
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
         """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
 

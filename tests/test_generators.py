@@ -74,7 +74,7 @@ def test_rain_patch_generates_drops_over_the_whole_sheet():
 def test_door_knock_example_knocks_when_it_says():
     from pathlib import Path
 
-    from jassy.offline import render
+    from jassy.engines.offline import render
 
     patch = load_patch(Path(__file__).parent.parent / "examples" / "door_knock.toml")
     out = render(patch.graph, patch.score, patch.duration)
