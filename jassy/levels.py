@@ -107,7 +107,7 @@ def calibrated(model: ModalModel, sample_rate: float = 48000.0) -> ModalModel:
     gain = reference_gain(ModalModel(model.frequencies, model.decays, model.gains), sample_rate)
     return ModalModel(
         model.frequencies, model.decays, model.gains, model.points, model.name, model.source, gain,
-        model.driving,
+        model.driving, surface=model.surface,
     )  # fmt: skip
 
 

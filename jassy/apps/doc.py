@@ -19,6 +19,7 @@ from jassy.ugendoc import describe_ugen, number_text
 def _value(x) -> str:
     """A parameter or event value as a user would write it."""
     from jassy.modal_model import Location, ModalModel
+    from jassy.surface import SurfacePoint
 
     if isinstance(x, ModalModel):
         return f"model {x.name or '?'} ({x.n_modes} modes, {x.n_points} location(s))"
@@ -26,6 +27,8 @@ def _value(x) -> str:
         if len(x.vertices) == 1:
             return str(x.vertices[0])
         return " + ".join(f"{w:g} {v}" for v, w in zip(x.vertices, x.weights, strict=True))
+    if isinstance(x, SurfacePoint):
+        return f"{{surface = [{x.u:.3f}, {x.v:.3f}]}}"
     if isinstance(x, bool):
         return "true" if x else "false"
     if isinstance(x, (int, float)):
@@ -61,11 +64,21 @@ def describe_model_points(model) -> str:
     of the object library's (``patches.objects``)."""
     from patches.objects import object_for_model
 
+    anywhere = []
+    if model.surface is not None:
+        a, b = model.surface.sides
+        anywhere = [
+            f"  anywhere: {{surface = [u, v]}}, u = x / {a:g} m, v = y / {b:g} m (the plate's analytic "
+            "mode shapes; {random_on_surface = MODEL} draws such points uniformly over the area)"
+        ]
     if not model.points:
-        return f"  {model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"
+        return "\n".join(
+            [f"  {model.n_points} location(s), unnamed (vertex indices 0..{model.n_points - 1})"] + anywhere
+        )
     info = object_for_model(model.name)
     described = info.points if info is not None else {}
-    return "\n".join(f"  {name}: {described.get(name, '')}".rstrip().rstrip(":") for name in model.points)
+    rows = [f"  {name}: {described.get(name, '')}".rstrip().rstrip(":") for name in model.points]
+    return "\n".join(rows + anywhere)
 
 
 def reference_markdown() -> str:
