@@ -651,7 +651,10 @@ class ModalBank(ModelParams, UGen):
         rows[DECAY] = self._fresh[1] ** period
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
-        self._bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
+        bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
+        #: per mode, the bins of a zero-padded periodogram (anytime_spectrum) it is smoothed over
+        self._bin_taps = bins[:, None] + np.arange(PSD_SMOOTHING.size)
+        self._psd = None  # the smoothed PSD at the modes' bins, remembered across periods
         two_d_tau = 2.0 * decays * self._horizon
         rows[GROWTH] = np.where(
             two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
@@ -863,6 +866,7 @@ class ModalBank(ModelParams, UGen):
         period = self._heard.size
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
+        self._periodogram = np.zeros(period // 2 + PSD_SMOOTHING.size)  # zero-padded by 2 bins
         self._horizon = horizon
         self._forcing_key = None
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
@@ -896,14 +900,16 @@ class ModalBank(ModelParams, UGen):
         force lately: the power spectral density of the last period's force (its ring) at
         each mode's frequency into the budget's SPECTRUM row; returns True."""
         force = self._heard - self._heard.mean()  # a steady load makes no sound
-        psd = np.abs(np.fft.rfft(force * self._window)) ** 2 / self._window_power
+        spectrum = np.fft.rfft(force * self._window)
+        padded, edge = self._periodogram, PSD_SMOOTHING.size // 2
+        np.multiply(spectrum.real, spectrum.real, out=padded[edge:-edge])
+        padded[edge:-edge] += spectrum.imag * spectrum.imag
         # a periodogram of noise scatters by its own size from bin to bin: smooth it over
-        # neighbouring bins and over periods (it is the trend that ranks)
-        psd = np.convolve(psd, PSD_SMOOTHING, mode="same")
+        # neighbouring bins and over periods (it is the trend that ranks), at the modes' bins
+        psd = padded[self._bin_taps] @ PSD_SMOOTHING / self._window_power
         if self._psd is not None:
             psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
-        self._psd = psd
-        self._mode_rows_view[SPECTRUM] = psd[self._bins]
+        self._psd = self._mode_rows_view[SPECTRUM] = psd
         return True
 
     def anytime_kicks(self, kicks: list, row: np.ndarray) -> tuple[float, bool]:
