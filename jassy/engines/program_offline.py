@@ -1,9 +1,9 @@
 """Offline rendering of a program graph on the device callback's code path.
 
-The score's events become the callback's event records (jassy.callback.EventRecords) and
+The score's events become the callback's event records (jassy.engines.callback.EventRecords) and
 one compiled call, :func:`render_planar`, renders a run of frames: per sub-block it applies
 the records due, runs the program and passes the output through the callback's output
-stage (jassy.callback.sub_block: NaN/Inf to 0, limiter and its meter, haptic limits), then
+stage (jassy.engines.callback.sub_block: NaN/Inf to 0, limiter and its meter, haptic limits), then
 the per-channel offsets, and writes the result's rows. No Python runs per block or per
 translated event; the sub-blocks, and so the output bits, are those of the node-by-node
 scheduler (jassy.scheduler).
@@ -19,8 +19,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy import callback, haptics, safety
-from jassy.callback import (
+from jassy import haptics, safety
+from jassy.engines import callback
+from jassy.engines.callback import (
     BLOCK,
     FRAME,
     HAPTIC_FLAGS,

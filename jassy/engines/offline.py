@@ -103,7 +103,7 @@ class OfflineEngine:
         self.why_not_program = why_not_compiled(graph) if program else "not asked for"
         self.compiled = None
         if self.why_not_program is None:
-            from jassy.program_offline import OfflineProgram
+            from jassy.engines.program_offline import OfflineProgram
 
             self.compiled = OfflineProgram(
                 graph,
@@ -171,7 +171,7 @@ class OfflineEngine:
 
     def _produce_compiled(self, out: np.ndarray, offset: int, n: int, ahead: int = 0) -> None:
         """:meth:`produce` into out[:, offset : offset + n] through the graph's program, in
-        compiled runs (jassy.program_offline); NaN/Inf are zeroed there, and the nodes that
+        compiled runs (jassy.engines.program_offline); NaN/Inf are zeroed there, and the nodes that
         produced them are reset after the sub-block that met them. The score's events of the
         next ``max(n, ahead)`` frames are translated into records now."""
         done = 0
