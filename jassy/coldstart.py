@@ -20,10 +20,11 @@ renames (jassy.jit locks the folder around numba's index update); it prints noth
 ignores its own errors (this process then compiles what is missing) and leaves with
 ``os._exit``; this process always reaps it.
 
-:func:`graph_units` gives the units of an :class:`jassy.offline.OfflineEngine`'s graph: one
-per kind of node the graph's program holds (its node function with every kernel it calls),
-the heaviest first, then a modal bank's pole design, and last a small stand-in render that
-compiles the engine's own kernels (the program's block loop, the scheduler, the output stage).
+:func:`graph_units` gives the units of the graph of a
+:class:`jassy.engines.offline.OfflineEngine`: one per kind of node the graph's program holds
+(its node function with every kernel it calls), the heaviest first, then a modal bank's pole
+design, and last a small stand-in render that compiles the engine's own kernels (the
+program's block loop, the scheduler, the output stage).
 """
 
 from __future__ import annotations
@@ -108,9 +109,9 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
 def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     """Compile units of a render of ``graph`` by an OfflineEngine built with
     ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
-    (:func:`jassy.startup.kernels_cached`) and the graph runs as a program."""
+    (:func:`jassy.apps.startup.kernels_cached`) and the graph runs as a program."""
     from jassy import program
-    from jassy.startup import kernels_cached
+    from jassy.apps.startup import kernels_cached
     from ugens.impact import ImpactForce
     from ugens.mix import Gain
     from ugens.modal import ModalBank, direct_ratio
@@ -141,9 +142,9 @@ def _render_stand_in(haptic: bool, engine_options: dict) -> None:
     """Render three blocks of a tap into a gain through an engine with the same options (so
     the same kernel types as the real render: block loop, scheduler, event kernels, output
     stage)."""
+    from jassy.engines.offline import OfflineEngine
     from jassy.events import Event
     from jassy.graph import Graph
-    from jassy.offline import OfflineEngine
     from ugens.impact import ImpactForce
     from ugens.mix import Gain
 

@@ -75,14 +75,14 @@ import hashlib, sys
 import numpy as np
 from jassy import coldstart
 from jassy.patchfile import load_patch
-from jassy.offline import OfflineEngine
+from jassy.engines.offline import OfflineEngine
 forked = []
 original = coldstart.compile_on_two_cores
 def counted(units):
     forked.append(original(units))
     return forked[-1]
-import jassy.offline
-jassy.offline.compile_on_two_cores = counted
+import jassy.engines.offline
+jassy.engines.offline.compile_on_two_cores = counted
 patch = load_patch("bell")
 audio = OfflineEngine(patch.graph, patch.score, 48000).render(1.0).audio
 print(forked[0], hashlib.sha256(np.ascontiguousarray(audio).tobytes()).hexdigest())

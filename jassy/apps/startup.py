@@ -38,7 +38,7 @@ class RunTime(NamedTuple):
 #: ``python -m jassy`` that also writes the main process's own CPU time (s, without its
 #: helpers') to the file named by its first argument.
 _MAIN_CPU = """import resource, sys
-from jassy.cli import main
+from jassy.apps.cli import main
 status = main(sys.argv[2:])
 own = resource.getrusage(resource.RUSAGE_SELF)
 with open(sys.argv[1], "w") as out:
