@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy import stopflag
+from jassy.coldstart import compile_on_two_cores, graph_units
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
@@ -87,6 +88,9 @@ class OfflineEngine:
             raise PatchError(f"block: expected an integer >= 1, got {block!r}")
         self.graph = graph
         self.sample_rate = float(sample_rate)
+        options = dict(sample_rate=sample_rate, block=block, limiter=limiter, release=release)
+        options.update(haptic_safety=haptic_safety, offsets_ms=offsets_ms, program=program)
+        compile_on_two_cores(graph_units(graph, options))  # a cold cache: half the compiling
         graph.prepare(self.sample_rate, block)
         from jassy.program import why_not_compiled  # imports the ugens: not at import time
 
