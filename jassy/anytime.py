@@ -86,6 +86,8 @@ class ModeBudget:
     weighting: str = "flat"
     peak_modes: int = field(default=0, init=False)
     decisions: int = field(default=0, init=False)
+    #: modes computed times frames, summed over the banks the budget renders
+    mode_samples: int = field(default=0, init=False)
 
     def __post_init__(self):
         if self.max_modes is None and self.cpu_fraction is None:
@@ -122,6 +124,7 @@ class ModeBudget:
         self.limit = min(self.max_modes or total, total)
         self.peak_modes = 0
         self.decisions = 0
+        self.mode_samples = 0
         self._clock = None
         self._fading = False
         self.active = self.decides(total)
@@ -175,6 +178,12 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
         self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
+        from ugens.modal import render_kept
+
+        outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with the banks
+        self._mb, self._wiring = mb, mb.Wiring(self._addresses, outputs)
+        self._busy, self._how = np.zeros(len(banks), dtype=bool), np.zeros(len(banks), dtype=np.int64)
+        self._render_all = specialise(render_kept, tables, self._wiring, self._how, 0, 0, 0)
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -209,14 +218,27 @@ class ModeBudget:
             self._render(rendered, end - rendered, rendered - start)
 
     def _render(self, start: int, n: int, offset: int) -> None:
-        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block;
-        a bank with nothing to compute (no mode sounding, no force in this or the last
-        period, nothing pending) only writes silence."""
-        forced, earlier, now, before = self._forced, self._unrendered, self._heard_now, self._heard_before
-        for i, process in enumerate(self._processes):  # (a force heard lately: its ring holds it)
-            if forced[i] or earlier[i] or now[i] or before[i] or not self.banks[i].anytime_silent(offset, n):
-                process(start, n, offset)
-        earlier[:] = False
+        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
+        in one compiled call (ugens.modal.render_kept) but for banks with a parameter
+        change, ramp or size input pending (their own ``process``); a bank with nothing to
+        compute (no mode sounding, no force in this or the last period, nothing pending)
+        only writes silence."""
+        mb = self._mb
+        busy, how = self._busy, self._how  # (a force heard lately: its ring holds it)
+        np.logical_or(self._forced, self._unrendered, out=busy)
+        busy |= self._heard_now
+        busy |= self._heard_before
+        how[:] = mb.UNLESS_SILENT
+        how[busy] = mb.COMPILED
+        by_python = [i for i, bank in enumerate(self.banks) if not bank.anytime_compiled()]
+        how[by_python] = mb.BY_PYTHON
+        self.mode_samples += self._render_all(self._tables, self._wiring, how, start, n, offset)
+        for i in by_python:
+            bank = self.banks[i]
+            if busy[i] or not bank.anytime_silent(offset, n):
+                self._processes[i](start, n, offset)
+                self.mode_samples += n * int(bank.meta[0])
+        self._unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
