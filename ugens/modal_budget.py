@@ -190,9 +190,11 @@ def scatter_kept(compact, kept, bank):
             j += 1
 
 
-@nb.njit(cache=True)
+@nb.njit(fastmath=True, cache=True)
 def centred_power(force):
-    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2."""
+    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2. (fastmath
+    lets the sums run in SIMD lanes: a strict left-to-right sum cost about 5 us per
+    2048-sample period, most of a decision over the wok's fourteen small banks.)"""
     n = force.size
     mean = 0.0
     for i in range(n):
