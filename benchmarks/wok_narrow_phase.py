@@ -50,7 +50,7 @@ def main() -> None:
     pos = np.ascontiguousarray(data["pos"])
     rot = np.stack([rotation_matrices(q) for q in data["quat"]])
     if hasattr(world, "model"):
-        geo = world.model()
+        geo = world.model().geometry
         buf = narrow.new_contacts(4096, new_mesh_memory(int(geo.point_start[-1])))
     else:  # a tree from before the Model record
         from physics.rigid import stepper

@@ -359,7 +359,7 @@ def test_remembered_mesh_queries_equal_a_search_of_every_triangle():
     w = World(StepParams(h=1e-3))
     w.add(Body("bowl", TriangleMesh(_bumpy_bowl()), Material("g", 1000, 0.5, 0), kind="static"))
     w.add(Body("ball", Sphere(0.01), Material("b", 1000, 0.5, 0)))
-    geo = w.model()
+    geo = w.model().geometry
     m, k = geo.mesh_of[0], geo.point_start[1]
     tris = geo.tris[geo.tri_start[m] : geo.tri_start[m + 1]]
     near = new_mesh_memory(geo.point_start[-1])
@@ -600,7 +600,7 @@ def _pair_gaps(world, state, margin=0.1):
     from physics.rigid.narrow import pair_contacts
     from physics.rigid.spatial import rotation_matrices
 
-    geo = world.model()
+    geo = world.model().geometry
     buf = new_contacts(64, new_mesh_memory(geo.point_start[-1]))
     rot = rotation_matrices(state.quat)
     count = pair_contacts(0, 1, state.pos, rot, geo, margin, buf, 0)
@@ -777,3 +777,18 @@ def test_unknown_contact_model_code_is_an_error():
     )
     with pytest.raises(ValueError, match="unknown contact model"):
         st.run_steps(model, opt, data, 0, 1, 0)
+
+
+def test_a_run_without_records_matches_the_run_that_keeps_them():
+    """keep_records=False writes the records over one reused buffer (here more than once) and
+    returns none: the motion and every count are those of the run that keeps them."""
+    from physics.rigid.bench import pile
+
+    world, state = pile(10)
+    kept = simulate(world, 4.0, state=state, sample_every=0)
+    lean = simulate(world, 4.0, state=state, sample_every=0, keep_records=False)
+    assert len(kept.records) > 1 << 16  # more than the reused buffer holds
+    assert lean.records.shape == (0, codes.REC_WIDTH)
+    for name in ("pos", "quat", "phi"):
+        assert np.array_equal(getattr(lean.state, name), getattr(kept.state, name))
+    assert lean.stats == kept.stats

@@ -1,5 +1,5 @@
 """The rigid world's compiled records, after MuJoCo's mjModel / mjOption split: a :class:`Model`
-of flat arrays that never change during a run (shapes, masses, materials) and the
+of flat arrays that never change during a run (its :class:`Geometry`, masses, materials) and the
 :class:`Options` of the step (integrator, contact model, solver settings). Both are
 ``typing.NamedTuple``s, which numba passes as plain tuples (also from its cache); the stepper's
 state and scratch are its ``Data`` (physics.rigid.stepper). world.World builds both records.
@@ -16,11 +16,12 @@ from typing import NamedTuple
 import numpy as np
 
 
-class Model(NamedTuple):
-    """Static arrays of a world's bodies (N bodies, S geometry slots, M meshes)."""
+class Geometry(NamedTuple):
+    """The bodies' shapes as flat arrays (N bodies, S geometry slots, M meshes): all the
+    narrow phase reads (kept apart from the rest of the Model so that a call of the narrow
+    phase, made per pair, passes only these)."""
 
     shape_type: np.ndarray  # (N,) shapes.SPHERE ... COMPOUND
-    kind: np.ndarray  # (N,) codes.DYNAMIC, STATIC or KINEMATIC
     param: np.ndarray  # (N, 4) sphere (radius); capsule (radius, half length); plane (unit
     #   normal, offset, m); mesh (thickness, depth behind the surface, m)
     bound: np.ndarray  # (N,) bounding radius about the centre of mass, m (inf for a plane)
@@ -47,6 +48,13 @@ class Model(NamedTuple):
     edges: np.ndarray  # (E, 18) hull edges: ends p, q, face normals n1, n2, n2 x n1, q - p
     piece_start: np.ndarray  # (N + 1,) rows of each body's geometry slots in piece_slots
     piece_slots: np.ndarray  # (Q,) geometry slots (a polytope: its own; a compound: its pieces)
+
+
+class Model(NamedTuple):
+    """Static arrays of a world's N bodies: their Geometry, kinds, masses and materials."""
+
+    geometry: Geometry
+    kind: np.ndarray  # (N,) codes.DYNAMIC, STATIC or KINEMATIC
     mass: np.ndarray  # (N,) kg (1 for a static or kinematic body)
     inertia: np.ndarray  # (N, 3) principal moments, kg m^2 (1 for a static or kinematic body)
     inv_mass: np.ndarray  # (N,) 1/kg, 0 for a static or kinematic body
@@ -80,7 +88,7 @@ class Options(NamedTuple):
 
 
 def empty_model_tables() -> dict[str, np.ndarray]:
-    """Zero-row tables for a world without meshes (the mesh fields of :class:`Model`)."""
+    """Zero-row tables for a world without meshes (the mesh fields of :class:`Geometry`)."""
     return {
         "tri_start": np.zeros(1, np.int64),
         "tris": np.zeros((0, 3, 3)),

@@ -26,7 +26,7 @@ mesh < compound). Methods:
 - anything vs triangle mesh: the same points against the mesh's triangle grid, keeping the
   side the triangle normals face; points up to the mesh's ``depth`` behind it penetrate.
 
-``model`` is the world's :class:`physics.rigid.model.Model`; the method of each pair of shape
+``model`` is the world's :class:`physics.rigid.model.Geometry`; the method of each pair of shape
 types comes from one table (PAIR_METHOD); the contact buffers (:class:`Contacts`) carry
 what each body point last met of a mesh (_mesh_closest).
 """

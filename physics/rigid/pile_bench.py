@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import resource
 import time
 
 import numpy as np
@@ -70,12 +71,20 @@ def pile_depths(pos: np.ndarray, quat: np.ndarray, side: float) -> np.ndarray:
     return np.maximum(np.concatenate([np.ravel(d) for d in depths]), 0.0)
 
 
+def _minor_faults() -> int:
+    """Minor page faults of this process so far (a page of new memory given on first touch)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+
 def bench_piles(
     sizes=(100, 1000), seconds: float = 0.2, rounds: int = 3, progress=lambda m: None
 ) -> list[dict]:
     """Per pile size: steps per CPU second of jassy and MuJoCo (best of ``rounds`` interleaved
     rounds of ``seconds`` each from the same settled state), their ratio, and the largest and
-    99th-percentile penetration after the rounds. Empty when MuJoCo is not installed."""
+    99th-percentile penetration after the rounds. Empty when MuJoCo is not installed. jassy
+    runs as MuJoCo does, keeping no contact history (``keep_records=False``), and again
+    keeping every contact record as a sound scene needs (``jassy_kept_steps_per_s``); the
+    minor page faults per step of each run (new memory touched) are counted too."""
     from physics.rigid.bench import pile
     from physics.rigid.peers import mujoco_pile, mujoco_steps
     from physics.rigid.world import simulate
@@ -89,15 +98,22 @@ def bench_piles(
         world, settled = pile(n)
         side = 0.05 * math.ceil(math.sqrt(n / 2.0)) + 0.05
         steps = int(round(seconds / world.params.h))
-        ours, theirs = [], []
+        ours, theirs, kept = [], [], []
+        faults = {"jassy": [], "mujoco": [], "kept": []}
         for _ in range(rounds):
-            t0 = time.process_time()
-            result = simulate(world, seconds, state=settled, sample_every=0)
+            f0, t0 = _minor_faults(), time.process_time()
+            result = simulate(world, seconds, state=settled, sample_every=0, keep_records=False)
             ours.append(time.process_time() - t0)
+            faults["jassy"].append(_minor_faults() - f0)
             model, data = reference[0], copy.copy(reference[1])
-            t0 = time.process_time()
+            f0, t0 = _minor_faults(), time.process_time()
             mujoco_steps((model, data), steps)
             theirs.append(time.process_time() - t0)
+            faults["mujoco"].append(_minor_faults() - f0)
+            f0, t0 = _minor_faults(), time.process_time()
+            simulate(world, seconds, state=settled, sample_every=0)  # every contact record kept
+            kept.append(time.process_time() - t0)
+            faults["kept"].append(_minor_faults() - f0)
         depth_j = pile_depths(result.state.pos[-n:], result.state.quat[-n:], side)  # after the pen's planes
         depth_m = pile_depths(data.xpos[1:], data.xquat[1:], side)
         rows.append(
@@ -106,6 +122,9 @@ def bench_piles(
                 "jassy_steps_per_s": steps / min(ours),
                 "mujoco_steps_per_s": steps / min(theirs),
                 "ratio": min(theirs) / min(ours),
+                "jassy_kept_steps_per_s": steps / min(kept),
+                "kept_ratio": min(theirs) / min(kept),
+                **{f"{k}_faults_per_step": min(v) / steps for k, v in faults.items()},
                 "jassy_contacts": result.stats["contacts"] / max(result.stats["solves"], 1),
                 "mujoco_contacts": int(data.ncon),
                 "jassy_sweeps": result.stats["sweeps"] / max(result.stats["solves"], 1),
@@ -145,6 +164,13 @@ def print_piles(rows: list[dict]) -> None:
             f"{r['jassy_sweeps']:6.1f} "
             f"{1e3 * r['jassy_depth_max']:9.3f}/{1e3 * r['mujoco_depth_max']:<9.3f} "
             f"{1e3 * r['jassy_depth_p99']:9.3f}/{1e3 * r['mujoco_depth_p99']:<9.3f}"
+        )
+    for r in rows:
+        print(
+            f"{r['bodies']:6d} bodies, contact records kept: jassy {r['jassy_kept_steps_per_s']:.0f} steps/s "
+            f"({r['kept_ratio']:.2f}x MuJoCo); minor page faults per step: jassy "
+            f"{r['jassy_faults_per_step']:.1f}, records kept {r['kept_faults_per_step']:.1f}, "
+            f"MuJoCo {r['mujoco_faults_per_step']:.1f}"
         )
     last = rows[-1]
     if "jassy_slope" in last:

@@ -125,7 +125,7 @@ def new_data(
     samples, the record buffer, statistics, sample buffer and warm start (kept by the caller
     across runs); fresh scratch, and a fresh memory of the body points near meshes."""
     n = pos.shape[0]
-    near = new_mesh_memory(int(m.point_start[-1]))
+    near = new_mesh_memory(int(m.geometry.point_start[-1]))
     return Data(
         pos,
         quat,
@@ -210,39 +210,77 @@ def _mark_resting(rec, first, last, kind, resting):
                 resting[i] = kind[i] == DYNAMIC
 
 
+class FreeMotion(NamedTuple):
+    """What the free motion of a body reads (from Model, Options and Data), gathered once per
+    stage: a call of _move then passes these arrays, not every array of m and d."""
+
+    kind: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    phi: np.ndarray
+    inertia: np.ndarray
+    mass: np.ndarray
+    gravity: np.ndarray
+    no_wrench: np.ndarray
+    resting: np.ndarray
+    kin_v: np.ndarray
+    kin_w: np.ndarray
+    method: int
+    adaptive_tolerance: float
+
+
+@nb.njit(cache=True, inline="always")
+def _free_motion(m, opt, d):
+    return FreeMotion(
+        m.kind,
+        d.pos,
+        d.quat,
+        d.phi,
+        m.inertia,
+        m.mass,
+        d.gravity,
+        d.no_wrench,
+        d.resting,
+        d.kin_v,
+        d.kin_w,
+        opt.integrator,
+        opt.adaptive_tolerance,
+    )
+
+
 @nb.njit(cache=True)
-def _move(m, opt, d, i, tau, out_p, out_q, out_phi):
-    """Pose and twist of body i after tau seconds of free motion from d's state, into row i of
-    out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: d.resting)."""
-    kind, pos, quat, phi = m.kind, d.pos, d.quat, d.phi
-    method = opt.integrator
+def _move(f, i, tau, out_p, out_q, out_phi):
+    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion), into row
+    i of out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: f.resting)."""
+    kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
+    method = f.method
     if kind[i] == DYNAMIC and method == SEMI_IMPLICIT and tau > 0.0:
         semi_implicit_into(
             pos[i],
             quat[i],
             phi[i],
-            m.inertia[i],
-            m.mass[i],
-            d.gravity,
-            d.no_wrench,
+            f.inertia[i],
+            f.mass[i],
+            f.gravity,
+            f.no_wrench,
             tau,
             out_p[i],
             out_q[i],
             out_phi[i],
-            not d.resting[i],
+            not f.resting[i],
         )
     elif kind[i] == DYNAMIC:
         advance_body_into(
             pos[i],
             quat[i],
             phi[i],
-            m.inertia[i],
-            m.mass[i],
-            d.gravity,
-            d.no_wrench,
+            f.inertia[i],
+            f.mass[i],
+            f.gravity,
+            f.no_wrench,
             tau,
             method,
-            opt.adaptive_tolerance,
+            f.adaptive_tolerance,
             out_p[i],
             out_q[i],
             out_phi[i],
@@ -251,9 +289,9 @@ def _move(m, opt, d, i, tau, out_p, out_q, out_phi):
         for x in range(6):
             out_phi[i, x] = phi[i, x]
         for x in range(3):
-            out_p[i, x] = pos[i, x] + d.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
+            out_p[i, x] = pos[i, x] + f.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
         if kind[i] == KINEMATIC:
-            _turn(i, tau, quat, d.kin_w, out_q)
+            _turn(i, tau, quat, f.kin_w, out_q)
         else:
             for x in range(4):
                 out_q[i, x] = quat[i, x]
@@ -278,10 +316,10 @@ def _turn(i, tau, quat, kin_w, out_q):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _pair_gap(m, a, b, pos, rot, margin, probe):
+def _pair_gap(geo, a, b, pos, rot, margin, probe):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
     buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
-    count = pair_contacts(a, b, pos, rot, m, margin, probe, np.int64(0))  # not a literal 0: one compile
+    count = pair_contacts(a, b, pos, rot, geo, margin, probe, np.int64(0))  # not a literal 0: one compile
     best = margin
     for c in range(count):
         best = min(best, probe.gaps[c])
@@ -295,11 +333,12 @@ def _gap_at(m, opt, d, a, b, tau, margin):
     pos, rot, mp, mq, mf = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi
     keep_pa, keep_pb = pos[a].copy(), pos[b].copy()
     keep_ra, keep_rb = rot[a].copy(), rot[b].copy()
+    f = _free_motion(m, opt, d)
     for i in (a, b):
-        _move(m, opt, d, i, tau, mp, mq, mf)
+        _move(f, i, tau, mp, mq, mf)
     for i in (a, b):
         pos[i], rot[i] = mp[i], quat_to_mat(mq[i])
-    gap = _pair_gap(m, a, b, pos, rot, margin, d.probe)
+    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe)
     pos[a], pos[b], rot[a], rot[b] = keep_pa, keep_pb, keep_ra, keep_rb
     return gap
 
@@ -397,7 +436,14 @@ def _pair_reach(pairs, vel, spin, kind, g, dt, out):
 @nb.njit(cache=True)
 def _boxes(m, d, margin):
     """d.lo, d.hi: bounding boxes grown by margin and d.motion; d.movable: the dynamic bodies."""
-    shape_type, bound, pos, motion, lo, hi = m.shape_type, m.bound, d.pos, d.motion, d.lo, d.hi
+    shape_type, bound, pos, motion, lo, hi = (
+        m.geometry.shape_type,
+        m.geometry.bound,
+        d.pos,
+        d.motion,
+        d.lo,
+        d.hi,
+    )
     for i in range(pos.shape[0]):
         d.movable[i] = m.kind[i] == DYNAMIC
         if shape_type[i] == PLANE:
@@ -418,12 +464,12 @@ def _apart(a, b, pos, bound, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _beyond_plane(a, b, pos, rot, m, margin):
+def _beyond_plane(a, b, pos, rot, geo, margin):
     """Whether body a lies wholly more than ``margin`` (m) beyond plane b: its centre's height
     over the plane less its bounding radius (every one of its contact points lies within that
     radius of its centre, narrow._against_plane), with a relative guard of 1e-9 against
     rounding. A plane pair that passes gives no contact, so the narrow phase is not called."""
-    param, bound = m.param, m.bound
+    param, bound = geo.param, geo.bound
     nx = rot[b, 0, 0] * param[b, 0] + rot[b, 0, 1] * param[b, 1] + rot[b, 0, 2] * param[b, 2]
     ny = rot[b, 1, 0] * param[b, 0] + rot[b, 1, 1] * param[b, 1] + rot[b, 1, 2] * param[b, 2]
     nz = rot[b, 2, 0] * param[b, 0] + rot[b, 2, 1] * param[b, 1] + rot[b, 2, 2] * param[b, 2]
@@ -434,15 +480,15 @@ def _beyond_plane(a, b, pos, rot, m, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _cannot_touch(a, b, pos, rot, m, margin):
+def _cannot_touch(a, b, pos, rot, geo, margin):
     """Cheap rejects before the narrow phase: bounding spheres apart, or a body wholly beyond
     a plane (both exact: such a pair has no contact within margin)."""
-    btype = m.shape_type
+    btype = geo.shape_type
     if btype[b] == PLANE and btype[a] != PLANE:
-        return _beyond_plane(a, b, pos, rot, m, margin)
+        return _beyond_plane(a, b, pos, rot, geo, margin)
     if btype[a] == PLANE and btype[b] != PLANE:
-        return _beyond_plane(b, a, pos, rot, m, margin)
-    return _apart(a, b, pos, m.bound, margin)
+        return _beyond_plane(b, a, pos, rot, geo, margin)
+    return _apart(a, b, pos, geo.bound, margin)
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -452,7 +498,7 @@ def _detect(m, opt, d, pairs, near):
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop."""
-    slop, pos, rot, buf = opt.slop, d.pos, d.rot, d.contacts
+    slop, pos, rot, buf, geo = opt.slop, d.pos, d.rot, d.contacts, m.geometry
     reach, gap, touching = near.reach, near.gap, near.touching
     count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
@@ -460,10 +506,10 @@ def _detect(m, opt, d, pairs, near):
         margin = slop + reach[p]
         gap[p] = margin
         touching[p] = False
-        if _cannot_touch(a, b, pos, rot, m, margin):
+        if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
-        count = pair_contacts(a, b, pos, rot, m, margin, buf, count)
+        count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
         for c in range(before, count):
             gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
@@ -491,12 +537,12 @@ def broad_stage(m, opt, d, dt, sweep):
     of free motion (sweep and prune of bounding boxes grown by how far each can move); d.spin
     keeps only what can change a gap (_gap_spin). Returns (pairs, the sweep scratch)."""
     _rotations(d.quat, d.rot)
-    _speeds(m.kind, m.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)
+    _speeds(m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)
     gravity_norm = _norm3(d.gravity)
     _motion(d.vel, d.spin, m.kind, gravity_norm, dt, d.motion)
     _boxes(m, d, opt.slop)
     pairs, sweep = sweep_pairs(d.lo, d.hi, d.movable, sweep)
-    _gap_spin(d.spin, m.shape_type)  # after the boxes, whose order on x sets the contacts' order
+    _gap_spin(d.spin, m.geometry.shape_type)  # after the boxes, whose order on x sets the contacts' order
     return pairs, sweep
 
 
@@ -539,8 +585,9 @@ def _mark_resting(rec, first, last, kind, resting):
 @nb.njit(cache=True, inline="always")
 def advance_stage(m, opt, d, tau):
     """Every body's pose and twist after tau seconds of free motion into d.new_*."""
+    f, new_pos, new_quat, new_phi = _free_motion(m, opt, d), d.new_pos, d.new_quat, d.new_phi
     for i in range(m.kind.shape[0]):
-        _move(m, opt, d, i, tau, d.new_pos, d.new_quat, d.new_phi)
+        _move(f, i, tau, new_pos, new_quat, new_phi)
 
 
 @nb.njit(cache=True, inline="always")
@@ -550,24 +597,37 @@ def impact_stage(m, opt, d, pairs, near, dt):
     threshold (module doc, step 6); dt when none."""
     slop, bounce = opt.slop, opt.bounce_threshold
     gravity_norm = _norm3(d.gravity)
+    # records read once, not per pair (taking one out of m or d in the loop costs a reference
+    # count per array it holds)
+    geo, pos, rot, new_pos, new_rot, probe, checks = (
+        m.geometry,
+        d.pos,
+        d.rot,
+        d.new_pos,
+        d.new_rot,
+        d.probe,
+        d.stats.impact_checks,
+    )
     reach, gap0, touching = near.reach, near.gap, near.touching
     _rotations(d.new_quat, d.new_rot)
-    _speeds(m.kind, m.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)  # after the solve
-    _gap_spin(d.spin, m.shape_type)
+    _speeds(
+        m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin
+    )  # after the solve
+    _gap_spin(d.spin, m.geometry.shape_type)
     _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, reach)
     first_hit = dt
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
         if touching[p] or gap0[p] - reach[p] >= -slop or reach[p] < bounce * dt:
             continue  # touching (the solve handles it), cannot close past -slop, or too slow
-        if _cannot_touch(a, b, d.new_pos, d.new_rot, m, slop):
+        if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
             continue
-        d.stats.impact_checks[0] += 1
-        g1 = _pair_gap(m, a, b, d.new_pos, d.new_rot, slop, d.probe)
+        checks[0] += 1
+        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe)
         if g1 >= -slop:
             continue
         within = reach[p] + 4.0 * slop
-        g0 = _pair_gap(m, a, b, d.pos, d.rot, within, d.probe)
+        g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
         first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within))
