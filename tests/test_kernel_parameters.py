@@ -48,7 +48,6 @@ WIDER = {
     ("physics/rigid/stepper.py", "_time_of_impact"),  # 14
     ("physics/rigid/stepper.py", "run_steps"),  # 22
     ("physics/rod/mixed.py", "_element_terms"),  # 14
-    ("ugens/bubbles.py", "bubbles"),  # 13
     ("ugens/drill.py", "drill_kernel"),  # 14
     ("ugens/engine_noise.py", "engine_noise"),  # 11
     ("ugens/friction.py", "bristle_residual"),  # 11
@@ -67,8 +66,6 @@ WIDER = {
     ("ugens/reverb.py", "reverb_run"),  # 14
     ("ugens/roll.py", "rolling_filter"),  # 11
     ("ugens/spatial.py", "spatialise"),  # 11
-    ("ugens/stochastic.py", "bounces"),  # 17
-    ("ugens/stochastic.py", "micro_impacts"),  # 17
 }
 
 
