@@ -59,10 +59,6 @@ WIDER = {
     ("ugens/modal_budget.py", "mode_importance"),  # 24
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
     ("ugens/modal_retune.py", "pole_rows"),  # 12
-    ("ugens/nonlinear_impact.py", "energy_safeguard"),  # 12
-    ("ugens/nonlinear_impact.py", "hc_run"),  # 11
-    ("ugens/nonlinear_impact.py", "hc_run_substeps"),  # 14
-    ("ugens/nonlinear_impact.py", "step_energy"),  # 11
     ("ugens/reverb.py", "reverb_run"),  # 14
     ("ugens/roll.py", "rolling_filter"),  # 11
     ("ugens/spatial.py", "spatialise"),  # 11
