@@ -26,9 +26,6 @@ WIDER = {
     ("physics/deform/quadrature.py", "_rule"),  # 16
     ("physics/deform/quadrature.py", "_singular"),  # 15
     ("physics/deform/quadrature.py", "integrate_rows"),  # 13
-    ("physics/deform/shape_matching.py", "_advance"),  # 18
-    ("physics/deform/shape_matching.py", "_contact_impulses"),  # 16
-    ("physics/deform/shape_matching.py", "_goals"),  # 15
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
     ("physics/rigid/impulses.py", "resolve"),  # 20
@@ -49,9 +46,6 @@ WIDER = {
     ("physics/rigid/stepper.py", "run_steps"),  # 22
     ("physics/rod/mixed.py", "_element_terms"),  # 14
     ("ugens/drill.py", "drill_kernel"),  # 14
-    ("ugens/engine_noise.py", "engine_noise"),  # 11
-    ("ugens/friction.py", "bristle_residual"),  # 11
-    ("ugens/friction.py", "friction_run"),  # 11
     ("ugens/modal.py", "mixed_step"),  # 12
     ("ugens/modal.py", "resonate"),  # 11
     ("ugens/modal.py", "resonate_ramp"),  # 11
@@ -59,9 +53,7 @@ WIDER = {
     ("ugens/modal_budget.py", "mode_importance"),  # 24
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
     ("ugens/modal_retune.py", "pole_rows"),  # 12
-    ("ugens/reverb.py", "reverb_run"),  # 14
     ("ugens/roll.py", "rolling_filter"),  # 11
-    ("ugens/spatial.py", "spatialise"),  # 11
 }
 
 

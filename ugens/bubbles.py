@@ -103,14 +103,12 @@ def bubble_decay(radius):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def spawn(voices, active, t, fs, radius, depth, prm):
-    """Start a bubble whose next computed sample is t seconds after its birth (prm: the
-    BubbleParams).
+def spawn(voices, active, t, fs, radius, depth, rise, gain, floor):
+    """Start a bubble whose next computed sample is t seconds after its birth.
 
     Takes a free voice, or the quietest one when all are busy. Returns the active count.
     Bubbles at or above Nyquist are not started.
     """
-    rise, gain, floor = prm.rise, prm.gain, prm.floor
     f0 = 3.0 / radius
     d = 0.13 / radius + 0.0072 * radius**-1.5
     if f0 * (1.0 + rise * d * max(t, 0.0)) >= 0.5 * fs:
@@ -203,13 +201,13 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
     """
     voices, meta, pending, st, rng, log = d
     prm = bubble_params(par)
-    r_lo, r_hi, exponent, d_lo, d_hi = prm.r_lo, prm.r_hi, prm.exponent, prm.d_lo, prm.d_hi
+    r_lo, r_hi, exponent, d_lo, d_hi, rise, gain, floor = prm
     active = meta[_ACTIVE]
     for i in range(n):
         idx = start + i
         while meta[_PENDING] > 0 and math.floor(pending[0, 0]) + 1 <= idx:
             t = (idx - pending[0, 0]) / fs
-            active = spawn(voices, active, t, fs, pending[0, 1], pending[0, 2], prm)
+            active = spawn(voices, active, t, fs, pending[0, 1], pending[0, 2], rise, gain, floor)
             meta[_PENDING] -= 1
             for j in range(meta[_PENDING]):
                 pending[j, 0] = pending[j + 1, 0]
@@ -227,7 +225,7 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
             radius = power_law_radius(u01(rng), r_lo, r_hi, exponent)
             depth = d_lo + (d_hi - d_lo) * u01(rng)
             t0 = idx + pos
-            active = spawn(voices, active, (idx + 1 - t0) / fs, fs, radius, depth, prm)
+            active = spawn(voices, active, (idx + 1 - t0) / fs, fs, radius, depth, rise, gain, floor)
             st[_RADIUS] = radius
             meta[_BIRTHS] += 1
             k = meta[_LOGGED]

@@ -17,7 +17,8 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
   transition over a step (HuntCrossleyImpact, the heard output of closed loops);
   :func:`silent`: the test by which silent modes are zeroed;
 * :func:`store`: a kernel's named state record written back to the float64 array that holds
-  it (its fields in order; the record's reader is the inverse).
+  it (its fields in order; the record's reader is the inverse); :func:`slot`: where one
+  field of such a record sits in its array.
 """
 
 from __future__ import annotations
@@ -63,11 +64,12 @@ def with_room(table, rows):
     return grown
 
 
-@nb.njit(cache=True)
+@nb.njit(inline="always", cache=True)
 def append_pulse(pulses, count, t0, T, impulse, fs):
     """Row ``count`` of a (t0, T, A) pulse table set to a pulse of ``impulse`` N s starting at
     fractional sample t0, T samples long; returns the table (a larger copy if it was full).
-    The amplitude A makes the sampled pulse sum to exactly impulse * fs (:func:`pulse_sum`)."""
+    The amplitude A makes the sampled pulse sum to exactly impulse * fs (:func:`pulse_sum`).
+    Inlined: in a fastmath kernel the amplitude is computed with the kernel's flags."""
     pulses = with_room(pulses, count + 1)
     pulses[count, 0] = t0
     pulses[count, 1] = T
@@ -133,3 +135,9 @@ def store(array, record):
     """Write the fields of ``record`` (a NamedTuple of floats) to array[0], array[1], ..."""
     for k in range(len(record)):
         array[k] = record[k]
+
+
+def slot(record_type: type, field: str) -> int:
+    """Index of ``field`` of a NamedTuple record type in the float64 array that holds the record
+    (for a host-side write of one setting)."""
+    return record_type._fields.index(field)
