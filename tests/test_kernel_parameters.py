@@ -21,11 +21,6 @@ WIDER = {
     ("physics/burr/contact.py", "voxel_moments"),  # 11
     ("physics/burr/octree.py", "_brick"),  # 11
     ("physics/burr/octree.py", "_descend"),  # 13
-    ("physics/deform/quadrature.py", "_add_point"),  # 16
-    ("physics/deform/quadrature.py", "_regular"),  # 16
-    ("physics/deform/quadrature.py", "_rule"),  # 16
-    ("physics/deform/quadrature.py", "_singular"),  # 15
-    ("physics/deform/quadrature.py", "integrate_rows"),  # 13
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
     ("physics/rigid/impulses.py", "resolve"),  # 20
@@ -44,15 +39,12 @@ WIDER = {
     ("physics/rigid/stepper.py", "_penalty"),  # 15
     ("physics/rigid/stepper.py", "_time_of_impact"),  # 14
     ("physics/rigid/stepper.py", "run_steps"),  # 22
-    ("physics/rod/mixed.py", "_element_terms"),  # 14
-    ("ugens/drill.py", "drill_kernel"),  # 14
     ("ugens/modal.py", "mixed_step"),  # 12
     ("ugens/modal.py", "resonate"),  # 11
     ("ugens/modal.py", "resonate_ramp"),  # 11
     ("ugens/modal_budget.py", "apply_kept"),  # 13
     ("ugens/modal_budget.py", "mode_importance"),  # 24
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
-    ("ugens/modal_retune.py", "pole_rows"),  # 12
     ("ugens/roll.py", "rolling_filter"),  # 11
 }
 

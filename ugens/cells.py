@@ -6,9 +6,9 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 * :func:`raised_cosine`: the 1 - cos contact pulse of JASS's BangForce (van den Doel & Pai,
   "JASS: a Java audio synthesis system for programmers", ICAD 2001);
 * :func:`pulse_sum`: its sampled sum, which scales a pulse to an exact impulse;
-* :func:`with_room`: a table that doubles its rows when full; :func:`append_pulse`,
-  :func:`append_pulses`: pulses added to a (t0, T, A) pulse table (ImpactForce, ImpactTrain,
-  Crumple, Break, Bounce);
+* :func:`with_room`: a table that doubles its rows when full; :func:`pulse_amplitude`,
+  :func:`append_pulse`, :func:`append_pulses`: pulses added to a (t0, T, A) pulse table
+  (ImpactForce, ImpactTrain, Crumple, Break, Bounce);
 * :func:`decay_sums`, :func:`add_onset`, :func:`drop_row`: exponential pulses r^x and x r^x
   (x samples after their onsets) kept as two running sums and a queue of pending onsets
   (the blast waves of Explosion, the firings of Engine);
@@ -64,25 +64,32 @@ def with_room(table, rows):
     return grown
 
 
-@nb.njit(inline="always", cache=True)
-def append_pulse(pulses, count, t0, T, impulse, fs):
-    """Row ``count`` of a (t0, T, A) pulse table set to a pulse of ``impulse`` N s starting at
-    fractional sample t0, T samples long; returns the table (a larger copy if it was full).
-    The amplitude A makes the sampled pulse sum to exactly impulse * fs (:func:`pulse_sum`).
-    Inlined: in a fastmath kernel the amplitude is computed with the kernel's flags."""
+@nb.njit(cache=True)
+def pulse_amplitude(impulse, fs, t0, T):
+    """The amplitude A of a 1 - cos pulse of ``impulse`` N s starting at fractional sample t0,
+    T samples long, whose samples sum to exactly impulse * fs (:func:`pulse_sum`)."""
+    return impulse * fs / pulse_sum(t0, T)
+
+
+@nb.njit(cache=True)
+def append_pulse(pulses, count, t0, T, amplitude):
+    """Row ``count`` of a (t0, T, A) pulse table set to (t0, T, amplitude); returns the table
+    (a larger copy if it was full)."""
     pulses = with_room(pulses, count + 1)
     pulses[count, 0] = t0
     pulses[count, 1] = T
-    pulses[count, 2] = impulse * fs / pulse_sum(t0, T)
+    pulses[count, 2] = amplitude
     return pulses
 
 
 @nb.njit(cache=True)
 def append_pulses(pulses, count, starts, lengths, impulses, fs):
-    """:func:`append_pulse` for each (start, length, impulse), the table grown once."""
+    """Pulses of ``impulses`` N s at fractional samples ``starts``, ``lengths`` samples long,
+    appended to a (t0, T, A) pulse table grown once (:func:`pulse_amplitude`)."""
     pulses = with_room(pulses, count + starts.shape[0])
     for k in range(starts.shape[0]):
-        pulses = append_pulse(pulses, count + k, starts[k], lengths[k], impulses[k], fs)
+        amplitude = pulse_amplitude(impulses[k], fs, starts[k], lengths[k])
+        pulses = append_pulse(pulses, count + k, starts[k], lengths[k], amplitude)
     return pulses
 
 

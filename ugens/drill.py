@@ -22,6 +22,7 @@ smoothed (follow a physics DrillTrack via jassy.events.track_events).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -35,8 +36,30 @@ from ugens.noise import seed_spec, uniform
 MAX_HARMONICS = 64
 
 
+class DrillControls(NamedTuple):
+    """The smoothed controls of a block, per sample."""
+
+    rpms: np.ndarray  #: burr speed (1/min)
+    forces: np.ndarray  #: normal force (N)
+    removals: np.ndarray  #: material removal rate (as the ``removal`` parameter)
+
+
+class DrillLevels(NamedTuple):
+    """Sample rate and levels of :func:`drill_kernel` (the DrillSource parameters)."""
+
+    fs: float  #: sample rate (Hz)
+    ripple: float  #: force ripple per newton
+    noise: float  #: cutting noise per newton
+    chips: float  #: cutting noise per unit removal
+    idle: float  #: level of the motor whine
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def drill_kernel(out, motor, n, rpms, forces, removals, gains, phase, rng, fs, ripple, noise, chips, idle):
+def drill_kernel(out, motor, n, controls, gains, phase, rng, levels):
+    """n samples of the excitation (out, N) and the motor whine (motor): harmonics ``gains``
+    of the rotation at phase phase[0] (rad) plus cutting noise from rng (module docstring)."""
+    rpms, forces, removals = controls
+    fs, ripple, noise, chips, idle = levels
     s = rng[0]
     ph = phase[0]
     two_pi = 2.0 * math.pi
@@ -125,10 +148,9 @@ class DrillSource(UGen):
         forces = self.force.fill(self._bufs[1], n)
         removals = self.removal.fill(self._bufs[2], n)
         v = self.values
-        drill_kernel(
-            self.out, self.extra["motor"], n, rpms, forces, removals, self.gains, self.phase, self.rng,
-            self.sample_rate, v["ripple"], v["noise"], v["chips"], v["idle"],
-        )  # fmt: skip
+        controls = DrillControls(rpms, forces, removals)
+        levels = DrillLevels(self.sample_rate, v["ripple"], v["noise"], v["chips"], v["idle"])
+        drill_kernel(self.out, self.extra["motor"], n, controls, self.gains, self.phase, self.rng, levels)
 
     def state_arrays(self):
         return {

@@ -39,7 +39,7 @@ from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, raised_cosine
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -211,7 +211,7 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
                 st[_LEFT] -= energy
             t0 = idx + pos
             impulse = math.sqrt(2.0 * mass * energy)
-            pulses = append_pulse(pulses, count, t0, T, impulse, fs)
+            pulses = append_pulse(pulses, count, t0, T, pulse_amplitude(impulse, fs, t0, T))
             count += 1
             st[_SIZE] = size
             cnt[_EVENTS] += 1
@@ -243,7 +243,9 @@ def bounces(out, size_out, start, n, opt, d, pulses):
             u = u01(rng)
             v_out = v * e * (1.0 - irregularity * u)
             impulse = mass * (v + v_out)
-            pulses = append_pulse(pulses, count, t0, T, impulse, fs)
+            # pulse_amplitude in this kernel's fastmath: the shipped bounce renders' last bits
+            amplitude = impulse * fs / pulse_sum(t0, T)
+            pulses = append_pulse(pulses, count, t0, T, amplitude)
             count += 1
             cnt[_EVENTS] += 1
             st[_SIZE] = fragment
