@@ -9,7 +9,7 @@ per kind when a program first holds that kind, so a first render compiles only t
 of the kinds its graph uses. They call the same kernels, on the same arrays, as the ugens'
 ``process`` (so the same output bits). Because the table holds raw addresses, the same
 function runs inside the PortAudio callback (a ``@cfunc`` that never takes the GIL, see
-jassy.callback) and offline, where :func:`run_blocks` renders every whole block up to the
+jassy.engines.callback) and offline, where :func:`run_blocks` renders every whole block up to the
 next event in one call (no Python per block).
 
 Ugens with a kernel here: :data:`PROGRAM_UGENS`. A graph holding any other node, a feedback

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jassy import Event, Graph, ModalModel
-from jassy.offline import OfflineEngine
+from jassy.engines.offline import OfflineEngine
 from jassy.program import why_not_compiled
 from ugens import Gain, ImpactForce, Mixer, ModalBank
 from ugens.filters import Biquad
@@ -80,7 +80,7 @@ def test_a_graph_with_a_node_without_kernel_says_which():
 UNUSED_KINDS_STAY_UNCOMPILED = """
 import numpy as np
 from jassy import Event, Graph, ModalModel
-from jassy.offline import OfflineEngine
+from jassy.engines.offline import OfflineEngine
 from jassy import program
 from ugens import Gain, ImpactForce, ModalBank
 from ugens import filters, pressure, radiation, scrape

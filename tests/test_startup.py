@@ -1,5 +1,5 @@
 """First render in a fresh process: the kernels it compiles are bounded and a second process
-loads every one of them from numba's cache (jassy.startup; timings: `jassy bench startup`)."""
+loads every one of them from numba's cache (jassy.apps.startup; timings: `jassy bench startup`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from jassy.startup import cached_kernels, render_argv, run_fresh
+from jassy.apps.startup import cached_kernels, render_argv, run_fresh
 
 #: Bounds well above this code's first bell render (22 functions, 22 specialisations, 7.5-8.2 s
 #: of CPU on the shared 2-core VM at load 13): a regression that doubles either fails.

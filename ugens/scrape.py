@@ -26,6 +26,7 @@ import numpy as np
 
 from jassy.errors import PatchError
 from jassy.jit import specialise
+from jassy.levels import ForceSpectrum
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
@@ -33,6 +34,7 @@ from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
+from ugens.tonal_level import TONAL_LEVEL_SPECS, TonalLevel
 
 LAWS = ("sqrt", "linear")
 #: Force per m of profile height of the needle contacts (Scrape, Roll).
@@ -598,7 +600,7 @@ class Scrape(NeedleContact):
 
 
 @register
-class ResonantScrape(ContactControls):
+class ResonantScrape(TonalLevel, ContactControls):
     """Scraping force with a speed-dependent pitch: JASS ``ARContactForce``.
 
     Seeded white noise (unit RMS, splitmix64 per sample) through a resonator whose centre
@@ -610,6 +612,10 @@ class ResonantScrape(ContactControls):
     with its zeros at z = +-1 (Steiglitz's constant-gain resonator) the sum of its squared
     impulse response is 2 / (1 - R^2) times g^2 whatever theta. So the output force has
     RMS gain * s(F, v) (N) at steady speed.
+
+    With ``level = "calibrated"`` and the ``model`` it drives, the force is scaled once so
+    that at the reference contact (f_ref, v_ref) a calibrated ModalBank of that model rings
+    at jassy.levels.TONAL_RMS_DBFS (ugens/tonal_level.py).
     """
 
     type_name = "ResonantScrape"
@@ -645,7 +651,23 @@ class ResonantScrape(ContactControls):
         ),
         "seed": seed_spec(),
         **law_specs(),
+        **TONAL_LEVEL_SPECS,
     }
+
+    def force_spectrum(self) -> ForceSpectrum:
+        """The force at the reference contact (s = 1, |v| = v_ref) with gain 1: unit-power
+        white noise through the resonator, one-sided PSD 2 |H(e^{i 2 pi f / fs})|^2 / fs."""
+        v, fs = self.values, self.sample_rate
+        centre = min(max(v["f0"] + v["slope"] * v["v_ref"], F_MIN), NYQUIST_FRACTION * fs)
+        radius = math.exp(-(v["damping"] + v["damping_slope"] * v["v_ref"]) / fs)
+        c1, c2 = 2.0 * radius * math.cos(2.0 * math.pi * centre / fs), radius * radius
+        g = math.sqrt(0.5 * (1.0 - c2))
+
+        def density(f: np.ndarray) -> np.ndarray:
+            z = np.exp(-2j * np.pi * f / fs)
+            return 2.0 / fs * np.abs(g * (1.0 - z * z) / (1.0 - c1 * z + c2 * z * z)) ** 2
+
+        return ForceSpectrum(np.zeros(0), np.zeros(0), density)
 
     def _prepare(self) -> None:
         super()._prepare()
@@ -658,7 +680,7 @@ class ResonantScrape(ContactControls):
             d_slope=v["damping_slope"],
             inv_fs=1.0 / fs,
             f_max=NYQUIST_FRACTION * fs,
-            gain=v["gain"],
+            gain=v["gain"] * self.tonal_gain(),
             law=law,
             inv_ref=inv_ref,
             min_speed=min_speed,

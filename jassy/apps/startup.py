@@ -77,7 +77,7 @@ def bench_startup(
 ) -> list[dict]:
     """Per scene: its first render in a fresh process with an empty kernel cache (cold: every
     kernel compiled), the kernels that render compiled, and the best of ``warm_runs`` later
-    renders in fresh processes (warm: kernels loaded). A first row times ``import jassy.cli``."""
+    renders in fresh processes (warm: kernels loaded). A first row times ``import jassy.apps.cli``."""
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         imports = [run_fresh(["--help"], cache_dir=folder) for _ in range(warm_runs)]

@@ -56,7 +56,7 @@ def wok_scene(seconds: float):
 def _timed_render(build, seconds: float, fraction: float | None):
     """(audio, bank CPU s, decision CPU s, modes, mode-samples computed) of one render."""
     from jassy.anytime import ModeBudget
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
 
     graph, score = build()
     banks = [node for node in graph.order if node.supports_budget]

@@ -37,14 +37,15 @@ import numba as nb
 import numpy as np
 from numba import types
 
-from jassy import hapticframes, haptics, program, safety
+from jassy import haptics, program, safety
+from jassy.engines import hapticframes
+from jassy.engines.hapticframes import FLAG_WATCHDOG
+from jassy.engines.memlock import resident
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
-from jassy.hapticframes import FLAG_WATCHDOG
 from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import drop_stale_cache, void_pointer
-from jassy.memlock import resident
 from jassy.program import (
     HEADER,
     KERNEL_MODULES,
@@ -324,7 +325,7 @@ def _now_ns(control):
 @nb.njit(cache=True, nogil=True)
 def tap_callback(control, out, frames, dac, flags):
     """Log the haptic channels of ``out`` and this callback (first stream frame, frames,
-    DAC time, flags) into the stream tap of :mod:`jassy.hapticsender` (addresses in the
+    DAC time, flags) into the stream tap of :mod:`jassy.engines.hapticsender` (addresses in the
     TAP_* slots: the log rows, then the haptic ring)."""
     ch, na = control[CHANNELS], control[N_AUDIO]
     nh = ch - na
@@ -594,7 +595,7 @@ class CallbackRenderer:
                 self.records(validate_event(self.graph, silent, "warm-up"), 0.0, self.now_queue)
 
     def memory(self) -> list[np.ndarray]:
-        """Every array the callback reads or writes (to keep resident: jassy.memlock)."""
+        """Every array the callback reads or writes (to keep resident: jassy.engines.memlock)."""
         arrays = [array for group in self.program._arrays.values() for array in group]
         arrays += [self.program.table, self.graph.bus, self.rows, self.control, self.stage]
         arrays += [self.params, self.limiter, self.haptic_last, self.levels, self.monitor_signal]
@@ -751,7 +752,7 @@ class CallbackPlayer:
         self._error: BaseException | None = None
 
     def start(self, device: int | None) -> None:
-        from jassy import portaudio
+        from jassy.engines import portaudio
 
         r = self.renderer
         horizon = int(HORIZON * r.sample_rate)
@@ -779,7 +780,7 @@ class CallbackPlayer:
 
     def stop(self) -> None:
         """Fade the forces, stop the feeder and the stream (PortAudio is released)."""
-        from jassy import portaudio
+        from jassy.engines import portaudio
 
         r = self.renderer
         if self.stream is not None:
