@@ -18,9 +18,6 @@ MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
     ("jassy/anytime_rank.py", "scan_forces"),  # 12
-    ("physics/burr/contact.py", "voxel_moments"),  # 11
-    ("physics/burr/octree.py", "_brick"),  # 11
-    ("physics/burr/octree.py", "_descend"),  # 13
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
     ("physics/rigid/impulses.py", "resolve"),  # 20
