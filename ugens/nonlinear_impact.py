@@ -65,7 +65,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import silent, state_step, store
+from ugens.cells import silent, slot, state_step, store
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
@@ -90,6 +90,10 @@ def hammer_state(hammer):
     """The HammerState record held in ``hammer``."""
     h = hammer
     return HammerState(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8])
+
+
+#: Where HammerState.active sits in the ``hammer`` array (the per-block silence test).
+_ACTIVE = slot(HammerState, "active")
 
 
 class StrikeStats(NamedTuple):
@@ -366,6 +370,7 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
     st = strike_stats(d.stats)
     end, vout, peak, contacts = st.end, st.vout, st.peak, st.contacts
     corrections, touching, measured = st.corrections, st.touching, st.measured
+    measuring = False  # whether a stat changed
     for i in range(n):
         kmodes = meta[0]
         sq = 0.0
@@ -400,12 +405,15 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
         x1 = x_free - kk * f
         frame = start + i
         if f > 0.0:
+            measuring = True
             touching = 1.0
             if f > peak:
                 peak = f
         if x0 > 0.0 and x1 <= 0.0 and measured == 0.0:
+            measuring = True
             end = frame + x0 / (x0 - x1)  # where the compression crosses 0
         if f == 0.0 and touching != 0.0:
+            measuring = True
             touching = 0.0
             contacts += 1.0
             if measured == 0.0:
@@ -441,7 +449,10 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
                         last = j + 1
                 meta[0] = last
     store(d.hammer, HammerState(xh, vh, xn, fp, en, 1.0 if active else 0.0, vn, fpp, sp))
-    store(d.stats, StrikeStats(st.start, end, st.vin, vout, peak, contacts, corrections, touching, measured))
+    if measuring:  # (most calls are one sample between contacts: nothing to write back)
+        store(
+            d.stats, StrikeStats(st.start, end, st.vin, vout, peak, contacts, corrections, touching, measured)
+        )
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -770,8 +781,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self._run(self.extra["contact"], force, energy, start, n, *self._steps, self._data, self._scratch)
 
     def _silent(self) -> bool:
-        """No mode left to compute and the hammer retired."""
-        return self.meta[0] == 0 and HammerState(*self.hammer).active == 0.0
+        """No mode left to compute and the hammer retired (read once per block: one field)."""
+        return self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

@@ -132,9 +132,10 @@ def shadow_alpha(phi):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def geometry(px, py, pz, prm, max_delay, out, row):
+def geometry(px, py, pz, par, max_delay, out, row):
     """The ramped values (offsets _G_L .. _BR1 from out[row]) of a source at (px, py, pz) m;
-    prm: the SpatialParams."""
+    par holds the SpatialParams."""
+    prm = spatial_params(par)
     fs = prm.fs
     c = prm.c
     a = prm.a
@@ -174,7 +175,7 @@ def geometry(px, py, pz, prm, max_delay, out, row):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def control_point(px, py, pz, st, prm, max_delay):
+def control_point(px, py, pz, st, par, max_delay):
     """At a control point with the source at (px, py, pz): set each ramped value's step so
     that it reaches, CONTROL_PERIOD samples on, the geometry of the position extrapolated
     from the last control point (the value itself carries on where its ramp ended). A
@@ -191,13 +192,13 @@ def control_point(px, py, pz, st, prm, max_delay):
     if still > 2.0:
         return
     if still == 2.0:
-        geometry(px, py, pz, prm, max_delay, st, _NOW)
+        geometry(px, py, pz, par, max_delay, st, _NOW)
         st[_STEP : _STEP + _VALUES] = 0.0
     else:
         ex = 2.0 * px - st[_LAST_X]
         ey = 2.0 * py - st[_LAST_Y]
         ez = 2.0 * pz - st[_LAST_Z]
-        geometry(ex, ey, ez, prm, max_delay, st, _TARGET)
+        geometry(ex, ey, ez, par, max_delay, st, _TARGET)
         for v in range(_VALUES):
             st[_STEP + v] = (st[_TARGET + v] - st[_NOW + v]) * (1.0 / CONTROL_PERIOD)
     st[_LAST_X] = px
@@ -232,7 +233,7 @@ def spatialise(x, left, right, n, path, par, d):
     i = 0
     while i < n:
         if phase == 0:
-            control_point(xs[i], ys[i], zs[i], st, prm, max_delay)
+            control_point(xs[i], ys[i], zs[i], st, par, max_delay)
             phase = CONTROL_PERIOD
         g_l, g_r, d_l, d_r, k = (
             st[_NOW + _G_L],
