@@ -17,7 +17,6 @@ PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
-    ("jassy/anytime_rank.py", "scan_forces"),  # 12
     ("physics/burr/contact.py", "voxel_moments"),  # 11
     ("physics/burr/octree.py", "_brick"),  # 11
     ("physics/burr/octree.py", "_descend"),  # 13
@@ -56,8 +55,6 @@ WIDER = {
     ("ugens/modal.py", "mixed_step"),  # 12
     ("ugens/modal.py", "resonate"),  # 11
     ("ugens/modal.py", "resonate_ramp"),  # 11
-    ("ugens/modal_budget.py", "apply_kept"),  # 13
-    ("ugens/modal_budget.py", "mode_importance"),  # 24
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
     ("ugens/modal_retune.py", "pole_rows"),  # 12
     ("ugens/nonlinear_impact.py", "energy_safeguard"),  # 12
