@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from jassy.bench import SAMPLE_RATE, _best_times
-from jassy.offline import OfflineEngine
+from jassy.apps.bench import SAMPLE_RATE, _best_times
+from jassy.engines.offline import OfflineEngine
 from jassy.patchfile import builtin_patches, load_patch
 
 

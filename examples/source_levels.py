@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 import ugens
-from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES, calibrated
+from jassy import Graph, ModalModel, render
+from jassy.levels import FORCE_SOURCES, MODEL_CALIBRATED_SOURCES, calibrated, driven_source
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ("tin_sheet_model.toml", "wine_glass_model.toml", "pot_model.toml", "bar_model.toml")
@@ -32,22 +32,19 @@ def once_calibrated(model: ModalModel) -> ModalModel:
 
 
 def peak_dbfs(model: ModalModel, source: str) -> float:
-    action, args = FORCE_SOURCES[source]
-    src = getattr(ugens, source)(name="src")
+    src, event = driven_source(source, model)
     bank = ugens.ModalBank(model, name="bank", level="calibrated")(src)
-    events = [Event(0.01, "src", action, args)]
-    y = render(Graph(bank), events, duration=1.0, sample_rate=48000, limiter=False).audio[0]
+    y = render(Graph(bank), [event], duration=1.0, sample_rate=48000, limiter=False).audio[0]
     return 20 * math.log10(max(float(np.abs(y).max()), 1e-30))
 
 
 def main() -> None:
     files = sys.argv[1:] or [str(ROOT / "patches" / name) for name in MODELS]
-    print("model | " + " | ".join(FORCE_SOURCES))
+    sources = [*FORCE_SOURCES, *MODEL_CALIBRATED_SOURCES]
+    print("model | " + " | ".join(sources))
     for file in files:
         model = once_calibrated(ModalModel.load(file))
-        print(
-            f"{model.name} | " + " | ".join(f"{peak_dbfs(model, s):.1f}" for s in FORCE_SOURCES), flush=True
-        )
+        print(f"{model.name} | " + " | ".join(f"{peak_dbfs(model, s):.1f}" for s in sources), flush=True)
 
 
 if __name__ == "__main__":

@@ -6,11 +6,11 @@ import time.
 """
 
 from jassy import jit  # noqa: F401 (first: every kernel runs its own compiled code, see jit)
+from jassy.engines.offline import OfflineEngine, Rendering, render
 from jassy.errors import JassyError, ModelError, PatchError, RenderError
 from jassy.events import ContactTrack, Event, HapticFrame, Impact
 from jassy.graph import Graph
 from jassy.modal_model import Location, ModalModel
-from jassy.offline import OfflineEngine, Rendering, render
 from jassy.ugen import UGen
 
 __version__ = "0.1.0"

@@ -1,5 +1,5 @@
 import sys
 
-from jassy.cli import main
+from jassy.apps.cli import main
 
 sys.exit(main())

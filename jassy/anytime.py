@@ -16,9 +16,10 @@ force of that spectrum builds in a mode over the horizon tau, so continuous cont
 (scraping, rolling, friction) compete with impacts and ringing modes on one scale. The
 top ``max_modes`` modes are computed for the next period; the rest are silenced and cost
 nothing: each bank runs its kept modes gathered into a compact bank, so its cost is
-proportional to them. Importance, ranking and the change of the kept set are compiled
-(ugens.modal_budget, jassy.anytime_rank); per decision each bank adds a few Python calls
-and, when it heard a force, a periodogram (numpy FFT).
+proportional to them. Every bank keeps its rows in the budget's shared tables
+(ugens.modal_budget.BudgetTables), and a decision is one compiled call over all of them
+(importance, ranking, kept sets); Python adds per decision only the impacts scheduled
+and, for a bank of many modes that heard a force, a periodogram (numpy FFT).
 
 A decision is taken only where something may change the ranking: an impact scheduled in
 this or the next period, a force heard in the last period, or a mode fading out. Between
@@ -41,17 +42,22 @@ rendering takes that fraction of real time (non-deterministic by nature).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from jassy.anytime_rank import rank_modes, scan_forces
+from jassy.anytime_rank import scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
 
 #: the impacts (impulse N s, location) on a bank no impact strikes
 NO_KICK: list[tuple[float, object]] = []
+
+#: The importance of a mode already computed is multiplied by this, so modes near the
+#: margin do not swap at every decision (each swap regathers a bank and cuts a mode).
+KEPT_BONUS = 1.25
 
 
 def a_weighting_power(f: np.ndarray) -> np.ndarray:
@@ -80,6 +86,8 @@ class ModeBudget:
     weighting: str = "flat"
     peak_modes: int = field(default=0, init=False)
     decisions: int = field(default=0, init=False)
+    #: modes computed times frames, summed over the banks the budget renders
+    mode_samples: int = field(default=0, init=False)
 
     def __post_init__(self):
         if self.max_modes is None and self.cpu_fraction is None:
@@ -116,31 +124,18 @@ class ModeBudget:
         self.limit = min(self.max_modes or total, total)
         self.peak_modes = 0
         self.decisions = 0
+        self.mode_samples = 0
         self._clock = None
         self._fading = False
         self.active = self.decides(total)
         self.renders = renders and self.active
-        #: every bank's importance now, next period, and whether it sounds (one row each);
-        #: the modes to compute and to fade (ugens.modal_budget.rank_modes)
-        self._scores = np.zeros((3, total))
-        self._keep, self._fade, self._later = (np.zeros(total, dtype=bool) for _ in range(3))
-        self._slices = []
-        offset = 0
-        for bank in banks:
-            bank.budgeted = self.active
-            cut = slice(offset, offset + bank.model.n_modes)
-            self._slices.append(cut)
-            if self.active:
-                bank.anytime_attach(self.period, self.horizon, self.weighting, self._scores[:, cut])
-            offset = cut.stop
         count = len(banks)
         #: per bank: an impact foreseen in this period, a force heard in this / the last
         #: period (folded in after each stretch), a force in the current stretch, woken by
-        #: it, its scores already all zero, a force since the bank was last rendered
+        #: it, a force since the bank was last rendered
         (
-            self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._zeroed,
-            self._unrendered,
-        ) = (np.zeros(count, dtype=bool) for _ in range(7))  # fmt: skip
+            self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
+        ) = (np.zeros(count, dtype=bool) for _ in range(6))  # fmt: skip
         self._any_expected = False
         self._inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
         self._addresses = np.array([x.ctypes.data for x in self._inputs], dtype=np.intp)
@@ -150,8 +145,45 @@ class ModeBudget:
             scan_forces, self._addresses, self._input_size, 0, 0, True, self._unseen, self._expected,
             self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
         )  # fmt: skip
+        for bank in banks:
+            bank.budgeted = self.active
+        if self.active:
+            self._attach_tables(banks, total)
         self._processes = [bank.process for bank in banks]
-        self._kicks, self._now = NO_KICK, {}
+        self._kicks, self._now, self._kicked = NO_KICK, {}, False
+
+    def _attach_tables(self, banks: list, total: int) -> None:
+        """Move every bank's rows into shared tables and prepare the compiled decision."""
+        from ugens import modal_budget as mb  # (not at the top: the ugens import jassy)
+
+        self._tables = tables = mb.budget_tables([b.model.n_modes for b in banks], self.period)
+        for slot, bank in enumerate(banks):
+            bank.anytime_attach(tables, slot, self.horizon, self.weighting)
+        #: the scores (now, next period, sounding) and the masks to keep, fade, and keep next
+        masks = (np.zeros(total, dtype=bool) for _ in range(3))
+        self._decision = mb.Decision(self._onset, np.zeros(len(banks), dtype=bool), self._addresses,
+                                  np.zeros((3, total)), *masks)  # fmt: skip
+        self._rows = {}  # id(bank): (slot, its ELSEWHERE_NOW row, its ELSEWHERE_NEXT row)
+        for slot, (bank, k, first) in enumerate(zip(banks, *tables.layout[:2], strict=True)):
+            cut = slice(first, first + k)
+            self._rows[id(bank)] = (
+                slot,
+                tables.rows[mb.ELSEWHERE_NOW, cut],
+                tables.rows[mb.ELSEWHERE_NEXT, cut],
+            )
+        #: the fields of tables.values that impacts set (this period, then the next), and SPECTRAL
+        self._kick_fields = ((mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW), (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT))
+        self._spectral_field = mb.SPECTRAL
+        self._spectral = [(slot, bank) for slot, bank in enumerate(banks) if bank.anytime_spectral]
+        shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
+        self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
+        self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
+        from ugens.modal import render_kept
+
+        outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with the banks
+        self._mb, self._wiring = mb, mb.Wiring(self._addresses, outputs)
+        self._busy, self._how = np.zeros(len(banks), dtype=bool), np.zeros(len(banks), dtype=np.int64)
+        self._render_all = specialise(render_kept, tables, self._wiring, self._how, 0, 0, 0)
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -186,14 +218,27 @@ class ModeBudget:
             self._render(rendered, end - rendered, rendered - start)
 
     def _render(self, start: int, n: int, offset: int) -> None:
-        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block;
-        a bank with nothing to compute (no mode sounding, no force in this or the last
-        period, nothing pending) only writes silence."""
-        forced, earlier, now, before = self._forced, self._unrendered, self._heard_now, self._heard_before
-        for i, process in enumerate(self._processes):  # (a force heard lately: its ring holds it)
-            if forced[i] or earlier[i] or now[i] or before[i] or not self.banks[i].anytime_silent(offset, n):
-                process(start, n, offset)
-        earlier[:] = False
+        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
+        in one compiled call (ugens.modal.render_kept) but for banks with a parameter
+        change, ramp or size input pending (their own ``process``); a bank with nothing to
+        compute (no mode sounding, no force in this or the last period, nothing pending)
+        only writes silence."""
+        mb = self._mb
+        busy, how = self._busy, self._how  # (a force heard lately: its ring holds it)
+        np.logical_or(self._forced, self._unrendered, out=busy)
+        busy |= self._heard_now
+        busy |= self._heard_before
+        how[:] = mb.UNLESS_SILENT
+        how[busy] = mb.COMPILED
+        by_python = [i for i, bank in enumerate(self.banks) if not bank.anytime_compiled()]
+        how[by_python] = mb.BY_PYTHON
+        self.mode_samples += self._render_all(self._tables, self._wiring, how, start, n, offset)
+        for i in by_python:
+            bank = self.banks[i]
+            if busy[i] or not bank.anytime_silent(offset, n):
+                self._processes[i](start, n, offset)
+                self.mode_samples += n * int(bank.meta[0])
+        self._unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
@@ -226,23 +271,27 @@ class ModeBudget:
         woken by the force in the sub-block's frames [offset, offset + n)."""
         kicks, now, period = self._kicks, self._now, self.period
         later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
-        heard = self._heard_now | self._heard_before  # before the stretch from ``at``
-        idle = []
-        for i, bank in enumerate(self.banks):
-            kick_now, kick_next = now.get(id(bank), NO_KICK), later.get(id(bank), NO_KICK)
-            woken = bank.sources["input"].out[offset : offset + n] if onset[i] else None
-            quiet = not (kick_now or kick_next or heard[i] or woken is not None or bank.meta[0])
-            if quiet and self._zeroed[i]:  # nothing rings, nothing comes: scores stay zero
-                idle.append(bank._kept_count == 0)
-                continue
-            self._zeroed[i] = quiet
-            bank.anytime_importance(kick_now, kick_next, period, bool(heard[i]), woken)
-            idle.append(False)
-        keep, fade = self._keep, self._fade
-        self._fading = rank_modes(self._scores, self.limit, keep, fade, self._later)
-        total = 0
-        for bank, cut, skip in zip(self.banks, self._slices, idle, strict=True):
-            total += 0 if skip else bank.anytime_apply(keep[cut], fade[cut], period)
+        d, values = self._decision, self._tables.values
+        np.logical_or(self._heard_now, self._heard_before, out=d.heard)  # before the stretch from ``at``
+        if self._kicked:
+            for fields in self._kick_fields:
+                values[fields, :] = 0.0
+        self._kicked = bool(now or later)
+        for column, (predicted, (kick, elsewhere)) in enumerate(
+            zip((now, later), self._kick_fields, strict=True)
+        ):
+            for key, impacts in predicted.items():
+                slot, *rows = self._rows[key]
+                values[kick, slot], values[elsewhere, slot] = self.banks[slot].anytime_kicks(
+                    impacts, rows[column]
+                )
+        for slot, bank in self._spectral:
+            heard = d.heard[slot] and not onset[slot]
+            values[self._spectral_field, slot] = heard and bank.anytime_spectrum()
+        rates = self._rates
+        if rates.limit != self.limit or rates.begin != offset or rates.end != offset + n:
+            rates = self._rates = rates._replace(limit=int(self.limit), begin=offset, end=offset + n)
+        self._fading, total = self._decide_all(self._tables, d, rates)
         self.peak_modes = max(self.peak_modes, total)
         self.decisions += 1
 

@@ -22,7 +22,9 @@ Distributions: ``{uniform = [lo, hi]}``, ``{loguniform = [lo, hi]}`` (0 < lo), `
 [models] entry, uniform over its locations), ``{random_on_track = MODEL}`` (a point uniform
 in distance along the model's texture track t0, t1, ... (jassy.tracks), anywhere between its
 points: the barycentric location of the two track points around it, whose gains are then
-interpolated with the track's linear shape functions). Poisson times: intervals drawn from
+interpolated with the track's linear shape functions), ``{random_on_surface = MODEL}`` (a
+point uniform over the area of a model with an analytic surface, jassy.surface: the location
+``{surface = [u, v]}``, whose gains are the mode shapes there). Poisson times: intervals drawn from
 an exponential distribution of mean 1/rate (a homogeneous Poisson process).
 """
 
@@ -38,7 +40,9 @@ from jassy.inputs import number, seconds, text_value
 #: Most events one generator may produce (a patch with more is refused, not rendered).
 MAX_GENERATED = 200_000
 GENERATOR_KEYS = {"node", "action", "times", "start", "stop", "seed", "args"}
-DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice", "random_point", "random_on_track")
+DISTRIBUTIONS = (
+    "uniform", "loguniform", "normal", "choice", "random_point", "random_on_track", "random_on_surface",
+)  # fmt: skip
 
 
 def _model_name(value: Any, models: dict, key: str) -> str:
@@ -70,6 +74,18 @@ def _on_track(value: Any, rng: np.random.Generator, models: dict, where: str):
     return draw
 
 
+def _on_surface(value: Any, rng: np.random.Generator, models: dict, where: str):
+    """A function drawing a point uniform over the area of a model's analytic surface: for a
+    rectangle, (u, v) = (x / a, y / b) uniform on the unit square."""
+    name = _model_name(value, models, f"{where}.random_on_surface")
+    if models[name].surface is None:
+        raise PatchError(
+            f"{where}.random_on_surface: model {name!r} has no surface (analytic mode shapes, as the "
+            "plate builder's models carry); random_point draws among its points"
+        )
+    return lambda: {"surface": [float(x) for x in rng.uniform(0.0, 1.0, 2)]}
+
+
 def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
     """A function of no arguments drawing one value of ``spec`` (validated now)."""
     if not isinstance(spec, dict):
@@ -82,6 +98,8 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
         return lambda: int(rng.integers(n))
     if kind == "random_on_track":
         return _on_track(value, rng, models, where)
+    if kind == "random_on_surface":
+        return _on_surface(value, rng, models, where)
     if kind == "choice":
         if not isinstance(value, list) or not value:
             raise PatchError(f"{where}.choice: expected a non-empty list")
@@ -89,7 +107,8 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
     if kind not in ("uniform", "loguniform", "normal"):
         raise PatchError(
             f"{where}: unknown distribution {kind!r}; "
-            f"expected uniform, loguniform, normal, choice, random_point or random_on_track"
+            "expected uniform, loguniform, normal, choice, random_point, random_on_track or "
+            "random_on_surface"
             f"{suggest(kind, DISTRIBUTIONS)}"
         )
     if not isinstance(value, list) or len(value) != 2:

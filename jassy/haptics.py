@@ -1,6 +1,6 @@
 """The haptic channel: safety (force clamp, slew-rate limit, stall watchdog) and
 per-channel offsets in exact samples. The UDP frames for kinesthetic devices:
-:mod:`jassy.hapticframes` (format) and :mod:`jassy.hapticsender` (pacing)."""
+:mod:`jassy.engines.hapticframes` (format) and :mod:`jassy.engines.hapticsender` (pacing)."""
 
 from __future__ import annotations
 

@@ -22,6 +22,7 @@ exponentials), so the calibration does not depend on the resonator code it calib
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -106,8 +107,53 @@ def calibrated(model: ModalModel, sample_rate: float = 48000.0) -> ModalModel:
     gain = reference_gain(ModalModel(model.frequencies, model.decays, model.gains), sample_rate)
     return ModalModel(
         model.frequencies, model.decays, model.gains, model.points, model.name, model.source, gain,
-        model.driving,
+        model.driving, surface=model.surface,
     )  # fmt: skip
+
+
+class ForceSpectrum(NamedTuple):
+    """A steady force: sinusoidal lines plus a broadband part."""
+
+    line_frequencies: np.ndarray  #: Hz
+    line_amplitudes: np.ndarray  #: N, the peak of each sinusoid
+    density: Callable[[np.ndarray], np.ndarray]  #: one-sided PSD (N^2/Hz) of the rest, at given Hz
+
+
+#: RMS level (dBFS) at which a calibrated tonal force source, at its reference operating
+#: point, rings a calibrated model (mean power over the model's locations): 10 dB under the
+#: reference strike's peak, so a noise band's peaks (crest ~4) come near -18 dBFS too.
+TONAL_RMS_DBFS = -28.0
+
+
+def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
+    """Mean square (per gain row, in the model's gain units squared; a row per operating point
+    if the density gives one) of the model's response to a steady force. Modes at or above
+    Nyquist are silent, as in a ModalBank. Lines: the exact sum over modes of a_k H_k(f),
+    H_k(f) = w_k / ((d_k + i 2 pi f)^2 + w_k^2) the transfer function of a_k e^{-d_k t}
+    sin(w_k t) per N s. Broadband part: each mode passes the density at its own frequency
+    over its noise bandwidth, G(f_k) a_k^2 / (8 d_k) x w_k^2 / (w_k^2 + d_k^2) (half of
+    int h_k^2 dt; modes much narrower than the band, cross terms of overlapping modes left
+    out)."""
+    audible = model.frequencies < sample_rate / 2
+    f, d, a = model.frequencies[audible], model.decays[audible], model.gains[:, audible]
+    w = 2.0 * np.pi * f
+    lines = np.asarray(spectrum.line_frequencies, dtype=np.float64)
+    s = 2j * np.pi * lines[None, :]
+    transfer = w[:, None] / ((d[:, None] + s) ** 2 + (w * w)[:, None])  # K x L
+    amplitudes = np.asarray(spectrum.line_amplitudes, dtype=np.float64)
+    power = (np.abs(a @ transfer) ** 2 * amplitudes**2 / 2).sum(axis=1)
+    noise_bandwidth = w * w / (w * w + d * d) / (8.0 * np.maximum(d, 1e-12))
+    return power + (spectrum.density(f) * noise_bandwidth) @ (a * a).T
+
+
+def tonal_level_gain(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
+    """The factor on a tonal source's force that makes a calibrated ModalBank of ``model``
+    ring at TONAL_RMS_DBFS RMS (mean power over the model's locations) under ``spectrum``
+    (1 where the model cannot hear it). A spectrum whose density gives one row per operating
+    point (S x modes) gets S factors."""
+    power = response_power(model, spectrum, sample_rate).mean(axis=-1)
+    rms = reference_gain(model, sample_rate) * np.sqrt(power)
+    return np.where(rms > 0, 10 ** (TONAL_RMS_DBFS / 20) / np.where(rms > 0, rms, 1.0), 1.0)
 
 
 class Drive(NamedTuple):
@@ -133,14 +179,35 @@ FORCE_SOURCES = {
     "RathRoll": Drive("set", {"speed": 0.2}),
 }
 
-#: Force sources whose force is a line spectrum or a narrow band (ResonantScrape's resonance
-#: at 700 Hz at 0.2 m/s, the drill burr's rotation harmonics of 500 Hz): their level on a
-#: model depends on whether a line meets a mode, so no default fits every model within
-#: -30..-6 dBFS (measured over the 17 shipped models: -28.5..+6.1 and -35.7..-1.3 dBFS).
-TONAL_FORCE_SOURCES = {
-    "ResonantScrape": Drive("set", {"speed": 0.2}),
+#: Force sources whose force is a line spectrum or a narrow band (ResonantScrape's resonance,
+#: the drill burr's rotation harmonics): in N their level on a model depends on whether a line
+#: meets a mode (at 0.2 m/s and 1 N over the 17 shipped models: -28.5..+6.1 and -35.7..-1.3
+#: dBFS), so with ``level = "calibrated"`` they are given the model they drive and scale their
+#: force by its response at their own frequencies (tonal_level_gain). Events as FORCE_SOURCES,
+#: at the reference operating point: ResonantScrape's reference contact (1 N, 1 m/s), the
+#: drill's light cut (1 N, 1 mm^3/s).
+MODEL_CALIBRATED_SOURCES = {
+    "ResonantScrape": Drive("set", {"speed": 1.0}),
     "DrillSource": Drive("set", {"force": 1.0, "removal": 1.0}),
 }
+
+
+def driven_source(type_name: str, model: ModalModel, name: str = "src"):
+    """A force source of FORCE_SOURCES or MODEL_CALIBRATED_SOURCES at its defaults (the
+    latter calibrated to ``model``) and the event, at 0.01 s, that sets it going."""
+    import ugens  # ugens import jassy
+    from jassy import Event
+
+    cls = getattr(ugens, type_name)
+    if type_name in MODEL_CALIBRATED_SOURCES:
+        drive = MODEL_CALIBRATED_SOURCES[type_name]
+        source = cls(model, name=name, level="calibrated")
+    else:
+        drive = FORCE_SOURCES[type_name]
+        source = cls(name=name)
+    return source, Event(0.01, name, drive.action, drive.args)
+
+
 #: Sources that own their resonator: ``level = "calibrated"`` scales what they output by the
 #: model's reference gain, as a calibrated ModalBank does (the loop stays in N and m).
 CALIBRATED_LOOPS = ("Friction", "HuntCrossleyImpact")
@@ -199,8 +266,12 @@ def level_convention(type_name: str) -> str:
             "a force in N: through a calibrated ModalBank with unit gain its defaults peak within "
             "-30..-6 dBFS on every shipped model"
         )
-    if type_name in TONAL_FORCE_SOURCES:
-        return "a force in N with a line or narrow-band spectrum: its level depends on the modes it meets"
+    if type_name in MODEL_CALIBRATED_SOURCES:
+        return (
+            "a force in N with a line or narrow-band spectrum; level = 'calibrated' with the model it "
+            f"drives: {TONAL_RMS_DBFS:g} dBFS RMS through a calibrated ModalBank at its reference "
+            "operating point"
+        )
     if type_name in CALIBRATED_LOOPS:
         return "level = 'calibrated' scales what it outputs by the model's reference gain (as ModalBank)"
     if type_name in SOUND_SOURCES:

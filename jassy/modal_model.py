@@ -17,6 +17,10 @@ minus modal resynthesis, a few ms) and plays it with every strike (StrikeAttack)
 ``reference_gain`` is the gain a ModalBank with ``level = "calibrated"`` applies (see
 jassy.levels); without it the bank computes it from the model by the same rule.
 
+``[surface]``: analytic mode shapes (jassy.surface, e.g. a simply supported plate's), which
+give gains anywhere on the surface: a location ``{surface = [u, v]}`` (fractions of the
+sides) besides the named points.
+
 Signed gains. ``gains`` are strike-to-pickup gains phi_k(c) phi_k(p) / M_k (mass-normalised
 mode shapes phi_k at the contact c and the pickup p), which have signs. A contact in a
 closed loop (HuntCrossleyImpact, Friction) needs the driving-point gains phi_k(c)^2 / M_k
@@ -36,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from jassy.errors import ModelError, PatchError, suggest
+from jassy.surface import PlateSurface, SurfacePoint, parse_surface_point, surface_from_dict
 from jassy.tracks import Track, find_track, track_gains
 
 
@@ -47,10 +52,13 @@ class Location:
     weights: tuple[float, ...]
 
 
-def parse_location(value: Any, where: str) -> Location:
-    """Parse a location from a patch value: int, point name, or {vertices, weights}."""
-    if isinstance(value, Location):
+def parse_location(value: Any, where: str) -> Location | SurfacePoint:
+    """Parse a location from a patch value: int, point name, {vertices, weights}, or
+    {surface = [u, v]} (a point of a model's analytic surface, jassy.surface)."""
+    if isinstance(value, (Location, SurfacePoint)):
         return value
+    if isinstance(value, dict) and set(value) == {"surface"}:
+        return parse_surface_point(value["surface"], where)
     if isinstance(value, bool):
         raise PatchError(
             f"{where}: expected a vertex index, point name or {{vertices, weights}}, got {value!r}"
@@ -79,7 +87,10 @@ def parse_location(value: Any, where: str) -> Location:
                 f"{where}.weights: expected non-negative weights summing to 1, got {list(weights)}"
             )
         return Location(tuple(verts), tuple(float(x) for x in w))
-    raise PatchError(f"{where}: expected a vertex index, point name or {{vertices, weights}}, got {value!r}")
+    raise PatchError(
+        f"{where}: expected a vertex index, point name, {{vertices, weights}} or {{surface = [u, v]}}, "
+        f"got {value!r}"
+    )
 
 
 @dataclass
@@ -96,6 +107,7 @@ class ModalModel:
     driving: np.ndarray | None = field(default=None, compare=False)  # driving-point gains [p, k]
     attack: np.ndarray | None = field(default=None, compare=False)  # unit-impulse residual samples
     attack_rate: float | None = None  # Hz, the sample rate of ``attack``
+    surface: PlateSurface | None = field(default=None, compare=False)  # gains anywhere (jassy.surface)
 
     def __post_init__(self):
         where = self.source or self.name or "model"
@@ -183,6 +195,8 @@ class ModalModel:
                 raise ModelError(
                     f"{where}: attack_rate: expected the attack's sample rate > 0 Hz, got {rate!r}"
                 )
+        if self.surface is not None and self.surface.orders_x.shape != (k,):
+            raise ModelError(f"{where}: surface: expected one mode shape per mode ({k})")
         if self.points and len(self.points) != self.n_points:
             raise ModelError(
                 f"{where}: points: expected {self.n_points} names (one per gain row), got {len(self.points)}"
@@ -204,12 +218,38 @@ class ModalModel:
             )
         return vertex
 
-    def check_location(self, location: Location, where: str) -> None:
+    def check_location(self, location: Location | SurfacePoint, where: str) -> None:
+        if isinstance(location, SurfacePoint):
+            if self.surface is None:
+                raise PatchError(
+                    f"{where}: model {self.name or self.source or '(unnamed)'} has no surface (analytic "
+                    "mode shapes), so {surface = [u, v]} cannot be heard on it; use its points"
+                    + (
+                        f" ({', '.join(self.points[:6])}{', ...' if len(self.points) > 6 else ''})"
+                        if self.points
+                        else ""
+                    )
+                )
+            return
         for v in location.vertices:
             self.point_index(v, where)
 
-    def gains_at(self, location: Location | int | str | None = None) -> np.ndarray:
-        """Per-mode gains at a location (barycentric blend of its vertices' rows)."""
+    def _surface_point(self, location: Any) -> SurfacePoint | None:
+        """The location as a checked SurfacePoint, or None for a point or a blend of points."""
+        if location is None:
+            return None
+        loc = parse_location(location, "location")
+        if not isinstance(loc, SurfacePoint):
+            return None
+        self.check_location(loc, "location")
+        return loc
+
+    def gains_at(self, location: Location | SurfacePoint | int | str | None = None) -> np.ndarray:
+        """Per-mode gains at a location (barycentric blend of its vertices' rows, or the
+        analytic surface's mode shapes at a SurfacePoint)."""
+        point = self._surface_point(location)
+        if point is not None:
+            return self.surface.gains(point)
         return self._blend(self.gains, location)
 
     @cached_property
@@ -233,6 +273,9 @@ class ModalModel:
     def driving_at(self, location: Location | int | str | None = None) -> np.ndarray | None:
         """Driving-point gains at a location (blended as gains_at): the ``driving`` rows, or
         the gains themselves if they are all >= 0; None for signed gains without them."""
+        point = self._surface_point(location)
+        if point is not None:
+            return self.surface.driving_gains(point)
         if self.driving is not None:
             return self._blend(self.driving, location)
         return self.gains_at(location) if not np.any(self.gains < 0) else None
@@ -241,13 +284,16 @@ class ModalModel:
     def _driving_columns(self, modes: Any) -> np.ndarray | None:
         return None if self.driving is None else self.driving[:, modes]
 
+    def _surface_modes(self, modes: Any) -> PlateSurface | None:
+        return None if self.surface is None else self.surface.modes(modes)
+
     def below(self, f_max: float) -> ModalModel:
         """The modes with frequency below ``f_max`` Hz."""
         keep = self.frequencies < f_max
         return ModalModel(
             self.frequencies[keep], self.decays[keep], self.gains[:, keep], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(keep),
-            attack=self.attack, attack_rate=self.attack_rate,
+            attack=self.attack, attack_rate=self.attack_rate, surface=self._surface_modes(keep),
         )  # fmt: skip
 
     def truncated(self, n: int) -> ModalModel:
@@ -255,8 +301,23 @@ class ModalModel:
         return ModalModel(
             self.frequencies[:n], self.decays[:n], self.gains[:, :n], self.points, self.name,
             reference_gain=self.reference_gain, driving=self._driving_columns(slice(0, n)),
-            attack=self.attack, attack_rate=self.attack_rate,
+            attack=self.attack, attack_rate=self.attack_rate, surface=self._surface_modes(slice(0, n)),
         )  # fmt: skip
+
+    def attack_at(self, rate: float) -> np.ndarray:
+        """The stored attack resampled to ``rate`` Hz (polyphase, Kaiser window; the same
+        samples when the rates agree); empty for a model without an attack."""
+        if self.attack is None or self.attack.size == 0:
+            return np.zeros(0)
+        attack_rate = float(self.attack_rate or rate)
+        if attack_rate == rate:
+            return np.asarray(self.attack, dtype=np.float64)
+        from fractions import Fraction
+
+        from scipy.signal import resample_poly
+
+        ratio = Fraction(rate / attack_rate).limit_denominator(1000)
+        return resample_poly(self.attack, ratio.numerator, ratio.denominator)
 
     def impulse_response(self, duration: float, sample_rate: float, location=None) -> np.ndarray:
         """Closed form sum_k a_k e^{-d_k t} sin(2 pi f_k t) at t = i/sample_rate.
@@ -302,7 +363,7 @@ class ModalModel:
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> ModalModel:
         """Build from a mapping with frequencies, decays, gains and optional points/name."""
         allowed = {"frequencies", "decays", "gains", "points", "name", "reference_gain", "driving", "attack",
-                   "attack_rate"}  # fmt: skip
+                   "attack_rate", "surface", *NPZ_SURFACE}  # fmt: skip
         for key in data:
             if key not in allowed:
                 raise ModelError(
@@ -334,6 +395,11 @@ class ModalModel:
             attack_rate = attack_rate.item()
         if attack is not None and attack_rate is None:
             raise ModelError(f"{source}: attack: needs attack_rate (its sample rate in Hz)")
+        surface = data.get("surface")
+        if surface is None and any(key in data for key in NPZ_SURFACE):
+            surface = {key: data.get(npz_key) for npz_key, key in NPZ_SURFACE.items()}
+        n_modes = np.size(data["frequencies"])
+        surface = None if surface is None else surface_from_dict(surface, n_modes, source)
         return cls(
             data["frequencies"],
             data["decays"],
@@ -345,6 +411,7 @@ class ModalModel:
             driving,
             attack,
             attack_rate,
+            surface,
         )
 
     @classmethod
@@ -391,6 +458,11 @@ class ModalModel:
                     if self.attack is not None:
                         extra["attack"] = self.attack
                         extra["attack_rate"] = np.array(float(self.attack_rate))
+                    if self.surface is not None:
+                        table = self.surface.to_dict()
+                        extra.update(
+                            {npz: np.array(table[key]) for npz, key in NPZ_SURFACE.items() if key in table}
+                        )
                     np.savez(
                         fh,
                         frequencies=self.frequencies,
@@ -426,7 +498,17 @@ class ModalModel:
         if self.attack is not None:
             lines.append(f"attack_rate = {float(self.attack_rate)!r}")
             lines.append(f"attack = {arr(self.attack)}")
+        if self.surface is not None:  # a table: after every top-level key
+            table = self.surface.to_dict()
+            lines += ["", "[surface]", f'kind = "{table.pop("kind")}"']
+            lines += [f"{key} = [{', '.join(repr(v) for v in values)}]" for key, values in table.items()]
         return "\n".join(lines) + "\n"
+
+
+#: NPZ member names of a model's surface table (the TOML keeps it as a [surface] table).
+NPZ_SURFACE = {
+    f"surface_{key}": key for key in ("kind", "sides", "orders_x", "orders_y", "pickup", "driving")
+}
 
 
 def read_npz(data: bytes, where: str) -> dict[str, np.ndarray]:

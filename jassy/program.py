@@ -9,7 +9,7 @@ per kind when a program first holds that kind, so a first render compiles only t
 of the kinds its graph uses. They call the same kernels, on the same arrays, as the ugens'
 ``process`` (so the same output bits). Because the table holds raw addresses, the same
 function runs inside the PortAudio callback (a ``@cfunc`` that never takes the GIL, see
-jassy.callback) and offline, where :func:`run_blocks` renders every whole block up to the
+jassy.engines.callback) and offline, where :func:`run_blocks` renders every whole block up to the
 next event in one call (no Python per block).
 
 Ugens with a kernel here: :data:`PROGRAM_UGENS`. A graph holding any other node, a feedback
@@ -41,7 +41,7 @@ from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_
 from ugens.modal import ModalBank, bank_step, resonate_ramp
 from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
-from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
+from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
 
 #: The modules whose kernels the program calls (a change there drops its numba cache).
 KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
@@ -125,7 +125,7 @@ class ResonantScrapeSlots(NamedTuple):
     speeds: int  #: (size,)
     rng: int  #: uint64 (1,)
     state: int  #: (8,)
-    cfg: int  #: a NoiseConfig (10,)
+    cfg: int  #: a NoiseConfig and the level table (NOISE_CFG_SIZE,)
 
 
 class BiquadSlots(NamedTuple):
@@ -308,7 +308,7 @@ def _resonant_scrape(table, base, start, n):
         speeds,
         _u64(noisy.rng, 1),
         _f64(noisy.state, 8),
-        _f64(noisy.cfg, 10),
+        _f64(noisy.cfg, NOISE_CFG_SIZE),
     )
 
 

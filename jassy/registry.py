@@ -17,7 +17,7 @@ def register(cls):
     """Class decorator: make ``cls`` available under ``cls.type_name``, with a constructor
     signature and a parameter section in its docstring generated from its ParamSpecs (what
     ``help()`` and ``inspect.signature`` show)."""
-    from jassy.doc import document_class
+    from jassy.ugendoc import document_class
 
     _REGISTRY[cls.type_name] = cls
     document_class(cls)

@@ -53,7 +53,7 @@ class UGen:
     #: time. The scheduler then hands them over ahead instead of splitting the sub-block.
     inline_events: ClassVar[bool] = False
     #: True for ugens that share a mode budget (anytime synthesis): they implement
-    #: :meth:`anytime_importance` and honour ``self.budgeted``.
+    #: :meth:`anytime_attach` and honour ``self.budgeted``.
     supports_budget: ClassVar[bool] = False
     #: True for :class:`Tap`, which carries another ugen's extra output and is named after it.
     is_tap: ClassVar[bool] = False
@@ -227,16 +227,10 @@ class UGen:
         are capped to it when the delay closes a loop."""
         raise NotImplementedError(f"{self.type_name} is not a delay")
 
-    def anytime_attach(self, period: int, horizon: float, weighting: str, scores) -> None:
-        """Budgeted banks: start a budgeted render (decisions every ``period`` frames,
-        importance written to ``scores``)."""
-        raise NotImplementedError(f"{self.type_name} takes no mode budget")
-
-    def anytime_importance(self, kick_now: list, kick_next: list, period: int, heard: bool, onset) -> None:
-        """Budgeted banks (``supports_budget``): per-mode importance for the coming
-        ``period`` frames, given the impacts (impulse N s, location) scheduled now and in
-        the next period, whether a force was heard lately and the force that wakes the
-        bank (or None), into the scores given at attach."""
+    def anytime_attach(self, tables, slot: int, horizon: float, weighting: str) -> None:
+        """Budgeted banks (``supports_budget``): start a budgeted render, the bank's rows in
+        column ``slot`` of the budget's shared ``tables`` (ugens.modal_budget.BudgetTables),
+        where one compiled decision ranks every bank's modes."""
         raise NotImplementedError(f"{self.type_name} takes no mode budget")
 
     # ---------------------------------------------------------- params and events

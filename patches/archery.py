@@ -23,11 +23,11 @@ import math
 
 import numpy as np
 
+from jassy.engines.offline import OFFLINE_BLOCK
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
-from jassy.offline import OFFLINE_BLOCK
 from patches.scene_io import render_normalised, write_csv
 
 PRE_ROLL = 0.2  # s of sound before the release

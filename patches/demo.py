@@ -3,7 +3,7 @@
 Click to tap, drag to scrape (or roll, in roll mode); sound and the haptic force channel
 play live on one clock. The plate's sound texture map follows the probe along the
 plate's track of gain locations (x across the window). :class:`Probe` turns pointer
-input into jassy events; the window posts them to a :class:`jassy.live.LiveEngine`, and
+input into jassy events; the window posts them to a :class:`jassy.engines.live.LiveEngine`, and
 :func:`render_script` renders a scripted probe path offline through the same Probe
 (that is how the tests drive it).
 
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jassy.engines.offline import OfflineEngine, Rendering
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
-from jassy.offline import OfflineEngine, Rendering
 
 MODES = ("scrape", "roll", "drill", "poke")
 PRESS_FORCE = 2.0  # N, normal force while the button is held
@@ -350,9 +350,9 @@ def start_live(mode: str, probe_udp: str | None = None, **live_options):
     """Start the live engine on ``mode``'s scene with its probe (and the drill's physics
     thread) and, with ``probe_udp`` = HOST:PORT, a UDP probe input driving the probe
     exactly as the pointer does. Returns (engine, probe, pose receiver or None)."""
-    from jassy.hapticframes import parse_address
-    from jassy.live import LiveEngine
-    from jassy.probeinput import PoseDriver, PoseReceiver
+    from jassy.engines.hapticframes import parse_address
+    from jassy.engines.live import LiveEngine
+    from jassy.engines.probeinput import PoseDriver, PoseReceiver
 
     engine = LiveEngine(build_scene(mode), [], monitor_seconds=0.25, mode="auto", **live_options)
     engine.start()

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from jassy.engines.offline import OFFLINE_BLOCK
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
-from jassy.offline import OFFLINE_BLOCK
 from patches.rigid_sound import IMPACT_HEADER, Voice, impact_rows, scene_graph
 from patches.scene_io import render_normalised, write_csv
 

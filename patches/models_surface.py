@@ -30,6 +30,10 @@ functions: {vertices = ["t2_3", "t2_4"], weights = [0.5, 0.5]} is the midpoint).
 straight track a mode shape is a sum of two sinusoids whose wavenumbers are at most the
 plate's bending wavenumber k = (omega^2 rho h / D)^(1/4); linear interpolation at a
 midpoint then errs by at most 1 - cos(k s / 2) of the mode's peak gain (spacing s).
+
+Anywhere on the plate: each model also carries its mode shapes (jassy.surface.PlateSurface:
+the orders (m, n), phi_k(q) / M and 1 / (M w_k)), so a location ``{surface = [x/a, y/b]}``
+gets exactly these gains and driving-point gains at any point, not only at the rows.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from jassy.modal_model import ModalModel
+from jassy.surface import PlateSurface
 
 
 def ss_plate_model(
@@ -99,7 +104,8 @@ def ss_plate_model(
         gains, driving = (
             np.array([float(f"{x:.{digits}g}") for x in g.flat]).reshape(g.shape) for g in (gains, driving)
         )
-    return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name, driving=driving)
+    surface = PlateSurface((a, b), m, n, listen / mass, 1.0 / (mass * 2 * np.pi * freqs))
+    return ModalModel(freqs, d0 + np.pi * freqs * eta, gains, names, name, driving=driving, surface=surface)
 
 
 def track_points(n_points: int, between: int) -> tuple[np.ndarray, tuple[str, ...]]:

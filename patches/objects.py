@@ -48,28 +48,31 @@ OBJECTS: dict[str, ObjectInfo] = {
     ),
     "glass_plate": ObjectInfo(
         "glass_plate_model.toml", "soda-lime glass plate, 300 x 200 x 5 mm",
-        "simply supported Kirchhoff plate, modes to 20 kHz",
+        "simply supported Kirchhoff plate, modes to 20 kHz; any point: {surface = [u, v]}",
         {"centre": "the middle", "off_centre": "41 % across, 37 % up", "near_edge": "13 % across, 29 % up",
          "corner": "7 % from each edge of a corner"},
     ),
     "steel_plate": ObjectInfo(
         "steel_plate_model.toml", "steel plate, 600 x 450 x 2 mm",
-        "simply supported plate, 675 modes to 16 kHz",
+        "simply supported plate, 675 modes to 16 kHz; any point: {surface = [u, v]}",
         _along_track(7, "on the diagonal track from (12 %, 30 %) to (88 %, 62 %):"),
     ),
     "wooden_board": ObjectInfo(
-        "wood_board_model.toml", "pine board, 800 x 300 x 18 mm", "orthotropic simply supported plate",
+        "wood_board_model.toml", "pine board, 800 x 300 x 18 mm",
+        "orthotropic simply supported plate; any point: {surface = [u, v]}",
         _along_track(3, "on the track from (10 %, 50 %) to (90 %, 40 %):"),
     ),
     "tin_sheet": ObjectInfo(
         "tin_sheet_model.toml", "tinplate panel, 500 x 350 x 0.8 mm",
-        "steel sheet nailed to a frame (simply supported), 1106 modes to 16 kHz",
+        "steel sheet nailed to a frame (simply supported), 1106 modes to 16 kHz; "
+        "any point: {surface = [u, v]}",
         {f"x{i}y{j}": f"grid point {(i + 0.5) / 4:.0%} across, {(j + 0.5) / 3:.0%} up"
          for i in range(4) for j in range(3)},
     ),
     "door": ObjectInfo(
         "door_model.toml", "solid pine door, 0.8 x 2.0 m, 40 mm thick",
-        "closed in its frame (simply supported edges), grain vertical, 399 modes to 16 kHz",
+        "closed in its frame (simply supported edges), grain vertical, 399 modes to 16 kHz; "
+        "any point: {surface = [u, v]}",
         {"centre": "the middle", "upper_panel": "centre line, 1.5 m up",
          "lower_panel": "centre line, 0.5 m up", "latch_edge": "beside the handle, 0.95 m up",
          "hinge_edge": "6 cm from the hinges, 1 m up"},

@@ -34,9 +34,9 @@ def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, 
     """Render (graph, score) for ``duration`` s through the radiation stage (a body of
     ``radius`` m, see ugens.radiation) and write ``out_wav`` scaled to a -6 dBFS peak.
     Returns (audio (channels, frames) as written, the engine's warnings)."""
+    from jassy.engines.offline import OfflineEngine
     from jassy.files import AtomicAudioWriter
     from jassy.graph import Graph
-    from jassy.offline import OfflineEngine
     from ugens.radiation import Radiation
 
     radiated = [Radiation(node, radius=radius, name=f"radiated{i}") for i, node in enumerate(graph.audio)]

@@ -7,7 +7,7 @@ import os
 import tempfile
 import time
 
-from jassy.offline import OFFLINE_BLOCK
+from jassy.engines.offline import OFFLINE_BLOCK
 from patches.wok import render_wok, simulate_wok
 
 

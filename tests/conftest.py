@@ -26,13 +26,13 @@ def jack():
     import ctypes.util
     import shutil
 
-    from jassy.jackserver import dummy_jack
+    from jassy.engines.jackserver import dummy_jack
 
     if ctypes.util.find_library("portaudio") is None:
         pytest.skip("libportaudio2 is not installed (apt-get install libportaudio2)")
     if shutil.which("jackd") is None:
         pytest.skip("jackd is not installed (apt-get install jackd2)")
-    from jassy.portaudio import LiveError
+    from jassy.engines.portaudio import LiveError
 
     try:
         server = dummy_jack(f"jassy-test-{os.getpid()}-{next(_servers)}", FS, 64, channels=4)

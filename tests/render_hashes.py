@@ -26,7 +26,7 @@ def digest(data: bytes) -> str:
 
 
 def patch_hashes(name: str) -> dict[str, str]:
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from jassy.patchfile import load_patch
 
     patch = load_patch(name)

@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import soundfile as sf
 
-from jassy.cli import main
+from jassy.apps.cli import main
 
 FS = 44100
 
@@ -53,7 +53,7 @@ def test_a_recordings_envelope_drives_a_parameter(tmp_path):
     from helpers import ArraySource
 
     from jassy import Graph, render
-    from jassy.analyze import analyze, feature_events
+    from jassy.apps.analyze import analyze, feature_events
     from ugens import Gain
 
     t = np.arange(2 * FS) / FS

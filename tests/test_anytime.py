@@ -6,8 +6,8 @@ from helpers import max_abs_diff
 
 from jassy import Event, Graph, ModalModel, PatchError, render
 from jassy.anytime import ModeBudget, a_weighting_power
-from jassy.cli import main
-from jassy.offline import OfflineEngine
+from jassy.apps.cli import main
+from jassy.engines.offline import OfflineEngine
 from jassy.patchfile import load_patch
 from patches.models import bell_model
 from patches.models_surface import steel_plate_model

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jassy import audiocheck as ac
+from jassy.apps import audiocheck as ac
+from jassy.engines.offline import render
 from jassy.graph import Graph
-from jassy.offline import render
 from jassy.patchfile import builtin_patches
 from ugens.oscillators import Sine
 from ugens.radiation import Radiation, radiate, radiation_coefficients, radiation_response
@@ -93,7 +93,7 @@ def test_shipped_patch_within_targets(name):
 
 
 def test_check_audio_cli_rejects_unknown_names_and_bad_durations(capsys):
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     assert main(["check-audio", "nosuch"]) == 2
     assert "unknown patch 'nosuch'" in capsys.readouterr().err

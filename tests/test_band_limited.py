@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jassy import audiocheck as ac
+from jassy.apps import audiocheck as ac
 from ugens.engine import BLAMP_HALF, BLAMP_PHASES, blamp_table
 
 

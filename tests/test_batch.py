@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 import soundfile
 
+from jassy.apps.cli import main
 from jassy.batch import _Lock, add_command, run_batch
 from jassy.batch.backends import BlobReader, error_result, make_task, render_task
 from jassy.batch.grid import GridError, load_grid
-from jassy.cli import main
+from jassy.engines.offline import OfflineEngine
 from jassy.errors import JassyError
 from jassy.files import deterministic_npz, deterministic_wav
-from jassy.offline import OfflineEngine
 from jassy.patchfile import load_patch
 
 PATCH = """

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from processes import read_line, rest_of_output
 
-from jassy.bridge import FADE, GAP, ForceOutput
+from jassy.apps.bridge import FADE, GAP, ForceOutput
+from jassy.engines.hapticframes import FLAG_FINAL
+from jassy.engines.probeinput import BUTTON_MAIN, PoseDriver, decode_pose, encode_pose
 from jassy.errors import JassyError
 from jassy.events import Event
-from jassy.hapticframes import FLAG_FINAL
-from jassy.probeinput import BUTTON_MAIN, PoseDriver, decode_pose, encode_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 

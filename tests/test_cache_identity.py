@@ -22,7 +22,7 @@ RENDER_SECONDS = 1.0
 RENDER_AND_HASH = f"""
 import hashlib, json, sys
 import numpy as np
-from jassy.offline import OfflineEngine
+from jassy.engines.offline import OfflineEngine
 from jassy.patchfile import load_patch
 hashes = {{}}
 for name in sys.argv[1:]:

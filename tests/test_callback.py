@@ -9,10 +9,10 @@ import pytest
 from test_program import contact_graph, contact_score
 
 from jassy import Event, Graph
-from jassy.callback import CallbackRenderer, choose_mode, render_into, why_not_callback
+from jassy.engines.callback import CallbackRenderer, choose_mode, render_into, why_not_callback
+from jassy.engines.offline import OfflineEngine
 from jassy.errors import JassyError
 from jassy.haptics import HapticSafety
-from jassy.offline import OfflineEngine
 from ugens import Gain, ImpactForce, ModalBank
 from ugens.delay import Delay
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jassy.hapticframes import FLAG_FINAL, FLAG_WATCHDOG, FrameRecorder
+from jassy.engines.hapticframes import FLAG_FINAL, FLAG_WATCHDOG, FrameRecorder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,7 +70,7 @@ def short_patch(tmp_path):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_each_ending_signal_raises_stopped_once_and_maps_to_its_exit_status(sig):
-    from jassy.signals import Stopped, stop_on_signals
+    from jassy.engines.signals import Stopped, stop_on_signals
 
     before = signal.getsignal(sig)
     cleaned = []

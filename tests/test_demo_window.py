@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from processes import read_line, rest_of_output
 
-from jassy.probeinput import encode_pose
+from jassy.engines.probeinput import encode_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 

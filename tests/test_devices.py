@@ -31,7 +31,7 @@ def test_devices_says_when_there_is_no_output_device():
 def test_devices_lists_the_jack_server_with_sounddevice_indices(jack):
     import json
 
-    from jassy.devices import find_device, output_devices
+    from jassy.engines.devices import find_device, output_devices
 
     found = output_devices()
     listing = subprocess.run(  # sounddevice's own view, in a process of its own
@@ -53,8 +53,8 @@ def test_devices_lists_the_jack_server_with_sounddevice_indices(jack):
 def test_a_server_that_stops_answering_fails_within_seconds_saying_why():
     import shutil
 
-    from jassy.jackserver import ServerNotAnswering, check_answers, dummy_jack
-    from jassy.portaudio import LiveError
+    from jassy.engines.jackserver import ServerNotAnswering, check_answers, dummy_jack
+    from jassy.engines.portaudio import LiveError
 
     if shutil.which("jackd") is None:
         pytest.skip("jackd is not installed (apt-get install jackd2)")
@@ -75,7 +75,7 @@ def test_a_server_that_stops_answering_fails_within_seconds_saying_why():
 
 
 def test_jackd_late_cycles_are_counted_by_cause(tmp_path):
-    from jassy.jackserver import server_xruns
+    from jassy.engines.jackserver import server_xruns
 
     log = tmp_path / "jackd.log"
     log.write_text(  # jackd 1.9's own lines: the dummy driver late twice, a client late once
@@ -88,7 +88,7 @@ def test_jackd_late_cycles_are_counted_by_cause(tmp_path):
 
 
 def test_callback_memory_is_kept_resident_without_changing_it():
-    from jassy.memlock import resident
+    from jassy.engines.memlock import resident
 
     data = np.arange(300_000, dtype=np.float64)  # 2.4 MB: pages not yet all written
     fresh = np.zeros(100_000)

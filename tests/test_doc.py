@@ -5,12 +5,12 @@ import tomllib
 
 import pytest
 
-from jassy.cli import main
-from jassy.doc import describe_ugen, spec_range
+from jassy.apps.cli import main
 from jassy.errors import PatchError, suggest
 from jassy.params import ParamSpec
 from jassy.patchfile import builtin_patches
 from jassy.registry import ugen_class, ugen_types
+from jassy.ugendoc import describe_ugen, spec_range
 
 
 def test_every_ugen_parameter_and_action_argument_is_in_the_reference():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from jassy.cli import main
+from jassy.apps.cli import main
 from jassy.errors import PatchError
 from jassy.patchfile import parse_event_option
 

@@ -30,7 +30,7 @@ import soundfile
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from jassy.cli import main
+from jassy.apps.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 PATCH_FILES = sorted(p for p in (ROOT / "patches").glob("*.toml") if not p.stem.endswith("_model"))
@@ -460,7 +460,7 @@ def command_options(command: str) -> list[tuple[str, bool]]:
     """(option string, takes a value) of a command's optional arguments."""
     import argparse
 
-    from jassy.cli import build_parser
+    from jassy.apps.cli import build_parser
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     out = []
@@ -507,7 +507,7 @@ def test_random_options_of_every_command_end_in_exit_0_or_one_line(workdir, monk
 
 def test_missing_mesh_is_reported_before_heavy_imports(tmp_path):
     code = (
-        "import sys\nfrom jassy.cli import main\n"
+        "import sys\nfrom jassy.apps.cli import main\n"
         f"assert main(['modes', {str(tmp_path / 'part.stl')!r}, '-o', {str(tmp_path / 'p.toml')!r}]) == 2\n"
         "heavy = ('trimesh', 'physics.modal.fem', 'physics.modal.meshes')\n"
         "print(sorted(m for m in heavy if m in sys.modules))"
@@ -523,7 +523,7 @@ def test_missing_mesh_is_reported_before_heavy_imports(tmp_path):
 
 
 def test_scene_summary_is_readable_lines():
-    from jassy.cli import _summary_lines
+    from jassy.apps.cli import _summary_lines
 
     text = _summary_lines({"frames": 48000, "peak": 0.123456, "stats": {"steps": 10}, "warnings": ["w"]})
     assert text.splitlines() == ["  frames: 48000", "  peak: 0.1235", "  stats:", "    steps: 10"]

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jassy import Event, Graph, JassyError, render
-from jassy.hapticframes import FLAG_CLAMPED, FLAG_FINAL, decode, encode, parse_address
+from jassy.engines.hapticframes import FLAG_CLAMPED, FLAG_FINAL, decode, encode, parse_address
 from jassy.haptics import HapticSafety, channel_delays, limit_force
 from ugens.impact import ImpactForce
 from ugens.mix import Gain

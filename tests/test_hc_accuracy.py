@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from jassy.engines.offline import render
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
-from jassy.offline import render
 from ugens.nonlinear_impact import HuntCrossleyImpact
 
 FS = 48000

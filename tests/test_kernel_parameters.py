@@ -56,8 +56,6 @@ WIDER = {
     ("ugens/modal.py", "mixed_step"),  # 12
     ("ugens/modal.py", "resonate"),  # 11
     ("ugens/modal.py", "resonate_ramp"),  # 11
-    ("ugens/modal_budget.py", "apply_kept"),  # 13
-    ("ugens/modal_budget.py", "mode_importance"),  # 24
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
     ("ugens/modal_retune.py", "pole_rows"),  # 12
     ("ugens/nonlinear_impact.py", "energy_safeguard"),  # 12

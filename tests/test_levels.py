@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from jassy.cli import main
-from jassy.offline import render
+from jassy.apps.cli import main
+from jassy.engines.offline import render
 from jassy.patchfile import load_patch
 from jassy.safety import CEILING, pinned_samples
 

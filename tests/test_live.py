@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from jassy import Event, Graph, ModalModel
-from jassy.hapticframes import FLAG_CLAMPED, FLAG_FINAL, FLAG_STALLED, FLAG_WATCHDOG, FrameRecorder
+from jassy.engines.hapticframes import FLAG_CLAMPED, FLAG_FINAL, FLAG_STALLED, FLAG_WATCHDOG, FrameRecorder
+from jassy.engines.offline import OfflineEngine
+from jassy.engines.portaudio import LiveError
 from jassy.haptics import HapticSafety
-from jassy.offline import OfflineEngine
 from jassy.patchfile import load_patch
-from jassy.portaudio import LiveError
 from ugens import Gain, ImpactForce, ModalBank
 
 FS = 48000
@@ -37,7 +37,7 @@ LATE_HOST_UNDERRUNS = 0.1
 
 
 def play_bell_on_the_ring(isolation):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     patch = load_patch("bell")
     live = LiveEngine(
@@ -67,7 +67,7 @@ def test_live_output_is_the_offline_rendering_sample_for_sample(jack, isolation)
 
 
 def test_callback_mode_plays_the_offline_rendering_with_the_devices_latency_only(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     patch = load_patch("bell")
     live = LiveEngine(patch.graph, patch.score, FS, 64, monitor_seconds=3.0, mode="auto")
@@ -87,7 +87,7 @@ def test_callback_mode_plays_the_offline_rendering_with_the_devices_latency_only
 
 
 def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     score = [Event(0.2 + 0.5 / FS, "hit", "impact", {"impulse": 0.01})]
     for offsets, lag in (({}, 0), ({"haptic": 2.0}, 96)):
@@ -103,7 +103,7 @@ def test_audio_and_haptics_share_the_clock_and_offsets_are_exact(jack):
 
 
 def test_posted_events_play_within_the_latency(jack):
-    from jassy.live import TAKEN_AT, LiveEngine
+    from jassy.engines.live import TAKEN_AT, LiveEngine
 
     live = LiveEngine(tap_graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0, mode="ring")
     live.start()
@@ -122,7 +122,7 @@ def test_posted_events_play_within_the_latency(jack):
 
 
 def test_watchdog_fades_haptics_to_zero_within_10_ms_when_the_producer_stalls(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     hit = ImpactForce(name="hit", duration=0.5)  # a long, slow push: force is high when we stall
     graph = Graph(Gain(hit, gain=0.0), haptic=hit)
@@ -159,8 +159,8 @@ def frames_of(recorder):
 
 def tap_over_udp(mode):
     """Play a tap for 0.5 s with UDP haptic frames; (stats, frames, heard, rendered, send times)."""
-    from jassy.hapticsender import LOGGED_SENDS
-    from jassy.live import LiveEngine
+    from jassy.engines.hapticsender import LOGGED_SENDS
+    from jassy.engines.live import LiveEngine
 
     rx = FrameRecorder()
     live = LiveEngine(
@@ -228,7 +228,7 @@ def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mod
 
 
 def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     rx = FrameRecorder()
     hit = ImpactForce(name="hit", duration=0.5)  # a long push, clamped at 1 N
@@ -276,7 +276,7 @@ WARM_CHECK = (
     """
 import numpy as np
 from numba.core.dispatcher import Dispatcher
-from jassy.live import LiveEngine
+from jassy.engines.live import LiveEngine
 from jassy.patchfile import load_patch
 
 patch = load_patch("wall_tap")
@@ -312,8 +312,8 @@ import sys
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 from jassy import Event, Graph, ModalModel
-from jassy.callback import CallbackRenderer, render_into
-from jassy.live import LiveEngine
+from jassy.engines.callback import CallbackRenderer, render_into
+from jassy.engines.live import LiveEngine
 from ugens import Gain, ImpactForce, ModalBank
 
 hit = ImpactForce(name="hit", duration=0.001)
@@ -358,7 +358,7 @@ def test_the_first_live_tap_loads_no_kernel(mode):
 
 
 def test_a_tap_posted_as_the_callback_stream_starts_plays_at_its_stamp(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     live = LiveEngine(tap_graph(), [], FS, 64, monitor_seconds=2.0)
     assert live.mode == "callback"  # the default where the graph allows it
@@ -379,7 +379,7 @@ def test_a_tap_posted_as_the_callback_stream_starts_plays_at_its_stamp(jack):
 def test_missing_portaudio_is_a_clear_error(monkeypatch):
     import ctypes
 
-    from jassy import portaudio
+    from jassy.engines import portaudio
 
     monkeypatch.setattr(portaudio, "_LIB", None)
     monkeypatch.setattr(portaudio.ctypes.util, "find_library", lambda name: None)
@@ -393,7 +393,7 @@ def test_missing_portaudio_is_a_clear_error(monkeypatch):
 
 
 def test_cli_devices_and_play(jack, capsys):
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     assert main(["devices"]) == 0
     assert "JACK" in capsys.readouterr().out

@@ -6,9 +6,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from jassy.bench_haptic import frame_stats
-from jassy.hapticframes import FLAG_FINAL, RECEIVE_BUFFER, FrameReceiver, encode
-from jassy.hapticsender import CONTROL_SLOTS, LOST, SEND_DROPPED, SENT, _send
+from jassy.apps.bench_haptic import frame_stats
+from jassy.engines.hapticframes import FLAG_FINAL, RECEIVE_BUFFER, FrameReceiver, encode
+from jassy.engines.hapticsender import CONTROL_SLOTS, LOST, SEND_DROPPED, SENT, _send
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -109,7 +109,7 @@ def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(bl
 def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
-    from jassy.bench_c import c_runner, compile_modal_f32
+    from jassy.apps.bench_c import c_runner, compile_modal_f32
     from ugens.modal import resonate
 
     fn, note = compile_modal_f32()

@@ -341,7 +341,7 @@ def test_materials_table_and_damping_law():
 
 
 def run_cli(argv):
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     return main(argv)
 
@@ -432,7 +432,7 @@ def test_shipped_bowl_model_is_the_builders_output():
 
 
 def test_bowl_patch_renders_the_computed_partials():
-    from jassy.offline import render
+    from jassy.engines.offline import render
     from jassy.patchfile import load_patch
 
     patch = load_patch("bowl")

@@ -147,7 +147,7 @@ def test_several_recordings_share_modes_and_get_one_gain_row_each():
 def test_resynthesis_and_cli(tmp_path, capsys):
     import soundfile as sf
 
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     rec, _, _ = recording(seed=4, drr_db=200.0, duration=1.0)
     path = tmp_path / "hit.wav"
@@ -165,7 +165,7 @@ def test_resynthesis_and_cli(tmp_path, capsys):
 def test_plot_option(tmp_path, monkeypatch, capsys):
     import soundfile as sf
 
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     rec, _, _ = recording(seed=5, drr_db=200.0, duration=0.5)
     path = tmp_path / "hit.wav"
@@ -198,7 +198,7 @@ def test_plot_option(tmp_path, monkeypatch, capsys):
 def test_fit_errors_exit_2(argv, message, tmp_path, monkeypatch, capsys):
     import soundfile as sf
 
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     monkeypatch.chdir(tmp_path)
     sf.write(tmp_path / "silent.wav", np.zeros(4800), RATE)

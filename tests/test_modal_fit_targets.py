@@ -89,7 +89,7 @@ def test_a_recording_clipped_to_its_end_exits_2_quickly(tmp_path, capsys):
     error line saying how long it is clipped, exit 2 (the old fitter ran for minutes)."""
     import soundfile as sf
 
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     x = strike([220.0, 900.0], [0.5, 2.0], [1.0, 0.5], 1.0, sigma=1e-4)
     path = tmp_path / "hot.wav"

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from jassy.cli import main
+from jassy.apps.cli import main
 
 PATCH = """
 [patch]

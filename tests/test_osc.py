@@ -11,7 +11,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
 from jassy import Event, Graph, JassyError, render
-from jassy.osc import OscControl, parse_address
+from jassy.engines.osc import OscControl, parse_address
 from ugens import Gain, ImpactForce
 
 FS = 48000
@@ -99,7 +99,7 @@ def test_address_option():
 
 
 def test_live_engine_plays_an_osc_impact(jack):
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
 
     live = LiveEngine(graph(), [], FS, 64, ring_blocks=3, monitor_seconds=2.0)
     live.start()
@@ -119,7 +119,7 @@ def test_live_engine_plays_an_osc_impact(jack):
 def test_cli_play_with_osc(jack, capsys):
     import socket
 
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))

@@ -10,7 +10,7 @@ import soundfile as sf
 from helpers import ArraySource, FailingSource, NaNSource
 
 from jassy import Graph, OfflineEngine, RenderError, render
-from jassy.cli import main
+from jassy.apps.cli import main
 from jassy.safety import CEILING
 from ugens.mix import Gain
 
@@ -134,9 +134,9 @@ def test_writing_non_finite_data_is_refused(tmp_path):
 
 def test_offline_rendering_never_loads_audio_device_libraries(tmp_path):
     code = (
-        "import sys; from jassy.cli import main; "
+        "import sys; from jassy.apps.cli import main; "
         f"main(['render', 'bell', '-o', r'{tmp_path / 'b.wav'}', '--duration', '0.1', '-q']); "
-        "print('sounddevice' in sys.modules or 'jassy.portaudio' in sys.modules)"
+        "print('sounddevice' in sys.modules or 'jassy.engines.portaudio' in sys.modules)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == "False"
@@ -221,7 +221,7 @@ def test_engine_limiter_over_chunks_matches_the_reference_and_meters_the_longest
     """The engine skips limiting chunks that are quiet and fully released; the audio must
     still equal the plain limiter bit for bit, and the meter's longest held run must be the
     longest over the whole render (a later, shorter run must not replace it)."""
-    from jassy.offline import CHUNK_FRAMES
+    from jassy.engines.offline import CHUNK_FRAMES
     from jassy.safety import release_coefficient
 
     rng = np.random.default_rng(3)

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import soundfile as sf
 
-from jassy.cli import main
+from jassy.apps.cli import main
 
 
 def test_rod_list_and_unknown_name(capsys):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from jassy.cli import main
-from jassy.preview import levels_db
+from jassy.apps.cli import main
+from jassy.apps.preview import levels_db
 
 pytest.importorskip("matplotlib")
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from jassy.doc import reference_markdown
+from jassy.apps.doc import reference_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "reference.md"

@@ -92,7 +92,7 @@ def test_render_reports_the_peak_as_a_sound_pressure_level(tmp_path, capsys):
     """A patch heard through SoundPressure: the summary reads the peak as dB SPL (dBFS +
     full_scale_spl) at the listening distance; the peak of a unit velocity sine far above the
     corner is rho c a / r."""
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     patch = tmp_path / "p.toml"
     patch.write_text(
@@ -145,7 +145,7 @@ def test_the_program_kernel_renders_the_same_bits_as_the_node(kind):
     """A struck plate heard through SoundPressure runs as one compiled program (no Python per
     node) with exactly the output of the node-by-node path, at block sizes 1, 64 and 4096."""
     from jassy import Event, ModalModel
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from ugens import ImpactForce, ModalBank
 
     model = ModalModel(np.geomspace(90.0, 12000.0, 12), np.linspace(3.0, 40.0, 12), np.ones((1, 12)))

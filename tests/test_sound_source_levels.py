@@ -16,9 +16,9 @@ from jassy import Event, Graph, render
 from jassy.levels import (
     CALIBRATED_LOOPS,
     FORCE_SOURCES,
+    MODEL_CALIBRATED_SOURCES,
     SIGNALS,
     SOUND_SOURCES,
-    TONAL_FORCE_SOURCES,
     WATER_DENSITY,
     bubble_gain,
     bubble_stream_rms,
@@ -36,7 +36,7 @@ def rendered(ugen, duration):
 
 def test_every_source_has_a_level_convention():
     """Each ugen that needs no input is in exactly one class of jassy.levels."""
-    classes = [set(FORCE_SOURCES), set(TONAL_FORCE_SOURCES), set(CALIBRATED_LOOPS), set(SIGNALS)]
+    classes = [set(FORCE_SOURCES), set(MODEL_CALIBRATED_SOURCES), set(CALIBRATED_LOOPS), set(SIGNALS)]
     classes.append(set(SOUND_SOURCES))
     sources = {
         name
@@ -118,7 +118,7 @@ def test_cavity_tone_rms_is_the_jet_band_at_the_resonance(on_resonance):
 
 
 def test_jassy_doc_states_each_sources_level_convention():
-    from jassy.doc import describe_ugen
+    from jassy.ugendoc import describe_ugen
 
     for name, cls in ugen_types().items():
         if not set(cls.inputs) - set(getattr(cls, "optional_inputs", ())):

@@ -1,7 +1,7 @@
 """Every shipped model driven by every force source at its default parameters, through a
 calibrated ModalBank with unit gains, peaks within -30..-6 dBFS (the level convention of
-jassy.levels: sources output forces in N with everyday defaults); so do the sources that
-sound by themselves, in full scale."""
+jassy.levels: sources output forces in N with everyday defaults; tonal ones calibrated to the
+model they drive); so do the sources that sound by themselves, in full scale."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES, SOUND_SOURCES, calibrated
+from jassy.levels import FORCE_SOURCES, MODEL_CALIBRATED_SOURCES, SOUND_SOURCES, calibrated, driven_source
 from patches.objects import OBJECTS
 from patches.shipped import shipped_models
 from ugens.nonlinear_impact import DEFAULT_STRIKE_SPEED
@@ -30,11 +30,9 @@ def once_calibrated(model: ModalModel) -> ModalModel:
 
 
 def peak_dbfs(model: ModalModel, source: str) -> float:
-    drive = FORCE_SOURCES[source]
-    src = getattr(ugens, source)(name="src")
+    src, event = driven_source(source, model)
     bank = ugens.ModalBank(model, name="bank", level="calibrated")(src)
-    events = [Event(0.01, "src", drive.action, drive.args)]
-    y = render(Graph(bank), events, duration=DURATION, sample_rate=48000, limiter=False).audio[0]
+    y = render(Graph(bank), [event], duration=DURATION, sample_rate=48000, limiter=False).audio[0]
     return 20 * math.log10(max(float(np.abs(y).max()), 1e-30))
 
 
@@ -42,7 +40,7 @@ def peak_dbfs(model: ModalModel, source: str) -> float:
 @pytest.mark.parametrize("filename", SHIPPED)
 def test_every_default_force_source_on_a_shipped_model_peaks_between_minus_30_and_minus_6_dbfs(filename):
     model = once_calibrated(ModalModel.load(PATCHES / filename))
-    levels = {s: peak_dbfs(model, s) for s in FORCE_SOURCES}
+    levels = {s: peak_dbfs(model, s) for s in [*FORCE_SOURCES, *MODEL_CALIBRATED_SOURCES]}
     outside = {s: round(db, 1) for s, db in levels.items() if not -30.0 <= db <= -6.0}
     assert not outside, f"{filename}: {outside} dBFS"
 

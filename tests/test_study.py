@@ -498,7 +498,7 @@ def test_cli_run_and_analyze(tmp_path, capsys):
 
 # --------------------------------------------------------------------------- stimulus patch
 def test_wall_tap_patch_is_a_force_pulse_and_a_bright_short_sound():
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from jassy.patchfile import load_patch
 
     patch = load_patch("wall_tap")
@@ -789,7 +789,7 @@ def test_dated_file_names_resume_the_unfinished_session_and_ids_stay_in_the_fold
 
 
 def test_bad_design_files_exit_2_with_one_line_naming_file_and_key(tmp_path, capsys):
-    from jassy.cli import main
+    from jassy.apps.cli import main
 
     cases = {
         "task": ('task = "toj"', 'task = "louder"'),

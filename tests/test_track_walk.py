@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from jassy import Event
+from jassy.engines.offline import OfflineEngine
 from jassy.graph import Graph
 from jassy.modal_model import Location, ModalModel
-from jassy.offline import OfflineEngine
 from ugens.impact import ImpactForce
 from ugens.modal import ModalBank
 
@@ -152,7 +152,7 @@ def test_models_without_a_track_keep_barycentric_blends():
 def test_the_device_walks_as_the_offline_render():
     from test_callback import play
 
-    from jassy.callback import CallbackRenderer
+    from jassy.engines.callback import CallbackRenderer
     from jassy.haptics import HapticSafety
 
     score = [

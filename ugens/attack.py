@@ -17,8 +17,6 @@ continuous force costs a convolution); silence costs a ring read per sample.
 
 from __future__ import annotations
 
-from fractions import Fraction
-
 import numba as nb
 import numpy as np
 
@@ -47,17 +45,6 @@ def scatter_attack(force, out, n, taps, ring, pos):
     pos[0] = p
 
 
-def attack_at_rate(attack: np.ndarray, attack_rate: float, rate: float) -> np.ndarray:
-    """The attack samples resampled from ``attack_rate`` to ``rate`` Hz (polyphase, Kaiser
-    window; the same samples when the rates agree)."""
-    if attack_rate == rate or attack.size == 0:
-        return np.asarray(attack, dtype=np.float64)
-    from scipy.signal import resample_poly
-
-    ratio = Fraction(rate / attack_rate).limit_denominator(1000)
-    return resample_poly(attack, ratio.numerator, ratio.denominator)
-
-
 @register
 class StrikeAttack(ModelParams, UGen):
     """The stored attack of a fitted modal model (``ModalModel.attack``), played for every
@@ -78,9 +65,8 @@ class StrikeAttack(ModelParams, UGen):
         model = self.model
         if model.attack is not None and not np.all(np.isfinite(model.attack)):  # pragma: no cover - validated
             raise PatchError(f"nodes.{self.name}.model: attack: expected finite samples")
-        raw = np.zeros(0) if model.attack is None else model.attack
         rate = float(self.sample_rate)
-        taps = attack_at_rate(raw, float(model.attack_rate or rate), rate)
+        taps = model.attack_at(rate)
         self.taps = np.ascontiguousarray(taps * self.values["gain"] / rate, dtype=np.float64)
         size = 1 << int(np.ceil(np.log2(max(self.taps.size, 1) + 1)))
         self.ring = np.zeros(size)

@@ -26,13 +26,19 @@ import math
 import numba as nb
 import numpy as np
 
+from jassy.levels import ForceSpectrum
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+from ugens.tonal_level import TONAL_LEVEL_SPECS, TonalLevel
 
 MAX_HARMONICS = 64
+#: The reference operating point of a calibrated level: a light cut, 1 N of normal force
+#: removing 1 mm^3 of bone per second, at the ``rpm`` the source starts with.
+REFERENCE_FORCE = 1.0
+REFERENCE_REMOVAL = 1.0
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -67,11 +73,14 @@ def drill_kernel(out, motor, n, rpms, forces, removals, gains, phase, rng, fs, r
 
 
 @register
-class DrillSource(UGen):
+class DrillSource(TonalLevel, UGen):
     """A spinning burr cutting bone: rotation harmonics plus cutting noise (force, N).
 
     Agus et al. IEEE VR 2002 / Presence 2003 (burr-bone model); the ``force`` and
-    ``removal`` controls come from physics.burr's haptic loop.
+    ``removal`` controls come from physics.burr's haptic loop. With ``level =
+    "calibrated"`` and the ``model`` it drives, the force (not ``motor``) is scaled once so
+    that at REFERENCE_FORCE and REFERENCE_REMOVAL, at the starting ``rpm``, a calibrated
+    ModalBank of that model rings at jassy.levels.TONAL_RMS_DBFS (ugens/tonal_level.py).
     """
 
     type_name = "DrillSource"
@@ -96,7 +105,21 @@ class DrillSource(UGen):
                            doc="cutting-noise peak amplitude per mm^3/s of removal"),
         "idle": ParamSpec("float", 0.05, low=0.0, high=10.0, doc="amplitude of the motor output"),
         "seed": seed_spec(),
+        **TONAL_LEVEL_SPECS,
     }  # fmt: skip
+
+    def force_spectrum(self) -> ForceSpectrum:
+        """The force at the reference operating point: the rotation harmonics below 0.45 fs
+        as lines, the uniform cutting noise (variance A^2 / 3) as a white density."""
+        v, fs = self.values, self.sample_rate
+        f = np.arange(1, self.gains.size + 1) * v["rpm"] / 60.0
+        audible = (f < 0.45 * fs) & (f > 0.0)
+        amplitude = v["noise"] * REFERENCE_FORCE + v["chips"] * REFERENCE_REMOVAL
+        return ForceSpectrum(
+            f[audible],
+            v["ripple"] * REFERENCE_FORCE * self.gains[audible],
+            lambda freqs: np.full(freqs.shape, 2.0 * amplitude**2 / (3.0 * fs)),
+        )
 
     def _prepare(self) -> None:
         self.rpm = self.smoothed("rpm")
@@ -109,6 +132,7 @@ class DrillSource(UGen):
         g[(k % self.values["flutes"]) == 0] *= self.values["flute_gain"]
         self.gains = g / math.sqrt(float(np.sum(g * g)))
         self._bufs = np.zeros((3, self.max_block))
+        self._level = float(self.tonal_gain())
 
     def _reset(self) -> None:
         for sm in (self.rpm, self.force, self.removal):
@@ -127,7 +151,8 @@ class DrillSource(UGen):
         v = self.values
         drill_kernel(
             self.out, self.extra["motor"], n, rpms, forces, removals, self.gains, self.phase, self.rng,
-            self.sample_rate, v["ripple"], v["noise"], v["chips"], v["idle"],
+            self.sample_rate, v["ripple"] * self._level, v["noise"] * self._level, v["chips"] * self._level,
+            v["idle"],
         )  # fmt: skip
 
     def state_arrays(self):

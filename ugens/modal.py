@@ -38,7 +38,6 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from typing import Any, NamedTuple
 
@@ -47,24 +46,40 @@ import numpy as np
 
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise, void_pointer
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import modal_budget
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
+    BY_PYTHON,
     COMPACT_ROWS,
-    apply_kept,
-    centred_power,
+    COMPILED,
+    DECAY,
+    FLOOR,
+    FLOOR2,
+    GROWTH,
+    INV,
+    KEPT_LANES,
+    SIN2,
+    SPECTRUM,
+    UNLESS_SILENT,
+    WEIGHT,
+    BudgetTables,
+    aligned,
+    compact_bank,
     gather_kept,
-    mode_importance,
+    line_aligned_zeros,
     scatter_kept,
 )
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
 from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state, size_changes
+
+drop_stale_cache(__file__, [modal_budget])  # render_kept's cache holds copies of its kernels
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -185,10 +200,6 @@ def flush_silent(y1, y2, active, floor):
 #: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
-#: Anytime budget: the importance of a mode already computed is multiplied by this, so modes
-#: near the margin do not swap at every decision (each swap costs a reordering and cuts a mode).
-KEPT_BONUS = 1.25
-
 #: Anytime budget: weights that smooth a force's periodogram over neighbouring bins.
 PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 
@@ -198,28 +209,6 @@ PSD_MEMORY = 0.75
 #: Anytime budget: banks of at most this many modes judge a continuous force by its power
 #: alone (spread flat over frequency), without a transform.
 FLAT_SPECTRUM_MODES = 8
-
-#: Anytime budget: the compact bank of the kept modes is padded to a multiple of this many
-#: modes: the mode loop then runs in whole SIMD vectors (30 modes cost 1.5x 32 without it).
-KEPT_LANES = 8
-
-#: Anytime budget: no force heard (an empty spectrum), no impacts elsewhere.
-NO_SPECTRUM = np.zeros(0)
-
-#: Anytime budget: what no impact adds (ModalBank._kicked), and no compact bank.
-NOT_KICKED = (0.0, NO_SPECTRUM)
-NO_COMPACT = np.zeros((COMPACT_ROWS, 0))
-
-
-def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
-    """A C-contiguous float64 array of zeros starting on a 64-byte cache-line boundary.
-
-    The mode loop's vector loads then never straddle cache lines: a bank 16 bytes off the
-    boundary ran the 1000-mode bell about 13 % slower (``jassy bench modal``)."""
-    size = int(np.prod(shape))
-    raw = np.zeros(size + 8)
-    skip = (-raw.ctypes.data % 64) // 8
-    return raw[skip : skip + size].reshape(shape)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -258,19 +247,10 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 
 
 @nb.njit(cache=True)
-def any_nonzero(force, n):
-    """Whether force[:n] has a non-zero sample."""
-    i = 0
-    while i < n and force[i] == 0.0:
-        i += 1
-    return i < n
-
-
-@nb.njit(cache=True)
 def hear(force, n, heard, start):
     """Copy force[:n] (frames start ..) into the ring ``heard`` (one budget period, frame
-    t at t modulo its length; only the last period of a longer sub-block stays); return
-    whether any sample is non-zero."""
+    t at t modulo its length; only the last period of a longer sub-block stays). Whether
+    it is non-zero the budget knows already (jassy.anytime_rank.scan_forces)."""
     size = heard.size
     i = max(0, n - size)
     while i < n:
@@ -278,7 +258,6 @@ def hear(force, n, heard, start):
         m = min(n - i, size - at)
         heard[at : at + m] = force[i : i + m]
         i += m
-    return any_nonzero(force, n)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -286,11 +265,41 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
     """One sub-block of a budgeted bank's kept modes (the compact bank, rows as
     :func:`bank_step`'s and whole vectors of ``lanes`` modes: its padding and flushed modes
     hold exact zeros, so the active count is rounded up); the force also goes to the
-    budget period's ring ``heard``. Returns whether the force has a non-zero sample."""
+    budget period's ring ``heard`` (empty: the force is zero and the ring holds zeros)."""
     width = meta[2]
     meta[0] = min((meta[0] + lanes - 1) // lanes * lanes, width)
     bank_step(force, out, start, n, compact, meta, floor, last)
-    return hear(force, n, heard, start)
+    if heard.size:
+        hear(force, n, heard, start)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def render_kept(t, wiring, how, start, n, offset):
+    """Every budgeted bank b with how[b] != BY_PYTHON (ugens.modal_budget) over frames
+    [start, start + n), from samples [offset, offset + n) of its input into its output
+    (``wiring``), by :func:`kept_step` on its compact bank (gathered if stale) from the
+    tables ``t``; with UNLESS_SILENT (no force in this stretch or the last period: its
+    ring holds zeros and keeps them) a bank with no mode sounding and no force sample
+    before writes zeros instead. Returns the modes computed times frames (each bank's
+    active count after its span)."""
+    work = 0
+    for b in range(how.size):
+        if how[b] == BY_PYTHON:
+            continue
+        out = nb.carray(void_pointer(wiring.outputs[b] + 8 * offset), (n,), np.float64)
+        if how[b] == UNLESS_SILENT and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+            for i in range(n):
+                out[i] = 0.0
+            continue
+        force = nb.carray(void_pointer(wiring.inputs[b] + 8 * offset), (n,), np.float64)
+        compact, meta = compact_bank(t, b), t.compact_meta[b]
+        floor, last = t.values[FLOOR, b], t.last[b : b + 1]
+        ring = t.rings[b] if how[b] == COMPILED else t.rings[b, :0]
+        kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
+        active = min(meta[0], t.meta[b, 2])
+        t.meta[b, 0] = active
+        work += active * n
+    return work
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -558,15 +567,10 @@ class ModalBank(ModelParams, UGen):
                 e.narrow_meta, self._floor, self.last, e.narrow_last,
             )  # fmt: skip
         self.budgeted = False
-        self._heard = None  # the force over the last budget period (anytime_attach)
-        self._faded = np.zeros(k, dtype=bool)
-        self._kept = np.arange(k)  # a budget's computed modes (the first _kept_count), ascending
-        self._kept_count = k
-        self._kept_mask = np.ones(k, dtype=bool)
-        self._compact = None  # while set, the kept modes' rows (modal_budget), not self.bank
-        self._compact_meta = np.zeros(3, dtype=np.int64)  # its [active, 0, kept]
-        self._compact_store = line_aligned_zeros((COMPACT_ROWS * (k + KEPT_LANES),))
-        self._weights = np.ones(k)  # per-mode importance weights (anytime_attach)
+        self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
+        self._heard = None  # the force over the last budget period (a ring of the tables)
+        self._compact = None  # the kept modes' rows, while _compact_meta[1] says they hold the state
+        self._compact_meta = np.zeros(3, dtype=np.int64)  # [active, gathered, width] (modal_budget)
         self._refresh_design_cache()
         self._step = specialise(
             bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor, self.last
@@ -624,12 +628,12 @@ class ModalBank(ModelParams, UGen):
         return row
 
     def _settle(self) -> None:
-        """Mixed precision: move the split's state back into ``self.bank`` (float64), before
-        anything reads or changes the bank's coefficients or state."""
-        compact = self._compact
-        if compact is not None:
-            self._compact = None
-            scatter_kept(compact, self._kept, self._kept_count, self.bank)
+        """Move the state of a budget's compact bank or of a precision split back into
+        ``self.bank`` (float64), before anything reads or changes the bank's coefficients
+        or state."""
+        if self._compact_meta[1]:
+            self._compact_meta[1] = 0
+            scatter_kept(self._compact_view(int(self._compact_meta[2])), self._kept_mask, self.bank)
         split = self._split
         if split is None:
             return
@@ -642,12 +646,10 @@ class ModalBank(ModelParams, UGen):
 
     def _reset(self) -> None:
         self._split = None
-        self._compact = None
-        k = self.model.n_modes
-        self._kept[:] = np.arange(k)
-        self._kept_count = k
-        self._kept_mask[:] = True
-        self._faded[:] = False
+        self._compact_meta[1] = 0
+        if self._tables is not None:
+            self._kept_mask[:] = True
+            self._faded[:] = False
         self._pending = deque()  # (frame, key, value, jump, ramp) of set_param_at
         if self._size != 1.0:
             self._size = 1.0
@@ -660,34 +662,39 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
-            self._heard_dirty, self._psd = False, None
+            self._psd = None
 
     def _refresh_design_cache(self) -> None:
-        """Keep the design for the current parameters (``fresh``) and, for the anytime
-        budget, each mode's energy decay per sample and sin^2 theta."""
+        """Keep the design for the current parameters (``fresh``; for an anytime budget
+        also in its tables, with the per-mode rows that depend on the poles)."""
         self._fresh = self._design()
-        c2 = self._fresh[1]
-        self._fresh_c2 = c2.copy()  # R^2: energy decay per sample
-        self._decay_period = (0, None)  # (period, R^(2 period)), made by anytime_importance
-        if self._heard is not None:
+        if self._tables is not None:
+            self._fresh_rows[:] = self._fresh
             self._refresh_forcing()
 
     def _refresh_forcing(self) -> None:
-        """Per mode (internal order) for the anytime budget: the DFT bin of its frequency
-        in a budget period, and its growth under a steady force over the budget's horizon
-        tau, (1 - e^{-2 d tau}) / (2 d) in s (the amplitude^2 a stationary force of power
-        spectral density S gives it is unit2 S times this)."""
+        """Per mode (internal order), in the budget's rows: sin^2 theta, 1 / (R^2 sin^2
+        theta), the energy decay over a period R^(2 period), the build-up under a steady
+        force over the budget's horizon tau, (1 - e^{-2 d tau}) / (2 d) in s (the
+        amplitude^2 a stationary force of power spectral density S gives it is unit2 S
+        times this), and the DFT bin of its frequency in a budget period."""
         v = self.values
         key = (v["freq_scale"], v["decay_scale"], self._size)
         if key == self._forcing_key:  # a location or gain change: nothing to redo
             return
         self._forcing_key, retune = key, 1.0 / np.sqrt(self._size)
+        _, _, sin2, inv = self._poles
+        rows, period = self._mode_rows_view, self._heard.size
+        rows[SIN2], rows[INV] = sin2, inv
+        rows[DECAY] = self._fresh[1] ** period
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
-        period = self._heard.size
-        self._bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
+        bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
+        #: per mode, the bins of a zero-padded periodogram (anytime_spectrum) it is smoothed over
+        self._bin_taps = bins[:, None] + np.arange(PSD_SMOOTHING.size)
+        self._psd = None  # the smoothed PSD at the modes' bins, remembered across periods
         two_d_tau = 2.0 * decays * self._horizon
-        self._growth = np.where(
+        rows[GROWTH] = np.where(
             two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
         )
 
@@ -695,7 +702,7 @@ class ModalBank(ModelParams, UGen):
         self._settle()
         before = self._poles
         self._refresh_design_cache()
-        if self.budgeted:  # modes a budget silenced follow ramps virtually:
+        if self._tables is not None:  # modes a budget silenced follow ramps virtually:
             out = ~self._kept_mask
             self.coef[:, out] = self.target[:, out] - self.meta[1] * self.delta[:, out]
         self.target[:] = self._fresh
@@ -828,12 +835,12 @@ class ModalBank(ModelParams, UGen):
                 self.meta[1], meta[2], self.last,
             )  # fmt: skip
             self._ramping = self.meta[1] > 0
-            self._heard_dirty |= hear(inp, n, self._heard, start)
+            hear(inp, n, self._heard, start)
         else:
-            self._heard_dirty |= self._kept_step(
+            self._kept_step(
                 inp, out, start, n, self._compact_bank, meta, self._floor, self.last, self._heard, KEPT_LANES
             )
-        self.meta[0] = min(meta[0], self._kept_count)
+        self.meta[0] = min(meta[0], self.meta[2])
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -848,35 +855,74 @@ class ModalBank(ModelParams, UGen):
 
     # ------------------------------------------------------------ anytime synthesis
     def _gathered(self) -> np.ndarray:
-        """The compact bank of the kept modes (gathered from ``self.bank`` if needed),
+        """The compact bank of the kept modes (gathered from ``self.bank`` if stale),
         padded with silent modes to a multiple of KEPT_LANES."""
+        meta = self._compact_meta
+        if not meta[1]:
+            width = -(-int(self.meta[2]) // KEPT_LANES) * KEPT_LANES
+            gather_kept(self.bank, self.delta, self.target, self._kept_mask, self._compact_view(width))
+            meta[:] = (self.meta[0], 1, width)
+        return self._compact_view(int(meta[2]))
+
+    def _compact_view(self, width: int) -> np.ndarray:
+        """The compact bank's rows for ``width`` modes (the budget's render_kept may have
+        gathered it at another width since this bank last did)."""
         compact = self._compact
-        if compact is None:
-            self._settle()
-            count = self._kept_count
-            width = -(-count // KEPT_LANES) * KEPT_LANES
-            compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
-            gather_kept(self.bank, self.delta, self.target, self._kept, count, compact)
-            self._compact_meta[:] = (self.meta[0], 0, width)
-            self._compact, self._compact_bank = compact, compact[:6]
+        if compact is None or compact.shape[1] != width:
+            compact = self._compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
+            self._compact_bank = compact[:6]
         return compact
 
-    def anytime_attach(self, period: int, horizon: float, weighting: str, scores: np.ndarray) -> None:
-        """Start a budgeted render with decisions every ``period`` frames; a continuous
-        force is judged by the amplitude it builds in ``horizon`` seconds; modes are
-        weighted by ``weighting`` ("flat" or "A", see jassy.anytime); ``scores`` (3, modes):
-        where :meth:`anytime_importance` writes (ugens.modal_budget.mode_importance)."""
+    def anytime_compiled(self) -> bool:
+        """Whether the budget's compiled render (:func:`render_kept`) can render the bank's
+        next span: no parameter change pending, no ramp, no size input."""
+        return not (self._pending or self._ramping or self._size_input is not None)
+
+    def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
+        """Start a budgeted render: the bank's rows move into column ``slot`` of the
+        budget's ``tables`` (ugens.modal_budget; decisions every period, the ring's
+        length); a continuous force is judged by the amplitude it builds in ``horizon``
+        seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime)."""
+        self._settle()
+        k, first, bank_at, coef_at, compact_at = (int(x) for x in tables.layout[:, slot])
+        self._tables, self._slot = tables, slot
+        views = {}
+        stores = {"bank": (tables.bank, bank_at, 6), "target": (tables.target, coef_at, 4)}
+        stores["delta"] = (tables.delta, coef_at, 4)
+        for name, (store, at, rows) in stores.items():
+            view = store[at : at + rows * k].reshape(rows, k)
+            view[:] = getattr(self, name)
+            views[name] = view
+        self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
+        self.coef, self.y = self.bank[:4], self.bank[4:]
+        self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
+        self._fresh_rows[:] = self._fresh
+        tables.meta[slot] = self.meta
+        self.meta = tables.meta[slot]
+        tables.last[slot] = self.last[0]
+        self.last = tables.last[slot : slot + 1]
+        tables.values[FLOOR, slot] = self._floor
+        self._compact_meta = tables.compact_meta[slot]
+        self._compact_meta[:] = 0
+        self._compact_store = tables.compact[compact_at : compact_at + COMPACT_ROWS * aligned(k + KEPT_LANES)]
+        cut = slice(first, first + k)
+        self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
+        self._kept_mask[:], self._faded[:] = True, False
+        self.meta[2] = k
+        self._mode_rows_view = tables.rows[:, cut]
         freqs = self.model.frequencies[self.order]
-        self._weights = a_weighting_power(freqs) if weighting == "A" else np.ones(freqs.size)
-        self._scores = scores
-        self._heard = np.zeros(period)
-        self._heard_dirty = False  # the ring may hold a non-zero force
-        self._importance = self._apply = None  # typed entry points, made at first use
+        self._mode_rows_view[WEIGHT] = a_weighting_power(freqs) if weighting == "A" else 1.0
+        tables.values[FLOOR2, slot] = self._floor * self._floor
+        self._heard = tables.rings[slot]
+        self._heard[:] = 0.0
         self._psd = None
+        period = self._heard.size
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
+        self._periodogram = np.zeros(period // 2 + PSD_SMOOTHING.size)  # zero-padded by 2 bins
         self._horizon = horizon
         self._forcing_key = None
+        self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
         compact = np.zeros((COMPACT_ROWS, KEPT_LANES))
         self._kept_step = specialise(
             kept_step, self.out, self.out, 0, 0, compact[:6], self._compact_meta, self._floor, self.last,
@@ -888,7 +934,8 @@ class ModalBank(ModelParams, UGen):
         """For a budgeted bank whose force is zero over the next ``n`` frames: if none of its
         modes sounds and nothing is pending (no force sample before, ramp, parameter
         change or size input), write silence to out[offset : offset + n] and return True
-        (its state, and its ring of the period's force, hold zeros already)."""
+        (its state holds zeros already, and so does its ring of the period's force: the
+        budget renders a bank that heard a force in this or the last period)."""
         if (
             self.meta[0]
             or self.last[0] != 0.0
@@ -898,88 +945,43 @@ class ModalBank(ModelParams, UGen):
         ):
             return False
         self.out[offset : offset + n] = 0.0
-        if self._heard_dirty:
-            self._heard[:] = 0.0
-            self._heard_dirty = False
         return True
 
-    def anytime_importance(
-        self, kick_now: list, kick_next: list, period: int, heard: bool, onset: np.ndarray | None
-    ) -> None:
-        """Per mode, in internal order, into the scores given at attach: importance for
-        this period, importance for the next one (amplitude decayed by a period, the
-        impulses scheduled then), and whether it sounds now. ``kick_*``: (impulse N s,
-        location or None) of each impact scheduled in this and the next period; ``heard``:
-        a force was heard in this or the last period (the ring of the last period's force
-        ranks the modes); ``onset``: the force that wakes the bank, silent for a period and
-        struck by nothing scheduled, in the coming frames (its power counts, flat over
-        frequency). See jassy.anytime and ugens.modal_budget.mode_importance."""
-        if not (kick_now or kick_next or self.meta[0] or onset is not None or heard):
-            self._scores[:] = 0.0  # nothing rings, nothing comes
-            return
-        spectrum, flat_psd = NO_SPECTRUM, 0.0
-        if onset is not None:
-            flat_psd = centred_power(onset) / self.sample_rate
-        elif heard:
-            if self.model.n_modes > FLAT_SPECTRUM_MODES:
-                force = self._heard - self._heard.mean()  # a steady load makes no sound
-                psd = np.abs(np.fft.rfft(force * self._window)) ** 2 / self._window_power
-                # a periodogram of noise scatters by its own size from bin to bin: smooth
-                # it over neighbouring bins and over periods (it is the trend that ranks)
-                psd = np.convolve(psd, PSD_SMOOTHING, mode="same")
-                if self._psd is not None:
-                    psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
-                self._psd = spectrum = psd
-            else:  # a few modes: the force's power spread flat (no transform)
-                flat_psd = centred_power(self._heard) / self.sample_rate
-        here_now, elsewhere_now = self._kicked(kick_now) if kick_now else NOT_KICKED
-        here_next, elsewhere_next = self._kicked(kick_next) if kick_next else NOT_KICKED
-        if self._decay_period[0] != period:
-            self._decay_period = (period, self._fresh_c2**period)
-        args = (
-            self._gathered(), self._kept, self._kept_count, self.target[2], self.delta[2],
-            float(self.meta[1]), self._poles[2], self._poles[3], float(self.sample_rate), spectrum,
-            self._bins, flat_psd, self._growth,
-            here_now, here_next, elsewhere_now, elsewhere_next, self._decay_period[1], self._weights,
-            self._kept_mask, self._faded, KEPT_BONUS, self._floor * self._floor, self._scores,
-        )  # fmt: skip
-        if self._importance is None:  # the typed entry point (a numba call of 24 arguments
-            self._importance = specialise(mode_importance, *args)  # costs several us to type)
-        self._importance(*args)
+    def anytime_spectrum(self) -> bool:
+        """A budgeted bank of many modes (``anytime_spectral``: banks of at most
+        FLAT_SPECTRUM_MODES spread the force's power flat over frequency) that heard a
+        force lately: the power spectral density of the last period's force (its ring) at
+        each mode's frequency into the budget's SPECTRUM row; returns True."""
+        force = self._heard - self._heard.mean()  # a steady load makes no sound
+        spectrum = np.fft.rfft(force * self._window)
+        padded, edge = self._periodogram, PSD_SMOOTHING.size // 2
+        np.multiply(spectrum.real, spectrum.real, out=padded[edge:-edge])
+        padded[edge:-edge] += spectrum.imag * spectrum.imag
+        # a periodogram of noise scatters by its own size from bin to bin: smooth it over
+        # neighbouring bins and over periods (it is the trend that ranks), at the modes' bins
+        psd = padded[self._bin_taps] @ PSD_SMOOTHING / self._window_power
+        if self._psd is not None:
+            psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
+        self._psd = self._mode_rows_view[SPECTRUM] = psd
+        return True
 
-    def _kicked(self, kicks: list) -> tuple[float, np.ndarray]:
-        """(sum of squared impulses at the current location, squared amplitudes per mode
-        from impacts at other locations (empty: none)) of impacts (impulse N s, location
-        or None: the current one)."""
-        here, elsewhere = 0.0, NO_SPECTRUM
+    def anytime_kicks(self, kicks: list, row: np.ndarray) -> tuple[float, bool]:
+        """Impacts (impulse N s, location or None: the current one): the sum of squared
+        impulses at the current location, and whether some strike elsewhere: then ``row``
+        (the budget's ELSEWHERE_NOW or _NEXT row of this bank's modes) holds the sum of
+        their squared amplitudes per mode."""
+        here, away = 0.0, False
         for impulse, location in kicks:
             if location is None:
                 here += impulse * impulse
             else:
+                if not away:
+                    row[:] = 0.0
+                    away = True
                 v = self.values
                 a = self._location_row(location) * (v["gain"] * self._level_gain * impulse)
-                a2 = a * a / self._size
-                elsewhere = a2 if elsewhere is NO_SPECTRUM else elsewhere + a2
-        return here, elsewhere
-
-    def anytime_apply(self, keep: np.ndarray, fade: np.ndarray, period: int) -> int:
-        """Compute the kept modes, fade out ``fade`` over ``period`` frames, silence the
-        rest (ugens.modal_budget.apply_kept). Returns how many are computed."""
-        shrink = math.exp(-math.log(1000.0) / period)  # -60 dB over one period
-        compact, held = (NO_COMPACT, 0) if self._compact is None else (self._compact, self._kept_count)
-        args = (
-            keep, fade, self._kept_mask, self._faded, self.bank, self.target, self.delta, self._fresh,
-            float(self.meta[1]), shrink, self._kept, compact, held,
-        )  # fmt: skip
-        if self._apply is None:
-            self._apply = specialise(apply_kept, *args)
-        count = self._apply(*args)
-        if count < 0:
-            return self._kept_count  # the same modes as now (the compact bank stays)
-        self._compact = None
-        self._kept_count = count
-        self.meta[0] = self.meta[2] = count
-        return count
+                row += a * a / self._size
+        return here, away
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         self._settle()

@@ -1,9 +1,16 @@
-"""Compiled parts of anytime synthesis for ModalBank: importance, ranking, the kept set.
+"""Compiled parts of anytime synthesis for ModalBank: the tables every budgeted bank keeps
+its rows in, and one decision over all of them (importance, ranking, kept sets).
 
 A budgeted bank keeps its modes in their internal order and computes only the kept ones:
 their rows are gathered into a compact bank (the same row layout, so the same kernels run
 on it, at a cost proportional to the kept modes) and scattered back when the kept set or
-the coefficients change. Modes outside the kept set hold zero state.
+the coefficients change. Modes outside the kept set hold zero state. The kept set is the
+mask ``BudgetTables.kept`` alone; its size is the bank's ``meta[2]`` (the most modes that
+may be active), the compact bank's width that size rounded up to whole vectors.
+
+Every budgeted bank's rows live in shared flat stores (:class:`BudgetTables`; bank b's
+(rows, modes) block at its offsets, so each bank still sees C-contiguous arrays), and a
+decision is one compiled call over all banks (:func:`decide`) instead of several per bank.
 
 Importance of mode k for the coming budget period (see jassy.anytime):
 
@@ -19,40 +26,175 @@ current location and E_k the squared amplitudes of impacts scheduled elsewhere.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
+
+from jassy import anytime_rank
+from jassy.anytime_rank import rank_modes
+from jassy.jit import drop_stale_cache, void_pointer
+
+drop_stale_cache(__file__, [anytime_rank])  # decide's cache holds a copy of rank_modes
 
 #: Rows of a compact bank: c1, c2, g, d, y1, y2 (as ModalBank.bank), then the ramp's
 #: per-sample increments and targets of c1, c2, g, d.
 COMPACT_ROWS = 14
 
+#: The compact bank of the kept modes is padded to a multiple of this many modes: the mode
+#: loop then runs in whole SIMD vectors (30 modes cost 1.5x 32 without it).
+KEPT_LANES = 8
+
+#: Per-mode rows of :attr:`BudgetTables.rows` (one column per mode of every bank): sin^2
+#: theta; 1 / (R^2 sin^2 theta); the build-up G under a steady force (s); the energy decay
+#: over one period, R^(2 period); the importance weight; the force's PSD at the mode's
+#: frequency (N^2/Hz, banks that hear a force through a transform); squared amplitudes of
+#: the impacts scheduled elsewhere on the bank, this period and the next; the squared
+#: amplitude now (scratch).
+SIN2, INV, GROWTH, DECAY, WEIGHT, SPECTRUM, ELSEWHERE_NOW, ELSEWHERE_NEXT, AMP2 = range(9)
+MODE_ROWS = 9
+
+#: Per-bank integer fields of :attr:`BudgetTables.layout`: mode count; its first column
+#: in the per-mode rows; offsets of its (6, modes) bank rows, of its (4, modes) target,
+#: delta and fresh rows, and of its compact bank in their stores.
+MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
+
+#: Per-bank fields of :attr:`BudgetTables.values`: sum of squared impulses (N^2 s^2) at the
+#: current location this period and the next; 1.0 if impacts elsewhere fill the
+#: ELSEWHERE_NOW / ELSEWHERE_NEXT rows; 1.0 if SPECTRUM holds the force's PSD (else the
+#: force's power counts flat over frequency); the state magnitude below which a mode is
+#: silent (ModalBank's ``floor``), and its square.
+KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2 = range(7)
+BANK_VALUES = 7
+
+
+#: How the budget renders a bank over a stretch (``how`` of ugens.modal.render_kept):
+#: through its Python ``process`` (a parameter change, ramp or size input is pending), by
+#: the compiled render, or by the compiled render unless it is silent (no force heard lately,
+#: no mode sounding: it writes zeros).
+BY_PYTHON, COMPILED, UNLESS_SILENT = range(3)
+
+
+class Wiring(NamedTuple):
+    """Addresses of every budgeted bank's input and output (float64 arrays of a block,
+    kept alive by their nodes)."""
+
+    inputs: np.ndarray
+    outputs: np.ndarray
+
+
+class BudgetTables(NamedTuple):
+    """The rows of every bank a mode budget shares, in flat stores (ModalBank's arrays are
+    C-contiguous views of them) and per-mode / per-bank tables."""
+
+    layout: np.ndarray  # int64 (5, banks): MODES .. COMPACT_AT
+    bank: np.ndarray  # float64: per bank (6, modes) c1, c2, g, d, y1, y2 (ModalBank.bank)
+    target: np.ndarray  # float64: per bank (4, modes), the coefficients' ramp targets
+    delta: np.ndarray  # float64: per bank (4, modes), their per-sample ramp increments
+    fresh: np.ndarray  # float64: per bank (4, modes), the design for the current parameters
+    compact: np.ndarray  # float64: per bank (COMPACT_ROWS, width): the kept modes' rows
+    meta: np.ndarray  # int64 (banks, 3): ModalBank.meta [active, ramp samples left, kept]
+    compact_meta: np.ndarray  # int64 (banks, 3): [active, gathered (1) or stale (0), width]
+    rows: np.ndarray  # float64 (MODE_ROWS, modes)
+    kept: np.ndarray  # bool (modes,): computed (the kept set, fading modes included)
+    faded: np.ndarray  # bool (modes,): fading out in this period
+    rings: np.ndarray  # float64 (banks, period): the force over the last period, frame t at t mod period
+    last: np.ndarray  # float64 (banks,): ModalBank.last, the force sample before the next frame
+    values: np.ndarray  # float64 (BANK_VALUES, banks)
+
+
+def aligned(size: int) -> int:
+    """``size`` rounded up to whole 64-byte cache lines of float64."""
+    return -(-size // 8) * 8
+
+
+def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
+    """A C-contiguous float64 array of zeros starting on a 64-byte cache-line boundary.
+
+    The mode loop's vector loads then never straddle cache lines: a bank 16 bytes off the
+    boundary ran the 1000-mode bell about 13 % slower (``jassy bench modal``)."""
+    size = int(np.prod(shape))
+    raw = np.zeros(size + 8)
+    skip = (-raw.ctypes.data % 64) // 8
+    return raw[skip : skip + size].reshape(shape)
+
+
+def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
+    """Empty tables for banks of ``mode_counts`` modes and a budget ``period`` (frames)."""
+    count = len(mode_counts)
+    layout = np.zeros((5, count), dtype=np.int64)
+    first = bank_at = coef_at = compact_at = 0
+    for b, k in enumerate(mode_counts):
+        layout[:, b] = (k, first, bank_at, coef_at, compact_at)
+        first += k
+        bank_at += aligned(6 * k)
+        coef_at += aligned(4 * k)
+        compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
+    return BudgetTables(
+        layout, line_aligned_zeros((bank_at,)), np.zeros(coef_at), np.zeros(coef_at), np.zeros(coef_at),
+        line_aligned_zeros((compact_at,)), np.zeros((count, 3), dtype=np.int64),
+        np.zeros((count, 3), dtype=np.int64), np.zeros((MODE_ROWS, first)), np.ones(first, dtype=bool),
+        np.zeros(first, dtype=bool), np.zeros((count, period)), np.zeros(count),
+        np.zeros((BANK_VALUES, count)),
+    )  # fmt: skip
+
 
 @nb.njit(cache=True)
-def gather_kept(bank, delta, target, kept, count, compact):
-    """Copy the rows of modes ``kept[:count]`` into ``compact[:, :count]`` (bank rows
-    0-5, delta rows 6-9, target rows 10-13); its further columns become silent modes."""
-    compact[:, count:] = 0.0
-    for j in range(count):
-        k = kept[j]
-        for r in range(6):
-            compact[r, j] = bank[r, k]
-        for r in range(4):
-            compact[6 + r, j] = delta[r, k]
-            compact[10 + r, j] = target[r, k]
+def gather_kept(bank, delta, target, kept, compact):
+    """Copy the rows of the modes ``kept`` (a mask) into the first columns of ``compact``
+    (bank rows 0-5, delta rows 6-9, target rows 10-13); its further columns become
+    silent modes."""
+    compact[:, :] = 0.0
+    j = 0
+    for k in range(kept.size):
+        if kept[k]:
+            for r in range(6):
+                compact[r, j] = bank[r, k]
+            for r in range(4):
+                compact[6 + r, j] = delta[r, k]
+                compact[10 + r, j] = target[r, k]
+            j += 1
 
 
 @nb.njit(cache=True)
-def scatter_kept(compact, kept, count, bank):
-    """Write the coefficients and state of the compact bank back to modes ``kept[:count]``."""
-    for j in range(count):
-        k = kept[j]
-        for r in range(6):
-            bank[r, k] = compact[r, j]
+def compact_bank(t, b):
+    """Bank b's compact bank, gathered from its rows first if stale (its width: the kept
+    modes rounded up to whole vectors of KEPT_LANES)."""
+    meta = t.compact_meta[b]
+    at = t.layout[COMPACT_AT, b]
+    if meta[1]:
+        width = meta[2]
+        return t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
+    k, o = t.layout[MODES, b], t.layout[FIRST, b]
+    width = (t.meta[b, 2] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES
+    compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
+    bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
+    bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
+    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
+    delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
+    gather_kept(bank, delta, target, t.kept[o : o + k], compact)
+    meta[0] = t.meta[b, 0]
+    meta[1] = 1
+    meta[2] = width
+    return compact
 
 
 @nb.njit(cache=True)
+def scatter_kept(compact, kept, bank):
+    """Write the coefficients and state of the compact bank back to the modes ``kept``."""
+    j = 0
+    for k in range(kept.size):
+        if kept[k]:
+            for r in range(6):
+                bank[r, k] = compact[r, j]
+            j += 1
+
+
+@nb.njit(fastmath=True, cache=True)
 def centred_power(force):
-    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2."""
+    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2. (fastmath
+    lets the sums run in SIMD lanes: a strict left-to-right sum cost about 5 us per
+    2048-sample period, most of a decision over the wok's fourteen small banks.)"""
     n = force.size
     mean = 0.0
     for i in range(n):
@@ -65,101 +207,195 @@ def centred_power(force):
     return total / n
 
 
-@nb.njit(fastmath=True, cache=True)
-def mode_importance(
-    compact, kept, count, target_gain, delta_gain, ramp_left, sin2, inv, sample_rate, spectrum, bins,
-    flat_psd, growth, kick_here_now, kick_here_next, elsewhere_now, elsewhere_next, decay_period, weights,
-    kept_mask, faded, bonus, floor2, scores,
-):  # fmt: skip
-    """Importance of every mode for this period (scores[0]) and the next (scores[1], the
-    amplitude decayed by ``decay_period`` = R^(2 period)), and whether it sounds now
-    (scores[2]: 1.0 or 0.0). Modes kept and not fading get ``bonus`` (no churn at the
-    margin).
+class Decision(NamedTuple):
+    """What a decision needs besides the tables: per bank, whether it is woken by a force
+    nobody scheduled (``onset``, whose input samples [begin, end) at ``inputs[b]``
+    (addresses of float64 arrays) are judged) or heard a force lately; the budget's scores
+    (3, modes) and the keep / fade / next-period masks of
+    :func:`jassy.anytime_rank.rank_modes`."""
 
-    ``spectrum``: the force's PSD per DFT bin (``bins[k]`` the mode's bin); if empty,
-    ``flat_psd``: its power spectral density spread flat (0: no force heard).
-    ``elsewhere_*``: squared amplitudes of impacts at other locations (empty: none)."""
-    n = inv.size
-    for k in range(n):
-        scores[2, k] = 0.0
-    amp2 = np.zeros(n)
-    for j in range(count):
-        k = kept[j]
-        y1 = compact[4, j]
-        y2 = compact[5, j]
-        a = (y1 * y1 - compact[0, j] * y1 * y2 + compact[1, j] * y2 * y2) / sin2[k]
-        if a > 0.0:
-            amp2[k] = a
-            if a > floor2:
-                scores[2, k] = 1.0
-    binned = spectrum.size > 0
-    has_now = elsewhere_now.size > 0
-    has_next = elsewhere_next.size > 0
-    for k in range(n):
-        g = (target_gain[k] - ramp_left * delta_gain[k]) * sample_rate
-        unit2 = g * g * inv[k]
-        s = spectrum[bins[k]] if binned else flat_psd
-        forced = unit2 * s * growth[k]
-        now = max(amp2[k], forced) + unit2 * kick_here_now
-        later = max(amp2[k] * decay_period[k], forced) + unit2 * kick_here_next
+    onset: np.ndarray
+    heard: np.ndarray
+    inputs: np.ndarray
+    scores: np.ndarray
+    keep: np.ndarray
+    fade: np.ndarray
+    later: np.ndarray
+
+
+class Rates(NamedTuple):
+    """Scalars of a decision: sample rate (Hz), the modes the budget may compute, the bonus
+    of a kept mode against churn, the amplitude factor per sample of a fading mode, and
+    the input samples [begin, end) an onset is judged by."""
+
+    sample_rate: float
+    limit: int
+    bonus: float
+    shrink: float
+    begin: int
+    end: int
+
+
+@nb.njit(fastmath=True, cache=True)
+def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
+    """Importance of bank b's modes for this period (scores[0]) and the next (scores[1],
+    the amplitude decayed by a period), and whether each sounds now (scores[2]: 1.0 or
+    0.0), into ``d.scores``; kept modes not fading get ``bonus`` (no churn at the margin).
+    ``flat_psd``: the force's PSD spread flat over frequency unless SPECTRAL."""
+    k, o = t.layout[MODES, b], t.layout[FIRST, b]
+    rows, scores, kept, faded = t.rows, d.scores, t.kept, t.faded
+    amp2 = rows[AMP2]
+    floor2 = t.values[FLOOR2, b]
+    for m in range(o, o + k):
+        amp2[m] = 0.0
+        scores[2, m] = 0.0
+    if t.compact_meta[b, 1]:  # the state is in the compact bank
+        width, at = t.compact_meta[b, 2], t.layout[COMPACT_AT, b]
+        j = 0
+        for m in range(o, o + k):
+            if kept[m]:
+                c1, c2 = t.compact[at + j], t.compact[at + width + j]
+                y1, y2 = t.compact[at + 4 * width + j], t.compact[at + 5 * width + j]
+                amp2[m] = (y1 * y1 - c1 * y1 * y2 + c2 * y2 * y2) / rows[SIN2, m]
+                j += 1
+    else:  # in the bank's rows (modes not kept hold zero state)
+        at = t.layout[BANK_AT, b]
+        for i in range(k):
+            m = o + i
+            if kept[m]:
+                c1, c2, y1, y2 = (
+                    t.bank[at + i],
+                    t.bank[at + k + i],
+                    t.bank[at + 4 * k + i],
+                    t.bank[at + 5 * k + i],
+                )
+                amp2[m] = (y1 * y1 - c1 * y1 * y2 + c2 * y2 * y2) / rows[SIN2, m]
+    spectral = t.values[SPECTRAL, b] > 0.0
+    has_now, has_next = t.values[HAS_ELSEWHERE_NOW, b] > 0.0, t.values[HAS_ELSEWHERE_NEXT, b] > 0.0
+    kick_now, kick_next = t.values[KICK_NOW, b], t.values[KICK_NEXT, b]
+    left = float(t.meta[b, 1])
+    gains = t.layout[COEF_AT, b] + 2 * k  # row g of target and delta
+    for i in range(k):
+        m = o + i
+        a = amp2[m]
+        if a < 0.0:
+            a = 0.0
+        elif a > floor2:
+            scores[2, m] = 1.0
+        g = (t.target[gains + i] - left * t.delta[gains + i]) * sample_rate
+        unit2 = g * g * rows[INV, m]
+        s = rows[SPECTRUM, m] if spectral else flat_psd
+        forced = unit2 * s * rows[GROWTH, m]
+        now = max(a, forced) + unit2 * kick_now
+        later = max(a * rows[DECAY, m], forced) + unit2 * kick_next
         if has_now:
-            now += elsewhere_now[k]
+            now += rows[ELSEWHERE_NOW, m]
         if has_next:
-            later += elsewhere_next[k]
-        w = weights[k]
-        if kept_mask[k] and not faded[k]:
+            later += rows[ELSEWHERE_NEXT, m]
+        if kept[m] and not faded[m]:
             now *= bonus
-        scores[0, k] = w * now
-        scores[1, k] = w * later
+        w = rows[WEIGHT, m]
+        scores[0, m] = w * now
+        scores[1, m] = w * later
 
 
 @nb.njit(cache=True)
-def apply_kept(
-    keep, fade, kept_mask, faded, bank, target, delta, fresh, ramp_left, shrink, kept, compact, count
-):
-    """Make ``keep`` | ``fade`` the computed set; return its size (its modes, ascending, in
-    ``kept``), or -1 if nothing changes (same set, no fades then or now). bank rows: c1,
-    c2, g, d, y1, y2 (ModalBank.bank); ``compact[:, :count]``: the kept modes' rows, written
-    back to ``bank`` first if the set changes.
+def apply_kept(t, b, keep, fade, ramp_left, shrink):
+    """Make ``keep`` | ``fade`` bank b's computed set; return its size, or -1 if nothing
+    changes (same set, no fades then or now). Its compact bank, if gathered, is written
+    back first and becomes stale.
 
     Modes back from a fade take their fresh design (their ramp is lost); entering modes
     take the coefficients their ramp has reached (target - left * delta); fading modes
     decay by ``shrink`` per sample (amplitude) and hear nothing; silenced modes hold zero
     state (their coefficients keep following ramps virtually)."""
-    n = keep.size
+    k, o = t.layout[MODES, b], t.layout[FIRST, b]
+    kept, faded = t.kept, t.faded
     same = True
-    for k in range(n):
-        if fade[k] or faded[k] or keep[k] != kept_mask[k]:
+    for m in range(o, o + k):
+        if fade[m] or faded[m] or keep[m] != kept[m]:
             same = False
             break
     if same:
         return -1
-    scatter_kept(compact, kept, count, bank)
-    coef = bank[:4]
+    at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
+    bank = t.bank[at : at + 6 * k].reshape((6, k))
+    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
+    delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
+    fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
+    if t.compact_meta[b, 1]:
+        width, c_at = t.compact_meta[b, 2], t.layout[COMPACT_AT, b]
+        scatter_kept(
+            t.compact[c_at : c_at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width)),
+            kept[o : o + k],
+            bank,
+        )
+        t.compact_meta[b, 1] = 0
     count = 0
-    for k in range(n):
-        if faded[k]:
+    for i in range(k):
+        m = o + i
+        if faded[m]:
             for r in range(4):
-                target[r, k] = fresh[r, k]
-                delta[r, k] = 0.0
-        if keep[k]:
-            if not kept_mask[k] or faded[k]:
+                target[r, i] = fresh[r, i]
+                delta[r, i] = 0.0
+        if keep[m]:
+            if not kept[m] or faded[m]:
                 for r in range(4):
-                    coef[r, k] = target[r, k] - ramp_left * delta[r, k]
-        elif fade[k]:
-            coef[0, k] *= shrink
-            coef[1, k] *= shrink * shrink
-            coef[2, k] = 0.0
-            coef[3, k] = 0.0
+                    bank[r, i] = target[r, i] - ramp_left * delta[r, i]
+        elif fade[m]:
+            bank[0, i] *= shrink
+            bank[1, i] *= shrink * shrink
+            bank[2, i] = 0.0
+            bank[3, i] = 0.0
             for r in range(4):
-                target[r, k] = coef[r, k]
-                delta[r, k] = 0.0
+                target[r, i] = bank[r, i]
+                delta[r, i] = 0.0
         else:
-            bank[4, k] = 0.0
-            bank[5, k] = 0.0
-        faded[k] = fade[k]
-        kept_mask[k] = keep[k] or fade[k]
-        if kept_mask[k]:
-            kept[count] = k
+            bank[4, i] = 0.0
+            bank[5, i] = 0.0
+        faded[m] = fade[m]
+        kept[m] = keep[m] or fade[m]
+        if kept[m]:
             count += 1
+    t.compact_meta[b, 1] = 0
     return count
+
+
+@nb.njit(cache=True)
+def decide(t, d, rates):
+    """One decision over every bank of the tables ``t``: importance of every mode, the
+    ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A quiet bank's
+    scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
+    the force in its input samples [begin, end), another bank that heard a force lately
+    judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
+    Returns (whether some mode fades, modes computed)."""
+    count = t.layout.shape[1]
+    scores = d.scores
+    for b in range(count):
+        kicked = False
+        for field in range(KICK_NOW, HAS_ELSEWHERE_NEXT + 1):
+            kicked |= t.values[field, b] > 0.0
+        if not (kicked or d.onset[b] or d.heard[b] or t.meta[b, 0]):
+            o, k = t.layout[FIRST, b], t.layout[MODES, b]
+            for r in range(3):
+                for m in range(o, o + k):
+                    scores[r, m] = 0.0
+            continue
+        flat_psd = 0.0
+        if d.onset[b]:
+            size = rates.end - rates.begin
+            x = nb.carray(void_pointer(d.inputs[b] + 8 * rates.begin), (size,), np.float64)
+            flat_psd = centred_power(x) / rates.sample_rate
+        elif d.heard[b] and t.values[SPECTRAL, b] == 0.0:
+            flat_psd = centred_power(t.rings[b]) / rates.sample_rate
+        bank_importance(t, d, b, flat_psd, rates.sample_rate, rates.bonus)
+    fading = rank_modes(scores, rates.limit, d.keep, d.fade, d.later)
+    total = 0
+    for b in range(count):
+        left = float(t.meta[b, 1])
+        kept = apply_kept(t, b, d.keep, d.fade, left, rates.shrink)
+        if kept >= 0:
+            t.meta[b, 0] = kept
+            t.meta[b, 2] = kept
+        total += t.meta[b, 2]
+    return fading, total

@@ -3,7 +3,7 @@
 A :class:`Task` is self-contained: the patch data with the variant's overrides applied and
 the bytes of its model files, so a worker needs jassy installed but no access to the
 grid's files; it returns the rendered file's bytes and the client writes them. Workers
-render with :meth:`jassy.offline.OfflineEngine.render_to_file`, exactly like
+render with :meth:`jassy.engines.offline.OfflineEngine.render_to_file`, exactly like
 ``jassy render``, so a variant's file does not depend on which worker rendered it
 (jassy.files fixes the time stamps libsndfile and numpy would write into the files).
 
@@ -152,7 +152,7 @@ def render_task(task: Task) -> Result:
     Result keys: index, id, status, error, audio (file bytes), haptic (bytes or None),
     frames, duration, sample_rate, peak, haptic_peak, warnings, render_s, worker.
     """
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from jassy.patchfile import build_patch
 
     t0 = time.perf_counter()

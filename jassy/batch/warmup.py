@@ -13,10 +13,10 @@ import contextlib
 
 def warm_up() -> None:
     """Render 256 frames of ImpactForce -> ModalBank -> Gain + Mixer (kernels loaded from cache)."""
+    from jassy.engines.offline import OfflineEngine
     from jassy.events import Event
     from jassy.graph import Graph
     from jassy.modal_model import ModalModel
-    from jassy.offline import OfflineEngine
     from jassy.registry import ugen_class
 
     model = ModalModel([440.0, 1000.0, 2500.0], [3.0, 5.0, 8.0], [[1.0, 0.5, 0.2]])

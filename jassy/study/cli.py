@@ -1,5 +1,5 @@
 """``jassy study run``, ``jassy study analyze`` and ``jassy study coverage``: wired into
-jassy/cli.py by ``add_command(subparsers)``. Each subcommand is ``func(args) -> int``; bad
+jassy/apps/cli.py by ``add_command(subparsers)``. Each subcommand is ``func(args) -> int``; bad
 input raises a JassyError (one line on stderr, exit code 2)."""
 
 from __future__ import annotations
@@ -143,7 +143,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     from jassy.study.analysis import analyze, export_fits, format_report, plot_report
 
     if args.plot:
-        from jassy.cli_checks import require_extra
+        from jassy.apps.cli_checks import require_extra
         from jassy.files import check_output
 
         require_extra("matplotlib", "plot", "--plot")

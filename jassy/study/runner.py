@@ -7,7 +7,7 @@ the haptic channels, a positive one the audio). The offset actually presented is
 the onset of a kind (audio or haptic) is the first sample whose magnitude exceeds
 ``onset_threshold`` times that kind's peak (the stimulus starts from digital silence), and
 the measured offset is audio onset minus haptic onset, in samples. With ``present="live"``
-the trial is also played on the device by a :class:`jassy.live.LiveEngine` and the
+the trial is also played on the device by a :class:`jassy.engines.live.LiveEngine` and the
 offset is measured on the monitor copy of what the device received.
 
 Results: ``RESULTS.csv`` gets one row per trial, appended, flushed and fsync'ed as soon
@@ -140,7 +140,7 @@ def render_trial(
     design: Design, offset_ms: float, condition: Condition | None = None, block: int | None = None
 ):
     """Render one trial's stimulus with the audio-haptic offset (ms; negative = audio first)."""
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
 
     patch = load_stimulus(design, condition)
     engine = OfflineEngine(
@@ -251,7 +251,7 @@ class LivePresenter:
         return target._replace(underruns=underruns)
 
     def _play(self, offset_ms: float, condition: Condition) -> Presented:
-        from jassy.live import LiveEngine
+        from jassy.engines.live import LiveEngine
 
         d = self.design
         patch = load_stimulus(d, condition)

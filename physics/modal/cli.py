@@ -1,6 +1,6 @@
 """The ``jassy modes`` and ``jassy fit`` commands, and :func:`describe_model` for ``jassy info``.
 
-Wire into ``jassy/cli.py`` with ``add_commands(sub)`` on the argparse subparsers. Each
+Wire into ``jassy/apps/cli.py`` with ``add_commands(sub)`` on the argparse subparsers. Each
 command is ``func(args) -> int`` and raises :class:`jassy.errors.JassyError` for bad input
 (the CLI prints one line and exits 2). Heavy modules are imported inside the functions.
 
@@ -193,7 +193,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if args.plot and os.path.splitext(args.plot)[1].lower() not in (".png", ".pdf", ".svg"):
         raise JassyError(f"--plot: {args.plot}: expected a .png, .pdf or .svg file name")
     if args.plot:
-        from jassy.cli_checks import require_extra
+        from jassy.apps.cli_checks import require_extra
         from jassy.files import check_distinct, check_output
 
         require_extra("matplotlib", "plot", "--plot")

@@ -671,8 +671,6 @@ def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0
     """The model's response to a unit impulse at ``onset`` (s), n samples: sum a e^{-dt} sin(wt)
     with optional per-mode phases (e.g. ``FitResult.phases[row]``), plus, with ``attack``,
     the model's stored attack (resampled to ``sample_rate``) from the onset."""
-    from ugens.attack import attack_at_rate
-
     t = np.arange(n) / sample_rate - onset
     live = t >= 0
     tt = t[live]
@@ -685,7 +683,7 @@ def resynthesise(model: ModalModel, n: int, sample_rate: float, onset: float = 0
             * np.sin(2 * np.pi * model.frequencies[k] * tt + ph[k])
         )
     if attack and model.attack is not None and model.attack.size:
-        samples = attack_at_rate(model.attack, float(model.attack_rate), float(sample_rate))
+        samples = model.attack_at(float(sample_rate))
         i0 = int(np.argmax(live)) if live.any() else n
         m = min(samples.size, n - i0)
         out[i0 : i0 + m] += samples[:m]

@@ -12,10 +12,10 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
+from jassy.engines.offline import OfflineEngine
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.modal_model import ModalModel
-from jassy.offline import OfflineEngine
 
 SAMPLE_RATE = 48000
 
@@ -86,7 +86,7 @@ def _bank_runner(
 def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024, c_loop=None) -> dict:
     from scipy.signal import lfilter
 
-    from jassy.bench_c import c_runner
+    from jassy.apps.bench_c import c_runner
     from ugens.modal import design
     from ugens.modal_f32 import TOLERANCE, float32_error
 
@@ -132,7 +132,7 @@ def _modal_row(k: int, seconds: float, block: int, big_block: int = 1024, c_loop
 
 def modal_bench(mode_counts=(64, 1024, 16384), seconds: float = 1.0, block: int = 64) -> list[dict]:
     """Mode-samples per second of ModalBank vs a plain numba loop, a scipy lfilter loop and
-    a C float32 loop compiled now (jassy.bench_c; skipped with a message without ``cc``).
+    a C float32 loop compiled now (jassy.apps.bench_c; skipped with a message without ``cc``).
 
     jassy (through ``ModalBank.process``, so its per-call overhead counts; float64 and
     ``precision = "mixed"``) and the plain loop run on the same random force in calls of
@@ -140,7 +140,7 @@ def modal_bench(mode_counts=(64, 1024, 16384), seconds: float = 1.0, block: int 
     whole force in one call; scipy's lfilter filters 1/16 of the frames in one call per
     mode (its cost is linear in frames).
     """
-    from jassy.bench_c import compile_modal_f32
+    from jassy.apps.bench_c import compile_modal_f32
 
     c_loop, note = compile_modal_f32()
     rows = [_modal_row(k, seconds, block, c_loop=c_loop) for k in mode_counts]
@@ -164,7 +164,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     stage, which is what the device callback runs per block. Three rounds of interleaved
     best-of-5 timings; the round with the median ratio is reported.
     """
-    from jassy.bench_blocks import resonate_blocks
+    from jassy.apps.bench_blocks import resonate_blocks
     from jassy.program import run_blocks
     from patches.models import bell_model
     from ugens.impact import ImpactForce
@@ -393,10 +393,10 @@ def live_bench(
     the main thread does heavy Python work; the mode (callback or ring), underruns (and
     jackd's late cycles by cause), latency and audio-haptic skew at a tap's onset
     (measured on the frames the callback handed to the device). ``floor``: then as long a
-    run of a callback that only writes silence (jassy.bench_floor): the underruns the
+    run of a callback that only writes silence (jassy.apps.bench_floor): the underruns the
     host causes on its own."""
-    from jassy.jackserver import dummy_jack, server_xruns
-    from jassy.live import LiveEngine
+    from jassy.engines.jackserver import dummy_jack, server_xruns
+    from jassy.engines.live import LiveEngine
     from ugens.impact import ImpactForce
     from ugens.mix import Gain, Mixer
     from ugens.modal import ModalBank
@@ -424,8 +424,8 @@ def live_bench(
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
-    from jassy.bench_haptic import frame_stats, loop_latency
-    from jassy.hapticframes import FrameRecorder
+    from jassy.apps.bench_haptic import frame_stats, loop_latency
+    from jassy.engines.hapticframes import FrameRecorder
 
     recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2) as server:
@@ -457,7 +457,7 @@ def live_bench(
     silent_from = first_played + int(np.argmax(rendered >= int((quiet_at + 1.5) * SAMPLE_RATE)))
     haptic.update(udp_tap(frames, heard, first_played, silent_from, first_played + audio_on))
     if floor:
-        from jassy.bench_floor import floor_run
+        from jassy.apps.bench_floor import floor_run
 
         haptic.update(floor_run(seconds, SAMPLE_RATE, block, _busy_python))
         haptic.update(over_floor(stats.underrun_callbacks, seconds, haptic))
@@ -507,7 +507,7 @@ def udp_tap(frames: list, heard: np.ndarray, first_played: int, silent_from: int
     first sample) minus the stream frame of the audio onset, and whether its force is the
     mean of what the device played over its samples. ``first_played``: the stream frame
     of heard[:, 0]."""
-    from jassy.hapticframes import FLAG_FINAL
+    from jassy.engines.hapticframes import FLAG_FINAL
 
     carrying = [
         f

@@ -12,7 +12,7 @@ import time
 from collections.abc import Iterator
 from typing import NamedTuple
 
-from jassy.portaudio import LiveError
+from jassy.engines.portaudio import LiveError
 
 #: Seconds a fresh server has to come up, and then to answer a client.
 START_TIMEOUT = 5.0
@@ -142,7 +142,7 @@ def check_answers(name: str, timeout: float = ANSWER_TIMEOUT) -> None:
     host API out when the connection fails, which a server still starting, or one slow to
     answer on a loaded machine, causes now and then (seen: one fixture in ~30 under load 9
     on 2 cores)."""
-    from jassy.devices import list_devices
+    from jassy.engines.devices import list_devices
 
     deadline = time.monotonic() + timeout
     tries = 0

@@ -32,8 +32,8 @@ import numba as nb
 import numpy as np
 from numba import types
 
-from jassy.callback import PLAYED as CALLBACK_PLAYED
-from jassy.callback import (
+from jassy.engines.callback import PLAYED as CALLBACK_PLAYED
+from jassy.engines.callback import (
     TAP_HAPTIC_ROWS,
     TAP_LOG,
     TAP_LOG_ROWS,
@@ -42,12 +42,8 @@ from jassy.callback import (
     CallbackRenderer,
     choose_mode,
 )
-from jassy.errors import JassyError
-from jassy.events import Event
-from jassy.graph import Graph
-from jassy.hapticframes import FLAG_CLAMPED, FLAG_SLEW, FLAG_STALLED, FLAG_WATCHDOG, parse_address
-from jassy.haptics import HapticSafety
-from jassy.hapticsender import (
+from jassy.engines.hapticframes import FLAG_CLAMPED, FLAG_SLEW, FLAG_STALLED, FLAG_WATCHDOG, parse_address
+from jassy.engines.hapticsender import (
     CLOCK_OFFSET,
     CONTROL_SLOTS,
     DONE,
@@ -56,8 +52,12 @@ from jassy.hapticsender import (
     child_setup,
     run_sender,
 )
-from jassy.memlock import resident
-from jassy.offline import OfflineEngine
+from jassy.engines.memlock import resident
+from jassy.engines.offline import OfflineEngine
+from jassy.errors import JassyError
+from jassy.events import Event
+from jassy.graph import Graph
+from jassy.haptics import HapticSafety
 from jassy.scheduler import validate_event
 from ugens.impact import ImpactForce
 
@@ -248,7 +248,7 @@ class LiveEngine:
     the switch interval is shortened while playing); "auto" picks "process" where fork
     is available and PortAudio is not yet loaded in this process.
 
-    mode: "callback" renders the graph inside the device callback (jassy.callback: no ring,
+    mode: "callback" renders the graph inside the device callback (jassy.engines.callback: no ring,
     latency = the device's); "ring" uses the producer above; "auto" (the default) takes
     the callback where the graph, score and options allow it (``mode_reason`` says why
     not otherwise): it never has fewer frames of latency, and its underruns on a loaded
@@ -347,8 +347,8 @@ class LiveEngine:
     def start(self, timeout: float = 60.0) -> None:
         """Start the producer (warm-up, prefill, open and start the stream) and wait
         until the device is running."""
-        from jassy import portaudio
-        from jassy.devices import find_device
+        from jassy.engines import portaudio
+        from jassy.engines.devices import find_device
 
         self._device_index = None if self.device is None else find_device(self.device)
         resident([self._memory])  # the rings, monitor and tap the callbacks write
@@ -518,7 +518,7 @@ class LiveEngine:
         )
 
     def callback_stats(self):
-        """Callback mode: the renderer's counters (jassy.callback.CallbackStats), else None."""
+        """Callback mode: the renderer's counters (jassy.engines.callback.CallbackStats), else None."""
         return (
             None if self._callback is None else self._callback.renderer.stats(self._callback.device_latency)
         )
@@ -547,7 +547,7 @@ class LiveEngine:
 
     # ----------------------------------------------------------------- producer
     def _sender_main(self, parent: int) -> None:
-        """The UDP haptic sender's process (see :mod:`jassy.hapticsender`)."""
+        """The UDP haptic sender's process (see :mod:`jassy.engines.hapticsender`)."""
         child_setup(parent)
         run_sender(self.tap, self._haptic_udp, self.sample_rate, self.haptic_torque)
 
@@ -558,7 +558,7 @@ class LiveEngine:
         if parent is not None:
             child_setup(parent)
         try:
-            from jassy import portaudio
+            from jassy.engines import portaudio
 
             engine = self._warm_engine()
             buf = np.zeros((len(self.graph.bus_rows), self.block))
@@ -597,7 +597,7 @@ class LiveEngine:
                 stream.close()
             gc.unfreeze()
             if isinstance(self._worker, threading.Thread):
-                from jassy import portaudio
+                from jassy.engines import portaudio
 
                 portaudio.release()  # leave this process as it was: the next engine may fork
 

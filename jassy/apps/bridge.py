@@ -1,8 +1,8 @@
 """``jassy haptic-bridge``: a reference device side for the UDP haptic loop.
 
 It runs a 1 kHz servo loop like a kinesthetic device's: each tick it sends the probe's
-pose (from a scripted path or the mouse) to the engine (:mod:`jassy.probeinput`) and
-takes the newest haptic frame the engine sent (:mod:`jassy.hapticframes`) as its output
+pose (from a scripted path or the mouse) to the engine (:mod:`jassy.engines.probeinput`) and
+takes the newest haptic frame the engine sent (:mod:`jassy.engines.hapticframes`) as its output
 force. It lets go on its own: when the final frame arrives, or when no frame has
 arrived for ``GAP`` seconds, the output force fades linearly to zero within ``FADE``
 seconds, so it is zero at most GAP + FADE = 5 ms after the last frame, whatever
@@ -19,10 +19,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from jassy.engines.hapticframes import FLAG_FINAL, decode, open_receiver, parse_address
+from jassy.engines.hapticsender import request_realtime_priority
+from jassy.engines.probeinput import BUTTON_MAIN, encode_pose
 from jassy.errors import JassyError
-from jassy.hapticframes import FLAG_FINAL, decode, open_receiver, parse_address
-from jassy.hapticsender import request_realtime_priority
-from jassy.probeinput import BUTTON_MAIN, encode_pose
 
 #: Silence after which the bridge stops trusting the last frame (s), and the fade (s).
 GAP, FADE = 0.002, 0.003

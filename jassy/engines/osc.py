@@ -14,7 +14,7 @@ sample of its time: engine time = time tag - ``origin`` (the wall-clock time, in
 seconds, of the engine's frame 0). Messages are checked like score events (node,
 parameter or action, type and range); a bad one is reported once (each distinct
 error, through ``report``) and ignored: it never stops the stream. Events reach the
-engine through ``post`` (e.g. :meth:`jassy.live.LiveEngine.post`).
+engine through ``post`` (e.g. :meth:`jassy.engines.live.LiveEngine.post`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ output underflows PortAudio flags for it are the host's: the server's cycle or t
 client's thread woke too late (on a virtual machine, a virtual CPU that was not
 running). ``jassy bench live --floor`` runs it for as long as the real run, on a server
 of the same period, with the same busy Python main thread, and reads jackd's own
-messages to split the late cycles by cause (:func:`jassy.jackserver.server_xruns`).
+messages to split the late cycles by cause (:func:`jassy.engines.jackserver.server_xruns`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 from numba import types
 
-from jassy.callback import OUTPUT_UNDERFLOW
+from jassy.engines.callback import OUTPUT_UNDERFLOW
 
 CALLBACKS, FLAGGED = range(2)
 
@@ -44,8 +44,8 @@ def floor_run(seconds: float, sample_rate: int, block: int, busy: Callable[[floa
     """Play silence for ``seconds`` on a fresh JACK dummy server of ``block`` frames while
     ``busy(seconds)`` runs on this thread; the callbacks, those flagged late, and jackd's
     late cycles by cause (driver: its own timer; client: a client still busy)."""
-    from jassy import portaudio
-    from jassy.jackserver import dummy_jack, server_xruns
+    from jassy.engines import portaudio
+    from jassy.engines.jackserver import dummy_jack, server_xruns
 
     counts = np.zeros(2, dtype=np.int64)
     with dummy_jack(f"jassy-floor-{os.getpid()}", sample_rate, block, channels=2) as server:

@@ -31,7 +31,7 @@ def _say(name: str) -> Callable[[str], None]:
 
 
 def _modal(args: argparse.Namespace) -> None:
-    from jassy import bench
+    from jassy.apps import bench
 
     counts = (64, 1024) if args.quick else (64, 1024, 16384)
     rows = bench.modal_bench(counts, seconds=0.25 if args.quick else 1.0)
@@ -43,14 +43,14 @@ def _modal(args: argparse.Namespace) -> None:
 
 
 def _contact(args: argparse.Namespace) -> None:
-    from jassy import bench
+    from jassy.apps import bench
 
     rows = bench.contact_bench()
     print(json.dumps(rows, indent=2)) if args.json else bench.print_contact(rows)
 
 
 def _live(args: argparse.Namespace) -> None:
-    from jassy import bench
+    from jassy.apps import bench
 
     result = bench.live_bench(
         seconds=args.seconds or 60.0,
@@ -123,17 +123,17 @@ def _rod(args: argparse.Namespace) -> None:
 
 
 def _startup(args: argparse.Namespace) -> None:
-    from jassy.startup import bench_startup, print_startup
+    from jassy.apps.startup import bench_startup, print_startup
 
     rows = bench_startup(("bell",) if args.quick else ("bell", "wok"), progress=_say("startup"))
     print(json.dumps(rows, indent=2)) if args.json else print_startup(rows)
 
 
 def _anytime(args: argparse.Namespace) -> None:
-    from jassy.anytime_bench import bench_anytime, plot_anytime, print_anytime
+    from jassy.apps.anytime_bench import bench_anytime, plot_anytime, print_anytime
 
     if args.plot:
-        from jassy.preview import check_png, require_matplotlib
+        from jassy.apps.preview import check_png, require_matplotlib
 
         require_matplotlib("--plot")
         check_png(args.plot, "--plot")

@@ -8,7 +8,7 @@ its own (its own interpreter lock: nothing the engine or the caller does in Pyth
 delays it): it maps each frame's first sample to its device time (the callback's DAC
 time plus the sample's offset over the sample rate), converts that to the local
 monotonic clock with the stream-clock offset the stream's owner measures, sleeps until
-then and sends (format: :mod:`jassy.hapticframes`). At the end it sends every frame
+then and sends (format: :mod:`jassy.engines.hapticframes`). At the end it sends every frame
 through the last one played, then a final frame with zero force and FLAG_FINAL.
 """
 
@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jassy.hapticframes import FLAG_FINAL, encode
+from jassy.engines.hapticframes import FLAG_FINAL, encode
 
 #: Control slots (float64) shared between the engine and the sender. LOST: frames skipped
 #: because the sender fell a haptic ring behind; SEND_DROPPED: frames the socket refused

@@ -8,8 +8,17 @@ import time
 
 import numpy as np
 
-from jassy.hapticframes import FLAG_FINAL, FrameRecorder, HapticFrame
-from jassy.hapticsender import CLOCK_OFFSET, LATE, LOGGED_SENDS, LOST, REALTIME, SEND_DROPPED, SENT, jitter
+from jassy.engines.hapticframes import FLAG_FINAL, FrameRecorder, HapticFrame
+from jassy.engines.hapticsender import (
+    CLOCK_OFFSET,
+    LATE,
+    LOGGED_SENDS,
+    LOST,
+    REALTIME,
+    SEND_DROPPED,
+    SENT,
+    jitter,
+)
 
 
 def frame_stats(live, frames: list[HapticFrame], receiver_dropped: int | None = None) -> dict:
@@ -57,8 +66,8 @@ def loop_latency(
     force the device plays (monitor), mapped onto the stream clock by the UDP frames'
     device times; in the mode the live scenes use (callback where the graph allows).
     Needs a running (JACK) device; the caller provides it."""
-    from jassy.live import LiveEngine
-    from jassy.probeinput import PoseDriver, PoseReceiver, encode_pose
+    from jassy.engines.live import LiveEngine
+    from jassy.engines.probeinput import PoseDriver, PoseReceiver, encode_pose
     from patches.demo import Probe, build_scene
 
     recorder = FrameRecorder(process=True)  # receiving here would hold this interpreter

@@ -180,7 +180,7 @@ def shipped_names() -> list[str]:
 
 def render_patch(name: str, rate: float, duration: float | None = None) -> tuple[Render, int]:
     """(mono render without the limiter, clipped sample count) of a TOML patch."""
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from jassy.patchfile import load_patch
 
     patch = load_patch(name)

@@ -12,15 +12,15 @@ import math
 import sys
 import time
 
-from jassy.cli_checks import (
+from jassy.apps.cli_checks import (
     LineParser,
     check_arguments,
     check_render_arguments,
     scene_options,
     signals_stop,
 )
+from jassy.engines.offline import OFFLINE_BLOCK
 from jassy.errors import JassyError, suggest
-from jassy.offline import OFFLINE_BLOCK
 from patches.scenes import SCENES
 
 DEFAULT_RATE = 48000
@@ -73,12 +73,12 @@ def _summary_lines(summary, indent: str = "  ") -> str:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    from jassy.offline import OfflineEngine
+    from jassy.engines.offline import OfflineEngine
     from jassy.patchfile import load_patch
 
     check_render_arguments(args)  # bad values and output names fail before any work
     if not args.quiet:
-        from jassy.startup import first_run_notice
+        from jassy.apps.startup import first_run_notice
 
         first_run_notice(lambda line: print(line, file=sys.stderr, flush=True))
     if args.normalise and args.patch in SCENES:
@@ -88,7 +88,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     if args.target is not None and not (math.isfinite(args.target) and -70.0 <= args.target <= 0.0):
         raise JassyError(f"--target: expected dB between -70 and 0, got {args.target}")
     if args.plot:
-        from jassy.preview import check_png, require_matplotlib
+        from jassy.apps.preview import check_png, require_matplotlib
 
         require_matplotlib("--plot")
         check_png(args.plot, "--plot")
@@ -105,7 +105,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise JassyError("--duration: the patch sets no duration; give one in seconds")
     if args.haptic and not patch.graph.haptic:
         raise JassyError(f"--haptic: patch {patch.name!r} has no haptic output ([outputs] haptic = ...)")
-    from jassy.cli_checks import check_render_size
+    from jassy.apps.cli_checks import check_render_size
 
     check_render_size(args, patch.graph, duration, rate)
     if args.mode_budget is not None:
@@ -119,7 +119,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         offsets_ms=offsets,
     )  # fmt: skip
     if args.normalise:
-        from jassy.loudness import TARGETS, render_normalised
+        from jassy.apps.loudness import TARGETS, render_normalised
 
         target = TARGETS[args.normalise] if args.target is None else args.target
         summary = render_normalised(
@@ -156,7 +156,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 def _plot_render(args: argparse.Namespace) -> None:
     """``--plot``: a preview PNG of the file just written."""
     if args.plot:
-        from jassy.preview import plot_file
+        from jassy.apps.preview import plot_file
 
         plot_file(args.output, args.plot)
         if not args.quiet:
@@ -172,7 +172,7 @@ def _haptic_options(args: argparse.Namespace):
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
-    from jassy.live import LiveEngine
+    from jassy.engines.live import LiveEngine
     from jassy.patchfile import load_patch
 
     patch = load_patch(args.patch, args.set or ())
@@ -198,7 +198,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
     print(f"mode: {engine.mode}{why}", flush=True)
     osc = None
     if args.osc:
-        from jassy.osc import OscControl, parse_address
+        from jassy.engines.osc import OscControl, parse_address
 
         host, port = parse_address(args.osc)
         osc = OscControl(patch.graph, engine.post, origin=0.0, host=host, port=port)
@@ -250,8 +250,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
-    from jassy.bridge import run_bridge, scripted_path, write_log
-    from jassy.hapticframes import parse_address
+    from jassy.apps.bridge import run_bridge, scripted_path, write_log
+    from jassy.engines.hapticframes import parse_address
 
     parse_address(args.engine, "--engine")  # bad addresses fail before anything starts
     parse_address(args.listen, "--listen")
@@ -280,7 +280,7 @@ def _cmd_haptic_bridge(args: argparse.Namespace) -> int:
 
 
 def _cmd_devices(args: argparse.Namespace) -> int:
-    from jassy.devices import describe, list_devices
+    from jassy.engines.devices import describe, list_devices
 
     print(describe(list_devices()))
     return 0
@@ -329,7 +329,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(describe_model(args.patch))
         return 0
 
-    from jassy.doc import describe_patch
+    from jassy.apps.doc import describe_patch
 
     patch = load_patch(args.patch, args.set or ())
     print(describe_patch(patch))
@@ -463,7 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list audio output devices")
     p.set_defaults(func=_cmd_devices)
 
-    from jassy import analyze, audiocheck, batch, doc, preview
+    from jassy import batch
+    from jassy.apps import analyze, audiocheck, doc, preview
     from jassy.study.cli import add_command as add_study
     from physics.modal.cli import add_commands as add_modal
 
@@ -484,7 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE")
     p.set_defaults(func=_cmd_info)
 
-    from jassy.benches import BENCHES, bench_help, run_bench
+    from jassy.apps.benches import BENCHES, bench_help, run_bench
 
     p = sub.add_parser("bench", help="measure throughput against references")
     p.add_argument("name", choices=list(BENCHES), help=bench_help())
@@ -517,14 +518,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="PNG", help="also write a plot")
     p.add_argument("--quick", action="store_true", help="smaller sizes")
     p.set_defaults(func=_cmd_rod)
-    from jassy.cli_checks import add_limit_options
+    from jassy.apps.cli_checks import add_limit_options
 
     add_limit_options(sub)
     return parser
 
 
 def _cmd_warm(args: argparse.Namespace) -> int:
-    from jassy.startup import warm
+    from jassy.apps.startup import warm
 
     if args.jobs is not None and args.jobs < 1:
         raise JassyError(f"--jobs: expected a whole number >= 1, got {args.jobs}")
@@ -550,7 +551,7 @@ def _cmd_rod(args: argparse.Namespace) -> int:
     if args.plot and not args.plot.lower().endswith(".png"):
         raise JassyError(f"--plot: expected a .png file name, got {args.plot!r}")
     if args.plot:
-        from jassy.cli_checks import require_extra
+        from jassy.apps.cli_checks import require_extra
         from jassy.files import check_output
 
         require_extra("matplotlib", "plot", "--plot")
@@ -566,7 +567,7 @@ LIVE_COMMANDS = ("play", "demo", "study", "haptic-bridge")
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit code (see the module docstring)."""
-    from jassy.signals import Stopped, stop_on_signals
+    from jassy.engines.signals import Stopped, stop_on_signals
 
     parser = build_parser()
     try:

@@ -5,7 +5,7 @@ sound server that accepts connections but never answers (a stopped JACK server) 
 PortAudio's initialisation block forever, and the calling process stays free of an
 initialised PortAudio (the live engine forks its producer only from such a process).
 Indices are PortAudio's device indices, the same ones the stream binding in
-:mod:`jassy.portaudio` opens.
+:mod:`jassy.engines.portaudio` opens.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import subprocess
 import sys
 from typing import NamedTuple
 
-from jassy.portaudio import LiveError
+from jassy.engines.portaudio import LiveError
 
 #: Seconds a device listing may take before the sound server counts as not answering.
 LIST_TIMEOUT = 10.0

@@ -3,7 +3,7 @@
 Only what jassy needs: opening an output stream whose callback is a C function pointer
 (a numba ``@cfunc``), so the audio thread never enters Python; this binding is the path
 that opens every live stream. Devices are listed and chosen by name through sounddevice
-(:mod:`jassy.devices`), on the same library, so the indices agree. It relies on
+(:mod:`jassy.engines.devices`), on the same library, so the indices agree. It relies on
 PortAudio's public, versioned C API only. Loading fails with a clear :class:`LiveError`
 where the library is missing.
 """
@@ -141,7 +141,7 @@ def check(lib: ctypes.CDLL, code: int, what: str) -> int:
 
 def default_output_device() -> int:
     """PortAudio's default output device index (device listing and lookup by name:
-    :mod:`jassy.devices`, through sounddevice)."""
+    :mod:`jassy.engines.devices`, through sounddevice)."""
     lib = library()
     index = lib.Pa_GetDefaultOutputDevice()
     for _ in range(NO_DEVICE_TRIES):
