@@ -126,13 +126,14 @@ TONAL_RMS_DBFS = -28.0
 
 
 def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
-    """Mean square (per gain row, in the model's gain units squared) of the model's response
-    to a steady force. Modes at or above Nyquist are silent, as in a ModalBank. Lines: the
-    exact sum over modes of a_k H_k(f), H_k(f) = w_k / ((d_k + i 2 pi f)^2 + w_k^2) the
-    transfer function of a_k e^{-d_k t} sin(w_k t) per N s. Broadband part: each mode
-    passes the density at its own frequency over its noise bandwidth, G(f_k) a_k^2 / (8 d_k)
-    x w_k^2 / (w_k^2 + d_k^2) (half of int h_k^2 dt; modes much narrower than the band,
-    cross terms of overlapping modes left out)."""
+    """Mean square (per gain row, in the model's gain units squared; a row per operating point
+    if the density gives one) of the model's response to a steady force. Modes at or above
+    Nyquist are silent, as in a ModalBank. Lines: the exact sum over modes of a_k H_k(f),
+    H_k(f) = w_k / ((d_k + i 2 pi f)^2 + w_k^2) the transfer function of a_k e^{-d_k t}
+    sin(w_k t) per N s. Broadband part: each mode passes the density at its own frequency
+    over its noise bandwidth, G(f_k) a_k^2 / (8 d_k) x w_k^2 / (w_k^2 + d_k^2) (half of
+    int h_k^2 dt; modes much narrower than the band, cross terms of overlapping modes left
+    out)."""
     audible = model.frequencies < sample_rate / 2
     f, d, a = model.frequencies[audible], model.decays[audible], model.gains[:, audible]
     w = 2.0 * np.pi * f
@@ -142,17 +143,17 @@ def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: floa
     amplitudes = np.asarray(spectrum.line_amplitudes, dtype=np.float64)
     power = (np.abs(a @ transfer) ** 2 * amplitudes**2 / 2).sum(axis=1)
     noise_bandwidth = w * w / (w * w + d * d) / (8.0 * np.maximum(d, 1e-12))
-    return power + (a * a) @ (spectrum.density(f) * noise_bandwidth)
+    return power + (spectrum.density(f) * noise_bandwidth) @ (a * a).T
 
 
-def tonal_level_gain(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> float:
+def tonal_level_gain(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
     """The factor on a tonal source's force that makes a calibrated ModalBank of ``model``
-    ring at TONAL_RMS_DBFS RMS (mean power over the model's locations) under ``spectrum``,
-    the force at the source's reference operating point (1 if the model cannot hear it)."""
-    rms = reference_gain(model, sample_rate) * float(
-        np.sqrt(response_power(model, spectrum, sample_rate).mean())
-    )
-    return 10 ** (TONAL_RMS_DBFS / 20) / rms if rms > 0 else 1.0
+    ring at TONAL_RMS_DBFS RMS (mean power over the model's locations) under ``spectrum``
+    (1 where the model cannot hear it). A spectrum whose density gives one row per operating
+    point (S x modes) gets S factors."""
+    power = response_power(model, spectrum, sample_rate).mean(axis=-1)
+    rms = reference_gain(model, sample_rate) * np.sqrt(power)
+    return np.where(rms > 0, 10 ** (TONAL_RMS_DBFS / 20) / np.where(rms > 0, rms, 1.0), 1.0)
 
 
 class Drive(NamedTuple):

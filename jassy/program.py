@@ -41,7 +41,7 @@ from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_
 from ugens.modal import ModalBank, bank_step, resonate_ramp
 from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
-from ugens.scrape import ResonantScrape, Scrape, profile_contact, resonant_noise
+from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
 
 #: The modules whose kernels the program calls (a change there drops its numba cache).
 KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
@@ -125,7 +125,7 @@ class ResonantScrapeSlots(NamedTuple):
     speeds: int  #: (size,)
     rng: int  #: uint64 (1,)
     state: int  #: (8,)
-    cfg: int  #: a NoiseConfig (10,)
+    cfg: int  #: a NoiseConfig and the level table (NOISE_CFG_SIZE,)
 
 
 class BiquadSlots(NamedTuple):
@@ -308,7 +308,7 @@ def _resonant_scrape(table, base, start, n):
         speeds,
         _u64(noisy.rng, 1),
         _f64(noisy.state, 8),
-        _f64(noisy.cfg, 10),
+        _f64(noisy.cfg, NOISE_CFG_SIZE),
     )
 
 

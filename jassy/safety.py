@@ -6,9 +6,45 @@ import math
 
 import numba as nb
 import numpy as np
+from llvmlite import ir as llvmir
+from numba.core import types
+from numba.extending import intrinsic
 
 #: Default ceiling of the final limiter: -0.1 dBFS.
 CEILING = 10 ** (-0.1 / 20)
+
+#: float64 bit masks: every bit but the sign, and the smallest magnitude of Inf and NaN.
+MAGNITUDE_BITS = 0x7FFFFFFFFFFFFFFF
+NONFINITE_BITS = 0x7FF0000000000000
+
+
+@intrinsic
+def float_from_bits(typingctx, bits):
+    """The float64 whose IEEE 754 bit pattern is the int64 ``bits``."""
+    sig = types.float64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], llvmir.DoubleType())
+
+    return sig, codegen
+
+
+@nb.njit(cache=True, nogil=True)
+def copy_finite(src, dst, n):
+    """dst[:n] = src[:n] with NaN/Inf replaced by 0, on int64 views of float64 samples;
+    returns (NaN/Inf count, magnitude bits of the largest finite |sample|). Magnitude bits
+    of finite doubles order as their values, so the loop needs no float compares and runs
+    in SIMD vectors (the peak is ``float_from_bits`` of the result)."""
+    bad = 0
+    top = 0
+    for i in range(n):
+        b = src[i]
+        a = b & MAGNITUDE_BITS
+        finite = a < NONFINITE_BITS
+        bad += 0 if finite else 1
+        top = max(top, a if finite else 0)
+        dst[i] = b if finite else 0
+    return bad, top
 
 
 @nb.njit(cache=True)
@@ -120,41 +156,72 @@ def pinned_samples(buf, n, ceiling, run):
     return count, longest, run
 
 
+#: Slots of a limiter meter's state (float64): the largest input peak (linear, finite
+#: samples before limiting), frames held at the ceiling, the longest run of them, the run
+#: still open at the end, and the frames metered.
+INPUT_PEAK, PINNED, LONGEST, OPEN_RUN, METERED = range(5)
+
+
+@nb.njit(cache=True)
+def limit_metered(buf, n, state, ceiling, release_coeff, peak, meter):
+    """:func:`limit` over buf[:, :n] given the finite input peak ``peak`` of those frames,
+    metered into ``meter`` (slots INPUT_PEAK .. METERED). A fully released limiter (gain
+    exactly 1) passes frames below the pinned threshold unchanged, so they are not read
+    again: the output is :func:`limit`'s bit for bit, in chunks of any size."""
+    meter[INPUT_PEAK] = max(meter[INPUT_PEAK], peak)
+    meter[METERED] += n
+    if state[0] == 1.0 and peak < ceiling * (1.0 - 1e-9):
+        meter[OPEN_RUN] = 0.0
+        return
+    limit(buf, n, state, ceiling, release_coeff)
+    count, longest, run = pinned_samples(buf, n, ceiling, int(meter[OPEN_RUN]))
+    meter[PINNED] += count
+    meter[LONGEST] = max(meter[LONGEST], longest)
+    meter[OPEN_RUN] = run
+
+
 class LimiterMeter:
     """What the final limiter did over a render: frames held at the ceiling, the longest run
-    of them (frames) and the largest input peak (linear, before limiting)."""
+    of them (frames) and the largest input peak (linear, before limiting), kept in
+    ``state`` (slots INPUT_PEAK .. METERED) where compiled renders update it too."""
 
     def __init__(self, ceiling: float = CEILING):
         self.ceiling = ceiling
-        self.pinned = 0
-        self.longest = 0
-        self._run = 0
-        self.input_peak = 0.0
-        self.frames = 0
+        self.state = np.zeros(METERED + 1)
+
+    @property
+    def pinned(self) -> int:
+        return int(self.state[PINNED])
+
+    @property
+    def longest(self) -> int:
+        return int(self.state[LONGEST])
+
+    @property
+    def input_peak(self) -> float:
+        return float(self.state[INPUT_PEAK])
+
+    @property
+    def frames(self) -> int:
+        return int(self.state[METERED])
 
     def before(self, buf: np.ndarray) -> None:
         """Record the peak of a chunk about to be limited (finite samples)."""
         if buf.size:
-            self.input_peak = max(self.input_peak, peak_abs(buf))
+            self.state[INPUT_PEAK] = max(self.state[INPUT_PEAK], peak_abs(buf))
 
     def after(self, buf: np.ndarray, n: int) -> None:
         """Count the frames of a limited chunk held at the ceiling."""
-        count, longest, self._run = pinned_samples(buf, n, self.ceiling, self._run)
-        self.longest = max(self.longest, longest)
-        self.pinned += count
-        self.frames += n
+        count, longest, run = pinned_samples(buf, n, self.ceiling, int(self.state[OPEN_RUN]))
+        self.state[LONGEST] = max(self.state[LONGEST], longest)
+        self.state[PINNED] += count
+        self.state[OPEN_RUN] = run
+        self.state[METERED] += n
 
     def limit(self, buf: np.ndarray, n: int, state: np.ndarray, release_coeff: float, peak: float) -> None:
-        """Limit buf[:, :n] in place (see :func:`limit`) and meter it, given its finite input
-        peak. A fully released limiter (gain exactly 1) passes a chunk whose peak is below
-        the pinned threshold unchanged, so such a chunk is not read again."""
-        self.input_peak = max(self.input_peak, peak)
-        if state[0] == 1.0 and peak < self.ceiling * (1.0 - 1e-9):
-            self._run = 0
-            self.frames += n
-            return
-        limit(buf, n, state, self.ceiling, release_coeff)
-        self.after(buf, n)
+        """Limit buf[:, :n] in place and meter it, given its finite input peak (see
+        :func:`limit_metered`)."""
+        limit_metered(buf, n, state, self.ceiling, release_coeff, peak, self.state)
 
     @property
     def reduction_db(self) -> float:

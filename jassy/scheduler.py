@@ -19,7 +19,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -29,9 +29,6 @@ from jassy.events import Event
 from jassy.graph import Graph
 from jassy.jit import specialise
 from jassy.tracks import walk_score
-
-if TYPE_CHECKING:  # the program imports the ugens: not at import time of the core
-    from jassy.program import Program
 
 # Times are converted as t * sample_rate; this slack keeps 0.01 s * 48000 on frame 480.
 _SAMPLE_SLACK = 1e-6
@@ -128,14 +125,10 @@ class Scheduler:
         score: Sequence[Event],
         sample_rate: float,
         block: int,
-        program: Program | None = None,
     ):
-        """``program``: the graph's program (jassy.program), run instead of each node's
-        ``process`` (same output); it must be built before the scheduler."""
         if block < 1:
             raise PatchError(f"block: expected an integer >= 1, got {block}")
         self.graph = graph
-        self.program = program
         self.block = int(block)
         self.sample_rate = float(sample_rate)
         checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
@@ -238,9 +231,6 @@ class Scheduler:
         frames of events that are not inline, and at the graph's feedback limit; inline
         events inside a sub-block are dispatched before it.
         """
-        if self.program is not None:
-            self._run_program(n, out)
-            return
         process = self.graph.process
         steps = self.graph.steps
         period = self.period
@@ -278,42 +268,6 @@ class Scheduler:
             upcoming = self._dispatch_inline(stop, never)
             stop = min(stop, upcoming)
             process(pos, stop - pos)
-            copy(bus, rows, out, pos - begin, stop - pos)
-            pos = stop
-        self.frame = end
-
-    def _run_program(self, n: int, out: np.ndarray) -> None:
-        """:meth:`run` through the graph's program: the same sub-blocks (a program graph has
-        no feedback limit or budget period), every run of whole blocks without an event in
-        one call."""
-        from jassy.program import run_blocks, run_program
-
-        program = self.program
-        table = program.table
-        bus, rows = self.graph.bus, self.graph.bus_rows
-        copy = specialise(gather, bus, rows, out, 0, 0)
-        block = self.block
-        frames = self.apply_frames
-        count = len(frames)
-        never = 1 << 62
-        begin = pos = self.frame
-        end = begin + n
-        upcoming = frames[self.next_event] if self.next_event < count else never
-        while pos < end:
-            if upcoming <= pos:
-                upcoming = self._dispatch_due(pos, never)
-                program.sync()
-            if pos % block == 0:
-                whole = (min(upcoming, end) - pos) // block
-                if whole > 0:
-                    run_blocks(table, bus, rows, out, pos - begin, pos, whole, block)
-                    pos += whole * block
-                    continue
-            stop = min(end, (pos // block + 1) * block)
-            upcoming = self._dispatch_inline(stop, never)
-            program.sync()
-            stop = min(stop, upcoming)
-            run_program(table, pos, stop - pos)
             copy(bus, rows, out, pos - begin, stop - pos)
             pos = stop
         self.frame = end

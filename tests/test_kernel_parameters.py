@@ -17,7 +17,6 @@ PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
-    ("jassy/anytime_rank.py", "scan_forces"),  # 12
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
     ("physics/rigid/impulses.py", "resolve"),  # 20

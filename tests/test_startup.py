@@ -11,8 +11,9 @@ import pytest
 
 from jassy.apps.startup import cached_kernels, render_argv, run_fresh
 
-#: Bounds well above this code's first bell render (22 functions, 22 specialisations, 7.5-8.2 s
-#: of CPU on the shared 2-core VM at load 13): a regression that doubles either fails.
+#: Bounds well above this code's first bell render (24 functions, 24 specialisations, 8.7-9.1 s
+#: of CPU in two processes on the shared 2-core VM at load 19): a regression that doubles
+#: either fails.
 MAX_KERNELS, MAX_SPECIALISATIONS, MAX_COLD_CPU_S = 45, 65, 90.0
 
 
@@ -35,6 +36,8 @@ def test_a_cold_bell_render_compiles_few_kernels_and_a_warm_one_compiles_none(tm
         specialisations,
     )
     assert cold.cpu_s < MAX_COLD_CPU_S
+    if len(os.sched_getaffinity(0)) >= 2:  # the compile helper took its share (about half)
+        assert cold.main_cpu_s < 0.8 * cold.cpu_s, cold
     before = _index_stamps(cache)
     warm = run_fresh(render_argv("bell", str(tmp_path)), cache_dir=str(cache))
     # every kernel came from the cache: numba rewrote no index and added no file

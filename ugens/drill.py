@@ -155,7 +155,7 @@ class DrillSource(TonalLevel, UGen):
         g[(k % self.values["flutes"]) == 0] *= self.values["flute_gain"]
         self.gains = g / math.sqrt(float(np.sum(g * g)))
         self._bufs = np.zeros((3, self.max_block))
-        self._level = self.tonal_gain()
+        self._level = float(self.tonal_gain())
 
     def _reset(self) -> None:
         for sm in (self.rpm, self.force, self.removal):

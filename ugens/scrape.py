@@ -133,12 +133,33 @@ class NoiseConfig(NamedTuple):
     law: float  #: index of the amplitude law in LAWS
     inv_ref: float  #: 1/(f_ref v_ref) (1/(N m/s))
     min_speed: float  #: slip speed below which the contact is silent (m/s)
+    level_step: float  #: speed step (m/s) of the level table after the record; 0: no table
+
+
+#: Entries of ResonantScrape's level table (log of the calibrated level's factor at |v| =
+#: i x level_step), stored in ``cfg`` after its NoiseConfig; ``cfg`` has NOISE_CFG_SIZE values.
+LEVEL_POINTS = 1024
+LEVEL_TABLE = len(NoiseConfig._fields)  #: index of the table's first entry in ``cfg``
+NOISE_CFG_SIZE = LEVEL_TABLE + LEVEL_POINTS
 
 
 @nb.njit(inline="always", cache=True)
 def noise_config(cfg):
     """The NoiseConfig record held in ``cfg``."""
-    return NoiseConfig(cfg[0], cfg[1], cfg[2], cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8], cfg[9])
+    return NoiseConfig(
+        cfg[0], cfg[1], cfg[2], cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8], cfg[9], cfg[10]
+    )
+
+
+@nb.njit(inline="always", cache=True)
+def table_level(cfg, x):
+    """exp of the level table (after the NoiseConfig in ``cfg``) at fractional index x >= 0,
+    linear in the log between entries, held beyond the last."""
+    i = int(x)
+    if i >= LEVEL_POINTS - 1:
+        return math.exp(cfg[LEVEL_TABLE + LEVEL_POINTS - 1])
+    w = x - i
+    return math.exp((1.0 - w) * cfg[LEVEL_TABLE + i] + w * cfg[LEVEL_TABLE + i + 1])
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -189,8 +210,9 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
     """White noise (unit RMS) through a unit-noise-gain resonator tuned by the speed.
 
     y = g (x - x[-2]) + 2 R cos(theta) y[-1] - R^2 y[-2], g = sqrt((1 - R^2) / 2), with
-    theta = 2 pi clamp(f0 + slope |v|) / fs and R = exp(-(d0 + d_slope |v|) / fs).
-    cfg holds a NoiseConfig; state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
+    theta = 2 pi clamp(f0 + slope |v|) / fs and R = exp(-(d0 + d_slope |v|) / fs); g times the
+    level table's factor at |v| when it has one. cfg holds a NoiseConfig and the level table
+    (NOISE_CFG_SIZE values); state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
     """
     c = noise_config(cfg)
     f0 = c.f0
@@ -203,6 +225,7 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
     law = int(c.law)
     inv_ref = c.inv_ref
     min_speed = c.min_speed
+    level_step = c.level_step
     x1, x2, y1, y2 = state[0], state[1], state[2], state[3]
     v_coef, c1, c2, g = state[4], state[5], state[6], state[7]
     s = rng[0]
@@ -216,6 +239,8 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
             c1 = 2.0 * R * math.cos(2.0 * math.pi * f * inv_fs)
             c2 = R * R
             g = math.sqrt(0.5 * (1.0 - c2))
+            if level_step > 0.0:
+                g *= table_level(cfg, av / level_step)
             v_coef = v
         s, u = uniform(s)
         x = root3 * u
@@ -613,9 +638,10 @@ class ResonantScrape(TonalLevel, ContactControls):
     impulse response is 2 / (1 - R^2) times g^2 whatever theta. So the output force has
     RMS gain * s(F, v) (N) at steady speed.
 
-    With ``level = "calibrated"`` and the ``model`` it drives, the force is scaled once so
-    that at the reference contact (f_ref, v_ref) a calibrated ModalBank of that model rings
-    at jassy.levels.TONAL_RMS_DBFS (ugens/tonal_level.py).
+    With ``level = "calibrated"`` and the ``model`` it drives, the force is scaled by a
+    table over the slip speed, computed once from the modes, so that at every speed a
+    calibrated ModalBank of that model rings at jassy.levels.TONAL_RMS_DBFS x gain x s(F, v)
+    (at the reference contact: TONAL_RMS_DBFS x gain; ugens/tonal_level.py).
     """
 
     type_name = "ResonantScrape"
@@ -654,20 +680,39 @@ class ResonantScrape(TonalLevel, ContactControls):
         **TONAL_LEVEL_SPECS,
     }
 
-    def force_spectrum(self) -> ForceSpectrum:
-        """The force at the reference contact (s = 1, |v| = v_ref) with gain 1: unit-power
-        white noise through the resonator, one-sided PSD 2 |H(e^{i 2 pi f / fs})|^2 / fs."""
+    def force_spectrum(self, speeds: np.ndarray | None = None) -> ForceSpectrum:
+        """The force with gain 1 and s = 1 at each slip speed of ``speeds`` (default: v_ref):
+        unit-power white noise through the resonator, one-sided PSD 2 |H(e^{i 2 pi f / fs})|^2
+        / fs, one row per speed."""
         v, fs = self.values, self.sample_rate
-        centre = min(max(v["f0"] + v["slope"] * v["v_ref"], F_MIN), NYQUIST_FRACTION * fs)
-        radius = math.exp(-(v["damping"] + v["damping_slope"] * v["v_ref"]) / fs)
-        c1, c2 = 2.0 * radius * math.cos(2.0 * math.pi * centre / fs), radius * radius
-        g = math.sqrt(0.5 * (1.0 - c2))
+        speed = np.atleast_1d(np.abs(v["v_ref"] if speeds is None else speeds))[:, None]
+        centre = np.clip(v["f0"] + v["slope"] * speed, F_MIN, NYQUIST_FRACTION * fs)
+        radius = np.exp(-(v["damping"] + v["damping_slope"] * speed) / fs)
+        c1, c2 = 2.0 * radius * np.cos(2.0 * np.pi * centre / fs), radius * radius
+        g = np.sqrt(0.5 * (1.0 - c2))
 
         def density(f: np.ndarray) -> np.ndarray:
-            z = np.exp(-2j * np.pi * f / fs)
+            z = np.exp(-2j * np.pi * f / fs)[None, :]
             return 2.0 / fs * np.abs(g * (1.0 - z * z) / (1.0 - c1 * z + c2 * z * z)) ** 2
 
         return ForceSpectrum(np.zeros(0), np.zeros(0), density)
+
+    def level_table(self) -> tuple[float, np.ndarray]:
+        """(speed step in m/s, log of the calibrated level's factor at |v| = i x step), over
+        the speeds that move the resonance from f0 to its clamp (at least to 2 v_ref); held
+        beyond. Level 'raw': no table (step 0)."""
+        if self.values["level"] != "calibrated":
+            return 0.0, np.zeros(LEVEL_POINTS)
+        v, fs = self.values, self.sample_rate
+        if v["slope"] > 0:
+            top = (NYQUIST_FRACTION * fs - v["f0"]) / v["slope"]
+        elif v["slope"] < 0:
+            top = (v["f0"] - F_MIN) / -v["slope"]
+        else:
+            top = 0.0
+        step = min(max(top, 2.0 * v["v_ref"]), 100.0) / (LEVEL_POINTS - 1)
+        gains = self.tonal_gain(self.force_spectrum(step * np.arange(LEVEL_POINTS)))
+        return step, np.log(gains)
 
     def _prepare(self) -> None:
         super()._prepare()
@@ -680,12 +725,14 @@ class ResonantScrape(TonalLevel, ContactControls):
             d_slope=v["damping_slope"],
             inv_fs=1.0 / fs,
             f_max=NYQUIST_FRACTION * fs,
-            gain=v["gain"] * self.tonal_gain(),
+            gain=v["gain"],
             law=law,
             inv_ref=inv_ref,
             min_speed=min_speed,
+            level_step=0.0,
         )
-        self.cfg = np.array(config, dtype=np.float64)
+        step, table = self.level_table()
+        self.cfg = np.concatenate([np.array(config._replace(level_step=step), dtype=np.float64), table])
         self.rng = np.zeros(1, dtype=np.uint64)
         self.state = np.zeros(8)
         self._kernel = specialise(

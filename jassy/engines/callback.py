@@ -27,7 +27,6 @@ next sub-block that reaches their frame).
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Sequence
@@ -64,7 +63,7 @@ from jassy.program import (
     run_program,
     why_not_compiled,
 )
-from jassy.safety import CEILING, limit, release_coefficient
+from jassy.safety import CEILING, METERED, copy_finite, float_from_bits, limit_metered, release_coefficient
 from jassy.scheduler import apply_frame, validate_event
 from jassy.tracks import walk_score
 from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
@@ -118,15 +117,19 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     BUSY_OVER,
     BUSY_MAX_AT,
     LATE_STRIKES,
-) = range(40)
+    OUTPUT,
+    METER,
+) = range(42)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = LATE_STRIKES + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = METER + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
 EVENT = 8
 SET_RAMP, SET_BIQUAD, STRIKE, MODAL_TARGET = 1, 2, 3, 4
 OUTPUT_UNDERFLOW = 4  # PortAudio's paOutputUnderflow status flag
+#: Bits of the OUTPUT slot: the limits the output stage applies.
+LIMIT_AUDIO, LIMIT_HAPTIC = 1, 2
 #: Impact pulses that may overlap in the callback (the offline table grows instead).
 PULSE_CAPACITY = 256
 #: Staged modal designs per ModalBank (events of one bank in flight at once).
@@ -226,21 +229,58 @@ def _next_cut(control, queue_index, pos, stop, prog):
 
 
 @nb.njit(cache=True, nogil=True)
+def sub_block(control, prog, pos, end):
+    """Render the sub-block from frame ``pos`` into the STAGE rows and return its end: apply
+    the queued records due there, cut at the next block boundary or record frame (at most
+    ``end``), run the program, then the output stage: NaN/Inf to 0 (counted in NONFINITE),
+    the audio limiter and its meter (LIMIT_AUDIO), the haptic force and slew limits
+    (LIMIT_HAPTIC) and the final fade of the haptic rows."""
+    block = control[BLOCK]
+    rows_n = control[N_ROWS]
+    na = control[N_AUDIO]
+    rows = _i64(control[ROWS], rows_n)
+    stage = _f64_rows(control[STAGE], rows_n, block)
+    par = _f64(control[PARAMS], 4)
+    stop = min(end, (pos // block + 1) * block)
+    for q in range(N_QUEUES):
+        stop = _next_cut(control, q, pos, stop, prog)
+    m = stop - pos
+    run_program(prog, pos, m)
+    bus_bits = nb.carray(void_pointer(control[BUS]), (control[BUS_COUNT], block), np.int64)
+    stage_bits = nb.carray(void_pointer(control[STAGE]), (rows_n, block), np.int64)
+    top = 0
+    for c in range(rows_n):
+        bad, magnitude = copy_finite(bus_bits[rows[c]], stage_bits[c], m)
+        control[NONFINITE] += bad
+        if c < na:
+            top = max(top, magnitude)
+    peak = float_from_bits(top)
+    if control[OUTPUT] & LIMIT_AUDIO:
+        meter = _f64(control[METER], METERED + 1)
+        limit_metered(stage[:na], m, _f64(control[LIMITER], 1), par[CEIL], par[RELEASE], peak, meter)
+    nh = rows_n - na
+    if nh > 0:
+        if control[OUTPUT] & LIMIT_HAPTIC:
+            last = _f64(control[HAPTIC_LAST], nh)
+            control[HAPTIC_FLAGS] |= limit_force(stage[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
+        left = control[FADE_LEFT]
+        if left >= 0:  # the run ends: forces fade linearly to zero over the watchdog time
+            window = control[WATCHDOG]
+            for i in range(m):
+                w = max(left - i, 0) / window
+                for c in range(na, rows_n):
+                    stage[c, i] *= w
+            control[FADE_LEFT] = max(left - m, 0)
+    return stop
+
+
+@nb.njit(cache=True, nogil=True)
 def render_into(control, out, frames):
     """Render ``frames`` frames of the program into the interleaved float32 ``out``."""
     prog = _i64(control[PROGRAM], 1)
     prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
-    block = control[BLOCK]
-    rows_n = control[N_ROWS]
-    na = control[N_AUDIO]
     ch = control[CHANNELS]
-    bus = _f64_rows(control[BUS], control[BUS_COUNT], block)
-    rows = _i64(control[ROWS], rows_n)
-    stage = _f64_rows(control[STAGE], rows_n, block)
-    par = _f64(control[PARAMS], 4)
-    lim = _f64(control[LIMITER], 1)
-    nh = rows_n - na
-    last = _f64(control[HAPTIC_LAST], max(nh, 1))
+    stage = _f64_rows(control[STAGE], control[N_ROWS], control[BLOCK])
     levels = _f64(control[LEVELS], max(ch, 1))
     mcap = control[MONITOR_CAP]
     begin = control[FRAME]
@@ -249,30 +289,8 @@ def render_into(control, out, frames):
     for c in range(ch):
         levels[c] = 0.0
     while pos < end:
-        stop = min(end, (pos // block + 1) * block)
-        for q in range(N_QUEUES):
-            stop = _next_cut(control, q, pos, stop, prog)
+        stop = sub_block(control, prog, pos, end)
         m = stop - pos
-        run_program(prog, pos, m)
-        for c in range(rows_n):
-            src = bus[rows[c]]
-            for i in range(m):
-                x = src[i]
-                if not math.isfinite(x):
-                    control[NONFINITE] += 1
-                    x = 0.0
-                stage[c, i] = x
-        limit(stage[:na], m, lim, par[CEIL], par[RELEASE])
-        if nh > 0:
-            control[HAPTIC_FLAGS] |= limit_force(stage[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
-            left = control[FADE_LEFT]
-            if left >= 0:  # the run ends: forces fade linearly to zero over the watchdog time
-                window = control[WATCHDOG]
-                for i in range(m):
-                    w = max(left - i, 0) / window
-                    for c in range(na, rows_n):
-                        stage[c, i] *= w
-                control[FADE_LEFT] = max(left - m, 0)
         at = pos - begin
         for i in range(m):
             for c in range(ch):
@@ -500,113 +518,19 @@ class EventQueue:
         return w
 
 
-class CallbackRenderer:
-    """The graph's program and its event translation, driven by a PortAudio callback.
+class EventRecords:
+    """Translates validated events into the callback's event records (see the module
+    docstring), as the offline scheduler would dispatch them (jassy.scheduler), for a
+    prepared graph whose program is built. Translation updates the nodes' parameter
+    values in event order; what needs the ugens' Python code (pulse amplitudes, modal
+    designs) is computed here, so applying a record only copies and steps."""
 
-    Create, then ``open_stream`` (or drive :func:`render_into` directly in tests); events go
-    through :meth:`push` (stamped) or :meth:`post` (live input)."""
-
-    def __init__(
-        self,
-        graph: Graph,
-        score: Sequence[Event],
-        sample_rate: float,
-        block: int,
-        haptic_to_card: bool = True,
-        haptic_safety: HapticSafety | None = None,
-        monitor_seconds: float = 0.0,
-        queue_capacity: int = 4096,
-    ):
+    def __init__(self, graph: Graph, sample_rate: float):
         self.graph = graph
         self.sample_rate = float(sample_rate)
-        self.block = int(block)
-        self.safety = haptic_safety or HapticSafety()
-        graph.prepare(self.sample_rate, self.block)
-        for node in graph.order:
-            if isinstance(node, ImpactForce):  # a fixed table: the callback never allocates
-                node.pulses = np.zeros((PULSE_CAPACITY, 3))
-        self.program = Program(graph)
-        self.n_audio = len(graph.audio)
-        self.rows = np.ascontiguousarray(graph.bus_rows)
-        self.channels = self.n_audio + (len(graph.haptic) if haptic_to_card else 0)
-        control = np.zeros(CONTROL, dtype=np.int64)
-        self.control = control
-        self.params = np.array(
-            [CEILING, release_coefficient(0.05, self.sample_rate), self.safety.max_force, 0.0]
-        )
-        self.params[MAX_STEP] = self.safety.step(self.sample_rate)
-        self.stage = np.zeros((self.rows.size, self.block))
-        self.limiter = np.ones(1)
-        self.haptic_last = np.zeros(max(len(graph.haptic), 1))
-        self.levels = np.zeros(max(self.channels, 1))
-        mcap = int(round(monitor_seconds * self.sample_rate))
-        self.monitor_signal = np.zeros((max(mcap, 1), max(self.channels, 1)))
-        self.monitor_index = np.full(max(mcap, 1), -1, dtype=np.int64)
-        for slot, array in (
-            (PROGRAM, self.program.table),
-            (BUS, graph.bus),
-            (ROWS, self.rows),
-            (STAGE, self.stage),
-            (PARAMS, self.params),
-            (LIMITER, self.limiter),
-            (HAPTIC_LAST, self.haptic_last),
-            (MONITOR, self.monitor_signal),
-            (MONITOR_INDEX, self.monitor_index),
-            (LEVELS, self.levels),
-        ):
-            control[slot] = array.ctypes.data
-        control[BUS_COUNT] = graph.bus.shape[0]
-        control[N_ROWS] = self.rows.size
-        control[N_AUDIO] = self.n_audio
-        control[CHANNELS] = self.channels
-        control[BLOCK] = self.block
-        control[MONITOR_CAP] = mcap
-        control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
-        self.priority = np.array([CALLBACK_PRIORITY, 0], dtype=np.int32)  # struct sched_param
-        control[PRIORITY] = self.priority.ctypes.data
-        control[REALTIME] = -1
-        self.timespec = np.zeros(2, dtype=np.int64)
-        control[CLOCK] = self.timespec.ctypes.data
-        control[BUFFER_NS] = int(self.block / self.sample_rate * 1e9)
-        control[FADE_LEFT] = -1
-        self.score_queue = EventQueue(control, 0, queue_capacity)
-        self.now_queue = EventQueue(control, 1, queue_capacity)
         self._bases = {node.name: 1 + i * RECORD for i, node in enumerate(graph.order)}
-        self._staging: dict[str, tuple[np.ndarray, list]] = {}
-        for node in graph.order:
-            if isinstance(node, ModalBank):
-                k = node.bank.shape[1]
-                self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
-        self._staged = 0
-        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        self.score = walk_score(graph, sorted(checked, key=lambda ev: ev.time), self.sample_rate)
-        self._next_score = 0
-        self._lock = threading.Lock()
-        self.late = 0  # posted events whose time had already been played
-        self._warm_posts()
-
-    def _warm_posts(self) -> None:
-        """Translate (and drop) a silent impact on every ImpactForce node: the first
-        translation loads the pulse kernel, milliseconds that would otherwise delay the
-        first live tap after the stream starts."""
-        for node in self.graph.order:
-            if isinstance(node, ImpactForce):
-                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
-                self.records(validate_event(self.graph, silent, "warm-up"), 0.0, self.now_queue)
-
-    def memory(self) -> list[np.ndarray]:
-        """Every array the callback reads or writes (to keep resident: jassy.engines.memlock)."""
-        arrays = [array for group in self.program._arrays.values() for array in group]
-        arrays += [self.program.table, self.graph.bus, self.rows, self.control, self.stage]
-        arrays += [self.params, self.limiter, self.haptic_last, self.levels, self.monitor_signal]
-        arrays += [self.monitor_index, self.priority, self.timespec]
-        arrays += [self.score_queue.records, self.now_queue.records]
-        return arrays + [staging for staging, _ in self._staging.values()]
-
-    # --------------------------------------------------------------- translation
-    def frame(self) -> int:
-        """The next frame the callback renders."""
-        return int(self.control[FRAME])
+        self._queue: EventQueue | None = None
+        self._pending = 0
 
     def records(self, event: Event, sample_time: float, queue: EventQueue) -> list[list[float]]:
         """The records that apply a validated event at fractional sample ``sample_time``, as
@@ -650,19 +574,167 @@ class CallbackRenderer:
         m = 0 if jump else self._ramp_samples(node, ramp)
         if isinstance(node, ModalBank):
             node._refresh_design_cache()
-            staging, used_by = self._staging[node.name]
-            slot = self._staged % MODAL_SLOTS
-            self._staged += 1
-            deadline = time.monotonic() + 1.0
-            while used_by[slot] is not None and used_by[slot][0].read <= used_by[slot][1]:
-                if time.monotonic() > deadline:
-                    raise JassyError("callback: the device stopped taking buffers")
-                time.sleep(0.0005)
-            staging[slot] = node._fresh
-            used_by[slot] = (self._queue, self._queue.write + self._pending)  # free once read
-            return [[frame, base, MODAL_TARGET, staging[slot].ctypes.data, m]]
+            return [[frame, base, MODAL_TARGET, self.stage_design(node), m]]
         op = SET_BIQUAD if isinstance(node, Biquad) else SET_RAMP
         return [[frame, base, op, _RAMP_SLOT[(type(node), key)], value, m]]
+
+    def stage_design(self, node: ModalBank) -> int:
+        """The address of ``node``'s new design (c1, c2, g, d rows) for a MODAL_TARGET
+        record; it must stay unchanged until the record is applied."""
+        raise NotImplementedError
+
+
+class ProgramRun(EventRecords):
+    """A prepared graph's program with the control slots, event queues and output-stage
+    arrays that :func:`sub_block` reads: the part the device callback and the offline
+    engine share. ``params``: [ceiling, limiter release coefficient, max force (N), max
+    force step per sample (N)]; ``output``: the LIMIT_* bits."""
+
+    def __init__(
+        self, graph: Graph, sample_rate: float, block: int, params, output: int, queue_capacity: int = 4096
+    ):
+        super().__init__(graph, sample_rate)
+        self.block = int(block)
+        self.program = Program(graph)
+        self.n_audio = len(graph.audio)
+        self.rows = np.ascontiguousarray(graph.bus_rows)
+        control = np.zeros(CONTROL, dtype=np.int64)
+        self.control = control
+        self.params = np.array(params, dtype=np.float64)
+        self.stage = np.zeros((self.rows.size, self.block))
+        self.limiter = np.ones(1)
+        self.haptic_last = np.zeros(max(len(graph.haptic), 1))
+        self.meter = np.zeros(METERED + 1)
+        for slot, array in (
+            (PROGRAM, self.program.table),
+            (BUS, graph.bus),
+            (ROWS, self.rows),
+            (STAGE, self.stage),
+            (PARAMS, self.params),
+            (LIMITER, self.limiter),
+            (HAPTIC_LAST, self.haptic_last),
+            (METER, self.meter),
+        ):
+            control[slot] = array.ctypes.data
+        control[BUS_COUNT] = graph.bus.shape[0]
+        control[N_ROWS] = self.rows.size
+        control[N_AUDIO] = self.n_audio
+        control[BLOCK] = self.block
+        control[OUTPUT] = output
+        control[FADE_LEFT] = -1
+        self.score_queue = EventQueue(control, 0, queue_capacity)
+        self.now_queue = EventQueue(control, 1, queue_capacity)
+
+    @property
+    def nonfinite(self) -> int:
+        """NaN/Inf samples replaced by 0 so far."""
+        return int(self.control[NONFINITE])
+
+    def arrays(self) -> list[np.ndarray]:
+        """Every array :func:`sub_block` reads or writes."""
+        arrays = [array for group in self.program._arrays.values() for array in group]
+        arrays += [self.program.table, self.graph.bus, self.rows, self.control, self.stage]
+        arrays += [self.params, self.limiter, self.haptic_last, self.meter]
+        return arrays + [self.score_queue.records, self.now_queue.records]
+
+
+class CallbackRenderer(ProgramRun):
+    """The graph's program and its event translation, driven by a PortAudio callback.
+
+    Create, then ``open_stream`` (or drive :func:`render_into` directly in tests); events go
+    through :meth:`push` (stamped) or :meth:`post` (live input)."""
+
+    def __init__(
+        self,
+        graph: Graph,
+        score: Sequence[Event],
+        sample_rate: float,
+        block: int,
+        haptic_to_card: bool = True,
+        haptic_safety: HapticSafety | None = None,
+        monitor_seconds: float = 0.0,
+        queue_capacity: int = 4096,
+    ):
+        self.safety = haptic_safety or HapticSafety()
+        graph.prepare(float(sample_rate), int(block))
+        for node in graph.order:
+            if isinstance(node, ImpactForce):  # a fixed table: the callback never allocates
+                node.pulses = np.zeros((PULSE_CAPACITY, 3))
+        params = [
+            CEILING,
+            release_coefficient(0.05, sample_rate),
+            self.safety.max_force,
+            self.safety.step(sample_rate),
+        ]
+        super().__init__(graph, sample_rate, block, params, LIMIT_AUDIO | LIMIT_HAPTIC, queue_capacity)
+        control = self.control
+        self.channels = self.n_audio + (len(graph.haptic) if haptic_to_card else 0)
+        self.levels = np.zeros(max(self.channels, 1))
+        mcap = int(round(monitor_seconds * self.sample_rate))
+        self.monitor_signal = np.zeros((max(mcap, 1), max(self.channels, 1)))
+        self.monitor_index = np.full(max(mcap, 1), -1, dtype=np.int64)
+        for slot, array in (
+            (MONITOR, self.monitor_signal),
+            (MONITOR_INDEX, self.monitor_index),
+            (LEVELS, self.levels),
+        ):
+            control[slot] = array.ctypes.data
+        control[CHANNELS] = self.channels
+        control[MONITOR_CAP] = mcap
+        control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
+        self.priority = np.array([CALLBACK_PRIORITY, 0], dtype=np.int32)  # struct sched_param
+        control[PRIORITY] = self.priority.ctypes.data
+        control[REALTIME] = -1
+        self.timespec = np.zeros(2, dtype=np.int64)
+        control[CLOCK] = self.timespec.ctypes.data
+        control[BUFFER_NS] = int(self.block / self.sample_rate * 1e9)
+        self._staging: dict[str, tuple[np.ndarray, list]] = {}
+        for node in graph.order:
+            if isinstance(node, ModalBank):
+                k = node.bank.shape[1]
+                self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
+        self._staged = 0
+        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
+        self.score = walk_score(graph, sorted(checked, key=lambda ev: ev.time), self.sample_rate)
+        self._next_score = 0
+        self._lock = threading.Lock()
+        self.late = 0  # posted events whose time had already been played
+        self._warm_posts()
+
+    def _warm_posts(self) -> None:
+        """Translate (and drop) a silent impact on every ImpactForce node: the first
+        translation loads the pulse kernel, milliseconds that would otherwise delay the
+        first live tap after the stream starts."""
+        for node in self.graph.order:
+            if isinstance(node, ImpactForce):
+                silent = Event(0.0, node.name, "impact", {"impulse": 0.0})
+                self.records(validate_event(self.graph, silent, "warm-up"), 0.0, self.now_queue)
+
+    def memory(self) -> list[np.ndarray]:
+        """Every array the callback reads or writes (to keep resident: jassy.engines.memlock)."""
+        arrays = self.arrays() + [self.levels, self.monitor_signal, self.monitor_index]
+        arrays += [self.priority, self.timespec]
+        return arrays + [staging for staging, _ in self._staging.values()]
+
+    # --------------------------------------------------------------- translation
+    def frame(self) -> int:
+        """The next frame the callback renders."""
+        return int(self.control[FRAME])
+
+    def stage_design(self, node: ModalBank) -> int:
+        """Copy ``node``'s new design into a free staging slot of its bank (waiting while
+        all MODAL_SLOTS are queued); the slot is free again once its record is read."""
+        staging, used_by = self._staging[node.name]
+        slot = self._staged % MODAL_SLOTS
+        self._staged += 1
+        deadline = time.monotonic() + 1.0
+        while used_by[slot] is not None and used_by[slot][0].read <= used_by[slot][1]:
+            if time.monotonic() > deadline:
+                raise JassyError("callback: the device stopped taking buffers")
+            time.sleep(0.0005)
+        staging[slot] = node._fresh
+        used_by[slot] = (self._queue, self._queue.write + self._pending)  # free once read
+        return staging[slot].ctypes.data
 
     # --------------------------------------------------------------------- input
     def feed(self, horizon_frames: int) -> None:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy import stopflag
+from jassy.coldstart import compile_on_two_cores, graph_units
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
@@ -26,6 +27,9 @@ from jassy.safety import CEILING, LimiterMeter, peak_abs, release_coefficient, s
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
+#: Frames of a program graph's render between two checks for a stop signal (about 1.4 s
+#: of audio at 48 kHz: one compiled call each).
+RENDER_FRAMES = 65536
 
 
 @dataclass
@@ -84,12 +88,12 @@ class OfflineEngine:
             raise PatchError(f"block: expected an integer >= 1, got {block!r}")
         self.graph = graph
         self.sample_rate = float(sample_rate)
+        options = dict(sample_rate=sample_rate, block=block, limiter=limiter, release=release)
+        options.update(haptic_safety=haptic_safety, offsets_ms=offsets_ms, program=program)
+        compile_on_two_cores(graph_units(graph, options))  # a cold cache: half the compiling
         graph.prepare(self.sample_rate, block)
-        from jassy.program import Program, why_not_compiled  # imports the ugens: not at import time
+        from jassy.program import why_not_compiled  # imports the ugens: not at import time
 
-        self.why_not_program = why_not_compiled(graph) if program else "not asked for"
-        self.program = Program(graph) if self.why_not_program is None else None
-        self.scheduler = Scheduler(graph, score, self.sample_rate, block, self.program)
         self.limiter = limiter
         self._limiter_state = np.ones(1)
         self.limiter_meter = LimiterMeter(CEILING)
@@ -100,6 +104,25 @@ class OfflineEngine:
         self.delays = channel_delays(offsets_ms or {}, len(graph.audio), len(graph.haptic), self.sample_rate)
         self._delay = ChannelDelay(self.delays)
         self.warnings: list[str] = []
+        self.why_not_program = why_not_compiled(graph) if program else "not asked for"
+        self.compiled = None
+        if self.why_not_program is None:
+            from jassy.engines.program_offline import OfflineProgram
+
+            self.compiled = OfflineProgram(
+                graph,
+                self.sample_rate,
+                block,
+                limiter,
+                self._release,
+                self.limiter_meter,
+                haptic_safety,
+                self._delay,
+            )
+        self.program = self.compiled.program if self.compiled is not None else None
+        self.scheduler = Scheduler(graph, score, self.sample_rate, block)
+        if self.compiled is not None:
+            self.compiled.attach(self.scheduler)
 
     @property
     def frame(self) -> int:
@@ -114,18 +137,7 @@ class OfflineEngine:
         buf = np.zeros((len(graph.bus_rows), size))
         abuf, hbuf = buf[:n_audio], buf[n_audio:]
 
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(
-                total=round(frames / self.sample_rate, 2),
-                unit="s",
-                delay=2.0,
-                desc="render",
-                leave=False,
-                bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s audio [{elapsed}<{remaining}]",
-            )
+        bar = _progress_bar(frames / self.sample_rate) if progress else None
         try:
             done = 0
             while done < frames:
@@ -144,6 +156,9 @@ class OfflineEngine:
     def produce(self, buf: np.ndarray, n: int) -> None:
         """Render the next n frames into buf[:, :n] (audio rows, then haptic rows) through
         the whole output stage."""
+        if self.compiled is not None:
+            self._produce_compiled(buf, 0, n)
+            return
         self.scheduler.run(n, buf)
         n_audio = len(self.graph.audio)
         a, h = buf[:n_audio, :n], buf[n_audio:, :n]
@@ -158,8 +173,29 @@ class OfflineEngine:
             self.haptic_flags |= limit_force(h, n, self._haptic_last, s.max_force, s.step(self.sample_rate))
         self._delay(buf, n)
 
+    def _produce_compiled(self, out: np.ndarray, offset: int, n: int, ahead: int = 0) -> None:
+        """:meth:`produce` into out[:, offset : offset + n] through the graph's program, in
+        compiled runs (jassy.engines.program_offline); NaN/Inf are zeroed there, and the nodes that
+        produced them are reset after the sub-block that met them. The score's events of the
+        next ``max(n, ahead)`` frames are translated into records now."""
+        done = 0
+        while done < n:
+            nonfinite = self.compiled.nonfinite
+            got, flags = self.compiled.render(out, offset + done, n - done, ahead - done)
+            self.haptic_flags |= flags
+            done += got
+            if self.compiled.nonfinite != nonfinite:
+                self._reset_nonfinite_nodes()
+                self.compiled.program.sync()
+
     def _quarantine(self, audio: np.ndarray, haptic: np.ndarray) -> None:
         """Replace NaN/Inf by silence, reset the nodes that hold them, report once per node."""
+        self._reset_nonfinite_nodes()
+        zero_nonfinite(audio)
+        zero_nonfinite(haptic)
+
+    def _reset_nonfinite_nodes(self) -> None:
+        """Reset the nodes that hold NaN/Inf and report each once."""
         t = self.frame / self.sample_rate
         for name in _nonfinite_nodes(self.graph):
             msg = f"node {name!r} produced NaN/Inf near t = {t:.3f} s; replaced by silence and reset"
@@ -168,21 +204,32 @@ class OfflineEngine:
             self.graph.nodes[name].reset()
         if not self.warnings:
             self.warnings.append(f"NaN/Inf in the output near t = {t:.3f} s; replaced by silence")
-        zero_nonfinite(audio)
-        zero_nonfinite(haptic)
 
     def render(self, duration: float, progress: bool = False) -> Rendering:
-        """Render ``duration`` seconds into arrays."""
+        """Render ``duration`` seconds into arrays (rows of one array: audio, then haptic)."""
         frames = frames_for(duration, self.sample_rate)
-        audio = np.empty((len(self.graph.audio), frames))  # every frame is copied in below
-        haptic = np.empty((len(self.graph.haptic), frames))
-        pos = 0
-        for a, h in self.chunks(frames, progress):
-            n = a.shape[1]
-            audio[:, pos : pos + n] = a
-            haptic[:, pos : pos + n] = h
-            pos += n
-        return Rendering(audio, haptic, self.sample_rate, self._final_warnings())
+        n_audio = len(self.graph.audio)
+        signals = np.empty((len(self.graph.bus_rows), frames))  # every frame is written below
+        if self.compiled is not None:  # straight into the result, in runs of RENDER_FRAMES
+            bar = _progress_bar(frames / self.sample_rate) if progress else None
+            pos = 0
+            while pos < frames:
+                stopflag.check()
+                n = min(RENDER_FRAMES, frames - pos)
+                self._produce_compiled(signals, pos, n, frames - pos)
+                pos += n
+                if bar is not None:
+                    bar.update(round(n / self.sample_rate, 6))
+            if bar is not None:
+                bar.close()
+        else:
+            pos = 0
+            for a, h in self.chunks(frames, progress):
+                n = a.shape[1]
+                signals[:n_audio, pos : pos + n] = a
+                signals[n_audio:, pos : pos + n] = h
+                pos += n
+        return Rendering(signals[:n_audio], signals[n_audio:], self.sample_rate, self._final_warnings())
 
     def _final_warnings(self) -> list[str]:
         """The render's warnings, with the limiter's report if it cut peaks."""
@@ -227,6 +274,20 @@ class OfflineEngine:
             "warnings": self._final_warnings(),
             "limiter": self.limiter_meter.report(self.sample_rate),
         }
+
+
+def _progress_bar(seconds: float):
+    """A progress bar of seconds of audio rendered (shown after 2 s)."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=round(seconds, 2),
+        unit="s",
+        delay=2.0,
+        desc="render",
+        leave=False,
+        bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s audio [{elapsed}<{remaining}]",
+    )
 
 
 def frames_for(duration: float, sample_rate: float) -> int:
