@@ -56,9 +56,7 @@ from ugens import modal_budget
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
-    BY_PYTHON,
     COMPACT_ROWS,
-    COMPILED,
     DECAY,
     FLOOR,
     FLOOR2,
@@ -67,7 +65,6 @@ from ugens.modal_budget import (
     KEPT_LANES,
     SIN2,
     SPECTRUM,
-    UNLESS_SILENT,
     WEIGHT,
     BudgetTables,
     aligned,
@@ -274,27 +271,29 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def render_kept(t, wiring, how, start, n, offset):
-    """Every budgeted bank b with how[b] != BY_PYTHON (ugens.modal_budget) over frames
-    [start, start + n), from samples [offset, offset + n) of its input into its output
-    (``wiring``), by :func:`kept_step` on its compact bank (gathered if stale) from the
-    tables ``t``; with UNLESS_SILENT (no force in this stretch or the last period: its
-    ring holds zeros and keeps them) a bank with no mode sounding and no force sample
-    before writes zeros instead. Returns the modes computed times frames (each bank's
-    active count after its span)."""
+def render_kept(t, h, outputs, by_python, start, n, offset):
+    """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
+    samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
+    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
+    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with no force
+    in this stretch or since it was last rendered, nor in this or the last period (its
+    ring holds zeros and keeps them) writes zeros if no mode sounds and no force sample
+    precedes. Returns the modes computed times frames (each bank's active count after
+    its span)."""
     work = 0
-    for b in range(how.size):
-        if how[b] == BY_PYTHON:
+    for b in range(by_python.size):
+        if by_python[b]:
             continue
-        out = nb.carray(void_pointer(wiring.outputs[b] + 8 * offset), (n,), np.float64)
-        if how[b] == UNLESS_SILENT and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
+        busy = h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
+        if not busy and t.meta[b, 0] == 0 and t.last[b] == 0.0:
             for i in range(n):
                 out[i] = 0.0
             continue
-        force = nb.carray(void_pointer(wiring.inputs[b] + 8 * offset), (n,), np.float64)
+        force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         compact, meta = compact_bank(t, b), t.compact_meta[b]
         floor, last = t.values[FLOOR, b], t.last[b : b + 1]
-        ring = t.rings[b] if how[b] == COMPILED else t.rings[b, :0]
+        ring = t.rings[b] if busy else t.rings[b, :0]
         kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
         active = min(meta[0], t.meta[b, 2])
         t.meta[b, 0] = active

@@ -68,21 +68,6 @@ KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLO
 BANK_VALUES = 7
 
 
-#: How the budget renders a bank over a stretch (``how`` of ugens.modal.render_kept):
-#: through its Python ``process`` (a parameter change, ramp or size input is pending), by
-#: the compiled render, or by the compiled render unless it is silent (no force heard lately,
-#: no mode sounding: it writes zeros).
-BY_PYTHON, COMPILED, UNLESS_SILENT = range(3)
-
-
-class Wiring(NamedTuple):
-    """Addresses of every budgeted bank's input and output (float64 arrays of a block,
-    kept alive by their nodes)."""
-
-    inputs: np.ndarray
-    outputs: np.ndarray
-
-
 class BudgetTables(NamedTuple):
     """The rows of every bank a mode budget shares, in flat stores (ModalBank's arrays are
     C-contiguous views of them) and per-mode / per-bank tables."""
