@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jassy.anytime_rank import scan_forces
+from jassy.anytime_rank import Hearing, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
 
@@ -86,6 +86,8 @@ class ModeBudget:
     weighting: str = "flat"
     peak_modes: int = field(default=0, init=False)
     decisions: int = field(default=0, init=False)
+    #: modes computed times frames, summed over the banks the budget renders
+    mode_samples: int = field(default=0, init=False)
 
     def __post_init__(self):
         if self.max_modes is None and self.cpu_fraction is None:
@@ -122,26 +124,20 @@ class ModeBudget:
         self.limit = min(self.max_modes or total, total)
         self.peak_modes = 0
         self.decisions = 0
+        self.mode_samples = 0
         self._clock = None
         self._fading = False
         self.active = self.decides(total)
         self.renders = renders and self.active
         count = len(banks)
-        #: per bank: an impact foreseen in this period, a force heard in this / the last
-        #: period (folded in after each stretch), a force in the current stretch, woken by
-        #: it, a force since the bank was last rendered
-        (
-            self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
-        ) = (np.zeros(count, dtype=bool) for _ in range(6))  # fmt: skip
-        self._any_expected = False
-        self._inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
-        self._addresses = np.array([x.ctypes.data for x in self._inputs], dtype=np.intp)
-        self._input_size = min(x.size for x in self._inputs)
-        self._unseen = np.array([not renders for _ in banks], dtype=bool)
-        self._scan = specialise(
-            scan_forces, self._addresses, self._input_size, 0, 0, True, self._unseen, self._expected,
-            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
+        inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
+        flags = (np.zeros(count, dtype=bool) for _ in range(6))
+        self._hearing = h = Hearing(
+            np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
+            np.array([not renders for _ in banks], dtype=bool), *flags,
         )  # fmt: skip
+        self._any_expected = False
+        self._scan = specialise(scan_forces, h, 0, 0, True)
         for bank in banks:
             bank.budgeted = self.active
         if self.active:
@@ -158,7 +154,8 @@ class ModeBudget:
             bank.anytime_attach(tables, slot, self.horizon, self.weighting)
         #: the scores (now, next period, sounding) and the masks to keep, fade, and keep next
         masks = (np.zeros(total, dtype=bool) for _ in range(3))
-        self._decision = mb.Decision(self._onset, np.zeros(len(banks), dtype=bool), self._addresses,
+        h = self._hearing
+        self._decision = mb.Decision(h.onset, np.zeros(len(banks), dtype=bool), h.inputs,
                                   np.zeros((3, total)), *masks)  # fmt: skip
         self._rows = {}  # id(bank): (slot, its ELSEWHERE_NOW row, its ELSEWHERE_NEXT row)
         for slot, (bank, k, first) in enumerate(zip(banks, *tables.layout[:2], strict=True)):
@@ -175,6 +172,11 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
         self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
+        from ugens.modal import render_kept
+
+        self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
+        self._by_python = np.zeros(len(banks), dtype=bool)
+        self._render_all = specialise(render_kept, tables, h, self._outputs, self._by_python, 0, 0, 0)
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -209,14 +211,25 @@ class ModeBudget:
             self._render(rendered, end - rendered, rendered - start)
 
     def _render(self, start: int, n: int, offset: int) -> None:
-        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block;
-        a bank with nothing to compute (no mode sounding, no force in this or the last
-        period, nothing pending) only writes silence."""
-        forced, earlier, now, before = self._forced, self._unrendered, self._heard_now, self._heard_before
-        for i, process in enumerate(self._processes):  # (a force heard lately: its ring holds it)
-            if forced[i] or earlier[i] or now[i] or before[i] or not self.banks[i].anytime_silent(offset, n):
-                process(start, n, offset)
-        earlier[:] = False
+        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
+        in one compiled call (ugens.modal.render_kept) but for banks with a parameter
+        change, ramp or size input pending (their own ``process``); a bank with nothing to
+        compute (no mode sounding, no force in this or the last period, nothing pending)
+        only writes silence."""
+        by_python, slow = self._by_python, []
+        for i, bank in enumerate(self.banks):
+            by_python[i] = python = not bank.anytime_compiled()
+            if python:
+                slow.append(i)
+        h = self._hearing
+        self.mode_samples += self._render_all(self._tables, h, self._outputs, by_python, start, n, offset)
+        for i in slow:  # (a force heard lately: its ring holds it)
+            bank = self.banks[i]
+            busy = h.forced[i] or h.unrendered[i] or h.heard_now[i] or h.heard_before[i]
+            if busy or not bank.anytime_silent(offset, n):
+                self._processes[i](start, n, offset)
+                self.mode_samples += n * int(bank.meta[0])
+        h.unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
@@ -226,23 +239,21 @@ class ModeBudget:
         if rotate:
             kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
             now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
+            expected = self._hearing.expected
             if self._any_expected:
-                self._expected[:] = False
+                expected[:] = False
             self._any_expected = bool(now)
             if now:
                 for i, bank in enumerate(self.banks):
-                    self._expected[i] = id(bank) in now
+                    expected[i] = id(bank) in now
         else:
             self._kicks, self._now = NO_KICK, {}
-        heard, woken = self._scan(
-            self._addresses, self._input_size, offset, offset + n, rotate, self._unseen, self._expected,
-            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
-        )  # fmt: skip
+        heard, woken = self._scan(self._hearing, offset, offset + n, rotate)
         driven = rotate and (self._fading or bool(self._kicks) or heard)
         if rotate and self.cpu_fraction is not None:
             driven = True
             self._adapt()
-        return self._onset if driven or woken else None
+        return self._hearing.onset if driven or woken else None
 
     def _decide(self, at: int, onset: np.ndarray, offset: int, n: int) -> None:
         """Rank every mode at frame ``at`` and apply the kept sets; ``onset``: the banks
@@ -250,7 +261,9 @@ class ModeBudget:
         kicks, now, period = self._kicks, self._now, self.period
         later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
         d, values = self._decision, self._tables.values
-        np.logical_or(self._heard_now, self._heard_before, out=d.heard)  # before the stretch from ``at``
+        np.logical_or(
+            self._hearing.heard_now, self._hearing.heard_before, out=d.heard
+        )  # before the stretch from ``at``
         if self._kicked:
             for fields in self._kick_fields:
                 values[fields, :] = 0.0

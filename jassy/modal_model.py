@@ -460,7 +460,9 @@ class ModalModel:
                         extra["attack_rate"] = np.array(float(self.attack_rate))
                     if self.surface is not None:
                         table = self.surface.to_dict()
-                        extra.update({npz_key: np.array(table[key]) for npz_key, key in NPZ_SURFACE.items()})
+                        extra.update(
+                            {npz: np.array(table[key]) for npz, key in NPZ_SURFACE.items() if key in table}
+                        )
                     np.savez(
                         fh,
                         frequencies=self.frequencies,

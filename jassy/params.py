@@ -64,7 +64,8 @@ class ParamSpec:
             return what
         return {
             "bool": "true or false",
-            "location": "a location: vertex index, or {vertices=[i,j,k], weights=[u,v,w]}",
+            "location": "a location: vertex index, point name, {vertices=[i,j,k], weights=[u,v,w]} or "
+            "{surface=[u,v]}",
             "model": "the name of a modal model",
             "floats": "a list of numbers",
         }[self.kind]

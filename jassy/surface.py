@@ -10,9 +10,10 @@ per-mode factors, so that at a point (u, v) = (x / a, y / b) of the plate
     driving-point d_k(u, v) = driving_k phi_k(u, v)^2    driving_k = 1 / (M_k w_k)
 
 (the pickup q and the modal masses M_k as the plate builder used them for the model's
-rows). A location ``{surface = [u, v]}`` (fractions of the sides, 0..1) names such a point;
-``{random_on_surface = MODEL}`` in a ``[[generate]]`` table draws one uniformly over the
-area (jassy.generators).
+rows). A model whose gains are themselves driving-point gains (heard at the contact, as the
+glass plate's) has no pickup: its gains anywhere are d_k(u, v). A location ``{surface =
+[u, v]}`` (fractions of the sides, 0..1) names such a point; ``{random_on_surface = MODEL}``
+in a ``[[generate]]`` table draws one uniformly over the area (jassy.generators).
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ class PlateSurface(NamedTuple):
     sides: tuple[float, float]  #: a, b (m)
     orders_x: np.ndarray  #: m_k, half-waves along a
     orders_y: np.ndarray  #: n_k, half-waves along b
-    pickup: np.ndarray  #: phi_k(q) / M_k: gains = pickup x phi_k (the model's gain units)
+    pickup: np.ndarray | None  #: phi_k(q) / M_k: gains = pickup x phi_k; None: gains = driving
     driving: np.ndarray  #: 1 / (M_k w_k): driving-point gains = driving x phi_k^2 (m per N s)
 
     def shapes(self, point: SurfacePoint) -> np.ndarray:
@@ -63,6 +64,8 @@ class PlateSurface(NamedTuple):
         return np.sin(np.pi * self.orders_x * point.u) * np.sin(np.pi * self.orders_y * point.v)
 
     def gains(self, point: SurfacePoint) -> np.ndarray:
+        if self.pickup is None:
+            return self.driving_gains(point)
         return self.pickup * self.shapes(point)
 
     def driving_gains(self, point: SurfacePoint) -> np.ndarray:
@@ -70,31 +73,32 @@ class PlateSurface(NamedTuple):
 
     def modes(self, keep: Any) -> PlateSurface:
         """The surface of a model keeping the modes ``keep`` (an index, mask or slice)."""
-        return PlateSurface(
-            self.sides, self.orders_x[keep], self.orders_y[keep], self.pickup[keep], self.driving[keep]
-        )
+        pickup = None if self.pickup is None else self.pickup[keep]
+        return PlateSurface(self.sides, self.orders_x[keep], self.orders_y[keep], pickup, self.driving[keep])
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``[surface]`` table of a model file."""
-        return {
+        """The ``[surface]`` table of a model file (no ``pickup`` key: gains = driving)."""
+        table = {
             "kind": SURFACE_KINDS[0],
             "sides": list(self.sides),
             "orders_x": self.orders_x.astype(int).tolist(),
             "orders_y": self.orders_y.astype(int).tolist(),
-            "pickup": self.pickup.tolist(),
+            "pickup": None if self.pickup is None else self.pickup.tolist(),
             "driving": self.driving.tolist(),
         }
+        return {key: value for key, value in table.items() if value is not None}
 
 
 def surface_from_dict(data: Any, n_modes: int, where: str) -> PlateSurface:
     """A model file's ``[surface]`` table, checked against the model's mode count."""
     if not isinstance(data, dict):
         raise ModelError(f"{where}: surface: expected a table ([surface])")
+    data = {key: value for key, value in data.items() if value is not None}
     unknown = set(data) - set(SURFACE_KEYS)
-    missing = set(SURFACE_KEYS) - set(data)
+    missing = set(SURFACE_KEYS) - set(data) - {"pickup"}
     if unknown or missing:
         raise ModelError(
-            f"{where}: surface: expected the keys {', '.join(SURFACE_KEYS)}"
+            f"{where}: surface: expected the keys {', '.join(SURFACE_KEYS)} (pickup optional)"
             + (f"; unknown {', '.join(sorted(unknown))}" if unknown else "")
             + (f"; missing {', '.join(sorted(missing))}" if missing else "")
         )
@@ -105,7 +109,9 @@ def surface_from_dict(data: Any, n_modes: int, where: str) -> PlateSurface:
         raise ModelError(f"{where}: surface.kind: expected one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
     try:
         sides = np.asarray(data["sides"], dtype=np.float64).reshape(-1)
-        arrays = [np.asarray(data[k], dtype=np.float64).reshape(-1) for k in SURFACE_KEYS[2:]]
+        arrays = [
+            np.asarray(data.get(k, np.zeros(n_modes)), dtype=np.float64).reshape(-1) for k in SURFACE_KEYS[2:]
+        ]
     except (TypeError, ValueError):
         raise ModelError(f"{where}: surface: expected numeric sides, orders, pickup and driving") from None
     if sides.shape != (2,) or not np.all(np.isfinite(sides)) or np.any(sides <= 0):
@@ -119,4 +125,5 @@ def surface_from_dict(data: Any, n_modes: int, where: str) -> PlateSurface:
             raise ModelError(f"{where}: surface.{key}: expected whole numbers of half-waves >= 1")
     if np.any(driving < 0):
         raise ModelError(f"{where}: surface.driving: expected values >= 0 (1 / (M w))")
+    pickup = pickup if "pickup" in data else None
     return PlateSurface((float(sides[0]), float(sides[1])), orders_x, orders_y, pickup, driving)

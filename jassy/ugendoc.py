@@ -24,8 +24,8 @@ def spec_range(spec: ParamSpec) -> str:
         high = "inf" if spec.high is None else number_text(spec.high)
         opening = "(" if spec.low_open or spec.low is None else "["
         return f"{opening}{low}, {high}{')' if spec.high is None else ']'}"
-    return {"bool": "true | false", "location": "vertex, point name or barycentric", "model": "model name",
-            "floats": "list of numbers"}.get(spec.kind, spec.kind)  # fmt: skip
+    return {"bool": "true | false", "location": "vertex, point name, barycentric or {surface = [u, v]}",
+            "model": "model name", "floats": "list of numbers"}.get(spec.kind, spec.kind)  # fmt: skip
 
 
 def spec_default(spec: ParamSpec) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from jassy.modal_model import ModalModel
+from jassy.surface import PlateSurface
 
 #: Named strike points of the plate as fractions (x / a, y / b) of its sides.
 PLATE_POINTS = {
@@ -48,7 +49,8 @@ def plate_model(
     phi_mn(x, y) = sin(m pi x / a) sin(n pi y / b) with modal mass M = rho h a b / 4. Gains
     are the driving-point displacement impulse response per N s at each point p,
     a_mn(p) = phi_mn(p)^2 / (M w_mn) (m per N s), as a closed-loop contact needs (and as
-    ModalBank plays them: the output is the displacement under the striker). Decay
+    ModalBank plays them: the output is the displacement under the striker), also anywhere
+    on the plate through the model's surface (jassy.surface, no pickup). Decay
     d = base_decay + pi f loss (1/s): material loss factor ``loss`` (d = loss w / 2; glass
     about 1e-3) plus a constant for the supports and radiation.
     """
@@ -65,7 +67,8 @@ def plate_model(
     shapes = np.sin(np.pi * m * xy[:, :1]) * np.sin(np.pi * n * xy[:, 1:])  # x/a, y/b fractions
     gains = shapes**2 / (modal_mass * 2.0 * np.pi * freqs)
     decays = base_decay + np.pi * freqs * loss
-    return ModalModel(freqs, decays, gains, tuple(points), "glass_plate")
+    surface = PlateSurface((a, b), m, n, None, 1.0 / (modal_mass * 2.0 * np.pi * freqs))  # gains = driving
+    return ModalModel(freqs, decays, gains, tuple(points), "glass_plate", surface=surface)
 
 
 SHIPPED = {"glass_plate_model.toml": plate_model}

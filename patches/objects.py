@@ -48,7 +48,7 @@ OBJECTS: dict[str, ObjectInfo] = {
     ),
     "glass_plate": ObjectInfo(
         "glass_plate_model.toml", "soda-lime glass plate, 300 x 200 x 5 mm",
-        "simply supported Kirchhoff plate, modes to 20 kHz",
+        "simply supported Kirchhoff plate, modes to 20 kHz; any point: {surface = [u, v]}",
         {"centre": "the middle", "off_centre": "41 % across, 37 % up", "near_edge": "13 % across, 29 % up",
          "corner": "7 % from each edge of a corner"},
     ),

@@ -17,7 +17,6 @@ PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
-    ("jassy/anytime_rank.py", "scan_forces"),  # 12
     ("physics/burr/contact.py", "voxel_moments"),  # 11
     ("physics/burr/octree.py", "_brick"),  # 11
     ("physics/burr/octree.py", "_descend"),  # 13

@@ -106,12 +106,13 @@ def test_an_impact_at_a_surface_point_rings_with_the_analytic_gains():
 
 @pytest.mark.parametrize("suffix", [".toml", ".npz"])
 def test_a_model_file_keeps_its_surface(tmp_path, suffix):
-    path = tmp_path / f"sheet{suffix}"
-    SHEET.truncated(50).save(path)
-    back = ModalModel.load(path)
     point = SurfacePoint(0.3, 0.6)
-    np.testing.assert_array_equal(back.gains_at(point), SHEET.gains_at(point)[:50])
-    np.testing.assert_array_equal(back.driving_at(point), SHEET.driving_at(point)[:50])
+    for model in (SHEET, ModalModel.load(PATCHES / "glass_plate_model.toml")):  # with and without pickup
+        path = tmp_path / f"{model.name}{suffix}"
+        model.truncated(50).save(path)
+        back = ModalModel.load(path)
+        np.testing.assert_array_equal(back.gains_at(point), model.gains_at(point)[:50])
+        np.testing.assert_array_equal(back.driving_at(point), model.driving_at(point)[:50])
 
 
 def test_surface_errors_are_one_line_naming_the_key():
@@ -124,3 +125,24 @@ def test_surface_errors_are_one_line_naming_the_key():
         ugens.ModalBank(plain, name="b", location={"surface": [0.5, 0.5]})
     with pytest.raises(PatchError, match=r"location\.surface: expected \[u, v\], fractions of the sides"):
         ugens.ModalBank(SHEET, name="b", location={"surface": [1.5, 0.5]})
+
+
+def test_the_glass_plates_surface_gives_driving_point_gains_anywhere():
+    """The glass plate's gains are driving-point gains (no pickup): phi^2 / (M w) anywhere,
+    from its constants (300 x 200 x 5 mm soda-lime glass, E 70 GPa, nu 0.22, 2500 kg/m^3)."""
+    plate = ModalModel.load(PATCHES / "glass_plate_model.toml")
+    assert plate.surface.pickup is None
+    m, n = plate.surface.orders_x, plate.surface.orders_y
+    a, b, h, rho = 0.3, 0.2, 0.005, 2500.0
+    d = 70e9 * h**3 / (12 * (1 - 0.22**2))
+    f = math.pi / 2 * math.sqrt(d / (rho * h)) * ((m / a) ** 2 + (n / b) ** 2)
+    np.testing.assert_allclose(plate.frequencies, f, rtol=1e-12)
+    for u, v in ((0.5, 0.5), (0.07, 0.09), (0.23, 0.61)):
+        phi = np.sin(math.pi * m * u) * np.sin(math.pi * n * v)
+        expected = phi**2 / (rho * h * a * b / 4 * 2 * math.pi * f)
+        np.testing.assert_allclose(plate.gains_at({"surface": [u, v]}), expected, rtol=1e-12, atol=1e-30)
+        np.testing.assert_allclose(plate.driving_at(SurfacePoint(u, v)), expected, rtol=1e-12, atol=1e-30)
+    for name, (u, v) in {"centre": (0.5, 0.5), "corner": (0.07, 0.09)}.items():
+        np.testing.assert_allclose(
+            plate.gains_at({"surface": [u, v]}), plate.gains_at(name), rtol=1e-12, atol=1e-30
+        )

@@ -46,17 +46,19 @@ import numpy as np
 
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise, void_pointer
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import modal_budget
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     COMPACT_ROWS,
     DECAY,
+    FLOOR,
     FLOOR2,
     GROWTH,
     INV,
@@ -66,12 +68,15 @@ from ugens.modal_budget import (
     WEIGHT,
     BudgetTables,
     aligned,
+    compact_bank,
     gather_kept,
     line_aligned_zeros,
     scatter_kept,
 )
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
 from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state, size_changes
+
+drop_stale_cache(__file__, [modal_budget])  # render_kept's cache holds copies of its kernels
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -276,11 +281,43 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
     """One sub-block of a budgeted bank's kept modes (the compact bank, rows as
     :func:`bank_step`'s and whole vectors of ``lanes`` modes: its padding and flushed modes
     hold exact zeros, so the active count is rounded up); the force also goes to the
-    budget period's ring ``heard``."""
+    budget period's ring ``heard`` (empty: the force is zero and the ring holds zeros)."""
     width = meta[2]
     meta[0] = min((meta[0] + lanes - 1) // lanes * lanes, width)
     bank_step(force, out, start, n, compact, meta, floor, last)
-    hear(force, n, heard, start)
+    if heard.size:
+        hear(force, n, heard, start)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def render_kept(t, h, outputs, by_python, start, n, offset):
+    """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
+    samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
+    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
+    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with no force
+    in this stretch or since it was last rendered, nor in this or the last period (its
+    ring holds zeros and keeps them) writes zeros if no mode sounds and no force sample
+    precedes. Returns the modes computed times frames (each bank's active count after
+    its span)."""
+    work = 0
+    for b in range(by_python.size):
+        if by_python[b]:
+            continue
+        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
+        busy = h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
+        if not busy and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+            for i in range(n):
+                out[i] = 0.0
+            continue
+        force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
+        compact, meta = compact_bank(t, b), t.compact_meta[b]
+        floor, last = t.values[FLOOR, b], t.last[b : b + 1]
+        ring = t.rings[b] if busy else t.rings[b, :0]
+        kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
+        active = min(meta[0], t.meta[b, 2])
+        t.meta[b, 0] = active
+        work += active * n
+    return work
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -614,7 +651,7 @@ class ModalBank(ModelParams, UGen):
         or state."""
         if self._compact_meta[1]:
             self._compact_meta[1] = 0
-            scatter_kept(self._compact, self._kept_mask, self.bank)
+            scatter_kept(self._compact_view(int(self._compact_meta[2])), self._kept_mask, self.bank)
         split = self._split
         if split is None:
             return
@@ -841,11 +878,23 @@ class ModalBank(ModelParams, UGen):
         meta = self._compact_meta
         if not meta[1]:
             width = -(-int(self.meta[2]) // KEPT_LANES) * KEPT_LANES
-            compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
-            gather_kept(self.bank, self.delta, self.target, self._kept_mask, compact)
+            gather_kept(self.bank, self.delta, self.target, self._kept_mask, self._compact_view(width))
             meta[:] = (self.meta[0], 1, width)
-            self._compact, self._compact_bank = compact, compact[:6]
-        return self._compact
+        return self._compact_view(int(meta[2]))
+
+    def _compact_view(self, width: int) -> np.ndarray:
+        """The compact bank's rows for ``width`` modes (the budget's render_kept may have
+        gathered it at another width since this bank last did)."""
+        compact = self._compact
+        if compact is None or compact.shape[1] != width:
+            compact = self._compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
+            self._compact_bank = compact[:6]
+        return compact
+
+    def anytime_compiled(self) -> bool:
+        """Whether the budget's compiled render (:func:`render_kept`) can render the bank's
+        next span: no parameter change pending, no ramp, no size input."""
+        return not (self._pending or self._ramping or self._size_input is not None)
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the
@@ -868,6 +917,9 @@ class ModalBank(ModelParams, UGen):
         self._fresh_rows[:] = self._fresh
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
+        tables.last[slot] = self.last[0]
+        self.last = tables.last[slot : slot + 1]
+        tables.values[FLOOR, slot] = self._floor
         self._compact_meta = tables.compact_meta[slot]
         self._compact_meta[:] = 0
         self._compact_store = tables.compact[compact_at : compact_at + COMPACT_ROWS * aligned(k + KEPT_LANES)]

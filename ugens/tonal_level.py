@@ -55,4 +55,6 @@ class TonalLevel(ModelParams):
                 f"nodes.{self.name}.level: 'calibrated' needs `model`, the ModalModel this force drives"
             )
         self.validate_model()
-        return tonal_level_gain(self.model, spectrum or self.force_spectrum(), self.sample_rate)
+        return tonal_level_gain(
+            self.model, self.force_spectrum() if spectrum is None else spectrum, self.sample_rate
+        )

@@ -7,13 +7,13 @@ decides).
 
 - error: 10 log10 of the energy of (budgeted - full) over the energy of full, on the
   rendered audio (dB; exact synthesis gives about -300 dB);
-- CPU: thread CPU time spent in the ModalBanks plus the budget's steps (decisions and
-  bookkeeping, without the banks they run), divided by the CPU time of the ModalBanks of
-  the full render (which skip silent modes); the best of ``repeats`` runs of each,
-  interleaved in the same process;
+- CPU: thread CPU time spent rendering the ModalBanks (their ``process``, or the budget's
+  render of them) plus the budget's steps (decisions and bookkeeping), divided by the CPU
+  time of the ModalBanks of the full render (which skip silent modes); the best of
+  ``repeats`` runs of each, interleaved in the same process;
 - mode-samples: the modes computed per sample (active at the end of each span a bank
-  renders), summed, over the full render's: the CPU ratio the bank kernel alone would
-  reach.
+  renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
+  its cost were proportional to the modes it computes.
 """
 
 from __future__ import annotations
@@ -64,6 +64,7 @@ def _timed_render(build, seconds: float, fraction: float | None):
     if fraction is not None:
         graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
     spent = [0, 0, 0]  # bank ns, decision ns (budget steps without the banks they render), mode-samples
+    stepping = [False]  # inside the budget's step (which counts the modes of the banks it renders)
 
     def clocked_bank(bank):
         process = bank.process
@@ -71,26 +72,39 @@ def _timed_render(build, seconds: float, fraction: float | None):
         def run(start, n, offset=0):
             t = time.thread_time_ns()
             process(start, n, offset)
-            spent[2] += n * int(bank.meta[0])  # modes active at the span's end (after flushing)
+            if not stepping[0]:
+                spent[2] += n * int(bank.meta[0])  # modes active at the span's end (after flushing)
             spent[0] += time.thread_time_ns() - t  # (the clock's own cost is the bank's, not the step's)
+
+        return run
+
+    def clocked_render(render):  # the budget rendering its banks (compiled, or their process)
+        def run(start, n, offset):
+            t, inside = time.thread_time_ns(), spent[0]
+            render(start, n, offset)
+            spent[0] = inside + time.thread_time_ns() - t
 
         return run
 
     def clocked_step(step):
         def run(start, n):
             t, inside = time.thread_time_ns(), spent[0]
+            stepping[0] = True
             step(start, n)
+            stepping[0] = False
             spent[1] += time.thread_time_ns() - t - (spent[0] - inside)
 
         return run
 
     for bank in banks:
         bank.process = clocked_bank(bank)
-    if graph.budget is not None:
-        graph.budget.step = clocked_step(graph.budget.step)
+    budget = graph.budget
+    if budget is not None:
+        budget.step, budget._render = clocked_step(budget.step), clocked_render(budget._render)
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
-    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total, spent[2]
+    work = spent[2] + (budget.mode_samples if budget is not None else 0)
+    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total, work
 
 
 def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:

@@ -140,7 +140,7 @@ def print_startup(rows: list[dict]) -> None:
         print(f"{r['case']:16s} {cold} {r['warm_wall_s']:9.2f}s {r['warm_cpu_s']:8.2f}s")
     print("kernels: functions/type specialisations compiled by the first render; CPU: the render's")
     print("processes together; main CPU: its main process alone (the compile helper, jassy.coldstart,")
-    print("runs beside it on the second core: on an idle machine the cold wall time is about this)")
+    print("runs beside it: on an idle machine the cold wall is about this, plus any wait for the helper)")
 
 
 def warm(
