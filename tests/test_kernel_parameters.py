@@ -48,7 +48,6 @@ WIDER = {
     ("physics/rigid/stepper.py", "run_steps"),  # 22
     ("physics/rod/mixed.py", "_element_terms"),  # 14
     ("ugens/bubbles.py", "bubbles"),  # 13
-    ("ugens/drill.py", "drill_kernel"),  # 14
     ("ugens/engine_noise.py", "engine_noise"),  # 11
     ("ugens/friction.py", "bristle_residual"),  # 11
     ("ugens/friction.py", "friction_run"),  # 11

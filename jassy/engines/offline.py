@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy import stopflag
-from jassy.coldstart import compile_on_two_cores, graph_units
+from jassy.engines.coldstart import compile_on_two_cores, graph_units
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
