@@ -34,7 +34,7 @@ from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
-from ugens.tonal_level import TONAL_LEVEL_SPECS, TonalLevel
+from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
 
 LAWS = ("sqrt", "linear")
 #: Force per m of profile height of the needle contacts (Scrape, Roll).
@@ -136,9 +136,9 @@ class NoiseConfig(NamedTuple):
     level_step: float  #: speed step (m/s) of the level table after the record; 0: no table
 
 
-#: Entries of ResonantScrape's level table (log of the calibrated level's factor at |v| =
-#: i x level_step), stored in ``cfg`` after its NoiseConfig; ``cfg`` has NOISE_CFG_SIZE values.
-LEVEL_POINTS = 1024
+#: ResonantScrape's level table (log of the calibrated level's factor at |v| = i x
+#: level_step, LEVEL_POINTS entries) is stored in ``cfg`` after its NoiseConfig; ``cfg`` has
+#: NOISE_CFG_SIZE values.
 LEVEL_TABLE = len(NoiseConfig._fields)  #: index of the table's first entry in ``cfg``
 NOISE_CFG_SIZE = LEVEL_TABLE + LEVEL_POINTS
 
@@ -153,13 +153,8 @@ def noise_config(cfg):
 
 @nb.njit(inline="always", cache=True)
 def table_level(cfg, x):
-    """exp of the level table (after the NoiseConfig in ``cfg``) at fractional index x >= 0,
-    linear in the log between entries, held beyond the last."""
-    i = int(x)
-    if i >= LEVEL_POINTS - 1:
-        return math.exp(cfg[LEVEL_TABLE + LEVEL_POINTS - 1])
-    w = x - i
-    return math.exp((1.0 - w) * cfg[LEVEL_TABLE + i] + w * cfg[LEVEL_TABLE + i + 1])
+    """exp of the level table (after the NoiseConfig in ``cfg``) at fractional index x >= 0."""
+    return log_table(cfg, LEVEL_TABLE, x)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -638,7 +633,7 @@ class ResonantScrape(TonalLevel, ContactControls):
     impulse response is 2 / (1 - R^2) times g^2 whatever theta. So the output force has
     RMS gain * s(F, v) (N) at steady speed.
 
-    With ``level = "calibrated"`` and the ``model`` it drives, the force is scaled by a
+    Given the ``model`` it drives (``level`` 'auto' or 'calibrated'), the force is scaled by a
     table over the slip speed, computed once from the modes, so that at every speed a
     calibrated ModalBank of that model rings at jassy.levels.TONAL_RMS_DBFS x gain x s(F, v)
     (at the reference contact: TONAL_RMS_DBFS x gain; ugens/tonal_level.py).
@@ -700,8 +695,8 @@ class ResonantScrape(TonalLevel, ContactControls):
     def level_table(self) -> tuple[float, np.ndarray]:
         """(speed step in m/s, log of the calibrated level's factor at |v| = i x step), over
         the speeds that move the resonance from f0 to its clamp (at least to 2 v_ref); held
-        beyond. Level 'raw': no table (step 0)."""
-        if self.values["level"] != "calibrated":
+        beyond. Not calibrated: no table (step 0)."""
+        if not self.is_calibrated():
             return 0.0, np.zeros(LEVEL_POINTS)
         v, fs = self.values, self.sample_rate
         if v["slope"] > 0:
