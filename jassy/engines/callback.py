@@ -229,17 +229,16 @@ def _next_cut(control, queue_index, pos, stop, prog):
 
 
 @nb.njit(cache=True, nogil=True)
-def sub_block(control, prog, pos, end):
-    """Render the sub-block from frame ``pos`` into the STAGE rows and return its end: apply
-    the queued records due there, cut at the next block boundary or record frame (at most
-    ``end``), run the program, then the output stage: NaN/Inf to 0 (counted in NONFINITE),
-    the audio limiter and its meter (LIMIT_AUDIO), the haptic force and slew limits
-    (LIMIT_HAPTIC) and the final fade of the haptic rows."""
+def sub_block(control, prog, pos, end, dst, at):
+    """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
+    haptic) and return its end: apply the queued records due there, cut at the next block
+    boundary or record frame (at most ``end``), run the program, then the output stage:
+    NaN/Inf to 0 (counted in NONFINITE), the audio limiter and its meter (LIMIT_AUDIO), the
+    haptic force and slew limits (LIMIT_HAPTIC) and the final fade of the haptic rows."""
     block = control[BLOCK]
     rows_n = control[N_ROWS]
     na = control[N_AUDIO]
     rows = _i64(control[ROWS], rows_n)
-    stage = _f64_rows(control[STAGE], rows_n, block)
     par = _f64(control[PARAMS], 4)
     stop = min(end, (pos // block + 1) * block)
     for q in range(N_QUEUES):
@@ -247,29 +246,30 @@ def sub_block(control, prog, pos, end):
     m = stop - pos
     run_program(prog, pos, m)
     bus_bits = nb.carray(void_pointer(control[BUS]), (control[BUS_COUNT], block), np.int64)
-    stage_bits = nb.carray(void_pointer(control[STAGE]), (rows_n, block), np.int64)
+    dst_bits = dst.view(np.int64)
     top = 0
     for c in range(rows_n):
-        bad, magnitude = copy_finite(bus_bits[rows[c]], stage_bits[c], m)
+        bad, magnitude = copy_finite(bus_bits[rows[c]], dst_bits[c, at:], m)
         control[NONFINITE] += bad
         if c < na:
             top = max(top, magnitude)
-    peak = float_from_bits(top)
+    out = dst[:, at : at + m]
     if control[OUTPUT] & LIMIT_AUDIO:
         meter = _f64(control[METER], METERED + 1)
-        limit_metered(stage[:na], m, _f64(control[LIMITER], 1), par[CEIL], par[RELEASE], peak, meter)
+        peak = float_from_bits(top)
+        limit_metered(out[:na], m, _f64(control[LIMITER], 1), par[CEIL], par[RELEASE], peak, meter)
     nh = rows_n - na
     if nh > 0:
         if control[OUTPUT] & LIMIT_HAPTIC:
             last = _f64(control[HAPTIC_LAST], nh)
-            control[HAPTIC_FLAGS] |= limit_force(stage[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
+            control[HAPTIC_FLAGS] |= limit_force(out[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
         left = control[FADE_LEFT]
         if left >= 0:  # the run ends: forces fade linearly to zero over the watchdog time
             window = control[WATCHDOG]
             for i in range(m):
                 w = max(left - i, 0) / window
                 for c in range(na, rows_n):
-                    stage[c, i] *= w
+                    out[c, i] *= w
             control[FADE_LEFT] = max(left - m, 0)
     return stop
 
@@ -289,7 +289,7 @@ def render_into(control, out, frames):
     for c in range(ch):
         levels[c] = 0.0
     while pos < end:
-        stop = sub_block(control, prog, pos, end)
+        stop = sub_block(control, prog, pos, end, stage, 0)
         m = stop - pos
         at = pos - begin
         for i in range(m):
