@@ -120,9 +120,10 @@ class ForceSpectrum(NamedTuple):
 
 
 #: RMS level (dBFS) at which a calibrated tonal force source, at its reference operating
-#: point, rings a calibrated model (mean power over the model's locations): 10 dB under the
-#: reference strike's peak, so a noise band's peaks (crest ~4) come near -18 dBFS too.
-TONAL_RMS_DBFS = -28.0
+#: point, rings a calibrated model (mean power over the model's locations): 8 dB under the
+#: reference strike's peak, so that the peaks stay within -30..-6 dBFS over TONAL_DRIVES too
+#: (ResonantScrape at 0.2 m/s is 7 dB under its 1 m/s reference by its amplitude law).
+TONAL_RMS_DBFS = -26.0
 
 
 def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
@@ -232,18 +233,28 @@ MODEL_CALIBRATED_SOURCES = {
 }
 
 
-def driven_source(type_name: str, model: ModalModel, name: str = "src"):
+#: Further operating points of the tonal force sources at which their defaults, given the
+#: model, stay within -30..-6 dBFS: ResonantScrape at the everyday scraping speed of
+#: FORCE_SOURCES (0.2 m/s), the drill's light cut at 10000 and 100000 rpm (its level table).
+TONAL_DRIVES = {
+    "ResonantScrape": (Drive("set", {"speed": 0.2}),),
+    "DrillSource": tuple(Drive("set", {"force": 1.0, "removal": 1.0, "rpm": rpm}) for rpm in (1e4, 1e5)),
+}
+
+
+def driven_source(type_name: str, model: ModalModel, name: str = "src", drive: Drive | None = None):
     """A force source of FORCE_SOURCES or MODEL_CALIBRATED_SOURCES at its defaults (the
-    latter calibrated to ``model``) and the event, at 0.01 s, that sets it going."""
+    latter given ``model``, so calibrated to it) and the event, at 0.01 s, that sets it going
+    (``drive``, default: the source's own)."""
     import ugens  # ugens import jassy
     from jassy import Event
 
     cls = getattr(ugens, type_name)
     if type_name in MODEL_CALIBRATED_SOURCES:
-        drive = MODEL_CALIBRATED_SOURCES[type_name]
+        drive = drive or MODEL_CALIBRATED_SOURCES[type_name]
         source = cls(model, name=name)
     else:
-        drive = FORCE_SOURCES[type_name]
+        drive = drive or FORCE_SOURCES[type_name]
         source = cls(name=name)
     return source, Event(0.01, name, drive.action, drive.args)
 

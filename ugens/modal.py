@@ -74,12 +74,20 @@ from ugens.modal_budget import (
     scatter_kept,
 )
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
-from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state, size_changes
+from ugens.modal_retune import (
+    TOP_BAND,
+    TOP_BAND_COS,
+    TOP_BAND_SIN,
+    TopBand,
+    pole_rows,
+    retune_state,
+    size_changes,
+)
 
 drop_stale_cache(__file__, [modal_budget])  # render_kept's cache holds copies of its kernels
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
-TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
+TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
 
 
 @nb.njit(cache=True, inline="always")
@@ -375,7 +383,7 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     poles = np.empty((4, freqs.size))
     sin2, inv = np.empty(freqs.size), np.empty(freqs.size)
     decays = np.ascontiguousarray(decays, dtype=np.float64)
-    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", *TOP_BAND_ROWS, poles, sin2, inv)
+    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, poles, sin2, inv)
     return poles[3]
 
 
@@ -612,7 +620,7 @@ class ModalBank(ModelParams, UGen):
                 v["decay_scale"] * retune,
                 float(self.sample_rate),
             )
-            pole_rows(freqs, decays, f_scale, d_scale, rate, band, *TOP_BAND_ROWS, poles, sin2, inv)
+            pole_rows(freqs, decays, f_scale, d_scale, rate, band, TOP_BAND_ROWS, poles, sin2, inv)
             self._poles = (key, poles, sin2, inv)
         return self._poles[1], self._poles[3]
 

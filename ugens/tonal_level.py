@@ -9,8 +9,8 @@ calibrated ModalBank of that model rings at ``jassy.levels.TONAL_RMS_DBFS`` RMS 
 over the model's locations) at the source's reference operating point; without a model
 (or with ``level = "raw"``) the force is in N as set. ResonantScrape,
 whose band moves with the slip speed, keeps a table of the factor over the speed, so the
-level holds at every speed (times its amplitude law); DrillSource's factor is fixed at its
-starting rpm, and its lines meet other modes as the rpm changes.
+level holds at every speed (times its amplitude law); DrillSource keeps one over the rpm,
+each entry calibrated on its harmonics averaged over the entry's rpm step.
 """
 
 from __future__ import annotations

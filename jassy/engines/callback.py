@@ -363,10 +363,22 @@ def tap_callback(control, out, frames, dac, flags):
     logged[0] += 1
 
 
-@nb.cfunc(
-    types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr),
-    cache=True,
+#: The C signature of the PortAudio callback :func:`program_callback`.
+CALLBACK_SIGNATURE = types.int32(
+    types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr
 )
+_compiled_callback: list = []
+
+
+def program_callback_address() -> int:
+    """The address of :func:`program_callback` compiled as a C function (compiled, or loaded
+    from numba's cache, on first use: an offline render, which runs the same render loop
+    through jassy.engines.program_offline, never pays for it)."""
+    if not _compiled_callback:
+        _compiled_callback.append(nb.cfunc(CALLBACK_SIGNATURE, cache=True)(program_callback))
+    return _compiled_callback[0].address
+
+
 def program_callback(inp, out, frames, time_info, status, user):
     """PortAudio callback: render the graph's program for this buffer, count."""
     control = nb.carray(user, (CONTROL,), np.int64)
@@ -835,7 +847,7 @@ class CallbackPlayer:
             r.channels,
             r.sample_rate,
             r.block,
-            program_callback.address,
+            program_callback_address(),
             r.control.ctypes.data,
         )
         self.device_latency = self.stream.output_latency
