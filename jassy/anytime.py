@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
 from jassy.anytime_rank import Hearing, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
@@ -110,13 +111,16 @@ class ModeBudget:
         holds every mode never does: the render is the full synthesis)."""
         return self.cpu_fraction is not None or (self.max_modes or total_modes) < total_modes
 
-    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False) -> None:
+    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False, audio=None) -> None:
         """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
         ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
         scheduled in [start, end). ``renders``: :meth:`step` also renders the banks (their
         inputs are rendered before it), splitting their sub-block only at the frames where
         it decides; otherwise the scheduler cuts sub-blocks at every period and a bank's
-        force counts as heard in every period (it may be rendered after the step)."""
+        force counts as heard in every period (it may be rendered after the step).
+        ``audio``: the graph's audio outputs (a bank heard only through another bank is
+        ranked by what reaches them; None: every bank is heard)."""
+        self._audio = audio
         self.banks = banks
         self.sample_rate = sample_rate
         self.upcoming = upcoming
@@ -168,6 +172,14 @@ class ModeBudget:
         #: the fields of tables.values that impacts set (this period, then the next), and SPECTRAL
         self._kick_fields = ((mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW), (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT))
         self._spectral_field = mb.SPECTRAL
+        #: banks fed by banks, credited with their feeders' impacts (this period, the next)
+        self._fed = feeding_banks(banks)
+        if self._fed:
+            weigh_feeders(tables, self._fed, heard_banks(banks, self._audio or banks), self.sample_rate)
+        self._chain_fields = (
+            (mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW, mb.ELSEWHERE_NOW),
+            (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
+        )
         self._spectral = [(slot, bank) for slot, bank in enumerate(banks) if bank.anytime_spectral]
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
@@ -276,6 +288,9 @@ class ModeBudget:
                 values[kick, slot], values[elsewhere, slot] = self.banks[slot].anytime_kicks(
                     impacts, rows[column]
                 )
+        if self._fed and self._kicked:
+            for fields in self._chain_fields:
+                credit_fed_banks(self._tables, self._fed, fields, self.sample_rate)
         for slot, bank in self._spectral:
             heard = d.heard[slot] and not onset[slot]
             values[self._spectral_field, slot] = heard and bank.anytime_spectrum()

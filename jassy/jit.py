@@ -136,7 +136,7 @@ def _lock_cache_index_updates() -> None:
     numba saves a new specialisation by reading the function's index, adding an entry
     under the first free data-file number and writing the index back. Two processes that
     save different specialisations of one function at once (``jassy warm``'s scenes, or a
-    render and its compile helper, jassy.coldstart) can both pick the same number, and one
+    render and its compile helper, jassy.engines.coldstart) can both pick the same number, and one
     index would then name the other's data. An exclusive ``flock`` on the cache folder
     around the update serialises them; each file is still written to a temporary name and
     renamed by numba."""

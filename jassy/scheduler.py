@@ -142,7 +142,9 @@ class Scheduler:
         budget = graph.budget
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
-            budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders)
+            budget.attach(
+                graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders, graph.audio
+            )
             if not budget.active or budget.renders:  # it holds every mode, or splits the banks'
                 self.period = None  # sub-blocks itself where it decides: no sub-block cuts
 
@@ -182,7 +184,7 @@ class Scheduler:
             i += 1
         for frame, ev in impacts:
             impulse, location = float(ev.args.get("impulse", 1.0)), ev.args.get("location")
-            for target in self.graph.location_targets(ev.node):
+            for target in self.graph.struck_targets(ev.node):
                 where = location if location is not None else placed.get((frame, target.name))
                 out.append((frame, [target], impulse, where))
         return out

@@ -1,4 +1,4 @@
-"""A cold render's compile units run on two cores (jassy.coldstart): every unit runs, the two
+"""A cold render's compile units run on two cores (jassy.engines.coldstart): every unit runs, the two
 processes share them, the helper is always reaped, and a render whose kernels came from the
 helper sounds the same as one that compiled them itself."""
 
@@ -11,7 +11,7 @@ import threading
 
 import pytest
 
-from jassy.coldstart import may_fork_helper
+from jassy.engines.coldstart import may_fork_helper
 
 TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 
@@ -19,7 +19,7 @@ TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 #: thread), and then no helper is forked.
 UNITS = """
 import os, sys
-from jassy.coldstart import compile_on_two_cores
+from jassy.engines.coldstart import compile_on_two_cores
 
 folder = sys.argv[1]
 here = os.getpid()
@@ -99,7 +99,7 @@ def test_no_helper_for_one_unit_or_with_other_threads_running():
 COLD_RENDER = """
 import hashlib, sys
 import numpy as np
-from jassy import coldstart
+from jassy.engines import coldstart
 from jassy.patchfile import load_patch
 from jassy.engines.offline import OfflineEngine
 forked = []

@@ -446,18 +446,18 @@ class RathRoll(ModelParams, Turning, ProfileContact):
 
     With a ``model`` (the surface's ModalModel, at ``location``) the force reaches the
     surface through the ball's contact spring, ``contact_stiffness`` k, and the surface
-    gives way: while the ball touches, the force is f - k x, x the surface's displacement
-    at the contact (its driving-point modes, solved per sample without delay;
-    :func:`press_surface`). An open-loop force drives a lightly damped mode that one of
-    its lines (or a burst of hops) lands on as if the surface were rigid, and the mode's
-    response grows with its Q; a real surface moves away under the ball instead, which
-    caps the force at resonance where the surface's receptance exceeds 1 / k (for the
-    steel plate and a 30 mm steel ball, k = 1.1e7 N/m against 1e-6..2e-4 m/N at its
-    strong modes' resonances): the contact filter of rolling-noise models (Remington,
-    JASA 81, 1987; Thompson, *Railway Noise and Vibration*, 2009, ch. 5), and SDT's
-    rolling filter drives its resonators through an impact interactor for the same
-    reason. The output is the force on the surface, to drive a ModalBank of the same
-    model at the same location.
+    gives way: while the ball touches, the force is f - k x (f: the open-loop force above,
+    x: the surface's displacement at the contact, from its driving-point modes, solved per
+    sample without delay; :func:`press_surface`). An open-loop force drives a lightly
+    damped mode that one of its lines (or a burst of hops) lands on as if the surface were
+    rigid, and the mode's response grows with its Q; a real surface moves away under the
+    ball instead, which caps the force at resonance where the surface's receptance exceeds
+    1 / k (the steel plate at its strong modes' resonances: 1e-6..2e-4 m/N, against 9e-8
+    m/N for a 30 mm steel ball): the contact filter of rolling-noise models (Remington,
+    JASA 81, 1987; Thompson, *Railway Noise and Vibration*, 2009, ch. 5); SDT couples its
+    rolling filter to the resonators through an impact interactor. The output is the
+    force on the surface, to drive a ModalBank of the same model at the same location;
+    the extra output ``contact`` moves with it.
     """
 
     type_name = "RathRoll"

@@ -109,9 +109,8 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
 def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     """Compile units of a render of ``graph`` by an OfflineEngine built with
     ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
-    (:func:`jassy.apps.startup.kernels_cached`) and the graph runs as a program."""
+    (:func:`kernels_cached`) and the graph runs as a program."""
     from jassy import program
-    from jassy.apps.startup import kernels_cached
     from ugens.impact import ImpactForce
     from ugens.mix import Gain
     from ugens.modal import ModalBank, direct_ratio
@@ -152,3 +151,14 @@ def _render_stand_in(haptic: bool, engine_options: dict) -> None:
     graph = Graph(Gain(tap, gain=0.5, name="out"), haptic=tap if haptic else None)
     engine = OfflineEngine(graph, [Event(0.001, "tap", "impact", {"impulse": 0.01})], **engine_options)
     engine.render(3 * engine_options["block"] / engine_options["sample_rate"])
+
+
+def kernels_cached() -> bool:
+    """Whether numba's cache already holds the output stage's limiter, which every render
+    calls (False on a fresh install, or after the cache was removed)."""
+    from jassy.safety import limit
+
+    try:
+        return os.path.exists(limit._cache._cache_file._index_path)
+    except AttributeError:  # a numba without this cache layout: say nothing
+        return True
