@@ -28,6 +28,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from jassy.errors import JassyError
+from jassy.jit import specialise
 from physics.rod import arc
 from physics.rod.band import band_fill, band_lu, band_solve, band_solve_vec
 from physics.rod.model import BC_ROWS, Arcs, Dynamics, FormulationBase, RodModel, RodState, sparse_from_blocks
@@ -63,6 +64,10 @@ class ElementTerms(NamedTuple):
     grad: np.ndarray  #: (n, 4) gravity gradient
     hess: np.ndarray  #: (n, 2, 2) gravity Hessian on (theta, kappa)
     hess_psd: np.ndarray  #: (n, 2, 2) its positive semi-definite part
+
+
+#: The Gauss-Legendre rule of the element integrals.
+GAUSS = Quadrature(arc.GAUSS_X, arc.GAUSS_W)
 
 
 @numba.njit(cache=True)
@@ -270,6 +275,7 @@ class MixedRod(FormulationBase):
         self.n = model.n
         self.ndof = 4 * model.n
         self.l = model.l
+        self._element_run = None  # _element_terms' compiled entry point, found at the first call
         self.kappa0 = model.kappa0
         self.kappa_index = slice(3, None, 4)
         self.start_rows = np.array(BC_ROWS[model.start_bc], dtype=np.int64)
@@ -338,13 +344,19 @@ class MixedRod(FormulationBase):
         n, m = self.n, self.model
         mass, gyro, grad = np.empty((n, 4, 4)), np.empty((n, 4)), np.empty((n, 4))
         hess, hess_psd = np.empty((n, 2, 2)), np.empty((n, 2, 2))
-        vg = _element_terms(
-            Elements(th, k, self.l, vv[2::4], vv[3::4]),
-            m.rho_A,
-            m.gravity,
-            Quadrature(arc.GAUSS_X, arc.GAUSS_W),
+        # fresh contiguous float64 copies and float scalars: the same types at every call, so
+        # the compiled entry point is looked up once (numba's dispatcher types records slowly)
+        rows = (th, k, self.l, vv[2::4], vv[3::4])
+        args = (
+            Elements(*(np.array(a, dtype=np.float64) for a in rows)),
+            float(m.rho_A),
+            float(m.gravity),
+            GAUSS,
             ElementTerms(mass, gyro, grad, hess, hess_psd),
         )
+        if self._element_run is None:
+            self._element_run = specialise(_element_terms, *args)
+        vg = self._element_run(*args)
         dk = k - self.kappa0
         grad[:, 3] += m.EI * self.l * dk
         V = vg + m.rho_A * m.gravity * float(self.l @ y) + 0.5 * m.EI * float(self.l @ (dk * dk))
