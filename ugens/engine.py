@@ -80,6 +80,8 @@ QUEUE = 16
 NOISE_STREAM = 0x5DEECE66D
 #: Noise level parameters -> fields of ugens.engine_noise.NoiseLevels.
 _NOISE_LEVELS = {"intake_level": "intake", "hiss": "hiss", "mechanical_level": "mechanical"}
+#: Where the two levels that switch the noise on sit in the levels array.
+_NOISE_INTAKE, _NOISE_MECHANICAL = (slot(engine_noise.NoiseLevels, k) for k in ("intake", "mechanical"))
 #: Rate (Hz) at which the noise levels are as set; other rates keep the spectral density.
 NOISE_RATE = 48000.0
 #: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
@@ -365,6 +367,7 @@ class Engine(UGen):
         self._noise = engine_noise.EngineNoise(
             self.noise_levels, self.noise_coef, self.noise_state, self.noise_rng
         )
+        self._noise_run = None
         for key in ("intake_level", "hiss", "mechanical_level"):
             self._param_changed(key, v[key], True)
         self.rpm = self.smoothed("rpm")
@@ -468,9 +471,8 @@ class Engine(UGen):
             self.par,
             _BLAMP,
         )
-        levels = engine_noise.NoiseLevels(*self.noise_levels)
-        if levels.intake > 0.0 or levels.mechanical > 0.0:
-            engine_noise.engine_noise(
+        if self.noise_levels[_NOISE_INTAKE] > 0.0 or self.noise_levels[_NOISE_MECHANICAL] > 0.0:
+            args = (
                 self.extra["pulses"],
                 self.out,
                 self.extra["intake"],
@@ -480,6 +482,9 @@ class Engine(UGen):
                 self._throttles.buffer,
                 self._noise,
             )
+            if self._noise_run is None:  # the same arrays at every block: one typed entry point
+                self._noise_run = specialise(engine_noise.engine_noise, *args)
+            self._noise_run(*args)
         else:
             self.extra["intake"][:n] = 0.0
             self.extra["mechanical"][:n] = 0.0

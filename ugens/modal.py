@@ -688,7 +688,7 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
-            self._psd = None
+            self._psd_remembered = False
 
     def _refresh_design_cache(self) -> None:
         """Keep the design for the current parameters (``fresh``; for an anytime budget
@@ -716,9 +716,8 @@ class ModalBank(ModelParams, UGen):
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
         bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
-        #: per mode, the bins of a zero-padded periodogram (anytime_spectrum) it is smoothed over
-        self._bin_taps = bins[:, None] + np.arange(PSD_SMOOTHING.size)
-        self._psd = None  # the smoothed PSD at the modes' bins, remembered across periods
+        self._psd_bins = bins  # the periodogram's bin at each mode (anytime_spectrum)
+        self._psd_remembered = False  # the SPECTRUM row holds the last smoothed PSD
         two_d_tau = 2.0 * decays * self._horizon
         rows[GROWTH] = np.where(
             two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
@@ -941,11 +940,11 @@ class ModalBank(ModelParams, UGen):
         tables.values[FLOOR2, slot] = self._floor * self._floor
         self._heard = tables.rings[slot]
         self._heard[:] = 0.0
-        self._psd = None
+        self._psd_remembered = False
         period = self._heard.size
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
-        self._periodogram = np.zeros(period // 2 + PSD_SMOOTHING.size)  # zero-padded by 2 bins
+        self._windowed = np.zeros(period)  # the period's force, centred and windowed
         self._horizon = horizon
         self._forcing_key = None
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
@@ -978,17 +977,13 @@ class ModalBank(ModelParams, UGen):
         FLAT_SPECTRUM_MODES spread the force's power flat over frequency) that heard a
         force lately: the power spectral density of the last period's force (its ring) at
         each mode's frequency into the budget's SPECTRUM row; returns True."""
-        force = self._heard - self._heard.mean()  # a steady load makes no sound
-        spectrum = np.fft.rfft(force * self._window)
-        padded, edge = self._periodogram, PSD_SMOOTHING.size // 2
-        np.multiply(spectrum.real, spectrum.real, out=padded[edge:-edge])
-        padded[edge:-edge] += spectrum.imag * spectrum.imag
-        # a periodogram of noise scatters by its own size from bin to bin: smooth it over
-        # neighbouring bins and over periods (it is the trend that ranks), at the modes' bins
-        psd = padded[self._bin_taps] @ PSD_SMOOTHING / self._window_power
-        if self._psd is not None:
-            psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
-        self._psd = self._mode_rows_view[SPECTRUM] = psd
+        modal_budget.centred_windowed(self._heard, self._window, self._windowed)
+        psd = self._mode_rows_view[SPECTRUM]
+        modal_budget.psd_at_bins(
+            np.fft.rfft(self._windowed), self._psd_bins, PSD_SMOOTHING, self._window_power, PSD_MEMORY,
+            self._psd_remembered, psd,
+        )  # fmt: skip
+        self._psd_remembered = True
         return True
 
     def anytime_kicks(self, kicks: list, row: np.ndarray) -> tuple[float, bool]:

@@ -176,6 +176,37 @@ def scatter_kept(compact, kept, bank):
 
 
 @nb.njit(fastmath=True, cache=True)
+def centred_windowed(force, window, out):
+    """out = (force - its mean) * window: a period's force ready for its periodogram (a
+    steady load makes no sound)."""
+    n = force.size
+    mean = 0.0
+    for i in range(n):
+        mean += force[i]
+    mean /= n
+    for i in range(n):
+        out[i] = (force[i] - mean) * window[i]
+
+
+@nb.njit(cache=True)
+def psd_at_bins(spectrum, bins, taps, scale, memory, remembered, psd):
+    """Per mode, the periodogram |spectrum|^2 / ``scale`` (N^2/Hz) smoothed over the bins
+    ``bins[m] - len(taps) // 2 ...`` with weights ``taps`` (bins past either end count as
+    zero), into ``psd``; ``remembered``: blended as memory * psd + (1 - memory) * new (a
+    periodogram of noise scatters by its own size: it is the trend that ranks)."""
+    edge, size = taps.size // 2, spectrum.size
+    for m in range(bins.size):
+        total = 0.0
+        for t in range(taps.size):
+            b = bins[m] + t - edge
+            if 0 <= b < size:
+                z = spectrum[b]
+                total += (z.real * z.real + z.imag * z.imag) * taps[t]
+        value = total / scale
+        psd[m] = memory * psd[m] + (1.0 - memory) * value if remembered else value
+
+
+@nb.njit(fastmath=True, cache=True)
 def centred_power(force):
     """Mean square of ``force`` about its mean (a steady load makes no sound), N^2. (fastmath
     lets the sums run in SIMD lanes: a strict left-to-right sum cost about 5 us per

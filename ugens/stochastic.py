@@ -317,6 +317,8 @@ class _MicroImpacts(PulseSource):
         self.rng = np.zeros(1, dtype=np.uint64)
         self.log = np.zeros((int(self.log_capacity), 4))
         self._constant: dict[int, float] = {}
+        self._impact_data = ImpactData(self.st, self.cnt, self.rng, self.count, self.log)
+        self._opt = None  # the kernel's settings record, rebuilt after a parameter change
 
     def _reset(self) -> None:
         super()._reset()
@@ -325,7 +327,7 @@ class _MicroImpacts(PulseSource):
         self.rng[0] = self.values["seed"]
 
     def _data(self) -> ImpactData:
-        return ImpactData(self.st, self.cnt, self.rng, self.count, self.log)
+        return self._impact_data
 
     def _per_sample(self, ramp: Smoothed, buffer: np.ndarray, n: int) -> np.ndarray:
         """Per-sample values of a smoothed parameter; a steady one is written once."""
@@ -369,6 +371,7 @@ class _Granular(_MicroImpacts):
         super()._prepare()
         self.ramps = {key: self.smoothed(key) for key in self._SMOOTHED}
         self.buffers = {key: np.zeros(self.max_block) for key in self._SMOOTHED}
+        self._inputs = GrainInputs(*(self.buffers[key] for key in self._SMOOTHED))
         x = self.out
         self._kernel = specialise(
             micro_impacts,
@@ -390,6 +393,7 @@ class _Granular(_MicroImpacts):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if key in self.ramps:
             self.ramps[key].set(value, self.ramp_samples(), jump)
+        self._opt = None
 
     def _arm(self, budget: float | None) -> None:
         """Start emitting; a budget (J) makes the run stop once that energy is spent."""
@@ -400,23 +404,16 @@ class _Granular(_MicroImpacts):
             self.st[_RUNNING] = 0.0
 
     def process(self, start: int, n: int) -> None:
-        r, b = self.ramps, self.buffers
-        v = self.values
+        for key in self._SMOOTHED:  # the per-sample values of the block into self._inputs
+            self._per_sample(self.ramps[key], self.buffers[key], n)
+        if self._opt is None:
+            v = self.values
+            fragmentation = v.get("fragmentation", 0.0)
+            self._opt = GrainSettings(
+                self.sample_rate, fragmentation, v["mass"], self._pulse_samples(), self._mode
+            )
         self.pulses = self._kernel(
-            self.out,
-            self.extra["size"],
-            start,
-            n,
-            GrainInputs(
-                self._per_sample(r["density"], b["density"], n),
-                self._per_sample(r["crushing_energy"], b["crushing_energy"], n),
-                self._per_sample(r["fragment"], b["fragment"], n),
-            ),
-            GrainSettings(
-                self.sample_rate, v.get("fragmentation", 0.0), v["mass"], self._pulse_samples(), self._mode
-            ),
-            self._data(),
-            self.pulses,
+            self.out, self.extra["size"], start, n, self._inputs, self._opt, self._impact_data, self.pulses
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
@@ -645,18 +642,25 @@ class Bounce(_MicroImpacts):
         self.st[_RUNNING] = 1.0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
-        pass  # read at each impact
+        self._opt = None  # read at each impact
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        x = self.out
+        self._kernel = specialise(bounces, x, x, 0, 0, self._settings(), self._data(), self.pulses)
+
+    def _settings(self) -> BounceSettings:
+        v = self.values
+        keys = ("gravity", "restitution", "irregularity", "mass")
+        fs, g, e, irregularity, mass = (float(x) for x in (self.sample_rate, *(v[k] for k in keys)))
+        pulse = self._pulse_samples()
+        return BounceSettings(
+            fs, g, e, irregularity, mass, pulse, float(v["min_speed"]), float(v["fragment"])
+        )
 
     def process(self, start: int, n: int) -> None:
-        v = self.values
-        settings = BounceSettings(
-            self.sample_rate,
-            v["gravity"],
-            v["restitution"],
-            v["irregularity"],
-            v["mass"],
-            self._pulse_samples(),
-            v["min_speed"],
-            v["fragment"],
+        if self._opt is None:
+            self._opt = self._settings()
+        self.pulses = self._kernel(
+            self.out, self.extra["size"], start, n, self._opt, self._impact_data, self.pulses
         )
-        self.pulses = bounces(self.out, self.extra["size"], start, n, settings, self._data(), self.pulses)

@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import specialise
 from physics.burr.contact import FASTMATH, R_VOXEL, Ball, Box, lens_centroid, lens_volume, voxel_moments
 
 
@@ -319,6 +320,8 @@ class Octree:
         # a depth-first stack never holds more than 8 entries per level
         self._stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
         self._out = np.zeros(4)
+        self._pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
+        self._descend_run = None  # _descend's typed entry point, found at the first call
         self.rebuild()
 
     def rebuild(self) -> None:
@@ -340,7 +343,9 @@ class Octree:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
         number of blocks visited. ``leaf``: side (voxels) at or below which partial blocks
         use the partial-volume rule (1 = exact voxel sum)."""
-        pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
         ball = Ball(float(centre[0]), float(centre[1]), float(centre[2]), float(R))
-        visits = _descend(pyramid, ball, int(leaf), self._out, self._stack)
+        args = (self._pyramid, ball, int(leaf), self._out, self._stack)
+        if self._descend_run is None:  # the same types at every call: one typed entry point
+            self._descend_run = specialise(_descend, *args)
+        visits = self._descend_run(*args)
         return self._out.copy(), int(visits)
