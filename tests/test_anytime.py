@@ -287,3 +287,24 @@ def test_an_impact_is_credited_to_the_bank_it_drives_and_passed_on_through_a_cha
     # a quarter of the modes (the struck bell ranked by what reaches the heard one) is
     # within -15 dB; crediting ``b`` with the hammer's impacts gave -2.7 dB
     assert 10 * np.log10(np.sum((y - full) ** 2) / np.sum(full**2)) < -15
+
+
+def test_the_compiled_periodogram_at_the_modes_bins_matches_numpy():
+    from ugens import modal_budget as mb
+    from ugens.modal import PSD_SMOOTHING
+
+    rng = np.random.default_rng(3)
+    period, k = 2048, 97
+    force, window = rng.normal(size=period) + 0.3, np.hanning(period)
+    bins = np.sort(rng.integers(0, period // 2 + 1, k))
+    bins[0], bins[-1] = 0, period // 2  # taps past either end count as zero
+    spectrum = np.fft.rfft((force - force.mean()) * window)
+    padded = np.pad(np.abs(spectrum) ** 2, 2)
+    expected = padded[bins[:, None] + np.arange(5)] @ PSD_SMOOTHING / 7.0
+    windowed, psd = np.zeros(period), np.full(k, 2.0)
+    mb.centred_windowed(force, window, windowed)
+    assert max_abs_diff(windowed, (force - force.mean()) * window) < 1e-12
+    mb.psd_at_bins(np.fft.rfft(windowed), bins, PSD_SMOOTHING, 7.0, 0.75, True, psd)  # remembered
+    assert np.allclose(psd, 0.75 * 2.0 + 0.25 * expected, rtol=1e-9)
+    mb.psd_at_bins(np.fft.rfft(windowed), bins, PSD_SMOOTHING, 7.0, 0.75, False, psd)
+    assert np.allclose(psd, expected, rtol=1e-9)
