@@ -48,7 +48,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jassy.anytime_rank import scan_forces
+from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
+from jassy.anytime_rank import Hearing, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
 
@@ -110,13 +111,16 @@ class ModeBudget:
         holds every mode never does: the render is the full synthesis)."""
         return self.cpu_fraction is not None or (self.max_modes or total_modes) < total_modes
 
-    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False) -> None:
+    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False, audio=None) -> None:
         """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
         ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
         scheduled in [start, end). ``renders``: :meth:`step` also renders the banks (their
         inputs are rendered before it), splitting their sub-block only at the frames where
         it decides; otherwise the scheduler cuts sub-blocks at every period and a bank's
-        force counts as heard in every period (it may be rendered after the step)."""
+        force counts as heard in every period (it may be rendered after the step).
+        ``audio``: the graph's audio outputs (a bank heard only through another bank is
+        ranked by what reaches them; None: every bank is heard)."""
+        self._audio = audio
         self.banks = banks
         self.sample_rate = sample_rate
         self.upcoming = upcoming
@@ -130,21 +134,14 @@ class ModeBudget:
         self.active = self.decides(total)
         self.renders = renders and self.active
         count = len(banks)
-        #: per bank: an impact foreseen in this period, a force heard in this / the last
-        #: period (folded in after each stretch), a force in the current stretch, woken by
-        #: it, a force since the bank was last rendered
-        (
-            self._expected, self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
-        ) = (np.zeros(count, dtype=bool) for _ in range(6))  # fmt: skip
-        self._any_expected = False
-        self._inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
-        self._addresses = np.array([x.ctypes.data for x in self._inputs], dtype=np.intp)
-        self._input_size = min(x.size for x in self._inputs)
-        self._unseen = np.array([not renders for _ in banks], dtype=bool)
-        self._scan = specialise(
-            scan_forces, self._addresses, self._input_size, 0, 0, True, self._unseen, self._expected,
-            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
+        inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
+        flags = (np.zeros(count, dtype=bool) for _ in range(6))
+        self._hearing = h = Hearing(
+            np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
+            np.array([not renders for _ in banks], dtype=bool), *flags,
         )  # fmt: skip
+        self._any_expected = False
+        self._scan = specialise(scan_forces, h, 0, 0, True)
         for bank in banks:
             bank.budgeted = self.active
         if self.active:
@@ -161,7 +158,8 @@ class ModeBudget:
             bank.anytime_attach(tables, slot, self.horizon, self.weighting)
         #: the scores (now, next period, sounding) and the masks to keep, fade, and keep next
         masks = (np.zeros(total, dtype=bool) for _ in range(3))
-        self._decision = mb.Decision(self._onset, np.zeros(len(banks), dtype=bool), self._addresses,
+        h = self._hearing
+        self._decision = mb.Decision(h.onset, np.zeros(len(banks), dtype=bool), h.inputs,
                                   np.zeros((3, total)), *masks)  # fmt: skip
         self._rows = {}  # id(bank): (slot, its ELSEWHERE_NOW row, its ELSEWHERE_NEXT row)
         for slot, (bank, k, first) in enumerate(zip(banks, *tables.layout[:2], strict=True)):
@@ -174,16 +172,23 @@ class ModeBudget:
         #: the fields of tables.values that impacts set (this period, then the next), and SPECTRAL
         self._kick_fields = ((mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW), (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT))
         self._spectral_field = mb.SPECTRAL
+        #: banks fed by banks, credited with their feeders' impacts (this period, the next)
+        self._fed = feeding_banks(banks)
+        if self._fed:
+            weigh_feeders(tables, self._fed, heard_banks(banks, self._audio or banks), self.sample_rate)
+        self._chain_fields = (
+            (mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW, mb.ELSEWHERE_NOW),
+            (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
+        )
         self._spectral = [(slot, bank) for slot, bank in enumerate(banks) if bank.anytime_spectral]
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
         self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
         from ugens.modal import render_kept
 
-        outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with the banks
-        self._mb, self._wiring = mb, mb.Wiring(self._addresses, outputs)
-        self._busy, self._how = np.zeros(len(banks), dtype=bool), np.zeros(len(banks), dtype=np.int64)
-        self._render_all = specialise(render_kept, tables, self._wiring, self._how, 0, 0, 0)
+        self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
+        self._by_python = np.zeros(len(banks), dtype=bool)
+        self._render_all = specialise(render_kept, tables, h, self._outputs, self._by_python, 0, 0, 0)
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -223,22 +228,20 @@ class ModeBudget:
         change, ramp or size input pending (their own ``process``); a bank with nothing to
         compute (no mode sounding, no force in this or the last period, nothing pending)
         only writes silence."""
-        mb = self._mb
-        busy, how = self._busy, self._how  # (a force heard lately: its ring holds it)
-        np.logical_or(self._forced, self._unrendered, out=busy)
-        busy |= self._heard_now
-        busy |= self._heard_before
-        how[:] = mb.UNLESS_SILENT
-        how[busy] = mb.COMPILED
-        by_python = [i for i, bank in enumerate(self.banks) if not bank.anytime_compiled()]
-        how[by_python] = mb.BY_PYTHON
-        self.mode_samples += self._render_all(self._tables, self._wiring, how, start, n, offset)
-        for i in by_python:
+        by_python, slow = self._by_python, []
+        for i, bank in enumerate(self.banks):
+            by_python[i] = python = not bank.anytime_compiled()
+            if python:
+                slow.append(i)
+        h = self._hearing
+        self.mode_samples += self._render_all(self._tables, h, self._outputs, by_python, start, n, offset)
+        for i in slow:  # (a force heard lately: its ring holds it)
             bank = self.banks[i]
-            if busy[i] or not bank.anytime_silent(offset, n):
+            busy = h.forced[i] or h.unrendered[i] or h.heard_now[i] or h.heard_before[i]
+            if busy or not bank.anytime_silent(offset, n):
                 self._processes[i](start, n, offset)
                 self.mode_samples += n * int(bank.meta[0])
-        self._unrendered[:] = False
+        h.unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
@@ -248,23 +251,21 @@ class ModeBudget:
         if rotate:
             kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
             now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
+            expected = self._hearing.expected
             if self._any_expected:
-                self._expected[:] = False
+                expected[:] = False
             self._any_expected = bool(now)
             if now:
                 for i, bank in enumerate(self.banks):
-                    self._expected[i] = id(bank) in now
+                    expected[i] = id(bank) in now
         else:
             self._kicks, self._now = NO_KICK, {}
-        heard, woken = self._scan(
-            self._addresses, self._input_size, offset, offset + n, rotate, self._unseen, self._expected,
-            self._heard_now, self._heard_before, self._forced, self._onset, self._unrendered,
-        )  # fmt: skip
+        heard, woken = self._scan(self._hearing, offset, offset + n, rotate)
         driven = rotate and (self._fading or bool(self._kicks) or heard)
         if rotate and self.cpu_fraction is not None:
             driven = True
             self._adapt()
-        return self._onset if driven or woken else None
+        return self._hearing.onset if driven or woken else None
 
     def _decide(self, at: int, onset: np.ndarray, offset: int, n: int) -> None:
         """Rank every mode at frame ``at`` and apply the kept sets; ``onset``: the banks
@@ -272,7 +273,9 @@ class ModeBudget:
         kicks, now, period = self._kicks, self._now, self.period
         later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
         d, values = self._decision, self._tables.values
-        np.logical_or(self._heard_now, self._heard_before, out=d.heard)  # before the stretch from ``at``
+        np.logical_or(
+            self._hearing.heard_now, self._hearing.heard_before, out=d.heard
+        )  # before the stretch from ``at``
         if self._kicked:
             for fields in self._kick_fields:
                 values[fields, :] = 0.0
@@ -285,6 +288,9 @@ class ModeBudget:
                 values[kick, slot], values[elsewhere, slot] = self.banks[slot].anytime_kicks(
                     impacts, rows[column]
                 )
+        if self._fed and self._kicked:
+            for fields in self._chain_fields:
+                credit_fed_banks(self._tables, self._fed, fields, self.sample_rate)
         for slot, bank in self._spectral:
             heard = d.heard[slot] and not onset[slot]
             values[self._spectral_field, slot] = heard and bank.anytime_spectrum()

@@ -3,6 +3,8 @@ and which banks hear a force."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -50,34 +52,50 @@ def rank_modes(scores, limit, keep, fade, later_top):
     return any_fade
 
 
+class Hearing(NamedTuple):
+    """What a budget knows of each bank's force: its input (float64 arrays of ``size`` at
+    ``inputs``, kept alive by their nodes), whether it is rendered after the budget
+    (``unseen``: its force counts as heard), an impact expected in this period, a force
+    heard in this and in the last period, a force in the current stretch, a force nobody
+    scheduled waking it (``onset``), and a force since it was last rendered."""
+
+    inputs: np.ndarray
+    size: int
+    unseen: np.ndarray
+    expected: np.ndarray
+    heard_now: np.ndarray
+    heard_before: np.ndarray
+    forced: np.ndarray
+    onset: np.ndarray
+    unrendered: np.ndarray
+
+
 @nb.njit(cache=True)
-def scan_forces(
-    addresses, size, begin, end, rotate, unseen, expected, heard_now, heard_before, forced, onset, unrendered
-):  # fmt: skip
-    """Which banks hear a force in samples [begin, end) of their inputs (float64 arrays of
-    ``size`` at ``addresses``, kept alive by their nodes) into ``forced``; banks ``unseen``
-    (rendered after the budget) count as forced. First the stretch scanned before is
-    folded into ``heard_now`` and ``unrendered``. ``rotate`` (a period starts): the last
-    period's ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected
-    no impact and heard nothing in this or the last period. Returns (any heard_before,
-    any onset). A bank that heard a force in this period already is not scanned."""
+def scan_forces(h, begin, end, rotate):
+    """Which banks hear a force in samples [begin, end) of their inputs into ``h.forced``;
+    banks ``unseen`` count as forced. First the stretch scanned before is folded into
+    ``heard_now`` and ``unrendered``. ``rotate`` (a period starts): the last period's
+    ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected no
+    impact and heard nothing in this or the last period. Returns (any heard_before, any
+    onset). A bank that heard a force in this period already is not scanned."""
     any_before = False
     any_onset = False
-    for b in range(addresses.size):
+    heard_now, heard_before, forced = h.heard_now, h.heard_before, h.forced
+    for b in range(h.inputs.size):
         heard_now[b] |= forced[b]
-        unrendered[b] |= forced[b]
+        h.unrendered[b] |= forced[b]
         if rotate:
             heard_before[b] = heard_now[b]
             heard_now[b] = False
         any_before |= heard_before[b]
-        loud = unseen[b]
+        loud = h.unseen[b]
         if not loud and not heard_now[b]:
-            x = nb.carray(void_pointer(addresses[b]), (size,), np.float64)
+            x = nb.carray(void_pointer(h.inputs[b]), (h.size,), np.float64)
             for i in range(begin, end):
                 if x[i] != 0.0:
                     loud = True
                     break
         forced[b] = loud
-        onset[b] = loud and not (expected[b] or heard_now[b] or heard_before[b] or unseen[b])
-        any_onset |= onset[b]
+        h.onset[b] = loud and not (h.expected[b] or heard_now[b] or heard_before[b] or h.unseen[b])
+        any_onset |= h.onset[b]
     return any_before, any_onset

@@ -57,6 +57,7 @@ class Graph:
         self._location_targets = {
             n: [u for u in self.downstream(n) if u.accepts_location] for n in self.nodes
         }
+        self._struck = {n: self._first_resonators(n) for n in self.nodes}
         self.sample_rate: float | None = None
 
     # ------------------------------------------------------------------ building
@@ -147,6 +148,27 @@ class Graph:
             out.append(m)
             stack.extend(self._consumers[m])
         return out
+
+    def _first_resonators(self, name: str) -> list[UGen]:
+        """Location-accepting nodes fed by node ``name`` through no other such node."""
+        out: list[UGen] = []
+        stack, seen = list(self._consumers[name]), set()
+        while stack:
+            m = stack.pop()
+            if m in seen:
+                continue
+            seen.add(m)
+            if self.nodes[m].accepts_location:
+                out.append(self.nodes[m])
+            else:
+                stack.extend(self._consumers[m])
+        return out
+
+    def struck_targets(self, name: str) -> list[UGen]:
+        """The resonators (location-accepting nodes) whose force input an impact at node
+        ``name`` drives: those it reaches without passing through another resonator (a
+        bank fed by a struck bank hears that bank's output, not the impact)."""
+        return self._struck[name]
 
     def downstream(self, name: str) -> list[UGen]:
         """Nodes fed (directly or indirectly) by node ``name``."""

@@ -11,7 +11,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
-from numba.core import caching, cgutils, codegen, types
+from numba.core import caching, cgutils, codegen, dispatcher, types
 from numba.extending import intrinsic
 
 
@@ -136,7 +136,7 @@ def _lock_cache_index_updates() -> None:
     numba saves a new specialisation by reading the function's index, adding an entry
     under the first free data-file number and writing the index back. Two processes that
     save different specialisations of one function at once (``jassy warm``'s scenes, or a
-    render and its compile helper, jassy.coldstart) can both pick the same number, and one
+    render and its compile helper, jassy.engines.coldstart) can both pick the same number, and one
     index would then name the other's data. An exclusive ``flock`` on the cache folder
     around the update serialises them; each file is still written to a temporary name and
     renamed by numba."""
@@ -160,5 +160,28 @@ def _lock_cache_index_updates() -> None:
     cache_file.save = save_locked
 
 
+def _no_c_wrappers_for_kernels() -> None:
+    """Compile ``numba.njit`` kernels without numba's C-callable wrapper.
+
+    numba lowers and optimises, for every specialisation, a C wrapper that lets the kernel
+    be used as a first-class function value (``types.FunctionType``). jassy never uses a
+    kernel that way (kernels passed to kernels are typed as dispatchers and called
+    directly), and the wrappers were 5-9 % of a cold bell render's CPU (the same output
+    bits without them). ``numba.cfunc`` compiles keep theirs: it is their entry point."""
+    compiler = getattr(dispatcher, "_FunctionCompiler", None)
+    customise = getattr(compiler, "_customize_flags", None)
+    if customise is None or getattr(customise, "drops_c_wrapper", False):
+        return
+
+    def customise_without_c_wrapper(self, flags):
+        flags = customise(self, flags)
+        flags.no_cfunc_wrapper = True
+        return flags
+
+    customise_without_c_wrapper.drops_c_wrapper = True
+    compiler._customize_flags = customise_without_c_wrapper
+
+
 _keep_linked_copies_private()
 _lock_cache_index_updates()
+_no_c_wrappers_for_kernels()

@@ -120,9 +120,10 @@ class ForceSpectrum(NamedTuple):
 
 
 #: RMS level (dBFS) at which a calibrated tonal force source, at its reference operating
-#: point, rings a calibrated model (mean power over the model's locations): 10 dB under the
-#: reference strike's peak, so a noise band's peaks (crest ~4) come near -18 dBFS too.
-TONAL_RMS_DBFS = -28.0
+#: point, rings a calibrated model (mean power over the model's locations): 8 dB under the
+#: reference strike's peak, so that the peaks stay within -30..-6 dBFS over TONAL_DRIVES too
+#: (ResonantScrape at 0.2 m/s is 7 dB under its 1 m/s reference by its amplitude law).
+TONAL_RMS_DBFS = -26.0
 
 
 def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
@@ -146,14 +147,54 @@ def response_power(model: ModalModel, spectrum: ForceSpectrum, sample_rate: floa
     return power + (spectrum.density(f) * noise_bandwidth) @ (a * a).T
 
 
+def _mode_power_integral(omega: np.ndarray, w: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """G(W) with dG/dW = |H(W)|^2, H(W) = w / ((d + i W)^2 + w^2) one mode's transfer
+    function at angular frequency W: H = (1 / (2 i)) (1 / A - 1 / C), A = d + i (W - w),
+    C = d + i (W + w), so |H|^2 = (|1/A|^2 + |1/C|^2 - 2 Re 1 / (A conj(C))) / 4; the last
+    term by partial fractions over A + conj(C) = 2 (d - i w), whose logs (Re > 0) are
+    ln|.| + i atan(Im / d)."""
+    below, above = np.arctan((omega - w) / d), np.arctan((omega + w) / d)
+    log_ratio = 0.5 * np.log((d * d + (omega + w) ** 2) / (d * d + (omega - w) ** 2))
+    cross = (d * (below + above) - w * log_ratio) / (d * d + w * w)
+    return ((below + above) / d - cross) / 4.0
+
+
+def band_line_power(
+    model: ModalModel, edges: np.ndarray, amplitudes: np.ndarray, sample_rate: float
+) -> np.ndarray:
+    """Mean square (mean over the model's locations) of the response to sinusoids of peak
+    ``amplitudes`` (N; L values, or S x L) whose frequencies are each averaged over a band,
+    band s of line l spanning edges[s, l]..edges[s + 1, l] Hz (``edges``: S + 1 x L,
+    rising): per band, sum over lines A^2 / 2 sum_k a_k^2 <|H_k|^2>, the mean of |H_k|^2 over
+    the band in closed form (_mode_power_integral); cross terms of overlapping modes left
+    out, as in response_power's broadband part. Modes at or above Nyquist are silent, and so
+    is a band of zero width."""
+    audible = model.frequencies < sample_rate / 2
+    w = 2.0 * np.pi * model.frequencies[audible][:, None]
+    d = np.maximum(model.decays[audible], 1e-12)[:, None]
+    weight = (model.gains[:, audible] ** 2).mean(axis=0)  # a_k^2, mean over locations
+    omega = 2.0 * np.pi * np.asarray(edges, float)
+    integral = np.stack([weight @ _mode_power_integral(row[None, :], w, d) for row in omega])  # S + 1 x L
+    span = np.diff(omega, axis=0)
+    mean = np.divide(np.diff(integral, axis=0), span, out=np.zeros_like(span), where=span > 0)
+    return (mean * np.asarray(amplitudes, float) ** 2 / 2.0).sum(axis=-1)
+
+
+def tonal_level_factor(model: ModalModel, power: np.ndarray, sample_rate: float) -> np.ndarray:
+    """The factor on a tonal source's force that makes a calibrated ModalBank of ``model``
+    ring at TONAL_RMS_DBFS RMS when the unscaled force's response has mean square ``power``
+    (mean over the model's locations, per operating point; 1 where the model cannot hear it)."""
+    rms = reference_gain(model, sample_rate) * np.sqrt(power)
+    return np.where(rms > 0, 10 ** (TONAL_RMS_DBFS / 20) / np.where(rms > 0, rms, 1.0), 1.0)
+
+
 def tonal_level_gain(model: ModalModel, spectrum: ForceSpectrum, sample_rate: float) -> np.ndarray:
     """The factor on a tonal source's force that makes a calibrated ModalBank of ``model``
     ring at TONAL_RMS_DBFS RMS (mean power over the model's locations) under ``spectrum``
     (1 where the model cannot hear it). A spectrum whose density gives one row per operating
     point (S x modes) gets S factors."""
     power = response_power(model, spectrum, sample_rate).mean(axis=-1)
-    rms = reference_gain(model, sample_rate) * np.sqrt(power)
-    return np.where(rms > 0, 10 ** (TONAL_RMS_DBFS / 20) / np.where(rms > 0, rms, 1.0), 1.0)
+    return tonal_level_factor(model, power, sample_rate)
 
 
 class Drive(NamedTuple):
@@ -182,28 +223,38 @@ FORCE_SOURCES = {
 #: Force sources whose force is a line spectrum or a narrow band (ResonantScrape's resonance,
 #: the drill burr's rotation harmonics): in N their level on a model depends on whether a line
 #: meets a mode (at 0.2 m/s and 1 N over the 17 shipped models: -28.5..+6.1 and -35.7..-1.3
-#: dBFS), so with ``level = "calibrated"`` they are given the model they drive and scale their
-#: force by its response at their own frequencies (tonal_level_gain). Events as FORCE_SOURCES,
-#: at the reference operating point: ResonantScrape's reference contact (1 N, 1 m/s), the
-#: drill's light cut (1 N, 1 mm^3/s).
+#: dBFS), so they are given the model they drive and then (``level = "auto"``, the default)
+#: scale their force by its response at their own frequencies (tonal_level_gain, level tables
+#: over speed and rpm). Events as FORCE_SOURCES, at the reference operating point:
+#: ResonantScrape's reference contact (1 N, 1 m/s), the drill's light cut (1 N, 1 mm^3/s).
 MODEL_CALIBRATED_SOURCES = {
     "ResonantScrape": Drive("set", {"speed": 1.0}),
     "DrillSource": Drive("set", {"force": 1.0, "removal": 1.0}),
 }
 
 
-def driven_source(type_name: str, model: ModalModel, name: str = "src"):
+#: Further operating points of the tonal force sources at which their defaults, given the
+#: model, stay within -30..-6 dBFS: ResonantScrape at the everyday scraping speed of
+#: FORCE_SOURCES (0.2 m/s), the drill's light cut at 10000 and 100000 rpm (its level table).
+TONAL_DRIVES = {
+    "ResonantScrape": (Drive("set", {"speed": 0.2}),),
+    "DrillSource": tuple(Drive("set", {"force": 1.0, "removal": 1.0, "rpm": rpm}) for rpm in (1e4, 1e5)),
+}
+
+
+def driven_source(type_name: str, model: ModalModel, name: str = "src", drive: Drive | None = None):
     """A force source of FORCE_SOURCES or MODEL_CALIBRATED_SOURCES at its defaults (the
-    latter calibrated to ``model``) and the event, at 0.01 s, that sets it going."""
+    latter given ``model``, so calibrated to it) and the event, at 0.01 s, that sets it going
+    (``drive``, default: the source's own)."""
     import ugens  # ugens import jassy
     from jassy import Event
 
     cls = getattr(ugens, type_name)
     if type_name in MODEL_CALIBRATED_SOURCES:
-        drive = MODEL_CALIBRATED_SOURCES[type_name]
-        source = cls(model, name=name, level="calibrated")
+        drive = drive or MODEL_CALIBRATED_SOURCES[type_name]
+        source = cls(model, name=name)
     else:
-        drive = FORCE_SOURCES[type_name]
+        drive = drive or FORCE_SOURCES[type_name]
         source = cls(name=name)
     return source, Event(0.01, name, drive.action, drive.args)
 
@@ -268,9 +319,9 @@ def level_convention(type_name: str) -> str:
         )
     if type_name in MODEL_CALIBRATED_SOURCES:
         return (
-            "a force in N with a line or narrow-band spectrum; level = 'calibrated' with the model it "
-            f"drives: {TONAL_RMS_DBFS:g} dBFS RMS through a calibrated ModalBank at its reference "
-            "operating point"
+            "a force in N with a line or narrow-band spectrum; given the model it drives (level "
+            f"'auto', the default): {TONAL_RMS_DBFS:g} dBFS RMS through a calibrated ModalBank at "
+            "its reference operating point, at any speed or rpm (a level table)"
         )
     if type_name in CALIBRATED_LOOPS:
         return "level = 'calibrated' scales what it outputs by the model's reference gain (as ModalBank)"

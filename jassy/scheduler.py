@@ -139,10 +139,13 @@ class Scheduler:
         self.inline = [self._is_inline(ev) for ev in self.events]
         self.next_event = 0
         self.frame = 0
+        self._impacts = None  # (frames, impacts) of the score, listed when first asked
         budget = graph.budget
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
-            budget.attach(graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders)
+            budget.attach(
+                graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders, graph.audio
+            )
             if not budget.active or budget.renders:  # it holds every mode, or splits the banks'
                 self.period = None  # sub-blocks itself where it decides: no sub-block cuts
 
@@ -156,6 +159,7 @@ class Scheduler:
         self.sample_times.insert(i, sample_time)
         self.apply_frames.insert(i, frame)
         self.inline.insert(i, self._is_inline(event))
+        self._impacts = None  # listed again when next asked
 
     def _is_inline(self, event: Event) -> bool:
         """Whether the event's node (and every node its impact location moves) applies it at
@@ -167,25 +171,32 @@ class Scheduler:
         return all(t.inline_events for t in self.graph.location_targets(event.node))
 
     def upcoming_impulses(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
-        """(frame, ugens downstream, impulse N s, location or None) of the impact-like events
-        applied in frames [start, end); an action without an ``impulse`` argument counts as
-        1 N s. The location is the impact's own, else one set on that ugen at that frame
-        (rigid scenes set each bank's location, then strike its hammer)."""
-        out, impacts, placed = [], [], {}
-        i = bisect.bisect_left(self.apply_frames, start)
-        while i < len(self.events) and self.apply_frames[i] < end:
-            ev = self.events[i]
+        """(frame, ugens whose force it drives, impulse N s, location or None) of the
+        impact-like events applied in frames [start, end); an action without an ``impulse``
+        argument counts as 1 N s. The location is the impact's own, else one set on that
+        ugen at that frame (rigid scenes set each bank's location, then strike its hammer).
+        Listed once per score (again after :meth:`insert`), then found by bisection."""
+        if self._impacts is None:
+            self._impacts = self._list_impacts()
+        frames, impacts = self._impacts
+        return impacts[bisect.bisect_left(frames, start) : bisect.bisect_left(frames, end)]
+
+    def _list_impacts(self) -> tuple[list[int], list[tuple[int, list, float, object]]]:
+        """Every impact of the score, in frame order, as :meth:`upcoming_impulses` lists them,
+        and their frames."""
+        impacts, placed = [], {}
+        for frame, ev in zip(self.apply_frames, self.events, strict=True):
             if ev.action != "set":
-                impacts.append((self.apply_frames[i], ev))
+                impacts.append((frame, ev))
             elif "location" in ev.args:
-                placed[(self.apply_frames[i], ev.node)] = ev.args["location"]
-            i += 1
+                placed[(frame, ev.node)] = ev.args["location"]
+        out = []
         for frame, ev in impacts:
             impulse, location = float(ev.args.get("impulse", 1.0)), ev.args.get("location")
-            for target in self.graph.location_targets(ev.node):
+            for target in self.graph.struck_targets(ev.node):
                 where = location if location is not None else placed.get((frame, target.name))
                 out.append((frame, [target], impulse, where))
-        return out
+        return [record[0] for record in out], out
 
     def _dispatch(self, index: int) -> None:
         ev = self.events[index]

@@ -23,7 +23,14 @@ from patches.models_impacts import plate_model
 from ugens.impact import ImpactForce
 from ugens.impact_train import ImpactTrain, auto_micro, effective_modulus, hertz_duration, micro_schedule
 from ugens.modal import ModalBank
-from ugens.nonlinear_impact import HuntCrossleyImpact, energy_safeguard, power, step_energy
+from ugens.nonlinear_impact import (
+    HammerParams,
+    HuntCrossleyImpact,
+    StepSums,
+    energy_safeguard,
+    power,
+    step_energy,
+)
 
 FS = 48000
 BLOCKS = (1, 64, 1000)
@@ -322,7 +329,19 @@ def test_energy_is_conserved_without_losses():
 def test_energy_safeguard_returns_the_force_nearest_to_the_energy_bound():
     """E(f) (hammer kinetic + modal quadratic + V) is convex: the safeguard returns the force
     closest to f on {E <= e_prev}, or the minimiser when that set is empty."""
-    args = (0.3, 0.01, 1 / FS, 1e-3, -2e-6, 1e-9, 2e-5, 1e-9, 1e7, 1.5)  # v_h, m, T, S0, S1, S2, x, K, k, a
+    sums = StepSums(vh_free=0.3, s0=1e-3, s1=-2e-6, s2=1e-9, x_free=2e-5)
+    params = HammerParams(
+        mass=0.01,
+        stiffness=1e7,
+        alpha=1.5,
+        dissipation=0.0,
+        step=1 / FS,
+        compliance=1e-9,
+        gain_sum=0.0,
+        energy_gain=1e-9,
+        floor=0.0,
+    )
+    args = (sums, params)
     f = np.linspace(0, 300, 30001)
     e = np.array([step_energy(x, *args)[0] for x in f])
     f_min, e_min = f[np.argmin(e)], e.min()

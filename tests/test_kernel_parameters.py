@@ -17,18 +17,6 @@ PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
-    ("jassy/anytime_rank.py", "scan_forces"),  # 12
-    ("physics/burr/contact.py", "voxel_moments"),  # 11
-    ("physics/burr/octree.py", "_brick"),  # 11
-    ("physics/burr/octree.py", "_descend"),  # 13
-    ("physics/deform/quadrature.py", "_add_point"),  # 16
-    ("physics/deform/quadrature.py", "_regular"),  # 16
-    ("physics/deform/quadrature.py", "_rule"),  # 16
-    ("physics/deform/quadrature.py", "_singular"),  # 15
-    ("physics/deform/quadrature.py", "integrate_rows"),  # 13
-    ("physics/deform/shape_matching.py", "_advance"),  # 18
-    ("physics/deform/shape_matching.py", "_contact_impulses"),  # 16
-    ("physics/deform/shape_matching.py", "_goals"),  # 15
     ("physics/rigid/impulses.py", "_row_apply"),  # 13
     ("physics/rigid/impulses.py", "_row_velocity"),  # 11
     ("physics/rigid/integrate.py", "_solve3"),  # 12
@@ -36,26 +24,11 @@ WIDER = {
     ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
     ("physics/rigid/meshgrid.py", "grid_closest"),  # 12
     ("physics/rigid/meshgrid.py", "grid_within"),  # 15
-    ("physics/rod/mixed.py", "_element_terms"),  # 14
-    ("ugens/bubbles.py", "bubbles"),  # 13
-    ("ugens/drill.py", "drill_kernel"),  # 14
-    ("ugens/engine_noise.py", "engine_noise"),  # 11
-    ("ugens/friction.py", "bristle_residual"),  # 11
-    ("ugens/friction.py", "friction_run"),  # 11
     ("ugens/modal.py", "mixed_step"),  # 12
     ("ugens/modal.py", "resonate"),  # 11
     ("ugens/modal.py", "resonate_ramp"),  # 11
     ("ugens/modal_f32.py", "resonate_delta"),  # 11
-    ("ugens/modal_retune.py", "pole_rows"),  # 12
-    ("ugens/nonlinear_impact.py", "energy_safeguard"),  # 12
-    ("ugens/nonlinear_impact.py", "hc_run"),  # 11
-    ("ugens/nonlinear_impact.py", "hc_run_substeps"),  # 14
-    ("ugens/nonlinear_impact.py", "step_energy"),  # 11
-    ("ugens/reverb.py", "reverb_run"),  # 14
     ("ugens/roll.py", "rolling_filter"),  # 11
-    ("ugens/spatial.py", "spatialise"),  # 11
-    ("ugens/stochastic.py", "bounces"),  # 17
-    ("ugens/stochastic.py", "micro_impacts"),  # 17
 }
 
 

@@ -124,3 +124,14 @@ def test_a_low_cluster_of_slow_modes_two_hertz_apart():
     ph = np.linspace(0.0, 2.0, len(f))
     x = strike(f, d, a, 2.0, sigma=10 ** (-60 / 20), phases=ph)
     assert_recovered(fit_recordings(x, RATE).model, f, d, a)
+
+
+def test_the_bench_credits_one_fitted_mode_to_one_true_mode():
+    """Two true modes 0.2 Hz apart (each tolerance 0.3 Hz) and one fitted mode between them:
+    one is found, not both; a second fitted mode near the other makes both found."""
+    from physics.modal.fit_bench import match_modes
+
+    true_f, tol = np.array([100.0, 100.2]), np.array([0.3, 0.3])
+    np.testing.assert_array_equal(match_modes(true_f, tol, np.array([100.12])), [-1, 0])
+    np.testing.assert_array_equal(match_modes(true_f, tol, np.array([100.12, 99.95])), [1, 0])
+    np.testing.assert_array_equal(match_modes(true_f, tol, np.array([101.0])), [-1, -1])

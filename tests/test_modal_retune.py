@@ -68,7 +68,7 @@ def reference_retune(coef, fresh, old_poles, new_poles, y1, y2, fp, fs):
 def compiled_poles(freqs, decays, band):
     k = freqs.size
     poles, sin2, inv = np.empty((4, k)), np.empty(k), np.empty(k)
-    pole_rows(freqs, decays, 1.0, 1.0, FS, band, *TOP_BAND_ROWS, poles, sin2, inv)
+    pole_rows(freqs, decays, 1.0, 1.0, FS, band, TOP_BAND_ROWS, poles, sin2, inv)
     return poles, sin2, inv
 
 

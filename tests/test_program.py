@@ -95,6 +95,28 @@ def test_python_events_output_limits_and_offsets_match_the_nodes_one_by_one(bloc
     assert (flags, meter) == (node_flags, node_meter)
 
 
+def test_many_overlapping_strikes_grow_the_pulse_table_between_compiled_runs():
+    """Forty strikes inside one 5 ms pulse (the table starts with 16 rows) and more events
+    than a run's queue holds (capacity 4096 records, 5000 strikes): the compiled render
+    grows the table and the queue before its runs and matches the nodes one by one."""
+    score = [
+        Event(0.01 + 2.5e-5 * k, "hit", "impact", {"impulse": 1e-4, "location": k % 3}) for k in range(40)
+    ]
+    score += [Event(0.02 + 1e-5 * k, "hit", "impact", {"impulse": 1e-5}) for k in range(5000)]
+    rendered = []
+    for program in (False, True):
+        hit = ImpactForce(name="hit", duration=0.005)
+        plate = ModalBank(plate_model(), name="plate")(hit)
+        engine = OfflineEngine(
+            Graph(Gain(plate, gain=0.05, name="out"), haptic=hit), score, FS, 64, program=program
+        )
+        assert (engine.program is not None) == program
+        rendered.append(engine.render(0.1))
+    assert np.max(np.abs(rendered[0].haptic)) > 40 * 1e-4 * FS / 240  # the pulses overlap
+    np.testing.assert_array_equal(rendered[1].audio, rendered[0].audio)
+    np.testing.assert_array_equal(rendered[1].haptic, rendered[0].haptic)
+
+
 def test_nan_in_a_program_graph_is_zeroed_reported_and_its_node_reset():
     """A bank driven to Inf (a gain of 1e308) produces non-finite samples in compiled code:
     they never leave the engine, the render says which node, and the node is reset."""

@@ -13,7 +13,15 @@ import pytest
 
 import ugens
 from jassy import Event, Graph, ModalModel, render
-from jassy.levels import FORCE_SOURCES, MODEL_CALIBRATED_SOURCES, SOUND_SOURCES, calibrated, driven_source
+from jassy.levels import (
+    FORCE_SOURCES,
+    MODEL_CALIBRATED_SOURCES,
+    SOUND_SOURCES,
+    TONAL_DRIVES,
+    Drive,
+    calibrated,
+    driven_source,
+)
 from patches.objects import OBJECTS
 from patches.shipped import shipped_models
 from ugens.nonlinear_impact import DEFAULT_STRIKE_SPEED
@@ -29,8 +37,8 @@ def once_calibrated(model: ModalModel) -> ModalModel:
     return model if model.reference_gain is not None else calibrated(model)
 
 
-def peak_dbfs(model: ModalModel, source: str) -> float:
-    src, event = driven_source(source, model)
+def peak_dbfs(model: ModalModel, source: str, drive: Drive | None = None) -> float:
+    src, event = driven_source(source, model, drive=drive)
     bank = ugens.ModalBank(model, name="bank", level="calibrated")(src)
     y = render(Graph(bank), [event], duration=DURATION, sample_rate=48000, limiter=False).audio[0]
     return 20 * math.log10(max(float(np.abs(y).max()), 1e-30))
@@ -41,6 +49,8 @@ def peak_dbfs(model: ModalModel, source: str) -> float:
 def test_every_default_force_source_on_a_shipped_model_peaks_between_minus_30_and_minus_6_dbfs(filename):
     model = once_calibrated(ModalModel.load(PATCHES / filename))
     levels = {s: peak_dbfs(model, s) for s in [*FORCE_SOURCES, *MODEL_CALIBRATED_SOURCES]}
+    for source, drives in TONAL_DRIVES.items():  # the tonal ones over their operating range
+        levels.update({f"{source} {d.args}": peak_dbfs(model, source, d) for d in drives})
     outside = {s: round(db, 1) for s, db in levels.items() if not -30.0 <= db <= -6.0}
     assert not outside, f"{filename}: {outside} dBFS"
 

@@ -34,7 +34,7 @@ fluidflow~).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -43,6 +43,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import with_room
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec
 from ugens.stochastic import next_event, u01
@@ -59,6 +60,36 @@ _ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
 _ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
 # st: accumulated rate, threshold, held radius
 _ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects
+
+
+class BubbleParams(NamedTuple):
+    """Settings read at each birth, stored in this order in the float64 array ``par``."""
+
+    r_lo: float  #: smallest stream radius (m)
+    r_hi: float  #: largest stream radius (m)
+    exponent: float  #: radius density p(r) ~ r^-exponent
+    d_lo: float  #: smallest depth factor
+    d_hi: float  #: largest depth factor
+    rise: float  #: rise factor sigma: frequency f0 (1 + sigma d t)
+    gain: float  #: full-scale amplitude of a 1 mm bubble at depth 1
+    floor: float  #: a bubble ends below floor times its initial amplitude
+
+
+@nb.njit(inline="always", cache=True)
+def bubble_params(par):
+    """The BubbleParams record held in ``par``."""
+    return BubbleParams(par[0], par[1], par[2], par[3], par[4], par[5], par[6], par[7])
+
+
+class BubbleData(NamedTuple):
+    """The arrays :func:`bubbles` updates."""
+
+    voices: np.ndarray  #: (7, max voices): phasor, its factor and rotation, end level per voice
+    meta: np.ndarray  #: int64 counts: active voices, pending bubbles, births, logged births
+    pending: np.ndarray  #: (rows, 3) scheduled bubbles: t0 (samples), radius (m), depth
+    st: np.ndarray  #: stream state: accumulated rate, threshold, held radius (m)
+    rng: np.ndarray  #: splitmix64 state, one uint64
+    log: np.ndarray  #: (rows, 3) stream births: t0 (samples), radius (m), depth
 
 
 def minnaert_frequency(radius):
@@ -161,15 +192,16 @@ def power_law_radius(u, lo, hi, exponent):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def bubbles(out, radius_out, start, n, fs, voices, meta, pending, rate, par, st, rng, log):
+def bubbles(out, radius_out, start, n, fs, rate, par, d):
     """Frames start .. start + n - 1 of scheduled bubbles (pending) plus a Poisson stream.
 
-    pending[j] = (t0 in samples, radius, depth), in time order; a bubble sounds from the
-    first frame after t0. Stream births in [idx, idx + 1) start at frame idx + 1.
-    par = (min radius, max radius, exponent, min depth, max depth, rise, gain, floor).
+    d: a BubbleData; pending[j] = (t0 in samples, radius, depth), in time order; a bubble
+    sounds from the first frame after t0. Stream births in [idx, idx + 1) start at frame
+    idx + 1. par holds a BubbleParams; rate: births per second at each frame.
     """
-    r_lo, r_hi, exponent, d_lo, d_hi = par[0], par[1], par[2], par[3], par[4]
-    rise, gain, floor = par[5], par[6], par[7]
+    voices, meta, pending, st, rng, log = d
+    prm = bubble_params(par)
+    r_lo, r_hi, exponent, d_lo, d_hi, rise, gain, floor = prm
     active = meta[_ACTIVE]
     for i in range(n):
         idx = start + i
@@ -242,26 +274,14 @@ class _Bubbles(UGen):
         self.log = np.zeros((int(self.log_capacity), 3))
         self._rates = np.zeros(self.max_block)
         self._radii = np.zeros(self.max_block)
-        self.par = np.zeros(8)
+        self.par = np.zeros(len(BubbleParams._fields))
         self._update_params()
         x = self.out
-        args = (
-            x,
-            x,
-            0,
-            0,
-            1.0,
-            self.voices,
-            self.meta,
-            self.pending,
-            x,
-            self.par,
-            self.st,
-            self.rng,
-            self.log,
-        )
-        self._kernel = specialise(bubbles, *args)
+        self._kernel = specialise(bubbles, x, x, 0, 0, 1.0, x, self.par, self._data())
         self._steady_rate: float | None = None
+
+    def _data(self) -> BubbleData:
+        return BubbleData(self.voices, self.meta, self.pending, self.st, self.rng, self.log)
 
     def _reset(self) -> None:
         self.voices[:] = 0.0
@@ -306,21 +326,7 @@ class _Bubbles(UGen):
         self._update_params()
 
     def _run(self, start: int, n: int, rates: np.ndarray, radius_out: np.ndarray) -> None:
-        self._kernel(
-            self.out,
-            radius_out,
-            start,
-            n,
-            self.sample_rate,
-            self.voices,
-            self.meta,
-            self.pending,
-            rates,
-            self.par,
-            self.st,
-            self.rng,
-            self.log,
-        )
+        self._kernel(self.out, radius_out, start, n, self.sample_rate, rates, self.par, self._data())
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -366,8 +372,7 @@ class Bubble(_Bubbles):
         if action != "bubble":
             return super().act(action, args, sample_time)
         k = int(self.meta[_PENDING])
-        if k == self.pending.shape[0]:
-            self.pending = np.concatenate([self.pending, np.zeros_like(self.pending)])
+        self.pending = with_room(self.pending, k + 1)
         self.pending[k] = (sample_time, args["radius"], args["depth"])
         self.meta[_PENDING] = k + 1
 

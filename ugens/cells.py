@@ -6,7 +6,9 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 * :func:`raised_cosine`: the 1 - cos contact pulse of JASS's BangForce (van den Doel & Pai,
   "JASS: a Java audio synthesis system for programmers", ICAD 2001);
 * :func:`pulse_sum`: its sampled sum, which scales a pulse to an exact impulse;
-* :func:`with_room`: a table that doubles its rows when full (pulse tables);
+* :func:`with_room`: a table that doubles its rows when full; :func:`pulse_amplitude`,
+  :func:`append_pulse`, :func:`append_pulses`: pulses added to a (t0, T, A) pulse table
+  (ImpactForce, ImpactTrain, Crumple, Break, Bounce);
 * :func:`decay_sums`, :func:`add_onset`, :func:`drop_row`: exponential pulses r^x and x r^x
   (x samples after their onsets) kept as two running sums and a queue of pending onsets
   (the blast waves of Explosion, the firings of Engine);
@@ -15,7 +17,8 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
   transition over a step (HuntCrossleyImpact, the heard output of closed loops);
   :func:`silent`: the test by which silent modes are zeroed;
 * :func:`store`: a kernel's named state record written back to the float64 array that holds
-  it (its fields in order; the record's reader is the inverse).
+  it (its fields in order; the record's reader is the inverse); :func:`slot`: where one
+  field of such a record sits in its array.
 """
 
 from __future__ import annotations
@@ -59,6 +62,35 @@ def with_room(table, rows):
         for j in range(table.shape[1]):
             grown[i, j] = table[i, j]
     return grown
+
+
+@nb.njit(cache=True)
+def pulse_amplitude(impulse, fs, t0, T):
+    """The amplitude A of a 1 - cos pulse of ``impulse`` N s starting at fractional sample t0,
+    T samples long, whose samples sum to exactly impulse * fs (:func:`pulse_sum`)."""
+    return impulse * fs / pulse_sum(t0, T)
+
+
+@nb.njit(cache=True)
+def append_pulse(pulses, count, t0, T, amplitude):
+    """Row ``count`` of a (t0, T, A) pulse table set to (t0, T, amplitude); returns the table
+    (a larger copy if it was full)."""
+    pulses = with_room(pulses, count + 1)
+    pulses[count, 0] = t0
+    pulses[count, 1] = T
+    pulses[count, 2] = amplitude
+    return pulses
+
+
+@nb.njit(cache=True)
+def append_pulses(pulses, count, starts, lengths, impulses, fs):
+    """Pulses of ``impulses`` N s at fractional samples ``starts``, ``lengths`` samples long,
+    appended to a (t0, T, A) pulse table grown once (:func:`pulse_amplitude`)."""
+    pulses = with_room(pulses, count + starts.shape[0])
+    for k in range(starts.shape[0]):
+        amplitude = pulse_amplitude(impulses[k], fs, starts[k], lengths[k])
+        pulses = append_pulse(pulses, count + k, starts[k], lengths[k], amplitude)
+    return pulses
 
 
 @nb.njit(inline="always", cache=True)
@@ -110,3 +142,9 @@ def store(array, record):
     """Write the fields of ``record`` (a NamedTuple of floats) to array[0], array[1], ..."""
     for k in range(len(record)):
         array[k] = record[k]
+
+
+def slot(record_type: type, field: str) -> int:
+    """Index of ``field`` of a NamedTuple record type in the float64 array that holds the record
+    (for a host-side write of one setting)."""
+    return record_type._fields.index(field)

@@ -40,7 +40,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import store
+from ugens.cells import slot, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -87,10 +87,6 @@ class MotorState(NamedTuple):
 def motor_state(st):
     """The MotorState record held in ``st``."""
     return MotorState(st[0], st[1])
-
-
-def _slot(name: str) -> int:
-    return MotorParams._fields.index(name)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -202,7 +198,9 @@ class DCMotor(UGen):
         "gear_level": ParamSpec("float", 0.03, low=0.0, high=100.0, doc="gear-mesh whine at 3000 rpm"),
         "seed": seed_spec(),
     }
-    _LEVELS = {key: _slot(key) for key in ("rotor_level", "ripple_level", "brush_level", "gear_level")}
+    _LEVELS = {
+        key: slot(MotorParams, key) for key in ("rotor_level", "ripple_level", "brush_level", "gear_level")
+    }
 
     def _prepare(self) -> None:
         v = self.values
@@ -210,9 +208,9 @@ class DCMotor(UGen):
         self.rng = np.zeros(1, dtype=np.uint64)
         self.par = np.zeros(len(MotorParams._fields))
         fixed = ("resistance", "motor_constant", "inertia", "friction", "segments", "teeth")
-        self.par[_slot("fs")] = self.sample_rate
+        self.par[slot(MotorParams, "fs")] = self.sample_rate
         for key in fixed:
-            self.par[_slot(key)] = v[key]
+            self.par[slot(MotorParams, key)] = v[key]
         for key in (*self._LEVELS, "switched_on"):
             self._param_changed(key, v[key], True)
         self.voltage = self.smoothed("voltage")
@@ -241,7 +239,7 @@ class DCMotor(UGen):
         if key in ("voltage", "load"):
             getattr(self, key).set(value, self.ramp_samples(), jump)
         elif key == "switched_on":
-            self.par[_slot("on")] = 1.0 if value else 0.0
+            self.par[slot(MotorParams, "on")] = 1.0 if value else 0.0
         else:
             self.par[self._LEVELS[key]] = value
 

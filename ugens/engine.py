@@ -63,7 +63,7 @@ from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import engine_noise
-from ugens.cells import add_onset, decay_sums, drop_row, store
+from ugens.cells import add_onset, decay_sums, drop_row, slot, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -78,8 +78,10 @@ PEAK = 0.5
 QUEUE = 16
 #: XORed into the seed for the intake and mechanical noise (a stream of its own).
 NOISE_STREAM = 0x5DEECE66D
-#: Noise level parameters -> slots of the levels vector of ugens.engine_noise.
-_NOISE_LEVELS = {"intake_level": 0, "hiss": 1, "mechanical_level": 2}
+#: Noise level parameters -> fields of ugens.engine_noise.NoiseLevels.
+_NOISE_LEVELS = {"intake_level": "intake", "hiss": "hiss", "mechanical_level": "mechanical"}
+#: Where the two levels that switch the noise on sit in the levels array.
+_NOISE_INTAKE, _NOISE_MECHANICAL = (slot(engine_noise.NoiseLevels, k) for k in ("intake", "mechanical"))
 #: Rate (Hz) at which the noise levels are as set; other rates keep the spectral density.
 NOISE_RATE = 48000.0
 #: Band-limited ramp correction: samples either side of an onset, cut-off (fraction of
@@ -173,7 +175,7 @@ def engine_data(delay: float) -> EngineData:
 
 
 _IRREGULARITY, _MISFIRE, _PORT, _GAIN = (
-    EngineParams._fields.index(k) for k in ("irregularity", "misfire", "port", "gain")
+    slot(EngineParams, k) for k in ("irregularity", "misfire", "port", "gain")
 )
 
 
@@ -361,7 +363,11 @@ class Engine(UGen):
         self.noise_coef = engine_noise.design(v, fs)
         self.noise_state = np.zeros((3, 2))
         self.noise_rng = np.zeros(1, dtype=np.uint64)
-        self.noise_levels = np.zeros(3)
+        self.noise_levels = np.zeros(len(engine_noise.NoiseLevels._fields))
+        self._noise = engine_noise.EngineNoise(
+            self.noise_levels, self.noise_coef, self.noise_state, self.noise_rng
+        )
+        self._noise_run = None
         for key in ("intake_level", "hiss", "mechanical_level"):
             self._param_changed(key, v[key], True)
         self.rpm = self.smoothed("rpm")
@@ -422,7 +428,7 @@ class Engine(UGen):
             n,
             np.full(n, REFERENCE_RPM),
             np.ones(n),
-            engine_data(par[EngineParams._fields.index("delay")]),
+            engine_data(par[slot(EngineParams, "delay")]),
             par,
             _BLAMP,
         )
@@ -451,7 +457,7 @@ class Engine(UGen):
             # white noise of a fixed variance spreads over fs / 2: the noise terms (hiss,
             # block) scale by sqrt(fs / NOISE_RATE) to keep their spectral density at any rate
             density = 1.0 if key == "intake_level" else math.sqrt(self.sample_rate / NOISE_RATE)
-            self.noise_levels[_NOISE_LEVELS[key]] = value * density
+            self.noise_levels[slot(engine_noise.NoiseLevels, _NOISE_LEVELS[key])] = value * density
 
     def process(self, start: int, n: int) -> None:
         self._run(
@@ -465,8 +471,8 @@ class Engine(UGen):
             self.par,
             _BLAMP,
         )
-        if self.noise_levels[0] > 0.0 or self.noise_levels[2] > 0.0:
-            engine_noise.engine_noise(
+        if self.noise_levels[_NOISE_INTAKE] > 0.0 or self.noise_levels[_NOISE_MECHANICAL] > 0.0:
+            args = (
                 self.extra["pulses"],
                 self.out,
                 self.extra["intake"],
@@ -474,11 +480,11 @@ class Engine(UGen):
                 n,
                 self._rpms.buffer,
                 self._throttles.buffer,
-                self.noise_levels,
-                self.noise_coef,
-                self.noise_state,
-                self.noise_rng,
+                self._noise,
             )
+            if self._noise_run is None:  # the same arrays at every block: one typed entry point
+                self._noise_run = specialise(engine_noise.engine_noise, *args)
+            self._noise_run(*args)
         else:
             self.extra["intake"][:n] = 0.0
             self.extra["mechanical"][:n] = 0.0

@@ -27,6 +27,7 @@ intake, exhaust and engine-block vibration as separate sources).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -58,8 +59,29 @@ NOISE_SPECS = {
 
 # coefficient rows: airbox band-pass, hiss band-pass, block high-pass; state rows alike
 _AIRBOX, _HISS, _BLOCK = range(3)
-# levels vector: intake, hiss, mechanical
-_INTAKE, _HISS_LEVEL, _MECH = range(3)
+
+
+class NoiseLevels(NamedTuple):
+    """Levels of the noise sources, stored in this order in the float64 array ``levels``."""
+
+    intake: float  #: intake sound (``intake_level``)
+    hiss: float  #: throttle hiss relative to the intake pulses, scaled to the sample rate
+    mechanical: float  #: engine-block noise (``mechanical_level``), scaled to the sample rate
+
+
+@nb.njit(inline="always", cache=True)
+def noise_levels(levels):
+    """The NoiseLevels record held in ``levels``."""
+    return NoiseLevels(levels[0], levels[1], levels[2])
+
+
+class EngineNoise(NamedTuple):
+    """The noise's arrays: levels (a NoiseLevels), filters and their state, random stream."""
+
+    levels: np.ndarray  #: a NoiseLevels
+    coef: np.ndarray  #: (3, 5) biquads [b0, b1, b2, a1, a2]: airbox, hiss, block
+    state: np.ndarray  #: (3, 2) the biquads' states
+    rng: np.ndarray  #: splitmix64 state, one uint64
 
 
 def design(values: dict, fs: float) -> np.ndarray:
@@ -81,19 +103,22 @@ def _biquad(x, c, s):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def engine_noise(pulses, out, intake_out, mech_out, n, rpms, throttles, levels, coef, state, rng):
-    """Add intake and mechanical noise for n samples to out; write the extra outputs."""
+def engine_noise(pulses, out, intake_out, mech_out, n, rpms, throttles, noise):
+    """Add intake and mechanical noise (noise: the EngineNoise) for n samples to out; write
+    the extra outputs."""
+    levels = noise_levels(noise.levels)
+    coef, state, rng = noise.coef, noise.state, noise.rng
     s = rng[0]
     for i in range(n):
         speed = rpms[i] / REFERENCE_RPM
         p = pulses[i]
         s, u = uniform(s)
-        hiss = levels[_HISS_LEVEL] * throttles[i] * speed * math.sqrt(speed) * u
-        intake = levels[_INTAKE] * (
+        hiss = levels.hiss * throttles[i] * speed * math.sqrt(speed) * u
+        intake = levels.intake * (
             _biquad(-p, coef[_AIRBOX], state[_AIRBOX]) + _biquad(hiss, coef[_HISS], state[_HISS])
         )
         s, u = uniform(s)
-        mech = levels[_MECH] * _biquad(speed * speed * abs(p) * u, coef[_BLOCK], state[_BLOCK])
+        mech = levels.mechanical * _biquad(speed * speed * abs(p) * u, coef[_BLOCK], state[_BLOCK])
         intake_out[i] = intake
         mech_out[i] = mech
         out[i] += intake + mech

@@ -43,7 +43,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import add_onset, decay_sums, drop_row, store, with_room
+from ugens.cells import add_onset, decay_sums, drop_row, slot, store, with_room
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -89,7 +89,7 @@ def explosion_state(st):
     return ExplosionState(st[0], st[1], st[2], st[3], st[4], st[5], st[6])
 
 
-_DISPERSION = ExplosionParams._fields.index("dispersion")
+_DISPERSION = slot(ExplosionParams, "dispersion")
 
 
 def friedlander(t: np.ndarray, peak: float, blast_time: float, decay: float = 1.0) -> np.ndarray:

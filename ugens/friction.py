@@ -136,10 +136,41 @@ def friction_state(state):
     return FrictionState(state[0], state[1], state[2])
 
 
+class Sample(NamedTuple):
+    """A sample's bristle equation: the deflection z0 at its start and the relative velocity
+    v(z) = (A - K z) / D as a function of the deflection z at its end (see the module doc)."""
+
+    z0: float  #: bristle deflection at the start of the sample (m)
+    A: float  #: v(0) D (m/s)
+    K: float  #: -dv/dz D (1/s)
+    D: float  #: 1 + G fs sigma2
+
+
+class Bristle(NamedTuple):
+    """The elasto-plastic bristle's constants for one sample."""
+
+    T: float  #: sample period (s)
+    s0: float  #: bristle stiffness sigma0 (N/m)
+    f_s: float  #: static friction force (N)
+    f_c: float  #: Coulomb friction force (N)
+    v_s: float  #: Stribeck velocity (m/s)
+    z_ba: float  #: break-away deflection (m)
+
+
+class Drive(NamedTuple):
+    """Per-sample inputs of :func:`friction_run`."""
+
+    speeds: np.ndarray  #: bow (surface) speed (m/s)
+    normals: np.ndarray  #: normal force (N)
+    strikes: np.ndarray  #: external force on the contact point (N)
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
+def bristle_residual(z, sample, bristle):
     """R(z) = z - z0 - T g(z, v(z)) and dR/dz, with v(z) = (A - K z) / D and
-    g = dz/dt of the elasto-plastic bristle (magnitudes f_s, f_c in N, z_ba in m)."""
+    g = dz/dt of the elasto-plastic bristle (a Sample and a Bristle)."""
+    z0, A, K, D = sample
+    T, s0, f_s, f_c, v_s, z_ba = bristle
     v = (A - K * z) / D
     if v == 0.0:
         g = 0.0
@@ -182,19 +213,22 @@ def bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
-    """The bristle deflection z[n] solving R(z) = 0 (see the module docstring)."""
+def solve_bristle(sample, bristle):
+    """The bristle deflection z[n] solving R(z) = 0 (a Sample and a Bristle; see the module
+    docstring)."""
+    z0, A, K, D = sample
+    T, s0, f_s, f_c, v_s, z_ba = bristle
     tol = RELATIVE_TOLERANCE * ((f_s + f_c) / s0 + abs(z0))
     z = z0
     for _ in range(NEWTON_ITERATIONS):
-        r, dr = bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        r, dr = bristle_residual(z, sample, bristle)
         if abs(r) <= tol:
             return z
         if not dr > 0.0:
             break
         z -= r / dr
     # fallback: grow a bracket from z0 in the direction of the root, then Newton-bisection
-    r0, _ = bristle_residual(z0, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+    r0, _ = bristle_residual(z0, sample, bristle)
     if r0 == 0.0:
         return z0
     step = T * abs(A) / D + 1e-3 * ((f_s + f_c) / s0 + abs(z0)) + 1e-300
@@ -202,7 +236,7 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
     near = z0
     far = z0 + direction * step
     for _ in range(2000):
-        rf, _ = bristle_residual(far, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        rf, _ = bristle_residual(far, sample, bristle)
         if rf * direction >= 0.0:
             break
         near = far
@@ -212,7 +246,7 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
     hi = max(near, far)
     z = 0.5 * (lo + hi)
     for _ in range(200):
-        r, dr = bristle_residual(z, z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba)
+        r, dr = bristle_residual(z, sample, bristle)
         if abs(r) <= tol or hi - lo <= 1e-15 * (abs(lo) + abs(hi)):
             return z
         if r < 0.0:
@@ -225,10 +259,11 @@ def solve_bristle(z0, A, K, D, T, s0, f_s, f_c, v_s, z_ba):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, par):
-    """n samples of the closed loop. strikes: an external force (N) on the contact point,
-    added to the resonator's free motion before the bristle is solved; modes rows: c1, c2,
-    g, y1, y2; h: scratch per mode; state holds a FrictionState, par a FrictionParams."""
+def friction_run(out, fout, n, drive, modes, h, state, rng, par):
+    """n samples of the closed loop. drive: the Drive (its strikes are added to the
+    resonator's free motion before the bristle is solved); modes rows: c1, c2, g, y1, y2;
+    h: scratch per mode; state holds a FrictionState, par a FrictionParams."""
+    speeds, normals, strikes = drive
     prm = friction_params(par)
     fs = prm.fs
     T = 1.0 / fs
@@ -271,7 +306,7 @@ def friction_run(out, fout, n, speeds, normals, strikes, modes, h, state, rng, p
             D = 1.0 + Gv * s2
             K = Gv * (s0 + s1 * fs)
             A = vb - (xh - x_prev) * fs + Gv * (s1 * fs * z0 - w)
-            z = solve_bristle(z0, A, K, D, T, s0, f_s, f_c, laws.stribeck, z_ba)
+            z = solve_bristle(Sample(z0, A, K, D), Bristle(T, s0, f_s, f_c, laws.stribeck, z_ba))
             v = (A - K * z) / D
             f = s0 * z + s1 * fs * (z - z0) + s2 * v + w
         else:
@@ -360,9 +395,7 @@ class Friction(ModelParams, UGen):
             self.out,
             self.out,
             0,
-            self._speeds.buffer,
-            self._forces.buffer,
-            self.input_buffer("strike"),
+            Drive(self._speeds.buffer, self._forces.buffer, self.input_buffer("strike")),
             self.modes,
             self.scratch,
             self.state,
@@ -412,9 +445,7 @@ class Friction(ModelParams, UGen):
             self.extra["contact"],
             self.extra["force"],
             n,
-            self._speeds.values(n),
-            self._forces.values(n),
-            self.input_buffer("strike"),
+            Drive(self._speeds.values(n), self._forces.values(n), self.input_buffer("strike")),
             self.modes,
             self.scratch,
             self.state,

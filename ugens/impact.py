@@ -20,7 +20,7 @@ import numpy as np
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum, raised_cosine, with_room
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_sum, raised_cosine
 
 
 @nb.njit(cache=True)
@@ -69,11 +69,20 @@ class PulseSource(UGen):
         """Start a pulse of ``impulse`` N s lasting ``duration`` s (at least MIN_PULSE_SAMPLES)
         at fractional sample ``sample_time``; its samples sum exactly to the impulse."""
         T = max(duration * self.sample_rate, MIN_PULSE_SAMPLES)
-        amp = impulse * self.sample_rate / pulse_sum(sample_time, T)
         c = int(self.count[0])
-        self.pulses = with_room(self.pulses, c + 1)
-        self.pulses[c] = (sample_time, T, amp)
+        amplitude = impulse * self.sample_rate / pulse_sum(sample_time, T)
+        self.pulses = append_pulse(self.pulses, c, float(sample_time), T, float(amplitude))
         self.count[0] = c + 1
+        self._idle = False
+
+    def add_pulses(self, starts: np.ndarray, durations: np.ndarray, impulses: np.ndarray) -> None:
+        """:meth:`add_pulse` for each (start, duration, impulse), in one compiled call."""
+        lengths = np.maximum(np.asarray(durations, dtype=np.float64) * self.sample_rate, MIN_PULSE_SAMPLES)
+        starts = np.ascontiguousarray(starts, dtype=np.float64)
+        impulses = np.ascontiguousarray(impulses, dtype=np.float64)
+        c = int(self.count[0])
+        self.pulses = append_pulses(self.pulses, c, starts, lengths, impulses, float(self.sample_rate))
+        self.count[0] = c + len(starts)
         self._idle = False
 
     def process(self, start: int, n: int) -> None:

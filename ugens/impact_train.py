@@ -261,12 +261,6 @@ class ImpactTrain(PulseSource):
         super()._reset()
         self.rng[0] = self.values["seed"]
 
-    def add_pulses(self, starts: np.ndarray, durations: np.ndarray, impulses: np.ndarray) -> None:
-        """Add 1 - cos pulses starting at fractional samples ``starts`` (durations in s,
-        impulses in N s; each pulse sums exactly to its impulse)."""
-        for t0, duration, impulse in zip(starts, durations, impulses, strict=True):
-            self.add_pulse(float(t0), float(duration), float(impulse))
-
     def _burst(self, sample_time: float, impulse: float, n: int, spread: float, tau: float):
         """Onsets (fractional samples), durations and impulses of one impact's micro-collisions."""
         if n == 1:

@@ -56,9 +56,7 @@ from ugens import modal_budget
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
-    BY_PYTHON,
     COMPACT_ROWS,
-    COMPILED,
     DECAY,
     FLOOR,
     FLOOR2,
@@ -67,7 +65,6 @@ from ugens.modal_budget import (
     KEPT_LANES,
     SIN2,
     SPECTRUM,
-    UNLESS_SILENT,
     WEIGHT,
     BudgetTables,
     aligned,
@@ -77,12 +74,45 @@ from ugens.modal_budget import (
     scatter_kept,
 )
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
-from ugens.modal_retune import TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN, pole_rows, retune_state, size_changes
+from ugens.modal_retune import (
+    TOP_BAND,
+    TOP_BAND_COS,
+    TOP_BAND_SIN,
+    TopBand,
+    pole_rows,
+    retune_state,
+    size_changes,
+)
 
 drop_stale_cache(__file__, [modal_budget])  # render_kept's cache holds copies of its kernels
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
-TOP_BAND_ROWS = (TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
+TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
+
+
+@nb.njit(cache=True, inline="always")
+def has_force(force, n):
+    """Whether force[:n] has a non-zero (or NaN) sample, tested eight samples at a time: a
+    silent block, the common case while a bank rings, costs an eighth of the branches."""
+    i = 0
+    while i + 8 <= n:
+        if (
+            (force[i] != 0.0)
+            | (force[i + 1] != 0.0)
+            | (force[i + 2] != 0.0)
+            | (force[i + 3] != 0.0)
+            | (force[i + 4] != 0.0)
+            | (force[i + 5] != 0.0)
+            | (force[i + 6] != 0.0)
+            | (force[i + 7] != 0.0)
+        ):
+            return True
+        i += 8
+    while i < n:
+        if force[i] != 0.0:
+            return True
+        i += 1
+    return False
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -94,11 +124,9 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
     only if some F[n] is non-zero (a pass over the modes, per call: most blocks of an
     impact's ringing have no force)."""
     direct = 0.0
-    for i in range(n):
-        if force[i] != 0.0:
-            for k in range(active):
-                direct += d[k]
-            break
+    if has_force(force, n):
+        for k in range(active):
+            direct += d[k]
     fp = last[0]
     i = 0
     while i + 4 <= n:
@@ -228,12 +256,8 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
         f = force[i : i + m]
         o = out[i : i + m]
-        if last[0] != 0.0:
+        if last[0] != 0.0 or has_force(f, m):
             meta[0] = meta[2]
-        for j in range(m):
-            if f[j] != 0.0:
-                meta[0] = meta[2]
-                break
         active = meta[0]
         if active == 0:
             for j in range(m):
@@ -274,27 +298,29 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def render_kept(t, wiring, how, start, n, offset):
-    """Every budgeted bank b with how[b] != BY_PYTHON (ugens.modal_budget) over frames
-    [start, start + n), from samples [offset, offset + n) of its input into its output
-    (``wiring``), by :func:`kept_step` on its compact bank (gathered if stale) from the
-    tables ``t``; with UNLESS_SILENT (no force in this stretch or the last period: its
-    ring holds zeros and keeps them) a bank with no mode sounding and no force sample
-    before writes zeros instead. Returns the modes computed times frames (each bank's
-    active count after its span)."""
+def render_kept(t, h, outputs, by_python, start, n, offset):
+    """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
+    samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
+    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
+    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with no force
+    in this stretch or since it was last rendered, nor in this or the last period (its
+    ring holds zeros and keeps them) writes zeros if no mode sounds and no force sample
+    precedes. Returns the modes computed times frames (each bank's active count after
+    its span)."""
     work = 0
-    for b in range(how.size):
-        if how[b] == BY_PYTHON:
+    for b in range(by_python.size):
+        if by_python[b]:
             continue
-        out = nb.carray(void_pointer(wiring.outputs[b] + 8 * offset), (n,), np.float64)
-        if how[b] == UNLESS_SILENT and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
+        busy = h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
+        if not busy and t.meta[b, 0] == 0 and t.last[b] == 0.0:
             for i in range(n):
                 out[i] = 0.0
             continue
-        force = nb.carray(void_pointer(wiring.inputs[b] + 8 * offset), (n,), np.float64)
+        force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         compact, meta = compact_bank(t, b), t.compact_meta[b]
         floor, last = t.values[FLOOR, b], t.last[b : b + 1]
-        ring = t.rings[b] if how[b] == COMPILED else t.rings[b, :0]
+        ring = t.rings[b] if busy else t.rings[b, :0]
         kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
         active = min(meta[0], t.meta[b, 2])
         t.meta[b, 0] = active
@@ -357,7 +383,7 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     poles = np.empty((4, freqs.size))
     sin2, inv = np.empty(freqs.size), np.empty(freqs.size)
     decays = np.ascontiguousarray(decays, dtype=np.float64)
-    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", *TOP_BAND_ROWS, poles, sin2, inv)
+    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, poles, sin2, inv)
     return poles[3]
 
 
@@ -594,7 +620,7 @@ class ModalBank(ModelParams, UGen):
                 v["decay_scale"] * retune,
                 float(self.sample_rate),
             )
-            pole_rows(freqs, decays, f_scale, d_scale, rate, band, *TOP_BAND_ROWS, poles, sin2, inv)
+            pole_rows(freqs, decays, f_scale, d_scale, rate, band, TOP_BAND_ROWS, poles, sin2, inv)
             self._poles = (key, poles, sin2, inv)
         return self._poles[1], self._poles[3]
 
@@ -662,7 +688,7 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
-            self._psd = None
+            self._psd_remembered = False
 
     def _refresh_design_cache(self) -> None:
         """Keep the design for the current parameters (``fresh``; for an anytime budget
@@ -690,9 +716,8 @@ class ModalBank(ModelParams, UGen):
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
         bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
-        #: per mode, the bins of a zero-padded periodogram (anytime_spectrum) it is smoothed over
-        self._bin_taps = bins[:, None] + np.arange(PSD_SMOOTHING.size)
-        self._psd = None  # the smoothed PSD at the modes' bins, remembered across periods
+        self._psd_bins = bins  # the periodogram's bin at each mode (anytime_spectrum)
+        self._psd_remembered = False  # the SPECTRUM row holds the last smoothed PSD
         two_d_tau = 2.0 * decays * self._horizon
         rows[GROWTH] = np.where(
             two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
@@ -915,11 +940,11 @@ class ModalBank(ModelParams, UGen):
         tables.values[FLOOR2, slot] = self._floor * self._floor
         self._heard = tables.rings[slot]
         self._heard[:] = 0.0
-        self._psd = None
+        self._psd_remembered = False
         period = self._heard.size
         self._window = np.hanning(period)
         self._window_power = self.sample_rate * float(np.sum(self._window**2))
-        self._periodogram = np.zeros(period // 2 + PSD_SMOOTHING.size)  # zero-padded by 2 bins
+        self._windowed = np.zeros(period)  # the period's force, centred and windowed
         self._horizon = horizon
         self._forcing_key = None
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
@@ -952,17 +977,13 @@ class ModalBank(ModelParams, UGen):
         FLAT_SPECTRUM_MODES spread the force's power flat over frequency) that heard a
         force lately: the power spectral density of the last period's force (its ring) at
         each mode's frequency into the budget's SPECTRUM row; returns True."""
-        force = self._heard - self._heard.mean()  # a steady load makes no sound
-        spectrum = np.fft.rfft(force * self._window)
-        padded, edge = self._periodogram, PSD_SMOOTHING.size // 2
-        np.multiply(spectrum.real, spectrum.real, out=padded[edge:-edge])
-        padded[edge:-edge] += spectrum.imag * spectrum.imag
-        # a periodogram of noise scatters by its own size from bin to bin: smooth it over
-        # neighbouring bins and over periods (it is the trend that ranks), at the modes' bins
-        psd = padded[self._bin_taps] @ PSD_SMOOTHING / self._window_power
-        if self._psd is not None:
-            psd = PSD_MEMORY * self._psd + (1.0 - PSD_MEMORY) * psd
-        self._psd = self._mode_rows_view[SPECTRUM] = psd
+        modal_budget.centred_windowed(self._heard, self._window, self._windowed)
+        psd = self._mode_rows_view[SPECTRUM]
+        modal_budget.psd_at_bins(
+            np.fft.rfft(self._windowed), self._psd_bins, PSD_SMOOTHING, self._window_power, PSD_MEMORY,
+            self._psd_remembered, psd,
+        )  # fmt: skip
+        self._psd_remembered = True
         return True
 
     def anytime_kicks(self, kicks: list, row: np.ndarray) -> tuple[float, bool]:

@@ -68,21 +68,6 @@ KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLO
 BANK_VALUES = 7
 
 
-#: How the budget renders a bank over a stretch (``how`` of ugens.modal.render_kept):
-#: through its Python ``process`` (a parameter change, ramp or size input is pending), by
-#: the compiled render, or by the compiled render unless it is silent (no force heard lately,
-#: no mode sounding: it writes zeros).
-BY_PYTHON, COMPILED, UNLESS_SILENT = range(3)
-
-
-class Wiring(NamedTuple):
-    """Addresses of every budgeted bank's input and output (float64 arrays of a block,
-    kept alive by their nodes)."""
-
-    inputs: np.ndarray
-    outputs: np.ndarray
-
-
 class BudgetTables(NamedTuple):
     """The rows of every bank a mode budget shares, in flat stores (ModalBank's arrays are
     C-contiguous views of them) and per-mode / per-bank tables."""
@@ -188,6 +173,37 @@ def scatter_kept(compact, kept, bank):
             for r in range(6):
                 bank[r, k] = compact[r, j]
             j += 1
+
+
+@nb.njit(fastmath=True, cache=True)
+def centred_windowed(force, window, out):
+    """out = (force - its mean) * window: a period's force ready for its periodogram (a
+    steady load makes no sound)."""
+    n = force.size
+    mean = 0.0
+    for i in range(n):
+        mean += force[i]
+    mean /= n
+    for i in range(n):
+        out[i] = (force[i] - mean) * window[i]
+
+
+@nb.njit(cache=True)
+def psd_at_bins(spectrum, bins, taps, scale, memory, remembered, psd):
+    """Per mode, the periodogram |spectrum|^2 / ``scale`` (N^2/Hz) smoothed over the bins
+    ``bins[m] - len(taps) // 2 ...`` with weights ``taps`` (bins past either end count as
+    zero), into ``psd``; ``remembered``: blended as memory * psd + (1 - memory) * new (a
+    periodogram of noise scatters by its own size: it is the trend that ranks)."""
+    edge, size = taps.size // 2, spectrum.size
+    for m in range(bins.size):
+        total = 0.0
+        for t in range(taps.size):
+            b = bins[m] + t - edge
+            if 0 <= b < size:
+                z = spectrum[b]
+                total += (z.real * z.real + z.imag * z.imag) * taps[t]
+        value = total / scale
+        psd[m] = memory * psd[m] + (1.0 - memory) * value if remembered else value
 
 
 @nb.njit(fastmath=True, cache=True)

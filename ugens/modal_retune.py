@@ -10,6 +10,7 @@ thousands of times a second of sound, so neither allocates or leaves the loop.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -21,6 +22,16 @@ TOP_BAND = 2.0 * np.pi / 3.0 + (np.arange(16) + 0.5) * (np.pi / 3.0) / 16
 #: cos and sin of TOP_BAND (z = e^{i omega} on the unit circle).
 TOP_BAND_COS = np.cos(TOP_BAND)
 TOP_BAND_SIN = np.sin(TOP_BAND)
+
+
+class TopBand(NamedTuple):
+    """Where the ``"band"`` direct ratio matches the continuous response: normalised
+    frequencies (rad per sample) and their cos and sin."""
+
+    omega: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
+
 
 #: Longest ring-out (s, to -60 dB) of a mode that a retune moves to or above Nyquist.
 LEAVING_FADE = 1e-3
@@ -56,14 +67,14 @@ def band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def pole_rows(
-    freqs, decays, freq_scale, decay_scale, fs, fit_band, band, band_cos, band_sin, poles, sin2, inv
-):
+def pole_rows(freqs, decays, freq_scale, decay_scale, fs, fit_band, top_band, poles, sin2, inv):
     """Per mode into poles (4, K): c1 = 2 R cos theta, c2 = R^2, s = R sin theta and the
-    direct ratio d / g (theta / (12 s), or :func:`band_ratio` if ``fit_band``); sin2 =
+    direct ratio d / g (theta / (12 s), or :func:`band_ratio` over the TopBand ``top_band``
+    if ``fit_band``); sin2 =
     sin^2 theta (1 for silent modes), inv = 1 / (R^2 sin^2 theta) (0 for silent modes).
     f = freqs * freq_scale (Hz), decay = decays * decay_scale (1/s), R = e^{-decay / fs},
     theta = 2 pi f / fs; modes at or above Nyquist are silent (zeros)."""
+    band, band_cos, band_sin = top_band
     for k in range(freqs.size):
         f = freqs[k] * freq_scale
         decay = decays[k] * decay_scale

@@ -65,20 +65,82 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import silent, state_step
+from ugens.cells import silent, slot, state_step, store
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
 
-# hammer array: position x_h, velocity v_h, compression x_n at the current instant, force of
-# the last sample (not yet applied to the stored mode states), energy E_n, active flag,
-# contact potential V(x_n), force of the sample before, sum of the mode velocities (contact
-# point velocity) at the end of the last step
-_XH, _VH, _XN, _FP, _EN, _ACTIVE, _VN, _FPP, _SP = range(9)
-# stats array (of the last strike): contact start and end of the first contact (fractional
-# frames), approach speed, compression velocity after the first contact (negative:
-# separating), peak force, contacts ended, energy corrections, in contact, first contact over
-_START, _END, _VIN, _VOUT, _PEAK, _CONTACTS, _CORR, _IN, _MEASURED = range(9)
+
+class HammerState(NamedTuple):
+    """The hammer at the current instant, stored in this order in the float64 array ``hammer``."""
+
+    xh: float  #: hammer position x_h (m)
+    vh: float  #: hammer velocity v_h (m/s)
+    xn: float  #: compression x_n (m)
+    fp: float  #: force of the last sample, not yet applied to the stored mode states (N)
+    en: float  #: energy E_n of hammer, modes and contact (J)
+    active: float  #: 1 while the hammer can still touch, 0 once retired
+    vn: float  #: contact potential V(x_n) (J)
+    fpp: float  #: force of the sample before (N)
+    sp: float  #: sum of the mode velocities (contact point velocity) after the last step (m/s)
+
+
+@nb.njit(inline="always", cache=True)
+def hammer_state(hammer):
+    """The HammerState record held in ``hammer``."""
+    h = hammer
+    return HammerState(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8])
+
+
+#: Where HammerState.active sits in the ``hammer`` array (the per-block silence test).
+_ACTIVE = slot(HammerState, "active")
+
+
+class StrikeStats(NamedTuple):
+    """Measurements of the last strike, stored in this order in the float64 array ``stats``."""
+
+    start: float  #: start of the first contact (fractional frame)
+    end: float  #: end of the first contact (fractional frame; 0 until known)
+    vin: float  #: approach speed (m/s)
+    vout: float  #: compression velocity after the first contact (m/s; negative: separating)
+    peak: float  #: peak force (N)
+    contacts: float  #: contacts ended
+    corrections: float  #: samples whose force the energy safeguard reduced
+    touching: float  #: 1 while in contact
+    measured: float  #: 1 once the first contact is over
+
+
+@nb.njit(inline="always", cache=True)
+def strike_stats(stats):
+    """The StrikeStats record held in ``stats``."""
+    s = stats
+    return StrikeStats(s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8])
+
+
+class ContactData(NamedTuple):
+    """The arrays the closed loop updates."""
+
+    state: np.ndarray  #: (2, K) mode positions q and velocities q' without the pending force
+    hammer: np.ndarray  #: a HammerState
+    stats: np.ndarray  #: a StrikeStats
+    meta: np.ndarray  #: int64 [modes to compute (0 once all are silent and the hammer retired)]
+
+
+class StepSize(NamedTuple):
+    """A step size's coefficients: a (10, K) ModeSteps array and a HammerParams array."""
+
+    coef: np.ndarray
+    prm: np.ndarray
+
+
+class StepSums(NamedTuple):
+    """What a step's energy needs besides the force f (from the modal pass)."""
+
+    vh_free: float  #: hammer velocity without the force (m/s)
+    s0: float  #: modal energy without the force's share (J)
+    s1: float  #: modal energy per force (J/N)
+    s2: float  #: modal energy per force^2 (J/N^2)
+    x_free: float  #: compression without the force (m)
 
 
 class ModeSteps(NamedTuple):
@@ -216,18 +278,20 @@ def solve_force(x0, v0, x_free, kk, k, alpha, lam, inv_t, guess):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def step_energy(f, vh_free, mass, tt, s0, s1, s2, x_free, kk, k, alpha):
-    """(E, V(x1)) after a sample with force f: hammer kinetic + modal quadratic + V(x1)."""
-    v = vh_free - f * tt / mass
-    vx = potential(x_free - kk * f, k, alpha)
-    return 0.5 * mass * v * v + s0 + f * s1 + f * f * s2 + vx, vx
+def step_energy(f, sums, p):
+    """(E, V(x1)) after a step with force f: hammer kinetic + modal quadratic + V(x1).
+    sums: the step's StepSums, p: its HammerParams."""
+    mass = p.mass
+    v = sums.vh_free - f * p.step / mass
+    vx = potential(sums.x_free - p.compliance * f, p.stiffness, p.alpha)
+    return 0.5 * mass * v * v + sums.s0 + f * sums.s1 + f * f * sums.s2 + vx, vx
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def energy_safeguard(f, e_prev, vh_free, mass, tt, s0, s1, s2, x_free, kk, k, alpha):
+def energy_safeguard(f, e_prev, sums, p):
     """The force nearest f whose step does not raise the energy above e_prev (bisection,
     as SDT), or the energy minimiser if none does. E(f) is convex in f."""
-    args = (vh_free, mass, tt, s0, s1, s2, x_free, kk, k, alpha)
+    args = (sums, p)
     hi = max(f, 1e-300)
     for _ in range(200):  # grow hi until E increases there (beyond the minimiser)
         if step_energy(hi * (1.0 + 1e-9), *args)[0] >= step_energy(hi, *args)[0]:
@@ -275,18 +339,18 @@ def hammer_params(prm):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm, meta):
+def hc_run(out, force_out, energy_out, start, n, step, d):
     """Frames start..start+n-1: per sample, one pass over the modes, then the scalar solve.
 
-    state rows: mode positions q and velocities p *without* the last force hammer[_FP]
-    (applied at the start of the next pass). prm holds a HammerParams.
-    meta[0]: modes to compute (0 once every mode is silent and the hammer retired).
+    step: the StepSize (coefficients, HammerParams); d: the ContactData, whose mode states
+    are kept *without* the last force (the hammer's ``fp``, applied at the start of the
+    next pass).
     """
-    p = hammer_params(prm)
+    p = hammer_params(step.prm)
     mass, k, alpha, lam, tt = p.mass, p.stiffness, p.alpha, p.dissipation, p.step
-    kk, gg, s2, floor = p.compliance, p.gain_sum, p.energy_gain, p.floor
+    kk, gg, floor = p.compliance, p.gain_sum, p.floor
     inv_t = 1.0 / tt
-    steps = mode_steps(coef)
+    steps = mode_steps(step.coef)
     a11 = steps.phi11
     a12 = steps.phi12
     a21 = steps.phi21
@@ -297,20 +361,26 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
     wp = steps.w_p
     dec = steps.decay
     inv_w = steps.inv_w
-    qs = state[0]
-    ps = state[1]
-    active = hammer[_ACTIVE] != 0.0
+    qs = d.state[0]
+    ps = d.state[1]
+    meta = d.meta
+    h = hammer_state(d.hammer)
+    xh, vh, xn, fp, en, vn, fpp, sp = h.xh, h.vh, h.xn, h.fp, h.en, h.vn, h.fpp, h.sp
+    active = h.active != 0.0
+    st = strike_stats(d.stats)
+    end, vout, peak, contacts = st.end, st.vout, st.peak, st.contacts
+    corrections, touching, measured = st.corrections, st.touching, st.measured
+    measuring = False  # whether a stat changed
     for i in range(n):
         kmodes = meta[0]
-        fp = hammer[_FP]
         sq = 0.0
         sp = 0.0
         s0 = 0.0
         s1 = 0.0
         for j in range(kmodes):
             q = qs[j] + g1[j] * fp
-            p = ps[j] + g2[j] * fp
-            qn, pn = state_step(a11[j], a12[j], a21[j], a22[j], q, p)
+            pj = ps[j] + g2[j] * fp
+            qn, pn = state_step(a11[j], a12[j], a21[j], a22[j], q, pj)
             qs[j] = qn
             ps[j] = pn
             sq += qn
@@ -318,56 +388,57 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
             s0 += wq[j] * qn * qn + wp[j] * pn * pn
             s1 += wq[j] * g1[j] * qn + wp[j] * g2[j] * pn
         s1 *= 2.0
-        vh = hammer[_VH]
-        xh_free = hammer[_XH] + tt * vh
-        x0 = hammer[_XN]
+        xh_free = xh + tt * vh
+        x0 = xn
         x_free = xh_free - sq
-        v0 = hammer[_VN]
+        v0 = vn
         f = 0.0
         if active and (x0 > 0.0 or x_free > 0.0):
-            fp2 = hammer[_FPP]  # guess: linear extrapolation of the last two forces
-            f = solve_force(x0, v0, x_free, kk, k, alpha, lam, inv_t, 2.0 * fp - fp2 if fp2 > 0.0 else fp)
-        e1, v1 = step_energy(f, vh, mass, tt, s0, s1, s2, x_free, kk, k, alpha)
-        if f > 0.0 and e1 > hammer[_EN] * (1.0 + 1e-13):
-            f = energy_safeguard(f, hammer[_EN], vh, mass, tt, s0, s1, s2, x_free, kk, k, alpha)
-            e1, v1 = step_energy(f, vh, mass, tt, s0, s1, s2, x_free, kk, k, alpha)
-            stats[_CORR] += 1.0
+            # guess: linear extrapolation of the last two forces
+            f = solve_force(x0, v0, x_free, kk, k, alpha, lam, inv_t, 2.0 * fp - fpp if fpp > 0.0 else fp)
+        sums = StepSums(vh, s0, s1, p.energy_gain, x_free)
+        e1, v1 = step_energy(f, sums, p)
+        if f > 0.0 and e1 > en * (1.0 + 1e-13):
+            f = energy_safeguard(f, en, sums, p)
+            e1, v1 = step_energy(f, sums, p)
+            corrections += 1.0
         x1 = x_free - kk * f
         frame = start + i
         if f > 0.0:
-            stats[_IN] = 1.0
-            if f > stats[_PEAK]:
-                stats[_PEAK] = f
-        if x0 > 0.0 and x1 <= 0.0 and stats[_MEASURED] == 0.0:
-            stats[_END] = frame + x0 / (x0 - x1)  # where the compression crosses 0
-        if f == 0.0 and stats[_IN] != 0.0:
-            stats[_IN] = 0.0
-            stats[_CONTACTS] += 1.0
-            if stats[_MEASURED] == 0.0:
-                stats[_MEASURED] = 1.0
-                stats[_VOUT] = vh - sp  # compression velocity after a force-free sample
-        hammer[_XH] = xh_free - f * tt * tt / (2.0 * mass)
-        hammer[_VH] = vh - f * tt / mass
-        hammer[_XN] = x1
-        hammer[_FPP] = fp
-        hammer[_FP] = f
-        hammer[_EN] = e1
-        hammer[_VN] = v1
-        hammer[_SP] = sp
+            measuring = True
+            touching = 1.0
+            if f > peak:
+                peak = f
+        if x0 > 0.0 and x1 <= 0.0 and measured == 0.0:
+            measuring = True
+            end = frame + x0 / (x0 - x1)  # where the compression crosses 0
+        if f == 0.0 and touching != 0.0:
+            measuring = True
+            touching = 0.0
+            contacts += 1.0
+            if measured == 0.0:
+                measured = 1.0
+                vout = vh - sp  # compression velocity after a force-free sample
+        xh = xh_free - f * tt * tt / (2.0 * mass)
+        vh = vh - f * tt / mass
+        xn = x1
+        fpp = fp
+        fp = f
+        en = e1
+        vn = v1
         out[i] = sq + gg * f
         force_out[i] = f
         energy_out[i] = e1
         if frame % FLUSH_PERIOD == FLUSH_PERIOD - 1 and f == 0.0:
-            if active and hammer[_VH] <= 0.0:
+            if active and vh <= 0.0:
                 # retire a hammer moving away that no free, damped mode can reach again: mode j
                 # is e^{-dt}(A cos wt + B sin wt), |.| <= sqrt(A^2 + B^2), A = q, B = (p + d q) / w
                 reach = 0.0
                 for j in range(kmodes):
                     b = (ps[j] + dec[j] * qs[j]) * inv_w[j]
                     reach += math.sqrt(qs[j] * qs[j] + b * b)
-                if hammer[_XH] + reach < 0.0:
+                if xh + reach < 0.0:
                     active = False
-                    hammer[_ACTIVE] = 0.0
             if not active:
                 last = 0
                 for j in range(kmodes):
@@ -377,51 +448,55 @@ def hc_run(out, force_out, energy_out, start, n, coef, state, hammer, stats, prm
                     else:
                         last = j + 1
                 meta[0] = last
+    store(d.hammer, HammerState(xh, vh, xn, fp, en, 1.0 if active else 0.0, vn, fpp, sp))
+    if measuring:  # (most calls are one sample between contacts: nothing to write back)
+        store(
+            d.stats, StrikeStats(st.start, end, st.vin, vout, peak, contacts, corrections, touching, measured)
+        )
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def commit_force(state, hammer, coef):
-    """Apply the pending force hammer[_FP] to the mode states with the force response of
-    the step (coef) that produced it."""
-    fp = hammer[_FP]
-    if fp != 0.0:
+    """Apply the pending force (the HammerState's ``fp``) to the mode states with the force
+    response of the step (coef) that produced it; the force history is cleared."""
+    h = hammer_state(hammer)
+    if h.fp != 0.0:
         steps = mode_steps(coef)
         for j in range(state.shape[1]):
-            state[0, j] += steps.g_q[j] * fp
-            state[1, j] += steps.g_p[j] * fp
-        hammer[_FP] = 0.0
-    hammer[_FPP] = 0.0
+            state[0, j] += steps.g_q[j] * h.fp
+            state[1, j] += steps.g_p[j] * h.fp
+    store(hammer, HammerState(h.xh, h.vh, h.xn, 0.0, h.en, h.active, h.vn, 0.0, h.sp))
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def hc_run_substeps(out, force_out, energy_out, start, n, coef, coef_sub, state, hammer, stats, prm,
-                    prm_sub, meta, scratch):  # fmt: skip
-    """hc_run over frames start..start+n-1, but each sample in which the hammer touches or
-    may touch (compression > 0, or > 0 within two samples at the current compression
-    velocity) is integrated in scratch.shape[1] sub-steps (coef_sub, prm_sub: the step
-    T / M). The force is then resolved at M points per sample: the exact modal steps hold
-    it over T / M, so the hold's low-pass (sinc) and the discrete gradient's error move M
-    times higher. The force output of such a sample is its mean (impulse / T). Between
-    samples the pending force is always one of a full step."""
+def hc_run_substeps(out, force_out, energy_out, start, n, full, sub, d, scratch):
+    """hc_run over frames start..start+n-1 with steps of ``full`` (a StepSize of one sample),
+    but each sample in which the hammer touches or may touch (compression > 0, or > 0
+    within two samples at the current compression velocity) is integrated in
+    scratch.shape[1] sub-steps of ``sub`` (the step T / M). The force is then resolved at M
+    points per sample: the exact modal steps hold it over T / M, so the hold's low-pass
+    (sinc) and the discrete gradient's error move M times higher. The force output of such
+    a sample is its mean (impulse / T). Between samples the pending force is always one of
+    a full step."""
     m_sub = scratch.shape[1]
-    tt = hammer_params(prm).step
+    tt = hammer_params(full.prm).step
     for i in range(n):
         frame = start + i
-        if hammer[_ACTIVE] == 0.0:  # retired: no contact in the rest of the block
-            hc_run(
-                out[i:], force_out[i:], energy_out[i:], frame, n - i, coef, state, hammer, stats, prm, meta
-            )
+        h = hammer_state(d.hammer)
+        if h.active == 0.0:  # retired: no contact in the rest of the block
+            hc_run(out[i:], force_out[i:], energy_out[i:], frame, n - i, full, d)
             return
-        near = hammer[_XN] + 2.0 * tt * (hammer[_VH] - hammer[_SP]) > 0.0
-        if hammer[_ACTIVE] != 0.0 and (hammer[_XN] > 0.0 or near):
-            commit_force(state, hammer, coef)
-            end = stats[_END]
-            hc_run(
-                scratch[0], scratch[1], scratch[2], 0, m_sub, coef_sub, state, hammer, stats, prm_sub, meta
-            )
-            if stats[_END] != end:
-                stats[_END] = frame + stats[_END] / m_sub
-            commit_force(state, hammer, coef_sub)
+        near = h.xn + 2.0 * tt * (h.vh - h.sp) > 0.0
+        if h.xn > 0.0 or near:
+            commit_force(d.state, d.hammer, full.coef)
+            end = strike_stats(d.stats).end
+            hc_run(scratch[0], scratch[1], scratch[2], 0, m_sub, sub, d)
+            s = strike_stats(d.stats)
+            if s.end != end:  # the contact ended in this sample: its sub-step, in frames
+                ended = frame + s.end / m_sub
+                store(d.stats, StrikeStats(s.start, ended, s.vin, s.vout, s.peak, s.contacts, s.corrections,
+                                           s.touching, s.measured))  # fmt: skip
+            commit_force(d.state, d.hammer, sub.coef)
             out[i] = scratch[0, m_sub - 1]
             mean = 0.0
             for m in range(m_sub):
@@ -429,7 +504,7 @@ def hc_run_substeps(out, force_out, energy_out, start, n, coef, coef_sub, state,
             force_out[i] = mean / m_sub  # the sample's impulse / T
             energy_out[i] = scratch[2, m_sub - 1]
         else:
-            hc_run(out[i:], force_out[i:], energy_out[i:], frame, 1, coef, state, hammer, stats, prm, meta)
+            hc_run(out[i:], force_out[i:], energy_out[i:], frame, 1, full, d)
 
 
 def design(frequencies, decays, gains, sample_rate):
@@ -543,10 +618,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.coef = np.zeros((len(ModeSteps._fields), k))
         self.coef_sub = np.zeros((len(ModeSteps._fields), k))
         self.state = np.zeros((2, k))
-        self.hammer = np.zeros(9)
-        self.stats = np.zeros(9)
-        self.prm = np.zeros(9)
-        self.prm_sub = np.zeros(9)
+        self.hammer = np.zeros(len(HammerState._fields))
+        self.stats = np.zeros(len(StrikeStats._fields))
+        self.prm = np.zeros(len(HammerParams._fields))
+        self.prm_sub = np.zeros(len(HammerParams._fields))
         self.meta = np.zeros(1, dtype=np.int64)
         self._scratch = np.zeros((3, SUBSTEPS))
         self.signed = model.driving is not None  # heard through the signed gains
@@ -554,23 +629,10 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.heard_state = np.zeros((2, k))
         self._level_gain = self.level_gain()
         self._design()
-        self._run = specialise(
-            hc_run_substeps,
-            self.out,
-            self.out,
-            self.out,
-            0,
-            0,
-            self.coef,
-            self.coef_sub,
-            self.state,
-            self.hammer,
-            self.stats,
-            self.prm,
-            self.prm_sub,
-            self.meta,
-            self._scratch,
-        )
+        self._steps = StepSize(self.coef, self.prm), StepSize(self.coef_sub, self.prm_sub)
+        self._data = ContactData(self.state, self.hammer, self.stats, self.meta)
+        x = self.out
+        self._run = specialise(hc_run_substeps, x, x, x, 0, 0, *self._steps, self._data, self._scratch)
 
     def _design(self) -> None:
         """Coefficients and scalar parameters from the current values (state untouched), for
@@ -620,8 +682,9 @@ class HuntCrossleyImpact(ModelParams, UGen):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         self._commit_force()
         self._design()
-        self.hammer[_VN] = potential(self.hammer[_XN], self.params.stiffness, self.params.alpha)
-        self.hammer[_EN] = self.energy()
+        h = HammerState(*self.hammer)
+        self.hammer[:] = h._replace(vn=potential(h.xn, self.params.stiffness, self.params.alpha))
+        self._set_energy()
 
     # ------------------------------------------------------------------ events
     def act(self, action: str, args: dict[str, Any], sample_time: float) -> None:
@@ -636,37 +699,42 @@ class HuntCrossleyImpact(ModelParams, UGen):
         lead = max(frame - sample_time, 0.0) / self.sample_rate  # s of contact before that frame
         xc = float(np.sum(self.state[0]))
         vc = float(np.sum(self.state[1]))
-        h = self.hammer
-        h[_XH] = xc + v0 * lead
-        h[_VH] = vc + v0
-        h[_SP] = vc
-        h[_XN] = v0 * lead
-        h[_VN] = potential(h[_XN], self.params.stiffness, self.params.alpha)
-        h[_ACTIVE] = 1.0
-        self.stats[:] = 0.0
-        self.stats[_START] = sample_time
-        self.stats[_VIN] = v0
+        xn = v0 * lead
+        self.hammer[:] = HammerState(*self.hammer)._replace(
+            xh=xc + v0 * lead,
+            vh=vc + v0,
+            sp=vc,
+            xn=xn,
+            vn=potential(xn, self.params.stiffness, self.params.alpha),
+            active=1.0,
+        )
+        self.stats[:] = StrikeStats(*np.zeros(len(StrikeStats._fields)))._replace(start=sample_time, vin=v0)
         self.meta[0] = self.model.n_modes
-        h[_EN] = self.energy()
+        self._set_energy()
+
+    def _set_energy(self) -> None:
+        """Store the energy of the current state as the hammer's E_n."""
+        self.hammer[:] = HammerState(*self.hammer)._replace(en=self.energy())
 
     # ------------------------------------------------------------- measurement
     def energy(self) -> float:
         """E (J) of the current state: m v_h^2/2 + sum_k M_k (q'^2 + (w^2 + d^2) q^2)/2 + V(x),
         computed here in Python from the state arrays (independent of the kernel's sums)."""
-        fp = self.hammer[_FP]
+        h = HammerState(*self.hammer)
         steps = ModeSteps(*self.coef)
-        q = self.state[0] + steps.g_q * fp
-        p = self.state[1] + steps.g_p * fp
+        q = self.state[0] + steps.g_q * h.fp
+        p = self.state[1] + steps.g_p * h.fp
         modal = float(np.sum(steps.w_q * q * q + steps.w_p * p * p))
-        x = self.hammer[_XH] - float(np.sum(q))
+        x = h.xh - float(np.sum(q))
         m, k, alpha = self.params.mass, self.params.stiffness, self.params.alpha
-        return 0.5 * m * self.hammer[_VH] ** 2 + modal + float(potential(x, k, alpha))
+        return 0.5 * m * h.vh**2 + modal + float(potential(x, k, alpha))
 
     @property
     def rebound_velocity(self) -> float | None:
         """Compression velocity (m/s) just after the first contact of the last strike:
         negative when the hammer separates (rebound speed = -this); None while in contact."""
-        return float(self.stats[_VOUT]) if self.stats[_MEASURED] else None
+        s = StrikeStats(*self.stats)
+        return float(s.vout) if s.measured else None
 
     @property
     def rebound_speed(self) -> float | None:
@@ -678,21 +746,22 @@ class HuntCrossleyImpact(ModelParams, UGen):
     @property
     def contact_time(self) -> float | None:
         """Duration (s) of the first contact of the last strike (compression > 0), or None."""
-        if not self.stats[_MEASURED] or self.stats[_END] == 0.0:
+        s = StrikeStats(*self.stats)
+        if not s.measured or s.end == 0.0:
             return None
-        return float(self.stats[_END] - self.stats[_START]) / self.sample_rate
+        return float(s.end - s.start) / self.sample_rate
 
     @property
     def corrections(self) -> int:
         """Samples whose force the energy safeguard had to reduce since the last strike."""
-        return int(self.stats[_CORR])
+        return int(StrikeStats(*self.stats).corrections)
 
     # -------------------------------------------------------------- processing
     def process(self, start: int, n: int) -> None:
         self._contact(start, n)
         if not self.signed:
             np.multiply(self.extra["contact"][:n], self._level_gain, out=self.out[:n])
-        elif self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:  # the loop's modes fell silent
+        elif self._silent():  # the loop's modes fell silent
             self.out[:n] = 0.0
             self.heard_state[:] = 0.0
         else:
@@ -701,30 +770,19 @@ class HuntCrossleyImpact(ModelParams, UGen):
     def _contact(self, start: int, n: int) -> None:
         """The closed loop: contact displacement, force and energy."""
         force, energy = self.extra["force"], self.extra["energy"]
-        if self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0:
-            # silent: no mode to compute and no hammer that can touch
+        if self._silent():  # no mode to compute and no hammer that can touch: free flight
             self.extra["contact"][:n] = 0.0
             force[:n] = 0.0
-            m, v = self.params.mass, self.hammer[_VH]
-            self.hammer[_XH] += v * n / self.sample_rate
+            h = HammerState(*self.hammer)
+            m, v = self.params.mass, h.vh
+            self.hammer[:] = h._replace(xh=h.xh + v * n / self.sample_rate)
             energy[:n] = 0.5 * m * v * v
             return
-        self._run(
-            self.extra["contact"],
-            force,
-            energy,
-            start,
-            n,
-            self.coef,
-            self.coef_sub,
-            self.state,
-            self.hammer,
-            self.stats,
-            self.prm,
-            self.prm_sub,
-            self.meta,
-            self._scratch,
-        )
+        self._run(self.extra["contact"], force, energy, start, n, *self._steps, self._data, self._scratch)
+
+    def _silent(self) -> bool:
+        """No mode left to compute and the hammer retired (read once per block: one field)."""
+        return self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

@@ -92,23 +92,31 @@ def radiate_pressure(x, out, n, coef, state, differentiate, scale):
 
 
 class PressureSetup(NamedTuple):
-    """The fixed float64 setup array of a SoundPressure node (``setup``), by index."""
+    """The fixed settings of a SoundPressure node, stored in this order in the float64 array
+    ``setup``."""
 
-    differentiate: float  # fs for a displacement input, else 0
-    scale: float  # 1 / (pressure of full scale), 1/Pa
-    spreading: float  # a pressure input: radius / distance * scale; else -1
+    differentiate: float  #: fs for a displacement input, else 0
+    scale: float  #: 1 / (pressure of full scale) (1/Pa)
+    spreading: float  #: a pressure input: radius / distance * scale; else -1
+
+
+@nb.njit(inline="always", cache=True)
+def pressure_setup(setup):
+    """The PressureSetup record held in ``setup``."""
+    return PressureSetup(setup[0], setup[1], setup[2])
 
 
 @nb.njit(cache=True)
 def sound_pressure(x, out, n, coef, state, setup):
-    """SoundPressure over x[:n]: a pressure input (setup[2] >= 0) is only spread, out = x
-    setup[2]; otherwise radiated by :func:`radiate_pressure` (setup as PressureSetup)."""
-    if setup[2] >= 0.0:
-        spreading = setup[2]
+    """SoundPressure over x[:n] (setup holds a PressureSetup): a pressure input (spreading
+    >= 0) is only spread, out = x spreading; otherwise radiated by :func:`radiate_pressure`."""
+    s = pressure_setup(setup)
+    if s.spreading >= 0.0:
+        spreading = s.spreading
         for i in range(n):
             out[i] = x[i] * spreading
     else:
-        radiate_pressure(x, out, n, coef, state, setup[0], setup[1])
+        radiate_pressure(x, out, n, coef, state, s.differentiate, s.scale)
 
 
 @register

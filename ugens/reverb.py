@@ -26,7 +26,7 @@ alternating signs (a decorrelated second channel for stereo). JASS counterpart:
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -36,6 +36,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import slot
 from ugens.kernels import FASTMATH
 
 #: Octave-band centres (Hz) of the ``t60`` values.
@@ -208,20 +209,53 @@ def _absorb(y, m, sections, filter_state, j):
     filter_state[6, 0, j], filter_state[6, 1, j] = s16, s26
 
 
+class Network(NamedTuple):
+    """The delay network's static arrays."""
+
+    lengths: np.ndarray  #: int64 (LINES,) line lengths (samples)
+    sections: np.ndarray  #: (SECTIONS, 5, LINES) each line's absorption filter [b0, b1, b2, a1, a2]
+    signs: np.ndarray  #: (LINES,) the input weights of the lines
+
+
+class ReverbParams(NamedTuple):
+    """Settings of :func:`reverb_run`, stored in this order in the float64 array ``par``."""
+
+    pre_delay: float  #: pre-delay (samples, a whole number)
+    dry: float  #: gain of the direct sound
+    wet: float  #: gain of the reverberation
+
+
+@nb.njit(inline="always", cache=True)
+def reverb_params(par):
+    """The ReverbParams record held in ``par``."""
+    return ReverbParams(par[0], par[1], par[2])
+
+
+class ReverbData(NamedTuple):
+    """The arrays :func:`reverb_run` updates."""
+
+    pre: np.ndarray  #: pre-delay ring
+    ring: np.ndarray  #: (LINES, size) the lines, size a power of two
+    ist: np.ndarray  #: int64 [pre-delay write index, ring write index]
+    filter_state: np.ndarray  #: (SECTIONS, 2, LINES) absorption filter states
+    chunk: np.ndarray  #: (LINES + 2, C) scratch, C <= the shortest line
+    wet_in: np.ndarray  #: (C,) scratch
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def reverb_run(x, out, right, n, pre, ring, ist, lengths, sections, filter_state, signs, par, chunk, wet_in):
-    """n samples. pre: pre-delay ring; ring (LINES, size): the lines; ist = [pre-delay
-    write, ring write]; sections (SECTIONS, 5, LINES): each line's absorption filter
-    [b0, b1, b2, a1, a2]; filter_state (SECTIONS, 2, LINES); signs: the input weights of
-    the lines; par = [pre-delay samples, dry, wet]; chunk (LINES + 2, C), wet_in (C):
-    scratch, C <= the shortest line.
+def reverb_run(x, out, right, n, net, par, d):
+    """n samples of input x to the outputs out (left) and right. net: the Network; par holds
+    the ReverbParams; d: the ReverbData.
 
     The network runs in chunks of at most C samples: everything a line delivers within a
     chunk was written before it, so each line's chunk is read and filtered at once (the
     filter state in registers), then the feedback matrix writes the chunk back."""
-    pre_len = int(par[0])
-    dry = par[1]
-    wet = par[2]
+    lengths, sections, signs = net
+    pre, ring, ist, filter_state, chunk, wet_in = d
+    prm = reverb_params(par)
+    pre_len = int(prm.pre_delay)
+    dry = prm.dry
+    wet = prm.wet
     pre_size = pre.size
     mask = ring.shape[1] - 1
     norm = 1.0 / math.sqrt(LINES)
@@ -345,30 +379,17 @@ class Reverb(UGen):
         self.filter_state = np.zeros((SECTIONS, 2, LINES))
         pre_len = int(round(v["pre_delay"] * fs))
         self.pre = np.zeros(pre_len + 1)
-        self.par = np.array([pre_len, v["dry"], v["wet"]], dtype=np.float64)
+        self.par = np.array(ReverbParams(pre_len, v["dry"], v["wet"]), dtype=np.float64)
         self.ist = np.zeros(2, dtype=np.int64)
         chunk = int(self.lengths.min())
         self.chunk = np.zeros((LINES + 2, chunk))
         self.wet_in = np.zeros(chunk)
+        self._net = Network(self.lengths, self.sections, INPUT_SIGNS)
+        self._data = ReverbData(self.pre, self.ring, self.ist, self.filter_state, self.chunk, self.wet_in)
         self._run = specialise(reverb_run, *self._arguments(0))
 
     def _arguments(self, n: int) -> tuple:
-        return (
-            self.input_buffer("input"),
-            self.out,
-            self.extra["right"],
-            n,
-            self.pre,
-            self.ring,
-            self.ist,
-            self.lengths,
-            self.sections,
-            self.filter_state,
-            INPUT_SIGNS,
-            self.par,
-            self.chunk,
-            self.wet_in,
-        )
+        return (self.input_buffer("input"), self.out, self.extra["right"], n, self._net, self.par, self._data)
 
     def _reset(self) -> None:
         self.ring[:] = 0.0
@@ -377,10 +398,8 @@ class Reverb(UGen):
         self.ist[:] = 0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
-        if key == "dry":
-            self.par[1] = value
-        elif key == "wet":
-            self.par[2] = value
+        if key in ("dry", "wet"):
+            self.par[slot(ReverbParams, key)] = value
 
     def process(self, start: int, n: int) -> None:
         self._run(*self._arguments(n))

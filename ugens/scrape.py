@@ -30,11 +30,12 @@ from jassy.levels import ForceSpectrum
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import store
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
-from ugens.tonal_level import TONAL_LEVEL_SPECS, TonalLevel
+from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
 
 LAWS = ("sqrt", "linear")
 #: Force per m of profile height of the needle contacts (Scrape, Roll).
@@ -136,9 +137,9 @@ class NoiseConfig(NamedTuple):
     level_step: float  #: speed step (m/s) of the level table after the record; 0: no table
 
 
-#: Entries of ResonantScrape's level table (log of the calibrated level's factor at |v| =
-#: i x level_step), stored in ``cfg`` after its NoiseConfig; ``cfg`` has NOISE_CFG_SIZE values.
-LEVEL_POINTS = 1024
+#: ResonantScrape's level table (log of the calibrated level's factor at |v| = i x
+#: level_step, LEVEL_POINTS entries) is stored in ``cfg`` after its NoiseConfig; ``cfg`` has
+#: NOISE_CFG_SIZE values.
 LEVEL_TABLE = len(NoiseConfig._fields)  #: index of the table's first entry in ``cfg``
 NOISE_CFG_SIZE = LEVEL_TABLE + LEVEL_POINTS
 
@@ -153,22 +154,51 @@ def noise_config(cfg):
 
 @nb.njit(inline="always", cache=True)
 def table_level(cfg, x):
-    """exp of the level table (after the NoiseConfig in ``cfg``) at fractional index x >= 0,
-    linear in the log between entries, held beyond the last."""
-    i = int(x)
-    if i >= LEVEL_POINTS - 1:
-        return math.exp(cfg[LEVEL_TABLE + LEVEL_POINTS - 1])
-    w = x - i
-    return math.exp((1.0 - w) * cfg[LEVEL_TABLE + i] + w * cfg[LEVEL_TABLE + i + 1])
+    """exp of the level table (after the NoiseConfig in ``cfg``) at fractional index x >= 0."""
+    return log_table(cfg, LEVEL_TABLE, x)
+
+
+class NeedleState(NamedTuple):
+    """State of :func:`profile_contact`, stored in this order in the float64 array ``state``."""
+
+    pos: float  #: profile position (points)
+    s1: float  #: the low-pass's first state
+    s2: float  #: the low-pass's second state
+    fc_coef: float  #: the cutoff (Hz) coef was designed for
+
+
+@nb.njit(inline="always", cache=True)
+def needle_state(state):
+    """The NeedleState record held in ``state``."""
+    return NeedleState(state[0], state[1], state[2], state[3])
+
+
+class NoiseState(NamedTuple):
+    """State of :func:`resonant_noise`, stored in this order in the float64 array ``state``."""
+
+    x1: float  #: input one sample back
+    x2: float  #: input two samples back
+    y1: float  #: output one sample back
+    y2: float  #: output two samples back
+    v_coef: float  #: the speed (m/s) c1, c2, g were designed for
+    c1: float  #: 2 R cos(theta)
+    c2: float  #: R^2
+    g: float  #: input gain
+
+
+@nb.njit(inline="always", cache=True)
+def noise_state(state):
+    """The NoiseState record held in ``state``."""
+    return NoiseState(state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7])
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     """Needle on a looped profile, low-passed with cutoff kc |v|, times gain s(F, v).
 
-    cfg holds a ProfileConfig; state = [pos (points), s1, s2, cutoff of coef (Hz)];
-    coef = RBJ low-pass [b0, b1, b2, a1, a2] for the cutoff state[3], redesigned when the
-    cutoff the speed asks for differs from it by more than CUTOFF_STEP (relative).
+    cfg holds a ProfileConfig, state a NeedleState; coef = RBJ low-pass [b0, b1, b2, a1, a2]
+    for the cutoff fc_coef, redesigned when the cutoff the speed asks for differs from it by
+    more than CUTOFF_STEP (relative).
     """
     c = profile_config(cfg)
     inv_dxfs = c.inv_dxfs
@@ -181,10 +211,7 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
     min_speed = c.min_speed
     cubic = c.cubic != 0.0
     L = prof.shape[0]
-    pos = state[0]
-    s1 = state[1]
-    s2 = state[2]
-    fc_coef = state[3]
+    pos, s1, s2, fc_coef = needle_state(state)
     for i in range(n):
         v = speeds[i]
         h = read_profile(prof, pos, cubic)
@@ -199,10 +226,7 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
             h = y
         out[i] = gain * contact_factor(forces[i], v, law, inv_ref, min_speed) * h
         pos = wrap(pos + v * inv_dxfs, L)
-    state[0] = pos
-    state[1] = s1
-    state[2] = s2
-    state[3] = fc_coef
+    store(state, NeedleState(pos, s1, s2, fc_coef))
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -212,7 +236,7 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
     y = g (x - x[-2]) + 2 R cos(theta) y[-1] - R^2 y[-2], g = sqrt((1 - R^2) / 2), with
     theta = 2 pi clamp(f0 + slope |v|) / fs and R = exp(-(d0 + d_slope |v|) / fs); g times the
     level table's factor at |v| when it has one. cfg holds a NoiseConfig and the level table
-    (NOISE_CFG_SIZE values); state = [x1, x2, y1, y2, v of coefficients, c1, c2, g].
+    (NOISE_CFG_SIZE values); state a NoiseState.
     """
     c = noise_config(cfg)
     f0 = c.f0
@@ -226,8 +250,7 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
     inv_ref = c.inv_ref
     min_speed = c.min_speed
     level_step = c.level_step
-    x1, x2, y1, y2 = state[0], state[1], state[2], state[3]
-    v_coef, c1, c2, g = state[4], state[5], state[6], state[7]
+    x1, x2, y1, y2, v_coef, c1, c2, g = noise_state(state)
     s = rng[0]
     root3 = math.sqrt(3.0)
     for i in range(n):
@@ -251,8 +274,7 @@ def resonant_noise(out, n, forces, speeds, rng, state, cfg):
         y1 = y
         out[i] = gain * contact_factor(forces[i], v, law, inv_ref, min_speed) * y
     rng[0] = s
-    state[0], state[1], state[2], state[3] = x1, x2, y1, y2
-    state[4], state[5], state[6], state[7] = v_coef, c1, c2, g
+    store(state, NoiseState(x1, x2, y1, y2, v_coef, c1, c2, g))
 
 
 # ------------------------------------------------------------------------------- params
@@ -556,7 +578,7 @@ class NeedleContact(ProfileContact):
             cubic=float(v["interp"] == "cubic"),
         )
         self.cfg = np.array(config, dtype=np.float64)
-        self.state = np.zeros(4)  # pos, s1, s2, v of coef
+        self.state = np.zeros(len(NeedleState._fields))
         self.coef = np.zeros(5)
         self._kernel = specialise(
             profile_contact,
@@ -572,7 +594,7 @@ class NeedleContact(ProfileContact):
 
     def _reset(self) -> None:
         super()._reset()
-        self.state[:] = (0.0, 0.0, 0.0, -UNDESIGNED)  # design the low-pass on the first sample
+        self.state[:] = NeedleState(0.0, 0.0, 0.0, -UNDESIGNED)  # design the low-pass on the first sample
         self.coef[:] = 0.0
 
     def process(self, start: int, n: int) -> None:
@@ -638,7 +660,7 @@ class ResonantScrape(TonalLevel, ContactControls):
     impulse response is 2 / (1 - R^2) times g^2 whatever theta. So the output force has
     RMS gain * s(F, v) (N) at steady speed.
 
-    With ``level = "calibrated"`` and the ``model`` it drives, the force is scaled by a
+    Given the ``model`` it drives (``level`` 'auto' or 'calibrated'), the force is scaled by a
     table over the slip speed, computed once from the modes, so that at every speed a
     calibrated ModalBank of that model rings at jassy.levels.TONAL_RMS_DBFS x gain x s(F, v)
     (at the reference contact: TONAL_RMS_DBFS x gain; ugens/tonal_level.py).
@@ -700,8 +722,8 @@ class ResonantScrape(TonalLevel, ContactControls):
     def level_table(self) -> tuple[float, np.ndarray]:
         """(speed step in m/s, log of the calibrated level's factor at |v| = i x step), over
         the speeds that move the resonance from f0 to its clamp (at least to 2 v_ref); held
-        beyond. Level 'raw': no table (step 0)."""
-        if self.values["level"] != "calibrated":
+        beyond. Not calibrated: no table (step 0)."""
+        if not self.is_calibrated():
             return 0.0, np.zeros(LEVEL_POINTS)
         v, fs = self.values, self.sample_rate
         if v["slope"] > 0:
@@ -734,7 +756,7 @@ class ResonantScrape(TonalLevel, ContactControls):
         step, table = self.level_table()
         self.cfg = np.concatenate([np.array(config._replace(level_step=step), dtype=np.float64), table])
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.state = np.zeros(8)
+        self.state = np.zeros(len(NoiseState._fields))
         self._kernel = specialise(
             resonant_noise, self.out, 0, self._forces, self._speeds, self.rng, self.state, self.cfg
         )
@@ -742,8 +764,9 @@ class ResonantScrape(TonalLevel, ContactControls):
     def _reset(self) -> None:
         super()._reset()
         self.rng[0] = self.values["seed"]
-        self.state[:] = 0.0
-        self.state[4] = UNDESIGNED  # design the resonator on the first sample
+        self.state[:] = NoiseState(
+            0.0, 0.0, 0.0, 0.0, UNDESIGNED, 0.0, 0.0, 0.0
+        )  # design on the first sample
 
     def process(self, start: int, n: int) -> None:
         forces, speeds = self._controls(start, n)

@@ -45,7 +45,7 @@ Output: the left ear or loudspeaker; extra output ``right``. JASS counterpart:
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -67,8 +67,41 @@ MODES = ("stereo", "binaural")
 #: Samples between two evaluations of the geometry (0.33 ms at 48 kHz); see the module doc.
 CONTROL_PERIOD = 16
 
-# parameter vector layout
-_FS, _C, _A, _REF, _MIN_R, _BINAURAL, _ABSORB = range(7)
+
+class SpatialParams(NamedTuple):
+    """Settings of :func:`spatialise`, stored in this order in the float64 array ``par``."""
+
+    fs: float  #: sample rate (Hz)
+    c: float  #: speed of sound (m/s)
+    a: float  #: head radius (m)
+    reference: float  #: distance of unit gain (m)
+    min_distance: float  #: closest distance (m)
+    binaural: float  #: 1 for the binaural model, 0 for equal-power stereo
+    absorb: float  #: 1 to low-pass with distance (air absorption)
+
+
+@nb.njit(inline="always", cache=True)
+def spatial_params(par):
+    """The SpatialParams record held in ``par``."""
+    return SpatialParams(par[0], par[1], par[2], par[3], par[4], par[5], par[6])
+
+
+class Path(NamedTuple):
+    """The source's position at each sample of a block (m)."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    zs: np.ndarray
+
+
+class SpatialData(NamedTuple):
+    """The arrays :func:`spatialise` updates."""
+
+    ring: np.ndarray  #: the input's delay line (a power of two long)
+    ist: np.ndarray  #: int64 integer state (_WRITE, _PHASE)
+    st: np.ndarray  #: float state (layout below)
+
+
 # float state layout: air low-pass (left, right), head shadow (left x1, y1, right x1, y1),
 # the position at the last control point and for how many control points it has not
 # moved; then three rows of the ramped values: their
@@ -100,15 +133,17 @@ def shadow_alpha(phi):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def geometry(px, py, pz, par, max_delay, out, row):
-    """The ramped values (offsets _G_L .. _BR1 from out[row]) of a source at (px, py, pz) m."""
-    fs = par[_FS]
-    c = par[_C]
-    a = par[_A]
-    r = max(math.sqrt(px * px + py * py + pz * pz), par[_MIN_R])
+    """The ramped values (offsets _G_L .. _BR1 from out[row]) of a source at (px, py, pz) m;
+    par holds the SpatialParams."""
+    prm = spatial_params(par)
+    fs = prm.fs
+    c = prm.c
+    a = prm.a
+    r = max(math.sqrt(px * px + py * py + pz * pz), prm.min_distance)
     s = min(max(px / r, -1.0), 1.0)
-    gain = par[_REF] / r
+    gain = prm.reference / r
     delay = r / c * fs
-    if par[_BINAURAL] != 0.0:
+    if prm.binaural != 0.0:
         theta = math.asin(s)
         near = -a / c * abs(s) * fs  # sin |theta| = |s|
         far = a / c * abs(theta) * fs
@@ -172,14 +207,18 @@ def control_point(px, py, pz, st, par, max_delay):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def spatialise(x, left, right, n, xs, ys, zs, ring, ist, st, par):
-    """n samples of the source x at positions (xs, ys, zs)[i]; ring: the input's delay line.
-    The geometry is evaluated at the control points (every CONTROL_PERIOD samples of the
-    stream, wherever the blocks are cut) and ramped linearly in between."""
-    fs = par[_FS]
-    binaural = par[_BINAURAL] != 0.0
-    absorb = par[_ABSORB] != 0.0
-    w0 = par[_C] / par[_A]
+def spatialise(x, left, right, n, path, par, d):
+    """n samples of the source x at the positions of ``path`` (a Path) to left and right;
+    par holds the SpatialParams, d is the SpatialData. The geometry is evaluated at the
+    control points (every CONTROL_PERIOD samples of the stream, wherever the blocks are cut)
+    and ramped linearly in between."""
+    xs, ys, zs = path
+    ring, ist, st = d
+    prm = spatial_params(par)
+    fs = prm.fs
+    binaural = prm.binaural != 0.0
+    absorb = prm.absorb != 0.0
+    w0 = prm.c / prm.a
     a1 = (2.0 * w0 - 2.0 * fs) / (2.0 * w0 + 2.0 * fs)  # the head shadow's pole (fixed)
     mask = ring.size - 1
     max_delay = ring.size - 4.0
@@ -315,21 +354,23 @@ class Spatialiser(UGen):
         self.ist = np.zeros(2, dtype=np.int64)
         self.st = np.zeros(_STATE_SIZE)
         self.par = np.array(
-            [
-                fs,
-                v["c"],
-                v["head_radius"],
-                v["reference_distance"],
-                v["min_distance"],
-                1.0 if v["mode"] == "binaural" else 0.0,
-                1.0 if v["air_absorption"] else 0.0,
-            ]
+            SpatialParams(
+                fs=fs,
+                c=v["c"],
+                a=v["head_radius"],
+                reference=v["reference_distance"],
+                min_distance=v["min_distance"],
+                binaural=1.0 if v["mode"] == "binaural" else 0.0,
+                absorb=1.0 if v["air_absorption"] else 0.0,
+            ),
+            dtype=np.float64,
         )
         self.ramps = {key: self.smoothed(key) for key in ("x", "y", "z")}
         self.controls = {key: Control(ramp, self.max_block) for key, ramp in self.ramps.items()}
         xs = self.controls["x"].buffer
-        example = (self.input_buffer("input"), self.out, self.extra["right"], 0, xs, xs, xs)
-        self._run = specialise(spatialise, *example, self.ring, self.ist, self.st, self.par)
+        self._data = SpatialData(self.ring, self.ist, self.st)
+        example = (self.input_buffer("input"), self.out, self.extra["right"], 0, Path(xs, xs, xs))
+        self._run = specialise(spatialise, *example, self.par, self._data)
 
     def _reset(self) -> None:
         self.ring[:] = 0.0
@@ -344,13 +385,10 @@ class Spatialiser(UGen):
 
     def process(self, start: int, n: int) -> None:
         sources, controls = self.sources, self.controls
-        xs, ys, zs = [
-            sources[track].out if track in sources else controls[key].values(n) for key, track in _TRACKS
-        ]
-        right = self.extra["right"]
-        self._run(
-            sources["input"].out, self.out, right, n, xs, ys, zs, self.ring, self.ist, self.st, self.par
+        path = Path(
+            *(sources[track].out if track in sources else controls[key].values(n) for key, track in _TRACKS)
         )
+        self._run(sources["input"].out, self.out, self.extra["right"], n, path, self.par, self._data)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

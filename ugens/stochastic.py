@@ -30,7 +30,7 @@ fragment size, which scales its frequencies by 1/sqrt(size)).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -39,8 +39,8 @@ from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
-from jassy.ugen import UGen
-from ugens.cells import pulse_sum, raised_cosine, with_room
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine
+from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -48,16 +48,55 @@ from ugens.noise import seed_spec, uniform
 ENERGY_LAMBDA = 1.45
 #: Clip range of the exponential energy draw (multiples of the crushing energy).
 ENERGY_CLIP = (0.1, 10.0)
-#: A pulse lasts at least this many samples (as ImpactForce).
-MIN_PULSE_SAMPLES = 2.0
 
 # layout of the float state st[]
 _ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
-# layout of the int state cnt[]: pulses in the table, micro-impacts so far, logged rows
-_PULSES, _EVENTS, _LOGGED = range(3)
+# layout of the int state cnt[]: micro-impacts so far, logged rows
+_EVENTS, _LOGGED = range(2)
 _CRUMPLE, _BREAK, _BREAK_SDT = 0, 1, 2
 #: Break's energy scalings: SDT's (events shrink with the energy left) or full-size events.
 BREAK_SCALINGS = ("sdt", "full")
+
+
+class GrainSettings(NamedTuple):
+    """Step settings of :func:`micro_impacts`."""
+
+    fs: float  #: sample rate (Hz)
+    spread: float  #: SDT's fragmentation f: each size times 1 - f + f U (drawn only for f > 0)
+    mass: float  #: impacting mass (kg)
+    T: float  #: pulse length (samples)
+    mode: int  #: _CRUMPLE, _BREAK or _BREAK_SDT
+
+
+class GrainInputs(NamedTuple):
+    """Per-sample inputs of :func:`micro_impacts` (arrays of the block's length)."""
+
+    density: np.ndarray  #: micro-impact rate (1/s)
+    crush: np.ndarray  #: crushing energy (J)
+    frag: np.ndarray  #: fragment size scale
+
+
+class BounceSettings(NamedTuple):
+    """Step settings of :func:`bounces`."""
+
+    fs: float  #: sample rate (Hz)
+    g: float  #: gravitational acceleration (m/s^2)
+    e: float  #: coefficient of restitution
+    irregularity: float  #: random loss per bounce: e (1 - irregularity U)
+    mass: float  #: mass of the bouncing object (kg)
+    T: float  #: pulse length (samples)
+    min_speed: float  #: bouncing stops below this rebound speed (m/s)
+    fragment: float  #: size reported on the size output
+
+
+class ImpactData(NamedTuple):
+    """What the controllers' kernels update besides the pulse table."""
+
+    st: np.ndarray  #: float state (_ACC ... _NEXT)
+    cnt: np.ndarray  #: int64 counters (_EVENTS, _LOGGED)
+    rng: np.ndarray  #: splitmix64 state, one uint64
+    count: np.ndarray  #: pulses in the table, one int64
+    log: np.ndarray  #: (rows, 4) event log: t0 (samples), energy (J), size, impulse (N s)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -112,20 +151,6 @@ def pulse_frame(pulses, count, idx):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def add_pulse(pulses, count, t0, T, impulse, fs):
-    """Append a pulse of ``impulse`` N s at fractional sample t0 (T samples long).
-
-    Returns the table (a larger copy if it was full). The amplitude makes the sampled
-    pulse sum to exactly impulse * fs (ugens.cells.pulse_sum).
-    """
-    pulses = with_room(pulses, count + 1)
-    pulses[count, 0] = t0
-    pulses[count, 1] = T
-    pulses[count, 2] = impulse * fs / pulse_sum(t0, T)
-    return pulses
-
-
-@nb.njit(fastmath=FASTMATH, cache=True)
 def log_event(log, cnt, t0, energy, size, impulse):
     """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
     k = cnt[_LOGGED]
@@ -138,20 +163,20 @@ def log_event(log, cnt, t0, energy, size, impulse):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def micro_impacts(
-    out, size_out, start, n, fs, density, crush, frag, spread, mass, T, mode, st, cnt, rng, pulses, log
-):
+def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
     """Crumple / Break kernel for frames start .. start + n - 1; returns the pulse table.
 
     Per frame idx: output the pulses and the held size, then fire the Poisson events of
-    the interval [idx, idx + 1): their pulses start at the next frame. density, crush,
-    frag: per-sample density (1/s), crushing energy (J) and fragment scale; spread: SDT's
-    fragmentation f, each size times 1 - f + f U (drawn only for f > 0). mode 0:
-    rate = density; mode 1 (break): rate = density * energy left / budget; mode 2 (break
-    as SDT): that rate, each event's energy and size also times energy left / budget,
-    and the run ends once the energy left is below one crushing energy.
+    the interval [idx, idx + 1): their pulses start at the next frame. inputs: a
+    GrainInputs, opt: GrainSettings, d: ImpactData. mode 0: rate = density; mode 1
+    (break): rate = density * energy left / budget; mode 2 (break as SDT): that rate, each
+    event's energy and size also times energy left / budget, and the run ends once the
+    energy left is below one crushing energy.
     """
-    count = cnt[_PULSES]
+    density, crush, frag = inputs
+    fs, spread, mass, T, mode = opt
+    st, cnt, rng = d.st, d.cnt, d.rng
+    count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
@@ -186,27 +211,27 @@ def micro_impacts(
                 st[_LEFT] -= energy
             t0 = idx + pos
             impulse = math.sqrt(2.0 * mass * energy)
-            pulses = add_pulse(pulses, count, t0, T, impulse, fs)
+            pulses = append_pulse(pulses, count, t0, T, pulse_amplitude(impulse, fs, t0, T))
             count += 1
             st[_SIZE] = size
             cnt[_EVENTS] += 1
-            log_event(log, cnt, t0, energy, size, impulse)
-    cnt[_PULSES] = count
+            log_event(d.log, cnt, t0, energy, size, impulse)
+    d.count[0] = count
     return pulses
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def bounces(
-    out, size_out, start, n, fs, g, e, irregularity, mass, T, min_speed, fragment, st, cnt, rng, pulses, log
-):
+def bounces(out, size_out, start, n, opt, d, pulses):
     """Bounce kernel: ballistic flights between impacts; returns the pulse table.
 
-    st[_NEXT]: fractional sample of the next impact, st[_V]: its impact speed (m/s).
-    An impact at speed v leaves at v' = v e (1 - irregularity U), pushes J = m (v + v'),
-    and the next impact follows after the flight time 2 v' / g; bouncing stops once
-    v' < min_speed.
+    opt: a BounceSettings, d: ImpactData. st[_NEXT]: fractional sample of the next impact,
+    st[_V]: its impact speed (m/s). An impact at speed v leaves at v' = v e (1 - irregularity U),
+    pushes J = m (v + v'), and the next impact follows after the flight time 2 v' / g;
+    bouncing stops once v' < min_speed.
     """
-    count = cnt[_PULSES]
+    fs, g, e, irregularity, mass, T, min_speed, fragment = opt
+    st, cnt, rng = d.st, d.cnt, d.rng
+    count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
@@ -218,17 +243,19 @@ def bounces(
             u = u01(rng)
             v_out = v * e * (1.0 - irregularity * u)
             impulse = mass * (v + v_out)
-            pulses = add_pulse(pulses, count, t0, T, impulse, fs)
+            # pulse_amplitude in this kernel's fastmath: the shipped bounce renders' last bits
+            amplitude = impulse * fs / pulse_sum(t0, T)
+            pulses = append_pulse(pulses, count, t0, T, amplitude)
             count += 1
             cnt[_EVENTS] += 1
             st[_SIZE] = fragment
-            log_event(log, cnt, t0, 0.5 * mass * v * v, fragment, impulse)
+            log_event(d.log, cnt, t0, 0.5 * mass * v * v, fragment, impulse)
             if v_out < min_speed or v_out <= 0.0:
                 st[_RUNNING] = 0.0
             else:
                 st[_V] = v_out
                 st[_NEXT] = t0 + 2.0 * v_out / g * fs
-    cnt[_PULSES] = count
+    d.count[0] = count
     return pulses
 
 
@@ -276,26 +303,31 @@ _CRUSH = ParamSpec(
 )
 
 
-class _MicroImpacts(UGen):
-    """Pulse table, RNG, state and event log shared by the controllers."""
+class _MicroImpacts(PulseSource):
+    """RNG, state and event log shared by the controllers (the pulse table is PulseSource's)."""
 
     outputs = ("size",)
     #: Rows kept by the event log (see :meth:`event_log`); 0 disables it.
     log_capacity = 0
 
     def _prepare(self) -> None:
+        super()._prepare()
         self.st = np.zeros(8)
-        self.cnt = np.zeros(3, dtype=np.int64)
+        self.cnt = np.zeros(2, dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.pulses = np.zeros((16, 3))
         self.log = np.zeros((int(self.log_capacity), 4))
         self._constant: dict[int, float] = {}
+        self._impact_data = ImpactData(self.st, self.cnt, self.rng, self.count, self.log)
+        self._opt = None  # the kernel's settings record, rebuilt after a parameter change
 
     def _reset(self) -> None:
+        super()._reset()
         self.st[:] = 0.0
         self.cnt[:] = 0
         self.rng[0] = self.values["seed"]
-        self.pulses[:] = 0.0
+
+    def _data(self) -> ImpactData:
+        return self._impact_data
 
     def _per_sample(self, ramp: Smoothed, buffer: np.ndarray, n: int) -> np.ndarray:
         """Per-sample values of a smoothed parameter; a steady one is written once."""
@@ -326,11 +358,7 @@ class _MicroImpacts(UGen):
         return rows
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {"st": self.st, "cnt": self.cnt, "rng": self.rng, "pulses": self.pulses}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        self.pulses = np.zeros_like(state["pulses"])  # the table may have grown since
-        super().set_state(state)
+        return {**super().state_arrays(), "st": self.st, "cnt": self.cnt, "rng": self.rng}
 
 
 class _Granular(_MicroImpacts):
@@ -343,6 +371,7 @@ class _Granular(_MicroImpacts):
         super()._prepare()
         self.ramps = {key: self.smoothed(key) for key in self._SMOOTHED}
         self.buffers = {key: np.zeros(self.max_block) for key in self._SMOOTHED}
+        self._inputs = GrainInputs(*(self.buffers[key] for key in self._SMOOTHED))
         x = self.out
         self._kernel = specialise(
             micro_impacts,
@@ -350,19 +379,10 @@ class _Granular(_MicroImpacts):
             x,
             0,
             0,
-            1.0,
-            x,
-            x,
-            x,
-            1.0,
-            1.0,
-            1.0,
-            0,
-            self.st,
-            self.cnt,
-            self.rng,
+            GrainInputs(x, x, x),
+            GrainSettings(1.0, 1.0, 1.0, 1.0, 0),
+            self._data(),
             self.pulses,
-            self.log,
         )
 
     def _reset(self) -> None:
@@ -373,6 +393,7 @@ class _Granular(_MicroImpacts):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if key in self.ramps:
             self.ramps[key].set(value, self.ramp_samples(), jump)
+        self._opt = None
 
     def _arm(self, budget: float | None) -> None:
         """Start emitting; a budget (J) makes the run stop once that energy is spent."""
@@ -383,26 +404,16 @@ class _Granular(_MicroImpacts):
             self.st[_RUNNING] = 0.0
 
     def process(self, start: int, n: int) -> None:
-        r, b = self.ramps, self.buffers
-        v = self.values
+        for key in self._SMOOTHED:  # the per-sample values of the block into self._inputs
+            self._per_sample(self.ramps[key], self.buffers[key], n)
+        if self._opt is None:
+            v = self.values
+            fragmentation = v.get("fragmentation", 0.0)
+            self._opt = GrainSettings(
+                self.sample_rate, fragmentation, v["mass"], self._pulse_samples(), self._mode
+            )
         self.pulses = self._kernel(
-            self.out,
-            self.extra["size"],
-            start,
-            n,
-            self.sample_rate,
-            self._per_sample(r["density"], b["density"], n),
-            self._per_sample(r["crushing_energy"], b["crushing_energy"], n),
-            self._per_sample(r["fragment"], b["fragment"], n),
-            v.get("fragmentation", 0.0),
-            v["mass"],
-            self._pulse_samples(),
-            self._mode,
-            self.st,
-            self.cnt,
-            self.rng,
-            self.pulses,
-            self.log,
+            self.out, self.extra["size"], start, n, self._inputs, self._opt, self._impact_data, self.pulses
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
@@ -631,26 +642,25 @@ class Bounce(_MicroImpacts):
         self.st[_RUNNING] = 1.0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
-        pass  # read at each impact
+        self._opt = None  # read at each impact
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        x = self.out
+        self._kernel = specialise(bounces, x, x, 0, 0, self._settings(), self._data(), self.pulses)
+
+    def _settings(self) -> BounceSettings:
+        v = self.values
+        keys = ("gravity", "restitution", "irregularity", "mass")
+        fs, g, e, irregularity, mass = (float(x) for x in (self.sample_rate, *(v[k] for k in keys)))
+        pulse = self._pulse_samples()
+        return BounceSettings(
+            fs, g, e, irregularity, mass, pulse, float(v["min_speed"]), float(v["fragment"])
+        )
 
     def process(self, start: int, n: int) -> None:
-        v = self.values
-        self.pulses = bounces(
-            self.out,
-            self.extra["size"],
-            start,
-            n,
-            self.sample_rate,
-            v["gravity"],
-            v["restitution"],
-            v["irregularity"],
-            v["mass"],
-            self._pulse_samples(),
-            v["min_speed"],
-            v["fragment"],
-            self.st,
-            self.cnt,
-            self.rng,
-            self.pulses,
-            self.log,
+        if self._opt is None:
+            self._opt = self._settings()
+        self.pulses = self._kernel(
+            self.out, self.extra["size"], start, n, self._opt, self._impact_data, self.pulses
         )

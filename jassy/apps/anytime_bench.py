@@ -13,7 +13,10 @@ decides).
   ``repeats`` runs of each, interleaved in the same process;
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
-  its cost were proportional to the modes it computes.
+  its cost were proportional to the modes it computes;
+- kernel: the bank kernel alone with every mode sounding, a compact bank of a quarter of
+  the scene's modes (rounded up to whole vectors) against a bank of all of them, thread
+  time per sample: its cost is not proportional to the modes (a fixed cost per sample).
 """
 
 from __future__ import annotations
@@ -137,6 +140,43 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
     return {"modes": total, "seconds": seconds, "full_bank_cpu_s": round(reference, 4), "rows": rows}
 
 
+def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeats: int = 30) -> dict:
+    """Thread time per sample of the bank kernel with every mode sounding: ``modes`` modes
+    (ugens.modal.bank_step) against the compact bank of ``fraction`` of them
+    (ugens.modal.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
+    from ugens.modal import bank_step, kept_step
+    from ugens.modal_budget import COMPACT_ROWS, KEPT_LANES, line_aligned_zeros
+
+    rng = np.random.default_rng(0)
+    force, out, ring = np.zeros(frames), np.zeros(frames), np.zeros(2048)
+
+    def ringing(rows: int, k: int) -> np.ndarray:
+        bank = line_aligned_zeros((rows, k))
+        radius = np.exp(-1.0 / SAMPLE_RATE)  # a 1 s decay: no mode falls silent
+        bank[0] = 2 * radius * np.cos(rng.uniform(0.01, 3.0, k))
+        bank[1], bank[2], bank[4] = radius * radius, 1e-3, rng.normal(size=k)
+        return bank
+
+    kept = max(1, round(fraction * modes))
+    width = -(-kept // KEPT_LANES) * KEPT_LANES
+    full, compact = ringing(6, modes), ringing(COMPACT_ROWS, width)
+    best = {"all": np.inf, "kept": np.inf}
+
+    def every_mode():
+        bank_step(force, out, 0, frames, full, np.array([modes, 0, modes]), 1e-10, np.zeros(1))
+
+    def kept_modes():
+        meta = np.array([width, 0, width])
+        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring, KEPT_LANES)
+
+    for _ in range(repeats):
+        for name, run in (("all", every_mode), ("kept", kept_modes)):
+            t = time.thread_time_ns()
+            run()
+            best[name] = min(best[name], (time.thread_time_ns() - t) / frames)
+    return {"modes": modes, "kept": kept, "all_ns": round(best["all"], 2), "kept_ns": round(best["kept"], 2)}
+
+
 def bench_anytime(quick: bool = False, names=("bell", "scrape", "wok")) -> dict:
     """Every scene of ``names``; ``quick``: shorter renders and one repeat."""
     scenes = {
@@ -144,7 +184,10 @@ def bench_anytime(quick: bool = False, names=("bell", "scrape", "wok")) -> dict:
         "scrape": lambda: patch_scene("scrape", 3.5 if quick else 7.0),
         "wok": lambda: wok_scene(1.5 if quick else 4.0),
     }
-    return {name: bench_scene(*scenes[name](), repeats=1 if quick else 3) for name in names}
+    result = {name: bench_scene(*scenes[name](), repeats=1 if quick else 3) for name in names}
+    for scene in result.values():
+        scene["kernel"] = kernel_floor(scene["modes"])
+    return result
 
 
 def print_anytime(result: dict) -> None:
@@ -158,6 +201,12 @@ def print_anytime(result: dict) -> None:
             print(
                 f"  {r['fraction']:6.0%}  {r['modes']:6d}  {r['error_db']:9.1f}   {cpu:15.2f}"
                 f"   {share:20.2f}   {work:19.2f}"
+            )
+        k = scene.get("kernel")
+        if k:
+            print(
+                f"  kernel alone, every mode sounding: {k['kept']} of {k['modes']} modes cost"
+                f" {k['kept_ns'] / k['all_ns']:.2f}x ({k['kept_ns']:.1f} vs {k['all_ns']:.1f} ns/sample)"
             )
 
 

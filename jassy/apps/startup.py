@@ -19,6 +19,8 @@ import time
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+from jassy.engines.coldstart import kernels_cached
+
 #: Scenes timed by default: the smallest patch users meet first and the heaviest physics scene.
 STARTUP_SCENES = ("bell", "wok")
 #: Seconds rendered per scene by ``jassy warm`` (enough to reach every kernel of the render).
@@ -50,7 +52,7 @@ sys.exit(status)
 def run_fresh(argv: Sequence[str], cache_dir: str | None = None) -> RunTime:
     """Run ``python -m jassy *argv`` in a new process (numba's cache in ``cache_dir`` when given)
     and time it: wall clock around the process, CPU from its resource usage (with that of
-    the compile helper it may fork, jassy.coldstart) and from its own report."""
+    the compile helper it may fork, jassy.engines.coldstart) and from its own report."""
     env = dict(os.environ)
     if cache_dir is not None:
         env["NUMBA_CACHE_DIR"] = cache_dir
@@ -139,8 +141,9 @@ def print_startup(rows: list[dict]) -> None:
         )
         print(f"{r['case']:16s} {cold} {r['warm_wall_s']:9.2f}s {r['warm_cpu_s']:8.2f}s")
     print("kernels: functions/type specialisations compiled by the first render; CPU: the render's")
-    print("processes together; main CPU: its main process alone (the compile helper, jassy.coldstart,")
-    print("runs beside it on the second core: on an idle machine the cold wall time is about this)")
+    print("processes together; main CPU: its main process alone (the compile helper of")
+    print("jassy.engines.coldstart runs beside it: on an idle machine the cold wall is about this,")
+    print("plus any wait for the helper)")
 
 
 def warm(
@@ -181,17 +184,6 @@ def warm(
             child.returncode = code
             log.close()
     return failed
-
-
-def kernels_cached() -> bool:
-    """Whether numba's cache already holds the output stage's limiter, which every render
-    calls (False on a fresh install, or after the cache was removed)."""
-    from jassy.safety import limit
-
-    try:
-        return os.path.exists(limit._cache._cache_file._index_path)
-    except AttributeError:  # a numba without this cache layout: say nothing
-        return True
 
 
 def first_run_notice(say: Callable[[str], None]) -> None:

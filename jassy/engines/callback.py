@@ -229,17 +229,16 @@ def _next_cut(control, queue_index, pos, stop, prog):
 
 
 @nb.njit(cache=True, nogil=True)
-def sub_block(control, prog, pos, end):
-    """Render the sub-block from frame ``pos`` into the STAGE rows and return its end: apply
-    the queued records due there, cut at the next block boundary or record frame (at most
-    ``end``), run the program, then the output stage: NaN/Inf to 0 (counted in NONFINITE),
-    the audio limiter and its meter (LIMIT_AUDIO), the haptic force and slew limits
-    (LIMIT_HAPTIC) and the final fade of the haptic rows."""
+def sub_block(control, prog, pos, end, dst, at):
+    """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
+    haptic) and return its end: apply the queued records due there, cut at the next block
+    boundary or record frame (at most ``end``), run the program, then the output stage:
+    NaN/Inf to 0 (counted in NONFINITE), the audio limiter and its meter (LIMIT_AUDIO), the
+    haptic force and slew limits (LIMIT_HAPTIC) and the final fade of the haptic rows."""
     block = control[BLOCK]
     rows_n = control[N_ROWS]
     na = control[N_AUDIO]
     rows = _i64(control[ROWS], rows_n)
-    stage = _f64_rows(control[STAGE], rows_n, block)
     par = _f64(control[PARAMS], 4)
     stop = min(end, (pos // block + 1) * block)
     for q in range(N_QUEUES):
@@ -247,29 +246,30 @@ def sub_block(control, prog, pos, end):
     m = stop - pos
     run_program(prog, pos, m)
     bus_bits = nb.carray(void_pointer(control[BUS]), (control[BUS_COUNT], block), np.int64)
-    stage_bits = nb.carray(void_pointer(control[STAGE]), (rows_n, block), np.int64)
+    dst_bits = dst.view(np.int64)
     top = 0
     for c in range(rows_n):
-        bad, magnitude = copy_finite(bus_bits[rows[c]], stage_bits[c], m)
+        bad, magnitude = copy_finite(bus_bits[rows[c]], dst_bits[c, at:], m)
         control[NONFINITE] += bad
         if c < na:
             top = max(top, magnitude)
-    peak = float_from_bits(top)
+    out = dst[:, at : at + m]
     if control[OUTPUT] & LIMIT_AUDIO:
         meter = _f64(control[METER], METERED + 1)
-        limit_metered(stage[:na], m, _f64(control[LIMITER], 1), par[CEIL], par[RELEASE], peak, meter)
+        peak = float_from_bits(top)
+        limit_metered(out[:na], m, _f64(control[LIMITER], 1), par[CEIL], par[RELEASE], peak, meter)
     nh = rows_n - na
     if nh > 0:
         if control[OUTPUT] & LIMIT_HAPTIC:
             last = _f64(control[HAPTIC_LAST], nh)
-            control[HAPTIC_FLAGS] |= limit_force(stage[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
+            control[HAPTIC_FLAGS] |= limit_force(out[na:], m, last, par[MAX_FORCE], par[MAX_STEP])
         left = control[FADE_LEFT]
         if left >= 0:  # the run ends: forces fade linearly to zero over the watchdog time
             window = control[WATCHDOG]
             for i in range(m):
                 w = max(left - i, 0) / window
                 for c in range(na, rows_n):
-                    stage[c, i] *= w
+                    out[c, i] *= w
             control[FADE_LEFT] = max(left - m, 0)
     return stop
 
@@ -289,7 +289,7 @@ def render_into(control, out, frames):
     for c in range(ch):
         levels[c] = 0.0
     while pos < end:
-        stop = sub_block(control, prog, pos, end)
+        stop = sub_block(control, prog, pos, end, stage, 0)
         m = stop - pos
         at = pos - begin
         for i in range(m):
@@ -363,10 +363,22 @@ def tap_callback(control, out, frames, dac, flags):
     logged[0] += 1
 
 
-@nb.cfunc(
-    types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr),
-    cache=True,
+#: The C signature of the PortAudio callback :func:`program_callback`.
+CALLBACK_SIGNATURE = types.int32(
+    types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr
 )
+_compiled_callback: list = []
+
+
+def program_callback_address() -> int:
+    """The address of :func:`program_callback` compiled as a C function (compiled, or loaded
+    from numba's cache, on first use: an offline render, which runs the same render loop
+    through jassy.engines.program_offline, never pays for it)."""
+    if not _compiled_callback:
+        _compiled_callback.append(nb.cfunc(CALLBACK_SIGNATURE, cache=True)(program_callback))
+    return _compiled_callback[0].address
+
+
 def program_callback(inp, out, frames, time_info, status, user):
     """PortAudio callback: render the graph's program for this buffer, count."""
     control = nb.carray(user, (CONTROL,), np.int64)
@@ -835,7 +847,7 @@ class CallbackPlayer:
             r.channels,
             r.sample_rate,
             r.block,
-            program_callback.address,
+            program_callback_address(),
             r.control.ctypes.data,
         )
         self.device_latency = self.stream.output_latency

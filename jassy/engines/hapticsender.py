@@ -8,7 +8,9 @@ its own (its own interpreter lock: nothing the engine or the caller does in Pyth
 delays it): it maps each frame's first sample to its device time (the callback's DAC
 time plus the sample's offset over the sample rate), converts that to the local
 monotonic clock with the stream-clock offset the stream's owner measures, sleeps until
-then and sends (format: :mod:`jassy.engines.hapticframes`). At the end it sends every frame
+then and sends (format: :mod:`jassy.engines.hapticframes`); where the device buffer is
+shorter than a frame, every frame waits (frame - buffer) more, the longest its last
+samples can take to be handed over. At the end it sends every frame
 through the last one played, then a final frame with zero force and FLAG_FINAL.
 """
 
@@ -123,6 +125,11 @@ class _Callbacks:
         return self.end
 
     @property
+    def buffer(self) -> int:
+        """Frames of the last logged callback (the device buffer)."""
+        return self.entries[-1][1] if self.entries else 0
+
+    @property
     def end(self) -> int:
         return self.entries[-1][0] + self.entries[-1][1] if self.entries else 0
 
@@ -190,7 +197,11 @@ def run_sender(
                 sequence += skipped
                 continue
             dac, flags = callbacks.span(start, start + per_frame)
-            delay = dac + control[CLOCK_OFFSET] - time.monotonic()
+            # a device buffer shorter than a frame hands a frame's last samples over up to
+            # (frame - buffer) after its first sample plays: every frame waits that long,
+            # so none leaves late by a varying fraction of it
+            hold = max(0, per_frame - callbacks.buffer) / sample_rate
+            delay = dac + hold + control[CLOCK_OFFSET] - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
             elif delay < -0.5e-3:

@@ -5,19 +5,24 @@ sub-block boundaries come from the absolute clock, the block size and the events
 chunk size does not change the result). Each chunk is checked for NaN/Inf, which are
 replaced by silence and reported once with the node that produced them, and the audio
 passes the final limiter so it stays within [-CEILING, CEILING].
+
+A graph whose every node has a program kernel renders on the device callback's code path
+instead (jassy.engines.program_offline): events, program and this output stage in compiled
+runs, written straight into the result, with the same bits.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from jassy import stopflag
-from jassy.coldstart import compile_on_two_cores, graph_units
+from jassy.engines.coldstart import compile_on_two_cores, graph_units
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
@@ -27,9 +32,10 @@ from jassy.safety import CEILING, LimiterMeter, peak_abs, release_coefficient, s
 from jassy.scheduler import Scheduler
 
 CHUNK_FRAMES = 8192
-#: Frames of a program graph's render between two checks for a stop signal (about 1.4 s
-#: of audio at 48 kHz: one compiled call each).
+#: Frames of a program graph's first compiled run into the result; the runs double while
+#: one lasts less than half of RENDER_CHECK (s), the longest between checks for a stop signal.
 RENDER_FRAMES = 65536
+RENDER_CHECK = 0.1
 
 
 @dataclass
@@ -210,14 +216,17 @@ class OfflineEngine:
         frames = frames_for(duration, self.sample_rate)
         n_audio = len(self.graph.audio)
         signals = np.empty((len(self.graph.bus_rows), frames))  # every frame is written below
-        if self.compiled is not None:  # straight into the result, in runs of RENDER_FRAMES
+        if self.compiled is not None:  # straight into the result, in growing runs
             bar = _progress_bar(frames / self.sample_rate) if progress else None
-            pos = 0
+            pos, run = 0, RENDER_FRAMES
             while pos < frames:
                 stopflag.check()
-                n = min(RENDER_FRAMES, frames - pos)
+                n = min(run, frames - pos)
+                began = time.monotonic()
                 self._produce_compiled(signals, pos, n, frames - pos)
                 pos += n
+                if time.monotonic() - began < RENDER_CHECK / 2:
+                    run *= 2
                 if bar is not None:
                     bar.update(round(n / self.sample_rate, 6))
             if bar is not None:

@@ -22,18 +22,15 @@ import numpy as np
 from jassy import haptics, safety
 from jassy.engines import callback
 from jassy.engines.callback import (
-    BLOCK,
     FRAME,
     HAPTIC_FLAGS,
     LIMIT_AUDIO,
     LIMIT_HAPTIC,
     METER,
     MODAL_TARGET,
-    N_ROWS,
     NONFINITE,
     PROGRAM,
     RECORD,
-    STAGE,
     STRIKE,
     ProgramRun,
     _event_not_supported,
@@ -44,7 +41,7 @@ from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, delay_channels
 from jassy.jit import drop_stale_cache
-from jassy.program import KERNEL_MODULES, _f64_rows, _i64
+from jassy.program import KERNEL_MODULES, _i64
 from jassy.safety import CEILING, LimiterMeter
 from jassy.scheduler import Scheduler, apply_frame
 from ugens.cells import with_room
@@ -69,23 +66,15 @@ def render_planar(control, out, offset, frames, delayed, history, delays, delay_
     sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed)."""
     prog = _i64(control[PROGRAM], 1)
     prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
-    rows_n = control[N_ROWS]
-    stage = _f64_rows(control[STAGE], rows_n, control[BLOCK])
     nonfinite = control[NONFINITE]
     begin = control[FRAME]
     pos = begin
     end = begin + frames
     while pos < end:
-        stop = sub_block(control, prog, pos, end)
-        m = stop - pos
-        if delayed:
-            delay_channels(stage, m, history, delays, delay_pos)
         at = offset + pos - begin
-        for c in range(rows_n):
-            src = stage[c]
-            dst = out[c]
-            for i in range(m):
-                dst[at + i] = src[i]
+        stop = sub_block(control, prog, pos, end, out, at)
+        if delayed:
+            delay_channels(out[:, at:], stop - pos, history, delays, delay_pos)
         pos = stop
         if control[NONFINITE] != nonfinite:
             break

@@ -93,11 +93,32 @@ def lens_centroid(d, R, r):
     return (v1 * z1 + v2 * z2) / (v1 + v2)
 
 
+class Ball(NamedTuple):
+    """The burr's sphere in grid units: centre (cx, cy, cz) and radius R (voxels)."""
+
+    cx: float
+    cy: float
+    cz: float
+    R: float
+
+
+class Box(NamedTuple):
+    """A box of voxels [i0..i1] x [j0..j1] x [k0..k1] (inclusive grid indices)."""
+
+    i0: int
+    i1: int
+    j0: int
+    j1: int
+    k0: int
+    k1: int
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
-def voxel_moments(dens, cx, cy, cz, R, i0, i1, j0, j1, k0, k1):
-    """(m0, m1x, m1y, m1z) of the voxels in the grid box [i0..i1] x [j0..j1] x [k0..k1],
-    each a sphere of radius R_VOXEL weighted by its lens overlap with the burr (radius R,
-    centre (cx, cy, cz), grid units)."""
+def voxel_moments(dens, ball, box):
+    """(m0, m1x, m1y, m1z) of the voxels in the Box, each a sphere of radius R_VOXEL weighted
+    by its lens overlap with the burr's Ball (grid units)."""
+    cx, cy, cz, R = ball
+    i0, i1, j0, j1, k0, k1 = box
     r = R_VOXEL
     reach2 = (R + r) * (R + r)
     inner2 = (R - r) * (R - r) if r < R else -1.0
@@ -140,7 +161,7 @@ def brute_moments(dens, cx, cy, cz, R, out):
     j1 = min(ny - 1, int(math.floor(cy + reach)))
     k0 = max(0, int(math.ceil(cz - reach)))
     k1 = min(nz - 1, int(math.floor(cz + reach)))
-    m0, mx, my, mz = voxel_moments(dens, cx, cy, cz, R, i0, i1, j0, j1, k0, k1)
+    m0, mx, my, mz = voxel_moments(dens, Ball(cx, cy, cz, R), Box(i0, i1, j0, j1, k0, k1))
     out[0] = m0
     out[1] = mx
     out[2] = my

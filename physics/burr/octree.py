@@ -32,11 +32,34 @@ of order (leaf/R) of m0; tests/test_burr.py measures both.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
-from physics.burr.contact import FASTMATH, R_VOXEL, lens_centroid, lens_volume, voxel_moments
+from jassy.jit import specialise
+from physics.burr.contact import FASTMATH, R_VOXEL, Ball, Box, lens_centroid, lens_volume, voxel_moments
+
+
+class Pyramid(NamedTuple):
+    """The density and its moment pyramid, as the kernels read them."""
+
+    dens: np.ndarray  #: (nx, ny, nz) voxel densities
+    base: int  #: lowest stored level (blocks of 2^base voxels per side)
+    top: int  #: highest level (one block)
+    mom: np.ndarray  #: [m0, m1x, m1y, m1z] per block of every stored level
+    off: np.ndarray  #: offset of each level's first block in mom
+    dims: np.ndarray  #: (levels, 3) blocks per axis of each level
+
+
+class Brick(NamedTuple):
+    """A base-level block: its indices, side s (voxels) and centre offset (s - 1) / 2."""
+
+    bi: int
+    bj: int
+    bk: int
+    s: int
+    half: float
 
 
 @nb.njit(cache=True)
@@ -48,11 +71,16 @@ def _build_base(dens, base, mom, off, dims):
     for bi in range(bx):
         for bj in range(by):
             for bk in range(bz):
-                _brick(dens, bi, bj, bk, s, half, nx, ny, nz, mom, off[base] + ((bi * by + bj) * bz + bk) * 4)
+                idx = off[base] + ((bi * by + bj) * bz + bk) * 4
+                _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
 
 
 @nb.njit(cache=True)
-def _brick(dens, bi, bj, bk, s, half, nx, ny, nz, mom, idx):
+def _brick(dens, brick, shape, mom, idx):
+    """mom[idx:idx + 4] = [m0, m1 about the brick centre] of the Brick's voxels (dens of
+    ``shape``; voxels outside count as empty)."""
+    bi, bj, bk, s, half = brick
+    nx, ny, nz = shape
     m0 = 0.0
     mx = 0.0
     my = 0.0
@@ -135,7 +163,8 @@ def _update(dens, base, top, mom, off, dims, box):
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
             for bk in range(lo[2], hi[2] + 1):
-                _brick(dens, bi, bj, bk, s, half, nx, ny, nz, mom, off[base] + ((bi * by + bj) * bz + bk) * 4)
+                idx = off[base] + ((bi * by + bj) * bz + bk) * 4
+                _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
     for level in range(base + 1, top + 1):
         for a in range(3):
             lo[a] >>= 1
@@ -144,7 +173,11 @@ def _update(dens, base, top, mom, off, dims, box):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _descend(dens, base, top, mom, off, dims, cx, cy, cz, R, leaf, out, stack):
+def _descend(pyramid, ball, leaf, out, stack):
+    """Moments of the Pyramid's density inside the burr's Ball into out (module docstring);
+    returns the blocks visited. stack: int64 scratch (8 (levels + 1), 4) of pending blocks."""
+    dens, base, top, mom, off, dims = pyramid
+    cx, cy, cz, R = ball
     r = R_VOXEL
     nx, ny, nz = dens.shape
     reach = R + r
@@ -231,7 +264,7 @@ def _descend(dens, base, top, mom, off, dims, cx, cy, cz, R, leaf, out, stack):
             continue
         if level == base:
             # refine to voxels: exact voxel-sphere sum over the brick
-            b0, bx, by, bz = voxel_moments(dens, cx, cy, cz, R, x0, x1, y0, y1, z0, z1)
+            b0, bx, by, bz = voxel_moments(dens, ball, Box(x0, x1, y0, y1, z0, z1))
             m0 += b0
             mx += bx
             my += by
@@ -287,6 +320,8 @@ class Octree:
         # a depth-first stack never holds more than 8 entries per level
         self._stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
         self._out = np.zeros(4)
+        self._pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
+        self._descend_run = None  # _descend's typed entry point, found at the first call
         self.rebuild()
 
     def rebuild(self) -> None:
@@ -308,8 +343,9 @@ class Octree:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
         number of blocks visited. ``leaf``: side (voxels) at or below which partial blocks
         use the partial-volume rule (1 = exact voxel sum)."""
-        visits = _descend(
-            self.density, self.base, self.top, self.mom, self.off, self.dims,
-            float(centre[0]), float(centre[1]), float(centre[2]), float(R), int(leaf), self._out, self._stack,
-        )  # fmt: skip
+        ball = Ball(float(centre[0]), float(centre[1]), float(centre[2]), float(R))
+        args = (self._pyramid, ball, int(leaf), self._out, self._stack)
+        if self._descend_run is None:  # the same types at every call: one typed entry point
+            self._descend_run = specialise(_descend, *args)
+        visits = self._descend_run(*args)
         return self._out.copy(), int(visits)

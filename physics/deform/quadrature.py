@@ -22,6 +22,7 @@ q = |x - centroid| / longest edge:
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -47,11 +48,54 @@ GL_W = 0.5 * _GL_W
 FAR, NEAR, MAX_LEVEL = 8.0, 2.5, 7
 
 
+class Panel(NamedTuple):
+    """A flat triangle as the quadrature sees it: y(xi, eta) = v0 + xi e1 + eta e2 (m)."""
+
+    v0: np.ndarray  #: (3,) the first vertex
+    e1: np.ndarray  #: (3,) edge to the second vertex
+    e2: np.ndarray  #: (3,) edge to the third vertex
+    nrm: np.ndarray  #: (3,) unit outward normal
+
+
+class Blocks(NamedTuple):
+    """The kernel matrices being filled and two 3x3 scratch blocks."""
+
+    H: np.ndarray  #: p* N_k integrals (3 sources x 3 nodes)
+    G: np.ndarray  #: u* N_k integrals
+    ku: np.ndarray  #: 3x3 scratch
+    kp: np.ndarray  #: 3x3 scratch
+
+
+class Rules(NamedTuple):
+    """Triangle rules (rows xi, eta, weight): far (degree 2) and near (degree 5)."""
+
+    rule3: np.ndarray
+    rule7: np.ndarray
+
+
+class GaussLegendre(NamedTuple):
+    """Gauss-Legendre points and weights on [0, 1] (the Duffy rule's factors)."""
+
+    x: np.ndarray
+    w: np.ndarray
+
+
+class Surface(NamedTuple):
+    """The boundary mesh: vertices (m), triangles, unit normals and areas (m^2)."""
+
+    V: np.ndarray
+    F: np.ndarray
+    normals: np.ndarray
+    areas: np.ndarray
+
+
 @nb.njit(cache=True)
-def _add_point(x, v0, e1, e2, nrm, xi, eta, wa, row, nodes, skip, consts, H, G, ku, kp):
-    """Add u* N_k, p* N_k at parametric (xi, eta) with physical weight ``wa`` (m^2) to the
-    3x3 blocks (row, nodes[k]) of G and H; node index ``skip`` (local 0..2) gets no H term.
-    ku, kp: 3x3 scratch."""
+def _add_point(x, panel, xi, eta, wa, row, nodes, skip, consts, out):
+    """Add u* N_k, p* N_k at parametric (xi, eta) of the Panel with physical weight ``wa``
+    (m^2) to the 3x3 blocks (row, nodes[k]) of G and H of ``out`` (Blocks); node index
+    ``skip`` (local 0..2) gets no H term."""
+    v0, e1, e2, nrm = panel
+    H, G, ku, kp = out
     cu, a, cp, b = consts[0], consts[1], consts[2], consts[3]
     r0 = v0[0] + xi * e1[0] + eta * e2[0] - x[0]
     r1 = v0[1] + xi * e1[1] + eta * e2[1] - x[1]
@@ -99,18 +143,20 @@ def _dist_ratio(x, v0, e1, e2, t):
 
 
 @nb.njit(cache=True)
-def _rule(x, v0, e1, e2, nrm, scale, t, rule, row, nodes, skip, consts, H, G, ku, kp):
+def _rule(x, panel, scale, t, rule, row, nodes, skip, consts, out):
     """Apply a triangle rule (rows xi, eta, weight) on the parametric sub-triangle t."""
     for g in range(rule.shape[0]):
         s, u, w = rule[g, 0], rule[g, 1], rule[g, 2]
         xi = t[0] + s * (t[2] - t[0]) + u * (t[4] - t[0])
         eta = t[1] + s * (t[3] - t[1]) + u * (t[5] - t[1])
-        _add_point(x, v0, e1, e2, nrm, xi, eta, w * scale, row, nodes, skip, consts, H, G, ku, kp)
+        _add_point(x, panel, xi, eta, w * scale, row, nodes, skip, consts, out)
 
 
 @nb.njit(cache=True)
-def _regular(x, v0, e1, e2, nrm, area, row, nodes, consts, rule3, rule7, H, G, ku, kp, stack):
+def _regular(x, panel, area, row, nodes, consts, rules, out, stack):
     """Integrate one element that does not contain x, subdividing near-singular pieces."""
+    v0, e1, e2, _ = panel
+    rule3, rule7 = rules
     stack[0, :6] = (0.0, 0.0, 1.0, 0.0, 0.0, 1.0)
     stack[0, 6] = 0.0
     top = 1
@@ -137,24 +183,28 @@ def _regular(x, v0, e1, e2, nrm, area, row, nodes, consts, rule3, rule7, H, G, k
                 top += 1
             continue
         rule = rule3 if q >= FAR else rule7
-        _rule(x, v0, e1, e2, nrm, area * 0.25**level, t, rule, row, nodes, -1, consts, H, G, ku, kp)
+        _rule(x, panel, area * 0.25**level, t, rule, row, nodes, -1, consts, out)
 
 
 @nb.njit(cache=True)
-def _singular(x, v0, e1, e2, nrm, area, row, nodes, consts, glx, glw, H, G, ku, kp):
+def _singular(x, panel, area, row, nodes, consts, gauss, out):
     """Duffy-transformed rule for an element whose local vertex 0 is the source x."""
+    glx, glw = gauss
     for i in range(glx.shape[0]):
         u = glx[i]
         for j in range(glx.shape[0]):
             w = glx[j]
             wa = 2.0 * area * u * glw[i] * glw[j]
-            _add_point(x, v0, e1, e2, nrm, u * (1.0 - w), u * w, wa, row, nodes, 0, consts, H, G, ku, kp)
+            _add_point(x, panel, u * (1.0 - w), u * w, wa, row, nodes, 0, consts, out)
 
 
 @nb.njit(parallel=True, cache=True)
-def integrate_rows(X, xvert, V, F, normals, areas, consts, rule3, rule7, glx, glw, H, G):
+def integrate_rows(X, xvert, surface, consts, rules, gauss, H, G):
     """Add to H, G (3 len(X) x 3 len(V), zeroed by the caller) the integrals of p* N_k and
-    u* N_k over all elements for sources X; xvert[i] is the mesh vertex at X[i] or -1."""
+    u* N_k over all elements of the Surface for sources X; xvert[i] is the mesh vertex at
+    X[i] or -1; rules: the Rules, gauss: the GaussLegendre of the singular elements."""
+    V, F, normals, areas = surface
+    rule3, rule7 = rules
     whole = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0])
     for i in nb.prange(X.shape[0]):
         x = X[i]
@@ -175,17 +225,19 @@ def integrate_rows(X, xvert, V, F, normals, areas, consts, rule3, rule7, glx, gl
             for k in range(3):
                 e1[k] = V[nodes[1], k] - v0[k]
                 e2[k] = V[nodes[2], k] - v0[k]
-            nrm, area = normals[e], areas[e]
+            panel = Panel(v0, e1, e2, normals[e])
+            out = Blocks(H, G, ku, kp)
+            area = areas[e]
             if loc >= 0:
-                _singular(x, v0, e1, e2, nrm, area, i, nodes, consts, glx, glw, H, G, ku, kp)
+                _singular(x, panel, area, i, nodes, consts, gauss, out)
                 continue
             q = _dist_ratio(x, v0, e1, e2, whole)
             if q >= FAR:
-                _rule(x, v0, e1, e2, nrm, area, whole, rule3, i, nodes, -1, consts, H, G, ku, kp)
+                _rule(x, panel, area, whole, rule3, i, nodes, -1, consts, out)
             elif q >= NEAR:
-                _rule(x, v0, e1, e2, nrm, area, whole, rule7, i, nodes, -1, consts, H, G, ku, kp)
+                _rule(x, panel, area, whole, rule7, i, nodes, -1, consts, out)
             else:
-                _regular(x, v0, e1, e2, nrm, area, i, nodes, consts, rule3, rule7, H, G, ku, kp, stack)
+                _regular(x, panel, area, i, nodes, consts, rules, out, stack)
 
 
 def kernel_constants(shear: float, nu: float) -> np.ndarray:
@@ -207,7 +259,13 @@ def integrate(X, xvert, V, F, normals, areas, shear: float, nu: float) -> tuple[
     H = np.zeros((3 * m, 3 * n))
     G = np.zeros((3 * m, 3 * n))
     integrate_rows(
-        np.ascontiguousarray(X, dtype=np.float64), np.asarray(xvert, dtype=np.int64), V, F, normals, areas,
-        kernel_constants(shear, nu), _R3, _R7, GL_X, GL_W, H, G,
-    )  # fmt: skip
+        np.ascontiguousarray(X, dtype=np.float64),
+        np.asarray(xvert, dtype=np.int64),
+        Surface(V, F, normals, areas),
+        kernel_constants(shear, nu),
+        Rules(_R3, _R7),
+        GaussLegendre(GL_X, GL_W),
+        H,
+        G,
+    )
     return H, G

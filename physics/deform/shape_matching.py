@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -47,6 +49,64 @@ BAG = -1  # boundary id of the spherical bag; plane k has id plane_id(k) = -2 - 
 def plane_id(k: int) -> int:
     """Boundary id of plane ``k`` (negative, so it never clashes with a body id >= 0)."""
     return -2 - k
+
+
+class Model(NamedTuple):
+    """The kernels' view of a :class:`ShapeMatching` (static arrays)."""
+
+    masses: np.ndarray  #: (n,) particle masses (kg)
+    body: np.ndarray  #: (n,) body index per particle (-1: not simulated)
+    order: np.ndarray  #: simulated particles grouped by body
+    starts: np.ndarray  #: (K + 1,) body b owns order[starts[b]:starts[b + 1]]
+    qrest: np.ndarray  #: (n, 3) rest offsets from the body's rest centre of mass (m)
+    q9: np.ndarray  #: (n, 9) quadratic terms of qrest
+    aqq: np.ndarray  #: (K, 3, 3) inverse of A_qq per body (linear mode)
+    aqq9: np.ndarray  #: (K, 9, 9) pseudo-inverse of the quadratic A~qq per body
+
+
+class Fit(NamedTuple):
+    """Options of the goal fit."""
+
+    mode: int  #: index in MODES
+    beta: float  #: share of the linear / quadratic deformation in the goals
+    tol: float  #: relative tolerance of a multiple top eigenvalue in Horn's fit
+
+
+class Motion(NamedTuple):
+    """Options of the velocity / position update."""
+
+    gravity: np.ndarray  #: (3,) m/s^2
+    alpha: float  #: stiffness in (0, 1]: share of the way to the goals per step
+    h: float  #: step (s)
+    viscosity: float  #: drag (1/s)
+    radius: float  #: particle radius against the boundaries (m)
+
+
+class Walls(NamedTuple):
+    """Boundaries as arrays: planes (P, 4) rows (unit n, d); bag (centre x, y, z, radius)."""
+
+    planes: np.ndarray
+    bag: np.ndarray
+
+
+class ContactRows(NamedTuple):
+    """Boundary contacts of a step, grouped by body (capacity: particles x boundaries)."""
+
+    particle: np.ndarray  #: int64 particle index
+    boundary: np.ndarray  #: int64 boundary id (< 0)
+    normal: np.ndarray  #: (cap, 3) unit normal into the allowed side
+    speed: np.ndarray  #: approach speed of the body's motion (m/s, >= 0)
+    depth: np.ndarray  #: penetration removed by the projection (m)
+
+
+class Impulses(NamedTuple):
+    """Options of the contact impulse solve."""
+
+    restitution: float  #: in [0, 1]
+    friction: float  #: Coulomb coefficient mu
+    iterations: int  #: sequential-impulse sweeps
+    bias: float  #: Baumgarte share of a penetration removed per step
+    h: float  #: step (s)
 
 
 @numba.njit(cache=True)
@@ -211,7 +271,11 @@ def _quadratic_terms(q):
 
 
 @numba.njit(cache=True)
-def _goals(x, m, order, starts, qrest, q9, aqq, aqq9, mode, beta, prior, tol, goal, quat, rot):
+def _goals(x, model, fit, prior, goal, quat, rot):
+    """Goal positions (goal), Horn rotations (quat, rot matrices) of every body at positions
+    x, from the body's rotations ``prior``."""
+    m, _, order, starts, qrest, q9, aqq, aqq9 = model
+    mode, beta, tol = fit
     S = np.empty((3, 3))
     apq = np.empty((3, 3))
     apq9 = np.empty((3, 9))
@@ -336,14 +400,17 @@ def _damp_rigid(x, v, m, order, starts, k):
 
 
 @numba.njit(cache=True)
-def _advance(
-    x, v, m, order, goal, f, gravity, alpha, h, visc, radius, planes, bag, cid, cbody, cn, cvn, cdep
-):
-    """Mueller's velocity/position update, then projection of the particles out of the
-    boundaries. Contacts (particle, boundary id, unit normal into the allowed side, approach
-    speed m/s) go to the c* buffers grouped by body; returns their count. The approach speed
-    is that of the particle's velocity without the shape-restoring term (the body's motion),
-    so a body resting on a boundary reports about h |gravity|, not its goal corrections."""
+def _advance(x, v, model, goal, f, opt, walls, rows):
+    """Mueller's velocity/position update (opt: a Motion), then projection of the particles
+    out of the boundaries (walls). Contacts (particle, boundary id, unit normal into the
+    allowed side, approach speed m/s, depth) go to ``rows`` grouped by body; returns their
+    count. The approach speed is that of the particle's velocity without the shape-restoring
+    term (the body's motion), so a body resting on a boundary reports about h |gravity|, not
+    its goal corrections."""
+    m, order = model.masses, model.order
+    gravity, alpha, h, visc, radius = opt
+    planes, bag = walls
+    cid, cbody, cn, cvn, cdep = rows
     damp = 1.0 / (1.0 + h * visc)
     vphys = np.empty(3)
     nc = 0
@@ -390,14 +457,17 @@ def _cross(a, b, out):
 
 
 @numba.njit(cache=True)
-def _contact_impulses(x, v, m, body, starts, order, cid, cn, cdep, nc, rest, mu, iters, bias, h, cimp):
+def _contact_impulses(x, v, model, rows, nc, opt, cimp):
     """Sequential impulses on each body's rigid motion (mass M, inertia about its centre)
-    at its contacts: normal impulses >= 0 stop approach (restitution ``rest``), Coulomb
-    friction bounds the tangential ones by mu x normal; the resulting change of v_cm and
-    omega is added to every particle of the body. The target separation speed is at least
-    bias x depth / h (Baumgarte), which lifts the rigid pose out of a penetration the particle
-    projection alone would leave (the goal fit pulls projected particles back). Normal impulse
-    per contact -> cimp (N s)."""
+    at its first nc contacts (rows): normal impulses >= 0 stop approach (restitution),
+    Coulomb friction bounds the tangential ones by mu x normal; the resulting change of v_cm
+    and omega is added to every particle of the body. The target separation speed is at
+    least bias x depth / h (Baumgarte), which lifts the rigid pose out of a penetration the
+    particle projection alone would leave (the goal fit pulls projected particles back).
+    opt: an Impulses. Normal impulse per contact -> cimp (N s)."""
+    m, body, starts, order = model.masses, model.body, model.starts, model.order
+    cid, cn, cdep = rows.particle, rows.normal, rows.depth
+    rest, mu, iters, bias, h = opt
     nb = starts.size - 1
     first = np.full(nb + 1, nc)
     for k in range(nc - 1, -1, -1):
@@ -645,6 +715,13 @@ class ShapeMatching:
     def n_bodies(self) -> int:
         return self.starts.size - 1
 
+    @cached_property
+    def model(self) -> Model:
+        """The arrays the kernels read (built once)."""
+        return Model(
+            self.masses, self.body, self.order, self.starts, self.qrest, self.q9, self.aqq, self.aqq9
+        )
+
     def initial_state(self, x=None, v=None, quat=None) -> BodyState:
         """State at rest positions (or ``x``), zero (or ``v``) velocity, identity rotations."""
         n = self.rest.shape[0]
@@ -660,24 +737,8 @@ class ShapeMatching:
         goal = state.x.copy()
         quat = np.empty_like(state.quat)
         rot = np.empty((self.n_bodies, 3, 3))
-        mode = MODES.index(self.mode)
-        _goals(
-            state.x,
-            self.masses,
-            self.order,
-            self.starts,
-            self.qrest,
-            self.q9,
-            self.aqq,
-            self.aqq9,
-            mode,
-            float(self.beta),
-            state.quat,
-            tol,
-            goal,
-            quat,
-            rot,
-        )
+        fit = Fit(MODES.index(self.mode), float(self.beta), float(tol))
+        _goals(state.x, self.model, fit, state.quat, goal, quat, rot)
         state.quat[:] = quat
         return goal, rot
 
@@ -701,52 +762,17 @@ class ShapeMatching:
         if self.damping > 0:
             _damp_rigid(state.x, state.v, self.masses, self.order, self.starts, float(self.damping))
         cap = self.order.size * (bnd.planes.shape[0] + 1)
-        cid = np.empty(cap, np.int64)
-        cb = np.empty(cap, np.int64)
-        cn = np.empty((cap, 3))
-        cvn = np.empty(cap)
-        cdep = np.empty(cap)
-        nc = _advance(
-            state.x,
-            state.v,
-            self.masses,
-            self.order,
-            goal,
-            f,
-            g,
-            float(self.alpha),
-            float(h),
-            float(self.viscosity),
-            float(self.radius),
-            bnd.planes,
-            bnd.packed(),
-            cid,
-            cb,
-            cn,
-            cvn,
-            cdep,
-        )
+        ids = np.empty(cap, np.int64)
+        rows = ContactRows(ids, np.empty_like(ids), np.empty((cap, 3)), np.empty(cap), np.empty(cap))
+        motion = Motion(g, float(self.alpha), float(h), float(self.viscosity), float(self.radius))
+        nc = _advance(state.x, state.v, self.model, goal, f, motion, Walls(bnd.planes, bnd.packed()), rows)
         cimp = np.empty(nc)
-        _contact_impulses(
-            state.x,
-            state.v,
-            self.masses,
-            self.body,
-            self.starts,
-            self.order,
-            cid,
-            cn,
-            cdep,
-            nc,
-            float(self.restitution),
-            float(self.friction),
-            int(self.iterations),
-            BIAS,
-            float(h),
-            cimp,
+        impulses = Impulses(
+            float(self.restitution), float(self.friction), int(self.iterations), BIAS, float(h)
         )
+        _contact_impulses(state.x, state.v, self.model, rows, nc, impulses, cimp)
         state.time += h
-        return Contacts(cid[:nc], cb[:nc], cvn[:nc], cimp[:nc])
+        return Contacts(rows.particle[:nc], rows.boundary[:nc], rows.speed[:nc], cimp[:nc])
 
     def rigid_velocity(self, state: BodyState) -> np.ndarray:
         """(n, 3) m/s: each body's rigid motion v_cm + omega x r (same momenta as ``state.v``)."""

@@ -291,7 +291,7 @@ def describe_model(path: str | os.PathLike) -> str:
     import numpy as np
 
     from jassy.modal_model import ModalModel
-    from physics.modal.fem import degenerate_groups
+    from physics.modal.fem import multiplicities
 
     m = ModalModel.load(path)
     lines = [
@@ -305,10 +305,7 @@ def describe_model(path: str | os.PathLike) -> str:
             f"attack: {m.attack.size} samples "
             f"({1e3 * m.attack.size / m.attack_rate:.1f} ms at {m.attack_rate:g} Hz)"
         )
-    order = np.argsort(m.frequencies, kind="stable")
-    multiplicity = np.ones(m.n_modes, dtype=int)
-    for g in degenerate_groups(m.frequencies[order]):
-        multiplicity[order[g]] = g.size
+    multiplicity = multiplicities(m.frequencies)
     few = m.n_points <= 6
     if few:
         heads = [p for p in m.points] if m.points else [f"v{i}" for i in range(m.n_points)]

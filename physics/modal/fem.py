@@ -452,6 +452,17 @@ def degenerate_groups(frequencies: np.ndarray, rtol: float = 1e-6) -> list[np.nd
     return [np.array(g) for g in groups]
 
 
+def multiplicities(frequencies: np.ndarray, rtol: float = 1e-6) -> np.ndarray:
+    """Per mode (in any order), the size of its degenerate family (1: a simple mode), the
+    families as :func:`degenerate_groups` finds them."""
+    frequencies = np.asarray(frequencies)
+    order = np.argsort(frequencies, kind="stable")
+    out = np.ones(frequencies.size, dtype=np.int64)
+    for g in degenerate_groups(frequencies[order], rtol):
+        out[order[g]] = g.size
+    return out
+
+
 def align_degenerate(un: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
     """Normal displacements (n_points, n_modes) with each degenerate family's basis rotated so
     that at the first point only the family's first mode moves along the normal.
@@ -578,9 +589,7 @@ def modes_from_mesh(
     groups = degenerate_groups(modes.frequencies)
     freqs = modes.frequencies
     gains = gains_from_displacements(align_degenerate(un, groups), freqs, radiation)
-    multiplicity = np.zeros(freqs.size, dtype=np.int64)
-    for g in groups:
-        multiplicity[g] = g.size
+    multiplicity = multiplicities(freqs)
     if f_max is not None:
         keep = freqs < f_max
         freqs, gains, multiplicity = freqs[keep], gains[:, keep], multiplicity[keep]

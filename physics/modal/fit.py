@@ -145,25 +145,39 @@ class FitResult:
 # ----------------------------------------------------------------------------- noise
 
 
-def noise_floor(x: np.ndarray, rate: float, n_fft: int, span: float = 1000.0) -> np.ndarray:
+def noise_floor(
+    x: np.ndarray, rate: float, n_fft: int, span: float = 1000.0, q_time: float = 0.2, q_freq: float = 0.2
+) -> np.ndarray:
     """Noise level |X_k|^2 of every bin of the length-``n_fft`` FFT of ``x`` (white noise of
     variance s^2 gives s^2 len(x)), by minimum statistics (Martin 2001, "Noise power spectral
-    density estimation based on optimal smoothing and minimum statistics"): Hann-windowed
-    frames, the 20th percentile over time of each bin divided by ln(1/0.8) (|X|^2 of noise
-    is exponentially distributed), then the median within +-``span`` Hz. Decaying
-    modes leave the later frames; the window keeps a loud mode's skirt out of distant bins
-    (a periodogram of the whole strike would count it as noise)."""
-    from scipy.ndimage import percentile_filter
+    density estimation based on optimal smoothing and minimum statistics"): frames under a
+    4-term Blackman-Harris window (sidelobes -92 dB, so a loud mode's skirt stays within a
+    few bins), the ``q_time`` quantile over time of each bin (decaying modes leave the later
+    frames), then the ``q_freq`` quantile over the bins within +-``span`` Hz (the window
+    shrinks at 0 Hz and Nyquist; a low quantile, because below a few hundred Hz slow modes
+    that never leave the frames can fill most bins), divided by the value those two
+    quantiles take for white noise of unit level: the j-th smallest of k exponentials has
+    F = Beta(j, k + 1 - j) (David & Nagaraja 2003, "Order statistics")."""
+    from scipy.signal.windows import blackmanharris
+    from scipy.special import betaincinv
 
     width = int(np.clip(1 << int(math.log2(max(x.size // 8, 1))), 64, 2048))
     if x.size < width:
         width = 1 << int(math.log2(max(x.size, 2)))
-    window = np.hanning(width)
+    window = blackmanharris(width, sym=False)
     frames = np.lib.stride_tricks.sliding_window_view(x, width)[:: width // 2] * window
     power = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / np.sum(window**2)
-    level = np.percentile(power, 20, axis=0) / 0.2231 if power.shape[0] >= 5 else power.mean(axis=0)
+    k = power.shape[0]
+    j = max(int(round(q_time * k)), 1)
+    level = np.partition(power, j - 1, axis=0)[j - 1]
     bin_hz = rate / width
-    level = percentile_filter(level, 50, size=2 * max(int(span / bin_hz), 1) + 1, mode="nearest")
+    half = max(int(span / bin_hz), 1)
+    padded = np.concatenate([np.full(half, np.inf), level, np.full(half, np.inf)])
+    near = np.sort(np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1), axis=1)
+    i = np.arange(level.size)
+    count = np.minimum(i + half, level.size - 1) - np.maximum(i - half, 0) + 1
+    level = near[i, (q_freq * (count - 1)).astype(int)]
+    level = level / -math.log1p(-betaincinv(j, k + 1 - j, q_freq))
     freqs = np.arange(n_fft // 2 + 1) * rate / n_fft
     return np.interp(freqs, np.arange(level.size) * bin_hz, level) * x.size
 
@@ -192,33 +206,62 @@ def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
     return np.arange(f_lo + stage.spacing / 2, f_hi + stage.spacing / 2, stage.spacing)
 
 
+class StageSpectra(NamedTuple):
+    """The FFTs (one common size ``n_fft``, so every signal's bands are shifted by the same
+    frequency and pool) of the first ``keep[i]`` samples of each signal, for one stage."""
+
+    specs: list
+    n_fft: int
+    keep: list
+
+
+def _stage_spectra(stage: Stage, signals, rate: float) -> StageSpectra:
+    keep = [min(x.size, int(stage.seconds * rate)) for x in signals]
+    n_fft = 1 << int(math.ceil(math.log2(2 * max(max(keep), 16))))
+    return StageSpectra([np.fft.rfft(x[:n], n_fft) for x, n in zip(signals, keep, strict=True)], n_fft, keep)
+
+
+class BandSignals(NamedTuple):
+    """One band of a stage over all signals: ``ys[j]`` = the band of signal ``kept[j]``
+    (signals too short for the band filter's transients are left out), with ``trim``
+    decimated samples cut from each end; ``band`` = the last :class:`esprit.Band` (rate and
+    exact centre are the same for all); ``noise`` = the largest band noise level."""
+
+    ys: list
+    kept: list
+    band: esprit.Band | None
+    noise: float
+    trim: int
+
+
+def _band_signals(stage: Stage, spectra: StageSpectra, rate: float, centre: float, noises) -> BandSignals:
+    """Each signal's band around ``centre`` Hz (:func:`esprit.band_signal`); ``noises`` =
+    each signal's noise |X_k|^2 per bin of the stage's FFT."""
+    trim_s = 4.0 / (stage.edge - stage.spacing / 2)
+    ys, kept, noise, band, trim = [], [], 0.0, None, 0
+    for i, (spec, n, nb) in enumerate(zip(spectra.specs, spectra.keep, noises, strict=True)):
+        band = esprit.band_signal(spec, spectra.n_fft, n, rate, centre, stage.spacing / 2, stage.edge, nb)
+        trim = int(math.ceil(trim_s * band.rate))
+        if band.y.size > 2 * trim + 16:
+            ys.append(band.y[trim:-trim])
+            kept.append(i)
+            noise = max(noise, band.noise)
+    return BandSignals(ys, kept, band, noise, trim)
+
+
 def _band_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin, work) -> list[Pole]:
     """Poles of one banded stage from the residual signals (one per segment)."""
-    keep_n = [min(r.size, int(stage.seconds * rate)) for r in residuals]
-    # one FFT size for all segments: their bands are shifted by the same frequency and pool
-    n_fft = 1 << int(math.ceil(math.log2(2 * max(max(keep_n), 16))))
-    specs = [np.fft.rfft(r[:n], n_fft) for r, n in zip(residuals, keep_n, strict=True)]
-    n_ffts = [n_fft] * len(specs)
-    trim_s = 4.0 / (stage.edge - stage.spacing / 2)  # the band filter's transients
+    spectra = _stage_spectra(stage, residuals, rate)
     out: list[Pole] = []
     # the noise of each segment at this stage's FFT size (|X|^2 scales with the length)
+    bins_hz = np.arange(spectra.n_fft // 2 + 1) * rate / spectra.n_fft
     noises = [
-        np.interp(
-            np.arange(spec.size) * rate / n_fft, np.arange(seg.noise.size) * rate / seg.n_fft, seg.noise
-        )
-        * n
-        / seg.x.size
-        for seg, spec, n_fft, n in zip(segments, specs, n_ffts, keep_n, strict=True)
+        np.interp(bins_hz, np.arange(seg.noise.size) * rate / seg.n_fft, seg.noise) * n / seg.x.size
+        for seg, n in zip(segments, spectra.keep, strict=True)
     ]
     for centre in _band_centres(stage, f_lo, f_hi):
         work.step(stage.name)
-        ys, noise = [], 0.0
-        for spec, n_fft, n, nb in zip(specs, n_ffts, keep_n, noises, strict=True):
-            band = esprit.band_signal(spec, n_fft, n, rate, centre, stage.spacing / 2, stage.edge, nb)
-            trim = int(math.ceil(trim_s * band.rate))
-            if band.y.size > 2 * trim + 16:
-                ys.append(band.y[trim:-trim])
-                noise = max(noise, band.noise)
+        ys, _, band, noise, _ = _band_signals(stage, spectra, rate, centre, noises)
         if not ys:
             continue
         shortest = min(y.size for y in ys)
@@ -314,15 +357,16 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
         if not members:
             continue
         z = _z(out, rate)
-        keep_n = [min(seg.x.size, int(stage.seconds * rate)) for seg in segments]
-        amps, specs = [], []
-        n_fft = 1 << int(math.ceil(math.log2(2 * max(max(keep_n), 16))))
-        for seg, n in zip(segments, keep_n, strict=True):
-            c = esprit.amplitudes(seg.x[:n], z, seg.excluded[seg.excluded < n])
-            amps.append(c)
-            specs.append(np.fft.rfft(seg.x[:n] - esprit.resynthesis(n, z, c), n_fft))
-        flat = np.zeros(n_fft // 2 + 1)
-        trim_s = 4.0 / (stage.edge - stage.spacing / 2)
+        keep = [min(seg.x.size, int(stage.seconds * rate)) for seg in segments]
+        amps = [
+            esprit.amplitudes(seg.x[:n], z, seg.excluded[seg.excluded < n])
+            for seg, n in zip(segments, keep, strict=True)
+        ]
+        residuals = [
+            seg.x[:n] - esprit.resynthesis(n, z, c) for seg, n, c in zip(segments, keep, amps, strict=True)
+        ]
+        spectra = _stage_spectra(stage, residuals, rate)
+        flat = [np.zeros(spectra.n_fft // 2 + 1)] * len(segments)
         centres = _band_centres(stage, f_lo, f_hi)
         if centres.size == 0:
             continue
@@ -332,21 +376,17 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
         for b, idx in home.items():
             f = np.array([out[i].frequency for i in idx])
             d = np.array([out[i].decay for i in idx])
-            ys, brate, centre = [], 0.0, 0.0
-            for spec, n, c in zip(specs, keep_n, amps, strict=True):
-                band = esprit.band_signal(
-                    spec, n_fft, n, rate, centres[b], stage.spacing / 2, stage.edge, flat
-                )
-                brate, centre = band.rate, band.centre
-                m = np.arange(band.y.size)
-                y = band.y + np.exp(np.outer(m, (-d + 2j * np.pi * (f - centre)) / brate)) @ (c[idx] / 2)
-                trim = int(math.ceil(trim_s * brate))
-                if y.size > 2 * trim + 16:
-                    ys.append(y[trim:-trim])
-            if not ys:
+            sig = _band_signals(stage, spectra, rate, centres[b], flat)
+            if not sig.ys:
                 continue
-            z0 = np.exp((-d + 2j * np.pi * (f - centre)) / brate)
-            z1, _ = esprit.refine(ys, brate, z0, max_nfev=20)
+            brate, centre = sig.band.rate, sig.band.centre
+            s_band = (-d + 2j * np.pi * (f - centre)) / brate
+            # the band's own modes added back: c / 2 (z e^{-i 2 pi f_c / fs})^(m D) at sample m
+            ys = [
+                y + np.exp(np.outer(sig.trim + np.arange(y.size), s_band)) @ (amps[i][idx] / 2)
+                for y, i in zip(sig.ys, sig.kept, strict=True)
+            ]
+            z1, _ = esprit.refine(ys, brate, np.exp(s_band), max_nfev=20)
             for i, zk in zip(idx, z1, strict=True):
                 if not 0 < abs(zk) < 1:
                     continue

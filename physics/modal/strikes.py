@@ -35,18 +35,6 @@ def _frame_peaks(x: np.ndarray, hop: int) -> np.ndarray:
     return np.abs(x[: n_frames * hop]).reshape(n_frames, hop).max(axis=1)
 
 
-def _rising(env: np.ndarray, rise_db: float, floor_db: float, look: int = 10) -> np.ndarray:
-    """Frames whose peak exceeds every one of the ``look`` frames before the previous one by
-    ``rise_db`` (an onset late in a frame rises over two frames) and lies within ``floor_db``
-    of the loudest frame."""
-    peak = float(env.max())
-    if peak == 0:
-        return np.zeros(env.size, dtype=bool)
-    pad = np.concatenate([np.full(look + 1, np.median(env[:look])), env])
-    before = np.lib.stride_tricks.sliding_window_view(pad[:-2], look)[: env.size].max(axis=1)
-    return (env > before * 10 ** (rise_db / 20)) & (env >= peak * 10 ** (-floor_db / 20))
-
-
 def prediction_error(x: np.ndarray, order: int = 32) -> np.ndarray:
     """The residual of an order-``order`` linear predictor fitted to the whole signal
     (autocorrelation method): ringing modes are predicted from their past and vanish from
@@ -62,34 +50,95 @@ def prediction_error(x: np.ndarray, order: int = 32) -> np.ndarray:
     return x - np.convolve(x, np.concatenate([[0.0], a]))[: x.size]
 
 
-def detect_onsets(x: np.ndarray, rate: float, rise_db: float = 12.0, floor_db: float = 40.0,
-                  min_gap: float = 0.05) -> list[int]:  # fmt: skip
-    """Sample indices of the strikes in a mono signal: 1 ms frames whose peak magnitude rises
-    ``rise_db`` above every frame of the previous 10 ms, at most ``floor_db`` below the
-    loudest frame, at least ``min_gap`` s apart. Two envelopes are searched: of the signal
-    (low modes starting from silence) and of its linear-prediction error (a new strike stands
-    out over modes still ringing from earlier strikes). The onset is
-    the first sample of that frame (or the frame before) above a quarter of the frame's peak."""
+def band_rise(x: np.ndarray, hop: int, width: int, n_bands: int = 32, look: int = 10) -> np.ndarray:
+    """Per frame (frame t ends at sample t ``hop``): the mean over ``n_bands`` equal
+    frequency bands of the rise of the band's log energy over the largest of the ``look``
+    frames before it that do not overlap it (0 where it falls) - a band-wise spectral flux
+    (Bello et al. 2005, "A tutorial on onset detection in music signals"). A strike raises
+    every band at once; noise and ringing modes raise few, so the mean stands out even where
+    the level rises by a few dB only."""
+    from scipy.ndimage import maximum_filter1d
+
+    padded = np.concatenate([np.zeros(width), x])
+    frames = np.lib.stride_tricks.sliding_window_view(padded, width)[::hop] * np.hanning(width)
+    power = np.abs(np.fft.rfft(frames, axis=1)) ** 2
+    edges = np.linspace(1, power.shape[1], n_bands + 1).astype(int)[:-1]
+    power = np.add.reduceat(power, edges, axis=1)
+    # bands 100 dB below the loudest are silent: their round-off does not rise
+    level = np.log(power + 1e-10 * max(float(power.max()), 1e-300))
+    latest = maximum_filter1d(level, size=look, axis=0, origin=(look - 1) // 2)  # max of t-look+1 .. t
+    shift = width // hop
+    before = np.full_like(level, np.inf)
+    before[shift + look :] = latest[look - 1 : level.shape[0] - shift - 1]
+    return np.clip(level - before, 0, None).mean(axis=1)
+
+
+def change_point(e: np.ndarray, guard: int = 8) -> int:
+    """The index n that best splits ``e`` into two parts of constant variance, the second
+    louder: the maximum-likelihood change point, min n log var(e[:n]) + (N - n) log var(e[n:])
+    (Hinkley 1970, "Inference about the change-point in a sequence of random variables")."""
+    power = np.cumsum(e**2)
+    n = np.arange(guard, e.size - guard)
+    if n.size == 0:
+        return 0
+    v1 = power[n - 1] / n
+    v2 = (power[-1] - power[n - 1]) / (e.size - n)
+    cost = n * np.log(v1 + 1e-300) + (e.size - n) * np.log(v2 + 1e-300)
+    cost[v2 <= v1] = np.inf
+    return int(n[np.argmin(cost)]) if np.isfinite(cost).any() else 0
+
+
+def detect_onsets(x: np.ndarray, rate: float, threshold: float = 11.0, min_rise: float = 0.25,
+                  floor_db: float = 40.0, min_gap: float = 0.05) -> list[int]:  # fmt: skip
+    """Sample indices of the strikes in a mono signal. Found by the band-wise rise of the
+    spectrum (:func:`band_rise`, 1 ms hops, ~10 ms frames): peaks more than ``threshold``
+    median absolute deviations above its median and above ``min_rise`` (a mean rise of 1.1
+    dB: a recording without noise has no spread) whose frame peaks at most ``floor_db`` below
+    the loudest, at least ``min_gap`` s apart (the larger rise kept). Each is placed to the
+    sample by the change point of the variance (:func:`change_point`) of the linear-
+    prediction error (:func:`prediction_error`: a new strike stands out of modes still
+    ringing) around the frame."""
     hop = max(int(rate / 1000), 1)
-    if x.size // hop < 2:
-        return []
-    candidates = set()
-    # the prediction error is white where nothing new happens, so a smaller rise stands out
-    for sig, rise in ((x, rise_db), (prediction_error(x), rise_db - 3.0)):
-        env = _frame_peaks(sig, hop)
-        for f in np.flatnonzero(_rising(env, rise, floor_db)):
-            lo = max(f - 1, 0) * hop
-            seg = np.abs(sig[lo : (f + 1) * hop])
-            candidates.add(lo + int(np.argmax(seg >= 0.25 * env[f])))
-    onsets: list[int] = []
-    for n0 in sorted(candidates):
-        if onsets and n0 - onsets[-1] < min_gap * rate:
-            continue
-        onsets.append(n0)
+    width = 1 << int(np.ceil(np.log2(8 * hop)))
+    chosen = (
+        _rising_frames(x, hop, width, threshold, min_rise, floor_db, min_gap * rate)
+        if x.size >= 4 * width
+        else []
+    )
+    error = prediction_error(x) if chosen else x
+    onsets = []
+    for t in chosen:
+        lo, hi = max(t * hop - width - 5 * hop, 0), min(t * hop + 2 * hop, x.size)
+        onsets.append(lo + change_point(error[lo:hi]))
     if not onsets and np.any(x != 0):  # a recording that starts with the strike
-        peak = float(np.max(np.abs(x)))
-        onsets.append(int(np.argmax(np.abs(x) >= 10 ** (-floor_db / 20) * peak)))
+        peak_level = float(np.max(np.abs(x)))
+        onsets.append(int(np.argmax(np.abs(x) >= 10 ** (-floor_db / 20) * peak_level)))
     return onsets
+
+
+def _rising_frames(x, hop, width, threshold, min_rise, floor_db, min_gap) -> list[int]:
+    """Frames (ending at sample t ``hop``) where :func:`band_rise` peaks above the
+    threshold of :func:`detect_onsets`, at least ``min_gap`` samples apart."""
+    score = band_rise(x, hop, width)
+    median = float(np.median(score))
+    spread = float(np.median(np.abs(score - median))) + 1e-12
+    loud = _frame_peaks(np.concatenate([np.zeros(width), x]), hop)
+    loud_enough = np.zeros(score.size, dtype=bool)
+    # the frame of samples [t hop - width, t hop) counts when its loudest 1 ms is within floor_db
+    frames_loud = np.lib.stride_tricks.sliding_window_view(loud, width // hop).max(axis=1)
+    m = min(score.size, frames_loud.size)
+    loud_enough[:m] = frames_loud[:m] >= loud.max() * 10 ** (-floor_db / 20)
+    peak = (score > max(median + threshold * spread, min_rise)) & loud_enough
+    peak &= score >= np.concatenate([[0.0], score[:-1]])
+    peak &= score >= np.concatenate([score[1:], [0.0]])
+    chosen: list[tuple[int, float]] = []
+    for t in np.flatnonzero(peak):
+        if chosen and (t - chosen[-1][0]) * hop < min_gap:
+            if score[t] > chosen[-1][1]:
+                chosen[-1] = (int(t), float(score[t]))
+            continue
+        chosen.append((int(t), float(score[t])))
+    return [t for t, _ in chosen]
 
 
 def hits_of(onsets: list[int], n: int, clipped: np.ndarray, rate: float, skip: float) -> list[Hit]:

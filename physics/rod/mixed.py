@@ -20,12 +20,15 @@ the gluing constraints in the next step, see physics.rod.model); ``constraint_he
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from jassy.errors import JassyError
+from jassy.jit import specialise
 from physics.rod import arc
 from physics.rod.band import band_fill, band_lu, band_solve, band_solve_vec
 from physics.rod.model import BC_ROWS, Arcs, Dynamics, FormulationBase, RodModel, RodState, sparse_from_blocks
@@ -36,11 +39,47 @@ element it leaves and the one it enters; its row on the element it leaves is d P
 kappa), where d Phi_x/dy = d Phi_y/dx = d Phi_theta/d(x, y) = 0, so it reaches at most 4 positions."""
 
 
+class Elements(NamedTuple):
+    """The arc elements' angles, curvatures, lengths and their rates."""
+
+    theta: np.ndarray  #: tangent angle at each element's start (rad)
+    kappa: np.ndarray  #: curvature (1/m)
+    seg: np.ndarray  #: length (m)
+    thd: np.ndarray  #: d theta / dt (rad/s)
+    kd: np.ndarray  #: d kappa / dt (1/(m s))
+
+
+class Quadrature(NamedTuple):
+    """Gauss-Legendre points and weights on [0, 1]."""
+
+    x: np.ndarray
+    w: np.ndarray
+
+
+class ElementTerms(NamedTuple):
+    """Per-element outputs of :func:`_element_terms`."""
+
+    mass: np.ndarray  #: (n, 4, 4) mass blocks on (x, y, theta, kappa) (kg, kg m, ...)
+    gyro: np.ndarray  #: (n, 4) gyroscopic forces
+    grad: np.ndarray  #: (n, 4) gravity gradient
+    hess: np.ndarray  #: (n, 2, 2) gravity Hessian on (theta, kappa)
+    hess_psd: np.ndarray  #: (n, 2, 2) its positive semi-definite part
+
+
+#: The Gauss-Legendre rule of the element integrals.
+GAUSS = Quadrature(arc.GAUSS_X, arc.GAUSS_W)
+
+
 @numba.njit(cache=True)
-def _element_terms(theta, kappa, seg, thd, kd, rho_a, g, gx, gw, mass, gyro, grad, hess, hess_psd):
-    """Per element: mass block, gyroscopic force, gravity gradient/Hessian on (theta, kappa).
-    Returns the gravity potential minus rho_A g sum l y_i. With c = (1, i, dr/dtheta, dr/dkappa)
-    (complex), M_ab = rho_A int Re(conj(c_a) c_b) ds; the (x, y) block is rho_A l I."""
+def _element_terms(el, rho_a, g, rule, terms):
+    """Per element: mass block, gyroscopic force, gravity gradient/Hessian on (theta, kappa)
+    into ``terms`` (an ElementTerms); el: the Elements, rule: the Quadrature, rho_a: mass per
+    length (kg/m), g: gravity (m/s^2). Returns the gravity potential minus rho_A g sum l y_i.
+    With c = (1, i, dr/dtheta, dr/dkappa) (complex), M_ab = rho_A int Re(conj(c_a) c_b) ds;
+    the (x, y) block is rho_A l I."""
+    theta, kappa, seg, thd, kd = el
+    gx, gw = rule
+    mass, gyro, grad, hess, hess_psd = terms
     v_sum = 0.0
     for i in range(theta.size):
         rot = np.exp(1j * theta[i])
@@ -236,6 +275,7 @@ class MixedRod(FormulationBase):
         self.n = model.n
         self.ndof = 4 * model.n
         self.l = model.l
+        self._element_run = None  # _element_terms' compiled entry point, found at the first call
         self.kappa0 = model.kappa0
         self.kappa_index = slice(3, None, 4)
         self.start_rows = np.array(BC_ROWS[model.start_bc], dtype=np.int64)
@@ -304,8 +344,19 @@ class MixedRod(FormulationBase):
         n, m = self.n, self.model
         mass, gyro, grad = np.empty((n, 4, 4)), np.empty((n, 4)), np.empty((n, 4))
         hess, hess_psd = np.empty((n, 2, 2)), np.empty((n, 2, 2))
-        vg = _element_terms(th, k, self.l, vv[2::4], vv[3::4], m.rho_A, m.gravity, arc.GAUSS_X, arc.GAUSS_W,
-                            mass, gyro, grad, hess, hess_psd)  # fmt: skip
+        # fresh contiguous float64 copies and float scalars: the same types at every call, so
+        # the compiled entry point is looked up once (numba's dispatcher types records slowly)
+        rows = (th, k, self.l, vv[2::4], vv[3::4])
+        args = (
+            Elements(*(np.array(a, dtype=np.float64) for a in rows)),
+            float(m.rho_A),
+            float(m.gravity),
+            GAUSS,
+            ElementTerms(mass, gyro, grad, hess, hess_psd),
+        )
+        if self._element_run is None:
+            self._element_run = specialise(_element_terms, *args)
+        vg = self._element_run(*args)
         dk = k - self.kappa0
         grad[:, 3] += m.EI * self.l * dk
         V = vg + m.rho_A * m.gravity * float(self.l @ y) + 0.5 * m.EI * float(self.l @ (dk * dk))
