@@ -9,8 +9,8 @@ per kind when a program first holds that kind, so a first render compiles only t
 of the kinds its graph uses. They call the same kernels, on the same arrays, as the ugens'
 ``process`` (so the same output bits). Because the table holds raw addresses, the same
 function runs inside the PortAudio callback (a ``@cfunc`` that never takes the GIL, see
-jassy.engines.callback) and offline, where :func:`run_blocks` renders every whole block up to the
-next event in one call (no Python per block).
+jassy.engines.callback) and offline, on the callback's code path (one compiled call per run
+of frames, jassy.engines.program_offline: no Python per block or per event).
 
 Ugens with a kernel here: :data:`PROGRAM_UGENS`. A graph holding any other node, a feedback
 delay, an anytime budget or a contact that follows physics curves keeps the per-node Python
@@ -405,7 +405,8 @@ def run_program(prog, start, n):
 @nb.njit(cache=True, nogil=True)
 def run_blocks(prog, bus, rows, out, offset, start, count, block):
     """``count`` whole blocks from frame ``start``; output channel r of each block goes to
-    out[r, offset + ...] from bus row rows[r]."""
+    out[r, offset + ...] from bus row rows[r]: the program alone, without events or an
+    output stage (``jassy bench modal`` times it against the bare kernel)."""
     for b in range(count):
         run_program(prog, start + b * block, block)
         at = offset + b * block

@@ -15,7 +15,7 @@ import numpy as np
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
-from ugens.cells import store, two_pole
+from ugens.cells import slot, store, two_pole
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams, design
@@ -189,7 +189,7 @@ class Roll(Turning, NeedleContact):
     def _prepare(self) -> None:
         super()._prepare()
         v = self.values
-        self.cfg[ProfileConfig._fields.index("inv_dxfs")] = 1.0 / (self.loop_dx() * self.sample_rate)
+        self.cfg[slot(ProfileConfig, "inv_dxfs")] = 1.0 / (self.loop_dx() * self.sample_rate)
         self.ball = ball_unevenness(v["seed"] + 1)
         self.turn = np.zeros(1)
         self._per_metre = 1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0

@@ -23,8 +23,8 @@ ignores its own errors (this process then compiles what is missing) and leaves w
 :func:`graph_units` gives the units of the graph of a
 :class:`jassy.engines.offline.OfflineEngine`: one per kind of node the graph's program holds
 (its node function with every kernel it calls), the heaviest first, then a modal bank's pole
-design, and last a small stand-in render that compiles the engine's own kernels (the
-program's block loop, the scheduler, the output stage).
+design, and last a small stand-in render (a silent tap) that compiles the engine's own
+kernels (the program's render loop, event application, the output stage).
 """
 
 from __future__ import annotations
@@ -112,7 +112,6 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     (:func:`kernels_cached`) and the graph runs as a program."""
     from jassy import program
     from ugens.impact import ImpactForce
-    from ugens.mix import Gain
     from ugens.modal import ModalBank, direct_ratio
 
     if _running_units or graph.budget is not None or not engine_options.get("program", True):
@@ -122,13 +121,13 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     if program.why_not_compiled(graph) is not None:
         return []
     kinds = [type(node) for node in graph.order]
-    # the heaviest kind first (this process starts there), the stand-in's kinds left to it
+    # the heaviest kind first (this process starts there); the stand-in holds a tap alone
     order = sorted(dict.fromkeys(kinds), key=lambda kind: kind is not ModalBank)
-    stand_in = ImpactForce in kinds and Gain in kinds
+    stand_in = ImpactForce in kinds
     units: list[Callable[[], object]] = [
         partial(program.node_function_address, program.PROGRAM_UGENS[kind])
         for kind in order
-        if not (stand_in and kind in (ImpactForce, Gain))
+        if not (stand_in and kind is ImpactForce)
     ]
     if ModalBank in kinds:  # its pole design, compiled when a bank is prepared
         units.append(partial(direct_ratio, np.array([440.0]), np.array([1.0]), 48000.0, "band"))
@@ -138,18 +137,16 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
 
 
 def _render_stand_in(haptic: bool, engine_options: dict) -> None:
-    """Render three blocks of a tap into a gain through an engine with the same options (so
-    the same kernel types as the real render: block loop, scheduler, event kernels, output
-    stage)."""
+    """Render three blocks of a silent tap through an engine with the same options: the same
+    kernel types as the real render's block loop, event application and output stage. (It
+    holds no other kind and plays no event, which leaves the most to this process: the
+    render loop is the largest unit.)"""
     from jassy.engines.offline import OfflineEngine
-    from jassy.events import Event
     from jassy.graph import Graph
     from ugens.impact import ImpactForce
-    from ugens.mix import Gain
 
     tap = ImpactForce(name="tap", duration=0.0008)
-    graph = Graph(Gain(tap, gain=0.5, name="out"), haptic=tap if haptic else None)
-    engine = OfflineEngine(graph, [Event(0.001, "tap", "impact", {"impulse": 0.01})], **engine_options)
+    engine = OfflineEngine(Graph(tap, haptic=tap if haptic else None), [], **engine_options)
     engine.render(3 * engine_options["block"] / engine_options["sample_rate"])
 
 

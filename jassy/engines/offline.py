@@ -5,6 +5,10 @@ sub-block boundaries come from the absolute clock, the block size and the events
 chunk size does not change the result). Each chunk is checked for NaN/Inf, which are
 replaced by silence and reported once with the node that produced them, and the audio
 passes the final limiter so it stays within [-CEILING, CEILING].
+
+A graph whose every node has a program kernel renders on the device callback's code path
+instead (jassy.engines.program_offline): events, program and this output stage in compiled
+runs, written straight into the result, with the same bits.
 """
 
 from __future__ import annotations

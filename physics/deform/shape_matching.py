@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import NamedTuple
 
 import numba
@@ -714,9 +715,9 @@ class ShapeMatching:
     def n_bodies(self) -> int:
         return self.starts.size - 1
 
-    @property
+    @cached_property
     def model(self) -> Model:
-        """The arrays the kernels read."""
+        """The arrays the kernels read (built once)."""
         return Model(
             self.masses, self.body, self.order, self.starts, self.qrest, self.q9, self.aqq, self.aqq9
         )

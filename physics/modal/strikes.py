@@ -100,14 +100,31 @@ def detect_onsets(x: np.ndarray, rate: float, threshold: float = 11.0, min_rise:
     ringing) around the frame."""
     hop = max(int(rate / 1000), 1)
     width = 1 << int(np.ceil(np.log2(8 * hop)))
-    if x.size < 4 * width:
-        return [0] if np.any(x != 0) else []
+    chosen = (
+        _rising_frames(x, hop, width, threshold, min_rise, floor_db, min_gap * rate)
+        if x.size >= 4 * width
+        else []
+    )
+    error = prediction_error(x) if chosen else x
+    onsets = []
+    for t in chosen:
+        lo, hi = max(t * hop - width - 5 * hop, 0), min(t * hop + 2 * hop, x.size)
+        onsets.append(lo + change_point(error[lo:hi]))
+    if not onsets and np.any(x != 0):  # a recording that starts with the strike
+        peak_level = float(np.max(np.abs(x)))
+        onsets.append(int(np.argmax(np.abs(x) >= 10 ** (-floor_db / 20) * peak_level)))
+    return onsets
+
+
+def _rising_frames(x, hop, width, threshold, min_rise, floor_db, min_gap) -> list[int]:
+    """Frames (ending at sample t ``hop``) where :func:`band_rise` peaks above the
+    threshold of :func:`detect_onsets`, at least ``min_gap`` samples apart."""
     score = band_rise(x, hop, width)
     median = float(np.median(score))
     spread = float(np.median(np.abs(score - median))) + 1e-12
     loud = _frame_peaks(np.concatenate([np.zeros(width), x]), hop)
     loud_enough = np.zeros(score.size, dtype=bool)
-    # the frame of samples [t hop - width, t hop) is loud enough when its loudest 1 ms is
+    # the frame of samples [t hop - width, t hop) counts when its loudest 1 ms is within floor_db
     frames_loud = np.lib.stride_tricks.sliding_window_view(loud, width // hop).max(axis=1)
     m = min(score.size, frames_loud.size)
     loud_enough[:m] = frames_loud[:m] >= loud.max() * 10 ** (-floor_db / 20)
@@ -116,20 +133,12 @@ def detect_onsets(x: np.ndarray, rate: float, threshold: float = 11.0, min_rise:
     peak &= score >= np.concatenate([score[1:], [0.0]])
     chosen: list[tuple[int, float]] = []
     for t in np.flatnonzero(peak):
-        if chosen and (t - chosen[-1][0]) * hop < min_gap * rate:
+        if chosen and (t - chosen[-1][0]) * hop < min_gap:
             if score[t] > chosen[-1][1]:
                 chosen[-1] = (int(t), float(score[t]))
             continue
         chosen.append((int(t), float(score[t])))
-    error = prediction_error(x)
-    onsets = []
-    for t, _ in chosen:
-        lo, hi = max(t * hop - width - 5 * hop, 0), min(t * hop + 2 * hop, x.size)
-        onsets.append(lo + change_point(error[lo:hi]))
-    if not onsets and np.any(x != 0):  # a recording that starts with the strike
-        peak_level = float(np.max(np.abs(x)))
-        onsets.append(int(np.argmax(np.abs(x) >= 10 ** (-floor_db / 20) * peak_level)))
-    return onsets
+    return [t for t, _ in chosen]
 
 
 def hits_of(onsets: list[int], n: int, clipped: np.ndarray, rate: float, skip: float) -> list[Hit]:
