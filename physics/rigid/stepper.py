@@ -162,6 +162,31 @@ def new_data(
     )
 
 
+class SolveBodies(NamedTuple):
+    """The Model arrays the contact solve reads (a call passes only these)."""
+
+    kind: np.ndarray
+    inv_mass: np.ndarray
+    inv_inertia: np.ndarray
+    restitution: np.ndarray
+    friction: np.ndarray
+    rolling: np.ndarray
+
+
+class SolveData(NamedTuple):
+    """The Data the contact solve reads and writes (a call passes only these)."""
+
+    contacts: Contacts
+    warm: WarmStart
+    pos: np.ndarray
+    rot: np.ndarray
+    phi: np.ndarray
+    kin_v: np.ndarray
+    kin_w: np.ndarray
+    rec: np.ndarray
+    stats: RunStats
+
+
 class PairScratch(NamedTuple):
     """Per broad-phase pair (grown with the pairs): how far its gap can shrink in the step (m),
     a lower bound of its gap (m), and whether it touches (gap <= slop)."""
@@ -433,19 +458,22 @@ def _pair_reach(pairs, vel, spin, kind, g, dt, out):
         out[p] = max(out[p], reach)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _boxes(m, d, margin):
     """d.lo, d.hi: bounding boxes grown by margin and d.motion; d.movable: the dynamic bodies."""
-    shape_type, bound, pos, motion, lo, hi = (
-        m.geometry.shape_type,
-        m.geometry.bound,
+    geo = m.geometry
+    shape_type, bound, kind, pos, motion, lo, hi, movable = (
+        geo.shape_type,
+        geo.bound,
+        m.kind,
         d.pos,
         d.motion,
         d.lo,
         d.hi,
+        d.movable,
     )
     for i in range(pos.shape[0]):
-        d.movable[i] = m.kind[i] == DYNAMIC
+        movable[i] = kind[i] == DYNAMIC
         if shape_type[i] == PLANE:
             lo[i] = -np.inf
             hi[i] = np.inf
@@ -492,13 +520,12 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _detect(m, opt, d, pairs, near):
-    """Contacts (into d.contacts; returns their count) of all pairs within margin = slop +
+def _detect(geo, slop, pos, rot, buf, pairs, near):
+    """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
     near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop."""
-    slop, pos, rot, buf, geo = opt.slop, d.pos, d.rot, d.contacts, m.geometry
     reach, gap, touching = near.reach, near.gap, near.touching
     count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
@@ -553,7 +580,7 @@ def narrow_stage(m, opt, d, pairs, near, dt):
     gravity_norm = _norm3(d.gravity)
     near.reach[: pairs.shape[0]] = 0.0
     _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, near.reach)
-    return _detect(m, opt, d, pairs, near)
+    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
 
 
 @nb.njit(cache=True, inline="always")
@@ -563,7 +590,9 @@ def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
     record count, -1 when d.rec is full."""
     d.stats.solves[0] += 1
     if opt.contact == IMPULSE:
-        return resolve(m, opt, d, solver, count, dt, time, step, nrec)
+        bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+        state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+        return resolve(bodies, opt, state, solver, count, dt, time, step, nrec)
     if opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
         d.stats.contacts[0] += count
         return penalty(m, opt, d, count, dt, time, step, nrec)
