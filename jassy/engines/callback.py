@@ -34,7 +34,9 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from llvmlite import ir as llvmir
 from numba import types
+from numba.extending import intrinsic
 
 from jassy import haptics, program, safety
 from jassy.engines import hapticframes
@@ -119,9 +121,11 @@ drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODU
     LATE_STRIKES,
     OUTPUT,
     METER,
-) = range(42)
+    NEXT_CUT,
+    OUTPUT_STAGE,
+) = range(44)
 #: Per queue: [records address, capacity, write, read]; the score queue, then the now queue.
-QUEUES, QUEUE_SLOTS, N_QUEUES = METER + 1, 4, 2
+QUEUES, QUEUE_SLOTS, N_QUEUES = OUTPUT_STAGE + 1, 4, 2
 CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 # float64 parameter slots
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
@@ -228,32 +232,34 @@ def _next_cut(control, queue_index, pos, stop, prog):
     return stop
 
 
-@nb.njit(cache=True, nogil=True)
-def sub_block(control, prog, pos, end, dst, at):
-    """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
-    haptic) and return its end: apply the queued records due there, cut at the next block
-    boundary or record frame (at most ``end``), run the program, then the output stage:
-    NaN/Inf to 0 (counted in NONFINITE), the audio limiter and its meter (LIMIT_AUDIO), the
-    haptic force and slew limits (LIMIT_HAPTIC) and the final fade of the haptic rows."""
+def _next_cut_entry(control_address, queue_index, pos, stop):
+    """:func:`_next_cut` for the program of the control slots at ``control_address``."""
+    control = nb.carray(void_pointer(control_address), (CONTROL,), np.int64)
+    prog = _i64(control[PROGRAM], 1)
+    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
+    return _next_cut(control, queue_index, pos, stop, prog)
+
+
+def _output_stage(control_address, dst_address, row_stride, m):
+    """The output stage of ``m`` frames of the bus rows into the float64 destination rows at
+    ``dst_address`` (``row_stride`` elements apart): NaN/Inf to 0 (counted in NONFINITE), the
+    audio limiter and its meter (LIMIT_AUDIO), the haptic force and slew limits
+    (LIMIT_HAPTIC) and the final fade of the haptic rows."""
+    control = nb.carray(void_pointer(control_address), (CONTROL,), np.int64)
     block = control[BLOCK]
     rows_n = control[N_ROWS]
     na = control[N_AUDIO]
     rows = _i64(control[ROWS], rows_n)
     par = _f64(control[PARAMS], 4)
-    stop = min(end, (pos // block + 1) * block)
-    for q in range(N_QUEUES):
-        stop = _next_cut(control, q, pos, stop, prog)
-    m = stop - pos
-    run_program(prog, pos, m)
     bus_bits = nb.carray(void_pointer(control[BUS]), (control[BUS_COUNT], block), np.int64)
-    dst_bits = dst.view(np.int64)
+    dst_bits = nb.carray(void_pointer(dst_address), (rows_n, row_stride), np.int64)
     top = 0
     for c in range(rows_n):
-        bad, magnitude = copy_finite(bus_bits[rows[c]], dst_bits[c, at:], m)
+        bad, magnitude = copy_finite(bus_bits[rows[c]], dst_bits[c, :], m)
         control[NONFINITE] += bad
         if c < na:
             top = max(top, magnitude)
-    out = dst[:, at : at + m]
+    out = nb.carray(void_pointer(dst_address), (rows_n, row_stride), np.float64)[:, :m]
     if control[OUTPUT] & LIMIT_AUDIO:
         meter = _f64(control[METER], METERED + 1)
         peak = float_from_bits(top)
@@ -271,6 +277,84 @@ def sub_block(control, prog, pos, end, dst, at):
                 for c in range(na, rows_n):
                     out[c, i] *= w
             control[FADE_LEFT] = max(left - m, 0)
+
+
+#: C signatures of the render loop's stages, compiled apart and called through their
+#: addresses (control[NEXT_CUT], control[OUTPUT_STAGE]): each compiles once, in any process,
+#: instead of being linked into, and optimised again in, every render loop that calls it.
+NEXT_CUT_SIGNATURE = types.int64(types.int64, types.int64, types.int64, types.int64)
+OUTPUT_STAGE_SIGNATURE = types.void(types.int64, types.int64, types.int64, types.int64)
+_compiled_stages: dict[str, object] = {}
+
+
+def next_cut_address() -> int:
+    """The address of the compiled event application of one queue (:func:`_next_cut`)."""
+    return _stage_address("next_cut", NEXT_CUT_SIGNATURE, _next_cut_entry)
+
+
+def output_stage_address() -> int:
+    """The address of the compiled output stage (:func:`_output_stage`)."""
+    return _stage_address("output_stage", OUTPUT_STAGE_SIGNATURE, _output_stage)
+
+
+def _stage_address(name: str, signature, function) -> int:
+    """A stage compiled as a C function (or loaded from numba's cache) on first use."""
+    compiled = _compiled_stages.get(name)
+    if compiled is None:
+        compiled = nb.cfunc(signature, cache=True, nogil=True)(function)
+        _compiled_stages[name] = compiled
+    return compiled.address
+
+
+@intrinsic
+def call_next_cut(typingctx, function, control_address, queue_index, pos, stop):
+    """Call the compiled :func:`_next_cut_entry` at address ``function``."""
+    sig = types.int64(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvmir.IntType(64)
+        pointer = builder.inttoptr(args[0], llvmir.FunctionType(i64, [i64] * 4).as_pointer())
+        return builder.call(pointer, args[1:])
+
+    return sig, codegen
+
+
+@intrinsic
+def call_output_stage(typingctx, function, control_address, dst_address, row_stride, m):
+    """Call the compiled :func:`_output_stage` at address ``function``."""
+    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvmir.IntType(64)
+        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
+        builder.call(pointer, args[1:])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@nb.njit(cache=True, nogil=True)
+def apply_due(control, pos):
+    """Apply the score queue's records due at frame ``pos`` (before a Python event there)."""
+    call_next_cut(control[NEXT_CUT], control.ctypes.data, 0, pos, pos)
+
+
+@nb.njit(cache=True, nogil=True)
+def sub_block(control, prog, pos, end, dst, at):
+    """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
+    haptic, each row contiguous) and return its end: apply the queued records due there
+    (control[NEXT_CUT]), cut at the next block boundary or record frame (at most ``end``),
+    run the program, then the output stage (control[OUTPUT_STAGE], :func:`_output_stage`)."""
+    block = control[BLOCK]
+    stop = min(end, (pos // block + 1) * block)
+    for q in range(N_QUEUES):
+        stop = call_next_cut(control[NEXT_CUT], control.ctypes.data, q, pos, stop)
+    m = stop - pos
+    run_program(prog, pos, m)
+    row_stride = dst.strides[0] // dst.itemsize
+    call_output_stage(
+        control[OUTPUT_STAGE], control.ctypes.data, dst.ctypes.data + at * dst.itemsize, row_stride, m
+    )
     return stop
 
 
@@ -634,6 +718,8 @@ class ProgramRun(EventRecords):
         control[BLOCK] = self.block
         control[OUTPUT] = output
         control[FADE_LEFT] = -1
+        control[NEXT_CUT] = next_cut_address()
+        control[OUTPUT_STAGE] = output_stage_address()
         self.score_queue = EventQueue(control, 0, queue_capacity)
         self.now_queue = EventQueue(control, 1, queue_capacity)
 

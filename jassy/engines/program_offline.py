@@ -34,7 +34,7 @@ from jassy.engines.callback import (
     STRIKE,
     ProgramRun,
     _event_not_supported,
-    _next_cut,
+    apply_due,
     sub_block,
 )
 from jassy.events import Event
@@ -80,14 +80,6 @@ def render_planar(control, out, offset, frames, delayed, history, delays, delay_
             break
     control[FRAME] = pos
     return pos - begin
-
-
-@nb.njit(cache=True, nogil=True)
-def apply_due(control, pos):
-    """Apply the score queue's records due at frame ``pos`` (before a Python event there)."""
-    prog = _i64(control[PROGRAM], 1)
-    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
-    _next_cut(control, 0, pos, pos, prog)
 
 
 class OfflineProgram(ProgramRun):
