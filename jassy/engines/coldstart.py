@@ -23,9 +23,9 @@ ignores its own errors (this process then compiles what is missing) and leaves w
 :func:`graph_units` gives the units of the graph of a
 :class:`jassy.engines.offline.OfflineEngine`: one per kind of node the graph's program holds
 (its node function with every kernel it calls), the heaviest first, then a modal bank's pole
-design, a small stand-in render (a silent tap) that compiles the engine's own kernels (the
-program's render loop), and last the two stages that loop calls through their addresses
-(event application, the output stage), which the helper compiles first.
+design, and last a small stand-in render (a silent tap) that compiles the engine's own
+kernels (the program's render loop, and event application and the output stage, which the loop
+calls through their addresses: compiled once each, not again inside every loop that calls them).
 """
 
 from __future__ import annotations
@@ -112,7 +112,6 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
     (:func:`kernels_cached`) and the graph runs as a program."""
     from jassy import program
-    from jassy.engines import callback
     from ugens.impact import ImpactForce
     from ugens.modal import ModalBank, direct_ratio
 
@@ -133,17 +132,16 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     ]
     if ModalBank in kinds:  # its pole design, compiled when a bank is prepared
         units.append(partial(direct_ratio, np.array([440.0]), np.array([1.0]), 48000.0, "band"))
-    if stand_in:  # the helper starts at the back: the render loop's stages, then the loop
+    if stand_in:
         units.append(partial(_render_stand_in, bool(graph.haptic), engine_options))
-        units += [callback.next_cut_address, callback.output_stage_address]
     return units
 
 
 def _render_stand_in(haptic: bool, engine_options: dict) -> None:
     """Render three blocks of a silent tap through an engine with the same options: the same
-    kernel types as the real render's render loop (its stages, called through their
-    addresses, are units of their own). It holds no other kind and plays no event, which
-    leaves the most to this process."""
+    kernel types as the real render's block loop, event application and output stage. (It
+    holds no other kind and plays no event, which leaves the most to this process: the
+    render loop is the largest unit.)"""
     from jassy.engines.offline import OfflineEngine
     from jassy.graph import Graph
     from ugens.impact import ImpactForce
