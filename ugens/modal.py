@@ -560,17 +560,39 @@ class ModalBank(ModelParams, UGen):
         ),
     }
 
+    def _design_basis(self) -> tuple[tuple, tuple]:
+        """What the design caches depend on besides the event-driven parameters: the model
+        and its arrays (compared by identity; a model's arrays are not changed in place),
+        and the sample rate, direct-gain form and level (compared by value)."""
+        model, v = self.model, self.values
+        objects = (model, model.frequencies, model.decays, model.gains, model.driving, model.surface)
+        return objects, (self.sample_rate, v["direct"], v["level"])
+
+    def _design_unchanged(self, basis: tuple[tuple, tuple]) -> bool:
+        """Whether ``basis`` is the one the design caches were made (and the model validated) for."""
+        kept = getattr(self, "_kept_basis", None)
+        return (
+            kept is not None
+            and all(a is b for a, b in zip(kept[0], basis[0], strict=True))
+            and kept[1] == basis[1]
+        )
+
     def _prepare(self) -> None:
-        self.validate_model()
         self._size_input = self.sources.get("size")
         self._size = 1.0  # the fragment size of the current design
         model = self.model
-        self._level_gain = self.level_gain()
-        self.order = np.argsort(model.decays, kind="stable")
-        self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
-        self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
-        self._location_rows = {}  # location -> the model's gains there, internal order
-        self._mode_rows = model.frequencies[self.order], model.decays[self.order]  # Hz, 1/s
+        basis = self._design_basis()
+        if not self._design_unchanged(basis):
+            # A new model or rate: validate and start the design caches afresh (a render of
+            # the same graph again keeps them, and its designs are the same numbers).
+            self.validate_model()
+            self._level_gain = self.level_gain()
+            self.order = np.argsort(model.decays, kind="stable")
+            self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
+            self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
+            self._location_rows = {}  # location -> the model's gains there, internal order
+            self._mode_rows = model.frequencies[self.order], model.decays[self.order]  # Hz, 1/s
+            self._kept_basis = basis
         self._tuning = np.full((6, model.n_modes), np.nan)  # the last retune's new tuning (retune_state)
         k = model.n_modes
         self.bank = line_aligned_zeros((6, k))  # c1, c2, g, d (current coefficients), y1, y2 (state)

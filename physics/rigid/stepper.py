@@ -27,7 +27,12 @@ outer step of h seconds (:func:`outer_step`) is:
 
 The stages are inlined into run_steps (numba inline="always"): a called kernel is linked
 into its caller's module and optimised again there, so a chain of stage calls above the
-narrow phase would compile it once per level.
+narrow phase would compile it once per level. Stages and helpers that allocate nothing
+(narrow_stage, _boxes, _commit, sample_stage, the per-body loops) are compiled without
+reference counting (``_nrt=False``): an inlined or reference-counted call taking Model and
+Data counts a reference up and down for every array they hold, a fixed cost per call. Such
+a kernel passes the flag on to the kernels it calls that set none, so it calls only kernels
+that are themselves ``_nrt=False``.
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -201,7 +206,7 @@ def new_pair_scratch(size):
     return PairScratch(np.empty(size), np.empty(size), np.empty(size, np.bool_))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _rotations(quat, rot):
     """rot[i]: rotation matrix of the unit quaternion quat[i] (spatial.quat_to_mat, in place)."""
     for i in range(quat.shape[0]):
@@ -223,7 +228,7 @@ def _rotations(quat, rot):
         )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _mark_resting(rec, first, last, kind, resting):
     """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
     (those of the solve just done)."""
@@ -400,7 +405,7 @@ def _norm3(x):
     return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _motion(vel, spin, kind, g, dt, motion):
     """motion[i]: a bound (m) on how far any point of body i moves in dt seconds of free motion,
     from its centre's speed and spin bound (_speeds), plus g dt^2 if it falls."""
@@ -409,7 +414,7 @@ def _motion(vel, spin, kind, g, dt, motion):
         motion[i] = dt * (speed + spin[i]) + (g * dt * dt if kind[i] == DYNAMIC else 0.0)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _speeds(kind, bound, inertia, phi, rot, kin_v, kin_w, vel, spin):
     """vel[i]: world velocity of body i's centre (m/s); spin[i]: a bound on its points' speed
     about the centre, bounding radius ``bound[i]`` * the largest |omega| of the step (m/s). A
@@ -424,15 +429,17 @@ def _speeds(kind, bound, inertia, phi, rot, kin_v, kin_w, vel, spin):
             momentum = math.sqrt((i0 * phi[i, 0]) ** 2 + (i1 * phi[i, 1]) ** 2 + (i2 * phi[i, 2]) ** 2)
             w = momentum / min(i0, i1, i2)
         elif kind[i] == KINEMATIC:
-            vel[i] = kin_v[i]
+            for x in range(3):
+                vel[i, x] = kin_v[i, x]
             w = math.sqrt(kin_w[i, 0] ** 2 + kin_w[i, 1] ** 2 + kin_w[i, 2] ** 2)
         else:
-            vel[i] = 0.0
+            for x in range(3):
+                vel[i, x] = 0.0
             w = 0.0
         spin[i] = bound[i] * w if w > 0.0 else 0.0  # a plane's infinite bound only if it turns
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _gap_spin(spin, shape_type):
     """The part of each body's spin bound (_speeds) that can change a gap: none for a sphere
     (turning about its centre moves no point of it nearer to anything), all of it otherwise.
@@ -442,7 +449,7 @@ def _gap_spin(spin, shape_type):
             spin[i] = 0.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _pair_reach(pairs, vel, spin, kind, g, dt, out):
     """out[p]: a bound (m) on how much pair p's gap can shrink in dt seconds of free motion:
     dt (|v_a - v_b| + spin_a + spin_b), plus g dt^2 when only one of them falls (the larger of
@@ -458,7 +465,7 @@ def _pair_reach(pairs, vel, spin, kind, g, dt, out):
         out[p] = max(out[p], reach)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def _boxes(m, d, margin):
     """d.lo, d.hi: bounding boxes grown by margin and d.motion; d.movable: the dynamic bodies."""
     geo = m.geometry
@@ -474,13 +481,14 @@ def _boxes(m, d, margin):
     )
     for i in range(pos.shape[0]):
         movable[i] = kind[i] == DYNAMIC
-        if shape_type[i] == PLANE:
-            lo[i] = -np.inf
-            hi[i] = np.inf
-            continue
-        reach = bound[i] + margin + motion[i]
-        lo[i] = pos[i] - reach
-        hi[i] = pos[i] + reach
+        for x in range(3):
+            if shape_type[i] == PLANE:
+                lo[i, x] = -np.inf
+                hi[i, x] = np.inf
+            else:
+                reach = bound[i] + margin + motion[i]
+                lo[i, x] = pos[i, x] - reach
+                hi[i, x] = pos[i, x] + reach
 
 
 @nb.njit(cache=True)
@@ -573,7 +581,7 @@ def broad_stage(m, opt, d, dt, sweep):
     return pairs, sweep
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def narrow_stage(m, opt, d, pairs, near, dt):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
     come within slop (_detect); returns their count."""
@@ -597,18 +605,6 @@ def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
         d.stats.contacts[0] += count
         return penalty(m, opt, d, count, dt, time, step, nrec)
     raise ValueError("stepper.contact_stage: unknown contact model code")
-
-
-@nb.njit(cache=True)
-def _mark_resting(rec, first, last, kind, resting):
-    """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
-    (those of the solve just done)."""
-    resting[:] = False
-    for r in range(first, last):
-        if rec[r, REC_IMPACT] == 0.0:
-            for col in (REC_A, REC_B):
-                i = int(rec[r, col])
-                resting[i] = kind[i] == DYNAMIC
 
 
 @nb.njit(cache=True, inline="always")
@@ -663,24 +659,33 @@ def impact_stage(m, opt, d, pairs, near, dt):
     return first_hit
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def _commit(d):
     """The state after the free motion (d.new_*) becomes the state."""
-    d.pos[:] = d.new_pos
-    d.quat[:] = d.new_quat
-    d.phi[:] = d.new_phi
+    _copy_rows(d.new_pos, d.pos)
+    _copy_rows(d.new_quat, d.quat)
+    _copy_rows(d.new_phi, d.phi)
 
 
 @nb.njit(cache=True, inline="always")
+def _copy_rows(src, dst, at=0):
+    """dst[i, at:at + k] = src[i, :k] for every row i (element by element: no temporary)."""
+    for i in range(src.shape[0]):
+        for x in range(src.shape[1]):
+            dst[i, at + x] = src[i, x]
+
+
+@nb.njit(cache=True, _nrt=False)
 def sample_stage(d, step):
     """After every d.every-th step counted from step d.origin, the poses and twists go to
     d.traj[k] (N, 13) if it has room."""
     done = step + 1 - d.origin
     if done % d.every == 0 and done // d.every - 1 < d.traj.shape[0]:
         k = done // d.every - 1
-        d.traj[k, :, :3] = d.pos
-        d.traj[k, :, 3:7] = d.quat
-        d.traj[k, :, 7:] = d.phi
+        row = d.traj[k]
+        _copy_rows(d.pos, row, 0)
+        _copy_rows(d.quat, row, 3)
+        _copy_rows(d.phi, row, 7)
 
 
 @nb.njit(cache=True, inline="always")
