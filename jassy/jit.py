@@ -11,6 +11,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
+from llvmlite import ir as llvmir
 from numba.core import caching, cgutils, codegen, dispatcher, types
 from numba.extending import intrinsic
 
@@ -23,6 +24,21 @@ def void_pointer(typingctx, address):
 
     def codegen(context, builder, signature, args):
         return builder.inttoptr(args[0], cgutils.voidptr_t)
+
+    return sig, codegen
+
+
+@intrinsic
+def call_void(typingctx, function, a, b, c, d):
+    """Call the compiled C function ``void f(int64, int64, int64, int64)`` at address
+    ``function`` (a cached ``numba.cfunc``: compiled once, not linked into its callers)."""
+    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvmir.IntType(64)
+        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
+        builder.call(pointer, args[1:])
+        return context.get_dummy_value()
 
     return sig, codegen
 

@@ -25,14 +25,12 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from llvmlite import ir as llvmir
 from numba.core import types
-from numba.extending import intrinsic
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from jassy import params
 from jassy.graph import Graph
-from jassy.jit import drop_stale_cache, void_pointer
+from jassy.jit import call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
 from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
@@ -379,27 +377,13 @@ def node_function_address(kind: int) -> int:
     return compiled.address
 
 
-@intrinsic
-def call_node(typingctx, function, table, base, start, n):
-    """Call the compiled node function at address ``function`` (see NODE_SIGNATURE)."""
-    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
-
-    def codegen(context, builder, signature, args):
-        i64 = llvmir.IntType(64)
-        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
-        builder.call(pointer, args[1:])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
 @nb.njit(cache=True, nogil=True)
 def run_program(prog, start, n):
     """Run every node of the program, in order, for frames start .. start + n - 1."""
     table = prog.ctypes.data
     for i in range(prog[0]):
         base = 1 + i * RECORD
-        call_node(prog[base + FUNCTION], table, base, start, n)
+        call_void(prog[base + FUNCTION], table, base, start, n)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -46,7 +46,7 @@ from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import HapticSafety, limit_force
-from jassy.jit import drop_stale_cache, void_pointer
+from jassy.jit import call_void, drop_stale_cache, void_pointer
 from jassy.program import (
     HEADER,
     KERNEL_MODULES,
@@ -319,20 +319,6 @@ def call_next_cut(typingctx, function, control_address, queue_index, pos, stop):
     return sig, codegen
 
 
-@intrinsic
-def call_output_stage(typingctx, function, control_address, dst_address, row_stride, m):
-    """Call the compiled :func:`_output_stage` at address ``function``."""
-    sig = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
-
-    def codegen(context, builder, signature, args):
-        i64 = llvmir.IntType(64)
-        pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
-        builder.call(pointer, args[1:])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
 @nb.njit(cache=True, nogil=True)
 def apply_due(control, pos):
     """Apply the score queue's records due at frame ``pos`` (before a Python event there)."""
@@ -352,9 +338,7 @@ def sub_block(control, prog, pos, end, dst, at):
     m = stop - pos
     run_program(prog, pos, m)
     row_stride = dst.strides[0] // dst.itemsize
-    call_output_stage(
-        control[OUTPUT_STAGE], control.ctypes.data, dst.ctypes.data + at * dst.itemsize, row_stride, m
-    )
+    call_void(control[OUTPUT_STAGE], control.ctypes.data, dst.ctypes.data + at * dst.itemsize, row_stride, m)
     return stop
 
 
