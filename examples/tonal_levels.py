@@ -12,14 +12,14 @@ model, then the range over the models (the window of jassy.levels is -30..-6 dBF
 
 from __future__ import annotations
 
+import argparse
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
 import ugens
-from jassy import Event, Graph, ModalModel, render
+from jassy import Event, Graph, JassyError, ModalModel, render
 from jassy.levels import calibrated
 from patches.objects import OBJECTS
 from patches.shipped import shipped_models
@@ -48,14 +48,20 @@ def drill(model: ModalModel, rpm: float, level: str) -> float:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="*", help="model files (default: the 17 shipped models)")
+    args = parser.parse_args()
     names = sorted(set(shipped_models()) | {info.file for info in OBJECTS.values()})
-    files = sys.argv[1:] or [str(ROOT / "patches" / name) for name in names]
+    files = args.models or [str(ROOT / "patches" / name) for name in names]
     columns = [f"scrape {v:g} m/s" for v in SPEEDS]
     columns += [f"drill {r / 1000:g}k rpm" for r in RPMS] + [f"raw drill {r / 1000:g}k" for r in RPMS]
     print("model | " + " | ".join(columns))
     rows = []
     for file in files:
-        model = ModalModel.load(file)
+        try:
+            model = ModalModel.load(file)
+        except JassyError as exc:
+            parser.error(str(exc))
         model = model if model.reference_gain is not None else calibrated(model)
         row = [scrape(model, v) for v in SPEEDS]
         row += [drill(model, r, "auto") for r in RPMS] + [drill(model, r, "raw") for r in RPMS]
