@@ -28,22 +28,29 @@ class FedBank(NamedTuple):
     transfers: tuple[np.ndarray, ...]  #: per feeder, |X(w_k)|^2 per unit P_j: (fed modes, feeder modes)
 
 
+def _first_banks_upstream(nodes, slots: dict[int, int]) -> list[int]:
+    """Slots of the banks (``slots``: id(bank) -> slot) reached from ``nodes`` going upstream
+    through their sources without passing another bank (the nodes themselves included)."""
+    found, stack, seen = [], list(nodes), set()
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if id(node) in slots:
+            found.append(slots[id(node)])
+        else:
+            stack.extend(node.sources.values())
+    return found
+
+
 def feeding_banks(banks: list) -> list[FedBank]:
     """The banks of ``banks`` (in the graph's order) fed by others of them, with the squared
     spectral transfer from each feeder's modes to theirs."""
     slots = {id(bank): i for i, bank in enumerate(banks)}
     fed = []
     for slot, bank in enumerate(banks):
-        feeders, stack, seen = [], list(bank.sources.values()), set()
-        while stack:
-            node = stack.pop()
-            if id(node) in seen:
-                continue
-            seen.add(id(node))
-            if id(node) in slots:
-                feeders.append(slots[id(node)])
-            else:
-                stack.extend(node.sources.values())
+        feeders = _first_banks_upstream(bank.sources.values(), slots)
         if feeders:
             w = 2 * np.pi * bank.model.frequencies
             transfers = tuple(_transfer(w, banks[a].model) for a in sorted(feeders))
@@ -110,16 +117,7 @@ def heard_banks(banks: list, audio: list) -> np.ndarray:
     """Whether each bank of ``banks`` reaches an ``audio`` output through no other bank."""
     slots = {id(bank): i for i, bank in enumerate(banks)}
     heard = np.zeros(len(banks), dtype=bool)
-    stack, seen = list(audio), set()
-    while stack:
-        node = stack.pop()
-        if id(node) in seen:
-            continue
-        seen.add(id(node))
-        if id(node) in slots:
-            heard[slots[id(node)]] = True
-        else:
-            stack.extend(node.sources.values())
+    heard[_first_banks_upstream(audio, slots)] = True
     return heard
 
 
