@@ -106,9 +106,7 @@ def _draw(spec: Any, rng: np.random.Generator, models: dict, where: str):
         return lambda: value[int(rng.integers(len(value)))]
     if kind not in ("uniform", "loguniform", "normal"):
         raise PatchError(
-            f"{where}: unknown distribution {kind!r}; "
-            "expected uniform, loguniform, normal, choice, random_point, random_on_track or "
-            "random_on_surface"
+            f"{where}: unknown distribution {kind!r}; expected one of {', '.join(DISTRIBUTIONS)}"
             f"{suggest(kind, DISTRIBUTIONS)}"
         )
     if not isinstance(value, list) or len(value) != 2:

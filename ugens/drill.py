@@ -31,6 +31,7 @@ from jassy.levels import ForceSpectrum, band_line_power, response_power, tonal_l
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import slot
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
@@ -208,7 +209,7 @@ class DrillSource(TonalLevel, UGen):
         if key in ("rpm", "force", "removal"):
             getattr(self, key).set(value, self.ramp_samples(), jump)
         elif key in ("ripple", "noise", "chips", "idle"):
-            self.cfg[:LEVEL_TABLE] = self._config(self.cfg[LEVEL_TABLE - 1])
+            self.cfg[:LEVEL_TABLE] = self._config(self.cfg[slot(DrillConfig, "level_step")])
 
     def process(self, start: int, n: int) -> None:
         rpms = self.rpm.fill(self._bufs[0], n)

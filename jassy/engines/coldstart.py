@@ -50,7 +50,8 @@ def may_fork_helper(units: Sequence[Callable[[], object]]) -> bool:
     """Whether :func:`compile_on_two_cores` would fork a helper for ``units`` here and now."""
     if _running_units or len(units) < 2 or not hasattr(os, "fork"):
         return False
-    if threading.active_count() != 1 or len(os.sched_getaffinity(0)) < 2:
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    if threading.active_count() != 1 or cores < 2:
         return False
     if multiprocessing.parent_process() is not None:  # already one of several workers
         return False

@@ -27,7 +27,6 @@ from jassy.engines.callback import (
     LIMIT_AUDIO,
     LIMIT_HAPTIC,
     METER,
-    MODAL_TARGET,
     NONFINITE,
     PROGRAM,
     RECORD,
@@ -162,12 +161,12 @@ class OfflineProgram(ProgramRun):
             if python or staged > DESIGN_BYTES:
                 stop = min(end, frames[i])
                 break
+            designs_before = len(self._designs)
             for record in self.records(events[i], sched.sample_times[i], queue):
                 records.append(record)
                 if record[2] == STRIKE:
                     strikes[int(record[1])] = strikes.get(int(record[1]), 0) + 1
-                elif record[2] == MODAL_TARGET:
-                    staged += self._designs[-1].nbytes
+            staged += sum(design.nbytes for design in self._designs[designs_before:])
             sched.next_event += 1
         if records:
             self._push(records)
