@@ -79,7 +79,7 @@ from ugens.modal_f32 import (
     delta_coefficients,
     delta_step,
     float32_error,
-    scaled_state,
+    narrow_rows,
     unscaled_state,
 )
 from ugens.modal_retune import (
@@ -418,8 +418,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef = np.ascontiguousarray(np.stack([c0, b2, g[narrow], d[narrow]]), dtype=np.float32)
-    state = scaled_state(y1[narrow], y2[narrow], g[narrow])
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow])
     nw, nn = wide.size, narrow.size
     return MixedSplit(
         wide,
