@@ -184,7 +184,7 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
         self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
-        from ugens.modal import render_kept
+        from ugens.modal_kept import render_kept
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
@@ -224,10 +224,8 @@ class ModeBudget:
 
     def _render(self, start: int, n: int, offset: int) -> None:
         """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
-        in one compiled call (ugens.modal.render_kept) but for banks with a parameter
-        change, ramp or size input pending (their own ``process``); a bank with nothing to
-        compute (no mode sounding, no force in this or the last period, nothing pending)
-        only writes silence."""
+        in one compiled call (ugens.modal_kept.render_kept) but for banks with a parameter
+        change, ramp or size input pending (their own ``process``)."""
         by_python, slow = self._by_python, []
         for i, bank in enumerate(self.banks):
             by_python[i] = python = not bank.anytime_compiled()
@@ -235,12 +233,9 @@ class ModeBudget:
                 slow.append(i)
         h = self._hearing
         self.mode_samples += self._render_all(self._tables, h, self._outputs, by_python, start, n, offset)
-        for i in slow:  # (a force heard lately: its ring holds it)
-            bank = self.banks[i]
-            busy = h.forced[i] or h.unrendered[i] or h.heard_now[i] or h.heard_before[i]
-            if busy or not bank.anytime_silent(offset, n):
-                self._processes[i](start, n, offset)
-                self.mode_samples += n * int(bank.meta[0])
+        for i in slow:
+            self._processes[i](start, n, offset)
+            self.mode_samples += n * int(self.banks[i].meta[0])
         h.unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:

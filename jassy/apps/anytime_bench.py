@@ -143,9 +143,10 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
 def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeats: int = 30) -> dict:
     """Thread time per sample of the bank kernel with every mode sounding: ``modes`` modes
     (ugens.modal.bank_step) against the compact bank of ``fraction`` of them
-    (ugens.modal.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
-    from ugens.modal import bank_step, kept_step
+    (ugens.modal_kept.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
+    from ugens.modal import bank_step
     from ugens.modal_budget import COMPACT_ROWS, KEPT_LANES, line_aligned_zeros
+    from ugens.modal_kept import kept_step
 
     rng = np.random.default_rng(0)
     force, out, ring = np.zeros(frames), np.zeros(frames), np.zeros(2048)
@@ -167,7 +168,7 @@ def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeat
 
     def kept_modes():
         meta = np.array([width, 0, width])
-        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring, KEPT_LANES)
+        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring)
 
     for _ in range(repeats):
         for name, run in (("all", every_mode), ("kept", kept_modes)):
