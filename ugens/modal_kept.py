@@ -15,13 +15,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy import anytime_rank
+from jassy.anytime_rank import ANY_EXPECTED, FADING, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
 from ugens import modal, modal_budget
 from ugens.kernels import FASTMATH
 from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, resonate
 from ugens.modal_budget import FLOOR, KEPT_LANES, compact_bank
 
-drop_stale_cache(__file__, [modal, modal_budget])  # the cache holds copies of their kernels
+drop_stale_cache(__file__, [modal, modal_budget, anytime_rank])  # the cache holds copies of their kernels
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -164,3 +166,53 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
         t.meta[b, 0] = active
         work += active * n
     return work
+
+
+@nb.njit(cache=True)
+def expect_impacts(h, kicks, count, at, period, state):
+    """A period starts at frame ``at``: mark the banks struck by a positive impulse in
+    [at, at + period) as expecting it (``h.expected``); return whether any impact applies in
+    [at, at + 2 period) (then the budget decides)."""
+    if state[ANY_EXPECTED]:
+        h.expected[:] = False
+    state[ANY_EXPECTED] = 0
+    coming = False
+    for j in range(count):
+        frame = kicks.frames[j]
+        if at <= frame < at + 2 * period:
+            coming = True
+            if frame < at + period and kicks.positive[j]:
+                state[ANY_EXPECTED] = 1
+                if kicks.slots[j] >= 0:
+                    h.expected[kicks.slots[j]] = True
+    return coming
+
+
+@nb.njit(cache=True)
+def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at, rendered):
+    """A mode budget's step over frames [at, start + n) of the sub-block [start, start + n)
+    (the banks rendered up to ``rendered``), in one compiled call: at each period's start
+    the impacts expected (:func:`expect_impacts`, from the first ``count`` rows of
+    ``kicks``, a jassy.anytime_rank.Kicks), in each stretch to the next period the forces
+    heard (jassy.anytime_rank.scan_forces), and the banks rendered (:func:`render_kept`)
+    up to the first frame where the budget decides: an impact comes in this or the next
+    period, a force was heard in the last one, a mode fades (``state``: FADING,
+    ANY_EXPECTED of jassy.anytime_rank), or a force nobody scheduled wakes a bank. Returns
+    (that frame or the sub-block's end, the frame rendered up to, modes computed times
+    frames, whether to decide there)."""
+    end, work = start + n, 0
+    while at < end:
+        stop = min(end, (at // period + 1) * period)
+        rotate = at % period == 0
+        coming = rotate and expect_impacts(h, kicks, count, at, period, state)
+        heard, woken = scan_forces(h, at - start, stop - start, rotate)
+        if woken or (rotate and (state[FADING] > 0 or coming or heard)):
+            if at > rendered:
+                work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
+                h.unrendered[:] = False
+            return at, at, work, True
+        at = stop
+    if end > rendered:
+        work += render_kept(t, h, outputs, by_python, rendered, end - rendered, rendered - start)
+        h.unrendered[:] = False
+    return end, end, work, False
