@@ -72,6 +72,7 @@ from ugens.modal_budget import (
 from ugens.modal_f32 import (
     MIN_GAIN,
     TOLERANCE,
+    decay_factor_error,
     delta_coefficients,
     delta_step,
     float32_error,
@@ -335,7 +336,8 @@ class MixedSplit(NamedTuple):
     """A ModalBank's modes split by precision (``precision = "mixed"``): internal indices
     of the float64 modes (``wide``) with their own bank rows (c1, c2, g, d, y1, y2) and
     meta, and of the float32 modes (``narrow``) with delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g, their meta [active, all] and the force sample before the block."""
+    state (y, Delta) / g, their meta [active, all, decay-factor form] and the force sample
+    before the block."""
 
     wide: np.ndarray
     wide_bank: np.ndarray
@@ -349,12 +351,15 @@ class MixedSplit(NamedTuple):
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
     """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
-    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >= MIN_GAIN."""
+    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and
+    |g| >= MIN_GAIN; in the faster decay-factor form if every float32 mode holds the
+    tolerance in it (:func:`ugens.modal_f32.decay_factor_error`)."""
     c1, c2, g, d, y1, y2 = bank
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
+    by_factor = bool(np.all(decay_factor_error(c1[narrow], c2[narrow], sample_rate) <= tolerance))
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow])
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], by_factor)
     nw, nn = wide.size, narrow.size
     return MixedSplit(
         wide,
@@ -363,7 +368,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
         narrow,
         coef,
         state,
-        np.array([nn, nn], dtype=np.int64),
+        np.array([nn, nn, by_factor], dtype=np.int64),
         np.zeros(1),
     )
 
