@@ -239,15 +239,16 @@ def test_penalty_contact_gives_impacts_at_the_ballistic_times():
 
 
 def test_penalty_contact_reports_the_rolling_speed():
-    """A ball rolling without slipping (v = 0.5 m/s, w = v / r) on a plane, linear penalty
-    contact: its contact track's rolling speed is |w| times the contact's lever arm (the
-    contact point lies halfway through the static overlap x = m g / k: r - x / 2),
-    v (1 - x / (2 r)), and it does not slip."""
+    """A ball rolling without slipping at v = 0.5 m/s on a plane, linear penalty contact,
+    resting at the static overlap x = m g / k: its contact point lies halfway through the
+    overlap (lever arm r - x / 2), so it spins at v / (r - x / 2); its contact track's
+    rolling speed (|w| times the lever arm) is v, and it does not slip."""
     v, radius, sink = 0.5, 0.02, 0.1 * G / 1e4
-    world = _penalty_ball(1e-4, -sink, velocity=(v, 0, 0), spin=(0, v / radius, 0), friction=0.5)
+    spin = (0, v / (radius - sink / 2), 0)
+    world = _penalty_ball(1e-4, -sink, velocity=(v, 0, 0), spin=spin, friction=0.5)
     track = contact_tracks(simulate(world, 0.1, sample_every=0))[0]
-    assert np.median(track.rolling_speed) == pytest.approx(v * (1 - sink / (2 * radius)), rel=2e-4)
-    assert np.median(track.slip_speed) < 1e-3 * v
+    assert np.median(track.rolling_speed) == pytest.approx(v, rel=1e-6)
+    assert np.median(track.slip_speed) < 1e-9 * v
 
 
 def test_box_resting_on_four_corners_carries_its_weight():
