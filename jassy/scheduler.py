@@ -40,6 +40,24 @@ def apply_frame(sample_time: float) -> int:
     return math.ceil(sample_time - _SAMPLE_SLACK)
 
 
+def ramp_seconds(event: Event, frame: int, sample_rate: float) -> float | None:
+    """The ramp of a set event applied at ``frame``, in seconds, made to end on the frame
+    where ``time + ramp`` applies (so that ramps chained along a track join exactly); None
+    if the event gives no ramp."""
+    if event.ramp is None:
+        return None
+    return (apply_frame((event.time + event.ramp) * sample_rate) - frame) / sample_rate
+
+
+def prepare_score(graph: Graph, score: Sequence[Event], sample_rate: float) -> list[Event]:
+    """The score validated against ``graph`` (errors name ``score[i]``), in time order (equal
+    times keep the score's order), with location ramps along texture tracks walked through
+    the tracks' points (jassy.tracks.walk_score)."""
+    checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
+    order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
+    return walk_score(graph, [checked[i] for i in order], sample_rate)
+
+
 def validate_event(graph: Graph, event: Event, where: str) -> Event:
     """Check an event against the graph; return it with validated, coerced args."""
     if not isinstance(event.time, (int, float)) or not math.isfinite(event.time) or event.time < 0:
@@ -131,9 +149,7 @@ class Scheduler:
         self.graph = graph
         self.block = int(block)
         self.sample_rate = float(sample_rate)
-        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
-        self.events = walk_score(graph, [checked[i] for i in order], self.sample_rate)
+        self.events = prepare_score(graph, score, self.sample_rate)
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
         self.apply_frames = [apply_frame(t) for t in self.sample_times]
         self.inline = [self._is_inline(ev) for ev in self.events]
@@ -203,10 +219,7 @@ class Scheduler:
         node = self.graph.nodes[ev.node]
         frame = self.apply_frames[index]
         if ev.action == "set":
-            ramp = ev.ramp
-            if ramp is not None:  # end on the frame where time + ramp applies: tracks join exactly
-                end = apply_frame((ev.time + ramp) * self.sample_rate)
-                ramp = (end - frame) / self.sample_rate
+            ramp = ramp_seconds(ev, frame, self.sample_rate)
             for key, value in ev.args.items():
                 _set(node, frame, key, value, ev.jump, ramp)
             return
