@@ -50,6 +50,11 @@ drop_stale_cache(__file__, [callback, haptics, safety, *KERNEL_MODULES])
 #: Bytes of staged modal designs after which translation waits for the render to apply them.
 DESIGN_BYTES = 1 << 24
 
+#: Records the event queues start with: the score queue grows as translation needs
+#: (:meth:`OfflineProgram._push`), and no live event is posted offline. (The device
+#: callback's 4096-record queues, 256 kB each, cost 80 us per render to map and unmap.)
+QUEUE_RECORDS = 64
+
 #: ModalBank parameters whose jump moves the poles: applied in Python at their frame (the
 #: ringing modes keep their phase, which needs the state there).
 POLE_KEYS = ("freq_scale", "decay_scale")
@@ -98,7 +103,7 @@ class OfflineProgram(ProgramRun):
         safety = haptic_safety or HapticSafety()
         params = [CEILING, release, safety.max_force, safety.step(sample_rate)]
         output = (LIMIT_AUDIO if limiter else 0) | (LIMIT_HAPTIC if haptic_safety is not None else 0)
-        super().__init__(graph, sample_rate, block, params, output, meter=meter.state)  # the engine's meter
+        super().__init__(graph, sample_rate, block, params, output, QUEUE_RECORDS, meter.state)
         self.delay = delay
         self.scheduler: Scheduler | None = None
         self._designs: list[np.ndarray] = []  # staged designs, kept until applied
