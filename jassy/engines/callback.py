@@ -335,11 +335,14 @@ def sub_block(control, prog, pos, end, dst, at):
     """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
     haptic, each row contiguous) and return its end: apply the queued records due there
     (control[NEXT_CUT]), cut at the next block boundary or record frame (at most ``end``),
-    run the program, then the output stage (control[OUTPUT_STAGE], :func:`_output_stage`)."""
+    run the program, then the output stage (control[OUTPUT_STAGE], :func:`_output_stage`).
+    An empty queue is not called."""
     block = control[BLOCK]
     stop = min(end, (pos // block + 1) * block)
     for q in range(N_QUEUES):
-        stop = call_next_cut(control[NEXT_CUT], control.ctypes.data, q, pos, stop)
+        slot = QUEUES + QUEUE_SLOTS * q
+        if control[slot + 3] != control[slot + 2]:  # records queued (read != write)
+            stop = call_next_cut(control[NEXT_CUT], control.ctypes.data, q, pos, stop)
     m = stop - pos
     run_program(prog, pos, m)
     row_stride = dst.strides[0] // dst.itemsize
