@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
-from jassy.anytime_rank import ANY_EXPECTED, FADING, Hearing, Kicks, scan_forces
+from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, Kicks, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
 
@@ -140,7 +140,8 @@ class ModeBudget:
             np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
             np.array([not renders for _ in banks], dtype=bool), *flags,
         )  # fmt: skip
-        self._state = np.zeros(2, dtype=np.int64)  # FADING, ANY_EXPECTED (jassy.anytime_rank)
+        self._state = np.zeros(3, dtype=np.int64)  # FADING, ANY_EXPECTED, EVERY_PERIOD (jassy.anytime_rank)
+        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
         self._scan = specialise(scan_forces, h, 0, 0, True)
         for bank in banks:
             bank.budgeted = self.active
@@ -188,7 +189,6 @@ class ModeBudget:
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
-        self._render_all = specialise(mk.render_kept, tables, h, self._outputs, self._by_python, 0, 0, 0)
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
         self._kick_table = Kicks(
             np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
@@ -217,55 +217,62 @@ class ModeBudget:
         one: a sub-block is split only where a decision changes the kept sets."""
         if not self.active:
             return
-        if self.renders and self.cpu_fraction is None and self._all_compiled():
-            self._compiled_step(start, n)
+        if self.renders:
+            self._rendering_step(start, n)
             return
-        end, period, rendered, at = start + n, self.period, start, start
+        end, period, at = start + n, self.period, start
         while at < end:
             stop = min(end, (at // period + 1) * period)
             onset = self._due(at, stop - at, at - start)
             if onset is not None:
-                if self.renders and at > rendered:
-                    self._render(rendered, at - rendered, rendered - start)
-                    rendered = at
                 self._decide(at, onset, at - start, stop - at)
             at = stop
-        if self.renders:
-            self._render(rendered, end - rendered, rendered - start)
 
-    def _all_compiled(self) -> bool:
-        """Whether the compiled render can render every bank (none has a parameter change,
-        ramp or size input pending); ``by_python`` is then all False."""
-        if all(bank.anytime_compiled() for bank in self.banks):
-            self._by_python[:] = False
-            return True
-        return False
-
-    def _compiled_step(self, start: int, n: int) -> None:
-        """:meth:`step` with every bank rendered by the compiled render: the bookkeeping and
-        the renders between decisions run in one compiled call (ugens.modal_kept.advance),
-        which returns to Python only where the budget decides."""
+    def _rendering_step(self, start: int, n: int) -> None:
+        """:meth:`step` when the budget renders the banks: the bookkeeping and the renders
+        between decisions run in one compiled call (ugens.modal_kept.advance), which
+        returns to Python only where the budget decides. Banks with a parameter change,
+        ramp or size input pending render through their own ``process`` over the same
+        spans."""
         period, end = self.period, start + n
         kicks = self.upcoming(start, end + 2 * period)
         count = self._load_kicks(kicks)
+        slow = self._python_banks()
         table, state, at, rendered = self._kick_table, self._state, start, start
         args = (self._tables, self._hearing, self._outputs, self._by_python)
         while True:
             state[FADING] = self._fading
+            was = rendered
             at, rendered, work, deciding = self._advance(
                 *args, table, count, state, period, start, n, at, rendered
             )
             self.mode_samples += work
+            for i in slow:
+                if rendered > was:
+                    self._processes[i](was, rendered - was, was - start)
+                    self.mode_samples += (rendered - was) * int(self.banks[i].meta[0])
             if not deciding:
                 return
             stop = min(end, (at // period + 1) * period)
             if at % period == 0:
                 self._kicks = [k for k in kicks if at <= k[0] < at + 2 * period]
                 self._now = self._predicted(self._kicks, at, at + period) if self._kicks else {}
+                if self.cpu_fraction is not None:
+                    self._adapt()
             else:
                 self._kicks, self._now = NO_KICK, {}
             self._decide(at, self._hearing.onset, at - start, stop - at)
             at = stop
+
+    def _python_banks(self) -> list[int]:
+        """The banks the compiled render cannot render now (a parameter change, ramp or size
+        input pending), marked in ``by_python``."""
+        slow = []
+        for i, bank in enumerate(self.banks):
+            self._by_python[i] = python = not bank.anytime_compiled()
+            if python:
+                slow.append(i)
+        return slow
 
     def _load_kicks(self, kicks: list) -> int:
         """Impacts (frame, nodes, impulse, location) into the compiled step's table, one row
@@ -286,22 +293,6 @@ class ModeBudget:
                 table.positive[row] = impulse > 0.0
                 row += 1
         return rows
-
-    def _render(self, start: int, n: int, offset: int) -> None:
-        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
-        in one compiled call (ugens.modal_kept.render_kept) but for banks with a parameter
-        change, ramp or size input pending (their own ``process``)."""
-        by_python, slow = self._by_python, []
-        for i, bank in enumerate(self.banks):
-            by_python[i] = python = not bank.anytime_compiled()
-            if python:
-                slow.append(i)
-        h = self._hearing
-        self.mode_samples += self._render_all(self._tables, h, self._outputs, by_python, start, n, offset)
-        for i in slow:
-            self._processes[i](start, n, offset)
-            self.mode_samples += n * int(self.banks[i].meta[0])
-        h.unrendered[:] = False
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``

@@ -63,8 +63,9 @@ class Kicks(NamedTuple):
 
 
 #: Fields of a budget's step state (int64): a mode fades out in this period (the last
-#: decision said so); some bank expects an impact in this period.
-FADING, ANY_EXPECTED = range(2)
+#: decision said so); some bank expects an impact in this period; the budget decides at
+#: every period (it adapts its size to a CPU budget).
+FADING, ANY_EXPECTED, EVERY_PERIOD = range(3)
 
 
 class Hearing(NamedTuple):

@@ -251,8 +251,9 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
     The sub-block is cut at multiples of FLUSH_PERIOD on the clock. In each piece, any
     input activates every allowed mode (the inactive ones hold exact zeros, so when they
     start does not matter); at each multiple, modes whose state fell below ``floor`` are
-    zeroed and the active count shrinks to the last audible mode. The flush frames do not
-    depend on the block size, so neither does the output."""
+    zeroed and the active count shrinks to the last audible mode (no mode is below a
+    ``floor`` <= 0: the scan is skipped). The flush frames do not depend on the block size,
+    so neither does the output."""
     i = 0
     while i < n:
         frame = start + i
@@ -269,7 +270,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         else:
             resonate(f, o, m, bank[0], bank[1], bank[2], bank[3], bank[4], bank[5], active, last)
         i += m
-        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
+        if active > 0 and floor > 0.0 and (start + i) % FLUSH_PERIOD == 0:
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
 
 

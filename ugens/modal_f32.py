@@ -126,23 +126,35 @@ def _next_delta(v, u, c0, b, f, by_factor):
 LANES = 32
 
 
-def _line_aligned_float32(rows: int, width: int) -> np.ndarray:
-    """Zeros (rows, width) in float32 starting on a 64-byte cache-line boundary (with
-    ``width`` a multiple of LANES, every row does: vector loads never straddle lines)."""
-    raw = np.zeros(rows * width + 16, np.float32)
+#: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
+#: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
+#: the same low 12 address bits (4K aliasing): the kernel ran at half speed or full speed
+#: depending on where the arrays happened to be allocated.
+ROW_SPREAD = 512
+
+
+def float32_rows(rows: int, width: int) -> np.ndarray:
+    """Zeros (rows, stride) in float32, C-contiguous, starting on a 64-byte cache-line
+    boundary, with stride >= width floats such that rows start ROW_SPREAD bytes apart
+    modulo 4 KiB (``width`` a multiple of LANES: every row starts on a line, and vector
+    loads never straddle lines)."""
+    stride = width + ((ROW_SPREAD - 4 * width) % 4096) // 4
+    raw = np.zeros(rows * stride + 16, np.float32)
     skip = (-raw.ctypes.data % 64) // 4
-    return raw[skip : skip + rows * width].reshape(rows, width)
+    return raw[skip : skip + rows * stride].reshape(rows, stride)
 
 
 def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
     d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
     (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
-    y2, padded to a multiple of LANES modes. A padding mode has c0 = 1 and b2 = 1 (R^2 =
-    0), so its y[n] = F[n-1] stays bounded, and g = d = 0, so it adds exact zeros."""
+    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
+    A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
+    and g = d = 0, so it adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
-    coef, state = _line_aligned_float32(4, width), _line_aligned_float32(2, width)
+    rows = float32_rows(6, width)
+    coef, state = rows[:4], rows[4:]
     coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
     coef[0, n:] = 1.0
     coef[1, n:] = 0.0 if decay_factor else 1.0

@@ -16,7 +16,7 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank
-from jassy.anytime_rank import ANY_EXPECTED, FADING, scan_forces
+from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
 from ugens import modal, modal_budget
 from ugens.kernels import FASTMATH
@@ -196,8 +196,9 @@ def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at,
     ``kicks``, a jassy.anytime_rank.Kicks), in each stretch to the next period the forces
     heard (jassy.anytime_rank.scan_forces), and the banks rendered (:func:`render_kept`)
     up to the first frame where the budget decides: an impact comes in this or the next
-    period, a force was heard in the last one, a mode fades (``state``: FADING,
-    ANY_EXPECTED of jassy.anytime_rank), or a force nobody scheduled wakes a bank. Returns
+    period, a force was heard in the last one, a mode fades or every period is decided
+    (``state``: FADING, ANY_EXPECTED, EVERY_PERIOD of jassy.anytime_rank), or a force
+    nobody scheduled wakes a bank. Returns
     (that frame or the sub-block's end, the frame rendered up to, modes computed times
     frames, whether to decide there)."""
     end, work = start + n, 0
@@ -206,7 +207,7 @@ def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at,
         rotate = at % period == 0
         coming = rotate and expect_impacts(h, kicks, count, at, period, state)
         heard, woken = scan_forces(h, at - start, stop - start, rotate)
-        if woken or (rotate and (state[FADING] > 0 or coming or heard)):
+        if woken or (rotate and (state[FADING] > 0 or state[EVERY_PERIOD] > 0 or coming or heard)):
             if at > rendered:
                 work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
                 h.unrendered[:] = False
