@@ -8,7 +8,7 @@ from test_modal_bank import FS, error_db, spread_model
 
 from jassy import Event, Graph, ModalModel, render
 from ugens.modal import ModalBank, design, split_by_precision
-from ugens.modal_f32 import TOLERANCE, float32_error, resonate_delta
+from ugens.modal_f32 import TOLERANCE, DeltaRows, float32_error, resonate_delta
 
 FREQS = np.geomspace(20.0, 20000.0, 7)
 DECAYS = np.geomspace(0.5, 500.0, 7)
@@ -51,9 +51,9 @@ def float32_only_response(f, d, seconds):
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    c0, b2, g, dd = split.narrow_coef
-    y, dy = split.narrow_state
-    resonate_delta(x, out, x.size, c0, b2, g, dd, y, dy, 1, np.zeros(1))
+    c0, b2, g, dd = split.rows.narrow_coef
+    y, dy = split.rows.narrow_state
+    resonate_delta(x, out, x.size, DeltaRows(c0, b2, g, dd, y, dy), 1, np.zeros(1))
     return out
 
 
@@ -110,7 +110,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import resonate
+    from ugens.modal import ModeRows, resonate
 
     fn, note = compile_modal_f32()
     if fn is None:
@@ -122,7 +122,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     run()
     ref = np.zeros(force.size)
     z = np.zeros(5)
-    resonate(force, ref, force.size, c1, c2, s, z, z.copy(), z.copy(), 5, np.zeros(1))
+    resonate(force, ref, force.size, ModeRows(c1, c2, s, z, z.copy(), z.copy()), 5, np.zeros(1))
     assert error_db(run.output.astype(np.float64), ref) < -60.0
     # loading the -ffast-math library must not switch the process to flush-to-zero
     tiny = np.finfo(np.float64).smallest_subnormal

@@ -115,14 +115,43 @@ def has_force(force, n):
     return False
 
 
+class ModeRows(NamedTuple):
+    """A float64 bank's rows as :func:`resonate` reads them, one entry per mode: the
+    coefficients c1 = 2 R cos theta, c2 = R^2, input gain g = a R sin theta / fs (per N)
+    and direct gain d (module docstring), and the state y1 = y[n-1], y2 = y[n-2]."""
+
+    c1: np.ndarray
+    c2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y1: np.ndarray
+    y2: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def mode_rows(bank):
+    """The ModeRows of a (6, K) bank array, whose rows are the record's fields in order."""
+    return ModeRows(bank[0], bank[1], bank[2], bank[3], bank[4], bank[5])
+
+
+class Ramp(NamedTuple):
+    """A linear ramp of a bank's coefficients (c1, c2, g, d): (4, K) arrays of the current
+    values, their per-sample increments and their final values."""
+
+    coef: np.ndarray
+    delta: np.ndarray
+    target: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
-    """Run modes [0, active) over force[:n] into out[:n] (overwrites out).
+def resonate(force, out, n, rows, active, last):
+    """Run modes [0, active) of ``rows`` (ModeRows) over force[:n] into out[:n] (overwrites out).
 
     last[0]: the force sample before force[0] (each resonator hears F[n-1]); left at
     force[n-1]. The direct term sum(d) F[n] is added once per sample; the sum is formed
     only if some F[n] is non-zero (a pass over the modes, per call: most blocks of an
     impact's ringing have no force)."""
+    c1, c2, g, d, y1, y2 = rows
     direct = 0.0
     if has_force(force, n):
         for k in range(active):
@@ -175,15 +204,15 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_ramp(force, out, n, coef, y1, y2, delta, target, remaining, active, last):
+def resonate_ramp(force, out, n, ramp, y1, y2, remaining, active, last):
     """As :func:`resonate` over modes [0, active) while the coefficients ramp linearly.
 
-    coef, delta, target: (4, K) current values, per-sample increments and final values of
-    (c1, c2, g, d). Each sample uses the current coefficients, then they step (as in
-    params.ramp_fill), so they equal target from the ramp's m-th sample on. Returns the
-    samples left.
+    ramp: a Ramp of (c1, c2, g, d); y1, y2: the state rows. Each sample uses the current
+    coefficients, then they step (as in params.ramp_fill), so they equal the ramp's target
+    from its m-th sample on (``remaining`` = m). Returns the samples left.
     """
     K = active
+    coef, delta, target = ramp
     c1, c2, g, d = coef[0], coef[1], coef[2], coef[3]
     fp = last[0]
     for i in range(n):
@@ -264,7 +293,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
                 o[j] = 0.0
             last[0] = 0.0
         else:
-            resonate(f, o, m, bank[0], bank[1], bank[2], bank[3], bank[4], bank[5], active, last)
+            resonate(f, o, m, mode_rows(bank), active, last)
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
             meta[0] = flush_silent(bank[4], bank[5], active, floor)
@@ -328,21 +357,35 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
     return work
 
 
+class MixedRows(NamedTuple):
+    """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
+    y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
+    state (y, Delta), their meta [active, all] and the force sample before the block."""
+
+    wide_bank: np.ndarray
+    wide_meta: np.ndarray
+    narrow_coef: np.ndarray
+    narrow_state: np.ndarray
+    narrow_meta: np.ndarray
+    narrow_last: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def mixed_step(
-    force, out, start, n, wide_bank, wide_meta, coef, state, narrow_meta, floor, last, narrow_last
-):
-    """One sub-block of a bank split by precision (MixedSplit): the float64 modes by
-    :func:`bank_step` (rows c1, c2, g, d, y1, y2) write out[:n], the float32 delta-form
-    modes (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
+def mixed_step(force, out, start, n, rows, floor, last):
+    """One sub-block of a bank split by precision (``rows``: MixedRows): the float64 modes
+    by :func:`bank_step` write out[:n], the float32 delta-form modes
+    (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
     fp = last[0]
-    if wide_meta[2] > 0:
-        bank_step(force, out, start, n, wide_bank, wide_meta, floor, last)
+    if rows.wide_meta[2] > 0:
+        bank_step(force, out, start, n, rows.wide_bank, rows.wide_meta, floor, last)
     else:
         for i in range(n):
             out[i] = 0.0
-    narrow_last[0] = fp
-    delta_step(force, out, start, n, coef, state, narrow_meta, floor, narrow_last, FLUSH_PERIOD)
+    rows.narrow_last[0] = fp
+    delta_step(
+        force, out, start, n, rows.narrow_coef, rows.narrow_state, rows.narrow_meta, floor,
+        rows.narrow_last, FLUSH_PERIOD,
+    )  # fmt: skip
     last[0] = force[n - 1]
 
 
@@ -389,18 +432,12 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
 
 class MixedSplit(NamedTuple):
     """A ModalBank's modes split by precision (``precision = "mixed"``): internal indices
-    of the float64 modes (``wide``) with their own bank rows (c1, c2, g, d, y1, y2) and
-    meta, and of the float32 modes (``narrow``) with delta-form rows (c0, b2, g, d) and
-    state (y, Delta), their meta [active, all] and the force sample before the block."""
+    of the float64 modes (``wide``) and of the float32 modes (``narrow``), and their rows
+    (MixedRows)."""
 
     wide: np.ndarray
-    wide_bank: np.ndarray
-    wide_meta: np.ndarray
     narrow: np.ndarray
-    narrow_coef: np.ndarray
-    narrow_state: np.ndarray
-    narrow_meta: np.ndarray
-    narrow_last: np.ndarray
+    rows: MixedRows
 
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
@@ -413,16 +450,15 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     coef = np.ascontiguousarray(np.stack([c0, b2, g[narrow], d[narrow]]), dtype=np.float32)
     state = np.ascontiguousarray(np.stack([y1[narrow], y1[narrow] - y2[narrow]]), dtype=np.float32)
     nw, nn = wide.size, narrow.size
-    return MixedSplit(
-        wide,
+    rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
         np.array([nw, 0, nw], dtype=np.int64),
-        narrow,
         coef,
         state,
         np.array([nn, nn], dtype=np.int64),
         np.zeros(1),
     )
+    return MixedSplit(wide, narrow, rows)
 
 
 #: The ``level`` of a ugen whose own modal resonator is heard (Friction, HuntCrossleyImpact).
@@ -609,11 +645,10 @@ class ModalBank(ModelParams, UGen):
         self._mixed = self.values["precision"] == "mixed"
         self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
         if self._mixed:
-            e = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            example = split_by_precision(np.zeros((6, 1)), self.sample_rate).rows
             self._mixed_step = specialise(
-                mixed_step, self.out, self.out, 0, 0, e.wide_bank, e.wide_meta, e.narrow_coef, e.narrow_state,
-                e.narrow_meta, self._floor, self.last, e.narrow_last,
-            )  # fmt: skip
+                mixed_step, self.out, self.out, 0, 0, example, self._floor, self.last
+            )
         self.budgeted = False
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
@@ -686,8 +721,8 @@ class ModalBank(ModelParams, UGen):
         if split is None:
             return
         self._split = None
-        y, dy = split.narrow_state.astype(np.float64)
-        self.y[:, split.wide] = split.wide_bank[4:]
+        y, dy = split.rows.narrow_state.astype(np.float64)
+        self.y[:, split.wide] = split.rows.wide_bank[4:]
         self.y[0, split.narrow] = y
         self.y[1, split.narrow] = y - dy
         self.meta[0] = self.meta[2]
@@ -863,9 +898,8 @@ class ModalBank(ModelParams, UGen):
             self._settle()
             y, meta = self.y, self.meta
             meta[0] = meta[2]
-            meta[1] = resonate_ramp(
-                inp, out, n, self.coef, y[0], y[1], self.delta, self.target, meta[1], meta[0], self.last
-            )
+            ramp = Ramp(self.coef, self.delta, self.target)
+            meta[1] = resonate_ramp(inp, out, n, ramp, y[0], y[1], meta[1], meta[0], self.last)
             self._ramping = meta[1] > 0
         else:
             self._settle()
@@ -877,10 +911,10 @@ class ModalBank(ModelParams, UGen):
         compact, meta = self._gathered(), self._compact_meta
         if self._ramping:
             meta[0] = meta[2]
+            ramp = Ramp(compact[:4], compact[6:10], compact[10:])
             self.meta[1] = resonate_ramp(
-                inp, out, n, compact[:4], compact[4], compact[5], compact[6:10], compact[10:],
-                self.meta[1], meta[2], self.last,
-            )  # fmt: skip
+                inp, out, n, ramp, compact[4], compact[5], self.meta[1], meta[2], self.last
+            )
             self._ramping = self.meta[1] > 0
             hear(inp, n, self._heard, start)
         else:
@@ -895,10 +929,7 @@ class ModalBank(ModelParams, UGen):
         split = self._split
         if split is None:
             split = self._split = split_by_precision(self.bank, self.sample_rate)
-        self._mixed_step(
-            inp, out, start, n, split.wide_bank, split.wide_meta, split.narrow_coef, split.narrow_state,
-            split.narrow_meta, self._floor, self.last, split.narrow_last,
-        )  # fmt: skip
+        self._mixed_step(inp, out, start, n, split.rows, self._floor, self.last)
 
     # ------------------------------------------------------------ anytime synthesis
     def _gathered(self) -> np.ndarray:

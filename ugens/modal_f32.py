@@ -25,6 +25,8 @@ in 4-lane float64.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -79,14 +81,32 @@ def float32_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndar
     return np.where(sounding, (drift + noise) / np.maximum(peak, 1e-300), 0.0)
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last):
-    """Add the float32 delta-form modes [0, active) over force[:n] to out[:n].
+class DeltaRows(NamedTuple):
+    """Float32 delta-form modes as :func:`resonate_delta` reads them, one entry per mode:
+    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2, input gain g and direct gain d, and
+    the state y = y[n-1], dy = Delta[n-1]."""
 
-    Arrays c0, b2, g, d (coefficients) and y, dy (state y[n-1], Delta[n-1]) are float32;
-    force and out float64. last[0]: the force sample before force[0], left at force[n-1].
-    The direct term sum(d) F[n] is added as in ugens.modal.resonate. Four samples per
-    pass over the modes, as there."""
+    c0: np.ndarray
+    b2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def delta_rows(coef, state):
+    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y, Delta)."""
+    return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_delta(force, out, n, rows, active, last):
+    """Add the float32 delta-form modes [0, active) of ``rows`` (DeltaRows, float32) over
+    force[:n] to out[:n] (float64, as force). last[0]: the force sample before force[0],
+    left at force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate.
+    Four samples per pass over the modes, as there."""
+    c0, b2, g, d, y, dy = rows
     direct = np.float32(0.0)
     for k in range(active):
         direct += d[k]
@@ -176,9 +196,7 @@ def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_perio
         if active == 0:
             last[0] = 0.0
         else:
-            resonate_delta(
-                f, out[i : i + m], m, coef[0], coef[1], coef[2], coef[3], state[0], state[1], active, last
-            )
+            resonate_delta(f, out[i : i + m], m, delta_rows(coef, state), active, last)
         i += m
         if active > 0 and (start + i) % flush_period == 0:
             meta[0] = flush_silent_delta(state[0], state[1], active, floor)
