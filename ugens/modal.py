@@ -389,17 +389,24 @@ def mixed_step(force, out, start, n, rows, floor, last):
     last[0] = force[n - 1]
 
 
+def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
+    """Rows (c1, c2, s, d / g) = (2 R cos theta, R^2, R sin theta, :func:`direct_ratio`) per
+    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs: the one design of every modal
+    resonator (:func:`ugens.modal_retune.pole_rows`, which ModalBank also calls with its
+    scales). Modes at or above Nyquist get zero coefficients and gain (silent)."""
+    freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
+    rows, sin2, inv = np.empty((4, freqs.size)), np.empty(freqs.size), np.empty(freqs.size)
+    decays = np.ascontiguousarray(decays, dtype=np.float64)
+    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, rows, sin2, inv)
+    return rows
+
+
 def design(frequencies, decays, sample_rate):
-    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64.
+    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64 (:func:`mode_poles`).
 
     Modes at or above Nyquist get zero coefficients and gain (silent).
     """
-    R = np.exp(-decays / sample_rate)
-    theta = 2.0 * np.pi * frequencies / sample_rate
-    ok = frequencies < sample_rate / 2
-    c1 = np.where(ok, 2.0 * R * np.cos(theta), 0.0)
-    c2 = np.where(ok, R * R, 0.0)
-    s = np.where(ok, R * np.sin(theta), 0.0)
+    c1, c2, s, _ = mode_poles(frequencies, decays, sample_rate)
     return c1, c2, s
 
 
@@ -422,12 +429,7 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     frequencies of about 0.5 theta^2 / 12 of a mode's static response (0.03 % at 1 kHz,
     3 % at 8 kHz, at 48 kHz).
     """
-    freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
-    poles = np.empty((4, freqs.size))
-    sin2, inv = np.empty(freqs.size), np.empty(freqs.size)
-    decays = np.ascontiguousarray(decays, dtype=np.float64)
-    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, poles, sin2, inv)
-    return poles[3]
+    return mode_poles(frequencies, decays, sample_rate, fit)[3]
 
 
 class MixedSplit(NamedTuple):
@@ -546,6 +548,7 @@ class ModalBank(ModelParams, UGen):
     """
 
     type_name = "ModalBank"
+    _held = False  #: while set, set_param only stores values: more keys of one change follow
     inputs = ("input", "size")
     optional_inputs = ("size",)
     accepts_location = True
@@ -781,6 +784,8 @@ class ModalBank(ModelParams, UGen):
         )
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if self._held:  # more keys of the same change follow (:meth:`_set_together`)
+            return
         self._settle()
         before = self._poles
         self._refresh_design_cache()
@@ -845,11 +850,25 @@ class ModalBank(ModelParams, UGen):
                 k += 1
             else:
                 frame, key, value, jump, ramp = pending.popleft()
-                self.set_param(key, value, jump=jump, ramp=ramp)
+                changes = [(key, value)]
+                while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
+                    changes.append(pending.popleft()[1:3])
+                self._set_together(changes, jump, ramp)
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
         for at, correction in kinks:
             out[at] += correction
+
+    def _set_together(self, changes: list[tuple[str, Any]], jump: bool, ramp: float | None) -> None:
+        """Parameter changes for one frame (the keys of one ``set`` event) with one redesign:
+        each value is checked and set in turn, the bank reacts once, to the last."""
+        self._held = True
+        try:
+            for key, value in changes[:-1]:
+                self.set_param(key, value, jump=jump, ramp=ramp)
+        finally:
+            self._held = False
+        self.set_param(*changes[-1], jump=jump, ramp=ramp)
 
     def _size_changes(self, n: int, offset: int = 0) -> np.ndarray:
         """Offsets from ``offset`` in this block where the size input differs from the size

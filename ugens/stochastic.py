@@ -39,7 +39,15 @@ from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine
+from ugens.cells import (
+    MIN_PULSE_SAMPLES,
+    append_pulse,
+    pulse_amplitude,
+    pulse_sum,
+    raised_cosine,
+    slot,
+    store,
+)
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -49,13 +57,48 @@ ENERGY_LAMBDA = 1.45
 #: Clip range of the exponential energy draw (multiples of the crushing energy).
 ENERGY_CLIP = (0.1, 10.0)
 
-# layout of the float state st[]
-_ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
-# layout of the int state cnt[]: micro-impacts so far, logged rows
-_EVENTS, _LOGGED = range(2)
 _CRUMPLE, _BREAK, _BREAK_SDT = 0, 1, 2
 #: Break's energy scalings: SDT's (events shrink with the energy left) or full-size events.
 BREAK_SCALINGS = ("sdt", "full")
+
+
+class ImpactState(NamedTuple):
+    """The controllers' float state, stored in this order in the float64 array ``st``: read
+    once per kernel call (:func:`impact_state`) and written back (cells.store)."""
+
+    acc: float  #: integrated event rate since the last event (the Poisson clock, :func:`next_event`)
+    target: float  #: the Exp(1) threshold of the next event
+    left: float  #: energy left to crumple or break (J)
+    budget: float  #: the run's energy (J; 0: no budget)
+    running: float  #: 1.0 while events are emitted
+    size: float  #: the fragment size held on the size output
+    speed: float  #: Bounce: the next impact's speed (m/s)
+    next_impact: float  #: Bounce: the next impact's fractional sample
+
+
+@nb.njit(inline="always", cache=True)
+def impact_state(st):
+    """The ImpactState record held in ``st``."""
+    return ImpactState(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7])
+
+
+class Counters(NamedTuple):
+    """The controllers' counters, stored in this order in the int64 array ``cnt``."""
+
+    events: int  #: micro-impacts since the render started
+    logged: int  #: rows of the event log filled
+
+
+@nb.njit(inline="always", cache=True)
+def counters(cnt):
+    """The Counters record held in ``cnt``."""
+    return Counters(cnt[0], cnt[1])
+
+
+_RUNNING, _BUDGET, _LEFT, _NEXT, _SPEED = (
+    slot(ImpactState, key) for key in ("running", "budget", "left", "next_impact", "speed")
+)
+_EVENTS, _LOGGED = (slot(Counters, key) for key in Counters._fields)
 
 
 class GrainSettings(NamedTuple):
@@ -92,8 +135,8 @@ class BounceSettings(NamedTuple):
 class ImpactData(NamedTuple):
     """What the controllers' kernels update besides the pulse table."""
 
-    st: np.ndarray  #: float state (_ACC ... _NEXT)
-    cnt: np.ndarray  #: int64 counters (_EVENTS, _LOGGED)
+    st: np.ndarray  #: float state, an ImpactState
+    cnt: np.ndarray  #: int64 counters, a Counters
     rng: np.ndarray  #: splitmix64 state, one uint64
     count: np.ndarray  #: pulses in the table, one int64
     log: np.ndarray  #: (rows, 4) event log: t0 (samples), energy (J), size, impulse (N s)
@@ -108,22 +151,20 @@ def u01(rng):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def next_event(st, rng, rate, pos):
+def next_event(acc, target, rng, rate, pos):
     """Exact Poisson event times at ``rate`` events per sample.
 
-    st[_ACC] accumulates the integrated rate, st[_TARGET] is the Exp(1) threshold of the
-    next event. From position pos in [0, 1) of the current sample, returns the position of
-    the next event in this sample, or -1 if there is none (the rate is accumulated)."""
-    if st[_TARGET] <= 0.0:
-        st[_TARGET] = -math.log(1.0 - u01(rng))
-    need = st[_TARGET] - st[_ACC]
+    acc: the integrated rate since the last event; target: the Exp(1) threshold of the next
+    event (drawn if <= 0). From position pos in [0, 1) of the current sample, returns (the
+    position of the next event in this sample, or -1 if there is none, and the new acc and
+    target)."""
+    if target <= 0.0:
+        target = -math.log(1.0 - u01(rng))
+    need = target - acc
     avail = rate * (1.0 - pos)
     if need > avail:
-        st[_ACC] += avail
-        return -1.0
-    st[_ACC] = 0.0
-    st[_TARGET] = -math.log(1.0 - u01(rng))
-    return min(pos + need / rate, 1.0)
+        return -1.0, acc + avail, target
+    return min(pos + need / rate, 1.0), 0.0, -math.log(1.0 - u01(rng))
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -151,15 +192,16 @@ def pulse_frame(pulses, count, idx):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def log_event(log, cnt, t0, energy, size, impulse):
-    """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
-    k = cnt[_LOGGED]
-    if k < log.shape[0]:
-        log[k, 0] = t0
-        log[k, 1] = energy
-        log[k, 2] = size
-        log[k, 3] = impulse
-        cnt[_LOGGED] = k + 1
+def log_event(log, logged, t0, energy, size, impulse):
+    """Record (t0 in samples, energy J, size, impulse N s) in row ``logged`` while the log has
+    room; returns the rows filled."""
+    if logged < log.shape[0]:
+        log[logged, 0] = t0
+        log[logged, 1] = energy
+        log[logged, 2] = size
+        log[logged, 3] = impulse
+        return logged + 1
+    return logged
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -175,24 +217,26 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
     """
     density, crush, frag = inputs
     fs, spread, mass, T, mode = opt
-    st, cnt, rng = d.st, d.cnt, d.rng
+    acc, target, left, budget, running, held, speed, next_impact = impact_state(d.st)
+    events, logged = counters(d.cnt)
+    rng = d.rng
     count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
         out[i] = s
-        size_out[i] = st[_SIZE]
+        size_out[i] = held
         pos = 0.0  # position inside [idx, idx + 1) already accounted for
-        while st[_RUNNING] != 0.0:
-            if mode == _BREAK_SDT and st[_LEFT] <= crush[i]:
-                st[_RUNNING] = 0.0
+        while running != 0.0:
+            if mode == _BREAK_SDT and left <= crush[i]:
+                running = 0.0
                 break
             rate = density[i] / fs
             if mode != _CRUMPLE:
-                rate *= st[_LEFT] / st[_BUDGET]
+                rate *= left / budget
             if rate <= 0.0:
                 break
-            pos = next_event(st, rng, rate, pos)
+            pos, acc, target = next_event(acc, target, rng, rate, pos)
             if pos < 0.0:
                 break
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
@@ -202,20 +246,22 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
                 size *= 1.0 - spread + spread * u01(rng)
             size *= 0.5 + 0.5 * u01(rng)
             if mode == _BREAK_SDT:
-                energy *= st[_LEFT] / st[_BUDGET]
-                size *= st[_LEFT] / st[_BUDGET]
-            if st[_BUDGET] > 0.0:
-                if energy >= st[_LEFT]:
-                    energy = st[_LEFT]
-                    st[_RUNNING] = 0.0
-                st[_LEFT] -= energy
+                energy *= left / budget
+                size *= left / budget
+            if budget > 0.0:
+                if energy >= left:
+                    energy = left
+                    running = 0.0
+                left -= energy
             t0 = idx + pos
             impulse = math.sqrt(2.0 * mass * energy)
             pulses = append_pulse(pulses, count, t0, T, pulse_amplitude(impulse, fs, t0, T))
             count += 1
-            st[_SIZE] = size
-            cnt[_EVENTS] += 1
-            log_event(d.log, cnt, t0, energy, size, impulse)
+            held = size
+            events += 1
+            logged = log_event(d.log, logged, t0, energy, size, impulse)
+    store(d.st, ImpactState(acc, target, left, budget, running, held, speed, next_impact))
+    store(d.cnt, Counters(events, logged))
     d.count[0] = count
     return pulses
 
@@ -224,22 +270,25 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
 def bounces(out, size_out, start, n, opt, d, pulses):
     """Bounce kernel: ballistic flights between impacts; returns the pulse table.
 
-    opt: a BounceSettings, d: ImpactData. st[_NEXT]: fractional sample of the next impact,
-    st[_V]: its impact speed (m/s). An impact at speed v leaves at v' = v e (1 - irregularity U),
+    opt: a BounceSettings, d: ImpactData (its ImpactState's ``next_impact``: the fractional
+    sample of the next impact, ``speed``: its impact speed, m/s). An impact at speed v leaves
+    at v' = v e (1 - irregularity U),
     pushes J = m (v + v'), and the next impact follows after the flight time 2 v' / g;
     bouncing stops once v' < min_speed.
     """
     fs, g, e, irregularity, mass, T, min_speed, fragment = opt
-    st, cnt, rng = d.st, d.cnt, d.rng
+    acc, target, left, budget, running, held, speed, next_impact = impact_state(d.st)
+    events, logged = counters(d.cnt)
+    rng = d.rng
     count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
         out[i] = s
-        size_out[i] = st[_SIZE]
-        while st[_RUNNING] != 0.0 and st[_NEXT] < idx + 1:
-            t0 = st[_NEXT]
-            v = st[_V]
+        size_out[i] = held
+        while running != 0.0 and next_impact < idx + 1:
+            t0 = next_impact
+            v = speed
             u = u01(rng)
             v_out = v * e * (1.0 - irregularity * u)
             impulse = mass * (v + v_out)
@@ -247,14 +296,16 @@ def bounces(out, size_out, start, n, opt, d, pulses):
             amplitude = impulse * fs / pulse_sum(t0, T)
             pulses = append_pulse(pulses, count, t0, T, amplitude)
             count += 1
-            cnt[_EVENTS] += 1
-            st[_SIZE] = fragment
-            log_event(d.log, cnt, t0, 0.5 * mass * v * v, fragment, impulse)
+            events += 1
+            held = fragment
+            logged = log_event(d.log, logged, t0, 0.5 * mass * v * v, fragment, impulse)
             if v_out < min_speed or v_out <= 0.0:
-                st[_RUNNING] = 0.0
+                running = 0.0
             else:
-                st[_V] = v_out
-                st[_NEXT] = t0 + 2.0 * v_out / g * fs
+                speed = v_out
+                next_impact = t0 + 2.0 * v_out / g * fs
+    store(d.st, ImpactState(acc, target, left, budget, running, held, speed, next_impact))
+    store(d.cnt, Counters(events, logged))
     d.count[0] = count
     return pulses
 
@@ -312,8 +363,8 @@ class _MicroImpacts(PulseSource):
 
     def _prepare(self) -> None:
         super()._prepare()
-        self.st = np.zeros(8)
-        self.cnt = np.zeros(2, dtype=np.int64)
+        self.st = np.zeros(len(ImpactState._fields))
+        self.cnt = np.zeros(len(Counters._fields), dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
         self.log = np.zeros((int(self.log_capacity), 4))
         self._constant: dict[int, float] = {}
@@ -638,7 +689,7 @@ class Bounce(_MicroImpacts):
             speed = math.sqrt(2.0 * g * height)
             sample_time += math.sqrt(2.0 * height / g) * self.sample_rate
         self.st[_NEXT] = sample_time
-        self.st[_V] = speed
+        self.st[_SPEED] = speed
         self.st[_RUNNING] = 1.0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
