@@ -59,7 +59,7 @@ _ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
 # meta: active voices, pending bubbles, births, logged births
 _ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
 # st: accumulated rate, threshold, held radius
-_ACC, _TARGET, _RADIUS = range(3)  # the first two: next_event's acc and target
+_ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects (ImpactState's acc, target)
 
 
 class BubbleParams(NamedTuple):
@@ -203,7 +203,6 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
     prm = bubble_params(par)
     r_lo, r_hi, exponent, d_lo, d_hi, rise, gain, floor = prm
     active = meta[_ACTIVE]
-    acc, target = st[_ACC], st[_TARGET]
     for i in range(n):
         idx = start + i
         while meta[_PENDING] > 0 and math.floor(pending[0, 0]) + 1 <= idx:
@@ -220,7 +219,7 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
         h = rate[i] / fs
         pos = 0.0
         while h > 0.0:
-            pos, acc, target = next_event(acc, target, rng, h, pos)
+            pos = next_event(st, rng, h, pos)
             if pos < 0.0:
                 break
             radius = power_law_radius(u01(rng), r_lo, r_hi, exponent)
@@ -236,7 +235,6 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
                 log[k, 2] = depth
                 meta[_LOGGED] = k + 1
     meta[_ACTIVE] = active
-    st[_ACC], st[_TARGET] = acc, target
 
 
 _RISE = ParamSpec("float", 0.1, low=0.0, high=10.0, doc="rise factor sigma: frequency f0 (1 + sigma d t)")

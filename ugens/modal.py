@@ -74,6 +74,7 @@ from ugens.modal_budget import (
     scatter_kept,
 )
 from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
+from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
 from ugens.modal_retune import (
     TOP_BAND,
     TOP_BAND_COS,
@@ -270,8 +271,8 @@ FLAT_SPECTRUM_MODES = 8
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
-    """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta[0] = active mode
-    count, meta[2] = the most modes that may be active (all, or the anytime budget's share);
+    """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta: a BankMeta (the
+    active mode count and the most modes that may be active);
     last[0] = the force sample before force[0].
 
     The sub-block is cut at multiples of FLUSH_PERIOD on the clock. In each piece, any
@@ -286,8 +287,8 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         f = force[i : i + m]
         o = out[i : i + m]
         if last[0] != 0.0 or has_force(f, m):
-            meta[0] = meta[2]
-        active = meta[0]
+            meta[ACTIVE] = meta[ALLOWED]
+        active = meta[ACTIVE]
         if active == 0:
             for j in range(m):
                 o[j] = 0.0
@@ -296,7 +297,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
             resonate(f, o, m, mode_rows(bank), active, last)
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
-            meta[0] = flush_silent(bank[4], bank[5], active, floor)
+            meta[ACTIVE] = flush_silent(bank[4], bank[5], active, floor)
 
 
 @nb.njit(cache=True)
@@ -319,8 +320,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
     :func:`bank_step`'s and whole vectors of ``lanes`` modes: its padding and flushed modes
     hold exact zeros, so the active count is rounded up); the force also goes to the
     budget period's ring ``heard`` (empty: the force is zero and the ring holds zeros)."""
-    width = meta[2]
-    meta[0] = min((meta[0] + lanes - 1) // lanes * lanes, width)
+    width = meta[ALLOWED]
+    meta[ACTIVE] = min((meta[ACTIVE] + lanes - 1) // lanes * lanes, width)
     bank_step(force, out, start, n, compact, meta, floor, last)
     if heard.size:
         hear(force, n, heard, start)
@@ -342,7 +343,7 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
             continue
         out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         busy = h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
-        if not busy and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0:
             for i in range(n):
                 out[i] = 0.0
             continue
@@ -351,8 +352,8 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
         floor, last = t.values[FLOOR, b], t.last[b : b + 1]
         ring = t.rings[b] if busy else t.rings[b, :0]
         kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
-        active = min(meta[0], t.meta[b, 2])
-        t.meta[b, 0] = active
+        active = min(meta[ACTIVE], t.meta[b, ALLOWED])
+        t.meta[b, ACTIVE] = active
         work += active * n
     return work
 
@@ -376,7 +377,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
     by :func:`bank_step` write out[:n], the float32 delta-form modes
     (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
     fp = last[0]
-    if rows.wide_meta[2] > 0:
+    if rows.wide_meta[ALLOWED] > 0:
         bank_step(force, out, start, n, rows.wide_bank, rows.wide_meta, floor, last)
     else:
         for i in range(n):
@@ -454,7 +455,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     nw, nn = wide.size, narrow.size
     rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
-        np.array([nw, 0, nw], dtype=np.int64),
+        np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
         np.array([nn, nn], dtype=np.int64),
@@ -639,7 +640,7 @@ class ModalBank(ModelParams, UGen):
         self.delta = np.zeros((4, k))
         self.target = np.zeros((4, k))
         self.last = np.zeros(1)  # the force sample before the next sub-block
-        self.meta = np.zeros(3, dtype=np.int64)  # [active modes, ramp samples left, active cap]
+        self.meta = np.zeros(len(BankMeta._fields), dtype=np.int64)  # a BankMeta
         self.coef[:] = self._design()
         self.target[:] = self.coef
         self._floor = float(self.values["floor"])
@@ -655,8 +656,8 @@ class ModalBank(ModelParams, UGen):
         self.budgeted = False
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
-        self._compact = None  # the kept modes' rows, while _compact_meta[1] says they hold the state
-        self._compact_meta = np.zeros(3, dtype=np.int64)  # [active, gathered, width] (modal_budget)
+        self._compact = None  # the kept modes' rows, while _compact_meta[GATHERED] says they hold the state
+        self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
         self._refresh_design_cache()
         self._step = specialise(
             bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor, self.last
@@ -717,9 +718,9 @@ class ModalBank(ModelParams, UGen):
         """Move the state of a budget's compact bank or of a precision split back into
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
         or state."""
-        if self._compact_meta[1]:
-            self._compact_meta[1] = 0
-            scatter_kept(self._compact_view(int(self._compact_meta[2])), self._kept_mask, self.bank)
+        if self._compact_meta[GATHERED]:
+            self._compact_meta[GATHERED] = 0
+            scatter_kept(self._compact_view(int(self._compact_meta[WIDTH])), self._kept_mask, self.bank)
         split = self._split
         if split is None:
             return
@@ -728,11 +729,11 @@ class ModalBank(ModelParams, UGen):
         self.y[:, split.wide] = split.rows.wide_bank[4:]
         self.y[0, split.narrow] = y
         self.y[1, split.narrow] = y - dy
-        self.meta[0] = self.meta[2]
+        self.meta[ACTIVE] = self.meta[ALLOWED]
 
     def _reset(self) -> None:
         self._split = None
-        self._compact_meta[1] = 0
+        self._compact_meta[GATHERED] = 0
         if self._tables is not None:
             self._kept_mask[:] = True
             self._faded[:] = False
@@ -744,7 +745,7 @@ class ModalBank(ModelParams, UGen):
         self.y[:] = 0.0
         self.last[0] = 0.0
         self.coef[:] = self.target
-        self.meta[:] = (0, 0, self.model.n_modes)
+        self.meta[:] = BankMeta(0, 0, self.model.n_modes)
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
@@ -791,7 +792,7 @@ class ModalBank(ModelParams, UGen):
         self._refresh_design_cache()
         if self._tables is not None:  # modes a budget silenced follow ramps virtually:
             out = ~self._kept_mask
-            self.coef[:, out] = self.target[:, out] - self.meta[1] * self.delta[:, out]
+            self.coef[:, out] = self.target[:, out] - self.meta[RAMP_LEFT] * self.delta[:, out]
         self.target[:] = self._fresh
         ramp = self.ramp_samples()
         if jump or ramp < 1:
@@ -799,11 +800,11 @@ class ModalBank(ModelParams, UGen):
                 self._jump_poles(before[1])
             else:
                 self.coef[:] = self.target
-            self.meta[1] = 0
+            self.meta[RAMP_LEFT] = 0
         else:
             self.delta[:] = (self.target - self.coef) / ramp
-            self.meta[1] = ramp
-        self._ramping = self.meta[1] > 0
+            self.meta[RAMP_LEFT] = ramp
+        self._ramping = self.meta[RAMP_LEFT] > 0
 
     def _jump_poles(self, old_poles: np.ndarray) -> None:
         """A jump of freq_scale or decay_scale: each ringing mode keeps its amplitude and
@@ -861,7 +862,20 @@ class ModalBank(ModelParams, UGen):
 
     def _set_together(self, changes: list[tuple[str, Any]], jump: bool, ramp: float | None) -> None:
         """Parameter changes for one frame (the keys of one ``set`` event) with one redesign:
-        each value is checked and set in turn, the bank reacts once, to the last."""
+        each value is checked and set in turn, the bank reacts once, to the last. A jump (or
+        a change without a ramp) of freq_scale or decay_scale retunes the ringing modes with
+        the gains of the moment, so such changes apply key by key, as the compiled program
+        applies them (and so do changes of ``smooth``, which times the ramps of the keys after it)."""
+        self._event_ramp = ramp
+        try:
+            steps = self.ramp_samples()
+        finally:
+            self._event_ramp = None
+        keys = {key for key, _ in changes}
+        if "smooth" in keys or ((jump or steps < 1) and keys & {"freq_scale", "decay_scale"}):
+            for key, value in changes:
+                self.set_param(key, value, jump=jump, ramp=ramp)
+            return
         self._held = True
         try:
             for key, value in changes[:-1]:
@@ -898,7 +912,7 @@ class ModalBank(ModelParams, UGen):
         old_poles = self._pole_design()[0]
         self._size = size
         self._refresh_design_cache()
-        self.meta[1] = 0
+        self.meta[RAMP_LEFT] = 0
         self._ramping = False
         y1, y2 = self.y
         fp, rate = float(self.last[0]), float(self.sample_rate)
@@ -916,10 +930,12 @@ class ModalBank(ModelParams, UGen):
         elif self._ramping:
             self._settle()
             y, meta = self.y, self.meta
-            meta[0] = meta[2]
+            meta[ACTIVE] = meta[ALLOWED]
             ramp = Ramp(self.coef, self.delta, self.target)
-            meta[1] = resonate_ramp(inp, out, n, ramp, y[0], y[1], meta[1], meta[0], self.last)
-            self._ramping = meta[1] > 0
+            meta[RAMP_LEFT] = resonate_ramp(
+                inp, out, n, ramp, y[0], y[1], meta[RAMP_LEFT], meta[ACTIVE], self.last
+            )
+            self._ramping = meta[RAMP_LEFT] > 0
         else:
             self._settle()
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
@@ -929,18 +945,18 @@ class ModalBank(ModelParams, UGen):
         the force goes to the budget period's ring (continuous excitation)."""
         compact, meta = self._gathered(), self._compact_meta
         if self._ramping:
-            meta[0] = meta[2]
+            meta[ACTIVE] = meta[WIDTH]
             ramp = Ramp(compact[:4], compact[6:10], compact[10:])
-            self.meta[1] = resonate_ramp(
-                inp, out, n, ramp, compact[4], compact[5], self.meta[1], meta[2], self.last
+            self.meta[RAMP_LEFT] = resonate_ramp(
+                inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
             )
-            self._ramping = self.meta[1] > 0
+            self._ramping = self.meta[RAMP_LEFT] > 0
             hear(inp, n, self._heard, start)
         else:
             self._kept_step(
                 inp, out, start, n, self._compact_bank, meta, self._floor, self.last, self._heard, KEPT_LANES
             )
-        self.meta[0] = min(meta[0], self.meta[2])
+        self.meta[ACTIVE] = min(meta[ACTIVE], self.meta[ALLOWED])
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -955,11 +971,11 @@ class ModalBank(ModelParams, UGen):
         """The compact bank of the kept modes (gathered from ``self.bank`` if stale),
         padded with silent modes to a multiple of KEPT_LANES."""
         meta = self._compact_meta
-        if not meta[1]:
-            width = -(-int(self.meta[2]) // KEPT_LANES) * KEPT_LANES
+        if not meta[GATHERED]:
+            width = -(-int(self.meta[ALLOWED]) // KEPT_LANES) * KEPT_LANES
             gather_kept(self.bank, self.delta, self.target, self._kept_mask, self._compact_view(width))
-            meta[:] = (self.meta[0], 1, width)
-        return self._compact_view(int(meta[2]))
+            meta[:] = CompactMeta(self.meta[ACTIVE], 1, width)
+        return self._compact_view(int(meta[WIDTH]))
 
     def _compact_view(self, width: int) -> np.ndarray:
         """The compact bank's rows for ``width`` modes (the budget's render_kept may have
@@ -1005,7 +1021,7 @@ class ModalBank(ModelParams, UGen):
         cut = slice(first, first + k)
         self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
         self._kept_mask[:], self._faded[:] = True, False
-        self.meta[2] = k
+        self.meta[ALLOWED] = k
         self._mode_rows_view = tables.rows[:, cut]
         freqs = self.model.frequencies[self.order]
         self._mode_rows_view[WEIGHT] = a_weighting_power(freqs) if weighting == "A" else 1.0
@@ -1034,7 +1050,7 @@ class ModalBank(ModelParams, UGen):
         (its state holds zeros already, and so does its ring of the period's force: the
         budget renders a bank that heard a force in this or the last period)."""
         if (
-            self.meta[0]
+            self.meta[ACTIVE]
             or self.last[0] != 0.0
             or self._ramping
             or self._pending
@@ -1088,4 +1104,4 @@ class ModalBank(ModelParams, UGen):
 
     def _state_restored(self) -> None:
         self._split = None
-        self._ramping = self.meta[1] > 0
+        self._ramping = self.meta[RAMP_LEFT] > 0

@@ -39,15 +39,7 @@ from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
-from ugens.cells import (
-    MIN_PULSE_SAMPLES,
-    append_pulse,
-    pulse_amplitude,
-    pulse_sum,
-    raised_cosine,
-    slot,
-    store,
-)
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine, slot
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -63,8 +55,8 @@ BREAK_SCALINGS = ("sdt", "full")
 
 
 class ImpactState(NamedTuple):
-    """The controllers' float state, stored in this order in the float64 array ``st``: read
-    once per kernel call (:func:`impact_state`) and written back (cells.store)."""
+    """The controllers' float state, stored in this order in the float64 array ``st``; the
+    kernels read and write its fields in place through the slots below (cells.slot)."""
 
     acc: float  #: integrated event rate since the last event (the Poisson clock, :func:`next_event`)
     target: float  #: the Exp(1) threshold of the next event
@@ -76,12 +68,6 @@ class ImpactState(NamedTuple):
     next_impact: float  #: Bounce: the next impact's fractional sample
 
 
-@nb.njit(inline="always", cache=True)
-def impact_state(st):
-    """The ImpactState record held in ``st``."""
-    return ImpactState(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7])
-
-
 class Counters(NamedTuple):
     """The controllers' counters, stored in this order in the int64 array ``cnt``."""
 
@@ -89,14 +75,8 @@ class Counters(NamedTuple):
     logged: int  #: rows of the event log filled
 
 
-@nb.njit(inline="always", cache=True)
-def counters(cnt):
-    """The Counters record held in ``cnt``."""
-    return Counters(cnt[0], cnt[1])
-
-
-_RUNNING, _BUDGET, _LEFT, _NEXT, _SPEED = (
-    slot(ImpactState, key) for key in ("running", "budget", "left", "next_impact", "speed")
+_ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _SPEED, _NEXT = (
+    slot(ImpactState, key) for key in ImpactState._fields
 )
 _EVENTS, _LOGGED = (slot(Counters, key) for key in Counters._fields)
 
@@ -151,20 +131,23 @@ def u01(rng):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def next_event(acc, target, rng, rate, pos):
+def next_event(st, rng, rate, pos):
     """Exact Poisson event times at ``rate`` events per sample.
 
-    acc: the integrated rate since the last event; target: the Exp(1) threshold of the next
-    event (drawn if <= 0). From position pos in [0, 1) of the current sample, returns (the
-    position of the next event in this sample, or -1 if there is none, and the new acc and
-    target)."""
-    if target <= 0.0:
-        target = -math.log(1.0 - u01(rng))
-    need = target - acc
+    st holds an ImpactState (of which ``acc``, the integrated rate, and ``target``, the
+    Exp(1) threshold of the next event, are read and written here). From position pos in
+    [0, 1) of the current sample, returns the position of the next event in this sample,
+    or -1 if there is none (the rate is accumulated)."""
+    if st[_TARGET] <= 0.0:
+        st[_TARGET] = -math.log(1.0 - u01(rng))
+    need = st[_TARGET] - st[_ACC]
     avail = rate * (1.0 - pos)
     if need > avail:
-        return -1.0, acc + avail, target
-    return min(pos + need / rate, 1.0), 0.0, -math.log(1.0 - u01(rng))
+        st[_ACC] += avail
+        return -1.0
+    st[_ACC] = 0.0
+    st[_TARGET] = -math.log(1.0 - u01(rng))
+    return min(pos + need / rate, 1.0)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -192,16 +175,15 @@ def pulse_frame(pulses, count, idx):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def log_event(log, logged, t0, energy, size, impulse):
-    """Record (t0 in samples, energy J, size, impulse N s) in row ``logged`` while the log has
-    room; returns the rows filled."""
-    if logged < log.shape[0]:
-        log[logged, 0] = t0
-        log[logged, 1] = energy
-        log[logged, 2] = size
-        log[logged, 3] = impulse
-        return logged + 1
-    return logged
+def log_event(log, cnt, t0, energy, size, impulse):
+    """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
+    k = cnt[_LOGGED]
+    if k < log.shape[0]:
+        log[k, 0] = t0
+        log[k, 1] = energy
+        log[k, 2] = size
+        log[k, 3] = impulse
+        cnt[_LOGGED] = k + 1
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -217,26 +199,24 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
     """
     density, crush, frag = inputs
     fs, spread, mass, T, mode = opt
-    acc, target, left, budget, running, held, speed, next_impact = impact_state(d.st)
-    events, logged = counters(d.cnt)
-    rng = d.rng
+    st, cnt, rng = d.st, d.cnt, d.rng
     count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
         out[i] = s
-        size_out[i] = held
+        size_out[i] = st[_SIZE]
         pos = 0.0  # position inside [idx, idx + 1) already accounted for
-        while running != 0.0:
-            if mode == _BREAK_SDT and left <= crush[i]:
-                running = 0.0
+        while st[_RUNNING] != 0.0:
+            if mode == _BREAK_SDT and st[_LEFT] <= crush[i]:
+                st[_RUNNING] = 0.0
                 break
             rate = density[i] / fs
             if mode != _CRUMPLE:
-                rate *= left / budget
+                rate *= st[_LEFT] / st[_BUDGET]
             if rate <= 0.0:
                 break
-            pos, acc, target = next_event(acc, target, rng, rate, pos)
+            pos = next_event(st, rng, rate, pos)
             if pos < 0.0:
                 break
             x = -math.log(1.0 - u01(rng)) / ENERGY_LAMBDA
@@ -246,22 +226,20 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
                 size *= 1.0 - spread + spread * u01(rng)
             size *= 0.5 + 0.5 * u01(rng)
             if mode == _BREAK_SDT:
-                energy *= left / budget
-                size *= left / budget
-            if budget > 0.0:
-                if energy >= left:
-                    energy = left
-                    running = 0.0
-                left -= energy
+                energy *= st[_LEFT] / st[_BUDGET]
+                size *= st[_LEFT] / st[_BUDGET]
+            if st[_BUDGET] > 0.0:
+                if energy >= st[_LEFT]:
+                    energy = st[_LEFT]
+                    st[_RUNNING] = 0.0
+                st[_LEFT] -= energy
             t0 = idx + pos
             impulse = math.sqrt(2.0 * mass * energy)
             pulses = append_pulse(pulses, count, t0, T, pulse_amplitude(impulse, fs, t0, T))
             count += 1
-            held = size
-            events += 1
-            logged = log_event(d.log, logged, t0, energy, size, impulse)
-    store(d.st, ImpactState(acc, target, left, budget, running, held, speed, next_impact))
-    store(d.cnt, Counters(events, logged))
+            st[_SIZE] = size
+            cnt[_EVENTS] += 1
+            log_event(d.log, cnt, t0, energy, size, impulse)
     d.count[0] = count
     return pulses
 
@@ -277,18 +255,16 @@ def bounces(out, size_out, start, n, opt, d, pulses):
     bouncing stops once v' < min_speed.
     """
     fs, g, e, irregularity, mass, T, min_speed, fragment = opt
-    acc, target, left, budget, running, held, speed, next_impact = impact_state(d.st)
-    events, logged = counters(d.cnt)
-    rng = d.rng
+    st, cnt, rng = d.st, d.cnt, d.rng
     count = d.count[0]
     for i in range(n):
         idx = start + i
         s, count = pulse_frame(pulses, count, idx)
         out[i] = s
-        size_out[i] = held
-        while running != 0.0 and next_impact < idx + 1:
-            t0 = next_impact
-            v = speed
+        size_out[i] = st[_SIZE]
+        while st[_RUNNING] != 0.0 and st[_NEXT] < idx + 1:
+            t0 = st[_NEXT]
+            v = st[_SPEED]
             u = u01(rng)
             v_out = v * e * (1.0 - irregularity * u)
             impulse = mass * (v + v_out)
@@ -296,16 +272,14 @@ def bounces(out, size_out, start, n, opt, d, pulses):
             amplitude = impulse * fs / pulse_sum(t0, T)
             pulses = append_pulse(pulses, count, t0, T, amplitude)
             count += 1
-            events += 1
-            held = fragment
-            logged = log_event(d.log, logged, t0, 0.5 * mass * v * v, fragment, impulse)
+            cnt[_EVENTS] += 1
+            st[_SIZE] = fragment
+            log_event(d.log, cnt, t0, 0.5 * mass * v * v, fragment, impulse)
             if v_out < min_speed or v_out <= 0.0:
-                running = 0.0
+                st[_RUNNING] = 0.0
             else:
-                speed = v_out
-                next_impact = t0 + 2.0 * v_out / g * fs
-    store(d.st, ImpactState(acc, target, left, budget, running, held, speed, next_impact))
-    store(d.cnt, Counters(events, logged))
+                st[_SPEED] = v_out
+                st[_NEXT] = t0 + 2.0 * v_out / g * fs
     d.count[0] = count
     return pulses
 
