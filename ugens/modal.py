@@ -73,7 +73,15 @@ from ugens.modal_budget import (
     line_aligned_zeros,
     scatter_kept,
 )
-from ugens.modal_f32 import TOLERANCE, delta_coefficients, delta_step, float32_error
+from ugens.modal_f32 import (
+    MIN_GAIN,
+    TOLERANCE,
+    delta_coefficients,
+    delta_step,
+    float32_error,
+    narrow_rows,
+    unscaled_state,
+)
 from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
 from ugens.modal_retune import (
     TOP_BAND,
@@ -361,7 +369,8 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
     y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
-    state (y, Delta), their meta [active, all] and the force sample before the block."""
+    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all] and the
+    force sample before the block."""
 
     wide_bank: np.ndarray
     wide_meta: np.ndarray
@@ -445,13 +454,12 @@ class MixedSplit(NamedTuple):
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
     """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
-    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance."""
+    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >= MIN_GAIN."""
     c1, c2, g, d, y1, y2 = bank
-    fits = float32_error(c1, c2, sample_rate) <= tolerance
+    fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef = np.ascontiguousarray(np.stack([c0, b2, g[narrow], d[narrow]]), dtype=np.float32)
-    state = np.ascontiguousarray(np.stack([y1[narrow], y1[narrow] - y2[narrow]]), dtype=np.float32)
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow])
     nw, nn = wide.size, narrow.size
     rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
@@ -725,10 +733,8 @@ class ModalBank(ModelParams, UGen):
         if split is None:
             return
         self._split = None
-        y, dy = split.rows.narrow_state.astype(np.float64)
         self.y[:, split.wide] = split.rows.wide_bank[4:]
-        self.y[0, split.narrow] = y
-        self.y[1, split.narrow] = y - dy
+        self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 
     def _reset(self) -> None:
