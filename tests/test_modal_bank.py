@@ -170,6 +170,20 @@ def test_silent_modes_are_zeroed_and_skipped():
     assert not np.any((y != 0) & (np.abs(y) < np.finfo(float).tiny))  # no subnormal output
 
 
+def test_floor_zero_computes_every_mode_as_a_scan_that_zeroes_nothing():
+    # e^{-400 t} is 1e-174 after 1 s: a floor of 1e-300 is scanned for but never reached,
+    # and floor 0 (no scan at all) must give the same bits and keep every mode active
+    model = ModalModel([300.0, 3000.0], [400.0, 9.0], [[1.0, 1.0]])
+    x = np.zeros(FS)
+    x[0] = FS
+    out = {}
+    for floor in (0.0, 1e-300):
+        bank = ModalBank(model, name="bank", floor=floor)(ArraySource(x))
+        out[floor] = render(Graph(bank), [], 1.0, FS, 64, limiter=False).audio[0]
+        assert bank.meta[0] == 2 and np.all(bank.y != 0.0)
+    assert np.array_equal(out[0.0], out[1e-300])
+
+
 @pytest.mark.parametrize("precision", ["float64", "mixed"])
 def test_state_save_and_restore_continues_identically(precision):
     model = spread_model(8)

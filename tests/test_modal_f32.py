@@ -8,7 +8,15 @@ from test_modal_bank import FS, error_db, spread_model
 
 from jassy import Event, Graph, ModalModel, render
 from ugens.modal import ModalBank, design, split_by_precision
-from ugens.modal_f32 import TOLERANCE, DeltaRows, float32_error, resonate_delta
+from ugens.modal_f32 import (
+    TOLERANCE,
+    DeltaRows,
+    decay_factor_error,
+    delta_coefficients,
+    float32_error,
+    narrow_rows,
+    resonate_delta,
+)
 
 FREQS = np.geomspace(20.0, 20000.0, 7)
 DECAYS = np.geomspace(0.5, 500.0, 7)
@@ -23,9 +31,9 @@ def mixed_impulse_response(model, seconds, precision="mixed", block=4096):
 
 def test_mixed_bank_holds_minus_60_db_over_the_whole_decay_on_the_grid():
     """Each mode of the grid 20 Hz - 20 kHz x 0.5 - 500 /s alone, until e^{-d t} < e^-8,
-    against a e^{-d t} sin(2 pi f t); the bound that chose its precision is never below
-    the measured error, and most modes run in float32."""
-    n32 = 0
+    against a e^{-d t} sin(2 pi f t); the bound that chose its precision and form is never
+    below the measured error, most modes run in float32, and both forms are used."""
+    n32 = by_factor = 0
     for f in FREQS:
         for d in DECAYS:
             model = ModalModel([f], [d], [[1.0]])
@@ -38,22 +46,26 @@ def test_mixed_bank_holds_minus_60_db_over_the_whole_decay_on_the_grid():
             bound = float32_error(c1, c2, FS)[0]
             if bound <= TOLERANCE:
                 n32 += 1
+                factor_bound = decay_factor_error(c1, c2, FS)[0]
+                if factor_bound <= TOLERANCE:
+                    by_factor += 1
+                    bound = factor_bound
                 assert err < 20 * np.log10(bound) + 1.0, (f, d, err, bound)
     assert n32 >= 0.9 * FREQS.size * DECAYS.size
+    assert 0.5 * n32 <= by_factor < n32
 
 
-def float32_only_response(f, d, seconds):
-    """A single mode forced into float32 (no bound), through the delta-form kernel."""
+def float32_only_response(f, d, seconds, decay_factor=False):
+    """A single mode forced into float32 (no bound), through the kernel in the delta form
+    or the decay-factor form."""
     c1, c2, s = design(np.array([f]), np.array([d]), FS)
-    bank = np.stack([c1, c2, s, np.zeros(1), np.zeros(1), np.zeros(1)])
-    split = split_by_precision(bank, FS, tolerance=np.inf)
-    assert split.narrow.size == 1
+    c0, b2 = delta_coefficients(c1, c2)
+    zero = np.zeros(1)
+    coef, state = narrow_rows(c0, b2, s, zero, zero, zero, decay_factor)
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    c0, b2, g, dd = split.rows.narrow_coef
-    y, dy = split.rows.narrow_state
-    resonate_delta(x, out, x.size, DeltaRows(c0, b2, g, dd, y, dy), 1, np.zeros(1))
+    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, np.zeros(1), decay_factor)
     return out
 
 

@@ -46,7 +46,7 @@ import numpy as np
 
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
-from jassy.jit import drop_stale_cache, specialise, void_pointer
+from jassy.jit import specialise
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
@@ -56,26 +56,23 @@ from ugens import modal_budget
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
-    COMPACT_ROWS,
     DECAY,
     FLOOR,
     FLOOR2,
     GROWTH,
     INV,
-    KEPT_LANES,
     SIN2,
     SPECTRUM,
     WEIGHT,
     BudgetTables,
-    aligned,
     compact_bank,
-    gather_kept,
     line_aligned_zeros,
-    scatter_kept,
+    settle_compact,
 )
 from ugens.modal_f32 import (
     MIN_GAIN,
     TOLERANCE,
+    decay_factor_error,
     delta_coefficients,
     delta_step,
     float32_error,
@@ -92,8 +89,6 @@ from ugens.modal_retune import (
     retune_state,
     size_changes,
 )
-
-drop_stale_cache(__file__, [modal_budget])  # render_kept's cache holds copies of its kernels
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -286,8 +281,9 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
     The sub-block is cut at multiples of FLUSH_PERIOD on the clock. In each piece, any
     input activates every allowed mode (the inactive ones hold exact zeros, so when they
     start does not matter); at each multiple, modes whose state fell below ``floor`` are
-    zeroed and the active count shrinks to the last audible mode. The flush frames do not
-    depend on the block size, so neither does the output."""
+    zeroed and the active count shrinks to the last audible mode (no mode is below a
+    ``floor`` <= 0: the scan is skipped). The flush frames do not depend on the block size,
+    so neither does the output."""
     i = 0
     while i < n:
         frame = start + i
@@ -304,73 +300,15 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         else:
             resonate(f, o, m, mode_rows(bank), active, last)
         i += m
-        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
+        if active > 0 and floor > 0.0 and (start + i) % FLUSH_PERIOD == 0:
             meta[ACTIVE] = flush_silent(bank[4], bank[5], active, floor)
-
-
-@nb.njit(cache=True)
-def hear(force, n, heard, start):
-    """Copy force[:n] (frames start ..) into the ring ``heard`` (one budget period, frame
-    t at t modulo its length; only the last period of a longer sub-block stays). Whether
-    it is non-zero the budget knows already (jassy.anytime_rank.scan_forces)."""
-    size = heard.size
-    i = max(0, n - size)
-    while i < n:
-        at = (start + i) % size
-        m = min(n - i, size - at)
-        heard[at : at + m] = force[i : i + m]
-        i += m
-
-
-@nb.njit(fastmath=FASTMATH, cache=True)
-def kept_step(force, out, start, n, compact, meta, floor, last, heard, lanes):
-    """One sub-block of a budgeted bank's kept modes (the compact bank, rows as
-    :func:`bank_step`'s and whole vectors of ``lanes`` modes: its padding and flushed modes
-    hold exact zeros, so the active count is rounded up); the force also goes to the
-    budget period's ring ``heard`` (empty: the force is zero and the ring holds zeros)."""
-    width = meta[ALLOWED]
-    meta[ACTIVE] = min((meta[ACTIVE] + lanes - 1) // lanes * lanes, width)
-    bank_step(force, out, start, n, compact, meta, floor, last)
-    if heard.size:
-        hear(force, n, heard, start)
-
-
-@nb.njit(fastmath=FASTMATH, cache=True)
-def render_kept(t, h, outputs, by_python, start, n, offset):
-    """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
-    samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
-    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
-    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with no force
-    in this stretch or since it was last rendered, nor in this or the last period (its
-    ring holds zeros and keeps them) writes zeros if no mode sounds and no force sample
-    precedes. Returns the modes computed times frames (each bank's active count after
-    its span)."""
-    work = 0
-    for b in range(by_python.size):
-        if by_python[b]:
-            continue
-        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
-        busy = h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
-        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0:
-            for i in range(n):
-                out[i] = 0.0
-            continue
-        force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
-        compact, meta = compact_bank(t, b), t.compact_meta[b]
-        floor, last = t.values[FLOOR, b], t.last[b : b + 1]
-        ring = t.rings[b] if busy else t.rings[b, :0]
-        kept_step(force, out, start, n, compact[:6], meta, floor, last, ring, KEPT_LANES)
-        active = min(meta[ACTIVE], t.meta[b, ALLOWED])
-        t.meta[b, ACTIVE] = active
-        work += active * n
-    return work
 
 
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
     y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all] and the
-    force sample before the block."""
+    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all, 1 in the
+    decay-factor form] and the force sample before the block."""
 
     wide_bank: np.ndarray
     wide_meta: np.ndarray
@@ -454,19 +392,22 @@ class MixedSplit(NamedTuple):
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
     """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
-    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >= MIN_GAIN."""
+    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and
+    |g| >= MIN_GAIN; in the faster decay-factor form if every float32 mode holds the
+    tolerance in it (:func:`ugens.modal_f32.decay_factor_error`)."""
     c1, c2, g, d, y1, y2 = bank
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
+    by_factor = bool(np.all(decay_factor_error(c1[narrow], c2[narrow], sample_rate) <= tolerance))
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow])
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], by_factor)
     nw, nn = wide.size, narrow.size
     rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array([nn, nn], dtype=np.int64),
+        np.array([nn, nn, by_factor], dtype=np.int64),
         np.zeros(1),
     )
     return MixedSplit(wide, narrow, rows)
@@ -664,7 +605,6 @@ class ModalBank(ModelParams, UGen):
         self.budgeted = False
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
-        self._compact = None  # the kept modes' rows, while _compact_meta[GATHERED] says they hold the state
         self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
         self._refresh_design_cache()
         self._step = specialise(
@@ -727,8 +667,7 @@ class ModalBank(ModelParams, UGen):
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
         or state."""
         if self._compact_meta[GATHERED]:
-            self._compact_meta[GATHERED] = 0
-            scatter_kept(self._compact_view(int(self._compact_meta[WIDTH])), self._kept_mask, self.bank)
+            self._settle_compact(self._tables, self._slot)
         split = self._split
         if split is None:
             return
@@ -947,9 +886,10 @@ class ModalBank(ModelParams, UGen):
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
 
     def _span_kept(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
-        """As :meth:`_span` for a budgeted bank: only the kept modes, in a compact bank;
-        the force goes to the budget period's ring (continuous excitation)."""
-        compact, meta = self._gathered(), self._compact_meta
+        """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
+        bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
+        excitation)."""
+        compact, meta = self._compact_of(self._tables, self._slot), self._compact_meta
         if self._ramping:
             meta[ACTIVE] = meta[WIDTH]
             ramp = Ramp(compact[:4], compact[6:10], compact[10:])
@@ -957,11 +897,9 @@ class ModalBank(ModelParams, UGen):
                 inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
             )
             self._ramping = self.meta[RAMP_LEFT] > 0
-            hear(inp, n, self._heard, start)
+            self._hear(inp, n, self._heard, start)
         else:
-            self._kept_step(
-                inp, out, start, n, self._compact_bank, meta, self._floor, self.last, self._heard, KEPT_LANES
-            )
+            self._kept_step(inp, out, start, n, compact[:6], meta, self._floor, self.last, self._heard)
         self.meta[ACTIVE] = min(meta[ACTIVE], self.meta[ALLOWED])
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
@@ -973,27 +911,8 @@ class ModalBank(ModelParams, UGen):
         self._mixed_step(inp, out, start, n, split.rows, self._floor, self.last)
 
     # ------------------------------------------------------------ anytime synthesis
-    def _gathered(self) -> np.ndarray:
-        """The compact bank of the kept modes (gathered from ``self.bank`` if stale),
-        padded with silent modes to a multiple of KEPT_LANES."""
-        meta = self._compact_meta
-        if not meta[GATHERED]:
-            width = -(-int(self.meta[ALLOWED]) // KEPT_LANES) * KEPT_LANES
-            gather_kept(self.bank, self.delta, self.target, self._kept_mask, self._compact_view(width))
-            meta[:] = CompactMeta(self.meta[ACTIVE], 1, width)
-        return self._compact_view(int(meta[WIDTH]))
-
-    def _compact_view(self, width: int) -> np.ndarray:
-        """The compact bank's rows for ``width`` modes (the budget's render_kept may have
-        gathered it at another width since this bank last did)."""
-        compact = self._compact
-        if compact is None or compact.shape[1] != width:
-            compact = self._compact = self._compact_store[: COMPACT_ROWS * width].reshape(COMPACT_ROWS, width)
-            self._compact_bank = compact[:6]
-        return compact
-
     def anytime_compiled(self) -> bool:
-        """Whether the budget's compiled render (:func:`render_kept`) can render the bank's
+        """Whether the budget's compiled render (ugens.modal_kept.render_kept) can render the bank's
         next span: no parameter change pending, no ramp, no size input."""
         return not (self._pending or self._ramping or self._size_input is not None)
 
@@ -1003,7 +922,7 @@ class ModalBank(ModelParams, UGen):
         length); a continuous force is judged by the amplitude it builds in ``horizon``
         seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime)."""
         self._settle()
-        k, first, bank_at, coef_at, compact_at = (int(x) for x in tables.layout[:, slot])
+        k, first, bank_at, coef_at, _ = (int(x) for x in tables.layout[:, slot])
         self._tables, self._slot = tables, slot
         views = {}
         stores = {"bank": (tables.bank, bank_at, 6), "target": (tables.target, coef_at, 4)}
@@ -1023,7 +942,6 @@ class ModalBank(ModelParams, UGen):
         tables.values[FLOOR, slot] = self._floor
         self._compact_meta = tables.compact_meta[slot]
         self._compact_meta[:] = 0
-        self._compact_store = tables.compact[compact_at : compact_at + COMPACT_ROWS * aligned(k + KEPT_LANES)]
         cut = slice(first, first + k)
         self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
         self._kept_mask[:], self._faded[:] = True, False
@@ -1042,29 +960,16 @@ class ModalBank(ModelParams, UGen):
         self._horizon = horizon
         self._forcing_key = None
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
-        compact = np.zeros((COMPACT_ROWS, KEPT_LANES))
+        from ugens import modal_kept  # (not at the top: it imports this module)
+
+        self._compact_of = specialise(compact_bank, tables, slot)
+        self._settle_compact = specialise(settle_compact, tables, slot)
+        self._hear = modal_kept.hear
         self._kept_step = specialise(
-            kept_step, self.out, self.out, 0, 0, compact[:6], self._compact_meta, self._floor, self.last,
-            self._heard, KEPT_LANES,
+            modal_kept.kept_step, self.out, self.out, 0, 0, np.zeros((6, 8)), self._compact_meta, self._floor,
+            self.last, self._heard,
         )  # fmt: skip
         self._refresh_forcing()
-
-    def anytime_silent(self, offset: int, n: int) -> bool:
-        """For a budgeted bank whose force is zero over the next ``n`` frames: if none of its
-        modes sounds and nothing is pending (no force sample before, ramp, parameter
-        change or size input), write silence to out[offset : offset + n] and return True
-        (its state holds zeros already, and so does its ring of the period's force: the
-        budget renders a bank that heard a force in this or the last period)."""
-        if (
-            self.meta[ACTIVE]
-            or self.last[0] != 0.0
-            or self._ramping
-            or self._pending
-            or self._size_input is not None
-        ):
-            return False
-        self.out[offset : offset + n] = 0.0
-        return True
 
     def anytime_spectrum(self) -> bool:
         """A budgeted bank of many modes (``anytime_spectral``: banks of at most

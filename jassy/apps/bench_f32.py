@@ -44,14 +44,17 @@ def _float64_reference(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.
     return out
 
 
-def _kernel_runner(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray) -> Callable[[], None]:
+def _kernel_runner(
+    force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray, by_factor: bool
+) -> Callable[[], None]:
     """ugens.modal_f32.resonate_delta over ``force`` in one call, fresh state, no direct term
-    (the C loop has none), on rows laid out as ModalBank's (:func:`narrow_rows`)."""
+    (the C loop has none), every mode in float32 in the form ModalBank chose, on rows laid
+    out as ModalBank's (:func:`narrow_rows`)."""
     from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta
 
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros_like(g)
-    coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros)
+    coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros, by_factor)
     out, last = np.zeros(force.size), np.zeros(1)
     rows = DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
@@ -59,7 +62,7 @@ def _kernel_runner(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndar
         state[:] = 0.0
         out[:] = 0.0
         last[0] = 0.0
-        resonate_delta(force, out, force.size, rows, g.size, last)
+        resonate_delta(force, out, force.size, rows, g.size, last, by_factor)
 
     run.output = out
     return run
@@ -68,12 +71,12 @@ def _kernel_runner(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndar
 def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -> list[dict]:
     """Per bank size: the C loop's mode-samples/s (median of the rounds), the kernel's and
     ModalBank's ratios to it (min, median, max over ``rounds``), each side's error against
-    float64 (dB of the peak) and the share of modes the mixed split runs in float32.
+    float64 (dB of the peak), the share of modes the mixed split runs in float32 and its
+    form.
     Without a C compiler the rows carry ``c_note`` and no ratios."""
     from jassy.apps.bench import SAMPLE_RATE, _bank_runner, _best_times, random_model
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import design
-    from ugens.modal_f32 import TOLERANCE, float32_error
+    from ugens.modal import design, split_by_precision
 
     c_loop, note = compile_modal_f32()
     rows = []
@@ -83,12 +86,15 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
         force = np.random.default_rng(1).standard_normal(frames)
         c1, c2, s = design(model.frequencies, model.decays, SAMPLE_RATE)
         g = s * model.gains[0] / SAMPLE_RATE
-        kernel = _kernel_runner(force, c1, c2, g)
+        split = split_by_precision(np.stack([c1, c2, g, 0 * g, 0 * g, 0 * g]), SAMPLE_RATE)
+        by_factor = bool(split.rows.narrow_meta[2])
+        kernel = _kernel_runner(force, c1, c2, g, by_factor)
         bank = _bank_runner(model, force, 1024, "mixed")
         row = {
             "modes": k,
             "frames": frames,
-            "float32_share": float(np.mean(float32_error(c1, c2, SAMPLE_RATE) <= TOLERANCE)),
+            "float32_share": split.narrow.size / k,
+            "form": "decay factor" if by_factor else "delta",
             "c_note": note,
         }
         ref = _float64_reference(force, c1, c2, g)
@@ -119,15 +125,19 @@ def print_float32(rows: list[dict]) -> None:
         f"({rows[0]['c_note']}); ratios min / median / max over interleaved rounds"
     )
     print(
-        f"{'modes':>6} {'frames':>6} {'float32 %':>9} {'C float32':>10} {'kernel/C':>20} "
+        f"{'modes':>6} {'frames':>6} {'float32 %':>9} {'form':>12} {'C float32':>10} {'kernel/C':>20} "
         f"{'ModalBank b1024/C':>20} {'err jassy':>10} {'err C':>7}"
     )
     for r in rows:
         if "kernel_vs_c" not in r:
-            print(f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}%  (no C reference)")
+            print(
+                f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}% {r['form']:>12}"
+                "  (no C reference)"
+            )
             continue
         kr, br = ("{:.2f} / {:.2f} / {:.2f}".format(*r[key]) for key in ("kernel_vs_c", "bank_vs_c"))
         print(
-            f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}% {r['c_rate']:>10.3g} "
+            f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}% {r['form']:>12} "
+            f"{r['c_rate']:>10.3g} "
             f"{kr:>20} {br:>20} {r['kernel_error_db']:>8.0f}dB {r['c_error_db']:>5.0f}dB"
         )
