@@ -82,6 +82,10 @@ def test_the_bound_is_needed_very_high_q_modes_fail_in_float32():
     f, d = 20.0, 0.5
     ref = ModalModel([f], [d], [[1.0]]).impulse_response(seconds, FS)
     assert error_db(float32_only_response(f, d, seconds)[1:], ref[1:]) < -80.0
+    # in the decay-factor form (R^2 rounded) its decay drifts past -70 dB, and that bound says so
+    c1, c2, _ = design(np.array([f]), np.array([d]), FS)
+    assert error_db(float32_only_response(f, d, seconds, decay_factor=True)[1:], ref[1:]) > -70.0
+    assert decay_factor_error(c1, c2, FS)[0] > TOLERANCE
 
 
 def test_mixed_bank_passes_where_float32_two_pole_fails():

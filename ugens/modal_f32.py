@@ -135,7 +135,7 @@ LANES = 32
 ROW_SPREAD = 512
 
 
-def _float32_rows(rows: int, width: int) -> np.ndarray:
+def float32_rows(rows: int, width: int) -> np.ndarray:
     """Zeros (rows, stride) in float32, C-contiguous, starting on a 64-byte cache-line
     boundary, with stride >= width floats such that rows start ROW_SPREAD bytes apart
     modulo 4 KiB (``width`` a multiple of LANES: every row starts on a line, and vector
@@ -150,12 +150,12 @@ def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.nd
     """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
     d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
     (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
-    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`_float32_rows`).
+    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
     A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
     and g = d = 0, so it adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
-    rows = _float32_rows(6, width)
+    rows = float32_rows(6, width)
     coef, state = rows[:4], rows[4:]
     coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
     coef[0, n:] = 1.0

@@ -319,6 +319,7 @@ class Roll(GivingSurface, Turning, NeedleContact):
             v = self.values
             roll_over(
                 self.out,
+                self._forces,
                 n,
                 self.surface,
                 self._scratch,

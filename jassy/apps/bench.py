@@ -271,7 +271,7 @@ def print_modal(rows: list[dict], graph: dict) -> None:
             f"{r['jassy'] / r['scipy_lfilter']:>8.0f}x {r['jassy_big_block'] / r['scipy_lfilter']:>13.0f}x"
         )
     print(
-        f'precision="mixed" (float32 delta form where the -60 dB bound allows) vs C float32 '
+        f'precision="mixed" (float32 where the -60 dB bound allows: delta or decay-factor form) vs C float32 '
         f"({rows[0]['c_note']})"
     )
     print(
