@@ -10,6 +10,7 @@ from jassy import Event, Graph, ModalModel, render
 from ugens.modal import ModalBank, design, split_by_precision
 from ugens.modal_f32 import (
     TOLERANCE,
+    DeltaRows,
     decay_factor_error,
     delta_coefficients,
     float32_error,
@@ -64,7 +65,7 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    resonate_delta(x, out, x.size, *coef, *state, 1, np.zeros(1), decay_factor)
+    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, np.zeros(1), decay_factor)
     return out
 
 
@@ -142,7 +143,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import resonate
+    from ugens.modal import ModeRows, resonate
 
     fn, note = compile_modal_f32()
     if fn is None:
@@ -154,7 +155,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     run()
     ref = np.zeros(force.size)
     z = np.zeros(5)
-    resonate(force, ref, force.size, c1, c2, s, z, z.copy(), z.copy(), 5, np.zeros(1))
+    resonate(force, ref, force.size, ModeRows(c1, c2, s, z, z.copy(), z.copy()), 5, np.zeros(1))
     assert error_db(run.output.astype(np.float64), ref) < -60.0
     # loading the -ffast-math library must not switch the process to flush-to-zero
     tiny = np.finfo(np.float64).smallest_subnormal

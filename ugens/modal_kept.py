@@ -20,7 +20,7 @@ from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
 from ugens import modal, modal_budget
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, resonate
+from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, mode_rows, resonate
 from ugens.modal_budget import FLOOR, KEPT_LANES, compact_bank
 
 drop_stale_cache(__file__, [modal, modal_budget, anytime_rank])  # the cache holds copies of their kernels
@@ -117,9 +117,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
                 o[j] = 0.0
             last[0] = 0.0
         elif forced:
-            resonate(
-                f, o, m, compact[0], compact[1], compact[2], compact[3], compact[4], compact[5], active, last
-            )
+            resonate(f, o, m, mode_rows(compact), active, last)
         else:
             ring(o, m, compact[0], compact[1], compact[4], compact[5], active)
         i += m
