@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
-from jassy.anytime_rank import Hearing, scan_forces
+from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, Kicks, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
 
@@ -140,7 +140,8 @@ class ModeBudget:
             np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
             np.array([not renders for _ in banks], dtype=bool), *flags,
         )  # fmt: skip
-        self._any_expected = False
+        self._state = np.zeros(3, dtype=np.int64)  # FADING, ANY_EXPECTED, EVERY_PERIOD (jassy.anytime_rank)
+        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
         self._scan = specialise(scan_forces, h, 0, 0, True)
         for bank in banks:
             bank.budgeted = self.active
@@ -184,11 +185,18 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
         self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
-        from ugens.modal import render_kept
+        from ugens import modal_kept as mk
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
-        self._render_all = specialise(render_kept, tables, h, self._outputs, self._by_python, 0, 0, 0)
+        self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
+        self._kick_table = Kicks(
+            np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
+        )
+        self._advance = specialise(
+            mk.advance, tables, h, self._outputs, self._by_python, self._kick_table, 0, self._state, 0, 0,
+            0, 0, 0,
+        )  # fmt: skip
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -209,39 +217,82 @@ class ModeBudget:
         one: a sub-block is split only where a decision changes the kept sets."""
         if not self.active:
             return
-        end, period, rendered, at = start + n, self.period, start, start
+        if self.renders:
+            self._rendering_step(start, n)
+            return
+        end, period, at = start + n, self.period, start
         while at < end:
             stop = min(end, (at // period + 1) * period)
             onset = self._due(at, stop - at, at - start)
             if onset is not None:
-                if self.renders and at > rendered:
-                    self._render(rendered, at - rendered, rendered - start)
-                    rendered = at
                 self._decide(at, onset, at - start, stop - at)
             at = stop
-        if self.renders:
-            self._render(rendered, end - rendered, rendered - start)
 
-    def _render(self, start: int, n: int, offset: int) -> None:
-        """Every bank over frames [start, start + n), from offset ``offset`` of the sub-block,
-        in one compiled call (ugens.modal.render_kept) but for banks with a parameter
-        change, ramp or size input pending (their own ``process``); a bank with nothing to
-        compute (no mode sounding, no force in this or the last period, nothing pending)
-        only writes silence."""
-        by_python, slow = self._by_python, []
+    def _rendering_step(self, start: int, n: int) -> None:
+        """:meth:`step` when the budget renders the banks: the bookkeeping and the renders
+        between decisions run in one compiled call (ugens.modal_kept.advance), which
+        returns to Python only where the budget decides. Banks with a parameter change,
+        ramp or size input pending render through their own ``process`` over the same
+        spans."""
+        period, end = self.period, start + n
+        kicks = self.upcoming(start, end + 2 * period)
+        count = self._load_kicks(kicks)
+        slow = self._python_banks()
+        table, state, at, rendered = self._kick_table, self._state, start, start
+        args = (self._tables, self._hearing, self._outputs, self._by_python)
+        while True:
+            state[FADING] = self._fading
+            was = rendered
+            at, rendered, work, deciding = self._advance(
+                *args, table, count, state, period, start, n, at, rendered
+            )
+            self.mode_samples += work
+            for i in slow:
+                if rendered > was:
+                    self._processes[i](was, rendered - was, was - start)
+                    self.mode_samples += (rendered - was) * int(self.banks[i].meta[0])
+            if not deciding:
+                return
+            stop = min(end, (at // period + 1) * period)
+            if at % period == 0:
+                self._kicks = [k for k in kicks if at <= k[0] < at + 2 * period]
+                self._now = self._predicted(self._kicks, at, at + period) if self._kicks else {}
+                if self.cpu_fraction is not None:
+                    self._adapt()
+            else:
+                self._kicks, self._now = NO_KICK, {}
+            self._decide(at, self._hearing.onset, at - start, stop - at)
+            at = stop
+
+    def _python_banks(self) -> list[int]:
+        """The banks the compiled render cannot render now (a parameter change, ramp or size
+        input pending), marked in ``by_python``."""
+        slow = []
         for i, bank in enumerate(self.banks):
-            by_python[i] = python = not bank.anytime_compiled()
+            self._by_python[i] = python = not bank.anytime_compiled()
             if python:
                 slow.append(i)
-        h = self._hearing
-        self.mode_samples += self._render_all(self._tables, h, self._outputs, by_python, start, n, offset)
-        for i in slow:  # (a force heard lately: its ring holds it)
-            bank = self.banks[i]
-            busy = h.forced[i] or h.unrendered[i] or h.heard_now[i] or h.heard_before[i]
-            if busy or not bank.anytime_silent(offset, n):
-                self._processes[i](start, n, offset)
-                self.mode_samples += n * int(bank.meta[0])
-        h.unrendered[:] = False
+        return slow
+
+    def _load_kicks(self, kicks: list) -> int:
+        """Impacts (frame, nodes, impulse, location) into the compiled step's table, one row
+        per bank struck (one row with slot -1 for an impact on none of the budget's
+        banks); returns the rows."""
+        rows = sum(max(len(nodes), 1) for _, nodes, _, _ in kicks)
+        table = self._kick_table
+        if rows > table.frames.size:
+            size = 2 * rows
+            table = self._kick_table = Kicks(
+                np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=bool)
+            )
+        row, slots = 0, self._slots
+        for frame, nodes, impulse, _ in kicks:
+            for node in nodes or (None,):
+                table.frames[row] = frame
+                table.slots[row] = slots.get(id(node), -1)
+                table.positive[row] = impulse > 0.0
+                row += 1
+        return rows
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
@@ -252,9 +303,9 @@ class ModeBudget:
             kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
             now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
             expected = self._hearing.expected
-            if self._any_expected:
+            if self._state[ANY_EXPECTED]:
                 expected[:] = False
-            self._any_expected = bool(now)
+            self._state[ANY_EXPECTED] = bool(now)
             if now:
                 for i, bank in enumerate(self.banks):
                     expected[i] = id(bank) in now

@@ -52,6 +52,22 @@ def rank_modes(scores, limit, keep, fade, later_top):
     return any_fade
 
 
+class Kicks(NamedTuple):
+    """The impacts a budget knows of over a sub-block and two periods past it, in frame
+    order: the frame each applies at, the slot of the bank it strikes (-1: none of the
+    budget's) and whether its impulse is positive (the bank then expects it)."""
+
+    frames: np.ndarray  # int64
+    slots: np.ndarray  # int64
+    positive: np.ndarray  # bool
+
+
+#: Fields of a budget's step state (int64): a mode fades out in this period (the last
+#: decision said so); some bank expects an impact in this period; the budget decides at
+#: every period (it adapts its size to a CPU budget).
+FADING, ANY_EXPECTED, EVERY_PERIOD = range(3)
+
+
 class Hearing(NamedTuple):
     """What a budget knows of each bank's force: its input (float64 arrays of ``size`` at
     ``inputs``, kept alive by their nodes), whether it is rendered after the budget

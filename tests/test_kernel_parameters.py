@@ -17,11 +17,6 @@ PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
 WIDER = {
-    ("ugens/modal.py", "mixed_step"),  # 12
-    ("ugens/modal.py", "resonate"),  # 11
-    ("ugens/modal.py", "resonate_ramp"),  # 11
-    ("ugens/modal_f32.py", "resonate_delta"),  # 11
-    ("ugens/roll.py", "rolling_filter"),  # 11
 }
 
 

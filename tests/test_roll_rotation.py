@@ -57,8 +57,12 @@ def rotation_errors(speeds, overrides=()):
 
 def test_rolling_force_pulses_at_the_rotation_rate():
     """The continuous layer (Roll: the ball's own profile, one revolution long, and its
-    out-of-roundness) on the plate, alone."""
-    errors = rotation_errors([0.1, 0.3, 1.0, 1.4], ["contact.gains=[1.0, 0.0]"])
+    out-of-roundness, under the contact filter) on the plate, alone, up to 1 m/s. (At 1.4
+    m/s its envelope peaks at 3 v / (2 pi r): its lines are 15 Hz apart and most of its
+    force lies near the ball's contact resonance, 1-2 kHz, where each of the plate's few
+    strong modes picks one line, so the envelope follows their beats rather than the
+    out-of-roundness's sidebands; the patch there is its micro-impacts, about 30 dB louder.)"""
+    errors = rotation_errors([0.1, 0.3, 0.6, 1.0], ["contact.gains=[1.0, 0.0]"])
     assert np.max(np.abs(errors)) < 0.05, errors
 
 
@@ -85,13 +89,28 @@ def test_centroid_changes_smoothly_with_speed():
     assert np.max(steps) < 1.3, (speeds[np.argmax(steps)], np.max(steps))
 
 
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("seed", ["ball.seed=1", "hops.seed=2", "hops.seed=4"])
+def test_centroid_changes_smoothly_over_other_profiles(seed):
+    """Other profiles of the ball (the rumble's ``ball.seed``, the micro-impacts' ``hops.seed``)
+    at the slow speeds where the layers are closest in level (0.1-0.16 m/s, 10 % apart).
+    The rumble drove the plate open loop: a line of its turn's spectrum landing on one of the
+    plate's few strong low modes raised its power by up to 10 dB between neighbouring speeds,
+    and the patch's centroid with it (1.43x, 1.60x, 1.81x here). Under the contact filter
+    the rumble grows with speed as the ball's inertia m w^2 r does, and sits lower there."""
+    speeds = 0.1 * 1.1 ** np.arange(6)
+    c = np.array([centroid(steady_roll(v, 0.5, [seed])) for v in speeds])
+    steps = np.maximum(c[1:] / c[:-1], c[:-1] / c[1:])
+    assert np.max(steps) < 1.3, (speeds[np.argmax(steps)], np.max(steps))
+
+
 def test_surface_that_gives_way_caps_the_force_at_resonance():
     """press_surface against the z-transform of its loop: a sine force k h through a
     spring k onto one mode (ModalBank's recursion) settles at |k h / (1 + k H(e^{jw}))|,
     H(z) = g / (1 - c1 z^-1 + c2 z^-2) (no delay in the loop); at the mode's resonance that is far below k h.
     Where the ball is off the surface (contact <= 0) the force passes unchanged."""
+    from ugens.driving_point import press_surface
     from ugens.modal import design
-    from ugens.roll import press_surface
 
     f0, decay, a, k = 440.0, 4.0, 2e-3, 1e5  # Hz, 1/s, m per N s, N/m
     c1, c2, s = design(np.array([f0]), np.array([decay]), FS)
@@ -119,3 +138,45 @@ def test_surface_that_gives_way_caps_the_force_at_resonance():
     out = free.copy()
     press_surface(out, np.zeros(100), 100, np.array([c1, c2, g, [0.3], [0.2]]), np.zeros(1), k, float(g[0]))
     np.testing.assert_array_equal(out, free)
+
+
+def test_rolling_contact_filter_against_its_z_transform():
+    """roll_over: a sine roughness r under a ball of mass m on a spring k with a dashpot c,
+    on one mode (ModalBank's recursion), settles at |F| = |K r / (1 + K (B + H))| per
+    unit r, K(z) = k + c fs (1 - z^-1), B(z) = 1 / (m fs^2 (1 - z^-1)^2) the ball's
+    impulse-invariant mass, H(z) the mode's recursion. In the continuous limit this is the
+    rolling contact filter 1 / (1/k - 1/(m w^2) + alpha(w)): far below the contact
+    resonance the force is the ball's inertia m w^2 r."""
+    from ugens.driving_point import roll_over
+    from ugens.modal import design
+
+    f0, decay, a = 300.0, 40.0, 2e-4  # the mode: Hz, 1/s, m per N s
+    m, k, c = 0.11, 1.1e7, 300.0  # kg, N/m, N s/m
+    c1, c2, s = design(np.array([f0]), np.array([decay]), FS)
+    g = s / FS * a
+    n = 2 * FS
+    t = np.arange(n) / FS
+    for f in (80.0, f0, 2500.0):
+        w = 2 * math.pi * f
+        out = np.sin(w * t)  # r = out * inv_height with inv_height = 1
+        modes = np.array([c1, c2, g, [0.0], [0.0]])
+        law = np.array([k, c, FS])
+        roll_over(
+            out, np.ones(n), n, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0])
+        )
+        z = np.exp(-1j * w / FS)
+        K = k + c * FS * (1 - z)
+        B = 1.0 / (m * FS**2 * (1 - z) ** 2)
+        H = g[0] / (1.0 - c1[0] * z + c2[0] * z * z)
+        expected = abs(K / (1.0 + K * (B + H)))
+        tail = slice(n - FS // 2, n)
+        basis = np.stack([np.sin(w * t[tail]), np.cos(w * t[tail])], axis=1)
+        amplitude = np.hypot(*np.linalg.lstsq(basis, out[tail], rcond=None)[0])
+        assert amplitude == pytest.approx(expected, rel=1e-4), f
+        if f == 80.0:  # below the contact resonance (1.6 kHz): the ball's inertia, m w^2
+            assert amplitude == pytest.approx(m * w * w, rel=0.05)
+    out = np.sin(np.arange(100) * 0.1)  # lifted off (no load): no contact force
+    roll_over(
+        out, np.zeros(100), 100, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0])
+    )
+    assert np.all(out == 0.0)

@@ -85,7 +85,8 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import store, two_pole
+from ugens.cells import store
+from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, settle
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams, design
@@ -273,24 +274,13 @@ def friction_run(out, fout, n, drive, modes, h, state, rng, par):
     s3 = prm.sigma3
     G = prm.gain_sum
     Gv = G * fs
-    c1 = modes[0]
-    c2 = modes[1]
-    g = modes[2]
-    y1 = modes[3]
-    y2 = modes[4]
-    nm = c1.shape[0]
     held = friction_state(state)
     z = held.z
     x_prev = held.x_prev
     v_prev = held.v_prev
     s = rng[0]
     for i in range(n):
-        xh = 0.0
-        fe = strikes[i]
-        for k in range(nm):
-            hk = two_pole(c1[k], c2[k], y1[k], y2[k], g[k] * fe)
-            h[k] = hk
-            xh += hk
+        xh = free_motion(modes, h, strikes[i])
         s, u = uniform(s)
         fn = normals[i]
         vb = speeds[i]
@@ -313,9 +303,7 @@ def friction_run(out, fout, n, drive, modes, h, state, rng, par):
             z = 0.0
             f = 0.0
             v = vb - (xh - x_prev) * fs
-        for k in range(nm):
-            y2[k] = y1[k]
-            y1[k] = h[k] + g[k] * f
+        settle(modes, h, f)
         x = xh + G * f
         out[i] = x
         fout[i] = f
@@ -375,7 +363,7 @@ class Friction(ModelParams, UGen):
     def _prepare(self) -> None:
         self.validate_model()
         self.check_param("location", self.values["location"], f"nodes.{self.name}.location")  # gains >= 0
-        self.modes = np.zeros((5, self.model.n_modes))  # c1, c2, g, y1, y2
+        self.modes = np.zeros((MODE_ROWS, self.model.n_modes))  # c1, c2, g, y1, y2
         self.scratch = np.zeros(self.model.n_modes)
         self.state = np.zeros(len(FrictionState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
@@ -406,13 +394,11 @@ class Friction(ModelParams, UGen):
     def _design(self) -> None:
         """Mode coefficients and the parameter vector from the current values."""
         v, fs = self.values, self.sample_rate
-        c1, c2, s = design(self.model.frequencies, self.model.decays, fs)
-        self.modes[0] = c1
-        self.modes[1] = c2
-        self.modes[2] = s / fs * self.model.driving_at(v["location"])
+        gain_sum = driving_point_modes(self.model, v["location"], fs, self.modes)
         if self.signed:
+            _, _, s = design(self.model.frequencies, self.model.decays, fs)
             heard = s / fs * self.model.gains_at(v["location"]) * self._level_gain
-            self.heard_coef[:] = impulse_invariant(c1, c2, heard)
+            self.heard_coef[:] = impulse_invariant(self.modes[0], self.modes[1], heard)
         self.par[:] = FrictionParams(
             fs=fs,
             sigma0=v["sigma0"],
@@ -423,7 +409,7 @@ class Friction(ModelParams, UGen):
             dynamic=v["dynamic"],
             stribeck=v["stribeck"],
             breakaway=v["breakaway"],
-            gain_sum=float(np.sum(self.modes[2])),
+            gain_sum=gain_sum,
         )
 
     def _reset(self) -> None:

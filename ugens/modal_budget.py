@@ -175,6 +175,19 @@ def scatter_kept(compact, kept, bank):
             j += 1
 
 
+@nb.njit(cache=True)
+def settle_compact(t, b):
+    """If bank b's compact bank holds its kept modes' state, write it back to the bank's
+    rows; the compact bank is then stale (gathered again by :func:`compact_bank`)."""
+    meta = t.compact_meta[b]
+    if meta[1]:
+        k, o = t.layout[MODES, b], t.layout[FIRST, b]
+        width, at, bank_at = meta[2], t.layout[COMPACT_AT, b], t.layout[BANK_AT, b]
+        compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
+        scatter_kept(compact, t.kept[o : o + k], t.bank[bank_at : bank_at + 6 * k].reshape((6, k)))
+        meta[1] = 0
+
+
 @nb.njit(fastmath=True, cache=True)
 def centred_windowed(force, window, out):
     """out = (force - its mean) * window: a period's force ready for its periodogram (a
@@ -339,14 +352,7 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
     target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
     delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
     fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
-    if t.compact_meta[b, 1]:
-        width, c_at = t.compact_meta[b, 2], t.layout[COMPACT_AT, b]
-        scatter_kept(
-            t.compact[c_at : c_at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width)),
-            kept[o : o + k],
-            bank,
-        )
-        t.compact_meta[b, 1] = 0
+    settle_compact(t, b)
     count = 0
     for i in range(k):
         m = o + i

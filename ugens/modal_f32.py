@@ -19,11 +19,15 @@ rounding noise; modes above the tolerance stay in float64 ("mixed precision"): v
 high Q only, omega / d above about 3e4-1e5 depending on how the coefficients happen to
 round (of 20 Hz-20 kHz x 0.5-500 /s: 6.3 kHz and 20 kHz at d = 0.5 /s).
 
-Cost per mode and sample: 3 FMA + 2 adds in 8-lane float32 (AVX2) against 3 FMA + 1 add
-in 4-lane float64.
+The state is kept divided by the mode's input gain g, so the force enters with an add:
+per mode and sample 3 FMA + 2 adds (with the output sum) in float32 lanes, twice as many
+as float64's, against 2 FMA + 1 multiply + 1 add of the float32 two-pole form. Modes
+with g = 0 (or below MIN_GAIN) stay in float64.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -67,10 +71,26 @@ def float32_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndar
     over the decay time's fs / d samples. The sum is divided by the response's peak e^{-d t*} sin(omega t*),
     t* = atan2(omega, d) / omega.
     """
+    return _rounding_error(c1, c2, sample_rate, decay_factor=False)
+
+
+def decay_factor_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndarray:
+    """As :func:`float32_error` for the decay-factor form, whose second coefficient is
+    R^2 = 1 - b2 rounded to float32: its absolute rounding, up to 2^-25, moves the decay
+    by up to fs 2^-26 (7e-4 /s at 48 kHz), so light modes (d below a few 1/s) may fail
+    where the delta form holds."""
+    return _rounding_error(c1, c2, sample_rate, decay_factor=True)
+
+
+def _rounding_error(c1, c2, sample_rate: float, decay_factor: bool) -> np.ndarray:
     sounding = c2 > 0.0
     c0, b2 = delta_coefficients(np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.25))
     theta, rho = _pole(c0, b2)
-    theta32, rho32 = _pole(c0.astype(np.float32).astype(np.float64), b2.astype(np.float32).astype(np.float64))
+    if decay_factor:
+        b2_32 = 1.0 - (1.0 - b2).astype(np.float32).astype(np.float64)
+    else:
+        b2_32 = b2.astype(np.float32).astype(np.float64)
+    theta32, rho32 = _pole(c0.astype(np.float32).astype(np.float64), b2_32)
     omega, decay = theta * sample_rate, np.maximum(rho * sample_rate, 1e-12)
     drift = (np.abs(theta32 - theta) + np.abs(rho32 - rho)) * sample_rate / (decay * np.e)
     noise = 2.0 * _EPS32 * np.sqrt(sample_rate / decay)
@@ -79,14 +99,112 @@ def float32_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndar
     return np.where(sounding, (drift + noise) / np.maximum(peak, 1e-300), 0.0)
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last):
-    """Add the float32 delta-form modes [0, active) over force[:n] to out[:n].
+#: Flags of the per-mode update: contraction into FMA, no reassociation, so that the
+#: update stays two independent FMAs and an add (reassociated, LLVM spends a multiply and
+#: more adds on it, and the adds are the scarcer units at small banks).
+_UPDATE_FLAGS = {"contract", "nsz", "arcp"}
 
-    Arrays c0, b2, g, d (coefficients) and y, dy (state y[n-1], Delta[n-1]) are float32;
-    force and out float64. last[0]: the force sample before force[0], left at force[n-1].
-    The direct term sum(d) F[n] is added as in ugens.modal.resonate. Four samples per
-    pass over the modes, as there."""
+#: Modes whose input gain is smaller than this (in magnitude) stay in float64: the float32
+#: state is scaled by 1 / g (:func:`narrow_rows`).
+MIN_GAIN = 1e-30
+
+
+@nb.njit(fastmath=_UPDATE_FLAGS, cache=True)
+def _next_delta(v, u, c0, b, f, by_factor):
+    """The scaled Delta[n] from v = Delta[n-1] / g, u = y[n-1] / g and F[n-1] = f (float32).
+
+    Delta form (b = b2): two FMA on independent operands and an add, so a mode's recursion
+    waits ~10 cycles per sample (three chained FMA: 12). Decay-factor form (``by_factor``,
+    b = R^2): two chained FMA with the state term last, ~8 cycles, one add fewer."""
+    if by_factor:
+        return (b * v + f) - c0 * u
+    return (f - c0 * u) + (v - b * v)
+
+
+#: The float32 rows hold a multiple of this many modes and the kernel runs whole multiples:
+#: LLVM's vector loop takes 32 float32 modes per step with AVX-512 (16 lanes, two
+#: interleaved; 16 with AVX2), and the modes left over ran in a 4-lane loop (at 254
+#: modes, 30 of them took half the time of the other 224).
+LANES = 32
+
+
+#: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
+#: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
+#: the same low 12 address bits (4K aliasing): the kernel ran at half speed or full speed
+#: depending on where the arrays happened to be allocated.
+ROW_SPREAD = 512
+
+
+def float32_rows(rows: int, width: int) -> np.ndarray:
+    """Zeros (rows, stride) in float32, C-contiguous, starting on a 64-byte cache-line
+    boundary, with stride >= width floats such that rows start ROW_SPREAD bytes apart
+    modulo 4 KiB (``width`` a multiple of LANES: every row starts on a line, and vector
+    loads never straddle lines)."""
+    stride = width + ((ROW_SPREAD - 4 * width) % 4096) // 4
+    raw = np.zeros(rows * stride + 16, np.float32)
+    skip = (-raw.ctypes.data % 64) // 4
+    return raw[skip : skip + rows * stride].reshape(rows, stride)
+
+
+def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
+    d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
+    (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
+    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
+    A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
+    and g = d = 0, so it adds exact zeros."""
+    n = g.size
+    width = -(-n // LANES) * LANES
+    rows = float32_rows(6, width)
+    coef, state = rows[:4], rows[4:]
+    coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
+    coef[0, n:] = 1.0
+    coef[1, n:] = 0.0 if decay_factor else 1.0
+    state[:, :n] = np.stack([y1 / g, (y1 - y2) / g])
+    return coef, state
+
+
+def unscaled_state(state: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(y[n-1], y[n-2]) in float64 of the ``g.size`` modes of :func:`narrow_rows`' state."""
+    y, dy = state[:, : g.size].astype(np.float64) * g
+    return y, y - dy
+
+
+class DeltaRows(NamedTuple):
+    """Float32 delta-form modes as :func:`resonate_delta` reads them, one entry per mode:
+    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 in the decay-factor form), input
+    gain g and direct gain d, and the state scaled by the input gain, y = y[n-1] / g,
+    dy = Delta[n-1] / g."""
+
+    c0: np.ndarray
+    b2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def delta_rows(coef, state):
+    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y, Delta) / g."""
+    return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_delta(force, out, n, rows, active, last, by_factor):
+    """Add the float32 delta-form modes [0, active) of ``rows`` over force[:n] to out[:n];
+    with ``by_factor`` in the decay-factor form (b2 holds R^2, :func:`narrow_rows`).
+
+    ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
+    enters with an add instead of a multiply and g weighs the output sum with an FMA);
+    force and out float64. last[0]: the force
+    sample before force[0], left at force[n-1]. The direct term sum(d) F[n] is added as
+    in ugens.modal.resonate. Four samples per pass over the modes, as there. The modes run
+    up to the next multiple of LANES within the rows (:func:`narrow_rows`' padding, or
+    modes silenced by the flush: exact zeros that stay zero without force, and with force
+    every mode is active)."""
+    c0, b2, g, d, y, dy = rows
+    active = min(-(-active // LANES) * LANES, c0.size)
     direct = np.float32(0.0)
     for k in range(active):
         direct += d[k]
@@ -107,18 +225,18 @@ def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last):
             gk = g[k]
             u = y[k]
             v = dy[k]
-            v = v - b * v - a * u + gk * fp
+            v = _next_delta(v, u, a, b, fp, by_factor)
             u = u + v
-            s0 += u
-            v = v - b * v - a * u + gk * f0
+            s0 += gk * u
+            v = _next_delta(v, u, a, b, f0, by_factor)
             u = u + v
-            s1 += u
-            v = v - b * v - a * u + gk * f1
+            s1 += gk * u
+            v = _next_delta(v, u, a, b, f1, by_factor)
             u = u + v
-            s2 += u
-            v = v - b * v - a * u + gk * f2
+            s2 += gk * u
+            v = _next_delta(v, u, a, b, f2, by_factor)
             u = u + v
-            s3 += u
+            s3 += gk * u
             y[k] = u
             dy[k] = v
         out[i] += s0 + direct * f0
@@ -131,11 +249,11 @@ def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last):
         f = np.float32(force[i])
         s = np.float32(0.0)
         for k in range(active):
-            v = dy[k] - b2[k] * dy[k] - c0[k] * y[k] + g[k] * fp
+            v = _next_delta(dy[k], y[k], c0[k], b2[k], fp, by_factor)
             u = y[k] + v
             y[k] = u
             dy[k] = v
-            s += u
+            s += g[k] * u
         out[i] += s + direct * f
         fp = f
         i += 1
@@ -143,12 +261,12 @@ def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last):
 
 
 @nb.njit(cache=True)
-def flush_silent_delta(y, dy, active, floor):
-    """Zero float32 modes whose y and Delta are below ``floor``; return the new active
-    count (last audible mode + 1)."""
+def flush_silent_delta(y, dy, g, active, floor):
+    """Zero float32 modes whose y and Delta (the scaled state times g) are below ``floor``;
+    return the new active count (last audible mode + 1)."""
     last = 0
     for k in range(active):
-        if abs(y[k]) < floor and abs(dy[k]) < floor:
+        if abs(g[k] * y[k]) < floor and abs(g[k] * dy[k]) < floor:
             y[k] = 0.0
             dy[k] = 0.0
         else:
@@ -160,7 +278,8 @@ def flush_silent_delta(y, dy, active, floor):
 def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_period):
     """Add one sub-block of the float32 modes to out[:n], with the silent-mode skipping
     of ugens.modal.bank_step (same flush frames). coef rows: c0, b2, g, d; state rows:
-    y, Delta; meta[0] = active count, meta[1] = all modes."""
+    y, Delta; meta[0] = active count, meta[1] = all modes, meta[2] = 1 in the decay-factor
+    form (coef row 1 holds R^2), 0 in the delta form."""
     i = 0
     while i < n:
         frame = start + i
@@ -176,9 +295,7 @@ def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_perio
         if active == 0:
             last[0] = 0.0
         else:
-            resonate_delta(
-                f, out[i : i + m], m, coef[0], coef[1], coef[2], coef[3], state[0], state[1], active, last
-            )
+            resonate_delta(f, out[i : i + m], m, delta_rows(coef, state), active, last, meta[2] == 1)
         i += m
         if active > 0 and (start + i) % flush_period == 0:
-            meta[0] = flush_silent_delta(state[0], state[1], active, floor)
+            meta[0] = flush_silent_delta(state[0], state[1], coef[2], active, floor)

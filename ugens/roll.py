@@ -1,7 +1,9 @@
 """Rolling contact forces: Roll (van den Doel's filtered profile) and RathRoll (Rath's rolling filter).
 
-Both are open-loop force generators (output in N, to drive a ModalBank) controlled by the
-smoothed contact parameters ``force`` (N) and ``speed`` (rolling speed, m/s).
+Both are force generators (output in N, to drive a ModalBank) controlled by the
+smoothed contact parameters ``force`` (N) and ``speed`` (rolling speed, m/s); open loop,
+or with a ``model`` through the ball's contact on a surface that gives way
+(:mod:`ugens.driving_point`).
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ import numpy as np
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
-from ugens.cells import slot, store, two_pole
+from ugens.cells import slot, store
+from ugens.driving_point import MODE_ROWS, driving_point_modes, press_surface, roll_over
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
-from ugens.modal import ModelParams, design
+from ugens.modal import ModelParams
 from ugens.scrape import (
     NYQUIST_FRACTION,
     STIFFNESS_SPEC,
@@ -99,6 +102,78 @@ class Turning:
         return self._fractal(n, 1.0 if self.unit_rms else v["roughness"], dx, where)
 
 
+def surface_specs(stiffness: float, doc: str) -> dict[str, ParamSpec]:
+    """The surface a rolling force presses on (``model``, ``location``) and the contact
+    spring between them (``contact_stiffness``, default ``stiffness``, N/m)."""
+    return {
+        "model": ParamSpec(
+            "model",
+            None,
+            fixed=True,
+            doc="the surface's ModalModel: the force reaches it through the contact spring and it "
+            "gives way (its driving-point modes at `location`); none: a rigid surface (open loop)",
+        ),
+        "location": ParamSpec("location", 0, doc="contact location on the model"),
+        "contact_stiffness": ParamSpec(
+            "float", stiffness, low=0.0, high=1e12, unit="N/m", fixed=True, doc=doc
+        ),
+    }
+
+
+class GivingSurface(ModelParams):
+    """Mixin of the rolling forces: with a ``model`` the force reaches the surface's
+    driving-point modes at ``location`` through the contact spring ``contact_stiffness``
+    and the surface gives way under it (:func:`ugens.driving_point.press_surface`)."""
+
+    driving_point = True
+
+    def _prepare_surface(self) -> None:
+        self.surface = None
+        if self.values["model"] is None:
+            return
+        self.validate_model()
+        self.check_param("location", self.values["location"], f"nodes.{self.name}.location")  # gains >= 0
+        self.surface = np.zeros((MODE_ROWS, self.model.n_modes))
+        self._scratch = np.zeros(self.model.n_modes)
+        self._design_surface()
+
+    def _design_surface(self) -> None:
+        self._gain_sum = driving_point_modes(
+            self.model, self.values["location"], self.sample_rate, self.surface
+        )
+
+    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if key == "location":
+            if self.surface is not None:
+                self._design_surface()  # the gains jump; the surface's motion is kept
+        else:
+            super()._param_changed(key, value, jump)
+
+    def _reset(self) -> None:
+        super()._reset()
+        if self.surface is not None:
+            self.surface[3:] = 0.0
+
+    def press(self, contact: np.ndarray, n: int) -> None:
+        """self.out[:n] through the contact spring while contact > 0 (contact moves with it)."""
+        if self.surface is not None:
+            press_surface(
+                self.out,
+                contact,
+                n,
+                self.surface,
+                self._scratch,
+                self.values["contact_stiffness"],
+                self._gain_sum,
+            )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        arrays = super().state_arrays()
+        if self.surface is not None:
+            arrays["surface"] = self.surface
+        return arrays
+
+
 def rotation_specs() -> dict[str, ParamSpec]:
     """The ball's ``radius`` and ``unevenness`` (a per-revolution load variation)."""
     return {
@@ -124,7 +199,7 @@ def rotation_specs() -> dict[str, ParamSpec]:
 
 
 @register
-class Roll(Turning, NeedleContact):
+class Roll(GivingSurface, Turning, NeedleContact):
     """Rolling force: a smooth profile read at the rolling speed through a speed-tracking low-pass.
 
     van den Doel, Kry & Pai, FoleyAutomatic (SIGGRAPH 2001), JASS ``ContactForce`` roll:
@@ -147,6 +222,14 @@ class Roll(Turning, NeedleContact):
 
     The default ``force`` is the weight of a light ball (8 g, 0.08 N): rolled at 0.2 m/s
     over a calibrated ModalBank (jassy.levels) it peaks between -30 and -6 dBFS.
+
+    With a ``model`` (the surface's ModalModel, at ``location``) the needle's height, the
+    output over ``stiffness``, is the roughness r under the rolling contact filter
+    (:func:`ugens.driving_point.roll_over`): the ball of ``mass`` m rides on its contact
+    spring ``contact_stiffness`` k (and dashpot ``contact_damping``) over r, and the surface
+    gives way under it, F = r / (1/k - 1/(m w^2) + alpha(w)). The output is then the
+    dynamic contact force on the surface, to drive a ModalBank of the same model at the
+    same location.
     """
 
     type_name = "Roll"
@@ -180,6 +263,30 @@ class Roll(Turning, NeedleContact):
         ),
         **law_specs(v_ref=0.2),
         **rotation_specs(),
+        "mass": ParamSpec(
+            "float",
+            0.008,
+            low=0.0,
+            low_open=True,
+            high=1e4,
+            unit="kg",
+            fixed=True,
+            doc="mass of the ball (with a `model`: its inertia in the contact filter)",
+        ),
+        **surface_specs(
+            1.1e7,
+            "with a `model`: the ball's Hertz contact spring (6 E*^2 R W)^(1/3) (Johnson, Contact "
+            "Mechanics, ch. 4); 1.1e7 for a 30 mm steel ball on steel under its weight",
+        ),
+        "contact_damping": ParamSpec(
+            "float",
+            0.0,
+            low=0.0,
+            high=1e9,
+            unit="N s/m",
+            fixed=True,
+            doc="with a `model`: a dashpot beside the contact spring (N s/m)",
+        ),
     }
 
     def cutoff_per_speed(self) -> float:
@@ -193,10 +300,14 @@ class Roll(Turning, NeedleContact):
         self.ball = ball_unevenness(v["seed"] + 1)
         self.turn = np.zeros(1)
         self._per_metre = 1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0
+        self._prepare_surface()
+        self._ball_motion = np.zeros(3)  # the ball's rise y[n-1], y[n-2] (m), compression (m)
+        self._contact_law = np.array([v["contact_stiffness"], v["contact_damping"], self.sample_rate])
 
     def _reset(self) -> None:
         super()._reset()
         self.turn[0] = 0.0
+        self._ball_motion[:] = 0.0
 
     def process(self, start: int, n: int) -> None:
         super().process(start, n)
@@ -204,9 +315,23 @@ class Roll(Turning, NeedleContact):
             modulate_by_turn(
                 self.out, n, self._speeds, self.ball, self.turn, self._per_metre, self.values["unevenness"]
             )
+        if self.surface is not None:
+            v = self.values
+            roll_over(
+                self.out,
+                self._forces,
+                n,
+                self.surface,
+                self._scratch,
+                self._ball_motion,
+                self._contact_law,
+                1.0 / v["stiffness"],
+                1.0 / (v["mass"] * self.sample_rate**2),
+                self._gain_sum,
+            )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {**super().state_arrays(), "turn": self.turn}
+        return {**super().state_arrays(), "turn": self.turn, "ball_motion": self._ball_motion}
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -263,13 +388,24 @@ def rolling_state(state):
     return RollingState(state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7])
 
 
+class RollingSetup(NamedTuple):
+    """The arrays :func:`rolling_filter` reads but does not change: the surface profile
+    ``prof`` (heights, m), ``coef`` = [b0, b1, b2, a1, a2] of the optional contact low-pass
+    (DF2T, states s1, s2), ``cfg`` holding a RollingConfig and ``ball``, the unevenness
+    table (ball_unevenness)."""
+
+    prof: np.ndarray
+    coef: np.ndarray
+    cfg: np.ndarray
+    ball: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg, ball):
+def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
 
-    cfg holds a RollingConfig, state a RollingState; coef = [b0, b1, b2, a1, a2] of the
-    optional contact low-pass (DF2T, states s1, s2); ball: the unevenness table
-    (ball_unevenness).
+    Forces (N), speeds (m/s) and the optional surface input per sample; ``state`` holds a
+    RollingState; ``setup``: a RollingSetup.
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -279,6 +415,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
     """
+    prof, coef, cfg, ball = setup
     config = rolling_config(cfg)
     inv_dxfs = config.inv_dxfs
     mass = config.mass
@@ -352,40 +489,8 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     store(state, RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase))
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def press_surface(out, contact, n, modes, scratch, stiffness, gain_sum):
-    """The force out[:n] (N) delivered through a contact spring of ``stiffness`` k (N/m) to
-    a surface that gives way: f = out - k x while the ball touches (contact > 0), x the
-    surface's displacement at the contact under f. contact[:n] is moved by f - out.
-
-    modes = [c1, c2, g, y1, y2] (5, K): the surface's modes at the contact with ModalBank's
-    recursion y[n] = c1 y[n-1] - c2 y[n-2] + g f[n] and driving-point gains g >= 0, so
-    x[n] = X + G f[n] (X: the modes' free part, G = gain_sum = sum_k g_k, m/N); solved
-    exactly per sample, f = (out - k X) / (1 + k G) (no delay in the loop).
-    """
-    c1 = modes[0]
-    c2 = modes[1]
-    g = modes[2]
-    y1 = modes[3]
-    y2 = modes[4]
-    K = c1.shape[0]
-    for i in range(n):
-        free = 0.0
-        for m in range(K):
-            y = two_pole(c1[m], c2[m], y1[m], y2[m], 0.0)
-            scratch[m] = y
-            free += y
-        k = stiffness if contact[i] > 0.0 else 0.0
-        f = (out[i] - k * free) / (1.0 + k * gain_sum)
-        for m in range(K):
-            y2[m] = y1[m]
-            y1[m] = scratch[m] + g[m] * f
-        contact[i] += f - out[i]
-        out[i] = f
-
-
 @register
-class RathRoll(ModelParams, Turning, ProfileContact):
+class RathRoll(GivingSurface, Turning, ProfileContact):
     """Rolling as micro-impacts: Rath's rolling filter (DAFx-03; SDT ``SDTRolling_dsp``).
 
     A ball of ``mass`` m pressed by its weight and the extra normal ``force`` F (total load
@@ -461,7 +566,6 @@ class RathRoll(ModelParams, Turning, ProfileContact):
     """
 
     type_name = "RathRoll"
-    driving_point = True
     inputs = ("input",)
     optional_inputs = ("input",)
     outputs = ("contact",)
@@ -500,22 +604,9 @@ class RathRoll(ModelParams, Turning, ProfileContact):
         ),
         **profile_specs(beta=1.0, roughness=None, dx=1e-5, length=2**16, k_low=100.0),
         **rotation_specs(),
-        "model": ParamSpec(
-            "model",
-            None,
-            fixed=True,
-            doc="the surface's ModalModel: the force reaches it through the contact spring and it "
-            "gives way (its driving-point modes at `location`); none: a rigid surface (open loop)",
-        ),
-        "location": ParamSpec("location", 0, doc="contact location on the model"),
-        "contact_stiffness": ParamSpec(
-            "float",
+        **surface_specs(
             1.1e7,
-            low=0.0,
-            high=1e12,
-            unit="N/m",
-            fixed=True,
-            doc="the ball's contact spring with a `model`: Hertz's (6 E*^2 R W)^(1/3) (Johnson, "
+            "the ball's contact spring with a `model`: Hertz's (6 E*^2 R W)^(1/3) (Johnson, "
             "Contact Mechanics, ch. 4); 1.1e7 for a 30 mm steel ball on steel under its weight",
         ),
     }
@@ -541,6 +632,7 @@ class RathRoll(ModelParams, Turning, ProfileContact):
         if v["contact_cutoff"] > 0:
             fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
             design_biquad(0, fc, 1.0 / math.sqrt(2.0), 1.0 / self.sample_rate, self.coef)
+        self._setup = RollingSetup(self.prof, self.coef, self.cfg, self.ball)
         self._kernel = specialise(
             rolling_filter,
             self.out,
@@ -549,42 +641,16 @@ class RathRoll(ModelParams, Turning, ProfileContact):
             self._forces,
             self._speeds,
             self.input_buffer("input"),
-            self.prof,
             self.state,
-            self.coef,
-            self.cfg,
-            self.ball,
+            self._setup,
         )
-        self.surface = None
-        if v["model"] is not None:
-            self.validate_model()
-            self.check_param("location", v["location"], f"nodes.{self.name}.location")  # gains >= 0
-            self.surface = np.zeros((5, self.model.n_modes))  # c1, c2, g, y1, y2
-            self._scratch = np.zeros(self.model.n_modes)
-            self._design_surface()
-
-    def _design_surface(self) -> None:
-        """The surface's modes at the contact (ModalBank's recursion, driving-point gains)."""
-        c1, c2, s = design(self.model.frequencies, self.model.decays, self.sample_rate)
-        self.surface[0] = c1
-        self.surface[1] = c2
-        self.surface[2] = s / self.sample_rate * self.model.driving_at(self.values["location"])
-        self._gain_sum = float(np.sum(self.surface[2]))
-
-    def _param_changed(self, key: str, value: Any, jump: bool) -> None:
-        if key == "location":
-            if self.surface is not None:
-                self._design_surface()  # the gains jump; the surface's motion is kept
-        else:
-            super()._param_changed(key, value, jump)
+        self._prepare_surface()
 
     def _reset(self) -> None:
         super()._reset()
         # start on the ground with the trace at the surface
         trace = self.prof[0] if "input" not in self.sources else 0.0
         self.state[:] = RollingState(0.0, trace, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        if self.surface is not None:
-            self.surface[3:] = 0.0
 
     def process(self, start: int, n: int) -> None:
         forces, speeds = self._controls(start, n)
@@ -595,25 +661,10 @@ class RathRoll(ModelParams, Turning, ProfileContact):
             forces,
             speeds,
             self.input_buffer("input"),
-            self.prof,
             self.state,
-            self.coef,
-            self.cfg,
-            self.ball,
+            self._setup,
         )
-        if self.surface is not None:
-            press_surface(
-                self.out,
-                self.extra["contact"],
-                n,
-                self.surface,
-                self._scratch,
-                self.values["contact_stiffness"],
-                self._gain_sum,
-            )
+        self.press(self.extra["contact"], n)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        arrays = {**super().state_arrays(), "state": self.state}
-        if self.surface is not None:
-            arrays["surface"] = self.surface
-        return arrays
+        return {**super().state_arrays(), "state": self.state}

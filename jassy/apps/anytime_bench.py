@@ -7,10 +7,11 @@ decides).
 
 - error: 10 log10 of the energy of (budgeted - full) over the energy of full, on the
   rendered audio (dB; exact synthesis gives about -300 dB);
-- CPU: thread CPU time spent rendering the ModalBanks (their ``process``, or the budget's
-  render of them) plus the budget's steps (decisions and bookkeeping), divided by the CPU
-  time of the ModalBanks of the full render (which skip silent modes); the best of
-  ``repeats`` runs of each, interleaved in the same process;
+- CPU: thread CPU time spent rendering the ModalBanks (their ``process``) plus the
+  budget's steps (its bookkeeping, its render of the banks and its decisions), divided by
+  the CPU time of the ModalBanks of the full render (which skip silent modes); the best of
+  ``repeats`` runs of each, interleaved in the same process; "decisions": the share of
+  the decisions alone (importance, ranking, kept sets, impacts and periodograms);
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
   its cost were proportional to the modes it computes;
@@ -66,7 +67,7 @@ def _timed_render(build, seconds: float, fraction: float | None):
     total = sum(b.model.n_modes for b in banks)
     if fraction is not None:
         graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
-    spent = [0, 0, 0]  # bank ns, decision ns (budget steps without the banks they render), mode-samples
+    spent = [0, 0, 0]  # bank ns (the rest of the budget's steps included), decision ns, mode-samples
     stepping = [False]  # inside the budget's step (which counts the modes of the banks it renders)
 
     def clocked_bank(bank):
@@ -81,21 +82,21 @@ def _timed_render(build, seconds: float, fraction: float | None):
 
         return run
 
-    def clocked_render(render):  # the budget rendering its banks (compiled, or their process)
-        def run(start, n, offset):
-            t, inside = time.thread_time_ns(), spent[0]
-            render(start, n, offset)
-            spent[0] = inside + time.thread_time_ns() - t
+    def clocked_decide(decide):  # a decision (importance, ranking, kept sets)
+        def run(*args):
+            t = time.thread_time_ns()
+            decide(*args)
+            spent[1] += time.thread_time_ns() - t
 
         return run
 
-    def clocked_step(step):
+    def clocked_step(step):  # the budget's bookkeeping and its render of the banks, and decisions
         def run(start, n):
-            t, inside = time.thread_time_ns(), spent[0]
+            t, inside, deciding = time.thread_time_ns(), spent[0], spent[1]
             stepping[0] = True
             step(start, n)
             stepping[0] = False
-            spent[1] += time.thread_time_ns() - t - (spent[0] - inside)
+            spent[0] = inside + time.thread_time_ns() - t - (spent[1] - deciding)
 
         return run
 
@@ -103,7 +104,7 @@ def _timed_render(build, seconds: float, fraction: float | None):
         bank.process = clocked_bank(bank)
     budget = graph.budget
     if budget is not None:
-        budget.step, budget._render = clocked_step(budget.step), clocked_render(budget._render)
+        budget.step, budget._decide = clocked_step(budget.step), clocked_decide(budget._decide)
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
     work = spent[2] + (budget.mode_samples if budget is not None else 0)
@@ -143,9 +144,10 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
 def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeats: int = 30) -> dict:
     """Thread time per sample of the bank kernel with every mode sounding: ``modes`` modes
     (ugens.modal.bank_step) against the compact bank of ``fraction`` of them
-    (ugens.modal.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
-    from ugens.modal import bank_step, kept_step
+    (ugens.modal_kept.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
+    from ugens.modal import bank_step
     from ugens.modal_budget import COMPACT_ROWS, KEPT_LANES, line_aligned_zeros
+    from ugens.modal_kept import kept_step
 
     rng = np.random.default_rng(0)
     force, out, ring = np.zeros(frames), np.zeros(frames), np.zeros(2048)
@@ -167,7 +169,7 @@ def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeat
 
     def kept_modes():
         meta = np.array([width, 0, width])
-        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring, KEPT_LANES)
+        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring)
 
     for _ in range(repeats):
         for name, run in (("all", every_mode), ("kept", kept_modes)):

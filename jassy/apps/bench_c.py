@@ -84,12 +84,28 @@ def compile_modal_f32() -> tuple[Callable | None, str]:
     return fn, f"cc {' '.join(FLAGS[:3])}"
 
 
+def _line_aligned(values: np.ndarray) -> np.ndarray:
+    """A float32 copy of ``values`` starting on a 64-byte cache-line boundary."""
+    raw = np.zeros(values.size + 16, np.float32)
+    skip = (-raw.ctypes.data % 64) // 4
+    copy = raw[skip : skip + values.size]
+    copy[:] = values
+    return copy
+
+
 def c_runner(fn: Callable, force: np.ndarray, c1, c2, g) -> Callable[[], None]:
-    """A function that runs the compiled loop over ``force`` in one call (fresh state)."""
-    f32 = [np.ascontiguousarray(a, dtype=np.float32) for a in (force, c1, c2, g)]
-    force32, c1f, c2f, gf = f32
-    out = np.zeros_like(force32)
-    y1, y2, last = np.zeros_like(c1f), np.zeros_like(c1f), np.zeros(1, np.float32)
+    """A function that runs the compiled loop over ``force`` in one call (fresh state), on
+    float32 rows laid out as jassy's float32 bank (ugens.modal_f32.float32_rows: on cache
+    lines, 512 bytes apart modulo 4 KiB, so neither side meets 4K aliasing by chance)."""
+    from ugens.modal_f32 import float32_rows
+
+    n = len(c1)
+    rows = float32_rows(5, -(-n // 32) * 32)[:, :n]
+    rows[:3] = np.stack([c1, c2, g])
+    c1f, c2f, gf, y1, y2 = rows
+    force32 = _line_aligned(force)
+    out = _line_aligned(np.zeros(force32.size))
+    last = np.zeros(1, np.float32)
     ptr = ctypes.POINTER(ctypes.c_float)
 
     def p(a):

@@ -42,6 +42,13 @@ def _modal(args: argparse.Namespace) -> None:
         bench.print_modal(rows, graph)
 
 
+def _float32(args: argparse.Namespace) -> None:
+    from jassy.apps.bench_f32 import float32_bench, print_float32
+
+    rows = float32_bench(rounds=2 if args.quick else 5, repeats=10 if args.quick else 40)
+    print(json.dumps(rows, indent=2)) if args.json else print_float32(rows)
+
+
 def _contact(args: argparse.Namespace) -> None:
     from jassy.apps import bench
 
@@ -159,6 +166,7 @@ def _fit(args: argparse.Namespace) -> None:
 #: ``jassy bench`` choices, in the order of its help.
 BENCHES: dict[str, Bench] = {
     "modal": Bench(_modal, "ModalBank vs plain numba and scipy, and the graph"),
+    "float32": Bench(_float32, "float32 modal kernel and ModalBank vs a C float32 loop, 16-5000 modes"),
     "contact": Bench(_contact, "real-time factor of every built-in patch"),
     "live": Bench(_live, "underruns, latency and skew on a JACK dummy server"),
     "batch": Bench(_batch, "variants per minute serial vs 2 workers"),

@@ -1,0 +1,143 @@
+"""``jassy bench float32``: the float32 modal kernel against a C float32 loop compiled in the
+same run, from small banks (where fixed per-sample costs weigh) to large ones.
+
+Both run the random bank of ``jassy bench modal`` (20 Hz-20 kHz, d 0.5-50 /s) over the same
+force in one call each, with fresh state: the C loop is the float32 two-pole recursion
+(jassy.apps.bench_c), jassy the delta-form kernel of ugens.modal_f32 that
+``ModalBank(precision="mixed")`` runs. ``ModalBank`` itself (mixed, calls of 1024 frames,
+its Python call and split included) is timed beside them. The machine is shared: each
+round times the three interleaved, best CPU time of ``repeats`` short calls, and the ratios
+of several rounds are reported as their range. Each side's error is measured against the
+float64 recursion (scipy.signal.lfilter per mode).
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Callable
+
+import numpy as np
+
+#: Bank sizes of the table.
+MODE_COUNTS = (16, 64, 256, 1000, 5000)
+
+#: Mode-samples per timed call (about 0.1 ms at 1e10 mode-samples/s).
+CALL_WORK = 2_000_000
+
+
+def _frames(modes: int) -> int:
+    """Frames per call: about CALL_WORK mode-samples, whole 1024-frame blocks, 1024-48000."""
+    return int(np.clip(CALL_WORK // modes, 1024, 48000)) // 1024 * 1024
+
+
+def _error_db(y: np.ndarray, ref: np.ndarray) -> float:
+    return float(20 * np.log10(np.max(np.abs(y - ref)) / np.max(np.abs(ref))))
+
+
+def _float64_reference(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """sum_k y_k with y[n] = c1 y[n-1] - c2 y[n-2] + g F[n-1], in float64."""
+    from scipy.signal import lfilter
+
+    out = np.zeros(force.size)
+    for a1, a2, gk in zip(c1, c2, g, strict=True):
+        out += lfilter([0.0, gk], [1.0, -a1, a2], force)
+    return out
+
+
+def _kernel_runner(
+    force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray, by_factor: bool
+) -> Callable[[], None]:
+    """ugens.modal_f32.resonate_delta over ``force`` in one call, fresh state, no direct term
+    (the C loop has none), every mode in float32 in the form ModalBank chose, on rows laid
+    out as ModalBank's (:func:`narrow_rows`)."""
+    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta
+
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros_like(g)
+    coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros, by_factor)
+    out, last = np.zeros(force.size), np.zeros(1)
+    rows = DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
+
+    def run():
+        state[:] = 0.0
+        out[:] = 0.0
+        last[0] = 0.0
+        resonate_delta(force, out, force.size, rows, g.size, last, by_factor)
+
+    run.output = out
+    return run
+
+
+def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -> list[dict]:
+    """Per bank size: the C loop's mode-samples/s (median of the rounds), the kernel's and
+    ModalBank's ratios to it (min, median, max over ``rounds``), each side's error against
+    float64 (dB of the peak), the share of modes the mixed split runs in float32 and its
+    form.
+    Without a C compiler the rows carry ``c_note`` and no ratios."""
+    from jassy.apps.bench import SAMPLE_RATE, _bank_runner, _best_times, random_model
+    from jassy.apps.bench_c import c_runner, compile_modal_f32
+    from ugens.modal import design, split_by_precision
+
+    c_loop, note = compile_modal_f32()
+    rows = []
+    for k in mode_counts:
+        model = random_model(k)
+        frames = _frames(k)
+        force = np.random.default_rng(1).standard_normal(frames)
+        c1, c2, s = design(model.frequencies, model.decays, SAMPLE_RATE)
+        g = s * model.gains[0] / SAMPLE_RATE
+        split = split_by_precision(np.stack([c1, c2, g, 0 * g, 0 * g, 0 * g]), SAMPLE_RATE)
+        by_factor = bool(split.rows.narrow_meta[2])
+        kernel = _kernel_runner(force, c1, c2, g, by_factor)
+        bank = _bank_runner(model, force, 1024, "mixed")
+        row = {
+            "modes": k,
+            "frames": frames,
+            "float32_share": split.narrow.size / k,
+            "form": "decay factor" if by_factor else "delta",
+            "c_note": note,
+        }
+        ref = _float64_reference(force, c1, c2, g)
+        kernel()
+        row["kernel_error_db"] = _error_db(kernel.output, ref)
+        if c_loop is None:
+            rows.append(row)
+            continue
+        c = c_runner(c_loop, force, c1, c2, g)
+        c()
+        row["c_error_db"] = _error_db(c.output.astype(np.float64), ref)
+        kernel_ratio, bank_ratio, c_rate = [], [], []
+        for _ in range(rounds):
+            t_kernel, t_c, t_bank = _best_times([kernel, c, bank], repeats=repeats)
+            kernel_ratio.append(t_c / t_kernel)
+            bank_ratio.append(t_c / t_bank)
+            c_rate.append(k * frames / t_c)
+        row["c_rate"] = statistics.median(c_rate)
+        row["kernel_vs_c"] = (min(kernel_ratio), statistics.median(kernel_ratio), max(kernel_ratio))
+        row["bank_vs_c"] = (min(bank_ratio), statistics.median(bank_ratio), max(bank_ratio))
+        rows.append(row)
+    return rows
+
+
+def print_float32(rows: list[dict]) -> None:
+    print(
+        "float32 modal bank vs a C float32 loop compiled now "
+        f"({rows[0]['c_note']}); ratios min / median / max over interleaved rounds"
+    )
+    print(
+        f"{'modes':>6} {'frames':>6} {'float32 %':>9} {'form':>12} {'C float32':>10} {'kernel/C':>20} "
+        f"{'ModalBank b1024/C':>20} {'err jassy':>10} {'err C':>7}"
+    )
+    for r in rows:
+        if "kernel_vs_c" not in r:
+            print(
+                f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}% {r['form']:>12}"
+                "  (no C reference)"
+            )
+            continue
+        kr, br = ("{:.2f} / {:.2f} / {:.2f}".format(*r[key]) for key in ("kernel_vs_c", "bank_vs_c"))
+        print(
+            f"{r['modes']:>6} {r['frames']:>6} {100 * r['float32_share']:>8.0f}% {r['form']:>12} "
+            f"{r['c_rate']:>10.3g} "
+            f"{kr:>20} {br:>20} {r['kernel_error_db']:>8.0f}dB {r['c_error_db']:>5.0f}dB"
+        )
