@@ -24,11 +24,6 @@ WIDER = {
     ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
     ("physics/rigid/meshgrid.py", "grid_closest"),  # 12
     ("physics/rigid/meshgrid.py", "grid_within"),  # 15
-    ("ugens/modal.py", "mixed_step"),  # 12
-    ("ugens/modal.py", "resonate"),  # 11
-    ("ugens/modal.py", "resonate_ramp"),  # 11
-    ("ugens/modal_f32.py", "resonate_delta"),  # 11
-    ("ugens/roll.py", "rolling_filter"),  # 11
 }
 
 

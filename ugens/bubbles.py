@@ -59,7 +59,7 @@ _ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
 # meta: active voices, pending bubbles, births, logged births
 _ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
 # st: accumulated rate, threshold, held radius
-_ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects
+_ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects (ImpactState's acc, target)
 
 
 class BubbleParams(NamedTuple):

@@ -103,7 +103,7 @@ def tables_at(a, i):
 
 
 #: Fields of a :class:`BudgetTables` (slots of FIELD in a handle).
-TABLE_FIELDS = 14
+TABLE_FIELDS = len(BudgetTables._fields)
 
 
 def aligned(size: int) -> int:

@@ -16,12 +16,12 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank, record_views
-from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, hearing_at, kicks_at, scan_forces
+from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, hearing_at, kicks_at, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
 from ugens import modal, modal_budget
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, resonate
+from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, mode_rows, resonate
 from ugens.modal_budget import FLOOR, KEPT_LANES, TABLE_FIELDS, compact_bank, settle_compact, tables_at
 
 drop_stale_cache(
@@ -120,9 +120,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
                 o[j] = 0.0
             last[0] = 0.0
         elif forced:
-            resonate(
-                f, o, m, compact[0], compact[1], compact[2], compact[3], compact[4], compact[5], active, last
-            )
+            resonate(f, o, m, mode_rows(compact), active, last)
         else:
             ring(o, m, compact[0], compact[1], compact[4], compact[5], active)
         i += m
@@ -223,7 +221,7 @@ def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at,
 
 
 #: Fields of a :class:`jassy.anytime_rank.Hearing`.
-HEARING_FIELDS = 9
+HEARING_FIELDS = len(Hearing._fields)
 
 
 @nb.njit(cache=True)

@@ -22,10 +22,13 @@ ignores its own errors (this process then compiles what is missing) and leaves w
 
 :func:`graph_units` gives the units of the graph of a
 :class:`jassy.engines.offline.OfflineEngine`: one per kind of node the graph's program holds
-(its node function with every kernel it calls), the heaviest first, then a modal bank's pole
-design, and last a small stand-in render (a silent tap) that compiles the engine's own
-kernels (the program's render loop, and event application and the output stage, which the loop
-calls through their addresses: compiled once each, not again inside every loop that calls them).
+(its node function with every kernel it calls), the heaviest first, a modal bank's pole
+design, the render loop's two stages (event application and the output stage: C functions
+the loop calls through their addresses, so each compiles on its own) and last the render
+loop itself, compiled for its argument types without running (it needs neither the graph
+nor the stages compiled). Before the fork this process compiles one trivial function, so
+that numba's one-off set-up (typing and target contexts, LLVM) is inherited by the helper
+instead of being done again there.
 """
 
 from __future__ import annotations
@@ -41,8 +44,8 @@ import numpy as np
 
 #: Claim marks of a unit in the shared memory.
 FREE, MINE, HELPERS = 0, 1, 2
-#: True while units run (here, or in the helper): a unit that builds an engine (the stand-in)
-#: neither forks a helper nor asks for units of its own.
+#: True while units run (here, or in the helper): a unit that builds an engine neither forks
+#: a helper nor asks for units of its own.
 _running_units = False
 
 
@@ -67,6 +70,7 @@ def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
     global _running_units
     if not may_fork_helper(units):
         return False
+    _set_up_numba()
     claims = mmap.mmap(-1, len(units))  # anonymous and shared: the helper sees these bytes
     claims[0] = MINE  # this process starts at the front, the helper at the back
     pid = os.fork()
@@ -87,6 +91,14 @@ def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
         claims.close()
         _running_units = False
     return True
+
+
+def _set_up_numba() -> None:
+    """Compile one trivial function (not cached): numba's one-off set-up of a process, about
+    0.35 s of CPU, done once before the fork instead of in both processes."""
+    import numba
+
+    numba.njit(lambda values: values[0] + 1.0)(np.zeros(1))
 
 
 def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
@@ -111,8 +123,12 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
 def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     """Compile units of a render of ``graph`` by an OfflineEngine built with
     ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
-    (:func:`kernels_cached`) and the graph runs as a program."""
+    (:func:`kernels_cached`) and the graph runs as a program. Ordered so that the two ends
+    meet with about half the work each: this process starts with the modal node function
+    (the largest unit) and the output stage, the helper with the render loop and event
+    application."""
     from jassy import program
+    from jassy.engines import callback
     from ugens.impact import ImpactForce
     from ugens.modal import ModalBank, direct_ratio
 
@@ -122,34 +138,38 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
         return []
     if program.why_not_compiled(graph) is not None:
         return []
-    kinds = [type(node) for node in graph.order]
-    # the heaviest kind first (this process starts there); the stand-in holds a tap alone
-    order = sorted(dict.fromkeys(kinds), key=lambda kind: kind is not ModalBank)
-    stand_in = ImpactForce in kinds
-    units: list[Callable[[], object]] = [
-        partial(program.node_function_address, program.PROGRAM_UGENS[kind])
-        for kind in order
-        if not (stand_in and kind is ImpactForce)
-    ]
+    kinds = sorted(dict.fromkeys(type(node) for node in graph.order), key=lambda kind: kind is not ModalBank)
+    nodes = [partial(program.node_function_address, program.PROGRAM_UGENS[kind]) for kind in kinds]
+    units: list[Callable[[], object]] = [*nodes[:1], callback.output_stage_address, *nodes[1:]]
     if ModalBank in kinds:  # its pole design, compiled when a bank is prepared
         units.append(partial(direct_ratio, np.array([440.0]), np.array([1.0]), 48000.0, "band"))
-    if stand_in:
-        units.append(partial(_render_stand_in, bool(graph.haptic), engine_options))
-    return units
+    if ImpactForce in kinds:
+        units.append(_compile_strike_records)
+    return [*units, callback.next_cut_address, _compile_render_loop]
 
 
-def _render_stand_in(haptic: bool, engine_options: dict) -> None:
-    """Render three blocks of a silent tap through an engine with the same options: the same
-    kernel types as the real render's block loop, event application and output stage. (It
-    holds no other kind and plays no event, which leaves the most to this process: the
-    render loop is the largest unit.)"""
-    from jassy.engines.offline import OfflineEngine
-    from jassy.graph import Graph
-    from ugens.impact import ImpactForce
+def _compile_strike_records() -> None:
+    """Compile the kernels that translating a strike into an event record calls from Python
+    (its pulse's sum, the growth of the tap's pulse table)."""
+    from ugens.cells import pulse_sum, with_room
 
-    tap = ImpactForce(name="tap", duration=0.0008)
-    engine = OfflineEngine(Graph(tap, haptic=tap if haptic else None), [], **engine_options)
-    engine.render(3 * engine_options["block"] / engine_options["sample_rate"])
+    pulse_sum(0.5, 2.0)
+    with_room(np.zeros((1, 3)), 1)
+
+
+def _compile_render_loop() -> None:
+    """Compile the offline render loop (jassy.engines.program_offline.render_planar, with the
+    program runner and the channel delays it calls) for the argument types the engine passes,
+    without running it."""
+    from jassy.engines.callback import CONTROL
+    from jassy.engines.program_offline import render_planar
+    from jassy.haptics import ChannelDelay
+    from jassy.jit import specialise
+
+    delay = ChannelDelay(np.zeros(1, dtype=np.int64))
+    control = np.zeros(CONTROL, dtype=np.int64)
+    out = np.zeros((1, 1))
+    specialise(render_planar, control, out, 0, 0, delay.active, delay.history, delay.delays, delay.pos)
 
 
 def kernels_cached() -> bool:

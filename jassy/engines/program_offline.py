@@ -26,23 +26,21 @@ from jassy.engines.callback import (
     HAPTIC_FLAGS,
     LIMIT_AUDIO,
     LIMIT_HAPTIC,
-    METER,
     NONFINITE,
-    PROGRAM,
-    RECORD,
     STRIKE,
     ProgramRun,
     _event_not_supported,
     apply_due,
+    program_table,
     sub_block,
 )
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, delay_channels
 from jassy.jit import drop_stale_cache
-from jassy.program import KERNEL_MODULES, _i64
+from jassy.program import KERNEL_MODULES
 from jassy.safety import CEILING, LimiterMeter
-from jassy.scheduler import Scheduler, apply_frame
+from jassy.scheduler import Scheduler, apply_frame, ramp_seconds
 from ugens.cells import with_room
 from ugens.impact import ImpactForce
 from ugens.modal import ModalBank
@@ -51,6 +49,11 @@ drop_stale_cache(__file__, [callback, haptics, safety, *KERNEL_MODULES])
 
 #: Bytes of staged modal designs after which translation waits for the render to apply them.
 DESIGN_BYTES = 1 << 24
+
+#: Records the event queues start with: the score queue grows as translation needs
+#: (:meth:`OfflineProgram._push`), and no live event is posted offline. (The device
+#: callback's 4096-record queues, 256 kB each, cost 80 us per render to map and unmap.)
+QUEUE_RECORDS = 64
 
 #: ModalBank parameters whose jump moves the poles: applied in Python at their frame (the
 #: ringing modes keep their phase, which needs the state there).
@@ -63,8 +66,7 @@ def render_planar(control, out, offset, frames, delayed, history, delays, delay_
     out[:, offset:] (float64 rows: audio, then haptic), with the per-channel delays if
     ``delayed`` (jassy.haptics.delay_channels); return the frames rendered: fewer if a
     sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed)."""
-    prog = _i64(control[PROGRAM], 1)
-    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
+    prog = program_table(control)
     nonfinite = control[NONFINITE]
     begin = control[FRAME]
     pos = begin
@@ -101,9 +103,7 @@ class OfflineProgram(ProgramRun):
         safety = haptic_safety or HapticSafety()
         params = [CEILING, release, safety.max_force, safety.step(sample_rate)]
         output = (LIMIT_AUDIO if limiter else 0) | (LIMIT_HAPTIC if haptic_safety is not None else 0)
-        super().__init__(graph, sample_rate, block, params, output)
-        self.meter = meter.state  # the engine's meter, updated by the compiled runs
-        self.control[METER] = self.meter.ctypes.data
+        super().__init__(graph, sample_rate, block, params, output, QUEUE_RECORDS, meter.state)
         self.delay = delay
         self.scheduler: Scheduler | None = None
         self._designs: list[np.ndarray] = []  # staged designs, kept until applied
@@ -134,10 +134,8 @@ class OfflineProgram(ProgramRun):
 
     def _event_ramp_samples(self, node, event: Event) -> int:
         """The samples a set event ramps over, as :meth:`records` computes them."""
-        if event.ramp is None:
-            return self._ramp_samples(node, None)
         rate = self.sample_rate
-        return apply_frame((event.time + event.ramp) * rate) - apply_frame(event.time * rate)
+        return self._ramp_samples(node, ramp_seconds(event, apply_frame(event.time * rate), rate))
 
     def _translate(self, end: int, ahead: int) -> tuple[int, bool]:
         """Queue the records of the scheduler's next events applied before frame ``ahead``
