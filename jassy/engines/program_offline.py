@@ -37,7 +37,7 @@ from jassy.engines.callback import (
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, delay_channels
-from jassy.jit import drop_stale_cache
+from jassy.jit import address, drop_stale_cache
 from jassy.program import KERNEL_MODULES
 from jassy.safety import CEILING, LimiterMeter
 from jassy.scheduler import Scheduler, apply_frame, ramp_seconds
@@ -116,7 +116,7 @@ class OfflineProgram(ProgramRun):
     def stage_design(self, node: ModalBank) -> int:
         """A new design is a new array (ModalBank._design): keep it until applied."""
         self._designs.append(node._fresh)
-        return node._fresh.ctypes.data
+        return address(node._fresh)
 
     def translatable(self, event: Event) -> bool:
         """Whether ``event`` has records that apply it as the scheduler's dispatch does."""
@@ -189,7 +189,7 @@ class OfflineProgram(ProgramRun):
             for j in range(r, w):
                 grown[j - r] = queue.records[j % cap]
             queue.records = grown
-            control[queue.slot] = grown.ctypes.data
+            control[queue.slot] = address(grown)
             control[queue.slot + 1] = size
             control[queue.slot + 2], control[queue.slot + 3] = w - r, 0
             w, cap = w - r, size
