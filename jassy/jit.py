@@ -54,6 +54,23 @@ def call_void(typingctx, function, a, b, c, d):
     return sig, codegen
 
 
+@intrinsic
+def prefetch_for_write(typingctx, address):
+    """Ask for the cache line holding ``address`` ahead of a write (LLVM's ``prefetch``
+    hint: write, high locality, data cache); never faults, and changes no value."""
+    sig = types.void(types.int64)
+
+    def codegen(context, builder, signature, args):
+        byte_pointer, i32 = llvmir.IntType(8).as_pointer(), llvmir.IntType(32)
+        kind = llvmir.FunctionType(llvmir.VoidType(), [byte_pointer, i32, i32, i32])
+        prefetch = cgutils.get_or_insert_function(builder.module, kind, "llvm.prefetch.p0i8")
+        write, keep, data = (llvmir.Constant(i32, v) for v in (1, 3, 1))
+        builder.call(prefetch, [builder.inttoptr(args[0], byte_pointer), write, keep, data])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 #: Entry points found by :func:`specialise`, by (kernel, type key of the arguments).
 _ENTRY_POINTS: dict[tuple, Callable] = {}
 

@@ -19,9 +19,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy import haptics, safety
+from jassy import haptics, jit, safety
 from jassy.engines import callback
 from jassy.engines.callback import (
+    BLOCK,
     FRAME,
     HAPTIC_FLAGS,
     LIMIT_AUDIO,
@@ -37,7 +38,7 @@ from jassy.engines.callback import (
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, delay_channels
-from jassy.jit import address, drop_stale_cache
+from jassy.jit import address, drop_stale_cache, prefetch_for_write
 from jassy.program import KERNEL_MODULES
 from jassy.safety import CEILING, LimiterMeter
 from jassy.scheduler import Scheduler, apply_frame, ramp_seconds
@@ -45,10 +46,13 @@ from ugens.cells import with_room
 from ugens.impact import ImpactForce
 from ugens.modal import ModalBank
 
-drop_stale_cache(__file__, [callback, haptics, safety, *KERNEL_MODULES])
+drop_stale_cache(__file__, [callback, haptics, jit, safety, *KERNEL_MODULES])
 
 #: Bytes of staged modal designs after which translation waits for the render to apply them.
 DESIGN_BYTES = 1 << 24
+
+#: Bytes of a cache line (x86-64, most arm64).
+LINE_BYTES = 64
 
 #: Records the event queues start with: the score queue grows as translation needs
 #: (:meth:`OfflineProgram._push`), and no live event is posted offline. (The device
@@ -61,18 +65,33 @@ POLE_KEYS = ("freq_scale", "decay_scale")
 
 
 @nb.njit(cache=True, nogil=True)
+def prefetch_rows(out, at, m):
+    """Ask for the cache lines of out[:, at : at + m] (float64 rows) ahead of their writes."""
+    start = out.ctypes.data + at * out.itemsize
+    for r in range(out.shape[0]):
+        row = start + r * out.strides[0]
+        for offset in range(0, m * out.itemsize, LINE_BYTES):
+            prefetch_for_write(row + offset)
+
+
+@nb.njit(cache=True, nogil=True)
 def render_planar(control, out, offset, frames, delayed, history, delays, delay_pos):
     """Render up to ``frames`` frames from control[FRAME] through the output stage into
     out[:, offset:] (float64 rows: audio, then haptic), with the per-channel delays if
     ``delayed`` (jassy.haptics.delay_channels); return the frames rendered: fewer if a
-    sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed)."""
+    sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed).
+
+    The result's cache lines of each sub-block are asked for before its program runs, so
+    that its output stage does not wait for them."""
     prog = program_table(control)
+    block = control[BLOCK]
     nonfinite = control[NONFINITE]
     begin = control[FRAME]
     pos = begin
     end = begin + frames
     while pos < end:
         at = offset + pos - begin
+        prefetch_rows(out, at, min(block, end - pos))
         stop = sub_block(control, prog, pos, end, out, at)
         if delayed:
             delay_channels(out[:, at:], stop - pos, history, delays, delay_pos)
