@@ -162,6 +162,9 @@ class OfflineProgram(ProgramRun):
         reach DESIGN_BYTES. Returns (the frame of the first event left before ``end``, else
         ``end``; whether that event is left for Python)."""
         sched = self.scheduler
+        left = sched.next_event
+        if left == len(sched.events) or sched.apply_frames[left] >= ahead:
+            return end, False  # nothing to translate
         queue = self.score_queue
         if queue.read == queue.write:  # drained: start the ring afresh
             self.control[queue.slot + 2] = self.control[queue.slot + 3] = 0
@@ -189,6 +192,8 @@ class OfflineProgram(ProgramRun):
             self._push(records)
         for base, count in strikes.items():
             node = self._impacts[base]
+            if int(node.count[0]) + count <= node.pulses.shape[0]:
+                continue  # room enough (a compiled call from here costs ~15 us, caches cold)
             grown = with_room(node.pulses, int(node.count[0]) + count)
             if grown is not node.pulses:
                 node.pulses = grown
