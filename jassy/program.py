@@ -36,7 +36,8 @@ from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
-from ugens.modal import ModalBank, bank_step, resonate_ramp
+from ugens.modal import ModalBank, Ramp, bank_step, resonate_ramp
+from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT
 from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
 from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
@@ -260,12 +261,13 @@ def _modal(table, base, start, n):
     bank = _f64_rows(bank_.bank, 6, k)
     meta = _i64(bank_.meta, 3)
     last = _f64(bank_.last, 1)
-    if meta[1] > 0:  # ramping
-        meta[0] = meta[2]
+    if meta[RAMP_LEFT] > 0:
+        meta[ACTIVE] = meta[ALLOWED]
         delta = _f64_rows(bank_.delta, 4, k)
         target = _f64_rows(bank_.target, 4, k)
-        meta[1] = resonate_ramp(
-            force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
+        ramp = Ramp(bank[:4], delta, target)
+        meta[RAMP_LEFT] = resonate_ramp(
+            force, out, n, ramp, bank[4], bank[5], meta[RAMP_LEFT], meta[ACTIVE], last
         )
     else:
         bank_step(force, out, start, n, bank, meta, _f64(bank_.floor, 1)[0], last)

@@ -275,3 +275,29 @@ def test_a_model_is_validated_again_at_a_new_rate():
     for _ in range(2):
         with pytest.raises(PatchError, match=r"nodes\.bank\.model.*frequencies\[1\].*Nyquist"):
             render(graph, [], 0.01, FS)
+
+
+def test_a_set_of_several_keys_redesigns_once_and_applies_every_key():
+    """One ``set`` event of three keys: the bank designs its coefficients once for it (not once
+    per key), and after the ramp they are those of a bank built with the three values."""
+    model = spread_model(12)
+    x = np.zeros(FS // 10)
+    x[0] = FS
+    bank = ModalBank(model, name="bank")(ArraySource(x))
+    designs = []
+    design_now = bank._design
+
+    def counted():
+        designs.append(1)
+        return design_now()
+
+    bank._design = counted
+    render(Graph(bank), [], 0.1, FS, 64, limiter=False)
+    at_start = len(designs)  # the designs of a render with no event
+    designs.clear()
+    change = {"freq_scale": 1.5, "decay_scale": 3.0, "gain": 2.0}
+    render(Graph(bank), [Event(0.05, "bank", "set", change, ramp=0.01)], 0.1, FS, 64, limiter=False)
+    assert len(designs) == at_start + 1
+    fresh = ModalBank(model, name="fresh", **change)(ArraySource(x))
+    render(Graph(fresh), [], 0.001, FS, 64, limiter=False)
+    np.testing.assert_allclose(bank.coef, fresh.coef, rtol=1e-12, atol=0.0)

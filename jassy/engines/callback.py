@@ -67,7 +67,7 @@ from jassy.program import (
 )
 from jassy.safety import CEILING, METERED, copy_finite, float_from_bits, limit_metered, release_coefficient
 from jassy.scheduler import apply_frame, prepare_score, ramp_seconds, validate_event
-from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_amplitude
 from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
 from ugens.mix import Gain
@@ -643,7 +643,7 @@ class EventRecords:
                 self._pending = len(out)
         tau = event.args.get("duration") or node.values["duration"]
         samples = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
-        amp = event.args["impulse"] * self.sample_rate / pulse_sum(sample_time, samples)
+        amp = pulse_amplitude(float(event.args["impulse"]), float(self.sample_rate), sample_time, samples)
         out.append([frame, base, STRIKE, sample_time, samples, amp])
         return out
 
