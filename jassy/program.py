@@ -30,13 +30,14 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from jassy import params
 from jassy.graph import Graph
-from jassy.jit import call_void, drop_stale_cache, void_pointer
+from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
 from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
-from ugens.modal import ModalBank, bank_step, resonate_ramp
+from ugens.modal import ModalBank, Ramp, bank_step, resonate_ramp
+from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT
 from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
 from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
@@ -260,12 +261,13 @@ def _modal(table, base, start, n):
     bank = _f64_rows(bank_.bank, 6, k)
     meta = _i64(bank_.meta, 3)
     last = _f64(bank_.last, 1)
-    if meta[1] > 0:  # ramping
-        meta[0] = meta[2]
+    if meta[RAMP_LEFT] > 0:
+        meta[ACTIVE] = meta[ALLOWED]
         delta = _f64_rows(bank_.delta, 4, k)
         target = _f64_rows(bank_.target, 4, k)
-        meta[1] = resonate_ramp(
-            force, out, n, bank[:4], bank[4], bank[5], delta, target, meta[1], meta[0], last
+        ramp = Ramp(bank[:4], delta, target)
+        meta[RAMP_LEFT] = resonate_ramp(
+            force, out, n, ramp, bank[4], bank[5], meta[RAMP_LEFT], meta[ACTIVE], last
         )
     else:
         bank_step(force, out, start, n, bank, meta, _f64(bank_.floor, 1)[0], last)
@@ -444,10 +446,10 @@ class Program:
         base = 1 + i * RECORD
         record = self.table[base : base + RECORD]
         record[:] = 0
-        record[:HEADER] = Header(PROGRAM_UGENS[type(node)], node.out.ctypes.data, node.max_block)
+        record[:HEADER] = Header(PROGRAM_UGENS[type(node)], address(node.out), node.max_block)
         record[FUNCTION] = node_function_address(record[0])
         for j, value in enumerate(slots):
-            record[HEADER + j] = value.ctypes.data if isinstance(value, np.ndarray) else value
+            record[HEADER + j] = address(value) if isinstance(value, np.ndarray) else value
         self._arrays[i] = [node.out, *(a for a in slots if isinstance(a, np.ndarray))]
         self._slots[i] = slots
 
@@ -458,7 +460,7 @@ class Program:
             return GainSlots(node.sources["input"].out, node.gain.ramp, node.gains)
         if isinstance(node, Mixer):
             names = node.input_names()
-            sources = np.array([node.sources[k].out.ctypes.data for k in names], dtype=np.int64)
+            sources = np.array([address(node.sources[k].out) for k in names], dtype=np.int64)
             gains = np.array([g for _, g in node._terms], dtype=np.float64)
             return MixerSlots(len(names), sources, gains)
         if isinstance(node, Multiply):

@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import bisect
 import math
+import weakref
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -38,6 +39,108 @@ def apply_frame(sample_time: float) -> int:
     """The frame at which an event at ``sample_time`` (in samples) applies: the first frame
     at or after it, allowing _SAMPLE_SLACK of rounding in the time's conversion."""
     return math.ceil(sample_time - _SAMPLE_SLACK)
+
+
+def ramp_seconds(event: Event, frame: int, sample_rate: float) -> float | None:
+    """The ramp of a set event applied at ``frame``, in seconds, made to end on the frame
+    where ``time + ramp`` applies (so that ramps chained along a track join exactly); None
+    if the event gives no ramp."""
+    if event.ramp is None:
+        return None
+    return (apply_frame((event.time + event.ramp) * sample_rate) - frame) / sample_rate
+
+
+def prepare_score(graph: Graph, score: Sequence[Event], sample_rate: float) -> list[Event]:
+    """The score validated against ``graph`` (errors name ``score[i]``), in time order (equal
+    times keep the score's order), with location ramps along texture tracks walked through
+    the tracks' points (jassy.tracks.walk_score).
+
+    A graph's last prepared score is kept (:class:`PreparedScore`) and returned again, as a
+    new list, while the score's contents, the sample rate and every node's parameter values
+    (by identity) are those it was prepared with: rendering a graph again does not validate
+    its score again."""
+    key = _score_key(score, sample_rate)
+    kept = _PREPARED.get(graph)
+    if key is not None and kept is not None and kept.key == key and kept.same_values(graph):
+        return list(kept.events)
+    checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
+    order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
+    events = walk_score(graph, [checked[i] for i in order], sample_rate)
+    if key is not None:
+        _PREPARED[graph] = PreparedScore(key, _values_of(graph), tuple(events))
+    return events
+
+
+class _Uncacheable(Exception):
+    """An event argument :func:`_snapshot` cannot compare by value."""
+
+
+#: Types an event field is compared by value as (with the type: 1, 1.0 and True validate
+#: differently).
+_SCALARS = frozenset((bool, int, float, str, type(None)))
+
+
+def _snapshot(value: Any) -> Any:
+    """A comparable copy of an event field, with each value's type, or _Uncacheable."""
+    kind = type(value)
+    if kind in _SCALARS:
+        return kind, value
+    if kind is list or kind is tuple:
+        return kind, tuple(map(_snapshot, value))
+    if kind is dict:
+        return kind, tuple((k, _snapshot(v)) for k, v in value.items())
+    if kind is np.ndarray or isinstance(value, np.generic):
+        return kind, value.dtype.str, np.shape(value), value.tobytes()
+    raise _Uncacheable
+
+
+def _score_key(score: Sequence[Event], sample_rate: float) -> tuple | None:
+    """The score's contents and the sample rate, compared by value (None: not comparable).
+    Node names and actions are those of a validated score when the key is kept."""
+    try:
+        events = tuple(
+            (
+                ev.node,
+                ev.action,
+                _snapshot(ev.time),
+                _snapshot(ev.args),
+                _snapshot(ev.jump),
+                _snapshot(ev.ramp),
+            )
+            for ev in score
+        )
+    except (_Uncacheable, AttributeError):  # an item that is no Event fails validation
+        return None
+    return float(sample_rate), events
+
+
+def _values_of(graph: Graph) -> tuple:
+    """Every node and its parameter values (the objects themselves, held)."""
+    return tuple((node, tuple(node.values.items())) for node in graph.order)
+
+
+class PreparedScore(NamedTuple):
+    """A graph's last prepared score: the key it was prepared for, the nodes' parameter
+    values then (validation and track walks read them: a model, a location) and the events."""
+
+    key: tuple
+    values: tuple
+    events: tuple
+
+    def same_values(self, graph: Graph) -> bool:
+        """Whether ``graph``'s nodes hold the very same parameter values (by identity; a
+        value changed in place, such as a model's arrays, is not seen)."""
+        now = _values_of(graph)
+        return len(now) == len(self.values) and all(
+            node is kept_node
+            and len(items) == len(kept_items)
+            and all(k == kk and v is kv for (k, v), (kk, kv) in zip(items, kept_items, strict=True))
+            for (node, items), (kept_node, kept_items) in zip(now, self.values, strict=True)
+        )
+
+
+#: Each graph's last prepared score (dropped with the graph).
+_PREPARED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def validate_event(graph: Graph, event: Event, where: str) -> Event:
@@ -131,9 +234,7 @@ class Scheduler:
         self.graph = graph
         self.block = int(block)
         self.sample_rate = float(sample_rate)
-        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        order = sorted(range(len(checked)), key=lambda i: (checked[i].time, i))
-        self.events = walk_score(graph, [checked[i] for i in order], self.sample_rate)
+        self.events = prepare_score(graph, score, self.sample_rate)
         self.sample_times = [ev.time * self.sample_rate for ev in self.events]
         self.apply_frames = [apply_frame(t) for t in self.sample_times]
         self.inline = [self._is_inline(ev) for ev in self.events]
@@ -203,10 +304,7 @@ class Scheduler:
         node = self.graph.nodes[ev.node]
         frame = self.apply_frames[index]
         if ev.action == "set":
-            ramp = ev.ramp
-            if ramp is not None:  # end on the frame where time + ramp applies: tracks join exactly
-                end = apply_frame((ev.time + ramp) * self.sample_rate)
-                ramp = (end - frame) / self.sample_rate
+            ramp = ramp_seconds(ev, frame, self.sample_rate)
             for key, value in ev.args.items():
                 _set(node, frame, key, value, ev.jump, ramp)
             return

@@ -50,6 +50,15 @@ def parse_surface_point(value: Any, where: str) -> SurfacePoint:
     return SurfacePoint(float(value[0]), float(value[1]))
 
 
+def plate_shapes(orders_x: np.ndarray, orders_y: np.ndarray, u: Any, v: Any) -> np.ndarray:
+    """phi_k(u, v) = sin(m_k pi u) sin(n_k pi v), the mode shapes of a simply supported
+    rectangular plate (orders m_k, n_k) at (u, v) = (x / a, y / b): (modes,) for a point given
+    by two numbers, (points, modes) for arrays of u and v."""
+    u = np.asarray(u, dtype=np.float64)[..., None]
+    v = np.asarray(v, dtype=np.float64)[..., None]
+    return np.sin(np.pi * orders_x * u) * np.sin(np.pi * orders_y * v)
+
+
 class PlateSurface(NamedTuple):
     """Mode shapes of a simply supported rectangular plate, per mode of its model."""
 
@@ -61,7 +70,7 @@ class PlateSurface(NamedTuple):
 
     def shapes(self, point: SurfacePoint) -> np.ndarray:
         """phi_k(u, v) of every mode."""
-        return np.sin(np.pi * self.orders_x * point.u) * np.sin(np.pi * self.orders_y * point.v)
+        return plate_shapes(self.orders_x, self.orders_y, point.u, point.v)
 
     def gains(self, point: SurfacePoint) -> np.ndarray:
         if self.pickup is None:

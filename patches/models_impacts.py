@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from jassy.modal_model import ModalModel
-from jassy.surface import PlateSurface
+from jassy.surface import PlateSurface, plate_shapes
 
 #: Named strike points of the plate as fractions (x / a, y / b) of its sides.
 PLATE_POINTS = {
@@ -64,7 +64,7 @@ def plate_model(
     m, n, freqs = m[keep], n[keep], freqs[keep]
     modal_mass = density * h * a * b / 4.0
     xy = np.array(list(points.values()))
-    shapes = np.sin(np.pi * m * xy[:, :1]) * np.sin(np.pi * n * xy[:, 1:])  # x/a, y/b fractions
+    shapes = plate_shapes(m, n, xy[:, 0], xy[:, 1])  # x/a, y/b fractions
     gains = shapes**2 / (modal_mass * 2.0 * np.pi * freqs)
     decays = base_decay + np.pi * freqs * loss
     surface = PlateSurface((a, b), m, n, None, 1.0 / (modal_mass * 2.0 * np.pi * freqs))  # gains = driving

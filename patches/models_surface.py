@@ -41,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from jassy.modal_model import ModalModel
-from jassy.surface import PlateSurface
+from jassy.surface import PlateSurface, plate_shapes
 
 
 def ss_plate_model(
@@ -85,18 +85,15 @@ def ss_plate_model(
     m, n, freqs = m[order], n[order], freqs[order]
     mass = rho * h * a * b / 4
 
-    def shape(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return np.sin(np.pi * np.outer(u, m)) * np.sin(np.pi * np.outer(v, n))
-
     if points is None:
         w, names = track_points(n_points, between)
         (u0, v0), (u1, v1) = track
-        at = shape(u0 + w * (u1 - u0), v0 + w * (v1 - v0))
+        at = plate_shapes(m, n, u0 + w * (u1 - u0), v0 + w * (v1 - v0))
     else:
         uv = np.array(list(points.values()), dtype=np.float64)
-        at = shape(uv[:, 0], uv[:, 1])
+        at = plate_shapes(m, n, uv[:, 0], uv[:, 1])
         names = tuple(points)
-    listen = shape(np.array([pickup[0]]), np.array([pickup[1]]))[0]
+    listen = plate_shapes(m, n, pickup[0], pickup[1])
     gains = at * listen / mass  # strike to pickup: signed
     # at the strike point itself, for contacts in a closed loop: a displacement receptance
     driving = at * at / (mass * 2 * np.pi * freqs)

@@ -16,20 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
-WIDER = {
-    ("physics/rigid/impulses.py", "_row_apply"),  # 13
-    ("physics/rigid/impulses.py", "_row_velocity"),  # 11
-    ("physics/rigid/integrate.py", "_solve3"),  # 12
-    ("physics/rigid/integrate.py", "advance_body_into"),  # 13
-    ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
-    ("physics/rigid/meshgrid.py", "grid_closest"),  # 12
-    ("physics/rigid/meshgrid.py", "grid_within"),  # 15
-    ("ugens/modal.py", "mixed_step"),  # 12
-    ("ugens/modal.py", "resonate"),  # 11
-    ("ugens/modal.py", "resonate_ramp"),  # 11
-    ("ugens/modal_f32.py", "resonate_delta"),  # 11
-    ("ugens/roll.py", "rolling_filter"),  # 11
-}
+WIDER: set[tuple[str, str]] = set()
 
 
 def _is_kernel(node: ast.FunctionDef) -> bool:

@@ -170,6 +170,20 @@ def test_silent_modes_are_zeroed_and_skipped():
     assert not np.any((y != 0) & (np.abs(y) < np.finfo(float).tiny))  # no subnormal output
 
 
+def test_floor_zero_computes_every_mode_as_a_scan_that_zeroes_nothing():
+    # e^{-400 t} is 1e-174 after 1 s: a floor of 1e-300 is scanned for but never reached,
+    # and floor 0 (no scan at all) must give the same bits and keep every mode active
+    model = ModalModel([300.0, 3000.0], [400.0, 9.0], [[1.0, 1.0]])
+    x = np.zeros(FS)
+    x[0] = FS
+    out = {}
+    for floor in (0.0, 1e-300):
+        bank = ModalBank(model, name="bank", floor=floor)(ArraySource(x))
+        out[floor] = render(Graph(bank), [], 1.0, FS, 64, limiter=False).audio[0]
+        assert bank.meta[0] == 2 and np.all(bank.y != 0.0)
+    assert np.array_equal(out[0.0], out[1e-300])
+
+
 @pytest.mark.parametrize("precision", ["float64", "mixed"])
 def test_state_save_and_restore_continues_identically(precision):
     model = spread_model(8)
@@ -261,3 +275,29 @@ def test_a_model_is_validated_again_at_a_new_rate():
     for _ in range(2):
         with pytest.raises(PatchError, match=r"nodes\.bank\.model.*frequencies\[1\].*Nyquist"):
             render(graph, [], 0.01, FS)
+
+
+def test_a_set_of_several_keys_redesigns_once_and_applies_every_key():
+    """One ``set`` event of three keys: the bank designs its coefficients once for it (not once
+    per key), and after the ramp they are those of a bank built with the three values."""
+    model = spread_model(12)
+    x = np.zeros(FS // 10)
+    x[0] = FS
+    bank = ModalBank(model, name="bank")(ArraySource(x))
+    designs = []
+    design_now = bank._design
+
+    def counted():
+        designs.append(1)
+        return design_now()
+
+    bank._design = counted
+    render(Graph(bank), [], 0.1, FS, 64, limiter=False)
+    at_start = len(designs)  # the designs of a render with no event
+    designs.clear()
+    change = {"freq_scale": 1.5, "decay_scale": 3.0, "gain": 2.0}
+    render(Graph(bank), [Event(0.05, "bank", "set", change, ramp=0.01)], 0.1, FS, 64, limiter=False)
+    assert len(designs) == at_start + 1
+    fresh = ModalBank(model, name="fresh", **change)(ArraySource(x))
+    render(Graph(fresh), [], 0.001, FS, 64, limiter=False)
+    np.testing.assert_allclose(bank.coef, fresh.coef, rtol=1e-12, atol=0.0)

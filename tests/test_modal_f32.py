@@ -10,6 +10,7 @@ from jassy import Event, Graph, ModalModel, render
 from ugens.modal import ModalBank, design, split_by_precision
 from ugens.modal_f32 import (
     TOLERANCE,
+    DeltaRows,
     decay_factor_error,
     delta_coefficients,
     float32_error,
@@ -64,7 +65,7 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    resonate_delta(x, out, x.size, *coef, *state, 1, np.zeros(1), decay_factor)
+    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, np.zeros(1), decay_factor)
     return out
 
 
@@ -81,6 +82,10 @@ def test_the_bound_is_needed_very_high_q_modes_fail_in_float32():
     f, d = 20.0, 0.5
     ref = ModalModel([f], [d], [[1.0]]).impulse_response(seconds, FS)
     assert error_db(float32_only_response(f, d, seconds)[1:], ref[1:]) < -80.0
+    # in the decay-factor form (R^2 rounded) its decay drifts past -70 dB, and that bound says so
+    c1, c2, _ = design(np.array([f]), np.array([d]), FS)
+    assert error_db(float32_only_response(f, d, seconds, decay_factor=True)[1:], ref[1:]) > -70.0
+    assert decay_factor_error(c1, c2, FS)[0] > TOLERANCE
 
 
 def test_mixed_bank_passes_where_float32_two_pole_fails():
@@ -138,7 +143,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import resonate
+    from ugens.modal import ModeRows, resonate
 
     fn, note = compile_modal_f32()
     if fn is None:
@@ -150,7 +155,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     run()
     ref = np.zeros(force.size)
     z = np.zeros(5)
-    resonate(force, ref, force.size, c1, c2, s, z, z.copy(), z.copy(), 5, np.zeros(1))
+    resonate(force, ref, force.size, ModeRows(c1, c2, s, z, z.copy(), z.copy()), 5, np.zeros(1))
     assert error_db(run.output.astype(np.float64), ref) < -60.0
     # loading the -ffast-math library must not switch the process to flush-to-zero
     tiny = np.finfo(np.float64).smallest_subnormal

@@ -57,8 +57,12 @@ def rotation_errors(speeds, overrides=()):
 
 def test_rolling_force_pulses_at_the_rotation_rate():
     """The continuous layer (Roll: the ball's own profile, one revolution long, and its
-    out-of-roundness) on the plate, alone."""
-    errors = rotation_errors([0.1, 0.3, 1.0, 1.4], ["contact.gains=[1.0, 0.0]"])
+    out-of-roundness, under the contact filter) on the plate, alone, up to 1 m/s. (At 1.4
+    m/s its envelope peaks at 3 v / (2 pi r): its lines are 15 Hz apart and most of its
+    force lies near the ball's contact resonance, 1-2 kHz, where each of the plate's few
+    strong modes picks one line, so the envelope follows their beats rather than the
+    out-of-roundness's sidebands; the patch there is its micro-impacts, about 30 dB louder.)"""
+    errors = rotation_errors([0.1, 0.3, 0.6, 1.0], ["contact.gains=[1.0, 0.0]"])
     assert np.max(np.abs(errors)) < 0.05, errors
 
 
@@ -81,6 +85,21 @@ def test_centroid_changes_smoothly_with_speed():
     lightly damped mode no longer drives it as if the plate were rigid."""
     speeds = 0.1 * 1.1 ** np.arange(32)  # 0.1 .. 1.9 m/s, 10 % apart
     c = np.array([centroid(steady_roll(v, 0.5)) for v in speeds])
+    steps = np.maximum(c[1:] / c[:-1], c[:-1] / c[1:])
+    assert np.max(steps) < 1.3, (speeds[np.argmax(steps)], np.max(steps))
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("seed", ["ball.seed=1", "hops.seed=2", "hops.seed=4"])
+def test_centroid_changes_smoothly_over_other_profiles(seed):
+    """Other profiles of the ball (the rumble's ``ball.seed``, the micro-impacts' ``hops.seed``)
+    at the slow speeds where the layers are closest in level (0.1-0.16 m/s, 10 % apart).
+    The rumble drove the plate open loop: a line of its turn's spectrum landing on one of the
+    plate's few strong low modes raised its power by up to 10 dB between neighbouring speeds,
+    and the patch's centroid with it (1.43x, 1.60x, 1.81x here). Under the contact filter
+    the rumble grows with speed as the ball's inertia m w^2 r does, and sits lower there."""
+    speeds = 0.1 * 1.1 ** np.arange(6)
+    c = np.array([centroid(steady_roll(v, 0.5, [seed])) for v in speeds])
     steps = np.maximum(c[1:] / c[:-1], c[:-1] / c[1:])
     assert np.max(steps) < 1.3, (speeds[np.argmax(steps)], np.max(steps))
 
@@ -141,8 +160,9 @@ def test_rolling_contact_filter_against_its_z_transform():
         w = 2 * math.pi * f
         out = np.sin(w * t)  # r = out * inv_height with inv_height = 1
         modes = np.array([c1, c2, g, [0.0], [0.0]])
+        law = np.array([k, c, FS])
         roll_over(
-            out, n, modes, np.zeros(1), np.zeros(3), np.array([k, c, FS]), 1.0, 1.0 / (m * FS**2), float(g[0])
+            out, np.ones(n), n, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0])
         )
         z = np.exp(-1j * w / FS)
         K = k + c * FS * (1 - z)
@@ -155,3 +175,8 @@ def test_rolling_contact_filter_against_its_z_transform():
         assert amplitude == pytest.approx(expected, rel=1e-4), f
         if f == 80.0:  # below the contact resonance (1.6 kHz): the ball's inertia, m w^2
             assert amplitude == pytest.approx(m * w * w, rel=0.05)
+    out = np.sin(np.arange(100) * 0.1)  # lifted off (no load): no contact force
+    roll_over(
+        out, np.zeros(100), 100, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0])
+    )
+    assert np.all(out == 0.0)

@@ -167,3 +167,45 @@ def test_bad_events_are_rejected_before_rendering(event, match):
     g = Gain(ModalBank(model, name="bank")(hit), name="g")
     with pytest.raises(PatchError, match=match):
         render(Graph(g), [event], 0.01)
+
+
+def track_graph():
+    """A bank on a three-point track (t0, t0_1, t1) struck by a hammer."""
+    gains = np.array([[1.0, 0.5, 0.2], [0.5, 1.0, 0.4], [0.2, 0.4, 1.0]])
+    model = ModalModel([300.0, 900.0, 2000.0], [3.0, 5.0, 8.0], gains, ("t0", "t0_1", "t1"))
+    hit = ImpactForce(name="hit", duration=0.001)
+    bank = ModalBank(model, name="bank", location="t0")(hit)
+    return Graph(bank, haptic=hit), bank
+
+
+def test_a_prepared_score_is_reused_only_for_the_same_score_rate_and_parameters():
+    from jassy.scheduler import prepare_score
+
+    def fresh(score, rate):
+        return prepare_score(track_graph()[0], score, rate)
+
+    graph, bank = track_graph()
+    score = [
+        Event(0.01, "hit", "impact", {"impulse": 0.1}),
+        Event(0.02, "bank", "set", {"location": "t1"}, ramp=0.013),
+    ]
+    first = prepare_score(graph, score, FS)
+    assert len(first) == 3  # the ramp walks through t0_1
+    again = prepare_score(graph, score, FS)
+    assert again == first and again is not first
+    # the walk's links land on the frames of the rate: another rate, other times
+    assert prepare_score(graph, score, 44100) == fresh(score, 44100) != first
+    score[1].args["location"] = "t0_1"  # an event changed in place: no walk now
+    assert prepare_score(graph, score, FS) == fresh(score, FS)
+    assert len(prepare_score(graph, score, FS)) == 2
+    score[0].args["impulse"] = 1
+    prepare_score(graph, score, FS)
+    score[0].args["impulse"] = True  # equal to 1, but no number: compared with its type
+    with pytest.raises(PatchError, match=r"score\[0\]"):
+        prepare_score(graph, score, FS)
+    score[0].args["impulse"] = 0.1
+    prepare_score(graph, score, FS)
+    # a node given another model: its locations are validated again
+    bank.configure("model", ModalModel([300.0], [3.0], np.array([[1.0]]), ("t0",)))
+    with pytest.raises(PatchError, match=r"score\[1\].*unknown point 't0_1'"):
+        prepare_score(graph, score, FS)

@@ -43,7 +43,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import with_room
+from ugens.cells import slot, with_room
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec
 from ugens.stochastic import next_event, u01
@@ -52,14 +52,40 @@ from ugens.stochastic import next_event, u01
 R_REF = 1e-3
 TWO_PI = 2.0 * math.pi
 
-# voice rows (struct of arrays, one column per voice): the phasor z = a e^{i phi} (real,
-# imaginary), its per-sample factor c = R e^{i dphi}, the factor's own rotation
-# q = e^{i ddphi}, and the squared end level
-_ZR, _ZI, _CR, _CI, _QR, _QI, _END = range(7)
-# meta: active voices, pending bubbles, births, logged births
-_ACTIVE, _PENDING, _BIRTHS, _LOGGED = range(4)
-# st: accumulated rate, threshold, held radius
-_ACC, _TARGET, _RADIUS = range(3)  # the first two as next_event expects
+
+class VoiceRows(NamedTuple):
+    """The rows of the voices array (struct of arrays, one column per voice), in this order."""
+
+    zr: np.ndarray  #: the phasor z = a e^{i phi}: real part
+    zi: np.ndarray  #: imaginary part
+    cr: np.ndarray  #: its per-sample factor c = R e^{i dphi}: real part
+    ci: np.ndarray  #: imaginary part
+    qr: np.ndarray  #: the factor's own rotation q = e^{i ddphi}: real part
+    qi: np.ndarray  #: imaginary part
+    end: np.ndarray  #: the squared level at which the voice ends
+
+
+class BubbleCounts(NamedTuple):
+    """The int64 array ``meta``, in this order."""
+
+    active: int  #: voices sounding
+    pending: int  #: scheduled bubbles not yet born
+    births: int  #: bubbles born since the render started
+    logged: int  #: rows of the birth log filled
+
+
+class StreamState(NamedTuple):
+    """The float64 array ``st``, in this order (the first two as :func:`next_event` expects:
+    ImpactState's acc and target)."""
+
+    acc: float  #: integrated birth rate since the last birth
+    target: float  #: the Exp(1) threshold of the next birth
+    radius: float  #: the last bubble's radius, held on the radius output (m)
+
+
+_ZR, _ZI, _CR, _CI, _QR, _QI, _END = (slot(VoiceRows, key) for key in VoiceRows._fields)
+_ACTIVE, _PENDING, _BIRTHS, _LOGGED = (slot(BubbleCounts, key) for key in BubbleCounts._fields)
+_ACC, _TARGET, _RADIUS = (slot(StreamState, key) for key in StreamState._fields)
 
 
 class BubbleParams(NamedTuple):
@@ -266,10 +292,10 @@ class _Bubbles(UGen):
     log_capacity = 0
 
     def _prepare(self) -> None:
-        self.voices = np.zeros((7, self.values["max_voices"]))
-        self.meta = np.zeros(4, dtype=np.int64)
+        self.voices = np.zeros((len(VoiceRows._fields), self.values["max_voices"]))
+        self.meta = np.zeros(len(BubbleCounts._fields), dtype=np.int64)
         self.pending = np.zeros((8, 3))
-        self.st = np.zeros(3)
+        self.st = np.zeros(len(StreamState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
         self.log = np.zeros((int(self.log_capacity), 3))
         self._rates = np.zeros(self.max_block)

@@ -82,10 +82,11 @@ def press_surface(out, contact, n, modes, scratch, stiffness, gain_sum):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def roll_over(out, n, modes, scratch, ball, contact, inv_height, ball_gain, gain_sum):
+def roll_over(out, loads, n, modes, scratch, ball, contact, inv_height, ball_gain, gain_sum):
     """The contact filter of rolling: a ball of mass m on a contact spring k (N/m) with a
     dashpot c (N s/m) rides over a roughness r (m) on a surface that gives way. out[:n]
-    holds r / inv_height and is replaced by the dynamic contact force F (N) on the surface.
+    holds r / inv_height and is replaced by the dynamic contact force F (N) on the surface;
+    while loads[i] <= 0 (the ball lifted off) there is no contact (F = 0).
 
     F = k d + c d', d = r - y - x the spring's compression: y the ball's rise, m y'' = F,
     stepped as the surface's modes are (impulse invariance: y[n] = 2 y[n-1] - y[n-2] +
@@ -110,7 +111,7 @@ def roll_over(out, n, modes, scratch, ball, contact, inv_height, ball_gain, gain
         x = free_motion(modes, scratch, 0.0)
         y = 2.0 * y1 - y2
         free = out[i] * inv_height - y - x
-        f = (stiff * free - damping * d1) / compliance
+        f = (stiff * free - damping * d1) / compliance if loads[i] > 0.0 else 0.0
         settle(modes, scratch, f)
         y2 = y1
         y1 = y + ball_gain * f

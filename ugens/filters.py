@@ -8,6 +8,7 @@ depend on block boundaries; once the ramps are steady the last coefficients are 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -16,15 +17,46 @@ from jassy.errors import PatchError
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import store
 from ugens.kernels import FASTMATH
 
 MODES = ("lowpass", "highpass", "bandpass")
 _LOWPASS, _HIGHPASS = 0, 1
 
 
+class BiquadCoefficients(NamedTuple):
+    """A biquad's coefficients normalised by a0, stored in this order in the float64 array
+    ``coef``: H(z) = (b0 + b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2)."""
+
+    b0: float
+    b1: float
+    b2: float
+    a1: float
+    a2: float
+
+
+@nb.njit(inline="always", cache=True)
+def biquad_coefficients(coef):
+    """The BiquadCoefficients record held in ``coef``."""
+    return BiquadCoefficients(coef[0], coef[1], coef[2], coef[3], coef[4])
+
+
+class BiquadState(NamedTuple):
+    """The Direct Form II transposed state, stored in this order in the float64 array ``state``."""
+
+    s1: float
+    s2: float
+
+
+@nb.njit(inline="always", cache=True)
+def biquad_state(state):
+    """The BiquadState record held in ``state``."""
+    return BiquadState(state[0], state[1])
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def design_biquad(mode, freq, q, inv_fs, coef):
-    """RBJ cookbook coefficients normalised by a0: coef = [b0, b1, b2, a1, a2].
+    """RBJ cookbook coefficients normalised by a0 into ``coef`` (a BiquadCoefficients).
 
     mode 0 low-pass, 1 high-pass, 2 band-pass with 0 dB peak gain; freq in Hz.
     """
@@ -44,45 +76,44 @@ def design_biquad(mode, freq, q, inv_fs, coef):
         b1 = 0.0
         b2 = -alpha
     inv_a0 = 1.0 / (1.0 + alpha)
-    coef[0] = b0 * inv_a0
-    coef[1] = b1 * inv_a0
-    coef[2] = b2 * inv_a0
-    coef[3] = -2.0 * cw * inv_a0
-    coef[4] = (1.0 - alpha) * inv_a0
+    normalised = BiquadCoefficients(
+        b0 * inv_a0, b1 * inv_a0, b2 * inv_a0, -2.0 * cw * inv_a0, (1.0 - alpha) * inv_a0
+    )
+    store(coef, normalised)
 
 
 @nb.njit(cache=True)
 def biquad(x, out, n, coef, state):
-    """Direct Form II transposed with fixed coefficients; state = [s1, s2].
+    """Direct Form II transposed with fixed coefficients (``coef``: a BiquadCoefficients,
+    ``state``: a BiquadState).
 
     Compiled without fastmath, as is :func:`biquad_ramp`: a recurrence has nothing to
     vectorise, and reassociation across unrolled iterations made the output depend on
     where a block was cut."""
-    b0, b1, b2, a1, a2 = coef[0], coef[1], coef[2], coef[3], coef[4]
-    s1, s2 = state[0], state[1]
+    b0, b1, b2, a1, a2 = biquad_coefficients(coef)
+    s1, s2 = biquad_state(state)
     for i in range(n):
         xi = x[i]
         y = b0 * xi + s1
         s1 = b1 * xi - a1 * y + s2
         s2 = b2 * xi - a2 * y
         out[i] = y
-    state[0] = s1
-    state[1] = s2
+    store(state, BiquadState(s1, s2))
 
 
 @nb.njit(cache=True)
 def biquad_ramp(x, out, n, mode, freqs, qs, inv_fs, coef, state):
     """Direct Form II transposed, coefficients redesigned each sample from freqs[i], qs[i]."""
-    s1, s2 = state[0], state[1]
+    s1, s2 = biquad_state(state)
     for i in range(n):
         design_biquad(mode, freqs[i], qs[i], inv_fs, coef)
+        b0, b1, b2, a1, a2 = biquad_coefficients(coef)
         xi = x[i]
-        y = coef[0] * xi + s1
-        s1 = coef[1] * xi - coef[3] * y + s2
-        s2 = coef[2] * xi - coef[4] * y
+        y = b0 * xi + s1
+        s1 = b1 * xi - a1 * y + s2
+        s2 = b2 * xi - a2 * y
         out[i] = y
-    state[0] = s1
-    state[1] = s2
+    store(state, BiquadState(s1, s2))
 
 
 @register
@@ -121,8 +152,8 @@ class Biquad(UGen):
         self.mode = MODES.index(self.values["mode"])
         self.freq = self.smoothed("freq")
         self.q = self.smoothed("q")
-        self.coef = np.zeros(5)
-        self.state = np.zeros(2)
+        self.coef = np.zeros(len(BiquadCoefficients._fields))
+        self.state = np.zeros(len(BiquadState._fields))
         self._freqs = np.zeros(self.max_block)
         self._qs = np.zeros(self.max_block)
 

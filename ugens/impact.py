@@ -20,7 +20,7 @@ import numpy as np
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_sum, raised_cosine
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_amplitude, raised_cosine
 
 
 @nb.njit(cache=True)
@@ -70,8 +70,8 @@ class PulseSource(UGen):
         at fractional sample ``sample_time``; its samples sum exactly to the impulse."""
         T = max(duration * self.sample_rate, MIN_PULSE_SAMPLES)
         c = int(self.count[0])
-        amplitude = impulse * self.sample_rate / pulse_sum(sample_time, T)
-        self.pulses = append_pulse(self.pulses, c, float(sample_time), T, float(amplitude))
+        amplitude = pulse_amplitude(float(impulse), float(self.sample_rate), float(sample_time), T)
+        self.pulses = append_pulse(self.pulses, c, float(sample_time), T, amplitude)
         self.count[0] = c + 1
         self._idle = False
 

@@ -50,6 +50,7 @@ from jassy.jit import specialise
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
+from jassy.record_views import handle
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import modal_budget
@@ -67,7 +68,6 @@ from ugens.modal_budget import (
     BudgetTables,
     compact_bank,
     line_aligned_zeros,
-    settle_compact,
 )
 from ugens.modal_f32 import (
     MIN_GAIN,
@@ -79,6 +79,7 @@ from ugens.modal_f32 import (
     narrow_rows,
     unscaled_state,
 )
+from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
 from ugens.modal_retune import (
     TOP_BAND,
     TOP_BAND_COS,
@@ -118,14 +119,43 @@ def has_force(force, n):
     return False
 
 
+class ModeRows(NamedTuple):
+    """A float64 bank's rows as :func:`resonate` reads them, one entry per mode: the
+    coefficients c1 = 2 R cos theta, c2 = R^2, input gain g = a R sin theta / fs (per N)
+    and direct gain d (module docstring), and the state y1 = y[n-1], y2 = y[n-2]."""
+
+    c1: np.ndarray
+    c2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y1: np.ndarray
+    y2: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def mode_rows(bank):
+    """The ModeRows of a (6, K) bank array, whose rows are the record's fields in order."""
+    return ModeRows(bank[0], bank[1], bank[2], bank[3], bank[4], bank[5])
+
+
+class Ramp(NamedTuple):
+    """A linear ramp of a bank's coefficients (c1, c2, g, d): (4, K) arrays of the current
+    values, their per-sample increments and their final values."""
+
+    coef: np.ndarray
+    delta: np.ndarray
+    target: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
-    """Run modes [0, active) over force[:n] into out[:n] (overwrites out).
+def resonate(force, out, n, rows, active, last):
+    """Run modes [0, active) of ``rows`` (ModeRows) over force[:n] into out[:n] (overwrites out).
 
     last[0]: the force sample before force[0] (each resonator hears F[n-1]); left at
     force[n-1]. The direct term sum(d) F[n] is added once per sample; the sum is formed
     only if some F[n] is non-zero (a pass over the modes, per call: most blocks of an
     impact's ringing have no force)."""
+    c1, c2, g, d, y1, y2 = rows
     direct = 0.0
     if has_force(force, n):
         for k in range(active):
@@ -178,15 +208,15 @@ def resonate(force, out, n, c1, c2, g, d, y1, y2, active, last):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_ramp(force, out, n, coef, y1, y2, delta, target, remaining, active, last):
+def resonate_ramp(force, out, n, ramp, y1, y2, remaining, active, last):
     """As :func:`resonate` over modes [0, active) while the coefficients ramp linearly.
 
-    coef, delta, target: (4, K) current values, per-sample increments and final values of
-    (c1, c2, g, d). Each sample uses the current coefficients, then they step (as in
-    params.ramp_fill), so they equal target from the ramp's m-th sample on. Returns the
-    samples left.
+    ramp: a Ramp of (c1, c2, g, d); y1, y2: the state rows. Each sample uses the current
+    coefficients, then they step (as in params.ramp_fill), so they equal the ramp's target
+    from its m-th sample on (``remaining`` = m). Returns the samples left.
     """
     K = active
+    coef, delta, target = ramp
     c1, c2, g, d = coef[0], coef[1], coef[2], coef[3]
     fp = last[0]
     for i in range(n):
@@ -244,15 +274,16 @@ FLAT_SPECTRUM_MODES = 8
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
-    """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta[0] = active mode
-    count, meta[2] = the most modes that may be active (all, or the anytime budget's share);
+    """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta: a BankMeta (the
+    active mode count and the most modes that may be active);
     last[0] = the force sample before force[0].
 
     The sub-block is cut at multiples of FLUSH_PERIOD on the clock. In each piece, any
     input activates every allowed mode (the inactive ones hold exact zeros, so when they
     start does not matter); at each multiple, modes whose state fell below ``floor`` are
-    zeroed and the active count shrinks to the last audible mode. The flush frames do not
-    depend on the block size, so neither does the output."""
+    zeroed and the active count shrinks to the last audible mode (no mode is below a
+    ``floor`` <= 0: the scan is skipped). The flush frames do not depend on the block size,
+    so neither does the output."""
     i = 0
     while i < n:
         frame = start + i
@@ -260,48 +291,70 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         f = force[i : i + m]
         o = out[i : i + m]
         if last[0] != 0.0 or has_force(f, m):
-            meta[0] = meta[2]
-        active = meta[0]
+            meta[ACTIVE] = meta[ALLOWED]
+        active = meta[ACTIVE]
         if active == 0:
             for j in range(m):
                 o[j] = 0.0
             last[0] = 0.0
         else:
-            resonate(f, o, m, bank[0], bank[1], bank[2], bank[3], bank[4], bank[5], active, last)
+            resonate(f, o, m, mode_rows(bank), active, last)
         i += m
-        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
-            meta[0] = flush_silent(bank[4], bank[5], active, floor)
+        if active > 0 and floor > 0.0 and (start + i) % FLUSH_PERIOD == 0:
+            meta[ACTIVE] = flush_silent(bank[4], bank[5], active, floor)
+
+
+class MixedRows(NamedTuple):
+    """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
+    y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
+    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all, 1 in the
+    decay-factor form] and the force sample before the block."""
+
+    wide_bank: np.ndarray
+    wide_meta: np.ndarray
+    narrow_coef: np.ndarray
+    narrow_state: np.ndarray
+    narrow_meta: np.ndarray
+    narrow_last: np.ndarray
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def mixed_step(
-    force, out, start, n, wide_bank, wide_meta, coef, state, narrow_meta, floor, last, narrow_last
-):
-    """One sub-block of a bank split by precision (MixedSplit): the float64 modes by
-    :func:`bank_step` (rows c1, c2, g, d, y1, y2) write out[:n], the float32 delta-form
-    modes (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
+def mixed_step(force, out, start, n, rows, floor, last):
+    """One sub-block of a bank split by precision (``rows``: MixedRows): the float64 modes
+    by :func:`bank_step` write out[:n], the float32 delta-form modes
+    (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
     fp = last[0]
-    if wide_meta[2] > 0:
-        bank_step(force, out, start, n, wide_bank, wide_meta, floor, last)
+    if rows.wide_meta[ALLOWED] > 0:
+        bank_step(force, out, start, n, rows.wide_bank, rows.wide_meta, floor, last)
     else:
         for i in range(n):
             out[i] = 0.0
-    narrow_last[0] = fp
-    delta_step(force, out, start, n, coef, state, narrow_meta, floor, narrow_last, FLUSH_PERIOD)
+    rows.narrow_last[0] = fp
+    delta_step(
+        force, out, start, n, rows.narrow_coef, rows.narrow_state, rows.narrow_meta, floor,
+        rows.narrow_last, FLUSH_PERIOD,
+    )  # fmt: skip
     last[0] = force[n - 1]
 
 
+def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
+    """Rows (c1, c2, s, d / g) = (2 R cos theta, R^2, R sin theta, :func:`direct_ratio`) per
+    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs: the one design of every modal
+    resonator (:func:`ugens.modal_retune.pole_rows`, which ModalBank also calls with its
+    scales). Modes at or above Nyquist get zero coefficients and gain (silent)."""
+    freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
+    rows, sin2, inv = np.empty((4, freqs.size)), np.empty(freqs.size), np.empty(freqs.size)
+    decays = np.ascontiguousarray(decays, dtype=np.float64)
+    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, rows, sin2, inv)
+    return rows
+
+
 def design(frequencies, decays, sample_rate):
-    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64.
+    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64 (:func:`mode_poles`).
 
     Modes at or above Nyquist get zero coefficients and gain (silent).
     """
-    R = np.exp(-decays / sample_rate)
-    theta = 2.0 * np.pi * frequencies / sample_rate
-    ok = frequencies < sample_rate / 2
-    c1 = np.where(ok, 2.0 * R * np.cos(theta), 0.0)
-    c2 = np.where(ok, R * R, 0.0)
-    s = np.where(ok, R * np.sin(theta), 0.0)
+    c1, c2, s, _ = mode_poles(frequencies, decays, sample_rate)
     return c1, c2, s
 
 
@@ -324,29 +377,17 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     frequencies of about 0.5 theta^2 / 12 of a mode's static response (0.03 % at 1 kHz,
     3 % at 8 kHz, at 48 kHz).
     """
-    freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
-    poles = np.empty((4, freqs.size))
-    sin2, inv = np.empty(freqs.size), np.empty(freqs.size)
-    decays = np.ascontiguousarray(decays, dtype=np.float64)
-    pole_rows(freqs, decays, 1.0, 1.0, float(sample_rate), fit == "band", TOP_BAND_ROWS, poles, sin2, inv)
-    return poles[3]
+    return mode_poles(frequencies, decays, sample_rate, fit)[3]
 
 
 class MixedSplit(NamedTuple):
     """A ModalBank's modes split by precision (``precision = "mixed"``): internal indices
-    of the float64 modes (``wide``) with their own bank rows (c1, c2, g, d, y1, y2) and
-    meta, and of the float32 modes (``narrow``) with delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g, their meta [active, all, decay-factor form] and the force sample
-    before the block."""
+    of the float64 modes (``wide``) and of the float32 modes (``narrow``), and their rows
+    (MixedRows)."""
 
     wide: np.ndarray
-    wide_bank: np.ndarray
-    wide_meta: np.ndarray
     narrow: np.ndarray
-    narrow_coef: np.ndarray
-    narrow_state: np.ndarray
-    narrow_meta: np.ndarray
-    narrow_last: np.ndarray
+    rows: MixedRows
 
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
@@ -361,16 +402,15 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
     coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], by_factor)
     nw, nn = wide.size, narrow.size
-    return MixedSplit(
-        wide,
+    rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
-        np.array([nw, 0, nw], dtype=np.int64),
-        narrow,
+        np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
         np.array([nn, nn, by_factor], dtype=np.int64),
         np.zeros(1),
     )
+    return MixedSplit(wide, narrow, rows)
 
 
 #: The ``level`` of a ugen whose own modal resonator is heard (Friction, HuntCrossleyImpact).
@@ -458,6 +498,7 @@ class ModalBank(ModelParams, UGen):
     """
 
     type_name = "ModalBank"
+    _held = False  #: while set, set_param only stores values: more keys of one change follow
     inputs = ("input", "size")
     optional_inputs = ("size",)
     accepts_location = True
@@ -537,7 +578,7 @@ class ModalBank(ModelParams, UGen):
             self._level_gain = self.level_gain()
             self.order = np.argsort(model.decays, kind="stable")
             self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
-            self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
+            self._gain_rows = {None: None}  # (location, gain) -> design, for the poles at key None
             self._location_rows = {}  # location -> the model's gains there, internal order
             self._mode_rows = model.frequencies[self.order], model.decays[self.order]  # Hz, 1/s
             self._kept_basis = basis
@@ -548,7 +589,7 @@ class ModalBank(ModelParams, UGen):
         self.delta = np.zeros((4, k))
         self.target = np.zeros((4, k))
         self.last = np.zeros(1)  # the force sample before the next sub-block
-        self.meta = np.zeros(3, dtype=np.int64)  # [active modes, ramp samples left, active cap]
+        self.meta = np.zeros(len(BankMeta._fields), dtype=np.int64)  # a BankMeta
         self.coef[:] = self._design()
         self.target[:] = self.coef
         self._floor = float(self.values["floor"])
@@ -557,15 +598,14 @@ class ModalBank(ModelParams, UGen):
         self._mixed = self.values["precision"] == "mixed"
         self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
         if self._mixed:
-            e = split_by_precision(np.zeros((6, 1)), self.sample_rate)
+            example = split_by_precision(np.zeros((6, 1)), self.sample_rate).rows
             self._mixed_step = specialise(
-                mixed_step, self.out, self.out, 0, 0, e.wide_bank, e.wide_meta, e.narrow_coef, e.narrow_state,
-                e.narrow_meta, self._floor, self.last, e.narrow_last,
-            )  # fmt: skip
+                mixed_step, self.out, self.out, 0, 0, example, self._floor, self.last
+            )
         self.budgeted = False
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
-        self._compact_meta = np.zeros(3, dtype=np.int64)  # [active, gathered, width] (modal_budget)
+        self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
         self._refresh_design_cache()
         self._step = specialise(
             bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor, self.last
@@ -595,21 +635,22 @@ class ModalBank(ModelParams, UGen):
 
     def _design(self) -> np.ndarray:
         """Target (c1, c2, g, d) from the current parameter values, in internal mode order:
-        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain."""
+        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain. Kept
+        per (location, gain) for the current poles: the array is shared, never changed."""
         poles, _ = self._pole_design()
         v = self.values
         key = (v["location"], v["gain"])
-        gains = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
-        if gains is None:
+        out = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
+        if out is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self._location_row(v["location"])
-            self._gain_rows[key] = gains
-        out = np.empty_like(poles)
-        out[:2] = poles[:2]
-        out[2] = gains
-        out[3] = gains * poles[3]
+            out = np.empty_like(poles)
+            out[:2] = poles[:2]
+            out[2] = gains
+            out[3] = gains * poles[3]
+            self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
     def _location_row(self, location: Any) -> np.ndarray:
@@ -626,19 +667,19 @@ class ModalBank(ModelParams, UGen):
         """Move the state of a budget's compact bank or of a precision split back into
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
         or state."""
-        if self._compact_meta[1]:
-            self._settle_compact(self._tables, self._slot)
+        if self._compact_meta[GATHERED]:
+            self._settle_compact(self._tables_handle, self._slot)
         split = self._split
         if split is None:
             return
         self._split = None
-        self.y[:, split.wide] = split.wide_bank[4:]
-        self.y[:, split.narrow] = unscaled_state(split.narrow_state, self.bank[2, split.narrow])
-        self.meta[0] = self.meta[2]
+        self.y[:, split.wide] = split.rows.wide_bank[4:]
+        self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
+        self.meta[ACTIVE] = self.meta[ALLOWED]
 
     def _reset(self) -> None:
         self._split = None
-        self._compact_meta[1] = 0
+        self._compact_meta[GATHERED] = 0
         if self._tables is not None:
             self._kept_mask[:] = True
             self._faded[:] = False
@@ -650,7 +691,7 @@ class ModalBank(ModelParams, UGen):
         self.y[:] = 0.0
         self.last[0] = 0.0
         self.coef[:] = self.target
-        self.meta[:] = (0, 0, self.model.n_modes)
+        self.meta[:] = BankMeta(0, 0, self.model.n_modes)
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
@@ -690,12 +731,14 @@ class ModalBank(ModelParams, UGen):
         )
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
+        if self._held:  # more keys of the same change follow (:meth:`_set_together`)
+            return
         self._settle()
         before = self._poles
         self._refresh_design_cache()
         if self._tables is not None:  # modes a budget silenced follow ramps virtually:
             out = ~self._kept_mask
-            self.coef[:, out] = self.target[:, out] - self.meta[1] * self.delta[:, out]
+            self.coef[:, out] = self.target[:, out] - self.meta[RAMP_LEFT] * self.delta[:, out]
         self.target[:] = self._fresh
         ramp = self.ramp_samples()
         if jump or ramp < 1:
@@ -703,11 +746,11 @@ class ModalBank(ModelParams, UGen):
                 self._jump_poles(before[1])
             else:
                 self.coef[:] = self.target
-            self.meta[1] = 0
+            self.meta[RAMP_LEFT] = 0
         else:
             self.delta[:] = (self.target - self.coef) / ramp
-            self.meta[1] = ramp
-        self._ramping = self.meta[1] > 0
+            self.meta[RAMP_LEFT] = ramp
+        self._ramping = self.meta[RAMP_LEFT] > 0
 
     def _jump_poles(self, old_poles: np.ndarray) -> None:
         """A jump of freq_scale or decay_scale: each ringing mode keeps its amplitude and
@@ -754,11 +797,38 @@ class ModalBank(ModelParams, UGen):
                 k += 1
             else:
                 frame, key, value, jump, ramp = pending.popleft()
-                self.set_param(key, value, jump=jump, ramp=ramp)
+                changes = [(key, value)]
+                while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
+                    changes.append(pending.popleft()[1:3])
+                self._set_together(changes, jump, ramp)
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
         for at, correction in kinks:
             out[at] += correction
+
+    def _set_together(self, changes: list[tuple[str, Any]], jump: bool, ramp: float | None) -> None:
+        """Parameter changes for one frame (the keys of one ``set`` event) with one redesign:
+        each value is checked and set in turn, the bank reacts once, to the last. A jump (or
+        a change without a ramp) of freq_scale or decay_scale retunes the ringing modes with
+        the gains of the moment, so such changes apply key by key, as the compiled program
+        applies them (and so do changes of ``smooth``, which times the ramps of the keys after it)."""
+        self._event_ramp = ramp
+        try:
+            steps = self.ramp_samples()
+        finally:
+            self._event_ramp = None
+        keys = {key for key, _ in changes}
+        if "smooth" in keys or ((jump or steps < 1) and keys & {"freq_scale", "decay_scale"}):
+            for key, value in changes:
+                self.set_param(key, value, jump=jump, ramp=ramp)
+            return
+        self._held = True
+        try:
+            for key, value in changes[:-1]:
+                self.set_param(key, value, jump=jump, ramp=ramp)
+        finally:
+            self._held = False
+        self.set_param(*changes[-1], jump=jump, ramp=ramp)
 
     def _size_changes(self, n: int, offset: int = 0) -> np.ndarray:
         """Offsets from ``offset`` in this block where the size input differs from the size
@@ -788,7 +858,7 @@ class ModalBank(ModelParams, UGen):
         old_poles = self._pole_design()[0]
         self._size = size
         self._refresh_design_cache()
-        self.meta[1] = 0
+        self.meta[RAMP_LEFT] = 0
         self._ramping = False
         y1, y2 = self.y
         fp, rate = float(self.last[0]), float(self.sample_rate)
@@ -806,11 +876,12 @@ class ModalBank(ModelParams, UGen):
         elif self._ramping:
             self._settle()
             y, meta = self.y, self.meta
-            meta[0] = meta[2]
-            meta[1] = resonate_ramp(
-                inp, out, n, self.coef, y[0], y[1], self.delta, self.target, meta[1], meta[0], self.last
+            meta[ACTIVE] = meta[ALLOWED]
+            ramp = Ramp(self.coef, self.delta, self.target)
+            meta[RAMP_LEFT] = resonate_ramp(
+                inp, out, n, ramp, y[0], y[1], meta[RAMP_LEFT], meta[ACTIVE], self.last
             )
-            self._ramping = meta[1] > 0
+            self._ramping = meta[RAMP_LEFT] > 0
         else:
             self._settle()
             self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
@@ -819,18 +890,18 @@ class ModalBank(ModelParams, UGen):
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
         bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
         excitation)."""
+        if not self._ramping:
+            self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
+            return
         compact, meta = self._compact_of(self._tables, self._slot), self._compact_meta
-        if self._ramping:
-            meta[0] = meta[2]
-            self.meta[1] = resonate_ramp(
-                inp, out, n, compact[:4], compact[4], compact[5], compact[6:10], compact[10:],
-                self.meta[1], meta[2], self.last,
-            )  # fmt: skip
-            self._ramping = self.meta[1] > 0
-            self._hear(inp, n, self._heard, start)
-        else:
-            self._kept_step(inp, out, start, n, compact[:6], meta, self._floor, self.last, self._heard)
-        self.meta[0] = min(meta[0], self.meta[2])
+        meta[ACTIVE] = meta[WIDTH]
+        ramp = Ramp(compact[:4], compact[6:10], compact[10:])
+        self.meta[RAMP_LEFT] = resonate_ramp(
+            inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
+        )
+        self._ramping = self.meta[RAMP_LEFT] > 0
+        self._hear(inp, n, self._heard, start)
+        self.meta[ACTIVE] = min(meta[ACTIVE], self.meta[ALLOWED])
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -838,10 +909,7 @@ class ModalBank(ModelParams, UGen):
         split = self._split
         if split is None:
             split = self._split = split_by_precision(self.bank, self.sample_rate)
-        self._mixed_step(
-            inp, out, start, n, split.wide_bank, split.wide_meta, split.narrow_coef, split.narrow_state,
-            split.narrow_meta, self._floor, self.last, split.narrow_last,
-        )  # fmt: skip
+        self._mixed_step(inp, out, start, n, split.rows, self._floor, self.last)
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
@@ -878,7 +946,7 @@ class ModalBank(ModelParams, UGen):
         cut = slice(first, first + k)
         self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
         self._kept_mask[:], self._faded[:] = True, False
-        self.meta[2] = k
+        self.meta[ALLOWED] = k
         self._mode_rows_view = tables.rows[:, cut]
         freqs = self.model.frequencies[self.order]
         self._mode_rows_view[WEIGHT] = a_weighting_power(freqs) if weighting == "A" else 1.0
@@ -895,13 +963,13 @@ class ModalBank(ModelParams, UGen):
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
         from ugens import modal_kept  # (not at the top: it imports this module)
 
+        self._tables_handle = handle(tables)
         self._compact_of = specialise(compact_bank, tables, slot)
-        self._settle_compact = specialise(settle_compact, tables, slot)
+        self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
         self._hear = modal_kept.hear
-        self._kept_step = specialise(
-            modal_kept.kept_step, self.out, self.out, 0, 0, np.zeros((6, 8)), self._compact_meta, self._floor,
-            self.last, self._heard,
-        )  # fmt: skip
+        self._kept_span = specialise(
+            modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
+        )
         self._refresh_forcing()
 
     def anytime_spectrum(self) -> bool:
@@ -948,4 +1016,4 @@ class ModalBank(ModelParams, UGen):
 
     def _state_restored(self) -> None:
         self._split = None
-        self._ramping = self.meta[1] > 0
+        self._ramping = self.meta[RAMP_LEFT] > 0

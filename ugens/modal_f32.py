@@ -27,6 +27,8 @@ with g = 0 (or below MIN_GAIN) stay in float64.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -133,7 +135,7 @@ LANES = 32
 ROW_SPREAD = 512
 
 
-def _float32_rows(rows: int, width: int) -> np.ndarray:
+def float32_rows(rows: int, width: int) -> np.ndarray:
     """Zeros (rows, stride) in float32, C-contiguous, starting on a 64-byte cache-line
     boundary, with stride >= width floats such that rows start ROW_SPREAD bytes apart
     modulo 4 KiB (``width`` a multiple of LANES: every row starts on a line, and vector
@@ -148,12 +150,12 @@ def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.nd
     """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
     d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
     (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
-    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`_float32_rows`).
+    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
     A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
     and g = d = 0, so it adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
-    rows = _float32_rows(6, width)
+    rows = float32_rows(6, width)
     coef, state = rows[:4], rows[4:]
     coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
     coef[0, n:] = 1.0
@@ -168,19 +170,40 @@ def unscaled_state(state: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.nda
     return y, y - dy
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, c0, b2, g, d, y, dy, active, last, by_factor):
-    """Add the float32 delta-form modes [0, active) over force[:n] to out[:n]; with
-    ``by_factor`` in the decay-factor form (b2 holds R^2, :func:`narrow_rows`).
+class DeltaRows(NamedTuple):
+    """Float32 delta-form modes as :func:`resonate_delta` reads them, one entry per mode:
+    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 in the decay-factor form), input
+    gain g and direct gain d, and the state scaled by the input gain, y = y[n-1] / g,
+    dy = Delta[n-1] / g."""
 
-    Arrays c0, b2, g, d (coefficients) and y, dy (state y[n-1] / g, Delta[n-1] / g: scaled
-    by the input gain, the force enters with an add instead of a multiply and g weighs
-    the output sum with an FMA) are float32; force and out float64. last[0]: the force
+    c0: np.ndarray
+    b2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def delta_rows(coef, state):
+    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y, Delta) / g."""
+    return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_delta(force, out, n, rows, active, last, by_factor):
+    """Add the float32 delta-form modes [0, active) of ``rows`` over force[:n] to out[:n];
+    with ``by_factor`` in the decay-factor form (b2 holds R^2, :func:`narrow_rows`).
+
+    ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
+    enters with an add instead of a multiply and g weighs the output sum with an FMA);
+    force and out float64. last[0]: the force
     sample before force[0], left at force[n-1]. The direct term sum(d) F[n] is added as
     in ugens.modal.resonate. Four samples per pass over the modes, as there. The modes run
     up to the next multiple of LANES within the rows (:func:`narrow_rows`' padding, or
     modes silenced by the flush: exact zeros that stay zero without force, and with force
     every mode is active)."""
+    c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
     direct = np.float32(0.0)
     for k in range(active):
@@ -272,20 +295,7 @@ def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_perio
         if active == 0:
             last[0] = 0.0
         else:
-            resonate_delta(
-                f,
-                out[i : i + m],
-                m,
-                coef[0],
-                coef[1],
-                coef[2],
-                coef[3],
-                state[0],
-                state[1],
-                active,
-                last,
-                meta[2] == 1,
-            )
+            resonate_delta(f, out[i : i + m], m, delta_rows(coef, state), active, last, meta[2] == 1)
         i += m
         if active > 0 and (start + i) % flush_period == 0:
             meta[0] = flush_silent_delta(state[0], state[1], coef[2], active, floor)

@@ -319,6 +319,7 @@ class Roll(GivingSurface, Turning, NeedleContact):
             v = self.values
             roll_over(
                 self.out,
+                self._forces,
                 n,
                 self.surface,
                 self._scratch,
@@ -387,13 +388,24 @@ def rolling_state(state):
     return RollingState(state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7])
 
 
+class RollingSetup(NamedTuple):
+    """The arrays :func:`rolling_filter` reads but does not change: the surface profile
+    ``prof`` (heights, m), ``coef`` = [b0, b1, b2, a1, a2] of the optional contact low-pass
+    (DF2T, states s1, s2), ``cfg`` holding a RollingConfig and ``ball``, the unevenness
+    table (ball_unevenness)."""
+
+    prof: np.ndarray
+    coef: np.ndarray
+    cfg: np.ndarray
+    ball: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, cfg, ball):
+def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
 
-    cfg holds a RollingConfig, state a RollingState; coef = [b0, b1, b2, a1, a2] of the
-    optional contact low-pass (DF2T, states s1, s2); ball: the unevenness table
-    (ball_unevenness).
+    Forces (N), speeds (m/s) and the optional surface input per sample; ``state`` holds a
+    RollingState; ``setup``: a RollingSetup.
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -403,6 +415,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, prof, state, coef, c
     with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
     """
+    prof, coef, cfg, ball = setup
     config = rolling_config(cfg)
     inv_dxfs = config.inv_dxfs
     mass = config.mass
@@ -619,6 +632,7 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         if v["contact_cutoff"] > 0:
             fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
             design_biquad(0, fc, 1.0 / math.sqrt(2.0), 1.0 / self.sample_rate, self.coef)
+        self._setup = RollingSetup(self.prof, self.coef, self.cfg, self.ball)
         self._kernel = specialise(
             rolling_filter,
             self.out,
@@ -627,11 +641,8 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self._forces,
             self._speeds,
             self.input_buffer("input"),
-            self.prof,
             self.state,
-            self.coef,
-            self.cfg,
-            self.ball,
+            self._setup,
         )
         self._prepare_surface()
 
@@ -650,11 +661,8 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             forces,
             speeds,
             self.input_buffer("input"),
-            self.prof,
             self.state,
-            self.coef,
-            self.cfg,
-            self.ball,
+            self._setup,
         )
         self.press(self.extra["contact"], n)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -25,10 +25,19 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import slot
 from ugens.kernels import FASTMATH
 
-# float state layout: read position (file samples), playing flag
-_POS, _PLAYING = range(2)
+
+class PlayState(NamedTuple):
+    """The player's state, stored in this order in the float64 array ``st`` (read through the
+    slots below, cells.slot)."""
+
+    pos: float  #: read position (file samples)
+    playing: float  #: 1.0 while playing
+
+
+_POS, _PLAYING = (slot(PlayState, key) for key in PlayState._fields)
 
 
 def load_audio(path: str, where: str) -> tuple[np.ndarray, float]:
@@ -116,7 +125,7 @@ class Sampler(UGen):
     def _prepare(self) -> None:
         where = f"nodes.{self.name}.file"
         self.data, self.file_rate = load_audio(self.values["file"], where)
-        self.st = np.zeros(2)
+        self.st = np.zeros(len(PlayState._fields))
         self.rate = self.smoothed("rate")
         self._rates = Control(self.rate, self.max_block)
         self.step = self.file_rate / self.sample_rate

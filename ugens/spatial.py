@@ -54,6 +54,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import slot
 from ugens.kernels import FASTMATH
 from ugens.pitchshift import MIN_DELAY, hermite_read
 
@@ -98,23 +99,58 @@ class SpatialData(NamedTuple):
     """The arrays :func:`spatialise` updates."""
 
     ring: np.ndarray  #: the input's delay line (a power of two long)
-    ist: np.ndarray  #: int64 integer state (_WRITE, _PHASE)
-    st: np.ndarray  #: float state (layout below)
+    ist: np.ndarray  #: int64 integer state, a SpatialCounters
+    st: np.ndarray  #: float state: a SpatialState, then three rows of RampedValues
 
 
-# float state layout: air low-pass (left, right), head shadow (left x1, y1, right x1, y1),
-# the position at the last control point and for how many control points it has not
-# moved; then three rows of the ramped values: their
-# current values, their per-sample steps, and the targets of the ramps being set
-_LP_L, _LP_R, _HX_L, _HY_L, _HX_R, _HY_R, _LAST_X, _LAST_Y, _LAST_Z, _STILL = range(10)
-# ramped values (offsets in a row): ear gains, ear delays (samples), air low-pass
-# coefficient, head-shadow numerator coefficients (b0, b1) of each ear
-_G_L, _G_R, _D_L, _D_R, _K, _BL0, _BL1, _BR0, _BR1 = range(9)
-_VALUES = 9
-_NOW, _STEP, _TARGET = 10, 10 + _VALUES, 10 + 2 * _VALUES  # where each row starts
-_STATE_SIZE = 10 + 3 * _VALUES
-# integer state layout: write slot, samples left to the next control point
-_WRITE, _PHASE = range(2)
+class SpatialState(NamedTuple):
+    """The first fields of the float state ``st``, in this order; the kernels read and write
+    them in place through the slots below (cells.slot)."""
+
+    lp_l: float  #: air low-pass, left
+    lp_r: float  #: air low-pass, right
+    hx_l: float  #: head shadow, left: last input
+    hy_l: float  #: head shadow, left: last output
+    hx_r: float  #: head shadow, right: last input
+    hy_r: float  #: head shadow, right: last output
+    last_x: float  #: the source's position at the last control point (m; NaN: none yet)
+    last_y: float
+    last_z: float
+    still: float  #: control points since the source last moved
+
+
+class RampedValues(NamedTuple):
+    """The values ramped between control points, one row of the float state each: their
+    current values, their per-sample steps, and the targets of the ramps being set."""
+
+    g_l: float  #: ear gains
+    g_r: float
+    d_l: float  #: ear delays (samples)
+    d_r: float
+    k: float  #: air low-pass coefficient
+    bl0: float  #: head-shadow numerator coefficients (b0, b1) of each ear
+    bl1: float
+    br0: float
+    br1: float
+
+
+class SpatialCounters(NamedTuple):
+    """The int64 state ``ist``, in this order."""
+
+    write: int  #: the ring's write slot
+    phase: int  #: samples left to the next control point
+
+
+_LP_L, _LP_R, _HX_L, _HY_L, _HX_R, _HY_R, _LAST_X, _LAST_Y, _LAST_Z, _STILL = (
+    slot(SpatialState, key) for key in SpatialState._fields
+)
+_G_L, _G_R, _D_L, _D_R, _K, _BL0, _BL1, _BR0, _BR1 = (slot(RampedValues, key) for key in RampedValues._fields)
+_VALUES = len(RampedValues._fields)
+_NOW, _STEP, _TARGET = (
+    len(SpatialState._fields) + row * _VALUES for row in range(3)
+)  # where each row starts
+_STATE_SIZE = len(SpatialState._fields) + 3 * _VALUES
+_WRITE, _PHASE = (slot(SpatialCounters, key) for key in SpatialCounters._fields)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -351,7 +387,7 @@ class Spatialiser(UGen):
         v, fs = self.values, self.sample_rate
         longest = v["max_distance"] / v["c"] * fs + v["head_radius"] / v["c"] * fs * 3.0 + 8
         self.ring = np.zeros(1 << int(math.ceil(math.log2(longest))))
-        self.ist = np.zeros(2, dtype=np.int64)
+        self.ist = np.zeros(len(SpatialCounters._fields), dtype=np.int64)
         self.st = np.zeros(_STATE_SIZE)
         self.par = np.array(
             SpatialParams(

@@ -39,7 +39,7 @@ from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine
+from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine, slot
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -49,13 +49,36 @@ ENERGY_LAMBDA = 1.45
 #: Clip range of the exponential energy draw (multiples of the crushing energy).
 ENERGY_CLIP = (0.1, 10.0)
 
-# layout of the float state st[]
-_ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _V, _NEXT = range(8)
-# layout of the int state cnt[]: micro-impacts so far, logged rows
-_EVENTS, _LOGGED = range(2)
 _CRUMPLE, _BREAK, _BREAK_SDT = 0, 1, 2
 #: Break's energy scalings: SDT's (events shrink with the energy left) or full-size events.
 BREAK_SCALINGS = ("sdt", "full")
+
+
+class ImpactState(NamedTuple):
+    """The controllers' float state, stored in this order in the float64 array ``st``; the
+    kernels read and write its fields in place through the slots below (cells.slot)."""
+
+    acc: float  #: integrated event rate since the last event (the Poisson clock, :func:`next_event`)
+    target: float  #: the Exp(1) threshold of the next event
+    left: float  #: energy left to crumple or break (J)
+    budget: float  #: the run's energy (J; 0: no budget)
+    running: float  #: 1.0 while events are emitted
+    size: float  #: the fragment size held on the size output
+    speed: float  #: Bounce: the next impact's speed (m/s)
+    next_impact: float  #: Bounce: the next impact's fractional sample
+
+
+class Counters(NamedTuple):
+    """The controllers' counters, stored in this order in the int64 array ``cnt``."""
+
+    events: int  #: micro-impacts since the render started
+    logged: int  #: rows of the event log filled
+
+
+_ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _SPEED, _NEXT = (
+    slot(ImpactState, key) for key in ImpactState._fields
+)
+_EVENTS, _LOGGED = (slot(Counters, key) for key in Counters._fields)
 
 
 class GrainSettings(NamedTuple):
@@ -92,8 +115,8 @@ class BounceSettings(NamedTuple):
 class ImpactData(NamedTuple):
     """What the controllers' kernels update besides the pulse table."""
 
-    st: np.ndarray  #: float state (_ACC ... _NEXT)
-    cnt: np.ndarray  #: int64 counters (_EVENTS, _LOGGED)
+    st: np.ndarray  #: float state, an ImpactState
+    cnt: np.ndarray  #: int64 counters, a Counters
     rng: np.ndarray  #: splitmix64 state, one uint64
     count: np.ndarray  #: pulses in the table, one int64
     log: np.ndarray  #: (rows, 4) event log: t0 (samples), energy (J), size, impulse (N s)
@@ -111,9 +134,10 @@ def u01(rng):
 def next_event(st, rng, rate, pos):
     """Exact Poisson event times at ``rate`` events per sample.
 
-    st[_ACC] accumulates the integrated rate, st[_TARGET] is the Exp(1) threshold of the
-    next event. From position pos in [0, 1) of the current sample, returns the position of
-    the next event in this sample, or -1 if there is none (the rate is accumulated)."""
+    st holds an ImpactState (of which ``acc``, the integrated rate, and ``target``, the
+    Exp(1) threshold of the next event, are read and written here). From position pos in
+    [0, 1) of the current sample, returns the position of the next event in this sample,
+    or -1 if there is none (the rate is accumulated)."""
     if st[_TARGET] <= 0.0:
         st[_TARGET] = -math.log(1.0 - u01(rng))
     need = st[_TARGET] - st[_ACC]
@@ -224,8 +248,9 @@ def micro_impacts(out, size_out, start, n, inputs, opt, d, pulses):
 def bounces(out, size_out, start, n, opt, d, pulses):
     """Bounce kernel: ballistic flights between impacts; returns the pulse table.
 
-    opt: a BounceSettings, d: ImpactData. st[_NEXT]: fractional sample of the next impact,
-    st[_V]: its impact speed (m/s). An impact at speed v leaves at v' = v e (1 - irregularity U),
+    opt: a BounceSettings, d: ImpactData (its ImpactState's ``next_impact``: the fractional
+    sample of the next impact, ``speed``: its impact speed, m/s). An impact at speed v leaves
+    at v' = v e (1 - irregularity U),
     pushes J = m (v + v'), and the next impact follows after the flight time 2 v' / g;
     bouncing stops once v' < min_speed.
     """
@@ -239,7 +264,7 @@ def bounces(out, size_out, start, n, opt, d, pulses):
         size_out[i] = st[_SIZE]
         while st[_RUNNING] != 0.0 and st[_NEXT] < idx + 1:
             t0 = st[_NEXT]
-            v = st[_V]
+            v = st[_SPEED]
             u = u01(rng)
             v_out = v * e * (1.0 - irregularity * u)
             impulse = mass * (v + v_out)
@@ -253,7 +278,7 @@ def bounces(out, size_out, start, n, opt, d, pulses):
             if v_out < min_speed or v_out <= 0.0:
                 st[_RUNNING] = 0.0
             else:
-                st[_V] = v_out
+                st[_SPEED] = v_out
                 st[_NEXT] = t0 + 2.0 * v_out / g * fs
     d.count[0] = count
     return pulses
@@ -312,8 +337,8 @@ class _MicroImpacts(PulseSource):
 
     def _prepare(self) -> None:
         super()._prepare()
-        self.st = np.zeros(8)
-        self.cnt = np.zeros(2, dtype=np.int64)
+        self.st = np.zeros(len(ImpactState._fields))
+        self.cnt = np.zeros(len(Counters._fields), dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
         self.log = np.zeros((int(self.log_capacity), 4))
         self._constant: dict[int, float] = {}
@@ -638,7 +663,7 @@ class Bounce(_MicroImpacts):
             speed = math.sqrt(2.0 * g * height)
             sample_time += math.sqrt(2.0 * height / g) * self.sample_rate
         self.st[_NEXT] = sample_time
-        self.st[_V] = speed
+        self.st[_SPEED] = speed
         self.st[_RUNNING] = 1.0
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:

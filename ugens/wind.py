@@ -37,7 +37,7 @@ SDT's counterparts: ``windflow~``, ``windkarman~``, ``windcavity~`` (Baldan et a
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -46,6 +46,7 @@ from jassy.jit import specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens.cells import slot
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -56,10 +57,37 @@ REFERENCE_SPEED = 10.0
 END_CORRECTION = 0.6133 + 0.8216
 _BANDPASS = 2
 
-# parameter vector layout
-_FS, _ST, _Q, _LEVEL, _GUST, _GUST_POLE, _GUST_NORM, _RESONATOR, _RES_GAIN = range(9)
-# float state layout: band-pass DF2T state, last centre frequency, gust, resonator state
-_S1, _S2, _LAST_F, _G, _R1, _R2 = range(6)
+
+class WindParams(NamedTuple):
+    """Settings of :func:`flow_noise`, stored in this order in the float64 array ``par`` (the
+    kernel reads them through the slots below, cells.slot)."""
+
+    fs: float  #: sample rate (Hz)
+    strouhal: float  #: Strouhal number St: the band-pass centre is St v / size
+    q: float  #: the band-pass's Q
+    level: float  #: output level at REFERENCE_SPEED
+    gust: float  #: gustiness: relative speed fluctuation
+    gust_pole: float  #: pole of the gusts' one-pole low-pass
+    gust_norm: float  #: scale that gives the low-passed gust noise unit variance
+    resonator: float  #: 1.0 when the noise also drives the Helmholtz resonator's band-pass
+    res_gain: float  #: the resonator's gain, 1 / sqrt(b0 of its band-pass)
+
+
+class WindState(NamedTuple):
+    """State of :func:`flow_noise`, stored in this order in the float64 array ``st``."""
+
+    s1: float  #: band-pass DF2T state
+    s2: float
+    last_f: float  #: the band-pass's last centre frequency (Hz; < 0: redesign)
+    g: float  #: the gust's low-passed noise
+    r1: float  #: resonator DF2T state
+    r2: float
+
+
+_FS, _ST, _Q, _LEVEL, _GUST, _GUST_POLE, _GUST_NORM, _RESONATOR, _RES_GAIN = (
+    slot(WindParams, key) for key in WindParams._fields
+)
+_S1, _S2, _LAST_F, _G, _R1, _R2 = (slot(WindState, key) for key in WindState._fields)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -144,11 +172,11 @@ class _Flow(UGen):
         self._speeds = Control(self.speed, self.max_block)
         self._sizes = Control(self.size, self.max_block)
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.st = np.zeros(6)
+        self.st = np.zeros(len(WindState._fields))
         self.coef = np.zeros(5)
         self.res_coef = np.zeros(5)
         pole = math.exp(-1.0 / (self.values["gust_time"] * fs))
-        self.par = np.zeros(9)
+        self.par = np.zeros(len(WindParams._fields))
         self.par[_FS] = fs
         self.par[_GUST_POLE] = pole
         # one-pole output variance from uniform draws (variance 1/3): (1 - p) / (1 + p) / 3

@@ -169,7 +169,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     from patches.models import bell_model
     from ugens.impact import ImpactForce
     from ugens.mix import Gain
-    from ugens.modal import ModalBank, line_aligned_zeros, resonate
+    from ugens.modal import ModalBank, ModeRows, line_aligned_zeros, resonate
 
     model = bell_model(n_modes)
     places = ["soundbow", "lip", "waist", "shoulder"]
@@ -225,8 +225,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     def run_kernel():
         state = fresh_bank()
         last[0] = 0.0
-        c1, c2, g, d, y1, y2 = state
-        resonate(force, out, frames, c1, c2, g, d, y1, y2, state.shape[1], last)
+        resonate(force, out, frames, ModeRows(*state), state.shape[1], last)
 
     def run_kernel_blocks():
         state = fresh_bank()
@@ -272,7 +271,7 @@ def print_modal(rows: list[dict], graph: dict) -> None:
             f"{r['jassy'] / r['scipy_lfilter']:>8.0f}x {r['jassy_big_block'] / r['scipy_lfilter']:>13.0f}x"
         )
     print(
-        f'precision="mixed" (float32 delta form where the -60 dB bound allows) vs C float32 '
+        f'precision="mixed" (float32 where the -60 dB bound allows: delta or decay-factor form) vs C float32 '
         f"({rows[0]['c_note']})"
     )
     print(

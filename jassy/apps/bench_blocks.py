@@ -6,7 +6,7 @@ import numba as nb
 
 from jassy.jit import drop_stale_cache
 from ugens import modal
-from ugens.modal import resonate
+from ugens.modal import mode_rows, resonate
 
 drop_stale_cache(__file__, [modal])  # the cache holds a copy of resonate
 
@@ -18,4 +18,4 @@ def resonate_blocks(force, out, bank, block, last):
     k = bank.shape[1]
     for s in range(0, force.size, block):
         n = min(block, force.size - s)
-        resonate(force[s:], out[s:], n, bank[0], bank[1], bank[2], bank[3], bank[4], bank[5], k, last)
+        resonate(force[s:], out[s:], n, mode_rows(bank), k, last)

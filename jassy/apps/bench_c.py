@@ -95,14 +95,17 @@ def _line_aligned(values: np.ndarray) -> np.ndarray:
 
 def c_runner(fn: Callable, force: np.ndarray, c1, c2, g) -> Callable[[], None]:
     """A function that runs the compiled loop over ``force`` in one call (fresh state), on
-    float32 arrays that start on 64-byte cache lines, as jassy's float32 rows do."""
-    force32, c1f, c2f, gf = (_line_aligned(a) for a in (force, c1, c2, g))
+    float32 rows laid out as jassy's float32 bank (ugens.modal_f32.float32_rows: on cache
+    lines, 512 bytes apart modulo 4 KiB, so neither side meets 4K aliasing by chance)."""
+    from ugens.modal_f32 import float32_rows
+
+    n = len(c1)
+    rows = float32_rows(5, -(-n // 32) * 32)[:, :n]
+    rows[:3] = np.stack([c1, c2, g])
+    c1f, c2f, gf, y1, y2 = rows
+    force32 = _line_aligned(force)
     out = _line_aligned(np.zeros(force32.size))
-    y1, y2, last = (
-        _line_aligned(np.zeros(c1f.size)),
-        _line_aligned(np.zeros(c1f.size)),
-        np.zeros(1, np.float32),
-    )
+    last = np.zeros(1, np.float32)
     ptr = ctypes.POINTER(ctypes.c_float)
 
     def p(a):

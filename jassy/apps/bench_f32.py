@@ -50,18 +50,19 @@ def _kernel_runner(
     """ugens.modal_f32.resonate_delta over ``force`` in one call, fresh state, no direct term
     (the C loop has none), every mode in float32 in the form ModalBank chose, on rows laid
     out as ModalBank's (:func:`narrow_rows`)."""
-    from ugens.modal_f32 import delta_coefficients, narrow_rows, resonate_delta
+    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta
 
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros_like(g)
     coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros, by_factor)
     out, last = np.zeros(force.size), np.zeros(1)
+    rows = DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
     def run():
         state[:] = 0.0
         out[:] = 0.0
         last[0] = 0.0
-        resonate_delta(force, out, force.size, *coef, *state, g.size, last, by_factor)
+        resonate_delta(force, out, force.size, rows, g.size, last, by_factor)
 
     run.output = out
     return run
@@ -86,7 +87,7 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
         c1, c2, s = design(model.frequencies, model.decays, SAMPLE_RATE)
         g = s * model.gains[0] / SAMPLE_RATE
         split = split_by_precision(np.stack([c1, c2, g, 0 * g, 0 * g, 0 * g]), SAMPLE_RATE)
-        by_factor = bool(split.narrow_meta[2])
+        by_factor = bool(split.rows.narrow_meta[2])
         kernel = _kernel_runner(force, c1, c2, g, by_factor)
         bank = _bank_runner(model, force, 1024, "mixed")
         row = {

@@ -46,7 +46,7 @@ from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import HapticSafety, limit_force
-from jassy.jit import call_void, drop_stale_cache, void_pointer
+from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.program import (
     HEADER,
     KERNEL_MODULES,
@@ -66,9 +66,8 @@ from jassy.program import (
     why_not_compiled,
 )
 from jassy.safety import CEILING, METERED, copy_finite, float_from_bits, limit_metered, release_coefficient
-from jassy.scheduler import apply_frame, validate_event
-from jassy.tracks import walk_score
-from ugens.cells import MIN_PULSE_SAMPLES, pulse_sum
+from jassy.scheduler import apply_frame, prepare_score, ramp_seconds, validate_event
+from ugens.cells import MIN_PULSE_SAMPLES, pulse_amplitude
 from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
 from ugens.mix import Gain
@@ -140,6 +139,13 @@ PULSE_CAPACITY = 256
 MODAL_SLOTS = 16
 #: How far ahead of the device the feeder pushes score events (s).
 HORIZON = 0.25
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def program_table(control):
+    """The program's int64 table at control[PROGRAM] (its first slot: the node count)."""
+    count = _i64(control[PROGRAM], 1)[0]
+    return _i64(control[PROGRAM], 1 + count * RECORD)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -235,8 +241,7 @@ def _next_cut(control, queue_index, pos, stop, prog):
 def _next_cut_entry(control_address, queue_index, pos, stop):
     """:func:`_next_cut` for the program of the control slots at ``control_address``."""
     control = nb.carray(void_pointer(control_address), (CONTROL,), np.int64)
-    prog = _i64(control[PROGRAM], 1)
-    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
+    prog = program_table(control)
     return _next_cut(control, queue_index, pos, stop, prog)
 
 
@@ -330,11 +335,14 @@ def sub_block(control, prog, pos, end, dst, at):
     """Render the sub-block from frame ``pos`` into dst[:, at:] (float64 rows: audio, then
     haptic, each row contiguous) and return its end: apply the queued records due there
     (control[NEXT_CUT]), cut at the next block boundary or record frame (at most ``end``),
-    run the program, then the output stage (control[OUTPUT_STAGE], :func:`_output_stage`)."""
+    run the program, then the output stage (control[OUTPUT_STAGE], :func:`_output_stage`).
+    An empty queue is not called."""
     block = control[BLOCK]
     stop = min(end, (pos // block + 1) * block)
     for q in range(N_QUEUES):
-        stop = call_next_cut(control[NEXT_CUT], control.ctypes.data, q, pos, stop)
+        slot = QUEUES + QUEUE_SLOTS * q
+        if control[slot + 3] != control[slot + 2]:  # records queued (read != write)
+            stop = call_next_cut(control[NEXT_CUT], control.ctypes.data, q, pos, stop)
     m = stop - pos
     run_program(prog, pos, m)
     row_stride = dst.strides[0] // dst.itemsize
@@ -345,8 +353,7 @@ def sub_block(control, prog, pos, end, dst, at):
 @nb.njit(cache=True, nogil=True)
 def render_into(control, out, frames):
     """Render ``frames`` frames of the program into the interleaved float32 ``out``."""
-    prog = _i64(control[PROGRAM], 1)
-    prog = _i64(control[PROGRAM], 1 + prog[0] * RECORD)
+    prog = program_table(control)
     ch = control[CHANNELS]
     stage = _f64_rows(control[STAGE], control[N_ROWS], control[BLOCK])
     levels = _f64(control[LEVELS], max(ch, 1))
@@ -573,7 +580,7 @@ class EventQueue:
         self.records = np.zeros((capacity, EVENT))
         self.control = control
         self.slot = QUEUES + QUEUE_SLOTS * index
-        control[self.slot] = self.records.ctypes.data
+        control[self.slot] = address(self.records)
         control[self.slot + 1] = capacity
 
     @property
@@ -623,10 +630,7 @@ class EventRecords:
         base = self._bases[event.node]
         out: list[list[float]] = []
         if event.action == "set":
-            ramp = event.ramp
-            if ramp is not None:
-                end = apply_frame((event.time + ramp) * self.sample_rate)
-                ramp = (end - frame) / self.sample_rate
+            ramp = ramp_seconds(event, frame, self.sample_rate)
             for key, value in event.args.items():
                 out.extend(self._set_records(node, base, frame, key, value, event.jump, ramp))
                 self._pending = len(out)
@@ -639,7 +643,7 @@ class EventRecords:
                 self._pending = len(out)
         tau = event.args.get("duration") or node.values["duration"]
         samples = max(tau * self.sample_rate, MIN_PULSE_SAMPLES)
-        amp = event.args["impulse"] * self.sample_rate / pulse_sum(sample_time, samples)
+        amp = pulse_amplitude(float(event.args["impulse"]), float(self.sample_rate), sample_time, samples)
         out.append([frame, base, STRIKE, sample_time, samples, amp])
         return out
 
@@ -668,10 +672,18 @@ class ProgramRun(EventRecords):
     """A prepared graph's program with the control slots, event queues and output-stage
     arrays that :func:`sub_block` reads: the part the device callback and the offline
     engine share. ``params``: [ceiling, limiter release coefficient, max force (N), max
-    force step per sample (N)]; ``output``: the LIMIT_* bits."""
+    force step per sample (N)]; ``output``: the LIMIT_* bits; ``meter``: the limiter meter's
+    state array (jassy.safety.LimiterMeter.state) to update, a new one if None."""
 
     def __init__(
-        self, graph: Graph, sample_rate: float, block: int, params, output: int, queue_capacity: int = 4096
+        self,
+        graph: Graph,
+        sample_rate: float,
+        block: int,
+        params,
+        output: int,
+        queue_capacity: int = 4096,
+        meter: np.ndarray | None = None,
     ):
         super().__init__(graph, sample_rate)
         self.block = int(block)
@@ -684,7 +696,7 @@ class ProgramRun(EventRecords):
         self.stage = np.zeros((self.rows.size, self.block))
         self.limiter = np.ones(1)
         self.haptic_last = np.zeros(max(len(graph.haptic), 1))
-        self.meter = np.zeros(METERED + 1)
+        self.meter = np.zeros(METERED + 1) if meter is None else meter
         for slot, array in (
             (PROGRAM, self.program.table),
             (BUS, graph.bus),
@@ -695,7 +707,7 @@ class ProgramRun(EventRecords):
             (HAPTIC_LAST, self.haptic_last),
             (METER, self.meter),
         ):
-            control[slot] = array.ctypes.data
+            control[slot] = address(array)
         control[BUS_COUNT] = graph.bus.shape[0]
         control[N_ROWS] = self.rows.size
         control[N_AUDIO] = self.n_audio
@@ -760,7 +772,7 @@ class CallbackRenderer(ProgramRun):
             (MONITOR_INDEX, self.monitor_index),
             (LEVELS, self.levels),
         ):
-            control[slot] = array.ctypes.data
+            control[slot] = address(array)
         control[CHANNELS] = self.channels
         control[MONITOR_CAP] = mcap
         control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))
@@ -776,8 +788,7 @@ class CallbackRenderer(ProgramRun):
                 k = node.bank.shape[1]
                 self._staging[node.name] = (np.zeros((MODAL_SLOTS, 4, k)), [None] * MODAL_SLOTS)
         self._staged = 0
-        checked = [validate_event(graph, ev, f"score[{i}]") for i, ev in enumerate(score)]
-        self.score = walk_score(graph, sorted(checked, key=lambda ev: ev.time), self.sample_rate)
+        self.score = prepare_score(graph, score, self.sample_rate)
         self._next_score = 0
         self._lock = threading.Lock()
         self.late = 0  # posted events whose time had already been played

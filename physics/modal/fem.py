@@ -452,15 +452,22 @@ def degenerate_groups(frequencies: np.ndarray, rtol: float = 1e-6) -> list[np.nd
     return [np.array(g) for g in groups]
 
 
+def group_sizes(groups: list[np.ndarray], n_modes: int) -> np.ndarray:
+    """Per mode, the size of its group in ``groups`` (index arrays, as
+    :func:`degenerate_groups` returns them; 1 for a mode in none)."""
+    out = np.ones(n_modes, dtype=np.int64)
+    for g in groups:
+        out[g] = g.size
+    return out
+
+
 def multiplicities(frequencies: np.ndarray, rtol: float = 1e-6) -> np.ndarray:
     """Per mode (in any order), the size of its degenerate family (1: a simple mode), the
     families as :func:`degenerate_groups` finds them."""
     frequencies = np.asarray(frequencies)
     order = np.argsort(frequencies, kind="stable")
-    out = np.ones(frequencies.size, dtype=np.int64)
-    for g in degenerate_groups(frequencies[order], rtol):
-        out[order[g]] = g.size
-    return out
+    groups = [order[g] for g in degenerate_groups(frequencies[order], rtol)]
+    return group_sizes(groups, frequencies.size)
 
 
 def align_degenerate(un: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
@@ -589,7 +596,7 @@ def modes_from_mesh(
     groups = degenerate_groups(modes.frequencies)
     freqs = modes.frequencies
     gains = gains_from_displacements(align_degenerate(un, groups), freqs, radiation)
-    multiplicity = multiplicities(freqs)
+    multiplicity = group_sizes(groups, freqs.size)
     if f_max is not None:
         keep = freqs < f_max
         freqs, gains, multiplicity = freqs[keep], gains[:, keep], multiplicity[keep]

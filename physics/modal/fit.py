@@ -22,7 +22,12 @@ frequency resolutions, each on what the previous ones left:
    (wood, small objects, high frequencies), with no band filter in the way. Faster
    "modes" (T60 < 2.3 ms) are the contact itself: a noise burst fits as dozens of them,
    so they are left to the attack.
-5. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
+5. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
+   all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
+   around each group of overlapping poles, the other poles subtracted), then the stages
+   again on what the refined poles leave (a weak mode on a strong one's skirt, a cluster's
+   missed member), and the joint refinement again with what they found.
+6. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
    linear least squares at the full rate (closed-form Gram matrix), minus what the previous
    hits still ring; gain = |amplitude| at the onset.
 
@@ -52,7 +57,7 @@ import numpy as np
 
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
-from physics.modal import esprit
+from physics.modal import esprit, varpro
 from physics.modal.strikes import Hit, clipped_samples, detect_onsets, hits_of
 
 
@@ -317,6 +322,20 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     return out
 
 
+def _detect(poles: list[Pole], segments, rate, f_lo, f_hi, margin, work) -> list[Pole]:
+    """``poles`` plus those each stage finds in what the poles found so far leave."""
+    poles = list(poles)
+    for stage in STAGES:
+        z = _z(poles, rate) if poles else np.zeros(0, dtype=complex)
+        res = _residuals(segments, z, rate, stage.seconds)
+        finder = _band_poles if stage.spacing else _full_rate_poles
+        new = finder(stage, res, segments, rate, f_lo, f_hi, margin, work)
+        poles.extend(p for p in new if not _duplicate(p, poles))
+        if not stage.spacing:
+            work.step(stage.name)
+    return poles
+
+
 def _matched_snr(c: complex, z: complex, n: int, noise: float) -> float:
     """Energy of c z^m over m < n relative to the noise variance per sample."""
     r2 = abs(z) ** 2
@@ -394,6 +413,75 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
                 d_new = -math.log(abs(zk)) * brate
                 if abs(f_new - centres[b]) <= 0.55 * stage.spacing and f_lo <= f_new <= f_hi:
                     out[i] = Pole(float(f_new), float(d_new))
+    return out
+
+
+def _pole_groups(poles: list[Pole], bin_hz: float, max_size: int = 10) -> list[list[int]]:
+    """Indices of poles (sorted by frequency) whose resonances overlap: neighbours closer than
+    twice their half-widths plus two bins share a group; a group larger than ``max_size`` is
+    split at its widest gap (relative to the half-widths)."""
+    order = sorted(range(len(poles)), key=lambda i: poles[i].frequency)
+    hw = {i: max(varpro.half_width(poles[i].decay), bin_hz) for i in order}
+
+    def gap(i, j):
+        return (poles[j].frequency - poles[i].frequency) / (hw[i] + hw[j])
+
+    groups, cur = [], order[:1]
+    for i, j in zip(order, order[1:], strict=False):
+        if poles[j].frequency - poles[i].frequency < 2 * (hw[i] + hw[j]) + 2 * bin_hz:
+            cur.append(j)
+        else:
+            groups.append(cur)
+            cur = [j]
+    if cur:
+        groups.append(cur)
+    out = []
+    while groups:
+        g = groups.pop()
+        if len(g) <= max_size:
+            out.append(g)
+            continue
+        cut = 1 + int(np.argmax([gap(i, j) for i, j in zip(g, g[1:], strict=False)]))
+        groups += [g[:cut], g[cut:]]
+    return out
+
+
+def _spectral_refine(poles: list[Pole], segments, rate, f_lo, f_hi, work, sweeps: int = 2) -> list[Pole]:
+    """Every pole refined by maximum likelihood over all hits and channels on the whole of
+    each segment (:func:`varpro.refine` on the DFT bins around each group of overlapping
+    poles, the other poles subtracted with their least-squares amplitudes); ``sweeps``
+    rounds, each from the residual of the previous one. A pole that leaves its window, its
+    frequency range or stops decaying keeps its old value."""
+    out = list(poles)
+    for _ in range(sweeps):
+        work.step("joint refinement")
+        z = _z(out, rate)
+        specs = []
+        for seg in segments:
+            n = varpro.fast_length(seg.x.size)
+            exc = seg.excluded[seg.excluded < n]
+            c = esprit.amplitudes(seg.x[:n], z, exc)
+            r = seg.x[:n] - esprit.resynthesis(n, z, c)
+            r[exc] = 0.0  # clipped samples: taken as the model (no evidence either way)
+            specs.append((np.fft.rfft(r), n, c))
+        bin_hz = rate / min(n for _, n, _ in specs)
+        new = list(out)
+        for idx in _pole_groups(out, bin_hz):
+            f = np.array([out[i].frequency for i in idx])
+            d = np.array([out[i].decay for i in idx])
+            reach = 6 * np.maximum(d / (2 * np.pi), 0) + 10 * bin_hz
+            lo, hi = max(float(np.min(f - reach)), 0.0), float(np.max(f + reach))
+            spectra = []
+            for spec, n, c in specs:
+                bins = np.arange(max(int(lo * n / rate), 1), min(int(hi * n / rate) + 1, n // 2))
+                phi, _, _ = varpro.model_columns(z[idx], bins, n)
+                own = phi[:, 0::2] @ c[idx].real + phi[:, 1::2] @ c[idx].imag
+                spectra.append(varpro.Spectrum(bins, spec[bins] + own, n))
+            ref = varpro.refine(spectra, rate, f, d)
+            for i, f_new, d_new, f_old, w in zip(idx, ref.frequencies, ref.decays, f, reach, strict=True):
+                if abs(f_new - f_old) <= w and f_lo <= f_new <= f_hi and 0 < d_new <= 2 * STAGES[-1].d_max:
+                    new[i] = Pole(float(f_new), float(d_new))
+        out = new
     return out
 
 
@@ -569,19 +657,16 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
             + f" s), got {len(locations)}"
         )
 
-    total = sum(_band_centres(st, f_min, f_hi).size + 1 if st.spacing else 1 for st in STAGES) + 2
+    total = sum(_band_centres(st, f_min, f_hi).size + 1 if st.spacing else 1 for st in STAGES) * 2 + 6
     work = _Work(progress, total, time_limit)
-    poles: list[Pole] = []
-    for stage in STAGES:
-        z = _z(poles, rate) if poles else np.zeros(0, dtype=complex)
-        res = _residuals(segments, z, rate, stage.seconds)
-        finder = _band_poles if stage.spacing else _full_rate_poles
-        new = finder(stage, res, segments, rate, f_min, f_hi, margin, work)
-        poles.extend(p for p in new if not _duplicate(p, poles))
-        if not stage.spacing:
-            work.step(stage.name)
+    poles = _detect([], segments, rate, f_min, f_hi, margin, work)
     if poles:
         poles = _polish(poles, segments, rate, f_min, f_hi, work)
+        poles = _spectral_refine(poles, segments, rate, f_min, f_hi, work)
+        found = len(poles)
+        poles = _detect(poles, segments, rate, f_min, f_hi, margin, work)
+        if len(poles) > found:
+            poles = _spectral_refine(poles, segments, rate, f_min, f_hi, work)
     if not poles:
         raise JassyError(
             "fit: no decaying modes found above the noise; check the recording (a strike of a "

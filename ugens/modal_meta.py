@@ -1,0 +1,35 @@
+"""The integer ``meta`` records of a ModalBank's kernels, stored in int64 arrays.
+
+A bank's meta (:class:`BankMeta`) says how many modes its kernels compute; an anytime
+budget's compact bank of the kept modes has its own (:class:`CompactMeta`), which
+:func:`ugens.modal.bank_step` reads as a bank's (the active count and its cap sit in the
+same slots). Kernels index the arrays by the slot constants below (cells.slot), which compile
+to the same loads as the numbers they replace.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from ugens.cells import slot
+
+
+class BankMeta(NamedTuple):
+    """A bank's int64 ``meta`` array, fields in this order."""
+
+    active: int  #: modes computed, [0, active): the last audible mode + 1
+    ramp_left: int  #: samples left of a coefficient ramp (0: none)
+    allowed: int  #: the most modes that may be active: all, or an anytime budget's share
+
+
+class CompactMeta(NamedTuple):
+    """The int64 meta of an anytime budget's compact bank of the kept modes, fields in this order."""
+
+    active: int  #: modes computed in the compact bank
+    gathered: int  #: 1 while the compact bank holds the kept modes' state, 0 when stale
+    width: int  #: the compact bank's modes (the kept ones padded to whole SIMD vectors)
+
+
+ACTIVE, RAMP_LEFT, ALLOWED = (slot(BankMeta, key) for key in BankMeta._fields)
+GATHERED, WIDTH = (slot(CompactMeta, key) for key in ("gathered", "width"))
+assert (slot(CompactMeta, "active"), WIDTH) == (ACTIVE, ALLOWED)  # bank_step reads either
