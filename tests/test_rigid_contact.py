@@ -11,7 +11,7 @@ from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
-from physics.rigid.impulses import new_warm_start
+from physics.rigid.impulses import new_solver, new_warm_start
 from physics.rigid.meshgrid import build_grid, grid_closest, grid_within
 from physics.rigid.narrow import _mesh_closest, new_contacts, new_mesh_memory, segment_params
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
@@ -798,6 +798,63 @@ def test_concave_body_rests_on_another_crosswise():
     assert np.max(np.abs(result.pos[-10:, 1] - [0, 0, com[2]])) < 2e-5
     rest = np.array([-com[1], com[0], h_ + com[2]])  # the com turned a quarter about z
     assert np.max(np.abs(result.pos[-10:, 2] - rest)) < 2e-5
+
+
+def _staggered_drop(tiny_scratch):
+    """Six balls dropped from staggered heights on a floor (e = 0.5), 0.6 s: (final state
+    arrays, records); with ``tiny_scratch`` the run starts with room for one pair and one
+    contact, so the scratch grows as the balls land (stepper.run)."""
+    w = World(StepParams(h=1e-3, bounce_threshold=0.05))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
+    for k in range(6):
+        place = Placement(position=(0.06 * k, 0, 0.03 + 0.02 * k))
+        w.add(Body(f"ball{k}", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), place)
+    model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
+    data = st.new_data(
+        model,
+        opt,
+        state.pos,
+        state.quat,
+        state.phi,
+        np.zeros((601, 0, 3)),
+        np.zeros((601, 0, 4)),
+        np.empty((1 << 14, codes.REC_WIDTH)),
+        st.new_stats(),
+        np.zeros((0, n, 13)),
+        1,
+        0,
+        new_warm_start(st.MAX_CONTACTS),
+    )
+    if tiny_scratch:
+        data = data._replace(
+            sweep=data.sweep._replace(pairs=np.empty((1, 2), np.int64)),
+            near=st.new_pair_scratch(1),
+            solver=new_solver(np.int64(1), n, st.MAX_CONTACTS),
+        )
+    steps, nrec = st.run(model, opt, data, 0, 600, 0)
+    assert steps == 600
+    return (state.pos, state.quat, state.phi), data.rec[:nrec]
+
+
+def test_a_step_stopped_for_more_scratch_resumes_where_it_stopped(monkeypatch):
+    """A sweep or narrow phase that outgrows the scratch stops the step; grown, the run goes on
+    from there: the same motion and records, bit for bit, as a run that had room from the
+    start."""
+    stops = []
+    grown = st._grown
+
+    def spy(d, steps):
+        stops.append(tuple(d.progress.need))
+        return grown(d, steps)
+
+    monkeypatch.setattr(st, "_grown", spy)
+    state, records = _staggered_drop(False)
+    assert not stops
+    state_tiny, records_tiny = _staggered_drop(True)
+    assert len(stops) >= 2  # the pairs and the contacts outgrew it
+    assert len(records) > 600
+    for a, b in zip(state + (records,), state_tiny + (records_tiny,), strict=True):
+        assert np.array_equal(a, b)
 
 
 def test_unknown_contact_model_code_is_an_error():

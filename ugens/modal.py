@@ -578,7 +578,7 @@ class ModalBank(ModelParams, UGen):
             self._level_gain = self.level_gain()
             self.order = np.argsort(model.decays, kind="stable")
             self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
-            self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
+            self._gain_rows = {None: None}  # (location, gain) -> design, for the poles at key None
             self._location_rows = {}  # location -> the model's gains there, internal order
             self._mode_rows = model.frequencies[self.order], model.decays[self.order]  # Hz, 1/s
             self._kept_basis = basis
@@ -635,21 +635,22 @@ class ModalBank(ModelParams, UGen):
 
     def _design(self) -> np.ndarray:
         """Target (c1, c2, g, d) from the current parameter values, in internal mode order:
-        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain."""
+        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain. Kept
+        per (location, gain) for the current poles: the array is shared, never changed."""
         poles, _ = self._pole_design()
         v = self.values
         key = (v["location"], v["gain"])
-        gains = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
-        if gains is None:
+        out = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
+        if out is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self._location_row(v["location"])
-            self._gain_rows[key] = gains
-        out = np.empty_like(poles)
-        out[:2] = poles[:2]
-        out[2] = gains
-        out[3] = gains * poles[3]
+            out = np.empty_like(poles)
+            out[:2] = poles[:2]
+            out[2] = gains
+            out[3] = gains * poles[3]
+            self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
     def _location_row(self, location: Any) -> np.ndarray:
