@@ -16,8 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
-WIDER = {
-}
+WIDER: set[tuple[str, str]] = set()
 
 
 def _is_kernel(node: ast.FunctionDef) -> bool:
