@@ -52,6 +52,7 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, Kicks, scan_forces
 from jassy.errors import PatchError
 from jassy.jit import specialise
+from jassy.record_views import handle
 
 #: the impacts (impulse N s, location) on a bank no impact strikes
 NO_KICK: list[tuple[float, object]] = []
@@ -184,7 +185,8 @@ class ModeBudget:
         self._spectral = [(slot, bank) for slot, bank in enumerate(banks) if bank.anytime_spectral]
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
-        self._decide_all = specialise(mb.decide, tables, self._decision, self._rates)
+        self._decide_handle = handle(tables, self._decision)
+        self._decide_all = specialise(mb.decide_at, self._decide_handle, self._rates)
         from ugens import modal_kept as mk
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
@@ -193,10 +195,16 @@ class ModeBudget:
         self._kick_table = Kicks(
             np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
         )
-        self._advance = specialise(
-            mk.advance, tables, h, self._outputs, self._by_python, self._kick_table, 0, self._state, 0, 0,
-            0, 0, 0,
-        )  # fmt: skip
+        self._step_handle = None  # (_load_kicks)
+        self._advance = specialise(mk.advance_at, self._steps_handle(), 0, 0, 0, 0, 0, 0)
+
+    def _steps_handle(self) -> np.ndarray:
+        """The handle (jassy.record_views) of what the compiled step reads: the tables, the
+        Hearing, the banks' outputs, the by-Python mask, the impacts and the step state."""
+        self._step_handle = handle(
+            self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,)
+        )
+        return self._step_handle
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -238,14 +246,11 @@ class ModeBudget:
         kicks = self.upcoming(start, end + 2 * period)
         count = self._load_kicks(kicks)
         slow = self._python_banks()
-        table, state, at, rendered = self._kick_table, self._state, start, start
-        args = (self._tables, self._hearing, self._outputs, self._by_python)
+        state, at, rendered, addresses = self._state, start, start, self._step_handle
         while True:
             state[FADING] = self._fading
             was = rendered
-            at, rendered, work, deciding = self._advance(
-                *args, table, count, state, period, start, n, at, rendered
-            )
+            at, rendered, work, deciding = self._advance(addresses, count, period, start, n, at, rendered)
             self.mode_samples += work
             for i in slow:
                 if rendered > was:
@@ -285,6 +290,7 @@ class ModeBudget:
             table = self._kick_table = Kicks(
                 np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=bool)
             )
+            self._steps_handle()
         row, slots = 0, self._slots
         for frame, nodes, impulse, _ in kicks:
             for node in nodes or (None,):
@@ -348,7 +354,7 @@ class ModeBudget:
         rates = self._rates
         if rates.limit != self.limit or rates.begin != offset or rates.end != offset + n:
             rates = self._rates = rates._replace(limit=int(self.limit), begin=offset, end=offset + n)
-        self._fading, total = self._decide_all(self._tables, d, rates)
+        self._fading, total = self._decide_all(self._decide_handle, rates)
         self.peak_modes = max(self.peak_modes, total)
         self.decisions += 1
 

@@ -8,7 +8,11 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import void_pointer
+from jassy import record_views
+from jassy.jit import drop_stale_cache, void_pointer
+from jassy.record_views import FIELD, bool_row, int_row
+
+drop_stale_cache(__file__, [record_views])  # the cache holds copies of its views
 
 
 @nb.njit(cache=True)
@@ -60,6 +64,13 @@ class Kicks(NamedTuple):
     frames: np.ndarray  # int64
     slots: np.ndarray  # int64
     positive: np.ndarray  # bool
+
+
+@nb.njit(cache=True)
+def kicks_at(a, i):
+    """The :class:`Kicks` whose fields start at slot ``i`` of handle ``a``
+    (jassy.record_views)."""
+    return Kicks(int_row(a, i), int_row(a, i + FIELD), bool_row(a, i + 2 * FIELD))
 
 
 #: Fields of a budget's step state (int64): a mode fades out in this period (the last
@@ -115,3 +126,14 @@ def scan_forces(h, begin, end, rotate):
         h.onset[b] = loud and not (h.expected[b] or heard_now[b] or heard_before[b] or h.unseen[b])
         any_onset |= h.onset[b]
     return any_before, any_onset
+
+
+@nb.njit(cache=True)
+def hearing_at(a, i):
+    """The :class:`Hearing` whose fields start at slot ``i`` of handle ``a``
+    (jassy.record_views)."""
+    return Hearing(
+        int_row(a, i), a[i + FIELD], bool_row(a, i + 2 * FIELD), bool_row(a, i + 3 * FIELD),
+        bool_row(a, i + 4 * FIELD), bool_row(a, i + 5 * FIELD), bool_row(a, i + 6 * FIELD),
+        bool_row(a, i + 7 * FIELD), bool_row(a, i + 8 * FIELD),
+    )  # fmt: skip

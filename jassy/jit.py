@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import os
 from collections.abc import Callable
@@ -14,6 +15,16 @@ from llvmlite import binding as llvm
 from llvmlite import ir as llvmir
 from numba.core import caching, cgutils, codegen, dispatcher, types
 from numba.extending import intrinsic
+
+
+def address(array: np.ndarray) -> int:
+    """The address of ``array``'s first element, as ``array.ctypes.data`` gives it (which
+    builds a ctypes helper object per call: about 3x slower for the arrays a program's
+    table and control slots point to, a few dozen per render)."""
+    try:
+        return ctypes.addressof(ctypes.c_char.from_buffer(array))
+    except (TypeError, ValueError, BufferError):  # read-only, not contiguous, or empty
+        return array.ctypes.data
 
 
 @intrinsic
@@ -38,6 +49,23 @@ def call_void(typingctx, function, a, b, c, d):
         i64 = llvmir.IntType(64)
         pointer = builder.inttoptr(args[0], llvmir.FunctionType(llvmir.VoidType(), [i64] * 4).as_pointer())
         builder.call(pointer, args[1:])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def prefetch_for_write(typingctx, address):
+    """Ask for the cache line holding ``address`` ahead of a write (LLVM's ``prefetch``
+    hint: write, high locality, data cache); never faults, and changes no value."""
+    sig = types.void(types.int64)
+
+    def codegen(context, builder, signature, args):
+        byte_pointer, i32 = llvmir.IntType(8).as_pointer(), llvmir.IntType(32)
+        kind = llvmir.FunctionType(llvmir.VoidType(), [byte_pointer, i32, i32, i32])
+        prefetch = cgutils.get_or_insert_function(builder.module, kind, "llvm.prefetch.p0i8")
+        write, keep, data = (llvmir.Constant(i32, v) for v in (1, 3, 1))
+        builder.call(prefetch, [builder.inttoptr(args[0], byte_pointer), write, keep, data])
         return context.get_dummy_value()
 
     return sig, codegen

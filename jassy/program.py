@@ -30,7 +30,7 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from jassy import params
 from jassy.graph import Graph
-from jassy.jit import call_void, drop_stale_cache, void_pointer
+from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
 from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
@@ -446,10 +446,10 @@ class Program:
         base = 1 + i * RECORD
         record = self.table[base : base + RECORD]
         record[:] = 0
-        record[:HEADER] = Header(PROGRAM_UGENS[type(node)], node.out.ctypes.data, node.max_block)
+        record[:HEADER] = Header(PROGRAM_UGENS[type(node)], address(node.out), node.max_block)
         record[FUNCTION] = node_function_address(record[0])
         for j, value in enumerate(slots):
-            record[HEADER + j] = value.ctypes.data if isinstance(value, np.ndarray) else value
+            record[HEADER + j] = address(value) if isinstance(value, np.ndarray) else value
         self._arrays[i] = [node.out, *(a for a in slots if isinstance(a, np.ndarray))]
         self._slots[i] = slots
 
@@ -460,7 +460,7 @@ class Program:
             return GainSlots(node.sources["input"].out, node.gain.ramp, node.gains)
         if isinstance(node, Mixer):
             names = node.input_names()
-            sources = np.array([node.sources[k].out.ctypes.data for k in names], dtype=np.int64)
+            sources = np.array([address(node.sources[k].out) for k in names], dtype=np.int64)
             gains = np.array([g for _, g in node._terms], dtype=np.float64)
             return MixerSlots(len(names), sources, gains)
         if isinstance(node, Multiply):

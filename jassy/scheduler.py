@@ -75,14 +75,18 @@ class _Uncacheable(Exception):
     """An event argument :func:`_snapshot` cannot compare by value."""
 
 
+#: Types an event field is compared by value as (with the type: 1, 1.0 and True validate
+#: differently).
+_SCALARS = frozenset((bool, int, float, str, type(None)))
+
+
 def _snapshot(value: Any) -> Any:
-    """A comparable copy of an event field, with each value's type (1, 1.0 and True validate
-    differently), or _Uncacheable."""
+    """A comparable copy of an event field, with each value's type, or _Uncacheable."""
     kind = type(value)
-    if value is None or kind in (bool, int, float, str):
+    if kind in _SCALARS:
         return kind, value
-    if kind in (list, tuple):
-        return kind, tuple(_snapshot(v) for v in value)
+    if kind is list or kind is tuple:
+        return kind, tuple(map(_snapshot, value))
     if kind is dict:
         return kind, tuple((k, _snapshot(v)) for k, v in value.items())
     if kind is np.ndarray or isinstance(value, np.generic):
@@ -91,9 +95,20 @@ def _snapshot(value: Any) -> Any:
 
 
 def _score_key(score: Sequence[Event], sample_rate: float) -> tuple | None:
-    """The score's contents and the sample rate, compared by value (None: not comparable)."""
+    """The score's contents and the sample rate, compared by value (None: not comparable).
+    Node names and actions are those of a validated score when the key is kept."""
     try:
-        events = tuple(_snapshot((ev.time, ev.node, ev.action, ev.args, ev.jump, ev.ramp)) for ev in score)
+        events = tuple(
+            (
+                ev.node,
+                ev.action,
+                _snapshot(ev.time),
+                _snapshot(ev.args),
+                _snapshot(ev.jump),
+                _snapshot(ev.ramp),
+            )
+            for ev in score
+        )
     except (_Uncacheable, AttributeError):  # an item that is no Event fails validation
         return None
     return float(sample_rate), events

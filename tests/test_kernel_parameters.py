@@ -16,15 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("jassy", "ugens", "physics", "patches")
 MAX_PARAMETERS = 10
 #: Kernels written before the rule, (file, function), with their parameter counts.
-WIDER = {
-    ("physics/rigid/impulses.py", "_row_apply"),  # 13
-    ("physics/rigid/impulses.py", "_row_velocity"),  # 11
-    ("physics/rigid/integrate.py", "_solve3"),  # 12
-    ("physics/rigid/integrate.py", "advance_body_into"),  # 13
-    ("physics/rigid/integrate.py", "semi_implicit_into"),  # 12
-    ("physics/rigid/meshgrid.py", "grid_closest"),  # 12
-    ("physics/rigid/meshgrid.py", "grid_within"),  # 15
-}
+WIDER: set[tuple[str, str]] = set()
 
 
 def _is_kernel(node: ast.FunctionDef) -> bool:

@@ -11,7 +11,7 @@ from physics.rigid import codes
 from physics.rigid import stepper as st
 from physics.rigid.broad import new_sweep, sweep_pairs
 from physics.rigid.events import contact_tracks, contact_wrench, haptic_frames, impacts
-from physics.rigid.impulses import new_warm_start
+from physics.rigid.impulses import new_solver, new_warm_start
 from physics.rigid.meshgrid import build_grid, grid_closest, grid_within
 from physics.rigid.narrow import _mesh_closest, new_contacts, new_mesh_memory, segment_params
 from physics.rigid.shapes import Box, Capsule, Convex, Plane, Sphere, TriangleMesh, mass_properties
@@ -204,6 +204,53 @@ def test_hunt_crossley_restitution_and_zero_force_at_touch(mass, exponent):
     assert first < 1e-3 * lam * v_in  # a linear damper would start at lambda-like c v_in
 
 
+def _penalty_ball(h, height, velocity=(0, 0, 0), spin=(0, 0, 0), friction=0.0):
+    """A 0.1 kg ball of radius 2 cm over a plane under the linear penalty model (k = 1e4 N/m,
+    c = 5 N s/m), its lowest point ``height`` (m) above the plane."""
+    radius, mass = 0.02, 0.1
+    density = mass / (4 / 3 * math.pi * radius**3)
+    params = StepParams(h=h, contact="linear", stiffness=1e4, damping=5.0, slop=0.0, bounce_threshold=0.05)
+    w = World(params)
+    w.add(Body("ground", Plane(), Material("g", 1000, 0, friction), kind="static"))
+    place = Placement(position=(0, 0, radius + height), velocity=velocity, angular_velocity=spin)
+    w.add(Body("ball", Sphere(radius), Material("b", density, 0, friction)), place)
+    return w
+
+
+def test_penalty_contact_gives_impacts_at_the_ballistic_times():
+    """A ball dropped from rest H = 0.1 m above a plane, linear penalty contact, h = 0.1 ms:
+    one impact per bounce (a bounce lasts many steps), the first at sqrt(2 H / g) and
+    sqrt(2 g H) (seen at the first step start after it: within h, and g h faster); each later
+    one a ballistic flight 2 v / g (v: its landing speed, take-off speed alike) after the
+    last pushing step of the bounce before (within the step of take-off, of landing and the
+    g h of the landing speed: 3 h)."""
+    h, height = 1e-4, 0.1
+    result = simulate(_penalty_ball(h, height), 0.6, sample_every=0)
+    hits = impacts(result)
+    assert len(hits) >= 3
+    first = math.sqrt(2 * height / G)
+    assert 0 < hits[0].time - first <= h * (1 + 1e-9)
+    assert hits[0].speed == pytest.approx(math.sqrt(2 * G * height), abs=G * h)
+    times = result.records[:, codes.REC_TIME]
+    for before, after in zip(hits[:-1], hits[1:], strict=True):
+        last_push = times[(times >= before.time) & (times < after.time)].max()
+        assert after.time - last_push == pytest.approx(2 * after.speed / G, abs=3 * h)
+        assert after.speed < before.speed  # the damper takes energy at each bounce
+
+
+def test_penalty_contact_reports_the_rolling_speed():
+    """A ball rolling without slipping at v = 0.5 m/s on a plane, linear penalty contact,
+    resting at the static overlap x = m g / k: its contact point lies halfway through the
+    overlap (lever arm r - x / 2), so it spins at v / (r - x / 2); its contact track's
+    rolling speed (|w| times the lever arm) is v, and it does not slip."""
+    v, radius, sink = 0.5, 0.02, 0.1 * G / 1e4
+    spin = (0, v / (radius - sink / 2), 0)
+    world = _penalty_ball(1e-4, -sink, velocity=(v, 0, 0), spin=spin, friction=0.5)
+    track = contact_tracks(simulate(world, 0.1, sample_every=0))[0]
+    assert np.median(track.rolling_speed) == pytest.approx(v, rel=1e-6)
+    assert np.median(track.slip_speed) < 1e-9 * v
+
+
 def test_box_resting_on_four_corners_carries_its_weight():
     w = World(StepParams(h=1e-3))
     w.add(Body("ground", Plane(), Material("g", 1000, 0, 0.5), kind="static"))
@@ -293,11 +340,6 @@ def test_second_mesh_carries_a_box_and_locates_its_contacts():
     assert np.all(np.abs(points[:, :2] - [0.3, 0.0]).max(axis=1) < 0.021)
 
 
-def _grid_args(grid):
-    """A lone grid's arrays in the argument order of grid_closest and grid_within."""
-    return grid.triangles, grid.spheres, grid.origin, grid.cell, grid.dims, grid.start, grid.items, (0, 0, 0)
-
-
 def test_grid_closest_point_matches_brute_force():
     """Against trimesh's vectorised point-triangle routine over every triangle."""
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
@@ -310,7 +352,7 @@ def test_grid_closest_point_matches_brute_force():
         cand = trimesh.triangles.closest_point(tris, np.tile(p, (len(tris), 1)))
         d = np.linalg.norm(cand - p, axis=1)
         q = cand[np.argmin(d)]
-        tri, d2, u, v, w = grid_closest(*p, 0.2, *_grid_args(grid))
+        tri, d2, u, v, w = grid_closest(*p, 0.2, grid.view())
         assert np.sqrt(d2) == pytest.approx(d.min(), abs=1e-9)
         assert np.allclose(np.array([u, v, w]) @ grid.triangles[tri], q, atol=1e-9)
 
@@ -331,7 +373,7 @@ def _distances(tris, p):
 def test_grid_within_lists_every_triangle_within_the_radius_nearest_first():
     mesh = _bumpy_bowl()
     grid = build_grid(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    args = _grid_args(grid)
+    view = grid.view()
     out, dist = np.full((2, 64), -1, np.int64), np.zeros((2, 64))
     rng = np.random.default_rng(9)
     pts = rng.normal(size=(40, 3))
@@ -341,14 +383,14 @@ def test_grid_within_lists_every_triangle_within_the_radius_nearest_first():
         ds = np.sort(d)  # a radius between two distances, beyond ten triangles (ties: a shared vertex)
         count = 10 + np.flatnonzero(np.diff(ds[9:]) > 1e-6)[0]
         radius = ds[count - 1 : count + 1].mean()
-        n = grid_within(*p, radius, *args, out, dist, 1)
+        n = grid_within(*p, radius, view, out, dist, 1)
         assert n == count
         assert set(out[1, :n]) == set(np.flatnonzero(d < radius))
         assert np.allclose(dist[1, :n], d[out[1, :n]], atol=1e-12)
         assert np.all(np.diff(dist[1, :n]) >= 0.0)
         assert np.all(out[0] == -1)  # only the row asked for is written
         assert (
-            grid_within(*p, radius, *args, out[:, : n - 1], dist[:, : n - 1], 1) == -1
+            grid_within(*p, radius, view, out[:, : n - 1], dist[:, : n - 1], 1) == -1
         )  # more than a row holds
 
 
@@ -422,15 +464,19 @@ def test_closest_segments_against_dense_sampling():
 
 def test_sweep_and_prune_equals_all_pairs():
     """The broad phase against every pair tested by brute force, with a scratch reused across
-    sweeps and a dense set that makes its pair buffer grow."""
+    sweeps and a dense set that outgrows its pair buffer (the sweep counts them all; grown,
+    it finds them)."""
     rng = np.random.default_rng(5)
     scratch = new_sweep(300)
     for size in (0.1, 0.6):
         lo = rng.uniform(0, 1, (300, 3))
         hi = lo + rng.uniform(0, size, (300, 3))
         movable = rng.uniform(size=300) < 0.8
-        pairs, scratch = sweep_pairs(lo, hi, movable, scratch)
-        got = [tuple(p) for p in pairs]
+        count = sweep_pairs(lo, hi, movable, scratch)
+        if count > scratch.pairs.shape[0]:
+            scratch = new_sweep(300, count)
+            assert sweep_pairs(lo, hi, movable, scratch) == count
+        got = [tuple(p) for p in scratch.pairs[:count]]
         overlap = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
         expected = {
             (i, j)
@@ -752,6 +798,63 @@ def test_concave_body_rests_on_another_crosswise():
     assert np.max(np.abs(result.pos[-10:, 1] - [0, 0, com[2]])) < 2e-5
     rest = np.array([-com[1], com[0], h_ + com[2]])  # the com turned a quarter about z
     assert np.max(np.abs(result.pos[-10:, 2] - rest)) < 2e-5
+
+
+def _staggered_drop(tiny_scratch):
+    """Six balls dropped from staggered heights on a floor (e = 0.5), 0.6 s: (final state
+    arrays, records); with ``tiny_scratch`` the run starts with room for one pair and one
+    contact, so the scratch grows as the balls land (stepper.run)."""
+    w = World(StepParams(h=1e-3, bounce_threshold=0.05))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
+    for k in range(6):
+        place = Placement(position=(0.06 * k, 0, 0.03 + 0.02 * k))
+        w.add(Body(f"ball{k}", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), place)
+    model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
+    data = st.new_data(
+        model,
+        opt,
+        state.pos,
+        state.quat,
+        state.phi,
+        np.zeros((601, 0, 3)),
+        np.zeros((601, 0, 4)),
+        np.empty((1 << 14, codes.REC_WIDTH)),
+        st.new_stats(),
+        np.zeros((0, n, 13)),
+        1,
+        0,
+        new_warm_start(st.MAX_CONTACTS),
+    )
+    if tiny_scratch:
+        data = data._replace(
+            sweep=data.sweep._replace(pairs=np.empty((1, 2), np.int64)),
+            near=st.new_pair_scratch(1),
+            solver=new_solver(np.int64(1), n, st.MAX_CONTACTS),
+        )
+    steps, nrec = st.run(model, opt, data, 0, 600, 0)
+    assert steps == 600
+    return (state.pos, state.quat, state.phi), data.rec[:nrec]
+
+
+def test_a_step_stopped_for_more_scratch_resumes_where_it_stopped(monkeypatch):
+    """A sweep or narrow phase that outgrows the scratch stops the step; grown, the run goes on
+    from there: the same motion and records, bit for bit, as a run that had room from the
+    start."""
+    stops = []
+    grown = st._grown
+
+    def spy(d, steps):
+        stops.append(tuple(d.progress.need))
+        return grown(d, steps)
+
+    monkeypatch.setattr(st, "_grown", spy)
+    state, records = _staggered_drop(False)
+    assert not stops
+    state_tiny, records_tiny = _staggered_drop(True)
+    assert len(stops) >= 2  # the pairs and the contacts outgrew it
+    assert len(records) > 600
+    for a, b in zip(state + (records,), state_tiny + (records_tiny,), strict=True):
+        assert np.array_equal(a, b)
 
 
 def test_unknown_contact_model_code_is_an_error():

@@ -58,10 +58,10 @@ def rotation_errors(speeds, overrides=()):
 def test_rolling_force_pulses_at_the_rotation_rate():
     """The continuous layer (Roll: the ball's own profile, one revolution long, and its
     out-of-roundness, under the contact filter) on the plate, alone, up to 1 m/s. (At 1.4
-    m/s its envelope peaks at 3 v / (2 pi r): half its power then lies near the ball's
-    contact resonance, 1-2 kHz, and the out-of-roundness hardly shows in its envelope,
-    whose depth is 0.15 with or without it; the patch there is its micro-impacts, about
-    30 dB louder.)"""
+    m/s its envelope peaks at 3 v / (2 pi r): its lines are 15 Hz apart and most of its
+    force lies near the ball's contact resonance, 1-2 kHz, where each of the plate's few
+    strong modes picks one line, so the envelope follows their beats rather than the
+    out-of-roundness's sidebands; the patch there is its micro-impacts, about 30 dB louder.)"""
     errors = rotation_errors([0.1, 0.3, 0.6, 1.0], ["contact.gains=[1.0, 0.0]"])
     assert np.max(np.abs(errors)) < 0.05, errors
 

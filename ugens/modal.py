@@ -50,6 +50,7 @@ from jassy.jit import specialise
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
+from jassy.record_views import handle
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import modal_budget
@@ -67,7 +68,6 @@ from ugens.modal_budget import (
     BudgetTables,
     compact_bank,
     line_aligned_zeros,
-    settle_compact,
 )
 from ugens.modal_f32 import (
     MIN_GAIN,
@@ -578,7 +578,7 @@ class ModalBank(ModelParams, UGen):
             self._level_gain = self.level_gain()
             self.order = np.argsort(model.decays, kind="stable")
             self._poles = None  # (parameters, (c1, c2, R sin theta), ...) of the last design
-            self._gain_rows = {None: None}  # (location, gain) -> gain row, for the poles at key None
+            self._gain_rows = {None: None}  # (location, gain) -> design, for the poles at key None
             self._location_rows = {}  # location -> the model's gains there, internal order
             self._mode_rows = model.frequencies[self.order], model.decays[self.order]  # Hz, 1/s
             self._kept_basis = basis
@@ -635,21 +635,22 @@ class ModalBank(ModelParams, UGen):
 
     def _design(self) -> np.ndarray:
         """Target (c1, c2, g, d) from the current parameter values, in internal mode order:
-        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain."""
+        d = g theta / (12 R sin theta) = a gain 2 pi f / (12 fs^2), the direct gain. Kept
+        per (location, gain) for the current poles: the array is shared, never changed."""
         poles, _ = self._pole_design()
         v = self.values
         key = (v["location"], v["gain"])
-        gains = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
-        if gains is None:
+        out = self._gain_rows.get(key) if self._gain_rows[None] is poles else None
+        if out is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
             gains = poles[2] * scale * self._location_row(v["location"])
-            self._gain_rows[key] = gains
-        out = np.empty_like(poles)
-        out[:2] = poles[:2]
-        out[2] = gains
-        out[3] = gains * poles[3]
+            out = np.empty_like(poles)
+            out[:2] = poles[:2]
+            out[2] = gains
+            out[3] = gains * poles[3]
+            self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
     def _location_row(self, location: Any) -> np.ndarray:
@@ -667,7 +668,7 @@ class ModalBank(ModelParams, UGen):
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
         or state."""
         if self._compact_meta[GATHERED]:
-            self._settle_compact(self._tables, self._slot)
+            self._settle_compact(self._tables_handle, self._slot)
         split = self._split
         if split is None:
             return
@@ -889,17 +890,17 @@ class ModalBank(ModelParams, UGen):
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
         bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
         excitation)."""
+        if not self._ramping:
+            self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
+            return
         compact, meta = self._compact_of(self._tables, self._slot), self._compact_meta
-        if self._ramping:
-            meta[ACTIVE] = meta[WIDTH]
-            ramp = Ramp(compact[:4], compact[6:10], compact[10:])
-            self.meta[RAMP_LEFT] = resonate_ramp(
-                inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
-            )
-            self._ramping = self.meta[RAMP_LEFT] > 0
-            self._hear(inp, n, self._heard, start)
-        else:
-            self._kept_step(inp, out, start, n, compact[:6], meta, self._floor, self.last, self._heard)
+        meta[ACTIVE] = meta[WIDTH]
+        ramp = Ramp(compact[:4], compact[6:10], compact[10:])
+        self.meta[RAMP_LEFT] = resonate_ramp(
+            inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
+        )
+        self._ramping = self.meta[RAMP_LEFT] > 0
+        self._hear(inp, n, self._heard, start)
         self.meta[ACTIVE] = min(meta[ACTIVE], self.meta[ALLOWED])
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
@@ -962,13 +963,13 @@ class ModalBank(ModelParams, UGen):
         self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
         from ugens import modal_kept  # (not at the top: it imports this module)
 
+        self._tables_handle = handle(tables)
         self._compact_of = specialise(compact_bank, tables, slot)
-        self._settle_compact = specialise(settle_compact, tables, slot)
+        self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
         self._hear = modal_kept.hear
-        self._kept_step = specialise(
-            modal_kept.kept_step, self.out, self.out, 0, 0, np.zeros((6, 8)), self._compact_meta, self._floor,
-            self.last, self._heard,
-        )  # fmt: skip
+        self._kept_span = specialise(
+            modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
+        )
         self._refresh_forcing()
 
     def anytime_spectrum(self) -> bool:

@@ -31,11 +31,12 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy import anytime_rank
+from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
+from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
 
-drop_stale_cache(__file__, [anytime_rank])  # decide's cache holds a copy of rank_modes
+drop_stale_cache(__file__, [anytime_rank, record_views])  # its cache holds copies of their kernels
 
 #: Rows of a compact bank: c1, c2, g, d, y1, y2 (as ModalBank.bank), then the ramp's
 #: per-sample increments and targets of c1, c2, g, d.
@@ -86,6 +87,23 @@ class BudgetTables(NamedTuple):
     rings: np.ndarray  # float64 (banks, period): the force over the last period, frame t at t mod period
     last: np.ndarray  # float64 (banks,): ModalBank.last, the force sample before the next frame
     values: np.ndarray  # float64 (BANK_VALUES, banks)
+
+
+@nb.njit(cache=True)
+def tables_at(a, i):
+    """The :class:`BudgetTables` whose fields start at slot ``i`` of handle ``a``
+    (jassy.record_views)."""
+    return BudgetTables(
+        int_table(a, i), float_row(a, i + FIELD), float_row(a, i + 2 * FIELD), float_row(a, i + 3 * FIELD),
+        float_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD), int_table(a, i + 6 * FIELD),
+        int_table(a, i + 7 * FIELD), float_table(a, i + 8 * FIELD), bool_row(a, i + 9 * FIELD),
+        bool_row(a, i + 10 * FIELD), float_table(a, i + 11 * FIELD), float_row(a, i + 12 * FIELD),
+        float_table(a, i + 13 * FIELD),
+    )  # fmt: skip
+
+
+#: Fields of a :class:`BudgetTables` (slots of FIELD in a handle).
+TABLE_FIELDS = len(BudgetTables._fields)
 
 
 def aligned(size: int) -> int:
@@ -421,3 +439,15 @@ def decide(t, d, rates):
             t.meta[b, 2] = kept
         total += t.meta[b, 2]
     return fading, total
+
+
+@nb.njit(cache=True)
+def decide_at(a, rates):
+    """:func:`decide` on the tables and the :class:`Decision` of handle ``a`` (their fields
+    in that order, jassy.record_views)."""
+    i = TABLE_FIELDS * FIELD
+    d = Decision(
+        bool_row(a, i), bool_row(a, i + FIELD), int_row(a, i + 2 * FIELD), float_table(a, i + 3 * FIELD),
+        bool_row(a, i + 4 * FIELD), bool_row(a, i + 5 * FIELD), bool_row(a, i + 6 * FIELD),
+    )  # fmt: skip
+    return decide(tables_at(a, 0), d, rates)

@@ -15,15 +15,18 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy import anytime_rank
-from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, scan_forces
+from jassy import anytime_rank, record_views
+from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, hearing_at, kicks_at, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
+from jassy.record_views import FIELD, bool_row, int_row
 from ugens import modal, modal_budget
 from ugens.kernels import FASTMATH
 from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, mode_rows, resonate
-from ugens.modal_budget import FLOOR, KEPT_LANES, compact_bank
+from ugens.modal_budget import FLOOR, KEPT_LANES, TABLE_FIELDS, compact_bank, settle_compact, tables_at
 
-drop_stale_cache(__file__, [modal, modal_budget, anytime_rank])  # the cache holds copies of their kernels
+drop_stale_cache(
+    __file__, [modal, modal_budget, anytime_rank, record_views]
+)  # the cache holds copies of their kernels
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -215,3 +218,37 @@ def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at,
         work += render_kept(t, h, outputs, by_python, rendered, end - rendered, rendered - start)
         h.unrendered[:] = False
     return end, end, work, False
+
+
+#: Fields of a :class:`jassy.anytime_rank.Hearing`.
+HEARING_FIELDS = len(Hearing._fields)
+
+
+@nb.njit(cache=True)
+def advance_at(a, count, period, start, n, at, rendered):
+    """:func:`advance` on the records of handle ``a`` (jassy.record_views): the budget's
+    tables, its Hearing, the banks' output addresses, the by-Python mask, its Kicks and
+    its step state, fields in that order."""
+    i = (TABLE_FIELDS + HEARING_FIELDS) * FIELD
+    t, h = tables_at(a, 0), hearing_at(a, TABLE_FIELDS * FIELD)
+    outputs, by_python, kicks = int_row(a, i), bool_row(a, i + FIELD), kicks_at(a, i + 2 * FIELD)
+    state = int_row(a, i + 5 * FIELD)
+    return advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at, rendered)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def kept_span(a, b, force, out, start, n):
+    """Budgeted bank b (its rows in the tables of handle ``a``, jassy.record_views) over
+    force[:n] into out[:n], frames [start, start + n), as :func:`render_kept` renders it
+    (for a bank that renders through its own ``process``): :func:`kept_step` on its
+    compact bank, gathered if stale; the force goes to its ring."""
+    t = tables_at(a, 0)
+    compact, meta = compact_bank(t, b), t.compact_meta[b]
+    kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
+    t.meta[b, 0] = min(meta[0], t.meta[b, 2])
+
+
+@nb.njit(cache=True)
+def settle_at(a, b):
+    """ugens.modal_budget.settle_compact of bank b on the tables of handle ``a``."""
+    settle_compact(tables_at(a, 0), b)

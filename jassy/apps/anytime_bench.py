@@ -15,9 +15,9 @@ decides).
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
   its cost were proportional to the modes it computes;
-- kernel: the bank kernel alone with every mode sounding, a compact bank of a quarter of
-  the scene's modes (rounded up to whole vectors) against a bank of all of them, thread
-  time per sample: its cost is not proportional to the modes (a fixed cost per sample).
+- kernel: the bank kernel alone with every mode ringing (no force), a compact bank of a
+  quarter of the scene's modes (rounded up to whole vectors; it rings freely,
+  ugens.modal_kept.ring) against a bank of all of them, thread time per sample.
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import HapticSafety, limit_force
-from jassy.jit import call_void, drop_stale_cache, void_pointer
+from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.program import (
     HEADER,
     KERNEL_MODULES,
@@ -580,7 +580,7 @@ class EventQueue:
         self.records = np.zeros((capacity, EVENT))
         self.control = control
         self.slot = QUEUES + QUEUE_SLOTS * index
-        control[self.slot] = self.records.ctypes.data
+        control[self.slot] = address(self.records)
         control[self.slot + 1] = capacity
 
     @property
@@ -707,7 +707,7 @@ class ProgramRun(EventRecords):
             (HAPTIC_LAST, self.haptic_last),
             (METER, self.meter),
         ):
-            control[slot] = array.ctypes.data
+            control[slot] = address(array)
         control[BUS_COUNT] = graph.bus.shape[0]
         control[N_ROWS] = self.rows.size
         control[N_AUDIO] = self.n_audio
@@ -772,7 +772,7 @@ class CallbackRenderer(ProgramRun):
             (MONITOR_INDEX, self.monitor_index),
             (LEVELS, self.levels),
         ):
-            control[slot] = array.ctypes.data
+            control[slot] = address(array)
         control[CHANNELS] = self.channels
         control[MONITOR_CAP] = mcap
         control[WATCHDOG] = max(1, int(self.safety.watchdog * self.sample_rate))

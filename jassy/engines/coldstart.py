@@ -47,6 +47,8 @@ FREE, MINE, HELPERS = 0, 1, 2
 #: True while units run (here, or in the helper): a unit that builds an engine neither forks
 #: a helper nor asks for units of its own.
 _running_units = False
+#: Set once numba's cache was found filled (:func:`kernels_cached`).
+_cache_found = False
 
 
 def may_fork_helper(units: Sequence[Callable[[], object]]) -> bool:
@@ -127,15 +129,15 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     meet with about half the work each: this process starts with the modal node function
     (the largest unit) and the output stage, the helper with the render loop and event
     application."""
+    if _running_units or graph.budget is not None or not engine_options.get("program", True):
+        return []
+    if kernels_cached():
+        return []
     from jassy import program
     from jassy.engines import callback
     from ugens.impact import ImpactForce
     from ugens.modal import ModalBank, direct_ratio
 
-    if _running_units or graph.budget is not None or not engine_options.get("program", True):
-        return []
-    if kernels_cached():
-        return []
     if program.why_not_compiled(graph) is not None:
         return []
     kinds = sorted(dict.fromkeys(type(node) for node in graph.order), key=lambda kind: kind is not ModalBank)
@@ -174,10 +176,15 @@ def _compile_render_loop() -> None:
 
 def kernels_cached() -> bool:
     """Whether numba's cache already holds the output stage's limiter, which every render
-    calls (False on a fresh install, or after the cache was removed)."""
+    calls (False on a fresh install, or after the cache was removed). Once found, the
+    answer is kept for the process (no file check per render)."""
+    global _cache_found
+    if _cache_found:
+        return True
     from jassy.safety import limit
 
     try:
-        return os.path.exists(limit._cache._cache_file._index_path)
+        _cache_found = os.path.exists(limit._cache._cache_file._index_path)
     except AttributeError:  # a numba without this cache layout: say nothing
-        return True
+        _cache_found = True
+    return _cache_found

@@ -19,9 +19,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy import haptics, safety
+from jassy import haptics, jit, safety
 from jassy.engines import callback
 from jassy.engines.callback import (
+    BLOCK,
     FRAME,
     HAPTIC_FLAGS,
     LIMIT_AUDIO,
@@ -37,7 +38,7 @@ from jassy.engines.callback import (
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, delay_channels
-from jassy.jit import drop_stale_cache
+from jassy.jit import address, drop_stale_cache, prefetch_for_write
 from jassy.program import KERNEL_MODULES
 from jassy.safety import CEILING, LimiterMeter
 from jassy.scheduler import Scheduler, apply_frame, ramp_seconds
@@ -45,10 +46,13 @@ from ugens.cells import with_room
 from ugens.impact import ImpactForce
 from ugens.modal import ModalBank
 
-drop_stale_cache(__file__, [callback, haptics, safety, *KERNEL_MODULES])
+drop_stale_cache(__file__, [callback, haptics, jit, safety, *KERNEL_MODULES])
 
 #: Bytes of staged modal designs after which translation waits for the render to apply them.
 DESIGN_BYTES = 1 << 24
+
+#: Bytes of a cache line (x86-64, most arm64).
+LINE_BYTES = 64
 
 #: Records the event queues start with: the score queue grows as translation needs
 #: (:meth:`OfflineProgram._push`), and no live event is posted offline. (The device
@@ -61,18 +65,33 @@ POLE_KEYS = ("freq_scale", "decay_scale")
 
 
 @nb.njit(cache=True, nogil=True)
+def prefetch_rows(out, at, m):
+    """Ask for the cache lines of out[:, at : at + m] (float64 rows) ahead of their writes."""
+    start = out.ctypes.data + at * out.itemsize
+    for r in range(out.shape[0]):
+        row = start + r * out.strides[0]
+        for offset in range(0, m * out.itemsize, LINE_BYTES):
+            prefetch_for_write(row + offset)
+
+
+@nb.njit(cache=True, nogil=True)
 def render_planar(control, out, offset, frames, delayed, history, delays, delay_pos):
     """Render up to ``frames`` frames from control[FRAME] through the output stage into
     out[:, offset:] (float64 rows: audio, then haptic), with the per-channel delays if
     ``delayed`` (jassy.haptics.delay_channels); return the frames rendered: fewer if a
-    sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed)."""
+    sub-block produced NaN/Inf (it is rendered, its NaN/Inf zeroed).
+
+    The result's cache lines of each sub-block are asked for before its program runs, so
+    that its output stage does not wait for them."""
     prog = program_table(control)
+    block = control[BLOCK]
     nonfinite = control[NONFINITE]
     begin = control[FRAME]
     pos = begin
     end = begin + frames
     while pos < end:
         at = offset + pos - begin
+        prefetch_rows(out, at, min(block, end - pos))
         stop = sub_block(control, prog, pos, end, out, at)
         if delayed:
             delay_channels(out[:, at:], stop - pos, history, delays, delay_pos)
@@ -116,7 +135,7 @@ class OfflineProgram(ProgramRun):
     def stage_design(self, node: ModalBank) -> int:
         """A new design is a new array (ModalBank._design): keep it until applied."""
         self._designs.append(node._fresh)
-        return node._fresh.ctypes.data
+        return address(node._fresh)
 
     def translatable(self, event: Event) -> bool:
         """Whether ``event`` has records that apply it as the scheduler's dispatch does."""
@@ -143,6 +162,9 @@ class OfflineProgram(ProgramRun):
         reach DESIGN_BYTES. Returns (the frame of the first event left before ``end``, else
         ``end``; whether that event is left for Python)."""
         sched = self.scheduler
+        left = sched.next_event
+        if left == len(sched.events) or sched.apply_frames[left] >= ahead:
+            return end, False  # nothing to translate
         queue = self.score_queue
         if queue.read == queue.write:  # drained: start the ring afresh
             self.control[queue.slot + 2] = self.control[queue.slot + 3] = 0
@@ -170,6 +192,8 @@ class OfflineProgram(ProgramRun):
             self._push(records)
         for base, count in strikes.items():
             node = self._impacts[base]
+            if int(node.count[0]) + count <= node.pulses.shape[0]:
+                continue  # room enough (a compiled call from here costs ~15 us, caches cold)
             grown = with_room(node.pulses, int(node.count[0]) + count)
             if grown is not node.pulses:
                 node.pulses = grown
@@ -189,7 +213,7 @@ class OfflineProgram(ProgramRun):
             for j in range(r, w):
                 grown[j - r] = queue.records[j % cap]
             queue.records = grown
-            control[queue.slot] = grown.ctypes.data
+            control[queue.slot] = address(grown)
             control[queue.slot + 1] = size
             control[queue.slot + 2], control[queue.slot + 3] = w - r, 0
             w, cap = w - r, size

@@ -237,8 +237,11 @@ def _response(k, j, a, b, linear, fixed_b, solver):
 
 
 @nb.njit(cache=True, inline="always")
-def _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both):
-    """Relative velocity of contact k along Jacobian row j (a's part, and b's if ``both``)."""
+def _row_velocity(k, j, a, b, jacobian, vel, linear, both):
+    """Relative velocity of contact k along Jacobian row j (a's part, and b's if ``both``):
+    jacobian = (frame, angular rows of a, angular rows of b), vel = (v, w) of the bodies."""
+    frame, ang_a, ang_b = jacobian
+    v, w = vel
     u = 0.0
     for x in range(3):
         u += ang_a[k, j, x] * w[a, x]
@@ -253,10 +256,15 @@ def _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both):
 
 
 @nb.njit(cache=True, inline="always")
-def _row_apply(k, j, a, b, impulse, frame, res_a, res_b, ima, imb, v, w, linear):
-    """Apply ``impulse`` along row j of contact k to both bodies (b gets the reaction). A body
-    of inverse mass 0 (static or kinematic) keeps its velocity and is not written: contacts
-    of different bodies on the same wall then do not wait on each other's stores."""
+def _row_apply(k, j, a, b, impulse, response, inv_masses, vel, linear):
+    """Apply ``impulse`` along row j of contact k to both bodies (b gets the reaction):
+    response = (frame, responses of a, responses of b), inv_masses = (1/m_a, 1/m_b), vel =
+    (v, w) of the bodies. A body of inverse mass 0 (static or kinematic) keeps its velocity
+    and is not written: contacts of different bodies on the same wall then do not wait on
+    each other's stores."""
+    frame, res_a, res_b = response
+    ima, imb = inv_masses
+    v, w = vel
     if ima > 0.0:
         for x in range(3):
             w[a, x] += impulse * res_a[k, j, x]
@@ -310,7 +318,7 @@ def _targets(m, opt, buf, nc, dt, solver):
         a, b = pair[c, 0], pair[c, 1]
         solver.mu[k] = math.sqrt(friction[a] * friction[b])
         solver.roll[k] = max(rolling[a], rolling[b])
-        un = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, True)
+        un = _row_velocity(k, 0, a, b, (frame, ang_a, ang_b), (v, w), True, True)
         solver.speed[k] = -un
         solver.impact[k] = -un > thr
         target[k, 0] = target[k, 1] = target[k, 2] = 0.0
@@ -326,43 +334,52 @@ def _targets(m, opt, buf, nc, dt, solver):
         for j in range(5):
             bias[k, j] = target[k, j] if j < 3 else 0.0
             if fixed:  # b's own velocity along row j (its part of the row, taken as "a")
-                bias[k, j] += _row_velocity(k, j, b, b, frame, ang_b, ang_b, v, w, j < 3, False)
+                bias[k, j] += _row_velocity(k, j, b, b, (frame, ang_b, ang_b), (v, w), j < 3, False)
+
+
+@nb.njit(cache=True, inline="always")
+def link_warm(warm, solver):
+    """Link the last solve's contacts (warm.keys, rows < warm.size) into one list per body a
+    (solver.head, solver.next; in the last solve's order), none of them taken (solver.used)."""
+    keys, head, nxt, used = warm.keys, solver.head, solver.next, solver.used
+    for i in range(head.shape[0]):
+        head[i] = -1
+    for e in range(warm.size[0] - 1, -1, -1):
+        nxt[e] = head[keys[e, 0]]
+        head[keys[e, 0]] = e
+        used[e] = False
+
+
+@nb.njit(cache=True, inline="always")
+def warm_match(buf, c, warm, solver):
+    """The first untaken last-solve contact (link_warm) with the bodies and features of
+    contact c of ``buf``, or -1."""
+    pair, feat, keys, used = buf.pairs, buf.features, warm.keys, solver.used
+    e = solver.head[pair[c, 0]]
+    while e >= 0:
+        if not used[e] and keys[e, 1] == pair[c, 1] and keys[e, 2] == feat[c, 0] and keys[e, 3] == feat[c, 1]:
+            return e
+        e = solver.next[e]
+    return -1
 
 
 @nb.njit(cache=True)
 def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
     """Initial impulses r from the last solve's contacts with the same (a, b, features): its
     force and rolling torque times dt, projected on the new frame and cones, and applied."""
-    pair, feat = buf.pairs, buf.features
-    keys, vals, size = warm.keys, warm.forces, warm.size
+    pair = buf.pairs
+    vals = warm.forces
     idx, frame, impact, r = solver.idx, solver.frame, solver.impact, solver.r
-    head, nxt, used = solver.head, solver.next, solver.used
-    m = size[0]
-    for i in range(head.shape[0]):
-        head[i] = -1
-    for e in range(m - 1, -1, -1):  # lists keep the last solve's order
-        nxt[e] = head[keys[e, 0]]
-        head[keys[e, 0]] = e
-        used[e] = False
+    link_warm(warm, solver)
     for k in range(nc):
         for j in range(5):
             r[k, j] = 0.0
         if impact[k]:
             continue
-        c = idx[k]
-        e = head[pair[c, 0]]
-        while e >= 0:
-            if (
-                not used[e]
-                and keys[e, 1] == pair[c, 1]
-                and keys[e, 2] == feat[c, 0]
-                and keys[e, 3] == feat[c, 1]
-            ):
-                break
-            e = nxt[e]
+        e = warm_match(buf, idx[k], warm, solver)
         if e < 0:
             continue
-        used[e] = True
+        solver.used[e] = True
         for j in range(3):
             r[k, j] = dt * (
                 vals[e, 0] * frame[k, j, 0] + vals[e, 1] * frame[k, j, 1] + vals[e, 2] * frame[k, j, 2]
@@ -395,10 +412,10 @@ def _apply_impulses(pair, nc, inv_mass, solver):
         ima, imb = inv_mass[a], inv_mass[b]
         for j in range(3):
             if r[k, j] != 0.0:
-                _row_apply(k, j, a, b, r[k, j], frame, res_a, res_b, ima, imb, v, w, True)
+                _row_apply(k, j, a, b, r[k, j], (frame, res_a, res_b), (ima, imb), (v, w), True)
         for j in range(3, 5):
             if r[k, j] != 0.0:
-                _row_apply(k, j, a, b, r[k, j], frame, res_a, res_b, ima, imb, v, w, False)
+                _row_apply(k, j, a, b, r[k, j], (frame, res_a, res_b), (ima, imb), (v, w), False)
 
 
 @nb.njit(cache=True)
@@ -490,11 +507,11 @@ def _contact_update(k, a, b, inv_mass, mu, roll, solver):
     frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
     ima, imb = inv_mass[a], inv_mass[b]
     both = imb > 0.0  # else b's velocity is fixed, and in the bias
-    u = _row_velocity(k, 0, a, b, frame, ang_a, ang_b, v, w, True, both)
+    u = _row_velocity(k, 0, a, b, (frame, ang_a, ang_b), (v, w), True, both)
     rn = max(0.0, r[k, 0] + (bias[k, 0] - u) * mass[k, 0])
     dn = rn - r[k, 0]
     if dn != 0.0:
-        _row_apply(k, 0, a, b, dn, frame, res_a, res_b, ima, imb, v, w, True)
+        _row_apply(k, 0, a, b, dn, (frame, res_a, res_b), (ima, imb), (v, w), True)
         r[k, 0] = rn
     if mu > 0.0:
         _disk_update(k, 1, a, b, ima, imb, mu * rn, True, both, solver)
@@ -507,13 +524,14 @@ def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
     """Gauss-Seidel update of rows j, j + 1 of contact k (friction: linear; rolling: angular
     only) projected onto the disk of radius ``limit``."""
     frame, ang_a, ang_b, res_a, res_b, mass, bias, r, v, w = _row_arrays(solver)
-    u1 = _row_velocity(k, j, a, b, frame, ang_a, ang_b, v, w, linear, both)
-    u2 = _row_velocity(k, j + 1, a, b, frame, ang_a, ang_b, v, w, linear, both)
+    jacobian, response, vel = (frame, ang_a, ang_b), (frame, res_a, res_b), (v, w)
+    u1 = _row_velocity(k, j, a, b, jacobian, vel, linear, both)
+    u2 = _row_velocity(k, j + 1, a, b, jacobian, vel, linear, both)
     x1, x2 = _disk(
         r[k, j] + (bias[k, j] - u1) * mass[k, j], r[k, j + 1] + (bias[k, j + 1] - u2) * mass[k, j + 1], limit
     )
-    _row_apply(k, j, a, b, x1 - r[k, j], frame, res_a, res_b, ima, imb, v, w, linear)
-    _row_apply(k, j + 1, a, b, x2 - r[k, j + 1], frame, res_a, res_b, ima, imb, v, w, linear)
+    _row_apply(k, j, a, b, x1 - r[k, j], response, (ima, imb), vel, linear)
+    _row_apply(k, j + 1, a, b, x2 - r[k, j + 1], response, (ima, imb), vel, linear)
     r[k, j], r[k, j + 1] = x1, x2
 
 
@@ -542,11 +560,64 @@ def _keep_warm(buf, nc, dt, warm, solver):
     size[0] = m
 
 
-@nb.njit(cache=True)
-def _records(buf, nc, rot, time, step, rec, nrec, solver):
-    """Append a record row per contact pushing (or impacting) after the solve, in detection
-    order; returns the record count, -1 when rec is full."""
+class Outcome(NamedTuple):
+    """What a contact model gives one contact, for its record row (write_record)."""
+
+    impulse: tuple  # (x, y, z) impulse on body a, N s, world
+    normal: tuple  # (x, y, z) unit normal from b to a
+    ra: tuple  # (x, y, z) contact point less a's centre, m, world
+    rb: tuple  # the same for b
+    speed: float  # approach speed, m/s
+    slip: float  # tangential speed after the response, m/s
+    roll: float  # rolling speed after the response, m/s (rolling_speed)
+    impact: bool  # approach faster than the bounce threshold (an impact)
+
+
+@nb.njit(cache=True, inline="always")
+def rolling_speed(w, a, b, normal, ra):
+    """Rolling speed (m/s) of contact point ra (m, from a's centre) with normal ``normal``:
+    the relative angular velocity of a and b (w, rad/s, world) across the normal times |ra|."""
+    wn = 0.0
+    for x in range(3):
+        wn += (w[a, x] - w[b, x]) * normal[x]
+    wt2 = 0.0
+    for x in range(3):
+        wt2 += (w[a, x] - w[b, x] - wn * normal[x]) ** 2
+    return math.sqrt(wt2) * math.sqrt(ra[0] ** 2 + ra[1] ** 2 + ra[2] ** 2)
+
+
+@nb.njit(cache=True, inline="always")
+def write_record(rec, nrec, buf, c, rot, when, outcome):
+    """Record row nrec (codes.RECORD_FIELDS) of contact c of ``buf`` (bodies, point, features,
+    barycentric weights) at when = (time s, outer step), with the contact model's ``outcome``
+    (Outcome); the lever arms go to each body's frame by its rotation rot[a], rot[b]."""
     pts, pair, feat, bar = buf.points, buf.pairs, buf.features, buf.bary
+    a, b = pair[c, 0], pair[c, 1]
+    impulse, normal, ra, rb = outcome.impulse, outcome.normal, outcome.ra, outcome.rb
+    rec[nrec, REC_TIME] = when[0]
+    rec[nrec, REC_STEP] = when[1]
+    rec[nrec, REC_A] = a
+    rec[nrec, REC_B] = b
+    for x in range(3):
+        rec[nrec, REC_POINT + x] = pts[c, x]
+        rec[nrec, REC_IMPULSE + x] = impulse[x]
+        rec[nrec, REC_BARY + x] = bar[c, x]
+        rec[nrec, REC_NORMAL + x] = normal[x]
+        rec[nrec, REC_LOCAL_A + x] = rot[a, 0, x] * ra[0] + rot[a, 1, x] * ra[1] + rot[a, 2, x] * ra[2]
+        rec[nrec, REC_LOCAL_B + x] = rot[b, 0, x] * rb[0] + rot[b, 1, x] * rb[1] + rot[b, 2, x] * rb[2]
+    rec[nrec, REC_SPEED] = outcome.speed
+    rec[nrec, REC_SLIP] = outcome.slip
+    rec[nrec, REC_ROLL] = outcome.roll
+    rec[nrec, REC_IMPACT] = 1.0 if outcome.impact else 0.0
+    rec[nrec, REC_FEAT_A] = feat[c, 0]
+    rec[nrec, REC_FEAT_B] = feat[c, 1]
+
+
+@nb.njit(cache=True)
+def _records(buf, nc, rot, when, rec, nrec, solver):
+    """Append a record row per contact pushing (or impacting) after the solve, in detection
+    order, at when = (time s, outer step); returns the record count, -1 when rec is full."""
+    pair = buf.pairs
     idx, ra, rb, frame, ang_a, ang_b = (
         solver.idx,
         solver.ra,
@@ -571,37 +642,26 @@ def _records(buf, nc, rot, time, step, rec, nrec, solver):
         c = idx[k]
         a, b = pair[c, 0], pair[c, 1]
         # slip: tangential relative velocity with gravity's increment (target) removed
-        s1 = _row_velocity(k, 1, a, b, frame, ang_a, ang_b, v, w, True, True) - target[k, 1]
-        s2 = _row_velocity(k, 2, a, b, frame, ang_a, ang_b, v, w, True, True) - target[k, 2]
-        wn = 0.0
-        for x in range(3):
-            wn += (w[a, x] - w[b, x]) * frame[k, 0, x]
-        wt2 = 0.0
-        for x in range(3):
-            wt2 += (w[a, x] - w[b, x] - wn * frame[k, 0, x]) ** 2
-        rec[nrec, REC_TIME] = time
-        rec[nrec, REC_STEP] = step
-        rec[nrec, REC_A] = a
-        rec[nrec, REC_B] = b
-        for x in range(3):
-            rec[nrec, REC_POINT + x] = pts[c, x]
-            rec[nrec, REC_IMPULSE + x] = (
-                r[k, 0] * frame[k, 0, x] + r[k, 1] * frame[k, 1, x] + r[k, 2] * frame[k, 2, x]
-            )
-            rec[nrec, REC_BARY + x] = bar[c, x]
-            rec[nrec, REC_NORMAL + x] = frame[k, 0, x]
-            rec[nrec, REC_LOCAL_A + x] = (
-                rot[a, 0, x] * ra[k, 0] + rot[a, 1, x] * ra[k, 1] + rot[a, 2, x] * ra[k, 2]
-            )
-            rec[nrec, REC_LOCAL_B + x] = (
-                rot[b, 0, x] * rb[k, 0] + rot[b, 1, x] * rb[k, 1] + rot[b, 2, x] * rb[k, 2]
-            )
-        rec[nrec, REC_SPEED] = speed0[k]
-        rec[nrec, REC_SLIP] = math.sqrt(s1 * s1 + s2 * s2)
-        rec[nrec, REC_ROLL] = math.sqrt(wt2) * math.sqrt(ra[k, 0] ** 2 + ra[k, 1] ** 2 + ra[k, 2] ** 2)
-        rec[nrec, REC_IMPACT] = 1.0 if impact[k] else 0.0
-        rec[nrec, REC_FEAT_A] = feat[c, 0]
-        rec[nrec, REC_FEAT_B] = feat[c, 1]
+        s1 = _row_velocity(k, 1, a, b, (frame, ang_a, ang_b), (v, w), True, True) - target[k, 1]
+        s2 = _row_velocity(k, 2, a, b, (frame, ang_a, ang_b), (v, w), True, True) - target[k, 2]
+        normal = (frame[k, 0, 0], frame[k, 0, 1], frame[k, 0, 2])
+        arm_a = (ra[k, 0], ra[k, 1], ra[k, 2])
+        impulse = (
+            r[k, 0] * frame[k, 0, 0] + r[k, 1] * frame[k, 1, 0] + r[k, 2] * frame[k, 2, 0],
+            r[k, 0] * frame[k, 0, 1] + r[k, 1] * frame[k, 1, 1] + r[k, 2] * frame[k, 2, 1],
+            r[k, 0] * frame[k, 0, 2] + r[k, 1] * frame[k, 1, 2] + r[k, 2] * frame[k, 2, 2],
+        )
+        outcome = Outcome(
+            impulse,
+            normal,
+            arm_a,
+            (rb[k, 0], rb[k, 1], rb[k, 2]),
+            speed0[k],
+            math.sqrt(s1 * s1 + s2 * s2),
+            rolling_speed(w, a, b, normal, arm_a),
+            impact[k],
+        )
+        write_record(rec, nrec, buf, c, rot, when, outcome)
         nrec += 1
     return nrec
 
@@ -628,4 +688,4 @@ def resolve(m, opt, d, solver, count, dt, time, step, nrec):
     d.stats.sweeps[0] += _sweeps(m, opt, buf.pairs, nc, d.rot, solver)
     _keep_warm(buf, nc, dt, warm, solver)
     store_twists(m.kind, d.rot, solver.v, solver.w, d.phi)
-    return _records(buf, nc, d.rot, time, step, d.rec, nrec, solver)
+    return _records(buf, nc, d.rot, (time, step), d.rec, nrec, solver)

@@ -18,6 +18,7 @@ under gravity g (m/s^2, world) and a constant body-frame wrench ``ext`` (N m, N)
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -28,6 +29,18 @@ SEMI_IMPLICIT = 0
 RK4 = 1
 ADAPTIVE = 2
 METHODS = {"semi-implicit": SEMI_IMPLICIT, "rk4": RK4, "adaptive": ADAPTIVE}
+
+
+class FreeBody(NamedTuple):
+    """One body's state and loads for a step of free motion."""
+
+    p: np.ndarray  # (3,) centre-of-mass position, m
+    q: np.ndarray  # (4,) unit quaternion of the principal frame
+    phi: np.ndarray  # (6,) body-frame twist (rad/s, m/s)
+    inertia: np.ndarray  # (3,) principal moments, kg m^2
+    mass: float  # kg
+    gravity: np.ndarray  # (3,) m/s^2, world
+    ext: np.ndarray  # (6,) constant body-frame wrench (N m, N)
 
 
 @nb.njit(cache=True)
@@ -64,8 +77,13 @@ def rk4_step(p, q, phi, inertia, mass, gravity, ext, h):
 
 
 @nb.njit(cache=True, inline="always")
-def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
-    """Solution (x0, x1, x2) of a 3 x 3 linear system by Cramer's rule (scalars)."""
+def _solve3(row0, row1, row2, b):
+    """Solution (x0, x1, x2) of the 3 x 3 linear system J x = b by Cramer's rule (J's rows and
+    b as 3-tuples of scalars)."""
+    j00, j01, j02 = row0
+    j10, j11, j12 = row1
+    j20, j21, j22 = row2
+    b0, b1, b2 = b
     c00, c01, c02 = j11 * j22 - j12 * j21, j12 * j20 - j10 * j22, j10 * j21 - j11 * j20
     det = j00 * c00 + j01 * c01 + j02 * c02
     x0 = b0 * c00 + b1 * (j02 * j21 - j01 * j22) + b2 * (j01 * j12 - j02 * j11)
@@ -90,18 +108,10 @@ def _implicit_midpoint_omega(w0, w1, w2, i0, i1, i2, t0, t1, t2, h):
         g2 = i2 * (x2 - w2) / h + (m0 * y1 - m1 * y0) - t2
         # dg/dw' = I/h + 0.5 ([wm] I - [I wm]), [x] the cross-product matrix
         d0, d1, d2 = _solve3(
-            i0 / h,
-            0.5 * (-m2 * i1 + y2),
-            0.5 * (m1 * i2 - y1),
-            0.5 * (m2 * i0 - y2),
-            i1 / h,
-            0.5 * (-m0 * i2 + y0),
-            0.5 * (-m1 * i0 + y1),
-            0.5 * (m0 * i1 - y0),
-            i2 / h,
-            g0,
-            g1,
-            g2,
+            (i0 / h, 0.5 * (-m2 * i1 + y2), 0.5 * (m1 * i2 - y1)),
+            (0.5 * (m2 * i0 - y2), i1 / h, 0.5 * (-m0 * i2 + y0)),
+            (0.5 * (-m1 * i0 + y1), 0.5 * (m0 * i1 - y0), i2 / h),
+            (g0, g1, g2),
         )
         x0, x1, x2 = x0 - d0, x1 - d1, x2 - d2
         if abs(d0) + abs(d1) + abs(d2) <= 1e-14 * (1.0 + abs(x0) + abs(x1) + abs(x2)):
@@ -121,12 +131,15 @@ def _rotate(qw, qx, qy, qz, x, y, z):
 
 
 @nb.njit(cache=True)
-def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi, ballistic=True):
+def semi_implicit_into(body, h, out, ballistic=True):
     """Closed-form translation under constant acceleration with an implicit-midpoint angular
-    update (see module doc), written into out_p, out_q, out_phi (scalar arithmetic, no
-    allocation). ``ballistic=False``: the centre moves with the new velocity instead,
-    p1 = p + h v1 (symplectic Euler), for a body held by a resting contact whose solve folded
-    the step's gravity increment into its velocity (it then stays put with zero velocity)."""
+    update (see module doc) of ``body`` (FreeBody) over h seconds, written into the rows
+    out = (p, q, phi) (scalar arithmetic, no allocation). ``ballistic=False``: the centre moves
+    with the new velocity instead, p1 = p + h v1 (symplectic Euler), for a body held by a
+    resting contact whose solve folded the step's gravity increment into its velocity (it then
+    stays put with zero velocity)."""
+    p, q, phi, inertia, mass, gravity, ext = body
+    out_p, out_q, out_phi = out
     x0, x1, x2 = _implicit_midpoint_omega(
         phi[0], phi[1], phi[2], inertia[0], inertia[1], inertia[2], ext[0], ext[1], ext[2], h
     )
@@ -159,7 +172,7 @@ def semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, 
 def semi_implicit_step(p, q, phi, inertia, mass, gravity, ext, h):
     """Closed-form translation, implicit-midpoint rotation (see module doc)."""
     p1, q1, phi1 = np.empty(3), np.empty(4), np.empty(6)
-    semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, p1, q1, phi1)
+    semi_implicit_into(FreeBody(p, q, phi, inertia, mass, gravity, ext), h, (p1, q1, phi1))
     return p1, q1, phi1
 
 
@@ -209,16 +222,24 @@ def advance_body(p, q, phi, inertia, mass, gravity, ext, h, method, tol):
     return p1, q1, f1
 
 
-@nb.njit(cache=True)
-def advance_body_into(p, q, phi, inertia, mass, gravity, ext, h, method, tol, out_p, out_q, out_phi):
-    """advance_body written into out_p, out_q, out_phi (no allocation for SEMI_IMPLICIT)."""
+@nb.njit(cache=True, _nrt=True)
+def advance_body_into(body, h, method, tol, out):
+    """advance_body of ``body`` (FreeBody) written into the rows out = (p, q, phi). It
+    allocates (RK4 and the adaptive method work on arrays), so it keeps numba's reference
+    counting when called from a kernel compiled without it; the stepper calls
+    semi_implicit_into directly for the default method."""
+    p, q, phi, inertia, mass, gravity, ext = body
+    out_p, out_q, out_phi = out
     if method == SEMI_IMPLICIT and h > 0.0:
-        semi_implicit_into(p, q, phi, inertia, mass, gravity, ext, h, out_p, out_q, out_phi)
+        semi_implicit_into(body, h, out)
         return
     p1, q1, f1 = advance_body(p, q, phi, inertia, mass, gravity, ext, h, method, tol)
-    out_p[:] = p1
-    out_q[:] = q1
-    out_phi[:] = f1
+    for x in range(3):
+        out_p[x] = p1[x]
+    for x in range(4):
+        out_q[x] = q1[x]
+    for x in range(6):
+        out_phi[x] = f1[x]
 
 
 def integrate_free(p, q, phi, inertia, mass, h, steps, method="rk4", gravity=(0.0, 0.0, 0.0), tol=1e-10):

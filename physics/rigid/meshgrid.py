@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -80,6 +81,28 @@ class TriangleGrid:
     start: np.ndarray
     items: np.ndarray
 
+    def view(self) -> GridView:
+        """The grid as the queries' record (a lone grid: offsets (0, 0, 0))."""
+        return GridView(
+            self.triangles, self.spheres, self.origin, self.cell, self.dims, self.start, self.items, (0, 0, 0)
+        )
+
+
+class GridView(NamedTuple):
+    """What grid_closest and grid_within read of a grid. The arrays may hold several grids end
+    to end (physics.rigid.model.Geometry's mesh tables): ``offsets`` = (first triangle, first
+    cell start, first item) of this one; items and the triangle indices the queries return
+    count from its first triangle."""
+
+    tri: np.ndarray  # (T, 3, 3) triangles' corners, m
+    spheres: np.ndarray  # (T, 4) their bounding spheres (centre, radius), m
+    origin: tuple  # (x, y, z) of the grid's low corner, m (an array or a tuple)
+    cell: float  # cell size, m
+    dims: tuple  # cell counts (an array or a tuple)
+    start: np.ndarray  # each cell's start in items
+    items: np.ndarray  # triangle numbers of the cells' lists
+    offsets: tuple  # (first triangle, first cell start, first item)
+
 
 def build_grid(vertices: np.ndarray, faces: np.ndarray, cell: float | None = None) -> TriangleGrid:
     """Bucket the triangles by the cells their bounding boxes overlap. The default cell is
@@ -139,12 +162,11 @@ def _cell_range(px, py, pz, radius, origin, cell, dims):
 
 
 @nb.njit(cache=True, inline="always")
-def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, items, offsets):
-    """Closest point of the surface within ``reach`` (m) of (px, py, pz): (triangle index or -1,
-    squared distance, barycentric weights u, v, w); no allocation. origin, dims: arrays or
-    tuples. tri, spheres, start and items may hold several grids end to end: offsets = (first
-    triangle, first cell start, first item) of this one, (0, 0, 0) for a lone grid; items and
-    the index returned count from the grid's first triangle."""
+def grid_closest(px, py, pz, reach, grid):
+    """Closest point of the surface ``grid`` (GridView) within ``reach`` (m) of (px, py, pz):
+    (triangle index from the grid's first or -1, squared distance, barycentric weights u, v,
+    w); no allocation."""
+    tri, spheres, origin, cell, dims, start, items, offsets = grid
     t0, s0, i0 = offsets[0], offsets[1], offsets[2]
     best = -1
     best_d2 = reach * reach
@@ -165,11 +187,12 @@ def grid_closest(px, py, pz, reach, tri, spheres, origin, cell, dims, start, ite
 
 
 @nb.njit(cache=True, inline="always")
-def grid_within(px, py, pz, radius, tri, spheres, origin, cell, dims, start, items, offsets, out, dist, row):
-    """The triangles of the surface within ``radius`` (m) of (px, py, pz), nearest first: their
-    indices (from the grid's first triangle, as grid_closest) into out[row] and distances (m)
-    into dist[row]; returns how many, or -1 when there are more than a row holds. Other
-    arguments as grid_closest."""
+def grid_within(px, py, pz, radius, grid, out, dist, row):
+    """The triangles of the surface ``grid`` (GridView) within ``radius`` (m) of (px, py, pz),
+    nearest first: their indices (from the grid's first triangle, as grid_closest) into
+    out[row] and distances (m) into dist[row]; returns how many, or -1 when there are more
+    than a row holds."""
+    tri, spheres, origin, cell, dims, start, items, offsets = grid
     t0, s0, i0 = offsets[0], offsets[1], offsets[2]
     n = 0
     lo_i, hi_i, lo_j, hi_j, lo_k, hi_k = _cell_range(px, py, pz, radius, origin, cell, dims)

@@ -40,6 +40,7 @@ import numba as nb
 import numpy as np
 
 from physics.rigid.meshgrid import (
+    GridView,
     grid_closest,
     grid_within,
     triangle_distance2,
@@ -672,29 +673,12 @@ def _mesh_closest(k, m, lx, ly, lz, reach, model, near):
         qx, qy, qz = triangle_point(tris, last, hu, hv, hw)
         bound = math.sqrt((lx - qx) ** 2 + (ly - qy) ** 2 + (lz - qz) ** 2) * (1.0 + 1e-9) + 1e-12
         radius = min(FAR * reach, bound)
-        tri, d2, u, v, w = grid_closest(
-            lx, ly, lz, radius, tris, spheres, origin, grid_f[m, 3], dims, starts, items, offsets
-        )
+        grid = GridView(tris, spheres, origin, grid_f[m, 3], dims, starts, items, offsets)
+        tri, d2, u, v, w = grid_closest(lx, ly, lz, radius, grid)
         anchor[k, 4] = 0.0
         if tri >= 0 and d2 < reach * reach:  # it will be asked again: list its candidates
             within = (math.sqrt(d2) + skin) * (1.0 + 1e-9)
-            n = grid_within(
-                lx,
-                ly,
-                lz,
-                within,
-                tris,
-                spheres,
-                origin,
-                grid_f[m, 3],
-                dims,
-                starts,
-                items,
-                offsets,
-                listed,
-                listed_dist,
-                k,
-            )
+            n = grid_within(lx, ly, lz, within, grid, listed, listed_dist, k)
             if n > 0:
                 anchor[k, 0], anchor[k, 1], anchor[k, 2], anchor[k, 3], anchor[k, 4] = lx, ly, lz, n, m + 1
     clear[k, 0], clear[k, 1], clear[k, 2] = lx, ly, lz

@@ -27,12 +27,15 @@ outer step of h seconds (:func:`outer_step`) is:
 
 The stages are inlined into run_steps (numba inline="always"): a called kernel is linked
 into its caller's module and optimised again there, so a chain of stage calls above the
-narrow phase would compile it once per level. Stages and helpers that allocate nothing
-(narrow_stage, _boxes, _commit, sample_stage, the per-body loops) are compiled without
-reference counting (``_nrt=False``): an inlined or reference-counted call taking Model and
-Data counts a reference up and down for every array they hold, a fixed cost per call. Such
-a kernel passes the flag on to the kernels it calls that set none, so it calls only kernels
-that are themselves ``_nrt=False``.
+narrow phase would compile it once per level. The whole step allocates nothing and run_steps
+is compiled without reference counting (``_nrt=False``, passed on to every kernel it calls
+that sets no flag of its own): with it, every use of Model or Data counted a reference up and
+down for each array they hold. Its scratch (contact solve, sweep, pair bounds, the gap
+probe's saved poses) lives in Data; a sweep that finds more pairs, or a narrow phase more
+contacts, than the scratch holds stops the run inside its step (Data.progress says where and
+how much is needed), and :func:`run` grows the scratch and resumes the step there. Only the
+RK4 and adaptive integrators allocate (integrate.advance_body_into keeps reference counting
+for itself).
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -48,7 +51,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from physics.rigid.broad import new_sweep, sweep_pairs
+from physics.rigid.broad import Sweep, new_sweep, sweep_pairs
 from physics.rigid.codes import (
     DYNAMIC,
     HUNT_CROSSLEY,
@@ -59,13 +62,12 @@ from physics.rigid.codes import (
     REC_B,
     REC_IMPACT,
 )
-from physics.rigid.impulses import WarmStart, new_solver, resolve
-from physics.rigid.integrate import SEMI_IMPLICIT, advance_body_into, semi_implicit_into
+from physics.rigid.impulses import SolverScratch, WarmStart, new_solver, resolve
+from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, semi_implicit_into
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
 from physics.rigid.penalty import penalty
 from physics.rigid.shapes import PLANE, SPHERE
-from physics.rigid.spatial import quat_log, quat_mul, quat_to_mat
 
 MAX_CONTACTS = 1 << 16
 PROBE_CONTACTS = 256  # contact rows of one pair's gap probe (impact times)
@@ -120,7 +122,27 @@ class Data(NamedTuple):
     hi: np.ndarray  # (N, 3)
     movable: np.ndarray  # (N,) bool: dynamic
     gravity: np.ndarray  # (3,) m/s^2
+    gravity_norm: float  # |gravity|, m/s^2
     no_wrench: np.ndarray  # (6,) the free motion's body wrench: none
+    solver: SolverScratch  # the contact solve's scratch (rows: contacts it can hold)
+    sweep: Sweep  # the broad phase's scratch (rows: pairs it can hold)
+    near: PairScratch  # per broad-phase pair (as many rows as sweep.pairs)
+    keep: np.ndarray  # (2, 12) the poses (position, rotation) a gap probe moves and restores
+    progress: Progress  # where a step stopped for more scratch, and the most contacts seen
+
+
+class Progress(NamedTuple):
+    """Where run_steps stopped inside an outer step for more scratch (run resumes it there),
+    and the most contacts of a (sub-)step so far (each a small array, updated in place)."""
+
+    t_local: np.ndarray  # (1,) time into the step, s
+    subs: np.ndarray  # (1,) impact sub-steps taken in it
+    need: np.ndarray  # (2,) pairs and contacts the scratch must hold (0, 0: it holds them)
+    most: np.ndarray  # (1,) most contacts of a (sub-)step
+
+
+def new_progress() -> Progress:
+    return Progress(np.zeros(1), np.zeros(1, np.int64), np.zeros(2, np.int64), np.full(1, 64, np.int64))
 
 
 def new_data(
@@ -131,6 +153,8 @@ def new_data(
     across runs); fresh scratch, and a fresh memory of the body points near meshes."""
     n = pos.shape[0]
     near = new_mesh_memory(int(m.geometry.point_start[-1]))
+    sweep = new_sweep(n)
+    gravity = np.array([opt.gx, opt.gy, opt.gz])
     return Data(
         pos,
         quat,
@@ -162,9 +186,46 @@ def new_data(
         np.empty((n, 3)),
         np.empty((n, 3)),
         np.zeros(n, np.bool_),
-        np.array([opt.gx, opt.gy, opt.gz]),
+        gravity,
+        float(np.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1] + gravity[2] * gravity[2])),
         np.zeros(6),
+        new_solver(np.int64(256), n, warm.keys.shape[0]),
+        sweep,
+        new_pair_scratch(sweep.pairs.shape[0]),
+        np.empty((2, 12)),
+        new_progress(),
     )
+
+
+def _grown(d: Data, steps: int) -> Data:
+    """d with scratch for the pairs and contacts d.progress.need asks for (twice as many, the
+    contacts at most the contact buffer's rows), resuming at its step ``steps`` (the kinematic
+    samples start there)."""
+    pairs, contacts = (int(x) for x in d.progress.need)
+    sweep, near, solver = d.sweep, d.near, d.solver
+    if pairs > sweep.pairs.shape[0]:
+        sweep = sweep._replace(pairs=np.empty((2 * pairs, 2), np.int64))
+        near = new_pair_scratch(2 * pairs)
+    if contacts > solver.idx.shape[0]:
+        rows = min(2 * contacts, d.contacts.gaps.shape[0])
+        solver = new_solver(np.int64(rows), d.pos.shape[0], d.warm.keys.shape[0])
+    d.progress.need[:] = 0
+    return d._replace(
+        kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], sweep=sweep, near=near, solver=solver
+    )
+
+
+def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) -> tuple[int, int]:
+    """run_steps, growing d's scratch whenever a step asks for more and resuming it: (steps
+    done, record count); fewer steps than n_steps when d.rec may not hold the next step's
+    records (the caller grows it and calls again)."""
+    done = 0
+    while True:
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec)
+        done += steps
+        if not d.progress.need.any():
+            return done, nrec
+        d = _grown(d, steps)
 
 
 class SolveBodies(NamedTuple):
@@ -201,40 +262,47 @@ class PairScratch(NamedTuple):
     touching: np.ndarray
 
 
-@nb.njit(cache=True)
-def new_pair_scratch(size):
+def new_pair_scratch(size: int) -> PairScratch:
     return PairScratch(np.empty(size), np.empty(size), np.empty(size, np.bool_))
 
 
 @nb.njit(cache=True, _nrt=False)
 def _rotations(quat, rot):
-    """rot[i]: rotation matrix of the unit quaternion quat[i] (spatial.quat_to_mat, in place)."""
+    """The rotation matrices of all the quaternions quat into rot (_rotation)."""
     for i in range(quat.shape[0]):
-        w, x, y, z = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-        rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2] = (
-            1 - 2 * (y * y + z * z),
-            2 * (x * y - w * z),
-            2 * (x * z + w * y),
-        )
-        rot[i, 1, 0], rot[i, 1, 1], rot[i, 1, 2] = (
-            2 * (x * y + w * z),
-            1 - 2 * (x * x + z * z),
-            2 * (y * z - w * x),
-        )
-        rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2] = (
-            2 * (x * z - w * y),
-            2 * (y * z + w * x),
-            1 - 2 * (x * x + y * y),
-        )
+        _rotation(quat, i, rot)
+
+
+@nb.njit(cache=True, inline="always")
+def _rotation(quat, i, rot):
+    """rot[i]: rotation matrix of the unit quaternion quat[i] (spatial.quat_to_mat, in place)."""
+    w, x, y, z = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
+    rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2] = (
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+    )
+    rot[i, 1, 0], rot[i, 1, 1], rot[i, 1, 2] = (
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+    )
+    rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2] = (
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
+    )
 
 
 @nb.njit(cache=True, _nrt=False)
-def _mark_resting(rec, first, last, kind, resting):
-    """resting[i]: dynamic body i has a non-impact contact among the records first..last-1
-    (those of the solve just done)."""
+def _mark_resting(rec, first, last, kind, impulse, resting):
+    """resting[i]: dynamic body i has a contact among the records first..last-1 (those of the
+    solve just done): a non-impact one under the impulse model (``impulse``: the solve folded
+    the step's gravity increment into its velocity), any under a penalty model (the symplectic
+    update: positions move with the velocities after the forces)."""
     resting[:] = False
     for r in range(first, last):
-        if rec[r, REC_IMPACT] == 0.0:
+        if rec[r, REC_IMPACT] == 0.0 or not impulse:
             for col in (REC_A, REC_B):
                 i = int(rec[r, col])
                 resting[i] = kind[i] == DYNAMIC
@@ -284,37 +352,13 @@ def _move(f, i, tau, out_p, out_q, out_phi):
     i of out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: f.resting)."""
     kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
     method = f.method
-    if kind[i] == DYNAMIC and method == SEMI_IMPLICIT and tau > 0.0:
-        semi_implicit_into(
-            pos[i],
-            quat[i],
-            phi[i],
-            f.inertia[i],
-            f.mass[i],
-            f.gravity,
-            f.no_wrench,
-            tau,
-            out_p[i],
-            out_q[i],
-            out_phi[i],
-            not f.resting[i],
-        )
-    elif kind[i] == DYNAMIC:
-        advance_body_into(
-            pos[i],
-            quat[i],
-            phi[i],
-            f.inertia[i],
-            f.mass[i],
-            f.gravity,
-            f.no_wrench,
-            tau,
-            method,
-            f.adaptive_tolerance,
-            out_p[i],
-            out_q[i],
-            out_phi[i],
-        )
+    if kind[i] == DYNAMIC:
+        body = FreeBody(pos[i], quat[i], phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
+        out = (out_p[i], out_q[i], out_phi[i])
+        if method == SEMI_IMPLICIT and tau > 0.0:
+            semi_implicit_into(body, tau, out, not f.resting[i])
+        else:
+            advance_body_into(body, tau, method, f.adaptive_tolerance, out)
     else:
         for x in range(6):
             out_phi[i, x] = phi[i, x]
@@ -359,17 +403,28 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
 @nb.njit(cache=True)
 def _gap_at(m, opt, d, a, b, tau, margin):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
-    moved_* scratch; d.pos and d.rot are restored)."""
-    pos, rot, mp, mq, mf = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi
-    keep_pa, keep_pb = pos[a].copy(), pos[b].copy()
-    keep_ra, keep_rb = rot[a].copy(), rot[b].copy()
+    moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
+    pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
+    for side in range(2):
+        i = a if side == 0 else b
+        for x in range(3):
+            keep[side, x] = pos[i, x]
+            for y in range(3):
+                keep[side, 3 + 3 * x + y] = rot[i, x, y]
     f = _free_motion(m, opt, d)
     for i in (a, b):
         _move(f, i, tau, mp, mq, mf)
     for i in (a, b):
-        pos[i], rot[i] = mp[i], quat_to_mat(mq[i])
+        for x in range(3):
+            pos[i, x] = mp[i, x]
+        _rotation(mq, i, rot)
     gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe)
-    pos[a], pos[b], rot[a], rot[b] = keep_pa, keep_pb, keep_ra, keep_rb
+    for side in range(2):
+        i = a if side == 0 else b
+        for x in range(3):
+            pos[i, x] = keep[side, x]
+            for y in range(3):
+                rot[i, x, y] = keep[side, 3 + 3 * x + y]
     return gap
 
 
@@ -397,12 +452,6 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
         if abs(f) < 1e-13:
             return t
     return hi
-
-
-@nb.njit(cache=True, inline="always")
-def _norm3(x):
-    """|x| of a 3-vector."""
-    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -555,47 +604,79 @@ def _detect(geo, slop, pos, rot, buf, pairs, near):
 def kinematic_stage(m, opt, d, s):
     """Kinematic bodies to their path's pose at the run's step s, with the velocity and angular
     velocity (finite differences over the step) that take them to the next."""
-    h = opt.h
+    h, kin_pos, kin_quat = opt.h, d.kin_pos, d.kin_quat
     for j in range(m.kinematic.shape[0]):
         i = m.kinematic[j]
-        d.pos[i] = d.kin_pos[s, j]
-        d.quat[i] = d.kin_quat[s, j]
-        d.kin_v[i] = (d.kin_pos[s + 1, j] - d.kin_pos[s, j]) / h
-        d.kin_w[i] = (
-            quat_log(quat_mul(d.kin_quat[s + 1, j], np.array([1.0, -1.0, -1.0, -1.0]) * d.kin_quat[s, j])) / h
-        )
+        for x in range(3):
+            d.pos[i, x] = kin_pos[s, j, x]
+            d.kin_v[i, x] = (kin_pos[s + 1, j, x] - kin_pos[s, j, x]) / h
+        for x in range(4):
+            d.quat[i, x] = kin_quat[s, j, x]
+        _turn_rate(kin_quat, s, j, h, i, d.kin_w)
 
 
 @nb.njit(cache=True, inline="always")
-def broad_stage(m, opt, d, dt, sweep):
+def _turn_rate(kin_quat, s, j, h, i, kin_w):
+    """kin_w[i]: the angular velocity (rad/s) turning kinematic body j from its quaternion at
+    step s to the next in h seconds, log(q1 conj(q0)) / h (spatial.quat_mul, quat_log in
+    scalars)."""
+    a0, a1, a2, a3 = (
+        kin_quat[s + 1, j, 0],
+        kin_quat[s + 1, j, 1],
+        kin_quat[s + 1, j, 2],
+        kin_quat[s + 1, j, 3],
+    )
+    b0, b1, b2, b3 = kin_quat[s, j, 0], -kin_quat[s, j, 1], -kin_quat[s, j, 2], -kin_quat[s, j, 3]
+    w = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    v0 = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    v1 = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    v2 = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+    if w < 0.0:
+        w, v0, v1, v2 = -w, -v0, -v1, -v2
+    n = math.sqrt(v0**2 + v1**2 + v2**2)
+    if n < 1e-12:
+        kin_w[i, 0], kin_w[i, 1], kin_w[i, 2] = (
+            2.0 * v0 / max(w, 1e-300) / h,
+            2.0 * v1 / max(w, 1e-300) / h,
+            2.0 * v2 / max(w, 1e-300) / h,
+        )
+    else:
+        scale = 2.0 * math.atan2(n, w) / n
+        kin_w[i, 0], kin_w[i, 1], kin_w[i, 2] = scale * v0 / h, scale * v1 / h, scale * v2 / h
+
+
+@nb.njit(cache=True, inline="always")
+def broad_stage(m, opt, d, dt):
     """Rotations, speed bounds and the pairs of bodies that can come within slop in dt seconds
-    of free motion (sweep and prune of bounding boxes grown by how far each can move); d.spin
-    keeps only what can change a gap (_gap_spin). Returns (pairs, the sweep scratch)."""
+    of free motion (sweep and prune of bounding boxes grown by how far each can move) into
+    d.sweep.pairs; d.spin keeps only what can change a gap (_gap_spin). Returns how many
+    pairs there are (more than d.sweep.pairs holds: grow it and sweep again)."""
     _rotations(d.quat, d.rot)
     _speeds(m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)
-    gravity_norm = _norm3(d.gravity)
-    _motion(d.vel, d.spin, m.kind, gravity_norm, dt, d.motion)
+    _motion(d.vel, d.spin, m.kind, d.gravity_norm, dt, d.motion)
     _boxes(m, d, opt.slop)
-    pairs, sweep = sweep_pairs(d.lo, d.hi, d.movable, sweep)
+    count = sweep_pairs(d.lo, d.hi, d.movable, d.sweep)
     _gap_spin(d.spin, m.geometry.shape_type)  # after the boxes, whose order on x sets the contacts' order
-    return pairs, sweep
+    return count
 
 
 @nb.njit(cache=True, _nrt=False)
 def narrow_stage(m, opt, d, pairs, near, dt):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
     come within slop (_detect); returns their count."""
-    gravity_norm = _norm3(d.gravity)
-    near.reach[: pairs.shape[0]] = 0.0
-    _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, near.reach)
+    reach = near.reach
+    for p in range(pairs.shape[0]):
+        reach[p] = 0.0
+    _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
     return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
 
 
 @nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
-    """The contact model's response to the contacts d.contacts[:count] over dt (s): the one
-    dispatch of contact models on opt.contact (an unknown code is an error). Returns the
-    record count, -1 when d.rec is full."""
+def contact_stage(m, opt, d, count, dt, time, step, nrec):
+    """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
+    scratch d.solver (rows >= count): the one dispatch of contact models on opt.contact (an
+    unknown code is an error). Returns the record count, -1 when d.rec is full."""
+    solver = d.solver
     d.stats.solves[0] += 1
     if opt.contact == IMPULSE:
         bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
@@ -603,7 +684,7 @@ def contact_stage(m, opt, d, solver, count, dt, time, step, nrec):
         return resolve(bodies, opt, state, solver, count, dt, time, step, nrec)
     if opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
         d.stats.contacts[0] += count
-        return penalty(m, opt, d, count, dt, time, step, nrec)
+        return penalty(m, opt, d, solver, count, dt, time, step, nrec)
     raise ValueError("stepper.contact_stage: unknown contact model code")
 
 
@@ -621,7 +702,6 @@ def impact_stage(m, opt, d, pairs, near, dt):
     the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
     threshold (module doc, step 6); dt when none."""
     slop, bounce = opt.slop, opt.bounce_threshold
-    gravity_norm = _norm3(d.gravity)
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
     # count per array it holds)
     geo, pos, rot, new_pos, new_rot, probe, checks = (
@@ -639,7 +719,7 @@ def impact_stage(m, opt, d, pairs, near, dt):
         m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin
     )  # after the solve
     _gap_spin(d.spin, m.geometry.shape_type)
-    _pair_reach(pairs, d.vel, d.spin, m.kind, gravity_norm, dt, reach)
+    _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
     first_hit = dt
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
@@ -689,32 +769,34 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, scratch, nrec):
+def outer_step(m, opt, d, step, nrec):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
-    impact sub-steps. ``scratch``: (solver, sweep, pair scratch), grown as needed. Returns
-    (record count, scratch, the most contacts of a (sub-)step)."""
-    solver, sweep, near = scratch
+    impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
+    it stopped for more scratch: d.progress.need says how much)."""
+    progress = d.progress
     h = opt.h
     max_events = opt.max_events if opt.contact == IMPULSE else 0
-    most = 0
-    t_local = 0.0
-    subs = 0
+    t_local = progress.t_local[0]
+    subs = progress.subs[0]
     while True:
         dt = h - t_local
         if dt <= 1e-15:
             break
-        pairs, sweep = broad_stage(m, opt, d, dt, sweep)
-        if pairs.shape[0] > near.reach.shape[0]:
-            near = new_pair_scratch(2 * pairs.shape[0])
+        count = broad_stage(m, opt, d, dt)
+        if count > d.sweep.pairs.shape[0] or count > d.near.reach.shape[0]:
+            progress.need[0] = count
+            return _stop(progress, t_local, subs, nrec)
+        pairs, near = d.sweep.pairs[:count], d.near
         count = narrow_stage(m, opt, d, pairs, near, dt)
-        most = max(most, count)
-        if count > solver.idx.shape[0]:
-            solver = new_solver(2 * count, m.kind.shape[0], d.warm.keys.shape[0])
+        if count > d.solver.idx.shape[0]:
+            progress.need[1] = count
+            return _stop(progress, t_local, subs, nrec)
+        progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, solver, count, dt, step * h + t_local, step, nrec)
+        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
-        _mark_resting(d.rec, solved, nrec, m.kind, d.resting)
+        _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
         advance_stage(m, opt, d, dt)
         first_hit = impact_stage(m, opt, d, pairs, near, dt) if subs < max_events else dt
         if first_hit < dt:
@@ -728,28 +810,34 @@ def outer_step(m, opt, d, step, scratch, nrec):
         if subs >= max_events and max_events > 0:
             d.stats.late_impacts[0] += 1
         break
-    return nrec, (solver, sweep, near), most
+    progress.t_local[0] = 0.0
+    progress.subs[0] = 0
+    return nrec, False
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _stop(progress, t_local, subs, nrec):
+    """outer_step's return when it stops for more scratch at t_local after subs sub-steps."""
+    progress.t_local[0] = t_local
+    progress.subs[0] = subs
+    return nrec, True
+
+
+@nb.njit(cache=True, _nrt=False)
 def run_steps(m, opt, d, first, n_steps, nrec):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
-    before a step when d.rec may not hold its records (the caller grows it and calls again)."""
-    n = m.kind.shape[0]
-    # sizes as np.int64: literal sizes would compile the function once per value
-    scratch = (
-        new_solver(np.int64(256), n, d.warm.keys.shape[0]),
-        new_sweep(n),
-        new_pair_scratch(np.int64(8 * n + 16)),
-    )
+    before a step when d.rec may not hold its records (the caller grows it and calls again),
+    and inside a step that needs more scratch (module doc; :func:`run` resumes it)."""
     max_events = opt.max_events if opt.contact == IMPULSE else 0
-    last_count = 64
     for s in range(n_steps):
-        if d.rec.shape[0] - nrec < (max_events + 2) * last_count + 64:
+        resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
+        if not resuming and d.rec.shape[0] - nrec < (max_events + 2) * d.progress.most[0] + 64:
             return s, nrec
-        kinematic_stage(m, opt, d, s)
-        nrec, scratch, most = outer_step(m, opt, d, first + s, scratch, nrec)
-        last_count = max(last_count, most)
+        if not resuming:
+            kinematic_stage(m, opt, d, s)
+        nrec, stopped = outer_step(m, opt, d, first + s, nrec)
+        if stopped:
+            return s, nrec
         sample_stage(d, first + s)
     return n_steps, nrec

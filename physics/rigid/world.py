@@ -521,7 +521,7 @@ def simulate(
             first,
             warm,
         )
-        steps, nrec = st.run_steps(model, opt, data, first + done, todo, nrec)
+        steps, nrec = st.run(model, opt, data, first + done, todo, nrec)
         if steps < todo and not keep_records and nrec > 0:
             nrec = 0  # the records are not kept: write over them
         elif steps < todo:  # the record buffer might not hold the next step: grow it

@@ -1,0 +1,64 @@
+"""The kernels that render a mode budget's kept modes (ugens.modal_kept)."""
+
+import numpy as np
+
+from ugens.modal import bank_step
+from ugens.modal_budget import line_aligned_zeros
+from ugens.modal_kept import kept_step
+
+FS = 48000
+
+
+def ringing_rows(width, rng):
+    """Compact-bank rows (c1, c2, g, d, y1, y2) of ``width`` modes ringing as
+    A R^n sin(n theta + phi) from n = 0, and their (A, R, theta, phi)."""
+    rows = line_aligned_zeros((6, width))
+    amp, theta, phi = rng.uniform(0.5, 2.0, width), rng.uniform(0.01, 3.0, width), rng.uniform(0, 6, width)
+    radius = np.exp(-rng.uniform(1.0, 30.0, width) / FS)
+    rows[0], rows[1], rows[2] = 2 * radius * np.cos(theta), radius**2, 1e-3
+    rows[4] = amp / radius * np.sin(phi - theta)  # y[-1]
+    rows[5] = amp / radius**2 * np.sin(phi - 2 * theta)  # y[-2]
+    return rows, (amp, radius, theta, phi)
+
+
+def test_free_ringing_follows_the_decaying_sinusoids():
+    """With no force the kept modes ring as sum_k A_k R_k^n sin(n theta_k + phi_k),
+    over stretches of every length the eight-sample passes and their remainder take
+    (flush frames at 1024 and 2048 inside)."""
+    rng = np.random.default_rng(1)
+    rows, (amp, radius, theta, phi) = ringing_rows(24, rng)
+    n = np.arange(3001)[:, None]
+    expected = np.sum(amp * radius**n * np.sin(n * theta + phi), axis=1)
+    out, at, meta, last = np.zeros(3001), 0, np.array([24, 0, 24]), np.zeros(1)
+    for size in (5, 8, 1000, 13, 1975):  # 3001 frames in spans of awkward lengths
+        kept_step(np.zeros(size), out[at : at + size], at, size, rows, meta, 1e-12, last, np.zeros(0))
+        at += size
+    assert np.max(np.abs(out - expected)) < 1e-9 * np.max(np.abs(expected))
+    assert meta[0] == 24 and last[0] == 0.0
+
+
+def test_kept_modes_match_the_full_bank_kernel_with_forces_and_silences():
+    """A force, then ringing, then a force again, then silence to the floor: the kept
+    kernel gives the full bank kernel's output (ugens.modal.bank_step on the same rows),
+    its silent modes flushed at the same frames, and the force copied to the ring."""
+    rng = np.random.default_rng(2)
+    rows, _ = ringing_rows(16, rng)
+    rows[0] *= np.exp(-2000.0 / FS)  # decay fast enough to fall silent within the render
+    rows[1] *= np.exp(-4000.0 / FS)
+    frames = 6000
+    force = np.zeros(frames)
+    force[100:140] = rng.normal(size=40)
+    force[3000:3010] = 1.0
+    full_rows, kept_rows = rows.copy(), rows.copy()
+    full_meta, kept_meta = np.array([16, 0, 16]), np.array([16, 0, 16])
+    full, kept, ring = np.zeros(frames), np.zeros(frames), np.zeros(2048)
+    full_last, kept_last = np.zeros(1), np.zeros(1)
+    for at in range(0, frames, 700):
+        size = min(700, frames - at)
+        f = force[at : at + size]
+        bank_step(f, full[at : at + size], at, size, full_rows, full_meta, 1e-10, full_last)
+        kept_step(f, kept[at : at + size], at, size, kept_rows, kept_meta, 1e-10, kept_last, ring)
+    assert np.max(np.abs(full[:3000])) > 1e-3
+    assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))
+    assert kept_meta[0] == full_meta[0] == 0  # every mode fell silent and was flushed
+    assert np.array_equal(ring[(np.arange(4096, 6000)) % 2048], force[4096:6000])
