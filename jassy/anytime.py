@@ -239,7 +239,7 @@ class ModeBudget:
 
     def _rendering_step(self, start: int, n: int) -> None:
         """:meth:`step` when the budget renders the banks: the bookkeeping and the renders
-        between decisions run in one compiled call (ugens.modal_kept.advance), which
+        between decisions run in one compiled call (ugens.modal_kept.advance_at), which
         returns to Python only where the budget decides. Banks with a parameter change,
         ramp or size input pending render through their own ``process`` over the same
         spans."""
