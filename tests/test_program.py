@@ -66,6 +66,19 @@ def test_program_renders_the_same_bits_as_the_nodes_one_by_one(block):
     np.testing.assert_array_equal(rendered[1].haptic, rendered[0].haptic)
 
 
+def test_compiled_runs_of_any_length_render_the_same_bits(monkeypatch):
+    # runs of 333 frames (30 runs, cut between the events' frames) against the paced runs
+    from jassy.engines import offline
+
+    paced = OfflineEngine(contact_graph(), contact_score(), FS, 64).render(0.2)
+    monkeypatch.setattr(offline, "RENDER_FRAMES", 333)
+    monkeypatch.setattr(offline, "RUN_GROWTH", 1)
+    short = OfflineEngine(contact_graph(), contact_score(), FS, 64).render(0.2)
+    assert np.any(paced.audio != 0) and np.any(paced.haptic != 0)
+    np.testing.assert_array_equal(short.audio, paced.audio)
+    np.testing.assert_array_equal(short.haptic, paced.haptic)
+
+
 @pytest.mark.parametrize("block", [1, 64])
 def test_python_events_output_limits_and_offsets_match_the_nodes_one_by_one(block):
     """A program graph's render applies its events as records inside compiled runs; a pole

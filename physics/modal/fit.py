@@ -448,8 +448,9 @@ def _pole_groups(poles: list[Pole], bin_hz: float, max_size: int = 10) -> list[l
 
 def _spectral_refine(poles: list[Pole], segments, rate, f_lo, f_hi, work, sweeps: int = 2) -> list[Pole]:
     """Every pole refined by maximum likelihood over all hits and channels on the whole of
-    each segment (:func:`varpro.refine` on the DFT bins around each group of overlapping
-    poles, the other poles subtracted with their least-squares amplitudes); ``sweeps``
+    each segment (:func:`varpro.refine` on the DFT bins within 6 half-power half-widths plus
+    10 bins of each group of overlapping poles, where a mode holds most of the information
+    on its decay; the other poles subtracted with their least-squares amplitudes); ``sweeps``
     rounds, each from the residual of the previous one. A pole that leaves its window, its
     frequency range or stops decaying keeps its old value."""
     out = list(poles)
@@ -469,7 +470,7 @@ def _spectral_refine(poles: list[Pole], segments, rate, f_lo, f_hi, work, sweeps
         for idx in _pole_groups(out, bin_hz):
             f = np.array([out[i].frequency for i in idx])
             d = np.array([out[i].decay for i in idx])
-            reach = 6 * np.maximum(d / (2 * np.pi), 0) + 10 * bin_hz
+            reach = 6 * varpro.half_width(d) + 10 * bin_hz
             lo, hi = max(float(np.min(f - reach)), 0.0), float(np.max(f + reach))
             spectra = []
             for spec, n, c in specs:

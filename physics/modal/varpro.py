@@ -158,6 +158,6 @@ def fast_length(n: int) -> int:
     return best
 
 
-def half_width(decay: float) -> float:
-    """Half-power half-width (Hz) of a mode decaying at ``decay`` 1/s."""
+def half_width(decay):
+    """Half-power half-width (Hz) of a mode decaying at ``decay`` 1/s (a number or an array)."""
     return decay / (2 * math.pi)
