@@ -172,6 +172,33 @@ def _update(dens, base, top, mom, off, dims, box):
         _build_parent(level, mom, off, dims, lo, hi)
 
 
+@nb.njit(cache=True)
+def _erode(base, top, mom, off, dims, voxels, count):
+    """Subtract each eroded voxel of the scratch records voxels[:count] (fields i, j, k,
+    removed) from its block at every stored level: m0 -= dec, m1 -= dec (x - c_I). The
+    moments are sums of integer counts times half-integer offsets, exact in float64, so
+    this equals a rebuild bit for bit."""
+    for n in range(count):
+        rec = voxels[n]
+        dec = float(rec.removed)
+        if dec == 0.0:
+            continue
+        i = rec.i
+        j = rec.j
+        k = rec.k
+        for level in range(base, top + 1):
+            s = 1 << level
+            half = 0.5 * (s - 1)
+            bi = i >> level
+            bj = j >> level
+            bk = k >> level
+            idx = off[level] + ((bi * dims[level, 1] + bj) * dims[level, 2] + bk) * 4
+            mom[idx] -= dec
+            mom[idx + 1] -= dec * (i - (bi * s + half))
+            mom[idx + 2] -= dec * (j - (bj * s + half))
+            mom[idx + 3] -= dec * (k - (bk * s + half))
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def _descend(pyramid, ball, leaf, out, stack):
     """Moments of the Pyramid's density inside the burr's Ball into out (module docstring);
@@ -338,6 +365,12 @@ class Octree:
     def update(self, box: np.ndarray) -> None:
         """Refresh after the voxels in box [i0, j0, k0, i1, j1, k1] (inclusive) changed."""
         _update(self.density, self.base, self.top, self.mom, self.off, self.dims, box)
+
+    def erode(self, voxels: np.ndarray, count: int) -> None:
+        """Refresh after erosion: subtract the decrements recorded in voxels[:count]
+        (CONTACT_VOXEL records of :mod:`physics.burr.contact`, field ``removed``) from every
+        level, without re-reading the bricks (the density must already hold them)."""
+        _erode(self.base, self.top, self.mom, self.off, self.dims, voxels, int(count))
 
     def moments(self, centre, R: float, leaf: int = 1) -> tuple[np.ndarray, int]:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
