@@ -196,6 +196,7 @@ class ModeBudget:
             np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
         )
         self._step_handle = None  # (_load_kicks)
+        self._loaded, self._loaded_rows = [], 0  # the impacts in the Kicks table, its rows
         self._advance = specialise(mk.advance_at, self._steps_handle(), 0, 0, 0, 0, 0, 0)
 
     def _steps_handle(self) -> np.ndarray:
@@ -238,7 +239,7 @@ class ModeBudget:
 
     def _rendering_step(self, start: int, n: int) -> None:
         """:meth:`step` when the budget renders the banks: the bookkeeping and the renders
-        between decisions run in one compiled call (ugens.modal_kept.advance), which
+        between decisions run in one compiled call (ugens.modal_kept.advance_at), which
         returns to Python only where the budget decides. Banks with a parameter change,
         ramp or size input pending render through their own ``process`` over the same
         spans."""
@@ -282,23 +283,28 @@ class ModeBudget:
     def _load_kicks(self, kicks: list) -> int:
         """Impacts (frame, nodes, impulse, location) into the compiled step's table, one row
         per bank struck (one row with slot -1 for an impact on none of the budget's
-        banks); returns the rows."""
-        rows = sum(max(len(nodes), 1) for _, nodes, _, _ in kicks)
-        table = self._kick_table
-        if rows > table.frames.size:
-            size = 2 * rows
+        banks); returns the rows. The same impacts as the last sub-block's are not loaded
+        again."""
+        loaded = self._loaded
+        if len(kicks) == len(loaded) and all(a is b for a, b in zip(kicks, loaded, strict=True)):
+            return self._loaded_rows
+        slots = self._slots
+        rows = [
+            (frame, slots.get(id(node), -1), impulse > 0.0)
+            for frame, nodes, impulse, _ in kicks
+            for node in nodes or (None,)
+        ]
+        count, table = len(rows), self._kick_table
+        if count > table.frames.size:
+            size = 2 * count
             table = self._kick_table = Kicks(
                 np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=bool)
             )
             self._steps_handle()
-        row, slots = 0, self._slots
-        for frame, nodes, impulse, _ in kicks:
-            for node in nodes or (None,):
-                table.frames[row] = frame
-                table.slots[row] = slots.get(id(node), -1)
-                table.positive[row] = impulse > 0.0
-                row += 1
-        return rows
+        if count:
+            table.frames[:count], table.slots[:count], table.positive[:count] = zip(*rows, strict=True)
+        self._loaded, self._loaded_rows = kicks, count
+        return count
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
         """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``

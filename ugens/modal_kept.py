@@ -189,19 +189,28 @@ def expect_impacts(h, kicks, count, at, period, state):
     return coming
 
 
+#: Fields of a :class:`jassy.anytime_rank.Hearing`.
+HEARING_FIELDS = len(Hearing._fields)
+
+
 @nb.njit(cache=True)
-def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at, rendered):
+def advance_at(a, count, period, start, n, at, rendered):
     """A mode budget's step over frames [at, start + n) of the sub-block [start, start + n)
-    (the banks rendered up to ``rendered``), in one compiled call: at each period's start
-    the impacts expected (:func:`expect_impacts`, from the first ``count`` rows of
-    ``kicks``, a jassy.anytime_rank.Kicks), in each stretch to the next period the forces
+    (the banks rendered up to ``rendered``), in one compiled call, on the records of handle
+    ``a`` (jassy.record_views): the budget's tables, its Hearing, the banks' output
+    addresses, the by-Python mask, its Kicks and its step state, fields in that order. At
+    each period's start the impacts expected (:func:`expect_impacts`, from the first
+    ``count`` rows of the Kicks), in each stretch to the next period the forces
     heard (jassy.anytime_rank.scan_forces), and the banks rendered (:func:`render_kept`)
     up to the first frame where the budget decides: an impact comes in this or the next
     period, a force was heard in the last one, a mode fades or every period is decided
     (``state``: FADING, ANY_EXPECTED, EVERY_PERIOD of jassy.anytime_rank), or a force
-    nobody scheduled wakes a bank. Returns
-    (that frame or the sub-block's end, the frame rendered up to, modes computed times
-    frames, whether to decide there)."""
+    nobody scheduled wakes a bank. Returns (that frame or the sub-block's end, the frame
+    rendered up to, modes computed times frames, whether to decide there)."""
+    i = (TABLE_FIELDS + HEARING_FIELDS) * FIELD
+    t, h = tables_at(a, 0), hearing_at(a, TABLE_FIELDS * FIELD)
+    outputs, by_python, kicks = int_row(a, i), bool_row(a, i + FIELD), kicks_at(a, i + 2 * FIELD)
+    state = int_row(a, i + 5 * FIELD)
     end, work = start + n, 0
     while at < end:
         stop = min(end, (at // period + 1) * period)
@@ -218,22 +227,6 @@ def advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at,
         work += render_kept(t, h, outputs, by_python, rendered, end - rendered, rendered - start)
         h.unrendered[:] = False
     return end, end, work, False
-
-
-#: Fields of a :class:`jassy.anytime_rank.Hearing`.
-HEARING_FIELDS = len(Hearing._fields)
-
-
-@nb.njit(cache=True)
-def advance_at(a, count, period, start, n, at, rendered):
-    """:func:`advance` on the records of handle ``a`` (jassy.record_views): the budget's
-    tables, its Hearing, the banks' output addresses, the by-Python mask, its Kicks and
-    its step state, fields in that order."""
-    i = (TABLE_FIELDS + HEARING_FIELDS) * FIELD
-    t, h = tables_at(a, 0), hearing_at(a, TABLE_FIELDS * FIELD)
-    outputs, by_python, kicks = int_row(a, i), bool_row(a, i + FIELD), kicks_at(a, i + 2 * FIELD)
-    state = int_row(a, i + 5 * FIELD)
-    return advance(t, h, outputs, by_python, kicks, count, state, period, start, n, at, rendered)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

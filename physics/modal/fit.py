@@ -26,7 +26,8 @@ frequency resolutions, each on what the previous ones left:
    all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
    around each group of overlapping poles, the other poles subtracted), then the stages
    again on what the refined poles leave (a weak mode on a strong one's skirt, a cluster's
-   missed member), and the joint refinement again with what they found.
+   missed member), and the joint refinement again with what they found (up to
+   ``EXTRA_PASSES`` such rounds).
 6. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
    linear least squares at the full rate (closed-form Gram matrix), minus what the previous
    hits still ring; gain = |amplitude| at the onset.
@@ -82,6 +83,11 @@ POLISH_MAX_DECAY = 40.0
 #: Least energy of a mode relative to the noise variance per sample (matched filter SNR, 13 dB:
 #: the best damped sinusoid fitted to white noise somewhere in 20 kHz x 1 s reaches ~10 dB).
 MIN_SNR = 20.0
+
+#: Rounds of (the stages on what the refined poles leave, the joint refinement) after the
+#: first; a round that finds no new pole ends them (``jassy bench fit``: the second round
+#: +1.6 % of decays within 5 %, +0.4 % of gains within 1 dB, about +20 % CPU).
+EXTRA_PASSES = 2
 
 STAGES = (
     Stage("zoom bands", 50.0, 50.0, 6.0, 0.0, 10.0, 2000.0),
@@ -658,15 +664,22 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
             + f" s), got {len(locations)}"
         )
 
-    total = sum(_band_centres(st, f_min, f_hi).size + 1 if st.spacing else 1 for st in STAGES) * 2 + 6
+    total = (
+        sum(_band_centres(st, f_min, f_hi).size + 1 if st.spacing else 1 for st in STAGES)
+        * (1 + EXTRA_PASSES)
+        + 4
+        + 2 * EXTRA_PASSES
+    )
     work = _Work(progress, total, time_limit)
     poles = _detect([], segments, rate, f_min, f_hi, margin, work)
     if poles:
         poles = _polish(poles, segments, rate, f_min, f_hi, work)
         poles = _spectral_refine(poles, segments, rate, f_min, f_hi, work)
-        found = len(poles)
-        poles = _detect(poles, segments, rate, f_min, f_hi, margin, work)
-        if len(poles) > found:
+        for _ in range(EXTRA_PASSES):
+            found = len(poles)
+            poles = _detect(poles, segments, rate, f_min, f_hi, margin, work)
+            if len(poles) == found:
+                break
             poles = _spectral_refine(poles, segments, rate, f_min, f_hi, work)
     if not poles:
         raise JassyError(

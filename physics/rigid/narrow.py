@@ -262,7 +262,7 @@ def _polytope_distance(x, y, z, b, sb, pos, rot, model):
     return dist, nx, ny, nz, tri - hstart[sb]
 
 
-@nb.njit(cache=True, inline="always")  # a call would pass all of model's arrays: 2x the time
+@nb.njit(cache=True, _nrt=False)
 def _spheres_polytope(a, b, sb, piece, pos, rot, model, margin, buf, count):
     """Contacts of sphere or capsule a with polytope b's geometry slot sb (its piece number
     ``piece``: features are offset by PIECE times it)."""
@@ -502,7 +502,7 @@ def _edge_contact(slots, axis, rows, pieces, pos, rot, model, buf, count):
     return _push(buf, count, (a, b), (px, py, pz), (nx, ny, nz), sep, (fa, fb), NO_BARY)
 
 
-@nb.njit(cache=True, inline="always")  # a call would pass all of model's arrays
+@nb.njit(cache=True, _nrt=False)
 def _polytopes(slots, pieces, pos, rot, model, margin, buf, count):
     """Contacts of two polytopes (geometry slots sa, sb; piece numbers ``pieces``) by
     separating axes: the face normals of each (_reference_face) and the cross products of
@@ -546,7 +546,7 @@ def _against_plane(a, b, pos, rot, model, margin, buf, count):
     return count
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def _against_mesh(a, b, pos, rot, model, margin, buf, count):
     tris, nrms, offsets, points = model.tris, model.tri_normals, model.point_start, model.points
     m = model.mesh_of[b]
@@ -624,7 +624,7 @@ def _closest_listed(k, n, lx, ly, lz, t0, tris, spheres, listed):
     return best, best_d2, bu, bv, bw
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def _mesh_closest(k, m, lx, ly, lz, reach, model, near):
     """Closest triangle of mesh m within ``reach`` (m) of body point k at (lx, ly, lz) in the
     mesh's frame: (triangle of the mesh or -1, squared distance, barycentric weights).
