@@ -42,6 +42,7 @@ rendering takes that fraction of real time (non-deterministic by nature).
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from dataclasses import dataclass, field
@@ -112,19 +113,20 @@ class ModeBudget:
         holds every mode never does: the render is the full synthesis)."""
         return self.cpu_fraction is not None or (self.max_modes or total_modes) < total_modes
 
-    def attach(self, banks: list, sample_rate: float, upcoming, renders: bool = False, audio=None) -> None:
+    def attach(self, banks: list, sample_rate: float, listed, renders: bool = False, audio=None) -> None:
         """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
-        ``upcoming(start, end)`` lists (frame, nodes, impulse, location) of impacts
-        scheduled in [start, end). ``renders``: :meth:`step` also renders the banks (their
-        inputs are rendered before it), splitting their sub-block only at the frames where
-        it decides; otherwise the scheduler cuts sub-blocks at every period and a bank's
-        force counts as heard in every period (it may be rendered after the step).
+        ``listed()`` gives (frames, impacts) of the score's impacts (frame, nodes, impulse,
+        location) in frame order, the same objects until the score changes. ``renders``:
+        :meth:`step` also renders the banks (their inputs are rendered before it), splitting
+        their sub-block only at the frames where it decides; otherwise the scheduler cuts
+        sub-blocks at every period and a bank's force counts as heard in every period (it
+        may be rendered after the step).
         ``audio``: the graph's audio outputs (a bank heard only through another bank is
         ranked by what reaches them; None: every bank is heard)."""
         self._audio = audio
         self.banks = banks
         self.sample_rate = sample_rate
-        self.upcoming = upcoming
+        self.listed = listed
         total = sum(b.model.n_modes for b in banks)
         self.limit = min(self.max_modes or total, total)
         self.peak_modes = 0
@@ -191,12 +193,15 @@ class ModeBudget:
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
+        #: the banks' anytime_compiled, the flags last written to by_python, those banks
+        self._compiled = [bank.anytime_compiled for bank in banks]
+        self._flags, self._slow = [False] * len(banks), []
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
         self._kick_table = Kicks(
             np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
         )
         self._step_handle = None  # (_load_kicks)
-        self._loaded, self._loaded_rows = [], 0  # the impacts in the Kicks table, its rows
+        self._loaded, self._loaded_rows = None, 0  # the listing in the Kicks table, its rows
         self._advance = specialise(mk.advance_at, self._steps_handle(), 0, 0, 0, 0, 0, 0)
 
     def _steps_handle(self) -> np.ndarray:
@@ -206,6 +211,11 @@ class ModeBudget:
             self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,)
         )
         return self._step_handle
+
+    def upcoming(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
+        """The impacts (frame, nodes, impulse, location) of the score in frames [start, end)."""
+        frames, impacts = self.listed()
+        return impacts[bisect.bisect_left(frames, start) : bisect.bisect_left(frames, end)]
 
     def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
         """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
@@ -244,8 +254,7 @@ class ModeBudget:
         ramp or size input pending render through their own ``process`` over the same
         spans."""
         period, end = self.period, start + n
-        kicks = self.upcoming(start, end + 2 * period)
-        count = self._load_kicks(kicks)
+        count = self._load_kicks(self.listed())
         slow = self._python_banks()
         state, at, rendered, addresses = self._state, start, start, self._step_handle
         while True:
@@ -261,7 +270,7 @@ class ModeBudget:
                 return
             stop = min(end, (at // period + 1) * period)
             if at % period == 0:
-                self._kicks = [k for k in kicks if at <= k[0] < at + 2 * period]
+                self._kicks = self.upcoming(at, at + 2 * period)
                 self._now = self._predicted(self._kicks, at, at + period) if self._kicks else {}
                 if self.cpu_fraction is not None:
                     self._adapt()
@@ -273,22 +282,20 @@ class ModeBudget:
     def _python_banks(self) -> list[int]:
         """The banks the compiled render cannot render now (a parameter change, ramp or size
         input pending), marked in ``by_python``."""
-        slow = []
-        for i, bank in enumerate(self.banks):
-            self._by_python[i] = python = not bank.anytime_compiled()
-            if python:
-                slow.append(i)
-        return slow
+        flags = [not compiled() for compiled in self._compiled]
+        if flags != self._flags:
+            self._by_python[:] = self._flags = flags
+            self._slow = [i for i, python in enumerate(flags) if python]
+        return self._slow
 
-    def _load_kicks(self, kicks: list) -> int:
-        """Impacts (frame, nodes, impulse, location) into the compiled step's table, one row
-        per bank struck (one row with slot -1 for an impact on none of the budget's
-        banks); returns the rows. The same impacts as the last sub-block's are not loaded
-        again."""
-        loaded = self._loaded
-        if len(kicks) == len(loaded) and all(a is b for a, b in zip(kicks, loaded, strict=True)):
+    def _load_kicks(self, listed: tuple) -> int:
+        """The score's impacts (``listed``: frames, impacts (frame, nodes, impulse, location))
+        into the compiled step's table, one row per bank struck (one row with slot -1 for
+        an impact on none of the budget's banks), in frame order; returns the rows. Loaded
+        once per render, again only when the score changes (a new listing)."""
+        if listed is self._loaded:
             return self._loaded_rows
-        slots = self._slots
+        kicks, slots = listed[1], self._slots
         rows = [
             (frame, slots.get(id(node), -1), impulse > 0.0)
             for frame, nodes, impulse, _ in kicks
@@ -303,7 +310,7 @@ class ModeBudget:
             self._steps_handle()
         if count:
             table.frames[:count], table.slots[:count], table.positive[:count] = zip(*rows, strict=True)
-        self._loaded, self._loaded_rows = kicks, count
+        self._loaded, self._loaded_rows = listed, count
         return count
 
     def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:

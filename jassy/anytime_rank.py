@@ -57,9 +57,9 @@ def rank_modes(scores, limit, keep, fade, later_top):
 
 
 class Kicks(NamedTuple):
-    """The impacts a budget knows of over a sub-block and two periods past it, in frame
-    order: the frame each applies at, the slot of the bank it strikes (-1: none of the
-    budget's) and whether its impulse is positive (the bank then expects it)."""
+    """The impacts of the score a budget renders, in frame order: the frame each applies
+    at, the slot of the bank it strikes (-1: none of the budget's) and whether its impulse
+    is positive (the bank then expects it)."""
 
     frames: np.ndarray  # int64
     slots: np.ndarray  # int64

@@ -51,6 +51,12 @@ def float_table(a, i):
 
 
 @nb.njit(inline="always", cache=True)
+def float32_table(a, i):
+    """The 2-D float32 array of the field at slot ``i`` of handle ``a``."""
+    return nb.carray(void_pointer(a[i]), (a[i + 1], a[i + 2]), np.float32)
+
+
+@nb.njit(inline="always", cache=True)
 def int_row(a, i):
     """The 1-D int64 array of the field at slot ``i`` of handle ``a``."""
     return nb.carray(void_pointer(a[i]), (a[i + 1],), np.int64)

@@ -245,7 +245,7 @@ class Scheduler:
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:
             budget.attach(
-                graph.budgeted, self.sample_rate, self.upcoming_impulses, graph.budget_renders, graph.audio
+                graph.budgeted, self.sample_rate, self.listed_impacts, graph.budget_renders, graph.audio
             )
             if not budget.active or budget.renders:  # it holds every mode, or splits the banks'
                 self.period = None  # sub-blocks itself where it decides: no sub-block cuts
@@ -277,10 +277,15 @@ class Scheduler:
         argument counts as 1 N s. The location is the impact's own, else one set on that
         ugen at that frame (rigid scenes set each bank's location, then strike its hammer).
         Listed once per score (again after :meth:`insert`), then found by bisection."""
+        frames, impacts = self.listed_impacts()
+        return impacts[bisect.bisect_left(frames, start) : bisect.bisect_left(frames, end)]
+
+    def listed_impacts(self) -> tuple[list[int], list[tuple[int, list, float, object]]]:
+        """(frames, impacts) of the whole score as :meth:`upcoming_impulses` lists them:
+        the same objects until :meth:`insert` changes the score."""
         if self._impacts is None:
             self._impacts = self._list_impacts()
-        frames, impacts = self._impacts
-        return impacts[bisect.bisect_left(frames, start) : bisect.bisect_left(frames, end)]
+        return self._impacts
 
     def _list_impacts(self) -> tuple[list[int], list[tuple[int, list, float, object]]]:
         """Every impact of the score, in frame order, as :meth:`upcoming_impulses` lists them,

@@ -208,6 +208,24 @@ def test_octree_update_matches_rebuild():
     np.testing.assert_allclose(o.mom, fresh.mom, rtol=1e-12, atol=1e-9)
 
 
+def test_octree_follows_erosion_exactly():
+    """The haptic loop refreshes the octree by subtracting each eroded voxel's decrement on
+    its path to the root: after many eroding steps its moments equal a pyramid rebuilt from
+    the eroded density bit for bit, and the moments at the burr equal the brute-force sum."""
+    vol = uniform_block((40, 40, 40), 1e-4, 200, top=25)
+    sim = BurrSim(vol, BurrParams(radius=1e-3, erosion=5e-5, leaf=4), seed=1)
+    removed = 0.0
+    for step in range(60):
+        centre = vol.to_world([19.5 + 0.05 * step, 19.5, 25.5 + 10 - 3 - 0.03 * step])
+        removed += sim.step(centre, omega=(2000.0, 0, 2000.0), dt=1e-3).removed
+    assert removed > 0
+    np.testing.assert_array_equal(sim.octree.mom, Octree(vol.density.copy()).mom)
+    g = vol.to_grid(centre)
+    brute = np.zeros(4)
+    brute_moments(vol.density, g[0], g[1], g[2], 10.0, brute)
+    np.testing.assert_allclose(sim.octree.moments(g, 10.0, 4)[0], brute, rtol=1e-9, atol=1e-6)
+
+
 def test_erosion_bookkeeping_and_roulette_expectation():
     """Removed mass = sum of counter decrements x voxel mass exactly; and, for rates far below
     one count per step, the mean decrement over many seeds equals the continuous law

@@ -50,7 +50,7 @@ from jassy.jit import specialise
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
-from jassy.record_views import handle
+from jassy.record_views import FIELD, float32_table, float_row, float_table, handle, int_row
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import modal_budget
@@ -337,6 +337,44 @@ def mixed_step(force, out, start, n, rows, floor, last):
     last[0] = force[n - 1]
 
 
+class BankArrays(NamedTuple):
+    """The arrays :func:`bank_span` reads through its handle (jassy.record_views): a
+    float64 bank's rows (c1, c2, g, d, y1, y2), its BankMeta and the force sample before
+    the block."""
+
+    bank: np.ndarray
+    meta: np.ndarray
+    last: np.ndarray
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def bank_span(force, out, start, n, a, floor):
+    """:func:`bank_step` on the BankArrays of handle ``a``. numba unboxes every array
+    argument at every call from Python, so ModalBank hands over one handle instead of
+    three arrays."""
+    bank_step(force, out, start, n, float_table(a, 0), int_row(a, FIELD), floor, float_row(a, 2 * FIELD))
+
+
+#: Fields of a MixedRows (slots of FIELD in a handle).
+MIXED_FIELDS = len(MixedRows._fields)
+
+
+@nb.njit(inline="always", cache=True)
+def mixed_rows_at(a, i):
+    """The MixedRows whose fields start at slot ``i`` of handle ``a`` (jassy.record_views)."""
+    return MixedRows(
+        float_table(a, i), int_row(a, i + FIELD), float32_table(a, i + 2 * FIELD),
+        float32_table(a, i + 3 * FIELD), int_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD),
+    )  # fmt: skip
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def mixed_span(force, out, start, n, a, floor):
+    """:func:`mixed_step` on handle ``a``: a MixedRows, then the force sample before the
+    block (one array for Python to hand over instead of eight)."""
+    mixed_step(force, out, start, n, mixed_rows_at(a, 0), floor, float_row(a, MIXED_FIELDS * FIELD))
+
+
 def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
     """Rows (c1, c2, s, d / g) = (2 R cos theta, R^2, R sin theta, :func:`direct_ratio`) per
     mode, float64, R = exp(-d / fs), theta = 2 pi f / fs: the one design of every modal
@@ -597,19 +635,22 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         self._mixed = self.values["precision"] == "mixed"
         self._split: MixedSplit | None = None  # while set, it holds the state, not self.bank
-        if self._mixed:
-            example = split_by_precision(np.zeros((6, 1)), self.sample_rate).rows
-            self._mixed_step = specialise(
-                mixed_step, self.out, self.out, 0, 0, example, self._floor, self.last
-            )
+        self._split_handle: np.ndarray | None = None  # the split's rows and self.last (mixed_span)
+        self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
+        self._bank_call = self._mixed_call = None  # entry points, found on first use (_call)
+        self._steady = None  # (_steady, _steady_rows): process's fast path (_span)
+        self._steady_rows: np.ndarray | None = None
         self.budgeted = False
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
         self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
         self._refresh_design_cache()
-        self._step = specialise(
-            bank_step, self.out, self.out, 0, 0, self.bank, self.meta, self._floor, self.last
-        )
+
+    def _call(self, kernel, rows: np.ndarray):
+        """The entry point of :func:`bank_span` or :func:`mixed_span` for this bank's
+        argument types: looked up when first used, not at prepare (a graph that runs as a
+        program renders its banks without them, and a cold process would compile them)."""
+        return specialise(kernel, self.out, self.out, 0, 0, rows, self._floor)
 
     def _pole_design(self) -> tuple[np.ndarray, np.ndarray]:
         """(c1, c2, R sin theta, d / g (:func:`direct_ratio`)) and 1 / (R^2 sin^2 theta)
@@ -666,7 +707,8 @@ class ModalBank(ModelParams, UGen):
     def _settle(self) -> None:
         """Move the state of a budget's compact bank or of a precision split back into
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
-        or state."""
+        or state (which ends process's fast path until the next plain span)."""
+        self._steady = None
         if self._compact_meta[GATHERED]:
             self._settle_compact(self._tables_handle, self._slot)
         split = self._split
@@ -679,6 +721,7 @@ class ModalBank(ModelParams, UGen):
 
     def _reset(self) -> None:
         self._split = None
+        self._steady = None
         self._compact_meta[GATHERED] = 0
         if self._tables is not None:
             self._kept_mask[:] = True
@@ -774,6 +817,10 @@ class ModalBank(ModelParams, UGen):
         """Frames [start, start + n) from the inputs' samples [offset, offset + n) of this
         sub-block into out[offset : offset + n] (an anytime budget renders a sub-block in
         pieces split where it decides)."""
+        steady = self._steady
+        if steady is not None and not offset and not self._pending:
+            steady(self._input.out, self.out, start, n, self._steady_rows, self._floor)
+            return
         inp, out = self._input.out, self.out
         if offset:
             inp, out = inp[offset:], out[offset:]
@@ -884,7 +931,18 @@ class ModalBank(ModelParams, UGen):
             self._ramping = meta[RAMP_LEFT] > 0
         else:
             self._settle()
-            self._step(inp, out, start, n, self.bank, self.meta, self._floor, self.last)
+            call = self._bank_call
+            if call is None:
+                call = self._bank_call = self._call(bank_span, self._bank_handle)
+            call(inp, out, start, n, self._bank_handle, self._floor)
+            self._hold_steady(call, self._bank_handle)
+
+    def _hold_steady(self, call, rows: np.ndarray) -> None:
+        """Let :meth:`process` call ``call`` on ``rows`` directly (no parameter change, ramp,
+        budget or size input in between) until :meth:`_settle` ends it: spans of 64 frames
+        at 64 modes cost ~1 us, a third of it the Python around the kernel."""
+        if self._size_input is None:
+            self._steady, self._steady_rows = call, rows
 
     def _span_kept(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
@@ -906,10 +964,14 @@ class ModalBank(ModelParams, UGen):
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
         float32 modes add to it."""
-        split = self._split
-        if split is None:
-            split = self._split = split_by_precision(self.bank, self.sample_rate)
-        self._mixed_step(inp, out, start, n, split.rows, self._floor, self.last)
+        if self._split is None:
+            self._split = split_by_precision(self.bank, self.sample_rate)
+            self._split_handle = handle(self._split.rows, (self.last,))
+        call = self._mixed_call
+        if call is None:
+            call = self._mixed_call = self._call(mixed_span, self._split_handle)
+        call(inp, out, start, n, self._split_handle, self._floor)
+        self._hold_steady(call, self._split_handle)
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
@@ -940,6 +1002,7 @@ class ModalBank(ModelParams, UGen):
         self.meta = tables.meta[slot]
         tables.last[slot] = self.last[0]
         self.last = tables.last[slot : slot + 1]
+        self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
         tables.values[FLOOR, slot] = self._floor
         self._compact_meta = tables.compact_meta[slot]
         self._compact_meta[:] = 0
@@ -1016,4 +1079,5 @@ class ModalBank(ModelParams, UGen):
 
     def _state_restored(self) -> None:
         self._split = None
+        self._steady = None
         self._ramping = self.meta[RAMP_LEFT] > 0

@@ -173,19 +173,19 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
 def expect_impacts(h, kicks, count, at, period, state):
     """A period starts at frame ``at``: mark the banks struck by a positive impulse in
     [at, at + period) as expecting it (``h.expected``); return whether any impact applies in
-    [at, at + 2 period) (then the budget decides)."""
+    [at, at + 2 period) (then the budget decides). The first ``count`` rows of ``kicks``
+    are in frame order: the period's are found by bisection."""
     if state[ANY_EXPECTED]:
         h.expected[:] = False
     state[ANY_EXPECTED] = 0
-    coming = False
-    for j in range(count):
-        frame = kicks.frames[j]
-        if at <= frame < at + 2 * period:
-            coming = True
-            if frame < at + period and kicks.positive[j]:
-                state[ANY_EXPECTED] = 1
-                if kicks.slots[j] >= 0:
-                    h.expected[kicks.slots[j]] = True
+    j = np.searchsorted(kicks.frames[:count], at)
+    coming = j < count and kicks.frames[j] < at + 2 * period
+    while j < count and kicks.frames[j] < at + period:
+        if kicks.positive[j]:
+            state[ANY_EXPECTED] = 1
+            if kicks.slots[j] >= 0:
+                h.expected[kicks.slots[j]] = True
+        j += 1
     return coming
 
 

@@ -152,10 +152,10 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
 
 def _compile_strike_records() -> None:
     """Compile the kernels that translating a strike into an event record calls from Python
-    (its pulse's sum, the growth of the tap's pulse table)."""
-    from ugens.cells import pulse_sum, with_room
+    (its pulse's amplitude, the growth of the tap's pulse table)."""
+    from ugens.cells import pulse_amplitude, with_room
 
-    pulse_sum(0.5, 2.0)
+    pulse_amplitude(1.0, 48000.0, 0.5, 2.0)
     with_room(np.zeros((1, 3)), 1)
 
 

@@ -1,10 +1,11 @@
 """Offline engine: render a graph and its score to arrays or to an audio file.
 
 The engine runs the scheduler chunk by chunk (a chunk is only a unit of output handling:
-sub-block boundaries come from the absolute clock, the block size and the events, so the
-chunk size does not change the result). Each chunk is checked for NaN/Inf, which are
-replaced by silence and reported once with the node that produced them, and the audio
-passes the final limiter so it stays within [-CEILING, CEILING].
+chunks end on block boundaries of the absolute clock, so the sub-blocks, and the output
+bits, are those of the block size and the events alone: arrays and files get the same
+bits). Each chunk is checked for NaN/Inf, which are replaced by silence and reported once
+with the node that produced them, and the audio passes the final limiter so it stays
+within [-CEILING, CEILING].
 
 A graph whose every node has a program kernel renders on the device callback's code path
 instead (jassy.engines.program_offline): events, program and this output stage in compiled
@@ -31,6 +32,7 @@ from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_forc
 from jassy.safety import CEILING, LimiterMeter, peak_abs, release_coefficient, scan_chunk, zero_nonfinite
 from jassy.scheduler import Scheduler
 
+#: Frames of an output chunk, rounded up to whole blocks (a chunk's end cuts no sub-block).
 CHUNK_FRAMES = 8192
 #: Frames of a program graph's first compiled run into the result; each next run takes
 #: about half of RENDER_CHECK (s of this thread's CPU time) between checks for a stop
@@ -148,8 +150,9 @@ class OfflineEngine:
         """Yield (audio, haptic) chunks covering the next ``frames`` frames."""
         graph = self.graph
         n_audio = len(graph.audio)
-        size = min(CHUNK_FRAMES, max(frames, 1))
-        buf = np.zeros((len(graph.bus_rows), size))
+        block = self.scheduler.block
+        chunk = -(-CHUNK_FRAMES // block) * block
+        buf = np.zeros((len(graph.bus_rows), min(chunk, max(frames, 1))))
         abuf, hbuf = buf[:n_audio], buf[n_audio:]
 
         bar = _progress_bar(frames / self.sample_rate) if progress else None
@@ -157,7 +160,7 @@ class OfflineEngine:
             done = 0
             while done < frames:
                 stopflag.check()  # a SIGTERM whose KeyboardInterrupt was lost still stops here
-                n = min(size, frames - done)
+                n = min(chunk - self.frame % block, frames - done)  # to a block boundary
                 self.produce(buf, n)
                 a, h = abuf[:, :n], hbuf[:, :n]
                 done += n
@@ -231,13 +234,13 @@ class OfflineEngine:
             pos, run = 0, -(-RENDER_FRAMES // block) * block
             while pos < frames:
                 stopflag.check()
-                n = min(run, frames - pos)
+                n = min(run - self.frame % block, frames - pos)  # to a block boundary
                 began = time.thread_time()
                 self._produce_compiled(signals, pos, n, frames - pos)
                 pos += n
                 took = max(time.thread_time() - began, 1e-6)
                 run = max(RENDER_FRAMES, min(RUN_GROWTH * n, int(n * RENDER_CHECK / 2 / took)))
-                run = -(-run // block) * block  # runs end on block boundaries: the same sub-blocks
+                run = -(-run // block) * block  # whole blocks: the same sub-blocks
                 if bar is not None:
                     bar.update(round(n / self.sample_rate, 6))
             if bar is not None:

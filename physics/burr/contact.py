@@ -242,23 +242,25 @@ class ContactOptions(NamedTuple):
 
 CONTACT_VOXEL = np.dtype(
     [("i", np.int64), ("j", np.int64), ("k", np.int64), ("dist2", np.float64), ("xi2", np.float64),
-     ("share", np.float64), ("radius", np.float64)]
+     ("share", np.float64), ("radius", np.float64), ("removed", np.int64)]
 )  # fmt: skip
 """A gathered contact voxel: grid index (i, j, k), squared distance dist2 to the burr
-centre and xi2 to the axis along -n (voxel^2), surface share (voxel^2) and contact-point
-radius (voxels)."""
+centre and xi2 to the axis along -n (voxel^2), surface share (voxel^2), contact-point
+radius (voxels) and the counter units eroded from it in this pass."""
 
 
 CONTACT_TALLY = np.dtype(
     [("force_x", np.float64), ("force_y", np.float64), ("force_z", np.float64), ("torque_x", np.float64),
      ("torque_y", np.float64), ("torque_z", np.float64), ("power", np.float64), ("expected", np.float64),
      ("removed", np.float64), ("voxels", np.float64), ("area", np.float64), ("lo_i", np.int64),
-     ("lo_j", np.int64), ("lo_k", np.int64), ("hi_i", np.int64), ("hi_j", np.int64), ("hi_k", np.int64)]
+     ("lo_j", np.int64), ("lo_k", np.int64), ("hi_i", np.int64), ("hi_j", np.int64), ("hi_k", np.int64),
+     ("gathered", np.int64)]
 )  # fmt: skip
 """What one surface pass adds up (SI): friction force (N) and torque (N m) about the burr
 centre, frictional power (W), expected and actual counter decrements, contact voxels, sum
-of their surface shares (m^2), and the grid box [lo, hi] (inclusive; empty: lo > hi) of
-the voxels changed."""
+of their surface shares (m^2), the grid box [lo, hi] (inclusive; empty: lo > hi) of
+the voxels changed, and the number of voxels gathered into the scratch (each with its
+``removed`` decrement)."""
 
 
 class ContactData(NamedTuple):
@@ -281,6 +283,7 @@ def _reset(d):
     t.power = t.expected = t.removed = t.voxels = t.area = 0.0
     t.lo_i, t.lo_j, t.lo_k = d.density.shape
     t.hi_i = t.hi_j = t.hi_k = -1
+    t.gathered = 0
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -324,6 +327,7 @@ def _gather(m, opt, d, defined, lo, hi):
                 rec.k = k
                 rec.dist2 = d2
                 rec.xi2 = xi2
+                rec.removed = 0
                 xmax = max(xmax, xi2)
                 n += 1
     return n, xmax
@@ -429,6 +433,7 @@ def _apply(m, opt, d, defined, count, a2, p_scale):
                 dec = float(c)
             if dec > 0.0:
                 dens[i, j, k] = np.uint8(int(c) - int(dec))
+                rec.removed = int(dec)
                 t.removed += dec
                 _grow_box(t, i, j, k)
     d.rng[0] = s_state
@@ -470,6 +475,7 @@ def contact_pass(m, opt, d):
     R = m.radius
     cap_box(c[0], c[1], c[2], R, nvec, -R_VOXEL / R, lo, hi, d.density.shape)  # bone-side hemisphere
     count, xi2max = _gather(m, opt, d, defined, lo, hi)
+    d.tally[0].gathered = count
     a = max(opt.a_hertz, math.sqrt(xi2max) + R_VOXEL)
     a2 = a * a
     wsum = _shares(m, d, defined, count, a2)

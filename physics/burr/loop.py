@@ -10,7 +10,8 @@ One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
    (normalised on the voxels), friction mu P dsigma against the sliding velocity of each
    voxel's burr-surface point (spin omega x p plus tool velocity) and the frictional power;
 4. erosion: each voxel loses K_er * power_i * dt kg (8-bit counter, Russian roulette), and
-   the octree is refreshed from the leaves up.
+   each eroded voxel's decrement is subtracted from its octree brick and the levels above
+   are rebuilt over the changed box.
 
 Units: SI (m, N, rad/s, kg); the volume's counters are density fractions of ``rho_full``.
 The force returned is the force of the bone on the burr (what the haptic device renders).
@@ -163,7 +164,8 @@ class BurrSim:
                      self._data_fields)  # fmt: skip
         t = _Tally(*d.tally[0].item())
         if self.octree is not None and t.removed > 0:
-            self.octree.update(np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k], dtype=np.int64))
+            box = np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k], dtype=np.int64)
+            self.octree.erode(d.voxels, t.gathered, box)
         friction = np.array([t.force_x, t.force_y, t.force_z])
         power = t.power
         removed = t.removed * v.mass_per_count

@@ -154,22 +154,59 @@ def _update(dens, base, top, mom, off, dims, box):
     s = 1 << base
     half = 0.5 * (s - 1)
     nx, ny, nz = dens.shape
+    by, bz = dims[base, 1], dims[base, 2]
+    for bi in range(box[0] >> base, (box[3] >> base) + 1):
+        for bj in range(box[1] >> base, (box[4] >> base) + 1):
+            for bk in range(box[2] >> base, (box[5] >> base) + 1):
+                idx = off[base] + ((bi * by + bj) * bz + bk) * 4
+                _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
+    _build_parents(base, top, mom, off, dims, box)
+
+
+@nb.njit(cache=True)
+def _build_parents(base, top, mom, off, dims, box):
+    """Recompute the blocks above ``base`` that hold voxels of box [i0, j0, k0, i1, j1, k1]."""
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
     for a in range(3):
         lo[a] = box[a] >> base
         hi[a] = box[a + 3] >> base
-    by, bz = dims[base, 1], dims[base, 2]
-    for bi in range(lo[0], hi[0] + 1):
-        for bj in range(lo[1], hi[1] + 1):
-            for bk in range(lo[2], hi[2] + 1):
-                idx = off[base] + ((bi * by + bj) * bz + bk) * 4
-                _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
     for level in range(base + 1, top + 1):
         for a in range(3):
             lo[a] >>= 1
             hi[a] >>= 1
         _build_parent(level, mom, off, dims, lo, hi)
+
+
+@nb.njit(cache=True)
+def _erode(base, top, mom, off, dims, voxels, count, box):
+    """Refresh the pyramid after erosion: subtract each eroded voxel of the scratch records
+    voxels[:count] (fields i, j, k, removed) from its brick, m0 -= dec, m1 -= dec (x - c_I),
+    then rebuild the blocks above from the changed box [i0, j0, k0, i1, j1, k1]. The moments
+    are sums of integer counts times half-integer offsets, exact in float64, so this equals
+    re-reading the bricks (:func:`_update`) bit for bit."""
+    if box[3] < box[0]:
+        return
+    s = 1 << base
+    half = 0.5 * (s - 1)
+    by, bz = dims[base, 1], dims[base, 2]
+    for n in range(count):
+        rec = voxels[n]
+        dec = float(rec.removed)
+        if dec == 0.0:
+            continue
+        i = rec.i
+        j = rec.j
+        k = rec.k
+        bi = i >> base
+        bj = j >> base
+        bk = k >> base
+        idx = off[base] + ((bi * by + bj) * bz + bk) * 4
+        mom[idx] -= dec
+        mom[idx + 1] -= dec * (i - (bi * s + half))
+        mom[idx + 2] -= dec * (j - (bj * s + half))
+        mom[idx + 3] -= dec * (k - (bk * s + half))
+    _build_parents(base, top, mom, off, dims, box)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -338,6 +375,13 @@ class Octree:
     def update(self, box: np.ndarray) -> None:
         """Refresh after the voxels in box [i0, j0, k0, i1, j1, k1] (inclusive) changed."""
         _update(self.density, self.base, self.top, self.mom, self.off, self.dims, box)
+
+    def erode(self, voxels: np.ndarray, count: int, box: np.ndarray) -> None:
+        """Refresh after erosion: subtract the decrements recorded in voxels[:count]
+        (CONTACT_VOXEL records of :mod:`physics.burr.contact`, field ``removed``) from their
+        bricks without re-reading them, then rebuild the levels above over ``box`` [i0, j0,
+        k0, i1, j1, k1] (inclusive), the box of the changed voxels."""
+        _erode(self.base, self.top, self.mom, self.off, self.dims, voxels, int(count), box)
 
     def moments(self, centre, R: float, leaf: int = 1) -> tuple[np.ndarray, int]:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
