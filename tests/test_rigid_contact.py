@@ -800,15 +800,15 @@ def test_concave_body_rests_on_another_crosswise():
     assert np.max(np.abs(result.pos[-10:, 2] - rest)) < 2e-5
 
 
-def _staggered_drop(tiny_scratch):
-    """Six balls dropped from staggered heights on a floor (e = 0.5), 0.6 s: (final state
-    arrays, records); with ``tiny_scratch`` the run starts with room for one pair and one
-    contact, so the scratch grows as the balls land (stepper.run)."""
+def _drop(places, tiny_scratch, steps=600):
+    """Balls (r = 2 cm, e = 0.5) dropped from ``places`` ((x, z) of their centres, m) on a
+    floor for ``steps`` steps of 1 ms: (final state arrays, records); with ``tiny_scratch`` the
+    run starts with room for one pair and one contact, so the scratch grows as the balls land
+    (stepper.run)."""
     w = World(StepParams(h=1e-3, bounce_threshold=0.05))
     w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
-    for k in range(6):
-        place = Placement(position=(0.06 * k, 0, 0.03 + 0.02 * k))
-        w.add(Body(f"ball{k}", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), place)
+    for k, (x, z) in enumerate(places):
+        w.add(Body(f"ball{k}", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), Placement(position=(x, 0, z)))
     model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
     data = st.new_data(
         model,
@@ -816,8 +816,8 @@ def _staggered_drop(tiny_scratch):
         state.pos,
         state.quat,
         state.phi,
-        np.zeros((601, 0, 3)),
-        np.zeros((601, 0, 4)),
+        np.zeros((steps + 1, 0, 3)),
+        np.zeros((steps + 1, 0, 4)),
         np.empty((1 << 14, codes.REC_WIDTH)),
         st.new_stats(),
         np.zeros((0, n, 13)),
@@ -831,30 +831,87 @@ def _staggered_drop(tiny_scratch):
             near=st.new_pair_scratch(1),
             solver=new_solver(np.int64(1), n, st.MAX_CONTACTS),
         )
-    steps, nrec = st.run(model, opt, data, 0, 600, 0)
-    assert steps == 600
+    data, done, nrec = st.run(model, opt, data, 0, steps, 0)
+    assert done == steps
     return (state.pos, state.quat, state.phi), data.rec[:nrec]
 
 
-def test_a_step_stopped_for_more_scratch_resumes_where_it_stopped(monkeypatch):
+def _fall_height(t, g=9.81, r=0.02):
+    """Centre height (m) from which a ball of radius r at rest touches the floor after t s."""
+    return r + 0.5 * g * t * t
+
+
+_LANDING = _fall_height(0.1005)  # lands half way through step 100
+
+
+@pytest.mark.parametrize(
+    "places",
+    [
+        [(0.06 * k, 0.03 + 0.02 * k) for k in range(6)],  # landings in different steps
+        [(0.0, _LANDING), (0.0, _LANDING + 0.04005)],  # a ball 50 um above: hit by the rebound
+    ],
+    ids=["staggered", "stacked"],
+)
+def test_a_step_stopped_for_more_scratch_resumes_where_it_stopped(monkeypatch, places):
     """A sweep or narrow phase that outgrows the scratch stops the step; grown, the run goes on
     from there: the same motion and records, bit for bit, as a run that had room from the
-    start."""
+    start. Two balls falling together, 50 um apart, have one contact (the floor's) when the
+    step starts; the lower one's rebound at its impact sub-step closes the gap within the step:
+    a second contact, and a stop inside the step after that sub-step."""
     stops = []
     grown = st._grown
 
-    def spy(d, steps):
-        stops.append(tuple(d.progress.need))
-        return grown(d, steps)
+    def spy(d, opt, steps, nrec):
+        stops.append((tuple(d.progress.need), float(d.progress.t_local[0]), int(d.progress.subs[0])))
+        return grown(d, opt, steps, nrec)
 
     monkeypatch.setattr(st, "_grown", spy)
-    state, records = _staggered_drop(False)
+    state, records = _drop(places, False)
     assert not stops
-    state_tiny, records_tiny = _staggered_drop(True)
-    assert len(stops) >= 2  # the pairs and the contacts outgrew it
-    assert len(records) > 600
+    state_tiny, records_tiny = _drop(places, True)
+    assert any(need[0] for need, _, _ in stops) and any(need[1] for need, _, _ in stops)
+    if len(places) == 2:
+        assert any(subs > 0 and t_local > 0.0 for _, t_local, subs in stops)
+    assert len(records) > 100 * len(places)
     for a, b in zip(state + (records,), state_tiny + (records_tiny,), strict=True):
         assert np.array_equal(a, b)
+
+
+def test_grown_scratch_makes_room_for_the_rest_of_the_step_or_raises():
+    """A step resumed with more contacts than seen before gets a record buffer with room for
+    its remaining solves at that count (the rows written kept); scratch that cannot grow past
+    the contact buffer is an error, not an endless stop-and-resume."""
+    w = World(StepParams(h=1e-3))
+    w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
+    w.add(Body("ball", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), Placement(position=(0, 0, 0.05)))
+    model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
+    rec = np.arange(100.0 * codes.REC_WIDTH).reshape(100, codes.REC_WIDTH)
+    data = st.new_data(
+        model,
+        opt,
+        state.pos,
+        state.quat,
+        state.phi,
+        np.zeros((2, 0, 3)),
+        np.zeros((2, 0, 4)),
+        rec,
+        st.new_stats(),
+        np.zeros((0, n, 13)),
+        1,
+        0,
+        new_warm_start(st.MAX_CONTACTS),
+    )
+    contacts = 2 * data.solver.idx.shape[0]
+    data.progress.need[:] = (0, contacts)
+    grown = st._grown(data, opt, 0, 90)
+    assert grown.progress.most[0] == contacts
+    assert grown.rec.shape[0] - 90 >= (opt.max_events + 2) * contacts
+    assert np.array_equal(grown.rec[:90], rec[:90])
+    full = grown.contacts.gaps.shape[0]
+    grown = grown._replace(solver=new_solver(np.int64(full), n, st.MAX_CONTACTS))
+    grown.progress.need[:] = (0, full + 1)
+    with pytest.raises(RuntimeError, match="cannot grow"):
+        st._grown(grown, opt, 0, 90)
 
 
 def test_unknown_contact_model_code_is_an_error():

@@ -61,6 +61,7 @@ from physics.rigid.codes import (
     REC_A,
     REC_B,
     REC_IMPACT,
+    REC_WIDTH,
 )
 from physics.rigid.impulses import SolverScratch, WarmStart, new_solver, resolve
 from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, semi_implicit_into
@@ -197,35 +198,64 @@ def new_data(
     )
 
 
-def _grown(d: Data, steps: int) -> Data:
+def _grown(d: Data, opt: Options, steps: int, nrec: int) -> Data:
     """d with scratch for the pairs and contacts d.progress.need asks for (twice as many, the
-    contacts at most the contact buffer's rows), resuming at its step ``steps`` (the kinematic
-    samples start there)."""
+    contacts at most the contact buffer's rows) and a record buffer with room for the rest of
+    the step at the most contacts seen (its first nrec rows kept), resuming at its step
+    ``steps`` (the kinematic samples start there). Raises when the scratch cannot grow."""
     pairs, contacts = (int(x) for x in d.progress.need)
-    sweep, near, solver = d.sweep, d.near, d.solver
-    if pairs > sweep.pairs.shape[0]:
+    sweep, near, solver, rec = d.sweep, d.near, d.solver, d.rec
+    grew = False
+    if pairs > min(sweep.pairs.shape[0], near.reach.shape[0]):
         sweep = sweep._replace(pairs=np.empty((2 * pairs, 2), np.int64))
         near = new_pair_scratch(2 * pairs)
+        grew = True
     if contacts > solver.idx.shape[0]:
         rows = min(2 * contacts, d.contacts.gaps.shape[0])
+        grew = grew or rows > solver.idx.shape[0]
         solver = new_solver(np.int64(rows), d.pos.shape[0], d.warm.keys.shape[0])
+    if not grew:
+        raise RuntimeError(
+            f"run: a step needs scratch for {pairs} pairs, {contacts} contacts; it cannot grow"
+        )
+    d.progress.most[0] = max(d.progress.most[0], contacts)
+    room = record_room(opt, d.progress.most[0])
+    if rec.shape[0] - nrec < room:
+        rec = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
+        rec[:nrec] = d.rec[:nrec]
     d.progress.need[:] = 0
     return d._replace(
-        kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], sweep=sweep, near=near, solver=solver
+        kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], rec=rec, sweep=sweep, near=near, solver=solver
     )
 
 
-def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) -> tuple[int, int]:
-    """run_steps, growing d's scratch whenever a step asks for more and resuming it: (steps
-    done, record count); fewer steps than n_steps when d.rec may not hold the next step's
-    records (the caller grows it and calls again)."""
+@nb.njit(cache=True, _nrt=False)
+def record_room(opt: Options, most) -> int:
+    """Records an outer step may write at ``most`` contacts per (sub-)step: one per contact
+    in each of its (max_events + 1) solves, with a margin."""
+    max_events = opt.max_events if opt.contact == IMPULSE else 0
+    return (max_events + 2) * most + 64
+
+
+def carry_scratch(d: Data, previous: Data) -> Data:
+    """d (a fresh run's Data) with the scratch previous grew and the most contacts it saw."""
+    return d._replace(
+        sweep=previous.sweep, near=previous.near, solver=previous.solver, progress=previous.progress
+    )
+
+
+def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) -> tuple[Data, int, int]:
+    """run_steps, growing d's scratch (and record buffer) whenever a step asks for more and
+    resuming it: (d with the grown scratch and records, steps done, record count); fewer steps
+    than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
+    again). The kinematic samples of the returned d start at the step it stopped in."""
     done = 0
     while True:
         steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec)
         done += steps
         if not d.progress.need.any():
-            return done, nrec
-        d = _grown(d, steps)
+            return d, done, nrec
+        d = _grown(d, opt, steps, nrec)
 
 
 class SolveBodies(NamedTuple):
@@ -829,10 +859,9 @@ def run_steps(m, opt, d, first, n_steps, nrec):
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
     and inside a step that needs more scratch (module doc; :func:`run` resumes it)."""
-    max_events = opt.max_events if opt.contact == IMPULSE else 0
     for s in range(n_steps):
         resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
-        if not resuming and d.rec.shape[0] - nrec < (max_events + 2) * d.progress.most[0] + 64:
+        if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
             return s, nrec
         if not resuming:
             kinematic_stage(m, opt, d, s)

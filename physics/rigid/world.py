@@ -503,6 +503,7 @@ def simulate(
     stats = st.new_stats()
     warm = new_warm_start(st.MAX_CONTACTS)
     done = 0
+    last = None  # the last chunk's Data
     while done < n_steps:
         todo = min(chunk, n_steps - done)
         kin_pos, kin_quat = _kinematic_samples(world, model.kinematic, first + done, todo, h)
@@ -521,7 +522,10 @@ def simulate(
             first,
             warm,
         )
-        steps, nrec = st.run(model, opt, data, first + done, todo, nrec)
+        if last is not None:
+            data = st.carry_scratch(data, last)  # the scratch grown so far, not grown again
+        last, steps, nrec = st.run(model, opt, data, first + done, todo, nrec)
+        rec = last.rec  # grown when a step resumed with too little room
         if steps < todo and not keep_records and nrec > 0:
             nrec = 0  # the records are not kept: write over them
         elif steps < todo:  # the record buffer might not hold the next step: grow it
