@@ -119,7 +119,11 @@ def _impacts_and_memory(d, solver, nk, dt):
     pair, feat, keys, forces = buf.pairs, buf.features, warm.keys, warm.forces
     link_warm(warm, solver)
     for k in range(nk):
-        if solver.impact[k] and warm_match(buf, solver.idx[k], warm, solver) >= 0:
+        if not solver.impact[k]:
+            continue
+        e = warm_match(buf, solver.idx[k], warm, solver)
+        if e >= 0:  # that contact was pushing: taken, so no other new contact matches it
+            solver.used[e] = True
             solver.impact[k] = False
     kept = min(nk, keys.shape[0])
     for k in range(kept):
