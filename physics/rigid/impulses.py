@@ -44,7 +44,7 @@ from physics.rigid.codes import (
 from physics.rigid.integrate import SEMI_IMPLICIT
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def world_velocities(kind, rot, phi, kin_v, kin_w, v, w):
     """World linear and angular velocities (m/s, rad/s) of every body's centre into v, w."""
     for i in range(kind.shape[0]):
@@ -58,7 +58,7 @@ def world_velocities(kind, rot, phi, kin_v, kin_w, v, w):
                 v[i, x] = w[i, x] = 0.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def store_twists(kind, rot, v, w, phi):
     """The dynamic bodies' twists phi (body frame) from their world velocities v, w."""
     for i in range(kind.shape[0]):
@@ -68,7 +68,7 @@ def store_twists(kind, rot, v, w, phi):
                 phi[i, 3 + x] = rot[i, 0, x] * v[i, 0] + rot[i, 1, x] * v[i, 1] + rot[i, 2, x] * v[i, 2]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def inv_inertia_world(kind, rot, inv_inertia, out):
     """World inverse inertia tensors (1/(kg m^2)) into out; zero for static and kinematic bodies."""
     for i in range(kind.shape[0]):
@@ -165,7 +165,7 @@ def new_solver(rows, n_bodies, warm_rows):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _contact_frames(buf, nc, pos, inv_mass, solver):
     """Per contact k < nc: frame rows (n, t1, t2), lever arms, Jacobian rows (angular parts;
     rows 3, 4 roll about t1, t2), responses I^-1 J^T and effective masses."""
@@ -287,7 +287,7 @@ def _disk(x1, x2, limit):
     return x1, x2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _select(gaps, count, slop, idx):
     """Rows of the contacts touching (gap <= slop) into idx; returns how many."""
     nc = 0
@@ -298,7 +298,7 @@ def _select(gaps, count, slop, idx):
     return nc
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _targets(m, opt, buf, nc, dt, solver):
     """Per contact: friction and rolling coefficients, approach speed, and the velocity targets:
     Newton restitution for an impact (approach faster than the bounce threshold), else resting:
@@ -363,7 +363,7 @@ def warm_match(buf, c, warm, solver):
     return -1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
     """Initial impulses r from the last solve's contacts with the same (a, b, features): its
     force and rolling torque times dt, projected on the new frame and cones, and applied."""
@@ -396,7 +396,7 @@ def _warm_impulses(buf, nc, dt, warm, inv_mass, solver):
     _apply_impulses(pair, nc, inv_mass, solver)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _apply_impulses(pair, nc, inv_mass, solver):
     """Apply every contact's impulses r to its bodies' velocities."""
     idx, frame, res_a, res_b, r = (
@@ -418,7 +418,7 @@ def _apply_impulses(pair, nc, inv_mass, solver):
                 _row_apply(k, j, a, b, r[k, j], (frame, res_a, res_b), (ima, imb), (v, w), False)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _sweeps(m, opt, pair, nc, rot, solver):
     """Projected Gauss-Seidel sweeps (normal row, friction disk, rolling disk of each contact)
     until no body's momentum changes over a sweep by more than tol times the largest normal
@@ -535,7 +535,7 @@ def _disk_update(k, j, a, b, ima, imb, limit, linear, both, solver):
     r[k, j], r[k, j + 1] = x1, x2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _keep_warm(buf, nc, dt, warm, solver):
     """Store the solved contacts pushing (r_N > 0) as the next solve's warm start, as forces
     r / dt, in detection order. Not after a solve with an impact: the impact's impulse spreads
@@ -613,7 +613,7 @@ def write_record(rec, nrec, buf, c, rot, when, outcome):
     rec[nrec, REC_FEAT_B] = feat[c, 1]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _records(buf, nc, rot, when, rec, nrec, solver):
     """Append a record row per contact pushing (or impacting) after the solve, in detection
     order, at when = (time s, outer step); returns the record count, -1 when rec is full."""

@@ -130,7 +130,7 @@ def _rotate(qw, qx, qy, qz, x, y, z):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def semi_implicit_into(body, h, out, ballistic=True):
     """Closed-form translation under constant acceleration with an implicit-midpoint angular
     update (see module doc) of ``body`` (FreeBody) over h seconds, written into the rows

@@ -68,7 +68,7 @@ def _push(i, imp, r, inv_mass, iw, v, w):
         w[i, x] += iw[i, x, 0] * t0 + iw[i, x, 1] * t1 + iw[i, x, 2] * t2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _forces(m, opt, d, solver, count, dt):
     """Apply the penalty impulse of every penetrating contact d.contacts[:count] over dt
     seconds to the velocities solver.v, solver.w; the k-th pushing contact's row in the
@@ -110,7 +110,7 @@ def _forces(m, opt, d, solver, count, dt):
     return nk
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _impacts_and_memory(d, solver, nk, dt):
     """An approach faster than the bounce threshold (solver.impact) stays an impact only for
     a contact that was not pushing at the last solve (d.warm); then the pushing contacts
@@ -135,7 +135,7 @@ def _impacts_and_memory(d, solver, nk, dt):
     warm.size[0] = kept
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _records(d, solver, nk, when, nrec):
     """A record row per pushing contact (solver rows of _forces) at when = (time s, outer
     step), slip and rolling speed after the update; returns the record count, -1 when d.rec
@@ -169,7 +169,7 @@ def _records(d, solver, nk, when, nrec):
     return nrec
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def penalty(m, opt, d, solver, count, dt, time, step, nrec):
     """Penalty forces of the contacts d.contacts[:count] over dt seconds at ``time`` (s) of
     outer step ``step``, in the scratch ``solver`` (impulses.new_solver, rows >= count):

@@ -376,7 +376,7 @@ def _free_motion(m, opt, d):
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _move(f, i, tau, out_p, out_q, out_phi):
     """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion), into row
     i of out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: f.resting)."""
@@ -430,7 +430,7 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
     return best
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _gap_at(m, opt, d, a, b, tau, margin):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
@@ -458,7 +458,7 @@ def _gap_at(m, opt, d, a, b, tau, margin):
     return gap
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi."""
     lo, hi = 0.0, dt
@@ -570,7 +570,7 @@ def _boxes(m, d, margin):
                 hi[i, x] = pos[i, x] + reach
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _apart(a, b, pos, bound, margin):
     """Whether the bounding spheres of a and b are more than ``margin`` apart (cheap reject)."""
     reach = bound[a] + bound[b] + margin  # inf for a plane: never apart
