@@ -209,3 +209,13 @@ def test_rolling_contact_returns_without_drift():
     assert steady == pytest.approx(m * w * w * 1e-6, rel=0.1)  # below the contact resonance
     assert np.abs(out[on:]).max() < 1.2 * steady
     assert np.all(out[off:on] == 0.0)
+
+
+def test_roll_with_a_model_needs_a_positive_stiffness():
+    """The output over ``stiffness`` is the roughness the contact filter reads: 0 is refused
+    in one line naming the key, not a ZeroDivisionError in the first block."""
+    from jassy.errors import PatchError
+
+    patch = load_patch("roll", overrides=["ball.stiffness=0.0"])
+    with pytest.raises(PatchError, match=r"nodes\.ball\.stiffness: expected > 0 with a model"):
+        render(patch.graph, [], 0.01, FS, 256, limiter=False)
