@@ -715,12 +715,14 @@ class ModalBank(ModelParams, UGen):
         if split is None:
             return
         self._split = None
+        self._split_handle = None
         self.y[:, split.wide] = split.rows.wide_bank[4:]
         self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 
     def _reset(self) -> None:
         self._split = None
+        self._split_handle = None
         self._steady = None
         self._compact_meta[GATHERED] = 0
         if self._tables is not None:
@@ -1079,5 +1081,6 @@ class ModalBank(ModelParams, UGen):
 
     def _state_restored(self) -> None:
         self._split = None
+        self._split_handle = None
         self._steady = None
         self._ramping = self.meta[RAMP_LEFT] > 0
