@@ -14,10 +14,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
 from jassy.modal_model import ModalModel
+from ugens import cells, kernels, modal
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal import design
+
+# its cache holds copies of their kernels and constants
+drop_stale_cache(__file__, [cells, kernels, modal])
 
 #: Rows of the modes array: recursion coefficients, driving-point gains, two past outputs.
 MODE_ROWS = 5
