@@ -32,7 +32,7 @@ from jassy import params
 from jassy.graph import Graph
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
-from ugens import cells, filters, impact, mix, modal, noise, pressure, radiation, scrape
+from ugens import cells, filters, impact, mix, modal, modal_meta, noise, pressure, radiation, scrape
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
@@ -43,7 +43,7 @@ from ugens.radiation import Radiation, radiate
 from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
 
 #: The modules whose kernels the program calls (a change there drops its numba cache).
-KERNEL_MODULES = [params, cells, filters, impact, mix, modal, noise, pressure, radiation, scrape]
+KERNEL_MODULES = [params, cells, filters, impact, mix, modal, modal_meta, noise, pressure, radiation, scrape]
 drop_stale_cache(__file__, KERNEL_MODULES)
 
 #: int64 slots per node record: a Header, its kind's slots record (zero-padded), and last the

@@ -183,3 +183,15 @@ def test_a_program_compiles_only_the_kinds_its_graph_holds():
         [sys.executable, "-c", UNUSED_KINDS_STAY_UNCOMPILED], capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_staged_designs_are_freed_once_the_score_is_applied():
+    """A ModalBank's retune stages its design (kept until the compiled run applies it); once
+    the queue has drained the staged designs and strike counts are dropped, also when no
+    event is left to translate."""
+    score = [Event(0.02, "plate", "set", {"freq_scale": 1.1, "decay_scale": 2.0}, ramp=0.01)]
+    engine = OfflineEngine(contact_graph(), score, FS, 64, program=True)
+    engine.render(0.03)
+    assert engine.compiled._designs  # staged in the run that applied it
+    engine.render(0.01)
+    assert engine.compiled._designs == [] and engine.compiled._strikes == {}

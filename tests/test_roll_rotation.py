@@ -180,3 +180,42 @@ def test_rolling_contact_filter_against_its_z_transform():
         out, np.zeros(100), 100, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0])
     )
     assert np.all(out == 0.0)
+
+
+def test_rolling_contact_returns_without_drift():
+    """roll_over: while the load is off the ball rides on the surface (no drift at its last
+    speed), so when a ramped load returns the contact force is back at its steady level at
+    once (a ball drifting at w r for 0.1 s would hit with k w r 0.1 s, thousands of times
+    it)."""
+    from ugens.driving_point import roll_over
+    from ugens.modal import design
+
+    f0, decay, a = 300.0, 40.0, 2e-4  # the surface's mode: Hz, 1/s, m per N s
+    m, k, c = 0.11, 1.1e7, 300.0  # kg, N/m, N s/m
+    c1, c2, s = design(np.array([f0]), np.array([decay]), FS)
+    g = s / FS * a
+    n = FS
+    w = 2 * math.pi * 80.0
+    off, on, ramp = int(0.3 * FS), int(0.4 * FS), int(0.02 * FS)
+    load = np.ones(n)  # N
+    load[off - ramp : off] = np.linspace(1.0, 0.0, ramp)
+    load[off:on] = 0.0
+    load[on : on + ramp] = np.linspace(0.0, 1.0, ramp)
+    out = 1e-6 * np.sin(w * np.arange(n) / FS)  # m of roughness
+    modes = np.array([c1, c2, g, [0.0], [0.0]])
+    law = np.array([k, c, FS])
+    roll_over(out, load, n, modes, np.zeros(1), np.zeros(3), law, 1.0, 1.0 / (m * FS**2), float(g[0]))
+    steady = np.abs(out[int(0.2 * FS) : off - ramp]).max()
+    assert steady == pytest.approx(m * w * w * 1e-6, rel=0.1)  # below the contact resonance
+    assert np.abs(out[on:]).max() < 1.2 * steady
+    assert np.all(out[off:on] == 0.0)
+
+
+def test_roll_with_a_model_needs_a_positive_stiffness():
+    """The output over ``stiffness`` is the roughness the contact filter reads: 0 is refused
+    in one line naming the key, not a ZeroDivisionError in the first block."""
+    from jassy.errors import PatchError
+
+    patch = load_patch("roll", overrides=["ball.stiffness=0.0"])
+    with pytest.raises(PatchError, match=r"nodes\.ball\.stiffness: expected > 0 with a model"):
+        render(patch.graph, [], 0.01, FS, 256, limiter=False)

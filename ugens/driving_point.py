@@ -14,10 +14,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
 from jassy.modal_model import ModalModel
+from ugens import cells, kernels, modal
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal import design
+
+# its cache holds copies of their kernels and constants
+drop_stale_cache(__file__, [cells, kernels, modal])
 
 #: Rows of the modes array: recursion coefficients, driving-point gains, two past outputs.
 MODE_ROWS = 5
@@ -86,7 +91,10 @@ def roll_over(out, loads, n, modes, scratch, ball, contact, inv_height, ball_gai
     """The contact filter of rolling: a ball of mass m on a contact spring k (N/m) with a
     dashpot c (N s/m) rides over a roughness r (m) on a surface that gives way. out[:n]
     holds r / inv_height and is replaced by the dynamic contact force F (N) on the surface;
-    while loads[i] <= 0 (the ball lifted off) there is no contact (F = 0).
+    while loads[i] <= 0 (the ball lifted off) there is no contact (F = 0) and the ball is
+    held on the surface (y = r - x: no compression, moving with it), so contact returns
+    without the drift of a ball moving on at its last speed. F is linear: the spring may
+    pull (loads[i] + F < 0) where a real ball would hop.
 
     F = k d + c d', d = r - y - x the spring's compression: y the ball's rise, m y'' = F,
     stepped as the surface's modes are (impulse invariance: y[n] = 2 y[n-1] - y[n-2] +
@@ -109,13 +117,20 @@ def roll_over(out, loads, n, modes, scratch, ball, contact, inv_height, ball_gai
     compliance = 1.0 + stiff * (ball_gain + gain_sum)
     for i in range(n):
         x = free_motion(modes, scratch, 0.0)
-        y = 2.0 * y1 - y2
-        free = out[i] * inv_height - y - x
-        f = (stiff * free - damping * d1) / compliance if loads[i] > 0.0 else 0.0
-        settle(modes, scratch, f)
-        y2 = y1
-        y1 = y + ball_gain * f
-        d1 = free - (ball_gain + gain_sum) * f
+        if loads[i] > 0.0:
+            y = 2.0 * y1 - y2
+            free = out[i] * inv_height - y - x
+            f = (stiff * free - damping * d1) / compliance
+            settle(modes, scratch, f)
+            y2 = y1
+            y1 = y + ball_gain * f
+            d1 = free - (ball_gain + gain_sum) * f
+        else:  # lifted: the ball follows the surface, to return without compression
+            f = 0.0
+            settle(modes, scratch, f)
+            y2 = y1
+            y1 = out[i] * inv_height - x
+            d1 = 0.0
         out[i] = f
     ball[0] = y1
     ball[1] = y2

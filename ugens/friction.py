@@ -81,16 +81,20 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, driving_point, heard, kernels, modal, noise
 from ugens.cells import store
 from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, settle
 from ugens.heard import heard_run, impulse_invariant
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams, design
 from ugens.noise import seed_spec, uniform
+
+# its cache holds copies of their kernels and constants
+drop_stale_cache(__file__, [cells, driving_point, heard, kernels, modal, noise])
 
 #: Normal forces at or below this (N) mean no contact (keeps z_ss representable).
 MIN_CONTACT = 1e-9

@@ -44,16 +44,17 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy import record_views
 from jassy.anytime import a_weighting_power
 from jassy.errors import ModelError, PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.levels import reference_gain
 from jassy.modal_model import ModalModel, parse_location
 from jassy.params import ParamSpec
 from jassy.record_views import FIELD, float32_table, float_row, float_table, handle, int_row
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens import modal_budget
+from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
 from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
@@ -89,6 +90,9 @@ from ugens.modal_retune import (
     retune_state,
     size_changes,
 )
+
+# its cache holds copies of their kernels and constants
+drop_stale_cache(__file__, [cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune, record_views])
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -715,12 +719,14 @@ class ModalBank(ModelParams, UGen):
         if split is None:
             return
         self._split = None
+        self._split_handle = None
         self.y[:, split.wide] = split.rows.wide_bank[4:]
         self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 
     def _reset(self) -> None:
         self._split = None
+        self._split_handle = None
         self._steady = None
         self._compact_meta[GATHERED] = 0
         if self._tables is not None:
@@ -1079,5 +1085,6 @@ class ModalBank(ModelParams, UGen):
 
     def _state_restored(self) -> None:
         self._split = None
+        self._split_handle = None
         self._steady = None
         self._ramping = self.meta[RAMP_LEFT] > 0

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
@@ -223,8 +224,10 @@ class Roll(GivingSurface, Turning, NeedleContact):
     The default ``force`` is the weight of a light ball (8 g, 0.08 N): rolled at 0.2 m/s
     over a calibrated ModalBank (jassy.levels) it peaks between -30 and -6 dBFS.
 
-    With a ``model`` (the surface's ModalModel, at ``location``) the needle's height, the
-    output over ``stiffness``, is the roughness r under the rolling contact filter
+    With a ``model`` (the surface's ModalModel, at ``location``) the output over
+    ``stiffness`` (> 0 required), r = s(F, v) h_lp(x) (1 + ``unevenness`` g(phi)) (m): the
+    filtered profile height scaled by the amplitude law and the out-of-roundness, so
+    ``stiffness`` cancels; r is the roughness under the rolling contact filter
     (:func:`ugens.driving_point.roll_over`): the ball of ``mass`` m rides on its contact
     spring ``contact_stiffness`` k (and dashpot ``contact_damping``) over r, and the surface
     gives way under it, F = r / (1/k - 1/(m w^2) + alpha(w)). The output is then the
@@ -301,6 +304,12 @@ class Roll(GivingSurface, Turning, NeedleContact):
         self.turn = np.zeros(1)
         self._per_metre = 1.0 / (2.0 * math.pi * v["radius"] * self.sample_rate) if v["radius"] > 0 else 0.0
         self._prepare_surface()
+        if self.surface is not None and not v["stiffness"] > 0.0:
+            raise PatchError(
+                f"nodes.{self.name}.stiffness: expected > 0 with a model (the output over it is the "
+                f"roughness), got {v['stiffness']}"
+            )
+        self._inv_stiffness = 1.0 / v["stiffness"] if self.surface is not None else 0.0
         self._ball_motion = np.zeros(3)  # the ball's rise y[n-1], y[n-2] (m), compression (m)
         self._contact_law = np.array([v["contact_stiffness"], v["contact_damping"], self.sample_rate])
 
@@ -325,7 +334,7 @@ class Roll(GivingSurface, Turning, NeedleContact):
                 self._scratch,
                 self._ball_motion,
                 self._contact_law,
-                1.0 / v["stiffness"],
+                self._inv_stiffness,
                 1.0 / (v["mass"] * self.sample_rate**2),
                 self._gain_sum,
             )

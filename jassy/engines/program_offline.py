@@ -162,14 +162,14 @@ class OfflineProgram(ProgramRun):
         reach DESIGN_BYTES. Returns (the frame of the first event left before ``end``, else
         ``end``; whether that event is left for Python)."""
         sched = self.scheduler
-        left = sched.next_event
-        if left == len(sched.events) or sched.apply_frames[left] >= ahead:
-            return end, False  # nothing to translate
         queue = self.score_queue
-        if queue.read == queue.write:  # drained: start the ring afresh
+        if queue.read == queue.write:  # drained: start the ring afresh, free the staged designs
             self.control[queue.slot + 2] = self.control[queue.slot + 3] = 0
             self._designs.clear()
             self._strikes.clear()
+        left = sched.next_event
+        if left == len(sched.events) or sched.apply_frames[left] >= ahead:
+            return end, False  # nothing to translate
         records = []
         strikes = self._strikes
         frames, events = sched.apply_frames, sched.events
