@@ -5,7 +5,7 @@ A budgeted bank keeps its modes in their internal order and computes only the ke
 their rows are gathered into a compact bank (the same row layout, so the same kernels run
 on it, at a cost proportional to the kept modes) and scattered back when the kept set or
 the coefficients change. Modes outside the kept set hold zero state. The kept set is the
-mask ``BudgetTables.kept`` alone; its size is the bank's ``meta[2]`` (the most modes that
+mask ``BudgetTables.kept`` alone; its size is the bank's ``meta[ALLOWED]`` (the most modes that
 may be active), the compact bank's width that size rounded up to whole vectors.
 
 Every budgeted bank's rows live in shared flat stores (:class:`BudgetTables`; bank b's
@@ -35,8 +35,12 @@ from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
+from ugens import modal_meta
+from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH
 
-drop_stale_cache(__file__, [anytime_rank, record_views])  # its cache holds copies of their kernels
+drop_stale_cache(
+    __file__, [anytime_rank, modal_meta, record_views]
+)  # its cache holds copies of their kernels
 
 #: Rows of a compact bank: c1, c2, g, d, y1, y2 (as ModalBank.bank), then the ramp's
 #: per-sample increments and targets of c1, c2, g, d.
@@ -165,20 +169,20 @@ def compact_bank(t, b):
     modes rounded up to whole vectors of KEPT_LANES)."""
     meta = t.compact_meta[b]
     at = t.layout[COMPACT_AT, b]
-    if meta[1]:
-        width = meta[2]
+    if meta[GATHERED]:
+        width = meta[WIDTH]
         return t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
     k, o = t.layout[MODES, b], t.layout[FIRST, b]
-    width = (t.meta[b, 2] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES
+    width = (t.meta[b, ALLOWED] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES
     compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
     bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
     bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
     target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
     delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
     gather_kept(bank, delta, target, t.kept[o : o + k], compact)
-    meta[0] = t.meta[b, 0]
-    meta[1] = 1
-    meta[2] = width
+    meta[ACTIVE] = t.meta[b, ACTIVE]
+    meta[GATHERED] = 1
+    meta[WIDTH] = width
     return compact
 
 
@@ -198,12 +202,12 @@ def settle_compact(t, b):
     """If bank b's compact bank holds its kept modes' state, write it back to the bank's
     rows; the compact bank is then stale (gathered again by :func:`compact_bank`)."""
     meta = t.compact_meta[b]
-    if meta[1]:
+    if meta[GATHERED]:
         k, o = t.layout[MODES, b], t.layout[FIRST, b]
-        width, at, bank_at = meta[2], t.layout[COMPACT_AT, b], t.layout[BANK_AT, b]
+        width, at, bank_at = meta[WIDTH], t.layout[COMPACT_AT, b], t.layout[BANK_AT, b]
         compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
         scatter_kept(compact, t.kept[o : o + k], t.bank[bank_at : bank_at + 6 * k].reshape((6, k)))
-        meta[1] = 0
+        meta[GATHERED] = 0
 
 
 @nb.njit(fastmath=True, cache=True)
@@ -296,8 +300,8 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
     for m in range(o, o + k):
         amp2[m] = 0.0
         scores[2, m] = 0.0
-    if t.compact_meta[b, 1]:  # the state is in the compact bank
-        width, at = t.compact_meta[b, 2], t.layout[COMPACT_AT, b]
+    if t.compact_meta[b, GATHERED]:  # the state is in the compact bank
+        width, at = t.compact_meta[b, WIDTH], t.layout[COMPACT_AT, b]
         j = 0
         for m in range(o, o + k):
             if kept[m]:
@@ -320,7 +324,7 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
     spectral = t.values[SPECTRAL, b] > 0.0
     has_now, has_next = t.values[HAS_ELSEWHERE_NOW, b] > 0.0, t.values[HAS_ELSEWHERE_NEXT, b] > 0.0
     kick_now, kick_next = t.values[KICK_NOW, b], t.values[KICK_NEXT, b]
-    left = float(t.meta[b, 1])
+    left = float(t.meta[b, RAMP_LEFT])
     gains = t.layout[COEF_AT, b] + 2 * k  # row g of target and delta
     for i in range(k):
         m = o + i
@@ -397,7 +401,7 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
         kept[m] = keep[m] or fade[m]
         if kept[m]:
             count += 1
-    t.compact_meta[b, 1] = 0
+    t.compact_meta[b, GATHERED] = 0
     return count
 
 
@@ -415,7 +419,7 @@ def decide(t, d, rates):
         kicked = False
         for field in range(KICK_NOW, HAS_ELSEWHERE_NEXT + 1):
             kicked |= t.values[field, b] > 0.0
-        if not (kicked or d.onset[b] or d.heard[b] or t.meta[b, 0]):
+        if not (kicked or d.onset[b] or d.heard[b] or t.meta[b, ACTIVE]):
             o, k = t.layout[FIRST, b], t.layout[MODES, b]
             for r in range(3):
                 for m in range(o, o + k):
@@ -432,12 +436,12 @@ def decide(t, d, rates):
     fading = rank_modes(scores, rates.limit, d.keep, d.fade, d.later)
     total = 0
     for b in range(count):
-        left = float(t.meta[b, 1])
+        left = float(t.meta[b, RAMP_LEFT])
         kept = apply_kept(t, b, d.keep, d.fade, left, rates.shrink)
         if kept >= 0:
-            t.meta[b, 0] = kept
-            t.meta[b, 2] = kept
-        total += t.meta[b, 2]
+            t.meta[b, ACTIVE] = kept
+            t.meta[b, ALLOWED] = kept
+        total += t.meta[b, ALLOWED]
     return fading, total
 
 

@@ -19,13 +19,14 @@ from jassy import anytime_rank, record_views
 from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, hearing_at, kicks_at, scan_forces
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
-from ugens import modal, modal_budget
+from ugens import modal, modal_budget, modal_meta
 from ugens.kernels import FASTMATH
 from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, mode_rows, resonate
 from ugens.modal_budget import FLOOR, KEPT_LANES, TABLE_FIELDS, compact_bank, settle_compact, tables_at
+from ugens.modal_meta import ACTIVE, ALLOWED, WIDTH
 
 drop_stale_cache(
-    __file__, [modal, modal_budget, anytime_rank, record_views]
+    __file__, [modal, modal_budget, modal_meta, anytime_rank, record_views]
 )  # the cache holds copies of their kernels
 
 
@@ -103,8 +104,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
     FLUSH_PERIOD on the clock, so the output does not depend on the block size), with
     force-free stretches by :func:`ring`. The force also goes to the budget period's ring
     ``heard`` (empty: the force is zero and the ring holds zeros)."""
-    width = meta[2]
-    meta[0] = min((meta[0] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES, width)
+    width = meta[WIDTH]
+    meta[ACTIVE] = min((meta[ACTIVE] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES, width)
     i = 0
     while i < n:
         frame = start + i
@@ -113,8 +114,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
         o = out[i : i + m]
         forced = last[0] != 0.0 or has_force(f, m)
         if forced:
-            meta[0] = width
-        active = meta[0]
+            meta[ACTIVE] = width
+        active = meta[ACTIVE]
         if active == 0:
             for j in range(m):
                 o[j] = 0.0
@@ -125,7 +126,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
             ring(o, m, compact[0], compact[1], compact[4], compact[5], active)
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
-            meta[0] = flush_silent(compact[4], compact[5], active, floor)
+            meta[ACTIVE] = flush_silent(compact[4], compact[5], active, floor)
     if heard.size:
         hear(force, n, heard, start)
 
@@ -153,7 +154,7 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
             continue
         out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         busy = heard_lately(h, b)
-        if not busy and t.meta[b, 0] == 0 and t.last[b] == 0.0:
+        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0:
             for i in range(n):
                 out[i] = 0.0
             continue
@@ -163,8 +164,8 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
         kept_step(
             force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
         )
-        active = min(meta[0], t.meta[b, 2])
-        t.meta[b, 0] = active
+        active = min(meta[ACTIVE], t.meta[b, ALLOWED])
+        t.meta[b, ACTIVE] = active
         work += active * n
     return work
 
@@ -238,7 +239,7 @@ def kept_span(a, b, force, out, start, n):
     t = tables_at(a, 0)
     compact, meta = compact_bank(t, b), t.compact_meta[b]
     kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
-    t.meta[b, 0] = min(meta[0], t.meta[b, 2])
+    t.meta[b, ACTIVE] = min(meta[ACTIVE], t.meta[b, ALLOWED])
 
 
 @nb.njit(cache=True)

@@ -72,6 +72,7 @@ from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
 from ugens.mix import Gain
 from ugens.modal import ModalBank
+from ugens.modal_meta import RAMP_LEFT
 from ugens.scrape import ResonantScrape, Scrape
 
 drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODULES])
@@ -201,12 +202,12 @@ def apply_event(prog, ev, control):
             for r in range(4):
                 for j in range(k):
                     bank[r, j] = target[r, j]
-            meta[1] = 0
+            meta[RAMP_LEFT] = 0
         else:
             for r in range(4):
                 for j in range(k):
                     delta[r, j] = (target[r, j] - bank[r, j]) / m
-            meta[1] = m
+            meta[RAMP_LEFT] = m
 
 
 @nb.njit(cache=True, nogil=True)
