@@ -26,39 +26,41 @@ import contextlib
 import os
 from collections.abc import Callable
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
-from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
-from physics.rigid.penalty import penalty
 
 
-def step_units(m: Model, opt: Options, d: st.Data) -> list[Callable[[], object]]:
-    """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d`` (nothing runs):
-    the narrow phase and impact times first (this process), the free motion, solves and stage
-    kernels from the back (the helper)."""
+class KernelCall(NamedTuple):
+    """A kernel and example arguments of the types run_steps calls it with."""
+
+    kernel: Callable
+    args: tuple
+
+
+def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
+    """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d``, each a list of
+    kernel calls to compile (not run): the narrow phase and impact times first (this
+    process), the free motion, solves and stage kernels from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
-    solve_bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
-    solve_data = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+    contact_model, move = st.step_kernels(opt)
     free = st._free_motion.py_func(m, opt, d)
-
-    def narrow_then_impacts() -> None:
-        specialise(st.narrow_stage, m, opt, d, d.sweep.pairs, d.near, dt)
-        specialise(st._time_of_impact, m, opt, d, whole, whole, dt, dt, dt, dt)
-
     return [
-        narrow_then_impacts,
-        partial(specialise, st._boxes, m, d, opt.slop),
-        partial(specialise, sweep_pairs, d.lo, d.hi, d.movable, d.sweep),
-        partial(specialise, st.sample_stage, d, whole),
-        partial(specialise, st._commit, d),
-        partial(specialise, penalty, m, opt, d, d.solver, count, dt, when, whole, whole),
-        partial(specialise, resolve, solve_bodies, opt, solve_data, d.solver, count, dt, when, whole, whole),
-        partial(specialise, st._move, free, whole, dt, d.new_pos, d.new_quat, d.new_phi),
+        [
+            KernelCall(st.narrow_stage, (m, opt, d, d.sweep.pairs, d.near, dt)),
+            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, move)),
+        ],
+        [KernelCall(st._boxes, (m, d, opt.slop))],
+        [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
+        [KernelCall(st.sample_stage, (d, whole))],
+        [KernelCall(st._commit, (d,))],
+        [KernelCall(contact_model, (m, opt, d, count, dt, when, whole, whole))],
+        [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
     ]
 
 
@@ -70,13 +72,15 @@ def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:
         return False
     from jassy.engines.coldstart import compile_on_two_cores
 
-    return compile_on_two_cores([partial(_quietly, unit) for unit in step_units(m, opt, d)])
+    return compile_on_two_cores([partial(_compile, unit) for unit in step_units(m, opt, d)])
 
 
-def _quietly(unit: Callable[[], object]) -> None:
-    """Run a compile unit, ignoring its errors: run_steps then compiles what it needs itself."""
-    with contextlib.suppress(Exception):  # only the time of this unit is lost
-        unit()
+def _compile(unit: list[KernelCall]) -> None:
+    """Compile a unit's kernels for their calls' types, ignoring errors (run_steps then
+    compiles what it needs itself: only this unit's time is lost)."""
+    for call in unit:
+        with contextlib.suppress(Exception):
+            specialise(call.kernel, *call.args)
 
 
 def _cached(kernel) -> bool:
