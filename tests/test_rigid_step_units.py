@@ -10,6 +10,7 @@ from numba.core import types
 
 from physics.rigid import stepper as st
 from physics.rigid.impulses import new_warm_start
+from physics.rigid.narrow import pair_contacts
 from physics.rigid.shapes import Plane, Sphere
 from physics.rigid.step_units import step_units
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
@@ -46,7 +47,7 @@ def test_units_compile_the_types_run_steps_asks_for():
     )
     calls = [call for unit in step_units(model, opt, data) for call in unit]
     kernels = {call.kernel for call in calls}
-    assert kernels >= {st.narrow_stage, st._time_of_impact, st.impulse_contacts, st._move_semi_implicit}
+    assert kernels >= {pair_contacts, st._time_of_impact, st.impulse_contacts, st._move_semi_implicit}
     for call in calls:
         wanted = tuple(nb.typeof(a) for a in call.args)
         cached = _cached_signatures(call.kernel)

@@ -11,13 +11,13 @@ records), and :func:`compile_step_ahead` hands them to
 back of the list while this process works from the front). run_steps then compiles here,
 loading its callees from the cache instead of compiling them.
 
-The split (exclusive CPU of each subtree on the wok, one cold run): this process takes the
-narrow phase (``narrow_stage``, ~35 s) and then the impact-time search (``_time_of_impact``,
-which reaches the narrow phase again through ``_pair_gap``), the helper first the free motion
-(``_move``, called from both run_steps and the impact-time search), the impulse solve
-(``impulses.resolve``, ~20 s) and the penalty models (``penalty.penalty``, ~13 s), then the
-small stage kernels. A unit compiled for other types than run_steps asks for would only cost
-time (run_steps compiles its own): tests/test_rigid_step_units.py checks that they agree.
+The split (CPU of each subtree's first compile on the wok, one cold run): this process takes
+the narrow phase (~35 s) and then the impact-time search (``_time_of_impact``, which reaches
+the narrow phase again through the gap probe), the helper first the free motion (``move``,
+called from both run_steps and the impact-time search), then the run's contact model
+(``impulse_contacts``: the impulse solve, ~20 s) and the small stage kernels. A unit compiled
+for other types than run_steps asks for would only cost time (run_steps would compile its
+own): tests/test_rigid_step_units.py checks that they agree.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.model import Model, Options
+from physics.rigid.narrow import pair_contacts
 
 
 class KernelCall(NamedTuple):
@@ -52,7 +53,7 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     free = st._free_motion.py_func(m, opt, d)
     return [
         [
-            KernelCall(st.narrow_stage, (m, opt, d, d.sweep.pairs, d.near, dt)),
+            KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
             KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, move)),
         ],
         [KernelCall(st._boxes, (m, d, opt.slop))],

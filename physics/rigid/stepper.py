@@ -26,20 +26,21 @@ outer step of h seconds (:func:`outer_step`) is:
    sub-steps per step; later impacts are resolved at the step end.
 
 The contact model and the free motion's integrator are kernels passed to run_steps
-(:func:`step_kernels`, chosen from Options in Python), not branches inside it: numba compiles
-a kernel argument's call for that kernel only, so a run compiles only its own model and
-integrator (the wok's first compile no longer builds the penalty models, RK4 and the adaptive
-integrator). The stages are inlined into run_steps (numba inline="always"): a called kernel is linked
-into its caller's module and optimised again there, so a chain of stage calls above the
-narrow phase would compile it once per level. The whole step allocates nothing and run_steps
-is compiled without reference counting (``_nrt=False``, passed on to every kernel it calls
-that sets no flag of its own): with it, every use of Model or Data counted a reference up and
-down for each array they hold. Its scratch (contact solve, sweep, pair bounds, the gap
-probe's saved poses) lives in Data; a sweep that finds more pairs, or a narrow phase more
-contacts, than the scratch holds stops the run inside its step (Data.progress says where and
-how much is needed), and :func:`run` grows the scratch and resumes the step there. Only the
-RK4 and adaptive integrators allocate (integrate.advance_body_into keeps reference counting
-for itself).
+(:func:`step_kernels`, chosen from Options in Python), not branches inside it: numba
+compiles a kernel argument's call for that kernel only, so a run compiles only its own model
+and integrator (the wok's first compile no longer builds the penalty models, RK4 and the
+adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
+are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
+linked into its caller's module and optimised again there, so each level of kernel calls
+above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
+compile). The whole step allocates nothing and run_steps is compiled without reference
+counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
+with it, every use of Model or Data counted a reference up and down for each array they
+hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
+Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
+stops the run inside its step (Data.progress says where and how much is needed), and
+:func:`run` grows the scratch and resumes the step there. Only the RK4 and adaptive
+integrators allocate (integrate.advance_body_into keeps reference counting for itself).
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -454,7 +455,7 @@ def _turn(i, tau, quat, kin_w, out_q):
     out_q[i, 0], out_q[i, 1], out_q[i, 2], out_q[i, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _pair_gap(geo, a, b, pos, rot, margin, probe):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
     buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
@@ -465,7 +466,7 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
     return best
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _gap_at(m, opt, d, a, b, tau, margin, move):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
@@ -642,7 +643,7 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
     return _apart(a, b, pos, geo.bound, margin)
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _detect(geo, slop, pos, rot, buf, pairs, near):
     """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
     near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
@@ -726,7 +727,7 @@ def broad_stage(m, opt, d, dt):
     return count
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def narrow_stage(m, opt, d, pairs, near, dt):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
     come within slop (_detect); returns their count."""
