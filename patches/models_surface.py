@@ -88,12 +88,12 @@ def ss_plate_model(
     if points is None:
         w, names = track_points(n_points, between)
         (u0, v0), (u1, v1) = track
-        at = plate_shapes(m, n, u0 + w * (u1 - u0), v0 + w * (v1 - v0))
+        at = plate_shapes(m, n, u0 + w * (u1 - u0), v0 + w * (v1 - v0), pi_last=True)
     else:
         uv = np.array(list(points.values()), dtype=np.float64)
-        at = plate_shapes(m, n, uv[:, 0], uv[:, 1])
+        at = plate_shapes(m, n, uv[:, 0], uv[:, 1], pi_last=True)
         names = tuple(points)
-    listen = plate_shapes(m, n, pickup[0], pickup[1])
+    listen = plate_shapes(m, n, pickup[0], pickup[1], pi_last=True)
     gains = at * listen / mass  # strike to pickup: signed
     # at the strike point itself, for contacts in a closed loop: a displacement receptance
     driving = at * at / (mass * 2 * np.pi * freqs)
