@@ -31,6 +31,7 @@ from jassy.events import ContactTrack, HapticFrame
 from physics.burr.contact import (
     CONTACT_TALLY,
     CONTACT_VOXEL,
+    NO_BRICKS,
     BurrModel,
     ContactData,
     ContactOptions,
@@ -118,8 +119,11 @@ class BurrSim:
         side = 2 * int(math.ceil(self.params.radius / volume.voxel + 1.0)) + 3
         cap = side**3
         rng = np.array([seed], dtype=np.uint64)
-        self.data = ContactData(volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY))
-        self._data_fields = tuple(self.data)
+        bricks = self.octree.bricks() if self.octree is not None else NO_BRICKS
+        self.data = ContactData(
+            volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY), bricks
+        )
+        self._data_fields = (*self.data[:4], tuple(bricks))
         self.removed_total = 0.0
         self.work_total = 0.0
 
@@ -165,7 +169,7 @@ class BurrSim:
         t = _Tally(*d.tally[0].item())
         if self.octree is not None and t.removed > 0:
             box = np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k], dtype=np.int64)
-            self.octree.erode(d.voxels, t.gathered, box)
+            self.octree.rebuild_above(box)
         friction = np.array([t.force_x, t.force_y, t.force_z])
         power = t.power
         removed = t.removed * v.mass_per_count
