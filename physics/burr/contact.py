@@ -473,14 +473,6 @@ def _apply(m, opt, d, count, p_scale):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def surface_pass(model, options, data):
-    """:func:`contact_pass` on a BurrModel, ContactOptions and ContactData given as plain
-    tuples (numba types a plain tuple's fields in C, a NamedTuple's in Python: ~0.5 us a
-    field per call at haptic rate)."""
-    contact_pass(BurrModel(*model), ContactOptions(*options), ContactData(*data[:4], Bricks(*data[4])))
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
 def contact_pass(m, opt, d):
     """Hertz pressure, friction and erosion over the burr's contact voxels; fills d.tally
     and the changed box, and keeps d.bricks' moments equal to the eroded density's.

@@ -169,11 +169,11 @@ def _update(dens, base, top, mom, off, dims, box):
             for bk in range(box[2] >> base, (box[5] >> base) + 1):
                 idx = off[base] + ((bi * by + bj) * bz + bk) * 4
                 _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
-    _build_parents(base, top, mom, off, dims, box)
+    build_parents(base, top, mom, off, dims, box)
 
 
 @nb.njit(cache=True)
-def _build_parents(base, top, mom, off, dims, box):
+def build_parents(base, top, mom, off, dims, box):
     """Recompute the blocks above ``base`` that hold voxels of box [i0, j0, k0, i1, j1, k1]."""
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
@@ -188,7 +188,7 @@ def _build_parents(base, top, mom, off, dims, box):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _descend(pyramid, ball, leaf, out, stack):
+def descend(pyramid, ball, leaf, out, stack):
     """Moments of the Pyramid's density inside the burr's Ball into out (module docstring);
     returns the blocks visited. stack: int64 scratch (8 (levels + 1), 4) of pending blocks."""
     dens, base, top, mom, off, dims = pyramid
@@ -333,10 +333,10 @@ class Octree:
         self.off = off
         self.mom = np.zeros(int(off[-1]))
         # a depth-first stack never holds more than 8 entries per level
-        self._stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
+        self.stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
         self._out = np.zeros(4)
-        self._pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
-        self._descend_run = None  # _descend's typed entry point, found at the first call
+        self.pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
+        self._descend_run = None  # descend's typed entry point, found at the first call
         self.rebuild()
 
     def rebuild(self) -> None:
@@ -363,15 +363,15 @@ class Octree:
         """Rebuild the levels above the bricks over ``box`` [i0, j0, k0, i1, j1, k1]
         (inclusive), after the bricks' moments changed there (erosion subtracts each eroded
         voxel's decrement from its brick: :func:`physics.burr.contact.contact_pass`)."""
-        _build_parents(self.base, self.top, self.mom, self.off, self.dims, box)
+        build_parents(self.base, self.top, self.mom, self.off, self.dims, box)
 
     def moments(self, centre, R: float, leaf: int = 1) -> tuple[np.ndarray, int]:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
         number of blocks visited. ``leaf``: side (voxels) at or below which partial blocks
         use the partial-volume rule (1 = exact voxel sum)."""
         ball = Ball(float(centre[0]), float(centre[1]), float(centre[2]), float(R))
-        args = (self._pyramid, ball, int(leaf), self._out, self._stack)
+        args = (self.pyramid, ball, int(leaf), self._out, self.stack)
         if self._descend_run is None:  # the same types at every call: one typed entry point
-            self._descend_run = specialise(_descend, *args)
+            self._descend_run = specialise(descend, *args)
         visits = self._descend_run(*args)
         return self._out.copy(), int(visits)
