@@ -80,7 +80,7 @@ from ugens.modal_f32 import (
     narrow_rows,
     unscaled_state,
 )
-from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
+from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta, NarrowMeta
 from ugens.modal_retune import (
     TOP_BAND,
     TOP_BAND_COS,
@@ -311,8 +311,8 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
     y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all, 1 in the
-    decay-factor form] and the force sample before the block."""
+    state (y[n-2], Delta[n-1]) / g (ugens.modal_f32.narrow_rows), their NarrowMeta
+    (ugens.modal_meta) and the force sample before the block."""
 
     wide_bank: np.ndarray
     wide_meta: np.ndarray
@@ -449,7 +449,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array([nn, nn, by_factor], dtype=np.int64),
+        np.array(NarrowMeta(nn, nn, int(by_factor)), dtype=np.int64),
         np.zeros(1),
     )
     return MixedSplit(wide, narrow, rows)

@@ -33,6 +33,7 @@ import numba as nb
 import numpy as np
 
 from ugens.kernels import FASTMATH
+from ugens.modal_meta import BY_FACTOR, NARROW_ACTIVE, NARROW_ALL
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.
@@ -76,9 +77,10 @@ def float32_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndar
 
 def decay_factor_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndarray:
     """As :func:`float32_error` for the decay-factor form, whose second coefficient is
-    R^2 = 1 - b2 rounded to float32: its absolute rounding, up to 2^-25, moves the decay
-    by up to fs 2^-26 (7e-4 /s at 48 kHz), so light modes (d below a few 1/s) may fail
-    where the delta form holds."""
+    R^2 - c0 = 1 - b2 - c0 rounded to float32 (:func:`factor_coefficient`): its absolute
+    rounding, up to 2^-25, moves the realised R^2 and so the decay by up to fs 2^-26
+    (7e-4 /s at 48 kHz), so light modes (d below a few 1/s) may fail where the delta form
+    holds."""
     return _rounding_error(c1, c2, sample_rate, decay_factor=True)
 
 
@@ -86,17 +88,25 @@ def _rounding_error(c1, c2, sample_rate: float, decay_factor: bool) -> np.ndarra
     sounding = c2 > 0.0
     c0, b2 = delta_coefficients(np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.25))
     theta, rho = _pole(c0, b2)
+    c0_32 = c0.astype(np.float32).astype(np.float64)
     if decay_factor:
-        b2_32 = 1.0 - (1.0 - b2).astype(np.float32).astype(np.float64)
+        b2_32 = 1.0 - (factor_coefficient(c0, b2).astype(np.float64) + c0_32)
     else:
         b2_32 = b2.astype(np.float32).astype(np.float64)
-    theta32, rho32 = _pole(c0.astype(np.float32).astype(np.float64), b2_32)
+    theta32, rho32 = _pole(c0_32, b2_32)
     omega, decay = theta * sample_rate, np.maximum(rho * sample_rate, 1e-12)
     drift = (np.abs(theta32 - theta) + np.abs(rho32 - rho)) * sample_rate / (decay * np.e)
     noise = 2.0 * _EPS32 * np.sqrt(sample_rate / decay)
     t_peak = np.arctan2(omega, decay) / np.maximum(omega, 1e-12)
     peak = np.exp(-decay * t_peak) * np.sin(omega * t_peak)
     return np.where(sounding, (drift + noise) / np.maximum(peak, 1e-300), 0.0)
+
+
+def factor_coefficient(c0: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """The decay-factor form's second coefficient in float32: R^2 - c0 = 1 - b2 - c0 with
+    c0 as rounded to float32, so that the realised R^2 (this plus the float32 c0, exact
+    in float64) is R^2 to within this coefficient's own rounding."""
+    return ((1.0 - b2) - c0.astype(np.float32).astype(np.float64)).astype(np.float32)
 
 
 #: Flags of the per-mode update: contraction into FMA, no reassociation, so that the
@@ -110,14 +120,19 @@ MIN_GAIN = 1e-30
 
 
 @nb.njit(fastmath=_UPDATE_FLAGS, cache=True)
-def _next_delta(v, u, c0, b, f, by_factor):
-    """The scaled Delta[n] from v = Delta[n-1] / g, u = y[n-1] / g and F[n-1] = f (float32).
+def _next_delta(v, p, u, c0, b, f, by_factor):
+    """The scaled Delta[n] from v = Delta[n-1] / g, p = y[n-2] / g, u = y[n-1] / g and
+    F[n-1] = f (float32).
 
-    Delta form (b = b2): two FMA on independent operands and an add, so a mode's recursion
-    waits ~10 cycles per sample (three chained FMA: 12). Decay-factor form (``by_factor``,
-    b = R^2): two chained FMA with the state term last, ~8 cycles, one add fewer."""
+    Delta form (b = b2): Delta[n] = (F - c0 y[n-1]) + (Delta[n-1] - b2 Delta[n-1]), two FMA
+    on independent operands and an add; a mode's recursion waits for y[n-1] = y[n-2] +
+    Delta[n-1] (an add), an FMA and an add per sample. Decay-factor form (``by_factor``, b
+    = R^2 - c0): with y[n-1] = y[n-2] + Delta[n-1], Delta[n] = R^2 Delta[n-1] - c0 y[n-1]
+    + F is (R^2 - c0) Delta[n-1] + (F - c0 y[n-2]): the term in y[n-2] is ready a sample
+    early, so Delta waits one FMA per sample on itself, as the two-pole form's y does (its
+    path through y[n-2], an add and two FMA, spans two samples)."""
     if by_factor:
-        return (b * v + f) - c0 * u
+        return b * v + (f - c0 * p)
     return (f - c0 * u) + (v - b * v)
 
 
@@ -147,34 +162,35 @@ def float32_rows(rows: int, width: int) -> np.ndarray:
 
 
 def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
-    d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
-    (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
-    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
-    A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
-    and g = d = 0, so it adds exact zeros."""
+    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 - c0
+    (:func:`factor_coefficient`), g, d) and (y[n-2] / g, Delta[n-1] / g) of modes with
+    float64 coefficients c0, b2 (:func:`delta_coefficients`), gains g, direct gains d and
+    state y[n-1] = y1, y[n-2] = y2, padded to a multiple of LANES modes (the rows may be
+    longer: :func:`float32_rows`). A padding mode has c0 = 1 and b2 = 1 (R^2 = 0, R^2 - c0
+    = -1), so its y[n] = F[n-1] stays bounded, and g = d = 0, so it adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
     rows = float32_rows(6, width)
     coef, state = rows[:4], rows[4:]
-    coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
+    coef[:, :n] = np.stack([c0, factor_coefficient(c0, b2) if decay_factor else b2, g, d])
     coef[0, n:] = 1.0
-    coef[1, n:] = 0.0 if decay_factor else 1.0
-    state[:, :n] = np.stack([y1 / g, (y1 - y2) / g])
+    coef[1, n:] = -1.0 if decay_factor else 1.0
+    state[:, :n] = np.stack([y2 / g, (y1 - y2) / g])
     return coef, state
 
 
 def unscaled_state(state: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(y[n-1], y[n-2]) in float64 of the ``g.size`` modes of :func:`narrow_rows`' state."""
-    y, dy = state[:, : g.size].astype(np.float64) * g
-    return y, y - dy
+    """(y[n-1], y[n-2]) in float64 of the ``g.size`` modes of :func:`narrow_rows`' state,
+    y[n-1] summed in float32 as the kernel sums it."""
+    p, dy = state[:, : g.size]
+    return (p + dy).astype(np.float64) * g, p.astype(np.float64) * g
 
 
 class DeltaRows(NamedTuple):
     """Float32 delta-form modes as :func:`resonate_delta` reads them, one entry per mode:
-    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 in the decay-factor form), input
-    gain g and direct gain d, and the state scaled by the input gain, y = y[n-1] / g,
-    dy = Delta[n-1] / g."""
+    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 - c0 in the decay-factor form),
+    input gain g and direct gain d, and the state scaled by the input gain, y = y[n-2] / g,
+    dy = Delta[n-1] / g (y[n-1] / g = y + dy)."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -186,7 +202,7 @@ class DeltaRows(NamedTuple):
 
 @nb.njit(inline="always", cache=True)
 def delta_rows(coef, state):
-    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y, Delta) / g."""
+    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y[n-2], Delta[n-1]) / g."""
     return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
 
@@ -223,21 +239,26 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
             a = c0[k]
             b = b2[k]
             gk = g[k]
-            u = y[k]
+            p = y[k]
             v = dy[k]
-            v = _next_delta(v, u, a, b, fp, by_factor)
+            u = p + v
+            v = _next_delta(v, p, u, a, b, fp, by_factor)
+            p = u
             u = u + v
             s0 += gk * u
-            v = _next_delta(v, u, a, b, f0, by_factor)
+            v = _next_delta(v, p, u, a, b, f0, by_factor)
+            p = u
             u = u + v
             s1 += gk * u
-            v = _next_delta(v, u, a, b, f1, by_factor)
+            v = _next_delta(v, p, u, a, b, f1, by_factor)
+            p = u
             u = u + v
             s2 += gk * u
-            v = _next_delta(v, u, a, b, f2, by_factor)
+            v = _next_delta(v, p, u, a, b, f2, by_factor)
+            p = u
             u = u + v
             s3 += gk * u
-            y[k] = u
+            y[k] = p
             dy[k] = v
         out[i] += s0 + direct * f0
         out[i + 1] += s1 + direct * f1
@@ -249,11 +270,12 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
         f = np.float32(force[i])
         s = np.float32(0.0)
         for k in range(active):
-            v = _next_delta(dy[k], y[k], c0[k], b2[k], fp, by_factor)
-            u = y[k] + v
+            p = y[k]
+            u = p + dy[k]
+            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, by_factor)
             y[k] = u
             dy[k] = v
-            s += g[k] * u
+            s += g[k] * (u + v)
         out[i] += s + direct * f
         fp = f
         i += 1
@@ -262,7 +284,7 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
 
 @nb.njit(cache=True)
 def flush_silent_delta(y, dy, g, active, floor):
-    """Zero float32 modes whose y and Delta (the scaled state times g) are below ``floor``;
+    """Zero float32 modes whose y[n-2] and Delta[n-1] (the scaled state times g) are below ``floor``;
     return the new active count (last audible mode + 1)."""
     last = 0
     for k in range(active):
@@ -277,25 +299,26 @@ def flush_silent_delta(y, dy, g, active, floor):
 @nb.njit(fastmath=FASTMATH, cache=True)
 def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_period):
     """Add one sub-block of the float32 modes to out[:n], with the silent-mode skipping
-    of ugens.modal.bank_step (same flush frames). coef rows: c0, b2, g, d; state rows:
-    y, Delta; meta[0] = active count, meta[1] = all modes, meta[2] = 1 in the decay-factor
-    form (coef row 1 holds R^2), 0 in the delta form."""
+    of ugens.modal.bank_step (same flush frames). coef rows: c0, b2 (R^2 - c0 in the
+    decay-factor form), g, d; state rows: y[n-2], Delta[n-1] (scaled by 1 / g); meta: a
+    NarrowMeta (ugens.modal_meta)."""
     i = 0
     while i < n:
         frame = start + i
         m = min(n - i, (frame // flush_period + 1) * flush_period - frame)
         f = force[i : i + m]
         if last[0] != 0.0:
-            meta[0] = meta[1]
+            meta[NARROW_ACTIVE] = meta[NARROW_ALL]
         for j in range(m):
             if f[j] != 0.0:
-                meta[0] = meta[1]
+                meta[NARROW_ACTIVE] = meta[NARROW_ALL]
                 break
-        active = meta[0]
+        active = meta[NARROW_ACTIVE]
         if active == 0:
             last[0] = 0.0
         else:
-            resonate_delta(f, out[i : i + m], m, delta_rows(coef, state), active, last, meta[2] == 1)
+            rows = delta_rows(coef, state)
+            resonate_delta(f, out[i : i + m], m, rows, active, last, meta[BY_FACTOR] == 1)
         i += m
         if active > 0 and (start + i) % flush_period == 0:
-            meta[0] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
+            meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
