@@ -242,7 +242,8 @@ def test_one_call_step_equals_its_parts(method):
         normal = -m1 / math.sqrt(float(m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2]))
         h = float(depth_from_m0(m0, p.rho0, p.radius))
         assert s.m0 == m0 and np.array_equal(s.m1, m1) and np.array_equal(s.normal, normal)
-        assert s.depth == h and np.array_equal(s.elastic, p.c_e * p.radius**2 * (h / p.radius) ** 1.5 * normal)
+        elastic = p.c_e * p.radius**2 * (h / p.radius) ** 1.5 * normal
+        assert s.depth == h and np.array_equal(s.elastic, elastic)
 
 
 def test_erosion_bookkeeping_and_roulette_expectation():
