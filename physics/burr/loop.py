@@ -1,6 +1,7 @@
 """The haptic-rate burr simulation: pose in, force out; and the constant-force descent.
 
-One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
+One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003), one compiled call
+(:func:`physics.burr.update.haptic_update`):
 
 1. moments m0, m1 of the density in the burr ball (octree or brute-force voxel sum);
 2. n = -m1/|m1| (out of the bone), h from m0 = pi rho0 R^3 (h/R)^2 (1 - h/(3R)) and the
@@ -9,9 +10,9 @@ One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
 3. the Hertz pressure P(xi) = P0 sqrt(1 - xi^2/a^2), a = sqrt(R h), P0 = 3|F_e|/(2 pi a^2)
    (normalised on the voxels), friction mu P dsigma against the sliding velocity of each
    voxel's burr-surface point (spin omega x p plus tool velocity) and the frictional power;
-4. erosion: each voxel loses K_er * power_i * dt kg (8-bit counter, Russian roulette), and
-   each eroded voxel's decrement is subtracted from its octree brick and the levels above
-   are rebuilt over the changed box.
+4. erosion: each voxel loses K_er * power_i * dt kg (8-bit counter, Russian roulette), its
+   decrement is subtracted from its octree brick as it is eroded, and the levels above are
+   rebuilt over the changed box.
 
 Units: SI (m, N, rad/s, kg); the volume's counters are density fractions of ``rho_full``.
 The force returned is the force of the bone on the burr (what the haptic device renders).
