@@ -220,8 +220,8 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
     numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
     force and out float64. last[0]: the force sample before force[0], left at
-    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate. Four
-    samples per pass over the modes, as there. The float32 modes run up to the next
+    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
+    passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
     multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
     the flush: exact zeros that stay zero without force, and with force every mode is
     active)."""
@@ -233,10 +233,12 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     if wide is not None:
         for k in range(wide_active):
             direct += wide[3, k]
-    fw = last[0]
-    fp = np.float32(fw)
     i = 0
     while i + 4 <= n:
+        # Only the loop's own values stay in registers across the float32 loop (scalars
+        # share the vector registers; a direct term and the float64 force samples held
+        # there cost 4 % at 64 modes): the force is read again where it is needed.
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
         f0 = np.float32(force[i])
         f1 = np.float32(force[i + 1])
         f2 = np.float32(force[i + 2])
@@ -269,15 +271,15 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
             s3 += gk * u
             y[k] = p
             dy[k] = v
-        w0 = force[i]  # read again: live across the float32 loop they would take registers
-        w1 = force[i + 1]
-        w2 = force[i + 2]
-        w3 = force[i + 3]
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
         t3 = 0.0
         if wide is not None:
+            fw = force[i - 1] if i > 0 else last[0]
+            w0 = force[i]
+            w1 = force[i + 1]
+            w2 = force[i + 2]
             for k in range(wide_active):
                 q1 = wide[0, k]
                 q2 = wide[1, k]
@@ -294,15 +296,14 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
                 t1 += v1
                 t2 += v2
                 t3 += v3
-        out[i] += (s0 + t0) + direct * w0
-        out[i + 1] += (s1 + t1) + direct * w1
-        out[i + 2] += (s2 + t2) + direct * w2
-        out[i + 3] += (s3 + t3) + direct * w3
-        fw = w3
-        fp = np.float32(w3)
+        out[i] += s0 + t0
+        out[i + 1] += s1 + t1
+        out[i + 2] += s2 + t2
+        out[i + 3] += s3 + t3
         i += 4
     while i < n:
-        w = force[i]
+        fw = force[i - 1] if i > 0 else last[0]
+        fp = np.float32(fw)
         s = np.float32(0.0)
         for k in range(active):
             p = y[k]
@@ -318,11 +319,13 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
                 wide[5, k] = wide[4, k]
                 wide[4, k] = v
                 t += v
-        out[i] += (s + t) + direct * w
-        fw = w
-        fp = np.float32(w)
+        out[i] += s + t
         i += 1
-    last[0] = fw
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
 
 
 @nb.njit(cache=True)
