@@ -108,7 +108,7 @@ class DrillTrack(ContactTrack):
 
 class BurrSim:
     """A spherical burr against an eroding voxel volume (the volume's array is modified).
-    The params are read once, here."""
+    The params and the volume's voxel size and origin are read once, here."""
 
     def __init__(self, volume: Volume, params: BurrParams | None = None, seed: int = 0):
         self.volume = volume
