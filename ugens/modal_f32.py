@@ -32,8 +32,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
-from ugens.modal_meta import BY_FACTOR, NARROW_ACTIVE, NARROW_ALL
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.
@@ -207,30 +207,41 @@ def delta_rows(coef, state):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, rows, active, last, by_factor):
-    """Add the float32 delta-form modes [0, active) of ``rows`` over force[:n] to out[:n];
-    with ``by_factor`` in the decay-factor form (b2 holds R^2, :func:`narrow_rows`).
+def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor):
+    """Add the float32 delta-form modes [0, active) of ``rows`` and the float64 modes [0,
+    wide_active) of ``wide`` over force[:n] to out[:n]; the float32 modes in the
+    decay-factor form with ``by_factor`` (b2 holds R^2 - c0, :func:`narrow_rows`).
 
     ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
-    enters with an add instead of a multiply and g weighs the output sum with an FMA);
-    force and out float64. last[0]: the force
-    sample before force[0], left at force[n-1]. The direct term sum(d) F[n] is added as
-    in ugens.modal.resonate. Four samples per pass over the modes, as there. The modes run
-    up to the next multiple of LANES within the rows (:func:`narrow_rows`' padding, or
-    modes silenced by the flush: exact zeros that stay zero without force, and with force
-    every mode is active)."""
+    enters with an add instead of a multiply and g weighs the output sum with an FMA).
+    ``wide``: None, or float64 rows c1, c2, g, d, y1, y2 as a float64 bank's (ugens.modal),
+    updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
+    bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
+    their scalar updates fill the float32 loop's waits). With None (a type of its own)
+    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
+    force and out float64. last[0]: the force sample before force[0], left at
+    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
+    passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
+    multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
+    the flush: exact zeros that stay zero without force, and with force every mode is
+    active)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
-    direct = np.float32(0.0)
+    direct = 0.0
     for k in range(active):
         direct += d[k]
-    fp = np.float32(last[0])
+    if wide is not None:
+        for k in range(wide_active):
+            direct += wide[3, k]
     i = 0
     while i + 4 <= n:
+        # Only the loop's own values stay in registers across the float32 loop (scalars
+        # share the vector registers; a direct term and the float64 force samples held
+        # there cost 4 % at 64 modes): the force is read again where it is needed.
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
         f0 = np.float32(force[i])
         f1 = np.float32(force[i + 1])
         f2 = np.float32(force[i + 2])
-        f3 = np.float32(force[i + 3])
         s0 = np.float32(0.0)
         s1 = np.float32(0.0)
         s2 = np.float32(0.0)
@@ -260,14 +271,39 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
             s3 += gk * u
             y[k] = p
             dy[k] = v
-        out[i] += s0 + direct * f0
-        out[i + 1] += s1 + direct * f1
-        out[i + 2] += s2 + direct * f2
-        out[i + 3] += s3 + direct * f3
-        fp = f3
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        t3 = 0.0
+        if wide is not None:
+            fw = force[i - 1] if i > 0 else last[0]
+            w0 = force[i]
+            w1 = force[i + 1]
+            w2 = force[i + 2]
+            for k in range(wide_active):
+                q1 = wide[0, k]
+                q2 = wide[1, k]
+                gk = wide[2, k]
+                u1 = wide[4, k]
+                u2 = wide[5, k]
+                v0 = two_pole(q1, q2, u1, u2, gk * fw)
+                v1 = two_pole(q1, q2, v0, u1, gk * w0)
+                v2 = two_pole(q1, q2, v1, v0, gk * w1)
+                v3 = two_pole(q1, q2, v2, v1, gk * w2)
+                wide[5, k] = v2
+                wide[4, k] = v3
+                t0 += v0
+                t1 += v1
+                t2 += v2
+                t3 += v3
+        out[i] += s0 + t0
+        out[i + 1] += s1 + t1
+        out[i + 2] += s2 + t2
+        out[i + 3] += s3 + t3
         i += 4
     while i < n:
-        f = np.float32(force[i])
+        fw = force[i - 1] if i > 0 else last[0]
+        fp = np.float32(fw)
         s = np.float32(0.0)
         for k in range(active):
             p = y[k]
@@ -276,10 +312,20 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
             y[k] = u
             dy[k] = v
             s += g[k] * (u + v)
-        out[i] += s + direct * f
-        fp = f
+        t = 0.0
+        if wide is not None:
+            for k in range(wide_active):
+                v = two_pole(wide[0, k], wide[1, k], wide[4, k], wide[5, k], wide[2, k] * fw)
+                wide[5, k] = wide[4, k]
+                wide[4, k] = v
+                t += v
+        out[i] += s + t
         i += 1
-    last[0] = fp
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
 
 
 @nb.njit(cache=True)
@@ -294,31 +340,3 @@ def flush_silent_delta(y, dy, g, active, floor):
         else:
             last = k + 1
     return last
-
-
-@nb.njit(fastmath=FASTMATH, cache=True)
-def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_period):
-    """Add one sub-block of the float32 modes to out[:n], with the silent-mode skipping
-    of ugens.modal.bank_step (same flush frames). coef rows: c0, b2 (R^2 - c0 in the
-    decay-factor form), g, d; state rows: y[n-2], Delta[n-1] (scaled by 1 / g); meta: a
-    NarrowMeta (ugens.modal_meta)."""
-    i = 0
-    while i < n:
-        frame = start + i
-        m = min(n - i, (frame // flush_period + 1) * flush_period - frame)
-        f = force[i : i + m]
-        if last[0] != 0.0:
-            meta[NARROW_ACTIVE] = meta[NARROW_ALL]
-        for j in range(m):
-            if f[j] != 0.0:
-                meta[NARROW_ACTIVE] = meta[NARROW_ALL]
-                break
-        active = meta[NARROW_ACTIVE]
-        if active == 0:
-            last[0] = 0.0
-        else:
-            rows = delta_rows(coef, state)
-            resonate_delta(f, out[i : i + m], m, rows, active, last, meta[BY_FACTOR] == 1)
-        i += m
-        if active > 0 and (start + i) % flush_period == 0:
-            meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)

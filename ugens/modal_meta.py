@@ -32,7 +32,7 @@ class CompactMeta(NamedTuple):
 
 
 class NarrowMeta(NamedTuple):
-    """The int64 meta of a bank's float32 modes (ugens.modal_f32.delta_step), fields in this order."""
+    """The int64 meta of a bank's float32 modes (ugens.modal.mixed_step), fields in this order."""
 
     active: int  #: float32 modes computed, [0, active): the last audible one + 1
     all: int  #: float32 modes in the rows (all become active when force arrives)

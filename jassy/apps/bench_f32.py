@@ -62,7 +62,7 @@ def _kernel_runner(
         state[:] = 0.0
         out[:] = 0.0
         last[0] = 0.0
-        resonate_delta(force, out, force.size, rows, g.size, last, by_factor)
+        resonate_delta(force, out, force.size, rows, g.size, None, 0, last, by_factor)
 
     run.output = out
     return run
