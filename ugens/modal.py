@@ -954,9 +954,12 @@ class ModalBank(ModelParams, UGen):
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
-        """Whether the budget's compiled render (ugens.modal_kept.render_kept) can render the bank's
-        next span: no parameter change pending, no ramp, no size input."""
-        return not (self._pending or self._ramping or self._size_input is not None)
+        """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
+        runs coefficient ramps) can render the bank's next span: no parameter change
+        pending, no size input. (The compiled render may have ended a ramp: the flag
+        follows the bank's meta here, before any span of the bank in Python.)"""
+        self._ramping = self.meta[RAMP_LEFT] > 0
+        return not (self._pending or self._size_input is not None)
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the

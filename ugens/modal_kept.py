@@ -34,7 +34,7 @@ from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
 from ugens import modal, modal_budget, modal_meta
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, flush_silent, mode_rows, resonate
+from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, mode_rows, resonate, resonate_ramp
 from ugens.modal_budget import (
     FLOOR,
     KEPT_LANES,
@@ -47,7 +47,7 @@ from ugens.modal_budget import (
     settle_compact,
     tables_at,
 )
-from ugens.modal_meta import ACTIVE, ALLOWED, WIDTH
+from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 
 drop_stale_cache(
     __file__, [modal, modal_budget, modal_meta, anytime_rank, record_views]
@@ -164,30 +164,52 @@ def heard_lately(h, b):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def ramp_kept(t, b, force, out, start, n, ring_of_force):
+    """Bank b's kept modes over force[:n] into out[:n] while its coefficients ramp (its
+    RAMP_LEFT > 0): ugens.modal.resonate_ramp on its compact bank (every column, no
+    flushes), then the force into the ring of the period's force (empty: it is zero)."""
+    compact, meta = compact_bank(t, b), t.compact_meta[b]
+    meta[ACTIVE] = meta[WIDTH]
+    ramp = Ramp(compact[:4], compact[6:10], compact[10:])
+    last = t.last[b : b + 1]
+    t.meta[b, RAMP_LEFT] = resonate_ramp(
+        force, out, n, ramp, compact[4], compact[5], t.meta[b, RAMP_LEFT], meta[WIDTH], last
+    )
+    if ring_of_force.size:
+        hear(force, n, ring_of_force, start)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def render_kept(t, h, outputs, by_python, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
     its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
-    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with nothing to
-    compute (not :func:`heard_lately`, no mode sounding, no force sample before) writes
-    zeros. Returns the modes computed times frames (each bank's active count after
-    its span)."""
+    (gathered if stale) from the tables ``t`` (ugens.modal_budget), or :func:`ramp_kept`
+    while its coefficients ramp. A bank with nothing to compute (not
+    :func:`heard_lately`, no mode sounding, no force sample before, no ramp) writes
+    zeros. Returns the modes computed times frames (each bank's active count after its
+    span)."""
     work = 0
     for b in range(by_python.size):
         if by_python[b]:
             continue
         out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         busy = heard_lately(h, b)
-        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0:
+        ramping = t.meta[b, RAMP_LEFT] > 0
+        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0 and not ramping:
             for i in range(n):
                 out[i] = 0.0
             continue
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
-        compact, meta = compact_bank(t, b), t.compact_meta[b]
         ring_of_force = t.rings[b] if busy else t.rings[b, :0]
-        kept_step(
-            force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
-        )
+        meta = t.compact_meta[b]
+        if ramping:
+            ramp_kept(t, b, force, out, start, n, ring_of_force)
+        else:
+            compact = compact_bank(t, b)
+            kept_step(
+                force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
+            )
         active = min(meta[ACTIVE], t.meta[b, ALLOWED])
         t.meta[b, ACTIVE] = active
         work += active * n
