@@ -322,7 +322,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
         o = out[i : i + m]
         for j in range(m):
             o[j] = 0.0
-        if last[0] != 0.0 or has_force(f, m):
+        if last[0] != 0.0 or has_force(f, 0, m):
             wide_meta[ACTIVE] = wide_meta[ALLOWED]
             narrow_meta[NARROW_ACTIVE] = narrow_meta[NARROW_ALL]
         wide_active = wide_meta[ACTIVE]
