@@ -12,12 +12,13 @@ back of the list while this process works from the front). run_steps then compil
 loading its callees from the cache instead of compiling them.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): this process takes
-the narrow phase (~35 s) and then the impact-time search (``_time_of_impact``, which reaches
-the narrow phase again through the gap probe), the helper first the free motion (``move``,
-called from both run_steps and the impact-time search), then the run's contact model
-(``impulse_contacts``: the impulse solve, ~20 s) and the small stage kernels. A unit compiled
-for other types than run_steps asks for would only cost time (run_steps would compile its
-own): tests/test_rigid_step_units.py checks that they agree.
+the narrow phase (``pair_contacts``, ~33 s) and then the impact-time search
+(``_time_of_impact``, which reaches the narrow phase again through the gap probe), the helper
+first the free motion (``_move``, called from both run_steps and the impact-time search),
+the impulse solve (``impulses.resolve``, ~20 s), the penalty models (``penalty.penalty``,
+~13 s) and the small stage kernels. A unit compiled for other types than run_steps asks for
+would only cost time (run_steps would compile its own): tests/test_rigid_step_units.py
+checks that they agree.
 """
 
 from __future__ import annotations
@@ -33,8 +34,10 @@ import numpy as np
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
+from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import pair_contacts
+from physics.rigid.penalty import penalty
 
 
 class KernelCall(NamedTuple):
@@ -49,19 +52,21 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     kernel calls to compile (not run): the narrow phase and impact times first (this
     process), the free motion, solves and stage kernels from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
-    contact_model, move = st.step_kernels(opt)
+    solve_bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+    solve_data = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
     free = st._free_motion.py_func(m, opt, d)
     return [
         [
             KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
-            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, move)),
+            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt)),
         ],
         [KernelCall(st._boxes, (m, d, opt.slop))],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
         [KernelCall(st.sample_stage, (d, whole))],
         [KernelCall(st._commit, (d,))],
-        [KernelCall(contact_model, (m, opt, d, count, dt, when, whole, whole))],
-        [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
+        [KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))],
+        [KernelCall(resolve, (solve_bodies, opt, solve_data, d.solver, count, dt, when, whole, whole))],
+        [KernelCall(st._move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
     ]
 
 

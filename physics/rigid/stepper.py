@@ -12,7 +12,7 @@ outer step of h seconds (:func:`outer_step`) is:
 4. contact_stage: contacts touching (gap <= slop) resolved by the contact model, impulse
    (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
    rolling resistance, penetration recovery and a warm start) or a penalty force
-   (physics.rigid.penalty); an unknown model code is an error (step_kernels);
+   (physics.rigid.penalty); an unknown model code is an error;
 5. advance_stage: every body moves freely to the end of the step (integrate.advance_body_into).
    With the default integrator a body in flight follows the exact ballistic path (so impact
    times and speeds of a bouncing body are those of the closed form); a body held by a resting
@@ -25,22 +25,18 @@ outer step of h seconds (:func:`outer_step`) is:
    world moves to the earliest such time and goes back to 2. At most ``max_events`` such
    sub-steps per step; later impacts are resolved at the step end.
 
-The contact model and the free motion's integrator are kernels passed to run_steps
-(:func:`step_kernels`, chosen from Options in Python), not branches inside it: numba
-compiles a kernel argument's call for that kernel only, so a run compiles only its own model
-and integrator (the wok's first compile no longer builds the penalty models, RK4 and the
-adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
-are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
-linked into its caller's module and optimised again there, so each level of kernel calls
-above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
-compile). The whole step allocates nothing and run_steps is compiled without reference
-counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
-with it, every use of Model or Data counted a reference up and down for each array they
-hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
-Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
-stops the run inside its step (Data.progress says where and how much is needed), and
-:func:`run` grows the scratch and resumes the step there. Only the RK4 and adaptive
-integrators allocate (integrate.advance_body_into keeps reference counting for itself).
+The stages are inlined into run_steps (numba inline="always"), and so are the narrow stage's
+pair loop and the impact-time search's gap probe: a called kernel is linked into its
+caller's module and optimised again there, so each level of kernel calls above the narrow
+phase compiled it once more (four such levels: ~12 s of the wok's first compile). The whole
+step allocates nothing and run_steps is compiled without reference counting (``_nrt=False``,
+passed on to every kernel it calls that sets no flag of its own): with it, every use of
+Model or Data counted a reference up and down for each array they hold. Its scratch (contact
+solve, sweep, pair bounds, the gap probe's saved poses) lives in Data; a sweep that finds
+more pairs, or a narrow phase more contacts, than the scratch holds stops the run inside its
+step (Data.progress says where and how much is needed), and :func:`run` grows the scratch
+and resumes the step there. Only the RK4 and adaptive integrators allocate
+(integrate.advance_body_into keeps reference counting for itself).
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -51,7 +47,6 @@ frame, and the normal.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numba as nb
@@ -255,10 +250,9 @@ def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) ->
     resuming it: (d with the grown scratch and records, steps done, record count); fewer steps
     than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
     again). The kinematic samples of the returned d start at the step it stopped in."""
-    contact_model, move = step_kernels(opt)
     done = 0
     while True:
-        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact_model, move)
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec)
         done += steps
         if not d.progress.need.any():
             return d, done, nrec
@@ -385,56 +379,27 @@ def _free_motion(m, opt, d):
 
 @nb.njit(cache=True, _nrt=False)
 def _move(f, i, tau, out_p, out_q, out_phi):
-    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion, any
-    integrator), into row i of out_p, out_q, out_phi (a dynamic body held by a resting contact
-    drifts: f.resting)."""
-    if f.kind[i] == DYNAMIC:
-        body = FreeBody(f.pos[i], f.quat[i], f.phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
+    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion), into row
+    i of out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: f.resting)."""
+    kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
+    method = f.method
+    if kind[i] == DYNAMIC:
+        body = FreeBody(pos[i], quat[i], phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
         out = (out_p[i], out_q[i], out_phi[i])
-        if f.method == SEMI_IMPLICIT and tau > 0.0:
+        if method == SEMI_IMPLICIT and tau > 0.0:
             semi_implicit_into(body, tau, out, not f.resting[i])
         else:
-            advance_body_into(body, tau, f.method, f.adaptive_tolerance, out)
+            advance_body_into(body, tau, method, f.adaptive_tolerance, out)
     else:
-        _move_fixed(f, i, tau, out_p, out_q, out_phi)
-
-
-@nb.njit(cache=True, _nrt=False)
-def _move_semi_implicit(f, i, tau, out_p, out_q, out_phi):
-    """_move with the semi-implicit integrator (f.method is SEMI_IMPLICIT): the other
-    integrators are not compiled into the step."""
-    if f.kind[i] == DYNAMIC:
-        if tau > 0.0:
-            body = FreeBody(f.pos[i], f.quat[i], f.phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
-            semi_implicit_into(body, tau, (out_p[i], out_q[i], out_phi[i]), not f.resting[i])
-        else:  # no time: the state as it is (integrate.advance_body)
-            _copy_row(f.pos, i, out_p)
-            _copy_row(f.quat, i, out_q)
-            _copy_row(f.phi, i, out_phi)
-    else:
-        _move_fixed(f, i, tau, out_p, out_q, out_phi)
-
-
-@nb.njit(cache=True, inline="always")
-def _copy_row(src, i, dst):
-    """dst[i] = src[i], element by element."""
-    for x in range(src.shape[1]):
-        dst[i, x] = src[i, x]
-
-
-@nb.njit(cache=True, inline="always")
-def _move_fixed(f, i, tau, out_p, out_q, out_phi):
-    """_move of a static or kinematic body: its twist kept, a kinematic one moved by it."""
-    kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
-    for x in range(6):
-        out_phi[i, x] = phi[i, x]
-    for x in range(3):
-        out_p[i, x] = pos[i, x] + f.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
-    if kind[i] == KINEMATIC:
-        _turn(i, tau, quat, f.kin_w, out_q)
-    else:
-        for x in range(4):
-            out_q[i, x] = quat[i, x]
+        for x in range(6):
+            out_phi[i, x] = phi[i, x]
+        for x in range(3):
+            out_p[i, x] = pos[i, x] + f.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
+        if kind[i] == KINEMATIC:
+            _turn(i, tau, quat, f.kin_w, out_q)
+        else:
+            for x in range(4):
+                out_q[i, x] = quat[i, x]
 
 
 @nb.njit(cache=True, inline="always")
@@ -467,7 +432,7 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
 
 
 @nb.njit(cache=True, inline="always")
-def _gap_at(m, opt, d, a, b, tau, margin, move):
+def _gap_at(m, opt, d, a, b, tau, margin):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
@@ -479,7 +444,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, move):
                 keep[side, 3 + 3 * x + y] = rot[i, x, y]
     f = _free_motion(m, opt, d)
     for i in (a, b):
-        move(f, i, tau, mp, mq, mf)
+        _move(f, i, tau, mp, mq, mf)
     for i in (a, b):
         for x in range(3):
             pos[i, x] = mp[i, x]
@@ -495,9 +460,8 @@ def _gap_at(m, opt, d, a, b, tau, margin, move):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, move):
-    """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``move``, step_kernels)."""
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
+    """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -505,7 +469,7 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, move):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin, move)
+        f = _gap_at(m, opt, d, a, b, t, margin)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -739,59 +703,32 @@ def narrow_stage(m, opt, d, pairs, near, dt):
 
 
 @nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, count, dt, time, step, nrec, contact_model):
+def contact_stage(m, opt, d, count, dt, time, step, nrec):
     """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
-    scratch d.solver (rows >= count), by ``contact_model`` (step_kernels: impulse_contacts
-    or penalty_contacts). Returns the record count, -1 when d.rec is full."""
+    scratch d.solver (rows >= count): the one dispatch of contact models on opt.contact (an
+    unknown code is an error). Returns the record count, -1 when d.rec is full."""
+    solver = d.solver
     d.stats.solves[0] += 1
-    return contact_model(m, opt, d, count, dt, time, step, nrec)
-
-
-@nb.njit(cache=True, _nrt=False)
-def impulse_contacts(m, opt, d, count, dt, time, step, nrec):
-    """contact_stage's impulse model (impulses.resolve)."""
-    bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
-    state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
-    return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
-
-
-@nb.njit(cache=True, _nrt=False)
-def penalty_contacts(m, opt, d, count, dt, time, step, nrec):
-    """contact_stage's penalty models, linear and Hunt-Crossley (physics.rigid.penalty)."""
-    d.stats.contacts[0] += count
-    return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
-
-
-class StepKernels(NamedTuple):
-    """The kernels run_steps calls for a run's options, chosen in Python so that a run
-    compiles only its own contact model and integrator (each is a type of its own to numba)."""
-
-    contact_model: Callable  # impulse_contacts or penalty_contacts
-    move: Callable  # free motion of one body: _move_semi_implicit or _move (any integrator)
-
-
-def step_kernels(opt: Options) -> StepKernels:
-    """The contact model and free-motion kernels of ``opt`` (an unknown contact model code is
-    an error)."""
     if opt.contact == IMPULSE:
-        contact_model = impulse_contacts
-    elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
-        contact_model = penalty_contacts
-    else:
-        raise ValueError(f"stepper.step_kernels: unknown contact model code {opt.contact!r}")
-    return StepKernels(contact_model, _move_semi_implicit if opt.integrator == SEMI_IMPLICIT else _move)
+        bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+        state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+        return resolve(bodies, opt, state, solver, count, dt, time, step, nrec)
+    if opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
+        d.stats.contacts[0] += count
+        return penalty(m, opt, d, solver, count, dt, time, step, nrec)
+    raise ValueError("stepper.contact_stage: unknown contact model code")
 
 
 @nb.njit(cache=True, inline="always")
-def advance_stage(m, opt, d, tau, move):
-    """Every body's pose and twist after tau seconds of free motion (``move``) into d.new_*."""
+def advance_stage(m, opt, d, tau):
+    """Every body's pose and twist after tau seconds of free motion into d.new_*."""
     f, new_pos, new_quat, new_phi = _free_motion(m, opt, d), d.new_pos, d.new_quat, d.new_phi
     for i in range(m.kind.shape[0]):
-        move(f, i, tau, new_pos, new_quat, new_phi)
+        _move(f, i, tau, new_pos, new_quat, new_phi)
 
 
 @nb.njit(cache=True, inline="always")
-def impact_stage(m, opt, d, pairs, near, dt, move):
+def impact_stage(m, opt, d, pairs, near, dt):
     """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
     the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
     threshold (module doc, step 6); dt when none."""
@@ -829,7 +766,7 @@ def impact_stage(m, opt, d, pairs, near, dt, move):
         g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, move))
+        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within))
     return first_hit
 
 
@@ -863,7 +800,7 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, nrec, contact_model, move):
+def outer_step(m, opt, d, step, nrec):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
     it stopped for more scratch: d.progress.need says how much)."""
@@ -887,14 +824,14 @@ def outer_step(m, opt, d, step, nrec, contact_model, move):
             return _stop(progress, t_local, subs, nrec)
         progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, contact_model)
+        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
-        advance_stage(m, opt, d, dt, move)
-        first_hit = impact_stage(m, opt, d, pairs, near, dt, move) if subs < max_events else dt
+        advance_stage(m, opt, d, dt)
+        first_hit = impact_stage(m, opt, d, pairs, near, dt) if subs < max_events else dt
         if first_hit < dt:
-            advance_stage(m, opt, d, first_hit, move)
+            advance_stage(m, opt, d, first_hit)
             _commit(d)
             t_local += first_hit
             subs += 1
@@ -918,19 +855,18 @@ def _stop(progress, t_local, subs, nrec):
 
 
 @nb.njit(cache=True, _nrt=False)
-def run_steps(m, opt, d, first, n_steps, nrec, contact_model, move):
+def run_steps(m, opt, d, first, n_steps, nrec):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
-    and inside a step that needs more scratch (module doc; :func:`run` resumes it). The
-    contact model and free motion are the kernels of :func:`step_kernels`."""
+    and inside a step that needs more scratch (module doc; :func:`run` resumes it)."""
     for s in range(n_steps):
         resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
         if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
             return s, nrec
         if not resuming:
             kinematic_stage(m, opt, d, s)
-        nrec, stopped = outer_step(m, opt, d, first + s, nrec, contact_model, move)
+        nrec, stopped = outer_step(m, opt, d, first + s, nrec)
         if stopped:
             return s, nrec
         sample_stage(d, first + s)
