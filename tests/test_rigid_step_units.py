@@ -46,7 +46,7 @@ def test_units_compile_the_types_run_steps_asks_for():
     )
     calls = [call for unit in step_units(model, opt, data) for call in unit]
     kernels = {call.kernel for call in calls}
-    assert kernels >= {pair_contacts, st._time_of_impact, resolve, st._move}
+    assert kernels >= {pair_contacts, st._time_of_impact, resolve, st._move_semi_implicit}
     for call in calls:
         wanted = tuple(nb.typeof(a) for a in call.args)
         cached = _cached_signatures(call.kernel)

@@ -14,11 +14,10 @@ loading its callees from the cache instead of compiling them.
 The split (CPU of each subtree's first compile on the wok, one cold run): this process takes
 the narrow phase (``pair_contacts``, ~33 s) and then the impact-time search
 (``_time_of_impact``, which reaches the narrow phase again through the gap probe), the helper
-first the free motion (``_move``, called from both run_steps and the impact-time search),
-the impulse solve (``impulses.resolve``, ~20 s), the penalty models (``penalty.penalty``,
-~13 s) and the small stage kernels. A unit compiled for other types than run_steps asks for
-would only cost time (run_steps would compile its own): tests/test_rigid_step_units.py
-checks that they agree.
+first the free motion (called from both run_steps and the impact-time search), then the
+run's contact model (``impulses.resolve``, ~20 s, or ``penalty.penalty``) and the small stage
+kernels. A unit compiled for other types than run_steps asks for would only cost time
+(run_steps would compile its own): tests/test_rigid_step_units.py checks that they agree.
 """
 
 from __future__ import annotations
@@ -52,21 +51,26 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     kernel calls to compile (not run): the narrow phase and impact times first (this
     process), the free motion, solves and stage kernels from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
-    solve_bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
-    solve_data = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+    contact, motion = st.step_models(opt)
+    if isinstance(contact, st.ImpulseContacts):
+        bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+        state = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+        solve = KernelCall(resolve, (bodies, opt, state, d.solver, count, dt, when, whole, whole))
+    else:
+        solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))
+    move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
     return [
         [
             KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
-            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt)),
+            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, motion)),
         ],
         [KernelCall(st._boxes, (m, d, opt.slop))],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
         [KernelCall(st.sample_stage, (d, whole))],
         [KernelCall(st._commit, (d,))],
-        [KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))],
-        [KernelCall(resolve, (solve_bodies, opt, solve_data, d.solver, count, dt, when, whole, whole))],
-        [KernelCall(st._move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
+        [solve],
+        [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
     ]
 
 
