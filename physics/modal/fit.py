@@ -314,17 +314,35 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
     z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]
     real = [r[:n] for r in residuals]
-    z, amps = esprit.refine(real, rate, z, real=True)
+    z, _ = esprit.refine(real, rate, z, real=True)
+    with np.errstate(all="ignore"):
+        fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    # faster poles are the contact: their part of the signal is left as noise for the others
+    z = z[np.isfinite(dz) & (fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min) & (dz <= stage.d_max)]
+    amps = [esprit.amplitudes(y, z) for y in real]
+    local = _local_noise(real, z, amps)
     out = []
     for k, zk in enumerate(z):
-        if not 0 < abs(zk) < math.inf:
-            continue
         f = np.angle(zk) * rate / (2 * np.pi)
         d = -math.log(abs(zk)) * rate
         # a real sinusoid of amplitude |c| has |c|^2 / 2 the power of a complex one
-        snr = max(_matched_snr(a[k], zk, n, noise) / 2 for a in amps)
-        if f_lo <= f <= f_hi and stage.d_min < d <= stage.d_max and snr >= MIN_SNR:
+        snr = max(_matched_snr(a[k], zk, n, max(noise, v[k])) / 2 for a, v in zip(amps, local, strict=True))
+        if snr >= MIN_SNR:
             out.append(Pole(float(f), float(d)))
+    return out
+
+
+def _local_noise(signals, z: np.ndarray, amps) -> list[np.ndarray]:
+    """Per signal and pole: the variance per sample of what the poles leave of the signal,
+    weighted by the pole's own energy envelope |z|^(2n) (where the pole has its energy). A
+    pole fitted to a contact's noise burst explains a few of its degrees of freedom and
+    leaves the rest beside it; a damped sinusoid leaves only the noise."""
+    out = []
+    for y, c in zip(signals, amps, strict=True):
+        r = y - esprit.resynthesis(y.size, z, c)
+        n = np.arange(y.size)
+        w = np.abs(z)[None, :] ** (2 * n[:, None])
+        out.append((r**2) @ w / np.maximum(w.sum(axis=0), 1e-300))
     return out
 
 
