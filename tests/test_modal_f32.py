@@ -65,7 +65,7 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, np.zeros(1), decay_factor)
+    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), decay_factor)
     return out
 
 

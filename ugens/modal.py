@@ -75,12 +75,26 @@ from ugens.modal_f32 import (
     TOLERANCE,
     decay_factor_error,
     delta_coefficients,
-    delta_step,
+    delta_rows,
     float32_error,
+    flush_silent_delta,
     narrow_rows,
+    resonate_delta,
     unscaled_state,
 )
-from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
+from ugens.modal_meta import (
+    ACTIVE,
+    ALLOWED,
+    BY_FACTOR,
+    GATHERED,
+    NARROW_ACTIVE,
+    NARROW_ALL,
+    RAMP_LEFT,
+    WIDTH,
+    BankMeta,
+    CompactMeta,
+    NarrowMeta,
+)
 from ugens.modal_retune import (
     TOP_BAND,
     TOP_BAND_COS,
@@ -310,35 +324,52 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
-    y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all, 1 in the
-    decay-factor form] and the force sample before the block."""
+    y1, y2) and meta (a BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
+    (y[n-2], Delta[n-1]) / g (ugens.modal_f32.narrow_rows) and their NarrowMeta
+    (ugens.modal_meta)."""
 
     wide_bank: np.ndarray
     wide_meta: np.ndarray
     narrow_coef: np.ndarray
     narrow_state: np.ndarray
     narrow_meta: np.ndarray
-    narrow_last: np.ndarray
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_step(force, out, start, n, rows, floor, last):
-    """One sub-block of a bank split by precision (``rows``: MixedRows): the float64 modes
-    by :func:`bank_step` write out[:n], the float32 delta-form modes
-    (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
-    fp = last[0]
-    if rows.wide_meta[ALLOWED] > 0:
-        bank_step(force, out, start, n, rows.wide_bank, rows.wide_meta, floor, last)
-    else:
-        for i in range(n):
-            out[i] = 0.0
-    rows.narrow_last[0] = fp
-    delta_step(
-        force, out, start, n, rows.narrow_coef, rows.narrow_state, rows.narrow_meta, floor,
-        rows.narrow_last, FLUSH_PERIOD,
-    )  # fmt: skip
-    last[0] = force[n - 1]
+    """One sub-block of a bank split by precision (``rows``: MixedRows) into out[:n]: the
+    float32 and the float64 modes in the same passes (ugens.modal_f32.resonate_delta),
+    with the silent-mode skipping and flush frames of :func:`bank_step` for each group;
+    last[0] as in bank_step."""
+    wide_bank, wide_meta, coef, state, narrow_meta = rows
+    i = 0
+    while i < n:
+        frame = start + i
+        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        f = force[i : i + m]
+        o = out[i : i + m]
+        for j in range(m):
+            o[j] = 0.0
+        if last[0] != 0.0 or has_force(f, m):
+            wide_meta[ACTIVE] = wide_meta[ALLOWED]
+            narrow_meta[NARROW_ACTIVE] = narrow_meta[NARROW_ALL]
+        wide_active = wide_meta[ACTIVE]
+        active = narrow_meta[NARROW_ACTIVE]
+        if active == 0 and wide_active == 0:
+            last[0] = 0.0
+        else:
+            narrow = delta_rows(coef, state)
+            by_factor = narrow_meta[BY_FACTOR] == 1
+            if wide_meta[ALLOWED] > 0:
+                resonate_delta(f, o, m, narrow, active, wide_bank, wide_active, last, by_factor)
+            else:
+                resonate_delta(f, o, m, narrow, active, None, 0, last, by_factor)
+        i += m
+        if (start + i) % FLUSH_PERIOD == 0:
+            if wide_active > 0 and floor > 0.0:
+                wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
+            if active > 0:
+                narrow_meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
 
 
 class BankArrays(NamedTuple):
@@ -368,14 +399,14 @@ def mixed_rows_at(a, i):
     """The MixedRows whose fields start at slot ``i`` of handle ``a`` (jassy.record_views)."""
     return MixedRows(
         float_table(a, i), int_row(a, i + FIELD), float32_table(a, i + 2 * FIELD),
-        float32_table(a, i + 3 * FIELD), int_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD),
+        float32_table(a, i + 3 * FIELD), int_row(a, i + 4 * FIELD),
     )  # fmt: skip
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_span(force, out, start, n, a, floor):
     """:func:`mixed_step` on handle ``a``: a MixedRows, then the force sample before the
-    block (one array for Python to hand over instead of eight)."""
+    block (one array for Python to hand over instead of seven)."""
     mixed_step(force, out, start, n, mixed_rows_at(a, 0), floor, float_row(a, MIXED_FIELDS * FIELD))
 
 
@@ -449,8 +480,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array([nn, nn, by_factor], dtype=np.int64),
-        np.zeros(1),
+        np.array(NarrowMeta(nn, nn, int(by_factor)), dtype=np.int64),
     )
     return MixedSplit(wide, narrow, rows)
 
