@@ -21,7 +21,6 @@ The force returned is the force of the bone on the burr (what the haptic device 
 from __future__ import annotations
 
 import math
-from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -39,10 +38,10 @@ from physics.burr.contact import (
     brute_moments,
 )
 from physics.burr.octree import Octree, Pyramid
-from physics.burr.update import STEP_RESULT, Burr, haptic_update
+from physics.burr.update import STEP_RESULT, Burr, haptic_update, unpack
 from physics.burr.volume import Volume
 
-_Tally = namedtuple("_Tally", CONTACT_TALLY.names)  # a CONTACT_TALLY record as Python numbers
+_FLOAT64 = np.dtype(np.float64)
 
 
 @dataclass
@@ -109,7 +108,7 @@ class DrillTrack(ContactTrack):
 
 class BurrSim:
     """A spherical burr against an eroding voxel volume (the volume's array is modified).
-    The params are read once, here."""
+    The params and the volume's voxel size and origin are read once, here."""
 
     def __init__(self, volume: Volume, params: BurrParams | None = None, seed: int = 0):
         self.volume = volume
@@ -169,35 +168,31 @@ class BurrSim:
         if self._update is None:  # the same types at every step: one typed entry point
             self._update = specialise(haptic_update, *args)
         self._update(*args)
-        m0, m1x, m1y, m1z, nx, ny, nz, h, load = self._result[0].item()
-        t = _Tally(*self.data.tally[0].item())
-        normal = np.array([nx, ny, nz])
-        elastic = load * normal
-        friction = np.array([t.force_x, t.force_y, t.force_z])
-        power = t.power
-        removed = t.removed * v.mass_per_count
+        (force, elastic, friction, torque, normal, m1), scalars = unpack(self._result)
+        m0, h, load, power, removed, expected, area = scalars
+        removed *= v.mass_per_count
         self.removed_total += removed
         self.work_total += power * dt if erode else 0.0
         return ContactState(
-            force=elastic + friction,
+            force=force,
             elastic=elastic,
             friction=friction,
-            torque=np.array([t.torque_x, t.torque_y, t.torque_z]),
+            torque=torque,
             normal=normal,
             depth=h,
             m0=m0,
-            m1=np.array([m1x, m1y, m1z]),
+            m1=m1,
             power=power,
             removed=removed,
-            expected=t.expected * v.mass_per_count,
-            contact_area=t.area,
+            expected=expected * v.mass_per_count,
+            contact_area=area,
             slip_speed=power / (p.mu * load) if p.mu > 0 and load > 0 else 0.0,
         )
 
 
 def _vector(x, name: str) -> np.ndarray:
     """``x`` as a writeable C-contiguous float64 array of shape (3,) (the update's types)."""
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (3,) and x.flags.c_contiguous \
+    if type(x) is np.ndarray and x.dtype is _FLOAT64 and x.shape == (3,) and x.flags.c_contiguous \
             and x.flags.writeable:  # fmt: skip
         return x
     v = np.array(x, dtype=np.float64)

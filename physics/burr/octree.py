@@ -355,15 +355,9 @@ class Octree:
         _update(self.density, self.base, self.top, self.mom, self.off, self.dims, box)
 
     def bricks(self) -> Bricks:
-        """The base level as the surface pass reads and erodes it (a view of ``mom``)."""
+        """The base level, whose moments the surface pass erodes (a view of ``mom``)."""
         d = self.dims[self.base]
         return Bricks(self.mom, int(self.off[self.base]), self.base, int(d[1]), int(d[2]))
-
-    def rebuild_above(self, box: np.ndarray) -> None:
-        """Rebuild the levels above the bricks over ``box`` [i0, j0, k0, i1, j1, k1]
-        (inclusive), after the bricks' moments changed there (erosion subtracts each eroded
-        voxel's decrement from its brick: :func:`physics.burr.contact.contact_pass`)."""
-        build_parents(self.base, self.top, self.mom, self.off, self.dims, box)
 
     def moments(self, centre, R: float, leaf: int = 1) -> tuple[np.ndarray, int]:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the

@@ -31,13 +31,25 @@ from physics.burr.contact import (
 )
 from physics.burr.octree import Pyramid, build_parents, descend
 
+_VECTORS = ("force", "elastic", "friction", "torque", "normal", "m1")
+_SCALARS = ("m0", "depth", "load", "power", "removed", "expected", "area")
 STEP_RESULT = np.dtype(
-    [("m0", np.float64), ("m1_x", np.float64), ("m1_y", np.float64), ("m1_z", np.float64),
-     ("normal_x", np.float64), ("normal_y", np.float64), ("normal_z", np.float64), ("depth", np.float64),
-     ("load", np.float64)]
-)  # fmt: skip
-"""What one update computes besides the tally: m0 (counter m^3), m1 about the burr centre
-(counter m^4), the unit normal (zeros if undefined), depth h (m) and load |F_e| (N)."""
+    [(f"{v}_{x}", np.float64) for v in _VECTORS for x in "xyz"] + [(s, np.float64) for s in _SCALARS]
+)
+"""What one update returns, all float64 (read as one array by :func:`unpack`): the force of
+the bone on the burr = elastic + friction (N), friction torque about the centre (N m), the
+unit normal (zeros if undefined), m1 about the centre (counter m^4); m0 (counter m^3),
+depth h (m), load |F_e| (N), frictional power (W), removed and expected counter units,
+contact area (m^2)."""
+
+
+def unpack(result: np.ndarray) -> tuple:
+    """A STEP_RESULT record (1,) as (force, elastic, friction, torque, normal, m1) arrays (3,)
+    (views of one fresh copy) and the Python floats (m0, depth, load, power, removed,
+    expected, area)."""
+    v = result.view(np.float64).copy()
+    vectors = tuple(v[3 * n : 3 * n + 3] for n in range(len(_VECTORS)))
+    return vectors, v[3 * len(_VECTORS) :].tolist()
 
 
 class Burr(NamedTuple):
@@ -127,5 +139,21 @@ def update(burr, model, moments, pose, data, result):
     r.normal_x = normal[0]
     r.normal_y = normal[1]
     r.normal_z = normal[2]
+    r.elastic_x = load * normal[0]
+    r.elastic_y = load * normal[1]
+    r.elastic_z = load * normal[2]
+    r.friction_x = t.force_x
+    r.friction_y = t.force_y
+    r.friction_z = t.force_z
+    r.force_x = r.elastic_x + t.force_x
+    r.force_y = r.elastic_y + t.force_y
+    r.force_z = r.elastic_z + t.force_z
+    r.torque_x = t.torque_x
+    r.torque_y = t.torque_y
+    r.torque_z = t.torque_z
     r.depth = h
     r.load = load
+    r.power = t.power
+    r.removed = t.removed
+    r.expected = t.expected
+    r.area = t.area
