@@ -142,9 +142,10 @@ def _next_delta(v, p, u, c0, b, f, by_factor):
 #: modes, 30 of them took half the time of the other 224).
 LANES = 32
 
-#: Banks of at most this many float32 modes (one vector of 16 float32 lanes with AVX-512) in
-#: the decay-factor form run a mode loop of exactly this trip count: LLVM then runs it as
-#: one vector instead of two (the second all padding), 0.72 -> 0.85x the C loop at 16 modes.
+#: Banks of at most this many float32 modes (one vector of 16 float32 lanes with AVX-512),
+#: all in the decay-factor form, run a mode loop of exactly this trip count: LLVM then runs
+#: it as one vector instead of two (the second all padding), 0.72 -> 0.85x the C loop at
+#: 16 modes.
 SMALL = 16
 
 
@@ -212,35 +213,71 @@ def delta_rows(coef, state):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def _four_samples(rows, k, fp, f0, f1, f2, by_factor):
-    """Four samples of mode k of ``rows`` (DeltaRows) driven by fp, f0, f1, f2 (float32):
-    its state advanced, and g y of each sample (the state is y / g)."""
-    c0, b2, g, _, y, dy = rows
-    a = c0[k]
-    b = b2[k]
-    gk = g[k]
-    p = y[k]
-    v = dy[k]
-    u = p + v
-    v = _next_delta(v, p, u, a, b, fp, by_factor)
-    p = u
-    u = u + v
-    a0 = gk * u
-    v = _next_delta(v, p, u, a, b, f0, by_factor)
-    p = u
-    u = u + v
-    a1 = gk * u
-    v = _next_delta(v, p, u, a, b, f1, by_factor)
-    p = u
-    u = u + v
-    a2 = gk * u
-    v = _next_delta(v, p, u, a, b, f2, by_factor)
-    p = u
-    u = u + v
-    a3 = gk * u
-    y[k] = p
-    dy[k] = v
-    return a0, a1, a2, a3
+def _resonate_small(force, out, n, rows, last):
+    """:func:`resonate_delta` for at most SMALL float32 modes in the decay-factor form and
+    no float64 modes: the mode loop's trip count is the constant SMALL, which LLVM runs as
+    one vector (the general loop takes two, the second all padding)."""
+    c0, b2, g, d, y, dy = rows
+    direct = 0.0
+    for k in range(SMALL):
+        direct += d[k]
+    i = 0
+    while i + 4 <= n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        f0 = np.float32(force[i])
+        f1 = np.float32(force[i + 1])
+        f2 = np.float32(force[i + 2])
+        s0 = np.float32(0.0)
+        s1 = np.float32(0.0)
+        s2 = np.float32(0.0)
+        s3 = np.float32(0.0)
+        for k in range(SMALL):
+            a = c0[k]
+            b = b2[k]
+            gk = g[k]
+            p = y[k]
+            v = dy[k]
+            u = p + v
+            v = _next_delta(v, p, u, a, b, fp, True)
+            p = u
+            u = u + v
+            s0 += gk * u
+            v = _next_delta(v, p, u, a, b, f0, True)
+            p = u
+            u = u + v
+            s1 += gk * u
+            v = _next_delta(v, p, u, a, b, f1, True)
+            p = u
+            u = u + v
+            s2 += gk * u
+            v = _next_delta(v, p, u, a, b, f2, True)
+            p = u
+            u = u + v
+            s3 += gk * u
+            y[k] = p
+            dy[k] = v
+        out[i] += s0
+        out[i + 1] += s1
+        out[i + 2] += s2
+        out[i + 3] += s3
+        i += 4
+    while i < n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        s = np.float32(0.0)
+        for k in range(SMALL):
+            p = y[k]
+            u = p + dy[k]
+            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
+            y[k] = u
+            dy[k] = v
+            s += g[k] * (u + v)
+        out[i] += s
+        i += 1
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -255,16 +292,19 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
     bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
-    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
+    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %. With None,
+    the decay-factor form and at most SMALL modes: :func:`_resonate_small`.
     force and out float64. last[0]: the force sample before force[0], left at
     force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
     passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
     multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
     the flush: exact zeros that stay zero without force, and with force every mode is
     active)."""
+    if wide is None and by_factor and 0 < active <= SMALL:
+        _resonate_small(force, out, n, rows, last)
+        return
     c0, b2, g, d, y, dy = rows
-    small = by_factor and 0 < active <= SMALL
-    active = SMALL if small else min(-(-active // LANES) * LANES, c0.size)
+    active = min(-(-active // LANES) * LANES, c0.size)
     direct = 0.0
     for k in range(active):
         direct += d[k]
@@ -284,39 +324,31 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         s1 = np.float32(0.0)
         s2 = np.float32(0.0)
         s3 = np.float32(0.0)
-        if small:  # a constant trip count and form: one vector, no branch
-            for k in range(SMALL):
-                a0, a1, a2, a3 = _four_samples(rows, k, fp, f0, f1, f2, True)
-                s0 += a0
-                s1 += a1
-                s2 += a2
-                s3 += a3
-        else:
-            for k in range(active):
-                a = c0[k]
-                b = b2[k]
-                gk = g[k]
-                p = y[k]
-                v = dy[k]
-                u = p + v
-                v = _next_delta(v, p, u, a, b, fp, by_factor)
-                p = u
-                u = u + v
-                s0 += gk * u
-                v = _next_delta(v, p, u, a, b, f0, by_factor)
-                p = u
-                u = u + v
-                s1 += gk * u
-                v = _next_delta(v, p, u, a, b, f1, by_factor)
-                p = u
-                u = u + v
-                s2 += gk * u
-                v = _next_delta(v, p, u, a, b, f2, by_factor)
-                p = u
-                u = u + v
-                s3 += gk * u
-                y[k] = p
-                dy[k] = v
+        for k in range(active):
+            a = c0[k]
+            b = b2[k]
+            gk = g[k]
+            p = y[k]
+            v = dy[k]
+            u = p + v
+            v = _next_delta(v, p, u, a, b, fp, by_factor)
+            p = u
+            u = u + v
+            s0 += gk * u
+            v = _next_delta(v, p, u, a, b, f0, by_factor)
+            p = u
+            u = u + v
+            s1 += gk * u
+            v = _next_delta(v, p, u, a, b, f1, by_factor)
+            p = u
+            u = u + v
+            s2 += gk * u
+            v = _next_delta(v, p, u, a, b, f2, by_factor)
+            p = u
+            u = u + v
+            s3 += gk * u
+            y[k] = p
+            dy[k] = v
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
