@@ -19,6 +19,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from physics.burr import contact, octree
 from physics.burr.contact import (
     Ball,
     Bricks,
@@ -30,6 +32,9 @@ from physics.burr.contact import (
     depth_from_m0,
 )
 from physics.burr.octree import Pyramid, build_parents, descend
+
+# haptic_update's cache holds copies of the contact and octree kernels it calls
+drop_stale_cache(__file__, [contact, octree])
 
 _VECTORS = ("force", "elastic", "friction", "torque", "normal", "m1")
 _SCALARS = ("m0", "depth", "load", "power", "removed", "expected", "area")
