@@ -4,9 +4,11 @@ checkouts, interleaved in one run.
 Each round runs, once per tree (one child process each, that tree first on the path, its own
 numba cache), the constant-force descent of ``jassy bench burr`` (256^3 phantom, 3000 steps
 at 1 kHz, the burr in contact and eroding) with the octree at ``leaf`` 4 and 1, and times
-every step and every moments call in CPU time (``time.process_time``); the first 50 steps
-(JIT warm-up) are left out. Printed per tree and leaf: the medians over rounds of the
-per-round medians (us), the final depth (mm), and the ratio to the first tree of each round.
+every step in CPU time (``time.process_time``) and, in a call of its own just before each
+step, the moments at that step's centre (``BurrSim.moments``, which a tree's step may or
+may not call itself); the first 50 steps (JIT warm-up) are left out. Printed per tree and
+leaf: the medians over rounds of the per-round medians (us), the final depth (mm), and the
+ratio to the first tree of each round.
 
     git archive 19a227f~1 | tar -x -C /tmp/burr_old   # the octree before the shallow refinement
     python benchmarks/burr_cpu.py . /tmp/burr_old --rounds 5
@@ -34,29 +36,26 @@ def child(leaves: list[int]) -> list[dict]:
     rows = []
     for leaf in leaves:
         steps, moments = [], []
-        step, moment = loop.BurrSim.step, loop.BurrSim.moments
+        step = loop.BurrSim.step
 
-        def timed_step(self, *a, step=step, steps=steps, **k):
+        def timed_step(self, centre, *a, step=step, steps=steps, moments=moments, **k):
             t0 = time.process_time()
-            state = step(self, *a, **k)
-            steps.append(time.process_time() - t0)
+            self.moments(centre)
+            t1 = time.process_time()
+            state = step(self, centre, *a, **k)
+            steps.append(time.process_time() - t1)
+            moments.append(t1 - t0)
             return state
-
-        def timed_moments(self, centre, moment=moment, moments=moments):
-            t0 = time.process_time()
-            out = moment(self, centre)
-            moments.append(time.process_time() - t0)
-            return out
 
         params = loop.BurrParams(radius=1.5e-3, method="octree", leaf=leaf)
         warm = type(base)(base.density[:64, :64, :64].copy(), base.voxel)
         loop.descent_experiment(warm, 0.05, 2.0, params=params)  # JIT warm-up
-        loop.BurrSim.step, loop.BurrSim.moments = timed_step, timed_moments
+        loop.BurrSim.step = timed_step
         try:
             vol = type(base)(base.density.copy(), base.voxel, base.origin, base.rho_full)
             res, surface, _ = loop.descent_experiment(vol, 3.0, 2.0, params=params)
         finally:
-            loop.BurrSim.step, loop.BurrSim.moments = step, moment
+            loop.BurrSim.step = step
         depth = surface - (res.centres[-1, 2] - params.radius)
         rows.append(
             {

@@ -18,8 +18,8 @@ top ``max_modes`` modes are computed for the next period; the rest are silenced 
 nothing: each bank runs its kept modes gathered into a compact bank, so its cost is
 proportional to them. Every bank keeps its rows in the budget's shared tables
 (ugens.modal_budget.BudgetTables), and a decision is one compiled call over all of them
-(importance, ranking, kept sets); Python adds per decision only the impacts scheduled
-and, for a bank of many modes that heard a force, a periodogram (numpy FFT).
+(impacts, periodograms, importance, ranking, kept sets), taken inside the compiled step
+that renders the banks unless a bank needs Python (see :meth:`ModeBudget.step`).
 
 A decision is taken only where something may change the ranking: an impact scheduled in
 this or the next period, a force heard in the last period, or a mode fading out. Between
@@ -42,7 +42,6 @@ rendering takes that fraction of real time (non-deterministic by nature).
 
 from __future__ import annotations
 
-import bisect
 import math
 import time
 from dataclasses import dataclass, field
@@ -50,13 +49,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
-from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, Kicks, scan_forces
+from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
 from jassy.record_views import handle
-
-#: the impacts (impulse N s, location) on a bank no impact strikes
-NO_KICK: list[tuple[float, object]] = []
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
 #: margin do not swap at every decision (each swap regathers a bank and cuts a mode).
@@ -101,8 +97,8 @@ class ModeBudget:
             raise PatchError(
                 f"cpu_budget: expected a fraction of real time in (0, 10], got {self.cpu_fraction!r}"
             )
-        if not isinstance(self.period, int) or self.period < 8:
-            raise PatchError(f"budget period: expected an integer >= 8 frames, got {self.period!r}")
+        if not isinstance(self.period, int) or self.period < 8 or self.period & (self.period - 1):
+            raise PatchError(f"budget period: expected a power of two >= 8 frames, got {self.period!r}")
         if self.weighting not in ("flat", "A"):
             raise PatchError(f"budget weighting: expected 'flat' or 'A', got {self.weighting!r}")
         if not 0 < self.horizon <= 60:
@@ -133,25 +129,23 @@ class ModeBudget:
         self.decisions = 0
         self.mode_samples = 0
         self._clock = None
-        self._fading = False
         self.active = self.decides(total)
         self.renders = renders and self.active
         count = len(banks)
         inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
         flags = (np.zeros(count, dtype=bool) for _ in range(6))
-        self._hearing = h = Hearing(
+        self._hearing = Hearing(
             np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
             np.array([not renders for _ in banks], dtype=bool), *flags,
         )  # fmt: skip
-        self._state = np.zeros(3, dtype=np.int64)  # FADING, ANY_EXPECTED, EVERY_PERIOD (jassy.anytime_rank)
+        self._state = np.zeros(STEP_STATE, dtype=np.int64)  # FADING .. PEAK (jassy.anytime_rank)
         self._state[EVERY_PERIOD] = self.cpu_fraction is not None
-        self._scan = specialise(scan_forces, h, 0, 0, True)
+        self._state[RENDERS] = self.renders
         for bank in banks:
             bank.budgeted = self.active
         if self.active:
             self._attach_tables(banks, total)
         self._processes = [bank.process for bank in banks]
-        self._kicks, self._now, self._kicked = NO_KICK, {}, False
 
     def _attach_tables(self, banks: list, total: int) -> None:
         """Move every bank's rows into shared tables and prepare the compiled decision."""
@@ -165,17 +159,6 @@ class ModeBudget:
         h = self._hearing
         self._decision = mb.Decision(h.onset, np.zeros(len(banks), dtype=bool), h.inputs,
                                   np.zeros((3, total)), *masks)  # fmt: skip
-        self._rows = {}  # id(bank): (slot, its ELSEWHERE_NOW row, its ELSEWHERE_NEXT row)
-        for slot, (bank, k, first) in enumerate(zip(banks, *tables.layout[:2], strict=True)):
-            cut = slice(first, first + k)
-            self._rows[id(bank)] = (
-                slot,
-                tables.rows[mb.ELSEWHERE_NOW, cut],
-                tables.rows[mb.ELSEWHERE_NEXT, cut],
-            )
-        #: the fields of tables.values that impacts set (this period, then the next), and SPECTRAL
-        self._kick_fields = ((mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW), (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT))
-        self._spectral_field = mb.SPECTRAL
         #: banks fed by banks, credited with their feeders' impacts (this period, the next)
         self._fed = feeding_banks(banks)
         if self._fed:
@@ -184,11 +167,11 @@ class ModeBudget:
             (mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW, mb.ELSEWHERE_NOW),
             (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
         )
-        self._spectral = [(slot, bank) for slot, bank in enumerate(banks) if bank.anytime_spectral]
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
-        self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0)
-        self._decide_handle = handle(tables, self._decision)
-        self._decide_all = specialise(mb.decide_at, self._decide_handle, self._rates)
+        window_power = self.sample_rate * float(np.sum(tables.spectra[mb.WINDOW] ** 2))
+        self._rates = mb.Rates(
+            float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, window_power
+        )
         from ugens import modal_kept as mk
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
@@ -197,87 +180,65 @@ class ModeBudget:
         self._compiled = [bank.anytime_compiled for bank in banks]
         self._flags, self._slow = [False] * len(banks), []
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
-        self._kick_table = Kicks(
-            np.zeros(16, dtype=np.int64), np.zeros(16, dtype=np.int64), np.zeros(16, dtype=bool)
-        )
-        self._step_handle = None  # (_load_kicks)
+        self._kick_table = self._empty_kicks(16, 0)
         self._loaded, self._loaded_rows = None, 0  # the listing in the Kicks table, its rows
-        self._advance = specialise(mk.advance_at, self._steps_handle(), 0, 0, 0, 0, 0, 0)
+        self._steps_handle()
+        self._advance = specialise(mk.advance_at, self._step_handle, 0, 0, 0, 0, 0, 0, self._rates)
+        self._impacts = specialise(mk.impacts_at, self._step_handle, 0, 0, 0)
+        self._decide_all = specialise(mk.decide_at, self._step_handle, self._rates)
 
-    def _steps_handle(self) -> np.ndarray:
+    @staticmethod
+    def _empty_kicks(rows: int, gains: int) -> Kicks:
+        return Kicks(
+            np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=bool),
+            np.zeros(rows), np.full(rows, -1, dtype=np.int64), np.zeros(max(gains, 1)),
+        )  # fmt: skip
+
+    def _steps_handle(self) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
-        Hearing, the banks' outputs, the by-Python mask, the impacts and the step state."""
+        Hearing, the banks' outputs, the by-Python mask, the impacts, the step state and
+        the Decision (ugens.modal_kept.DECISION_AT)."""
         self._step_handle = handle(
-            self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,)
-        )
-        return self._step_handle
-
-    def upcoming(self, start: int, end: int) -> list[tuple[int, list, float, object]]:
-        """The impacts (frame, nodes, impulse, location) of the score in frames [start, end)."""
-        frames, impacts = self.listed()
-        return impacts[bisect.bisect_left(frames, start) : bisect.bisect_left(frames, end)]
-
-    def _predicted(self, kicks: list, start: int, end: int) -> dict[int, list[tuple[float, object]]]:
-        """Per bank, the (impulse N s, location or None: the bank's own) of every impact of
-        ``kicks`` (frame, nodes, impulse, location) in frames [start, end)."""
-        predicted: dict[int, list[tuple[float, object]]] = {}
-        for frame, node_banks, impulse, location in kicks:
-            if start <= frame < end and impulse > 0.0:
-                for bank in node_banks:
-                    predicted.setdefault(id(bank), []).append((impulse, location))
-        return predicted
+            self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,),
+            self._decision,
+        )  # fmt: skip
 
     def step(self, start: int, n: int) -> None:
         """Graph step for frames [start, start + n), after every node the banks hear:
         decide at multiples of ``period`` where the ranking may change, and at once where
         a bank that heard nothing for a period starts to hear a force nobody scheduled (a
-        contact starting), so that its modes sound from the contact's first sample. When
-        the budget renders the banks, it runs them up to each decision and after the last
-        one: a sub-block is split only where a decision changes the kept sets."""
+        contact starting), so that its modes sound from the contact's first sample. The
+        bookkeeping, the decisions and (when the budget renders the banks) the renders
+        between them run in one compiled call (ugens.modal_kept.advance_at): a sub-block
+        is split only where a decision changes the kept sets. It returns to Python to
+        decide only when a bank renders through its own ``process`` (a parameter change,
+        ramp or size input pending: rendered over the same spans), a bank is fed by
+        another (credited in Python, jassy.anytime_chain) or a CPU budget adapts."""
         if not self.active:
             return
-        if self.renders:
-            self._rendering_step(start, n)
-            return
-        end, period, at = start + n, self.period, start
-        while at < end:
-            stop = min(end, (at // period + 1) * period)
-            onset = self._due(at, stop - at, at - start)
-            if onset is not None:
-                self._decide(at, onset, at - start, stop - at)
-            at = stop
-
-    def _rendering_step(self, start: int, n: int) -> None:
-        """:meth:`step` when the budget renders the banks: the bookkeeping and the renders
-        between decisions run in one compiled call (ugens.modal_kept.advance_at), which
-        returns to Python only where the budget decides. Banks with a parameter change,
-        ramp or size input pending render through their own ``process`` over the same
-        spans."""
         period, end = self.period, start + n
         count = self._load_kicks(self.listed())
-        slow = self._python_banks()
+        slow = self._python_banks() if self.renders else []
         state, at, rendered, addresses = self._state, start, start, self._step_handle
+        state[INLINE] = not (slow or self._fed or self.cpu_fraction is not None)
         while True:
-            state[FADING] = self._fading
             was = rendered
-            at, rendered, work, deciding = self._advance(addresses, count, period, start, n, at, rendered)
+            at, rendered, work, deciding = self._advance(
+                addresses, count, period, start, n, at, rendered, self._rates
+            )
             self.mode_samples += work
             for i in slow:
                 if rendered > was:
                     self._processes[i](was, rendered - was, was - start)
-                    self.mode_samples += (rendered - was) * int(self.banks[i].meta[0])
+                    self.mode_samples += (rendered - was) * self.banks[i].active_modes()
             if not deciding:
-                return
+                break
             stop = min(end, (at // period + 1) * period)
-            if at % period == 0:
-                self._kicks = self.upcoming(at, at + 2 * period)
-                self._now = self._predicted(self._kicks, at, at + period) if self._kicks else {}
-                if self.cpu_fraction is not None:
-                    self._adapt()
-            else:
-                self._kicks, self._now = NO_KICK, {}
-            self._decide(at, self._hearing.onset, at - start, stop - at)
+            if at % period == 0 and self.cpu_fraction is not None:
+                self._adapt()
+            self._decide(at, count, at - start, stop - at)
             at = stop
+        self.decisions, self.peak_modes = int(state[DECISIONS]), int(state[PEAK])
 
     def _python_banks(self) -> list[int]:
         """The banks the compiled render cannot render now (a parameter change, ramp or size
@@ -291,85 +252,47 @@ class ModeBudget:
     def _load_kicks(self, listed: tuple) -> int:
         """The score's impacts (``listed``: frames, impacts (frame, nodes, impulse, location))
         into the compiled step's table, one row per bank struck (one row with slot -1 for
-        an impact on none of the budget's banks), in frame order; returns the rows. Loaded
-        once per render, again only when the score changes (a new listing)."""
+        an impact on none of the budget's banks), in frame order, with the struck bank's
+        gains at each location named; returns the rows. Loaded once per render, again
+        only when the score changes (a new listing)."""
         if listed is self._loaded:
             return self._loaded_rows
-        kicks, slots = listed[1], self._slots
-        rows = [
-            (frame, slots.get(id(node), -1), impulse > 0.0)
-            for frame, nodes, impulse, _ in kicks
-            for node in nodes or (None,)
-        ]
-        count, table = len(rows), self._kick_table
-        if count > table.frames.size:
-            size = 2 * count
-            table = self._kick_table = Kicks(
-                np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=bool)
-            )
-            self._steps_handle()
+        slots, rows, located, gains, size = self._slots, [], {}, [], 0
+        for frame, nodes, impulse, location in listed[1]:
+            for node in nodes or (None,):
+                slot = slots.get(id(node), -1)
+                at = -1
+                if slot >= 0 and location is not None:
+                    at = located.get((slot, location))
+                    if at is None:
+                        row = self.banks[slot]._location_row(location)
+                        at = located[(slot, location)] = size
+                        gains.append(row)
+                        size += row.size
+                rows.append((frame, slot, impulse > 0.0, impulse, at))
+        count = len(rows)
+        table = self._kick_table = self._empty_kicks(max(count, 1), size)
         if count:
-            table.frames[:count], table.slots[:count], table.positive[:count] = zip(*rows, strict=True)
+            for field, column in zip(table[:5], zip(*rows, strict=True), strict=True):
+                field[:count] = column
+        if gains:
+            np.concatenate(gains, out=table.gains)
+        self._steps_handle()
         self._loaded, self._loaded_rows = listed, count
         return count
 
-    def _due(self, at: int, n: int, offset: int) -> np.ndarray | None:
-        """Bookkeeping at frame ``at`` (a period's start or a sub-block's) for the next ``n``
-        frames (inputs at ``offset`` of the sub-block); the banks woken by a force nobody
-        scheduled (a mask) if the budget decides at ``at``, else None."""
-        rotate = at % self.period == 0
-        if rotate:
-            kicks = self._kicks = self.upcoming(at, at + 2 * self.period)
-            now = self._now = self._predicted(kicks, at, at + self.period) if kicks else {}
-            expected = self._hearing.expected
-            if self._state[ANY_EXPECTED]:
-                expected[:] = False
-            self._state[ANY_EXPECTED] = bool(now)
-            if now:
-                for i, bank in enumerate(self.banks):
-                    expected[i] = id(bank) in now
-        else:
-            self._kicks, self._now = NO_KICK, {}
-        heard, woken = self._scan(self._hearing, offset, offset + n, rotate)
-        driven = rotate and (self._fading or bool(self._kicks) or heard)
-        if rotate and self.cpu_fraction is not None:
-            driven = True
-            self._adapt()
-        return self._hearing.onset if driven or woken else None
-
-    def _decide(self, at: int, onset: np.ndarray, offset: int, n: int) -> None:
-        """Rank every mode at frame ``at`` and apply the kept sets; ``onset``: the banks
-        woken by the force in the sub-block's frames [offset, offset + n)."""
-        kicks, now, period = self._kicks, self._now, self.period
-        later = self._predicted(kicks, at + period, at + 2 * period) if kicks else {}
-        d, values = self._decision, self._tables.values
-        np.logical_or(
-            self._hearing.heard_now, self._hearing.heard_before, out=d.heard
-        )  # before the stretch from ``at``
-        if self._kicked:
-            for fields in self._kick_fields:
-                values[fields, :] = 0.0
-        self._kicked = bool(now or later)
-        for column, (predicted, (kick, elsewhere)) in enumerate(
-            zip((now, later), self._kick_fields, strict=True)
-        ):
-            for key, impacts in predicted.items():
-                slot, *rows = self._rows[key]
-                values[kick, slot], values[elsewhere, slot] = self.banks[slot].anytime_kicks(
-                    impacts, rows[column]
-                )
-        if self._fed and self._kicked:
+    def _decide(self, at: int, count: int, offset: int, n: int) -> None:
+        """Rank every mode at frame ``at`` and apply the kept sets (in Python's hands: the
+        step does this itself unless a bank needs Python); onsets are judged by the
+        sub-block's input samples [offset, offset + n)."""
+        kicked = self._impacts(self._step_handle, count, at, self.period)
+        if self._fed and kicked:
             for fields in self._chain_fields:
                 credit_fed_banks(self._tables, self._fed, fields, self.sample_rate)
-        for slot, bank in self._spectral:
-            heard = d.heard[slot] and not onset[slot]
-            values[self._spectral_field, slot] = heard and bank.anytime_spectrum()
         rates = self._rates
         if rates.limit != self.limit or rates.begin != offset or rates.end != offset + n:
             rates = self._rates = rates._replace(limit=int(self.limit), begin=offset, end=offset + n)
-        self._fading, total = self._decide_all(self._decide_handle, rates)
-        self.peak_modes = max(self.peak_modes, total)
-        self.decisions += 1
+        self._decide_all(self._step_handle, rates)
 
     def _adapt(self) -> None:
         now = time.perf_counter()

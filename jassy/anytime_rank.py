@@ -10,7 +10,7 @@ import numpy as np
 
 from jassy import record_views
 from jassy.jit import drop_stale_cache, void_pointer
-from jassy.record_views import FIELD, bool_row, int_row
+from jassy.record_views import FIELD, bool_row, float_row, int_row
 
 drop_stale_cache(__file__, [record_views])  # the cache holds copies of its views
 
@@ -58,25 +58,63 @@ def rank_modes(scores, limit, keep, fade, later_top):
 
 class Kicks(NamedTuple):
     """The impacts of the score a budget renders, in frame order: the frame each applies
-    at, the slot of the bank it strikes (-1: none of the budget's) and whether its impulse
-    is positive (the bank then expects it)."""
+    at, the slot of the bank it strikes (-1: none of the budget's), whether its impulse
+    is positive (the bank then expects it), the impulse (N s), and where the struck
+    bank's gains at its location start in ``gains`` (-1: the bank's current location);
+    ``gains``: those rows, each the model's gain per mode at a location, in the bank's
+    mode order."""
 
     frames: np.ndarray  # int64
     slots: np.ndarray  # int64
     positive: np.ndarray  # bool
+    impulses: np.ndarray  # float64
+    located: np.ndarray  # int64
+    gains: np.ndarray  # float64
 
 
 @nb.njit(cache=True)
 def kicks_at(a, i):
     """The :class:`Kicks` whose fields start at slot ``i`` of handle ``a``
     (jassy.record_views)."""
-    return Kicks(int_row(a, i), int_row(a, i + FIELD), bool_row(a, i + 2 * FIELD))
+    return Kicks(
+        int_row(a, i), int_row(a, i + FIELD), bool_row(a, i + 2 * FIELD), float_row(a, i + 3 * FIELD),
+        int_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD),
+    )  # fmt: skip
 
 
 #: Fields of a budget's step state (int64): a mode fades out in this period (the last
 #: decision said so); some bank expects an impact in this period; the budget decides at
-#: every period (it adapts its size to a CPU budget).
-FADING, ANY_EXPECTED, EVERY_PERIOD = range(3)
+#: every period (it adapts its size to a CPU budget); the step takes its decisions itself
+#: (no Python needed: no bank renders through Python, no bank is fed by another, no CPU
+#: budget); the step renders the banks; decisions taken; the most modes a decision kept.
+FADING, ANY_EXPECTED, EVERY_PERIOD, INLINE, RENDERS, DECISIONS, PEAK = range(7)
+STEP_STATE = 7
+
+
+@nb.njit(cache=True, inline="always")
+def has_force(force, begin, end):
+    """Whether force[begin:end] has a non-zero (or NaN) sample, tested eight samples at a
+    time: a silent block, the common case while a bank rings, costs an eighth of the
+    branches."""
+    i = begin
+    while i + 8 <= end:
+        if (
+            (force[i] != 0.0)
+            | (force[i + 1] != 0.0)
+            | (force[i + 2] != 0.0)
+            | (force[i + 3] != 0.0)
+            | (force[i + 4] != 0.0)
+            | (force[i + 5] != 0.0)
+            | (force[i + 6] != 0.0)
+            | (force[i + 7] != 0.0)
+        ):
+            return True
+        i += 8
+    while i < end:
+        if force[i] != 0.0:
+            return True
+        i += 1
+    return False
 
 
 class Hearing(NamedTuple):
@@ -117,11 +155,7 @@ def scan_forces(h, begin, end, rotate):
         any_before |= heard_before[b]
         loud = h.unseen[b]
         if not loud and not heard_now[b]:
-            x = nb.carray(void_pointer(h.inputs[b]), (h.size,), np.float64)
-            for i in range(begin, end):
-                if x[i] != 0.0:
-                    loud = True
-                    break
+            loud = has_force(nb.carray(void_pointer(h.inputs[b]), (h.size,), np.float64), begin, end)
         forced[b] = loud
         h.onset[b] = loud and not (h.expected[b] or heard_now[b] or heard_before[b] or h.unseen[b])
         any_onset |= h.onset[b]

@@ -13,7 +13,8 @@ import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
 from llvmlite import ir as llvmir
-from numba.core import caching, cgutils, codegen, dispatcher, types
+from numba.core import caching, cgutils, codegen, dispatcher, errors, targetconfig, types
+from numba.core.typing import typeof as numba_typeof
 from numba.extending import intrinsic
 
 
@@ -226,6 +227,72 @@ def _no_c_wrappers_for_kernels() -> None:
     compiler._customize_flags = customise_without_c_wrapper
 
 
+def _faster_flag_comparisons() -> None:
+    """Compare numba's compiler flags without building a dict of every option per compare.
+
+    Typing a call looks its implementation up in a cache keyed by the compiler flags, and
+    numba's ``TargetConfig`` hashes and compares flags by building ``{option: value}`` for
+    all ~20 options through their properties, twice per compare (tens of thousands of
+    compares in a first render). Same results here: ``values()`` is the class's defaults
+    overlaid with the options set (the same dict, in the same order), flags with equal set
+    options are equal without building it, and the hash is the sorted option names', as
+    numba's (a constant per class)."""
+    config = getattr(targetconfig, "TargetConfig", None)
+    if config is None or getattr(config.values, "overlays_defaults", False):
+        return
+    defaults: dict[type, dict] = {}
+    hashes: dict[type, int] = {}
+
+    def values(self):
+        kind = type(self)
+        found = defaults.get(kind)
+        if found is None:
+            found = defaults[kind] = {name: option.default for name, option in kind.options.items()}
+        merged = dict(found)
+        merged.update(self._values)
+        return merged
+
+    def equal(self, other):
+        if not isinstance(other, config):
+            return NotImplemented
+        if type(self) is type(other) and self._values == other._values:
+            return True
+        return values(self) == values(other)
+
+    def hashed(self):
+        kind = type(self)
+        found = hashes.get(kind)
+        if found is None:
+            found = hashes[kind] = hash(tuple(sorted(kind.options)))
+        return found
+
+    values.overlays_defaults = True
+    config.values, config.__eq__, config.__hash__ = values, equal, hashed
+
+
+def _plain_error_text() -> None:
+    """Build numba's typing-error messages without terminal colours.
+
+    Typing a call tries each candidate implementation and keeps an error message for every
+    one that does not fit (thousands in a first render, nearly all discarded); with
+    colorama installed each message is wrapped for colours, which initialises colorama's
+    stream wrappers again per message. Messages that reach a user read the same, uncoloured
+    (as with numba's ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING``)."""
+
+    class PlainText:
+        def code(self, message):
+            return message
+
+        errmsg = filename = indicate = highlight = reset = code
+
+    plain = PlainText()
+    errors._termcolor_inst = plain
+    if hasattr(numba_typeof, "_termcolor"):
+        numba_typeof._termcolor = plain
+
+
 _keep_linked_copies_private()
 _lock_cache_index_updates()
 _no_c_wrappers_for_kernels()
+_faster_flag_comparisons()
+_plain_error_text()

@@ -416,6 +416,8 @@ def why_not_compiled(graph: Graph) -> str | None:
             return f"node {node.name!r} follows contact curves"
         if isinstance(node, ModalBank) and "size" in node.sources:
             return f"node {node.name!r} is retuned by a fragment size input"
+        if isinstance(node, ModalBank) and node.values["precision"] == "mixed":
+            return f"node {node.name!r} runs in mixed precision (its float32 split has no program kernel)"
     return None
 
 

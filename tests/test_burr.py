@@ -226,6 +226,26 @@ def test_octree_follows_erosion_exactly():
     np.testing.assert_allclose(sim.octree.moments(g, 10.0, 4)[0], brute, rtol=1e-9, atol=1e-6)
 
 
+@pytest.mark.parametrize("method", ["octree", "brute"])
+def test_one_call_step_equals_its_parts(method):
+    """BurrSim.step runs moments, normal, depth and load in one compiled call: each equals the
+    same quantity computed apart in Python (BurrSim.moments, n = -m1/|m1|, the cap-depth
+    inversion, F_e = c_e R^2 (h/R)^(3/2) n), bit for bit, over eroding steps."""
+    vol = uniform_block((40, 40, 40), 1e-4, 200, top=25)
+    p = BurrParams(radius=1e-3, erosion=5e-5, method=method, leaf=4)
+    sim = BurrSim(vol, p, seed=3)
+    for step in range(20):
+        centre = vol.to_world([19.5 + 0.3 * step, 19.7, 25.5 + 10 - 2.5 - 0.05 * step])
+        m0, m1 = sim.moments(centre)
+        s = sim.step(centre, omega=(2000.0, 0, 2000.0), dt=1e-3)
+        assert s.removed > 0
+        normal = -m1 / math.sqrt(float(m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2]))
+        h = float(depth_from_m0(m0, p.rho0, p.radius))
+        assert s.m0 == m0 and np.array_equal(s.m1, m1) and np.array_equal(s.normal, normal)
+        elastic = p.c_e * p.radius**2 * (h / p.radius) ** 1.5 * normal
+        assert s.depth == h and np.array_equal(s.elastic, elastic)
+
+
 def test_erosion_bookkeeping_and_roulette_expectation():
     """Removed mass = sum of counter decrements x voxel mass exactly; and, for rates far below
     one count per step, the mean decrement over many seeds equals the continuous law

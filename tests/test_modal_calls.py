@@ -52,3 +52,26 @@ def test_a_gain_change_during_the_ringing_reaches_the_next_strike(precision, inl
     ringing[[0, second]] = False  # the strikes' own samples carry the direct term
     error = np.max(np.abs(out - exact)[ringing]) / np.max(np.abs(exact))
     assert error < (1e-9 if precision == "float64" else 10 ** (-70 / 20))
+
+
+def test_a_mixed_bank_in_a_graph_renders_in_mixed_precision():
+    """A graph the program could run (taps into a bank) holding a mixed-precision bank runs
+    node by node, and its bank's float32 modes are heard: the render differs from the
+    float64 bank's by more than nothing and less than -70 dB (the compiled program, which
+    has only the float64 kernel, rendered the float64 bits)."""
+    from jassy import Event, Graph
+    from jassy.engines.offline import OfflineEngine
+    from ugens import ImpactForce
+
+    model = ModalModel([30.0, 440.0, 3000.0], [0.7, 3.0, 20.0], [[1.0, 0.5, 0.3]])
+    score = [Event(0.01 * k, "tap", "impact", {"impulse": 0.001 * (k + 1)}) for k in range(3)]
+    rendered = {}
+    for precision in ("float64", "mixed"):
+        tap = ImpactForce(name="tap", duration=0.0007)
+        graph = Graph(ModalBank(model, name="bank", precision=precision)(tap))
+        engine = OfflineEngine(graph, score, FS, BLOCK, program=True)
+        rendered[precision] = engine.render(0.3).audio[0]
+        if precision == "mixed":
+            assert engine.program is None and "mixed precision" in engine.why_not_program
+    error = np.max(np.abs(rendered["mixed"] - rendered["float64"])) / np.max(np.abs(rendered["float64"]))
+    assert 0.0 < error < 10 ** (-70 / 20), error

@@ -17,6 +17,7 @@ from ugens.modal_f32 import (
     narrow_rows,
     resonate_delta,
 )
+from ugens.modal_meta import BY_FACTOR
 
 FREQS = np.geomspace(20.0, 20000.0, 7)
 DECAYS = np.geomspace(0.5, 500.0, 7)
@@ -65,7 +66,7 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.zeros(x.size)
-    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, np.zeros(1), decay_factor)
+    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), decay_factor)
     return out
 
 
@@ -105,14 +106,18 @@ def render_noise(model, precision, score=(), seconds=0.5, block=64):
 
 
 @pytest.mark.parametrize("block", [1, 64, 1000])
-@pytest.mark.parametrize("all_float32", [False, True])
-def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, all_float32):
+@pytest.mark.parametrize("modes", ["split", "all_float32", "small"])
+def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, modes):
     """Broadband force, a ramped freq_scale change (run in float64, then back to mixed) and a
     location jump: within -60 dB of the float64 bank at any block size, with and without
-    float64 modes in the split."""
-    model = spread_model()
-    if all_float32:
+    float64 modes in the split, and for a bank small enough for the 16-mode kernel."""
+    model = spread_model(12 if modes == "small" else 40)
+    if modes != "split":
         model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
+    if modes == "small":
+        c1, c2, s = design(model.frequencies, model.decays, FS)
+        split = split_by_precision(np.stack([c1, c2, s, 0 * s, 0 * s, 0 * s]), FS)
+        assert split.wide.size == 0 and split.rows.narrow_meta[BY_FACTOR] == 1
     score = [
         Event(0.1, "bank", "set", {"freq_scale": 1.2}, ramp=0.01),
         Event(0.2, "bank", "set", {"location": 1}, jump=True),

@@ -44,8 +44,9 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy import record_views
+from jassy import anytime_rank, record_views
 from jassy.anytime import a_weighting_power
+from jassy.anytime_rank import has_force
 from jassy.errors import ModelError, PatchError
 from jassy.jit import drop_stale_cache, specialise
 from jassy.levels import reference_gain
@@ -59,12 +60,16 @@ from ugens.cells import silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
+    FLAT_SPECTRUM_MODES,
     FLOOR,
     FLOOR2,
+    GAIN_LEVEL,
     GROWTH,
     INV,
+    REMEMBERED,
     SIN2,
-    SPECTRUM,
+    SIZE,
+    TRANSFORMED,
     WEIGHT,
     BudgetTables,
     compact_bank,
@@ -75,52 +80,44 @@ from ugens.modal_f32 import (
     TOLERANCE,
     decay_factor_error,
     delta_coefficients,
-    delta_step,
+    delta_rows,
     float32_error,
+    flush_silent_delta,
     narrow_rows,
+    resonate_delta,
     unscaled_state,
 )
-from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH, BankMeta, CompactMeta
+from ugens.modal_meta import (
+    ACTIVE,
+    ALLOWED,
+    BY_FACTOR,
+    GATHERED,
+    NARROW_ACTIVE,
+    NARROW_ALL,
+    RAMP_LEFT,
+    WIDTH,
+    BankMeta,
+    CompactMeta,
+    NarrowMeta,
+)
 from ugens.modal_retune import (
     TOP_BAND,
     TOP_BAND_COS,
     TOP_BAND_SIN,
     TopBand,
     pole_rows,
+    resonator,
     retune_state,
     size_changes,
 )
 
 # its cache holds copies of their kernels and constants
-drop_stale_cache(__file__, [cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune, record_views])
+drop_stale_cache(
+    __file__, [anytime_rank, cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune, record_views]
+)
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
-
-
-@nb.njit(cache=True, inline="always")
-def has_force(force, n):
-    """Whether force[:n] has a non-zero (or NaN) sample, tested eight samples at a time: a
-    silent block, the common case while a bank rings, costs an eighth of the branches."""
-    i = 0
-    while i + 8 <= n:
-        if (
-            (force[i] != 0.0)
-            | (force[i + 1] != 0.0)
-            | (force[i + 2] != 0.0)
-            | (force[i + 3] != 0.0)
-            | (force[i + 4] != 0.0)
-            | (force[i + 5] != 0.0)
-            | (force[i + 6] != 0.0)
-            | (force[i + 7] != 0.0)
-        ):
-            return True
-        i += 8
-    while i < n:
-        if force[i] != 0.0:
-            return True
-        i += 1
-    return False
 
 
 class ModeRows(NamedTuple):
@@ -161,7 +158,7 @@ def resonate(force, out, n, rows, active, last):
     impact's ringing have no force)."""
     c1, c2, g, d, y1, y2 = rows
     direct = 0.0
-    if has_force(force, n):
+    if has_force(force, 0, n):
         for k in range(active):
             direct += d[k]
     fp = last[0]
@@ -265,16 +262,6 @@ def flush_silent(y1, y2, active, floor):
 #: Silent modes are looked for at every multiple of this many frames on the clock.
 FLUSH_PERIOD = 1024
 
-#: Anytime budget: weights that smooth a force's periodogram over neighbouring bins.
-PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
-
-#: Anytime budget: the share of the previous smoothed periodogram kept at each decision.
-PSD_MEMORY = 0.75
-
-#: Anytime budget: banks of at most this many modes judge a continuous force by its power
-#: alone (spread flat over frequency), without a transform.
-FLAT_SPECTRUM_MODES = 8
-
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
@@ -294,7 +281,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
         f = force[i : i + m]
         o = out[i : i + m]
-        if last[0] != 0.0 or has_force(f, m):
+        if last[0] != 0.0 or has_force(f, 0, m):
             meta[ACTIVE] = meta[ALLOWED]
         active = meta[ACTIVE]
         if active == 0:
@@ -310,35 +297,52 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
-    y1, y2) and meta (as a bank's), the float32 modes' delta-form rows (c0, b2, g, d) and
-    state (y, Delta) / g (ugens.modal_f32.narrow_rows), their meta [active, all, 1 in the
-    decay-factor form] and the force sample before the block."""
+    y1, y2) and meta (a BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
+    (y[n-2], Delta[n-1]) / g (ugens.modal_f32.narrow_rows) and their NarrowMeta
+    (ugens.modal_meta)."""
 
     wide_bank: np.ndarray
     wide_meta: np.ndarray
     narrow_coef: np.ndarray
     narrow_state: np.ndarray
     narrow_meta: np.ndarray
-    narrow_last: np.ndarray
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_step(force, out, start, n, rows, floor, last):
-    """One sub-block of a bank split by precision (``rows``: MixedRows): the float64 modes
-    by :func:`bank_step` write out[:n], the float32 delta-form modes
-    (ugens.modal_f32.delta_step) add to it; last[0] as in bank_step."""
-    fp = last[0]
-    if rows.wide_meta[ALLOWED] > 0:
-        bank_step(force, out, start, n, rows.wide_bank, rows.wide_meta, floor, last)
-    else:
-        for i in range(n):
-            out[i] = 0.0
-    rows.narrow_last[0] = fp
-    delta_step(
-        force, out, start, n, rows.narrow_coef, rows.narrow_state, rows.narrow_meta, floor,
-        rows.narrow_last, FLUSH_PERIOD,
-    )  # fmt: skip
-    last[0] = force[n - 1]
+    """One sub-block of a bank split by precision (``rows``: MixedRows) into out[:n]: the
+    float32 and the float64 modes in the same passes (ugens.modal_f32.resonate_delta),
+    with the silent-mode skipping and flush frames of :func:`bank_step` for each group;
+    last[0] as in bank_step."""
+    wide_bank, wide_meta, coef, state, narrow_meta = rows
+    i = 0
+    while i < n:
+        frame = start + i
+        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        f = force[i : i + m]
+        o = out[i : i + m]
+        for j in range(m):
+            o[j] = 0.0
+        if last[0] != 0.0 or has_force(f, 0, m):
+            wide_meta[ACTIVE] = wide_meta[ALLOWED]
+            narrow_meta[NARROW_ACTIVE] = narrow_meta[NARROW_ALL]
+        wide_active = wide_meta[ACTIVE]
+        active = narrow_meta[NARROW_ACTIVE]
+        if active == 0 and wide_active == 0:
+            last[0] = 0.0
+        else:
+            narrow = delta_rows(coef, state)
+            by_factor = narrow_meta[BY_FACTOR] == 1
+            if wide_meta[ALLOWED] > 0:
+                resonate_delta(f, o, m, narrow, active, wide_bank, wide_active, last, by_factor)
+            else:
+                resonate_delta(f, o, m, narrow, active, None, 0, last, by_factor)
+        i += m
+        if (start + i) % FLUSH_PERIOD == 0:
+            if wide_active > 0 and floor > 0.0:
+                wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
+            if active > 0:
+                narrow_meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
 
 
 class BankArrays(NamedTuple):
@@ -368,22 +372,22 @@ def mixed_rows_at(a, i):
     """The MixedRows whose fields start at slot ``i`` of handle ``a`` (jassy.record_views)."""
     return MixedRows(
         float_table(a, i), int_row(a, i + FIELD), float32_table(a, i + 2 * FIELD),
-        float32_table(a, i + 3 * FIELD), int_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD),
+        float32_table(a, i + 3 * FIELD), int_row(a, i + 4 * FIELD),
     )  # fmt: skip
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_span(force, out, start, n, a, floor):
     """:func:`mixed_step` on handle ``a``: a MixedRows, then the force sample before the
-    block (one array for Python to hand over instead of eight)."""
+    block (one array for Python to hand over instead of seven)."""
     mixed_step(force, out, start, n, mixed_rows_at(a, 0), floor, float_row(a, MIXED_FIELDS * FIELD))
 
 
 def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
     """Rows (c1, c2, s, d / g) = (2 R cos theta, R^2, R sin theta, :func:`direct_ratio`) per
-    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs: the one design of every modal
-    resonator (:func:`ugens.modal_retune.pole_rows`, which ModalBank also calls with its
-    scales). Modes at or above Nyquist get zero coefficients and gain (silent)."""
+    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs, compiled as ModalBank designs its
+    modes (:func:`ugens.modal_retune.pole_rows`, which ModalBank calls with its scales).
+    Modes at or above Nyquist get zero coefficients and gain (silent)."""
     freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
     rows, sin2, inv = np.empty((4, freqs.size)), np.empty(freqs.size), np.empty(freqs.size)
     decays = np.ascontiguousarray(decays, dtype=np.float64)
@@ -392,12 +396,17 @@ def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
 
 
 def design(frequencies, decays, sample_rate):
-    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64 (:func:`mode_poles`).
+    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64: the resonator
+    formula of :func:`ugens.modal_retune.resonator` evaluated by numpy, as the closed-loop
+    ugens (Friction, RathRoll) and the benches design their modes (ModalBank runs the same
+    formula compiled, :func:`mode_poles`; the two differ in the last bit of some modes).
 
     Modes at or above Nyquist get zero coefficients and gain (silent).
     """
-    c1, c2, s, _ = mode_poles(frequencies, decays, sample_rate)
-    return c1, c2, s
+    frequencies = np.asarray(frequencies, dtype=np.float64)
+    c1, c2, s, _ = resonator(frequencies, np.asarray(decays, dtype=np.float64), sample_rate)
+    sounding = frequencies < sample_rate / 2
+    return np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.0), np.where(sounding, s, 0.0)
 
 
 def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
@@ -449,8 +458,7 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array([nn, nn, by_factor], dtype=np.int64),
-        np.zeros(1),
+        np.array(NarrowMeta(nn, nn, int(by_factor)), dtype=np.int64),
     )
     return MixedSplit(wide, narrow, rows)
 
@@ -744,7 +752,7 @@ class ModalBank(ModelParams, UGen):
         self._ramping = False
         if self._heard is not None:
             self._heard[:] = 0.0
-            self._psd_remembered = False
+            self._tables.values[REMEMBERED, self._slot] = 0.0
 
     def _refresh_design_cache(self) -> None:
         """Keep the design for the current parameters (``fresh``; for an anytime budget
@@ -752,6 +760,8 @@ class ModalBank(ModelParams, UGen):
         self._fresh = self._design()
         if self._tables is not None:
             self._fresh_rows[:] = self._fresh
+            values, slot = self._tables.values, self._slot
+            values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
             self._refresh_forcing()
 
     def _refresh_forcing(self) -> None:
@@ -771,9 +781,8 @@ class ModalBank(ModelParams, UGen):
         rows[DECAY] = self._fresh[1] ** period
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
-        bins = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2).astype(np.int64)
-        self._psd_bins = bins  # the periodogram's bin at each mode (anytime_spectrum)
-        self._psd_remembered = False  # the SPECTRUM row holds the last smoothed PSD
+        self._psd_bins[:] = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2)
+        self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
         two_d_tau = 2.0 * decays * self._horizon
         rows[GROWTH] = np.where(
             two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
@@ -981,9 +990,12 @@ class ModalBank(ModelParams, UGen):
 
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
-        """Whether the budget's compiled render (ugens.modal_kept.render_kept) can render the bank's
-        next span: no parameter change pending, no ramp, no size input."""
-        return not (self._pending or self._ramping or self._size_input is not None)
+        """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
+        runs coefficient ramps) can render the bank's next span: no parameter change
+        pending, no size input. (The compiled render may have ended a ramp: the flag
+        follows the bank's meta here, before any span of the bank in Python.)"""
+        self._ramping = self.meta[RAMP_LEFT] > 0
+        return not (self._pending or self._size_input is not None)
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the
@@ -1022,14 +1034,15 @@ class ModalBank(ModelParams, UGen):
         tables.values[FLOOR2, slot] = self._floor * self._floor
         self._heard = tables.rings[slot]
         self._heard[:] = 0.0
-        self._psd_remembered = False
-        period = self._heard.size
-        self._window = np.hanning(period)
-        self._window_power = self.sample_rate * float(np.sum(self._window**2))
-        self._windowed = np.zeros(period)  # the period's force, centred and windowed
+        self._psd_bins = tables.bins[cut]
+        tables.values[REMEMBERED, slot] = 0.0
+        tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
+        tables.values[GAIN_LEVEL, slot], tables.values[SIZE, slot] = (
+            self.values["gain"] * self._level_gain,
+            self._size,
+        )
         self._horizon = horizon
         self._forcing_key = None
-        self.anytime_spectral = k > FLAT_SPECTRUM_MODES  # (anytime_spectrum)
         from ugens import modal_kept  # (not at the top: it imports this module)
 
         self._tables_handle = handle(tables)
@@ -1041,37 +1054,9 @@ class ModalBank(ModelParams, UGen):
         )
         self._refresh_forcing()
 
-    def anytime_spectrum(self) -> bool:
-        """A budgeted bank of many modes (``anytime_spectral``: banks of at most
-        FLAT_SPECTRUM_MODES spread the force's power flat over frequency) that heard a
-        force lately: the power spectral density of the last period's force (its ring) at
-        each mode's frequency into the budget's SPECTRUM row; returns True."""
-        modal_budget.centred_windowed(self._heard, self._window, self._windowed)
-        psd = self._mode_rows_view[SPECTRUM]
-        modal_budget.psd_at_bins(
-            np.fft.rfft(self._windowed), self._psd_bins, PSD_SMOOTHING, self._window_power, PSD_MEMORY,
-            self._psd_remembered, psd,
-        )  # fmt: skip
-        self._psd_remembered = True
-        return True
-
-    def anytime_kicks(self, kicks: list, row: np.ndarray) -> tuple[float, bool]:
-        """Impacts (impulse N s, location or None: the current one): the sum of squared
-        impulses at the current location, and whether some strike elsewhere: then ``row``
-        (the budget's ELSEWHERE_NOW or _NEXT row of this bank's modes) holds the sum of
-        their squared amplitudes per mode."""
-        here, away = 0.0, False
-        for impulse, location in kicks:
-            if location is None:
-                here += impulse * impulse
-            else:
-                if not away:
-                    row[:] = 0.0
-                    away = True
-                v = self.values
-                a = self._location_row(location) * (v["gain"] * self._level_gain * impulse)
-                row += a * a / self._size
-        return here, away
+    def active_modes(self) -> int:
+        """The modes the bank computes now (its kernels' active count)."""
+        return int(self.meta[ACTIVE])
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         self._settle()

@@ -35,11 +35,12 @@ from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
-from ugens import modal_meta
+from ugens import modal_meta, real_fft
 from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH
+from ugens.real_fft import real_spectrum, twiddles
 
 drop_stale_cache(
-    __file__, [anytime_rank, modal_meta, record_views]
+    __file__, [anytime_rank, modal_meta, real_fft, record_views]
 )  # its cache holds copies of their kernels
 
 #: Rows of a compact bank: c1, c2, g, d, y1, y2 (as ModalBank.bank), then the ramp's
@@ -68,9 +69,33 @@ MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
 #: current location this period and the next; 1.0 if impacts elsewhere fill the
 #: ELSEWHERE_NOW / ELSEWHERE_NEXT rows; 1.0 if SPECTRUM holds the force's PSD (else the
 #: force's power counts flat over frequency); the state magnitude below which a mode is
-#: silent (ModalBank's ``floor``), and its square.
-KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2 = range(7)
-BANK_VALUES = 7
+#: silent (ModalBank's ``floor``), and its square; the bank's gain times its level gain
+#: and its fragment size (an impact's amplitude per mode elsewhere is its location's
+#: gain times impulse times the first, over the root of the second); 1.0 once SPECTRUM
+#: holds a smoothed PSD to blend the next with; 1.0 if the bank judges a force by its
+#: periodogram (more modes than FLAT_SPECTRUM_MODES).
+(
+    KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2, GAIN_LEVEL, SIZE,
+    REMEMBERED, TRANSFORMED,
+) = range(11)  # fmt: skip
+BANK_VALUES = 11
+
+#: Banks of at most this many modes judge a continuous force by its power alone (spread
+#: flat over frequency), without a transform.
+FLAT_SPECTRUM_MODES = 8
+
+#: Weights that smooth a force's periodogram over neighbouring bins.
+PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
+
+#: The share of the previous smoothed periodogram kept at each decision.
+PSD_MEMORY = 0.75
+
+#: Rows of :attr:`BudgetTables.spectra` (one budget period wide): the Hann window, the
+#: period's force centred and windowed, the transform's cos and sin table
+#: (ugens.real_fft.twiddles), its scratch (real, imaginary) and the spectrum (real,
+#: imaginary).
+WINDOW, WINDOWED, COS, SIN, PACKED_RE, PACKED_IM, SPECTRUM_RE, SPECTRUM_IM = range(8)
+SPECTRA_ROWS = 8
 
 
 class BudgetTables(NamedTuple):
@@ -91,6 +116,8 @@ class BudgetTables(NamedTuple):
     rings: np.ndarray  # float64 (banks, period): the force over the last period, frame t at t mod period
     last: np.ndarray  # float64 (banks,): ModalBank.last, the force sample before the next frame
     values: np.ndarray  # float64 (BANK_VALUES, banks)
+    bins: np.ndarray  # int64 (modes,): the periodogram's bin at each mode's frequency
+    spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window, scratch and result
 
 
 @nb.njit(cache=True)
@@ -102,7 +129,7 @@ def tables_at(a, i):
         float_row(a, i + 4 * FIELD), float_row(a, i + 5 * FIELD), int_table(a, i + 6 * FIELD),
         int_table(a, i + 7 * FIELD), float_table(a, i + 8 * FIELD), bool_row(a, i + 9 * FIELD),
         bool_row(a, i + 10 * FIELD), float_table(a, i + 11 * FIELD), float_row(a, i + 12 * FIELD),
-        float_table(a, i + 13 * FIELD),
+        float_table(a, i + 13 * FIELD), int_row(a, i + 14 * FIELD), float_table(a, i + 15 * FIELD),
     )  # fmt: skip
 
 
@@ -127,7 +154,8 @@ def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
 
 
 def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
-    """Empty tables for banks of ``mode_counts`` modes and a budget ``period`` (frames)."""
+    """Empty tables for banks of ``mode_counts`` modes and a budget ``period`` (frames, a
+    power of two)."""
     count = len(mode_counts)
     layout = np.zeros((5, count), dtype=np.int64)
     first = bank_at = coef_at = compact_at = 0
@@ -142,8 +170,17 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
         line_aligned_zeros((compact_at,)), np.zeros((count, 3), dtype=np.int64),
         np.zeros((count, 3), dtype=np.int64), np.zeros((MODE_ROWS, first)), np.ones(first, dtype=bool),
         np.zeros(first, dtype=bool), np.zeros((count, period)), np.zeros(count),
-        np.zeros((BANK_VALUES, count)),
+        np.zeros((BANK_VALUES, count)), np.zeros(first, dtype=np.int64), spectra_rows(period),
     )  # fmt: skip
+
+
+def spectra_rows(period: int) -> np.ndarray:
+    """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window
+    and the transform's tables set, the rest zero."""
+    spectra = np.zeros((SPECTRA_ROWS, period))
+    spectra[WINDOW] = np.hanning(period)
+    spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
+    return spectra
 
 
 @nb.njit(cache=True)
@@ -224,19 +261,18 @@ def centred_windowed(force, window, out):
 
 
 @nb.njit(cache=True)
-def psd_at_bins(spectrum, bins, taps, scale, memory, remembered, psd):
-    """Per mode, the periodogram |spectrum|^2 / ``scale`` (N^2/Hz) smoothed over the bins
+def psd_at_bins(re, im, bins, taps, scale, memory, remembered, psd):
+    """Per mode, the periodogram |re + i im|^2 / ``scale`` (N^2/Hz) smoothed over the bins
     ``bins[m] - len(taps) // 2 ...`` with weights ``taps`` (bins past either end count as
     zero), into ``psd``; ``remembered``: blended as memory * psd + (1 - memory) * new (a
     periodogram of noise scatters by its own size: it is the trend that ranks)."""
-    edge, size = taps.size // 2, spectrum.size
+    edge, size = taps.size // 2, re.size
     for m in range(bins.size):
         total = 0.0
         for t in range(taps.size):
             b = bins[m] + t - edge
             if 0 <= b < size:
-                z = spectrum[b]
-                total += (z.real * z.real + z.imag * z.imag) * taps[t]
+                total += (re[b] * re[b] + im[b] * im[b]) * taps[t]
         value = total / scale
         psd[m] = memory * psd[m] + (1.0 - memory) * value if remembered else value
 
@@ -276,8 +312,9 @@ class Decision(NamedTuple):
 
 class Rates(NamedTuple):
     """Scalars of a decision: sample rate (Hz), the modes the budget may compute, the bonus
-    of a kept mode against churn, the amplitude factor per sample of a fading mode, and
-    the input samples [begin, end) an onset is judged by."""
+    of a kept mode against churn, the amplitude factor per sample of a fading mode, the
+    input samples [begin, end) an onset is judged by, and the periodogram's scale (the
+    sample rate times the window's energy: a PSD in N^2/Hz)."""
 
     sample_rate: float
     limit: int
@@ -285,6 +322,82 @@ class Rates(NamedTuple):
     shrink: float
     begin: int
     end: int
+    window_power: float
+
+
+@nb.njit(cache=True)
+def decision_at(a, i):
+    """The :class:`Decision` whose fields start at slot ``i`` of handle ``a``
+    (jassy.record_views)."""
+    return Decision(
+        bool_row(a, i), bool_row(a, i + FIELD), int_row(a, i + 2 * FIELD), float_table(a, i + 3 * FIELD),
+        bool_row(a, i + 4 * FIELD), bool_row(a, i + 5 * FIELD), bool_row(a, i + 6 * FIELD),
+    )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def periodogram(t, b, window_power):
+    """The power spectral density (N^2/Hz) of bank b's force over the last period (its
+    ring; centred, Hann-windowed) at each of its modes' bins (:attr:`BudgetTables.bins`),
+    smoothed over PSD_SMOOTHING and blended with the last one by PSD_MEMORY, into its
+    SPECTRUM row (ugens.real_fft: no Python between the force and the row)."""
+    s = t.spectra
+    half = s.shape[1] // 2
+    centred_windowed(t.rings[b], s[WINDOW], s[WINDOWED])
+    re, im = s[SPECTRUM_RE, : half + 1], s[SPECTRUM_IM, : half + 1]
+    real_spectrum(s[WINDOWED], s[COS], s[SIN], s[PACKED_RE, :half], s[PACKED_IM, :half], re, im)
+    o, k = t.layout[FIRST, b], t.layout[MODES, b]
+    remembered = t.values[REMEMBERED, b] > 0.0
+    psd_at_bins(
+        re,
+        im,
+        t.bins[o : o + k],
+        PSD_SMOOTHING,
+        window_power,
+        PSD_MEMORY,
+        remembered,
+        t.rows[SPECTRUM, o : o + k],
+    )
+    t.values[REMEMBERED, b] = 1.0
+
+
+@nb.njit(cache=True)
+def load_impacts(t, kicks, count, at, period):
+    """The impacts scheduled in this period [at, at + period) and the next (rows of the
+    first ``count`` of ``kicks``, jassy.anytime_rank.Kicks, in frame order) into the
+    tables: per bank struck, the sum of squared impulses at its current location
+    (KICK_NOW / KICK_NEXT) and, for impacts at other locations, the squared amplitude per
+    mode, (gain at the location * GAIN_LEVEL * impulse)^2 / SIZE, summed in the
+    ELSEWHERE_NOW / ELSEWHERE_NEXT rows (HAS_ELSEWHERE_* set). Returns whether some bank
+    is struck. Called with ``period`` 0 (a decision between period starts): no impact."""
+    values, rows = t.values, t.rows
+    for field in range(KICK_NOW, HAS_ELSEWHERE_NEXT + 1):
+        values[field, :] = 0.0
+    if period == 0:
+        return False
+    kicked = False
+    j = np.searchsorted(kicks.frames[:count], at)
+    while j < count and kicks.frames[j] < at + 2 * period:
+        b = kicks.slots[j]
+        if b >= 0 and kicks.positive[j]:
+            kicked = True
+            later = 1 if kicks.frames[j] >= at + period else 0
+            impulse = kicks.impulses[j]
+            if kicks.located[j] < 0:
+                values[KICK_NOW + later, b] += impulse * impulse
+            else:
+                o, k = t.layout[FIRST, b], t.layout[MODES, b]
+                row = rows[ELSEWHERE_NOW + later, o : o + k]
+                if values[HAS_ELSEWHERE_NOW + later, b] == 0.0:
+                    row[:] = 0.0
+                    values[HAS_ELSEWHERE_NOW + later, b] = 1.0
+                scale, size = values[GAIN_LEVEL, b] * impulse, values[SIZE, b]
+                gains = kicks.gains[kicks.located[j] : kicks.located[j] + k]
+                for i in range(k):
+                    a = gains[i] * scale
+                    row[i] += a * a / size
+        j += 1
+    return kicked
 
 
 @nb.njit(fastmath=True, cache=True)
@@ -408,13 +521,21 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
 @nb.njit(cache=True)
 def decide(t, d, rates):
     """One decision over every bank of the tables ``t``: importance of every mode, the
-    ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A quiet bank's
+    ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A bank judging
+    its force by a transform (TRANSFORMED) that heard one lately, and was not woken now,
+    takes its :func:`periodogram` first (SPECTRAL). A quiet bank's
     scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
     the force in its input samples [begin, end), another bank that heard a force lately
     judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
     Returns (whether some mode fades, modes computed)."""
     count = t.layout.shape[1]
     scores = d.scores
+    for b in range(count):
+        if t.values[TRANSFORMED, b] > 0.0:
+            spectral = d.heard[b] and not d.onset[b]
+            if spectral:
+                periodogram(t, b, rates.window_power)
+            t.values[SPECTRAL, b] = 1.0 if spectral else 0.0
     for b in range(count):
         kicked = False
         for field in range(KICK_NOW, HAS_ELSEWHERE_NEXT + 1):
@@ -443,15 +564,3 @@ def decide(t, d, rates):
             t.meta[b, ALLOWED] = kept
         total += t.meta[b, ALLOWED]
     return fading, total
-
-
-@nb.njit(cache=True)
-def decide_at(a, rates):
-    """:func:`decide` on the tables and the :class:`Decision` of handle ``a`` (their fields
-    in that order, jassy.record_views)."""
-    i = TABLE_FIELDS * FIELD
-    d = Decision(
-        bool_row(a, i), bool_row(a, i + FIELD), int_row(a, i + 2 * FIELD), float_table(a, i + 3 * FIELD),
-        bool_row(a, i + 4 * FIELD), bool_row(a, i + 5 * FIELD), bool_row(a, i + 6 * FIELD),
-    )  # fmt: skip
-    return decide(tables_at(a, 0), d, rates)

@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
@@ -76,9 +77,10 @@ def float32_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndar
 
 def decay_factor_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np.ndarray:
     """As :func:`float32_error` for the decay-factor form, whose second coefficient is
-    R^2 = 1 - b2 rounded to float32: its absolute rounding, up to 2^-25, moves the decay
-    by up to fs 2^-26 (7e-4 /s at 48 kHz), so light modes (d below a few 1/s) may fail
-    where the delta form holds."""
+    R^2 - c0 = 1 - b2 - c0 rounded to float32 (:func:`factor_coefficient`): its absolute
+    rounding, up to 2^-25, moves the realised R^2 and so the decay by up to fs 2^-26
+    (7e-4 /s at 48 kHz), so light modes (d below a few 1/s) may fail where the delta form
+    holds."""
     return _rounding_error(c1, c2, sample_rate, decay_factor=True)
 
 
@@ -86,17 +88,25 @@ def _rounding_error(c1, c2, sample_rate: float, decay_factor: bool) -> np.ndarra
     sounding = c2 > 0.0
     c0, b2 = delta_coefficients(np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.25))
     theta, rho = _pole(c0, b2)
+    c0_32 = c0.astype(np.float32).astype(np.float64)
     if decay_factor:
-        b2_32 = 1.0 - (1.0 - b2).astype(np.float32).astype(np.float64)
+        b2_32 = 1.0 - (factor_coefficient(c0, b2).astype(np.float64) + c0_32)
     else:
         b2_32 = b2.astype(np.float32).astype(np.float64)
-    theta32, rho32 = _pole(c0.astype(np.float32).astype(np.float64), b2_32)
+    theta32, rho32 = _pole(c0_32, b2_32)
     omega, decay = theta * sample_rate, np.maximum(rho * sample_rate, 1e-12)
     drift = (np.abs(theta32 - theta) + np.abs(rho32 - rho)) * sample_rate / (decay * np.e)
     noise = 2.0 * _EPS32 * np.sqrt(sample_rate / decay)
     t_peak = np.arctan2(omega, decay) / np.maximum(omega, 1e-12)
     peak = np.exp(-decay * t_peak) * np.sin(omega * t_peak)
     return np.where(sounding, (drift + noise) / np.maximum(peak, 1e-300), 0.0)
+
+
+def factor_coefficient(c0: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """The decay-factor form's second coefficient in float32: R^2 - c0 = 1 - b2 - c0 with
+    c0 as rounded to float32, so that the realised R^2 (this plus the float32 c0, exact
+    in float64) is R^2 to within this coefficient's own rounding."""
+    return ((1.0 - b2) - c0.astype(np.float32).astype(np.float64)).astype(np.float32)
 
 
 #: Flags of the per-mode update: contraction into FMA, no reassociation, so that the
@@ -110,14 +120,19 @@ MIN_GAIN = 1e-30
 
 
 @nb.njit(fastmath=_UPDATE_FLAGS, cache=True)
-def _next_delta(v, u, c0, b, f, by_factor):
-    """The scaled Delta[n] from v = Delta[n-1] / g, u = y[n-1] / g and F[n-1] = f (float32).
+def _next_delta(v, p, u, c0, b, f, by_factor):
+    """The scaled Delta[n] from v = Delta[n-1] / g, p = y[n-2] / g, u = y[n-1] / g and
+    F[n-1] = f (float32).
 
-    Delta form (b = b2): two FMA on independent operands and an add, so a mode's recursion
-    waits ~10 cycles per sample (three chained FMA: 12). Decay-factor form (``by_factor``,
-    b = R^2): two chained FMA with the state term last, ~8 cycles, one add fewer."""
+    Delta form (b = b2): Delta[n] = (F - c0 y[n-1]) + (Delta[n-1] - b2 Delta[n-1]), two FMA
+    on independent operands and an add; a mode's recursion waits for y[n-1] = y[n-2] +
+    Delta[n-1] (an add), an FMA and an add per sample. Decay-factor form (``by_factor``, b
+    = R^2 - c0): with y[n-1] = y[n-2] + Delta[n-1], Delta[n] = R^2 Delta[n-1] - c0 y[n-1]
+    + F is (R^2 - c0) Delta[n-1] + (F - c0 y[n-2]): the term in y[n-2] is ready a sample
+    early, so Delta waits one FMA per sample on itself, as the two-pole form's y does (its
+    path through y[n-2], an add and two FMA, spans two samples)."""
     if by_factor:
-        return (b * v + f) - c0 * u
+        return b * v + (f - c0 * p)
     return (f - c0 * u) + (v - b * v)
 
 
@@ -126,6 +141,12 @@ def _next_delta(v, u, c0, b, f, by_factor):
 #: interleaved; 16 with AVX2), and the modes left over ran in a 4-lane loop (at 254
 #: modes, 30 of them took half the time of the other 224).
 LANES = 32
+
+#: Banks of at most this many float32 modes (one vector of 16 float32 lanes with AVX-512),
+#: all in the decay-factor form, run a mode loop of exactly this trip count: LLVM then runs
+#: it as one vector instead of two (the second all padding), 0.72 -> 0.85x the C loop at
+#: 16 modes.
+SMALL = 16
 
 
 #: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
@@ -147,34 +168,35 @@ def float32_rows(rows: int, width: int) -> np.ndarray:
 
 
 def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 = 1 - b2, g,
-    d) and (y[n-1] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
-    (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
-    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
-    A padding mode has c0 = 1 and b2 = 1 (R^2 = 0), so its y[n] = F[n-1] stays bounded,
-    and g = d = 0, so it adds exact zeros."""
+    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 - c0
+    (:func:`factor_coefficient`), g, d) and (y[n-2] / g, Delta[n-1] / g) of modes with
+    float64 coefficients c0, b2 (:func:`delta_coefficients`), gains g, direct gains d and
+    state y[n-1] = y1, y[n-2] = y2, padded to a multiple of LANES modes (the rows may be
+    longer: :func:`float32_rows`). A padding mode has c0 = 1 and b2 = 1 (R^2 = 0, R^2 - c0
+    = -1), so its y[n] = F[n-1] stays bounded, and g = d = 0, so it adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
     rows = float32_rows(6, width)
     coef, state = rows[:4], rows[4:]
-    coef[:, :n] = np.stack([c0, 1.0 - b2 if decay_factor else b2, g, d])
+    coef[:, :n] = np.stack([c0, factor_coefficient(c0, b2) if decay_factor else b2, g, d])
     coef[0, n:] = 1.0
-    coef[1, n:] = 0.0 if decay_factor else 1.0
-    state[:, :n] = np.stack([y1 / g, (y1 - y2) / g])
+    coef[1, n:] = -1.0 if decay_factor else 1.0
+    state[:, :n] = np.stack([y2 / g, (y1 - y2) / g])
     return coef, state
 
 
 def unscaled_state(state: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(y[n-1], y[n-2]) in float64 of the ``g.size`` modes of :func:`narrow_rows`' state."""
-    y, dy = state[:, : g.size].astype(np.float64) * g
-    return y, y - dy
+    """(y[n-1], y[n-2]) in float64 of the ``g.size`` modes of :func:`narrow_rows`' state,
+    y[n-1] summed in float32 as the kernel sums it."""
+    p, dy = state[:, : g.size]
+    return (p + dy).astype(np.float64) * g, p.astype(np.float64) * g
 
 
 class DeltaRows(NamedTuple):
     """Float32 delta-form modes as :func:`resonate_delta` reads them, one entry per mode:
-    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 in the decay-factor form), input
-    gain g and direct gain d, and the state scaled by the input gain, y = y[n-1] / g,
-    dy = Delta[n-1] / g."""
+    the coefficients c0 = 1 - c1 + c2, b2 = 1 - c2 (R^2 - c0 in the decay-factor form),
+    input gain g and direct gain d, and the state scaled by the input gain, y = y[n-2] / g,
+    dy = Delta[n-1] / g (y[n-1] / g = y + dy)."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -186,35 +208,118 @@ class DeltaRows(NamedTuple):
 
 @nb.njit(inline="always", cache=True)
 def delta_rows(coef, state):
-    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y, Delta) / g."""
+    """The DeltaRows of coefficient rows (c0, b2, g, d) and state rows (y[n-2], Delta[n-1]) / g."""
     return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, rows, active, last, by_factor):
-    """Add the float32 delta-form modes [0, active) of ``rows`` over force[:n] to out[:n];
-    with ``by_factor`` in the decay-factor form (b2 holds R^2, :func:`narrow_rows`).
-
-    ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
-    enters with an add instead of a multiply and g weighs the output sum with an FMA);
-    force and out float64. last[0]: the force
-    sample before force[0], left at force[n-1]. The direct term sum(d) F[n] is added as
-    in ugens.modal.resonate. Four samples per pass over the modes, as there. The modes run
-    up to the next multiple of LANES within the rows (:func:`narrow_rows`' padding, or
-    modes silenced by the flush: exact zeros that stay zero without force, and with force
-    every mode is active)."""
+def _resonate_small(force, out, n, rows, last):
+    """:func:`resonate_delta` for at most SMALL float32 modes in the decay-factor form and
+    no float64 modes: the mode loop's trip count is the constant SMALL, which LLVM runs as
+    one vector (the general loop takes two, the second all padding)."""
     c0, b2, g, d, y, dy = rows
-    active = min(-(-active // LANES) * LANES, c0.size)
-    direct = np.float32(0.0)
-    for k in range(active):
+    direct = 0.0
+    for k in range(SMALL):
         direct += d[k]
-    fp = np.float32(last[0])
     i = 0
     while i + 4 <= n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
         f0 = np.float32(force[i])
         f1 = np.float32(force[i + 1])
         f2 = np.float32(force[i + 2])
-        f3 = np.float32(force[i + 3])
+        s0 = np.float32(0.0)
+        s1 = np.float32(0.0)
+        s2 = np.float32(0.0)
+        s3 = np.float32(0.0)
+        for k in range(SMALL):
+            a = c0[k]
+            b = b2[k]
+            gk = g[k]
+            p = y[k]
+            v = dy[k]
+            u = p + v
+            v = _next_delta(v, p, u, a, b, fp, True)
+            p = u
+            u = u + v
+            s0 += gk * u
+            v = _next_delta(v, p, u, a, b, f0, True)
+            p = u
+            u = u + v
+            s1 += gk * u
+            v = _next_delta(v, p, u, a, b, f1, True)
+            p = u
+            u = u + v
+            s2 += gk * u
+            v = _next_delta(v, p, u, a, b, f2, True)
+            p = u
+            u = u + v
+            s3 += gk * u
+            y[k] = p
+            dy[k] = v
+        out[i] += s0
+        out[i + 1] += s1
+        out[i + 2] += s2
+        out[i + 3] += s3
+        i += 4
+    while i < n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        s = np.float32(0.0)
+        for k in range(SMALL):
+            p = y[k]
+            u = p + dy[k]
+            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
+            y[k] = u
+            dy[k] = v
+            s += g[k] * (u + v)
+        out[i] += s
+        i += 1
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor):
+    """Add the float32 delta-form modes [0, active) of ``rows`` and the float64 modes [0,
+    wide_active) of ``wide`` over force[:n] to out[:n]; the float32 modes in the
+    decay-factor form with ``by_factor`` (b2 holds R^2 - c0, :func:`narrow_rows`).
+
+    ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
+    enters with an add instead of a multiply and g weighs the output sum with an FMA).
+    ``wide``: None, or float64 rows c1, c2, g, d, y1, y2 as a float64 bank's (ugens.modal),
+    updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
+    bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
+    their scalar updates fill the float32 loop's waits). With None (a type of its own)
+    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %. With None,
+    the decay-factor form and at most SMALL modes: :func:`_resonate_small`.
+    force and out float64. last[0]: the force sample before force[0], left at
+    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
+    passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
+    multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
+    the flush: exact zeros that stay zero without force, and with force every mode is
+    active)."""
+    if wide is None and by_factor and 0 < active <= SMALL:
+        _resonate_small(force, out, n, rows, last)
+        return
+    c0, b2, g, d, y, dy = rows
+    active = min(-(-active // LANES) * LANES, c0.size)
+    direct = 0.0
+    for k in range(active):
+        direct += d[k]
+    if wide is not None:
+        for k in range(wide_active):
+            direct += wide[3, k]
+    i = 0
+    while i + 4 <= n:
+        # Only the loop's own values stay in registers across the float32 loop (scalars
+        # share the vector registers; a direct term and the float64 force samples held
+        # there cost 4 % at 64 modes): the force is read again where it is needed.
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        f0 = np.float32(force[i])
+        f1 = np.float32(force[i + 1])
+        f2 = np.float32(force[i + 2])
         s0 = np.float32(0.0)
         s1 = np.float32(0.0)
         s2 = np.float32(0.0)
@@ -223,46 +328,87 @@ def resonate_delta(force, out, n, rows, active, last, by_factor):
             a = c0[k]
             b = b2[k]
             gk = g[k]
-            u = y[k]
+            p = y[k]
             v = dy[k]
-            v = _next_delta(v, u, a, b, fp, by_factor)
+            u = p + v
+            v = _next_delta(v, p, u, a, b, fp, by_factor)
+            p = u
             u = u + v
             s0 += gk * u
-            v = _next_delta(v, u, a, b, f0, by_factor)
+            v = _next_delta(v, p, u, a, b, f0, by_factor)
+            p = u
             u = u + v
             s1 += gk * u
-            v = _next_delta(v, u, a, b, f1, by_factor)
+            v = _next_delta(v, p, u, a, b, f1, by_factor)
+            p = u
             u = u + v
             s2 += gk * u
-            v = _next_delta(v, u, a, b, f2, by_factor)
+            v = _next_delta(v, p, u, a, b, f2, by_factor)
+            p = u
             u = u + v
             s3 += gk * u
-            y[k] = u
+            y[k] = p
             dy[k] = v
-        out[i] += s0 + direct * f0
-        out[i + 1] += s1 + direct * f1
-        out[i + 2] += s2 + direct * f2
-        out[i + 3] += s3 + direct * f3
-        fp = f3
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        t3 = 0.0
+        if wide is not None:
+            fw = force[i - 1] if i > 0 else last[0]
+            w0 = force[i]
+            w1 = force[i + 1]
+            w2 = force[i + 2]
+            for k in range(wide_active):
+                q1 = wide[0, k]
+                q2 = wide[1, k]
+                gk = wide[2, k]
+                u1 = wide[4, k]
+                u2 = wide[5, k]
+                v0 = two_pole(q1, q2, u1, u2, gk * fw)
+                v1 = two_pole(q1, q2, v0, u1, gk * w0)
+                v2 = two_pole(q1, q2, v1, v0, gk * w1)
+                v3 = two_pole(q1, q2, v2, v1, gk * w2)
+                wide[5, k] = v2
+                wide[4, k] = v3
+                t0 += v0
+                t1 += v1
+                t2 += v2
+                t3 += v3
+        out[i] += s0 + t0
+        out[i + 1] += s1 + t1
+        out[i + 2] += s2 + t2
+        out[i + 3] += s3 + t3
         i += 4
     while i < n:
-        f = np.float32(force[i])
+        fw = force[i - 1] if i > 0 else last[0]
+        fp = np.float32(fw)
         s = np.float32(0.0)
         for k in range(active):
-            v = _next_delta(dy[k], y[k], c0[k], b2[k], fp, by_factor)
-            u = y[k] + v
+            p = y[k]
+            u = p + dy[k]
+            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, by_factor)
             y[k] = u
             dy[k] = v
-            s += g[k] * u
-        out[i] += s + direct * f
-        fp = f
+            s += g[k] * (u + v)
+        t = 0.0
+        if wide is not None:
+            for k in range(wide_active):
+                v = two_pole(wide[0, k], wide[1, k], wide[4, k], wide[5, k], wide[2, k] * fw)
+                wide[5, k] = wide[4, k]
+                wide[4, k] = v
+                t += v
+        out[i] += s + t
         i += 1
-    last[0] = fp
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
 
 
 @nb.njit(cache=True)
 def flush_silent_delta(y, dy, g, active, floor):
-    """Zero float32 modes whose y and Delta (the scaled state times g) are below ``floor``;
+    """Zero float32 modes whose y[n-2] and Delta[n-1] (the scaled state times g) are below ``floor``;
     return the new active count (last audible mode + 1)."""
     last = 0
     for k in range(active):
@@ -272,30 +418,3 @@ def flush_silent_delta(y, dy, g, active, floor):
         else:
             last = k + 1
     return last
-
-
-@nb.njit(fastmath=FASTMATH, cache=True)
-def delta_step(force, out, start, n, coef, state, meta, floor, last, flush_period):
-    """Add one sub-block of the float32 modes to out[:n], with the silent-mode skipping
-    of ugens.modal.bank_step (same flush frames). coef rows: c0, b2, g, d; state rows:
-    y, Delta; meta[0] = active count, meta[1] = all modes, meta[2] = 1 in the decay-factor
-    form (coef row 1 holds R^2), 0 in the delta form."""
-    i = 0
-    while i < n:
-        frame = start + i
-        m = min(n - i, (frame // flush_period + 1) * flush_period - frame)
-        f = force[i : i + m]
-        if last[0] != 0.0:
-            meta[0] = meta[1]
-        for j in range(m):
-            if f[j] != 0.0:
-                meta[0] = meta[1]
-                break
-        active = meta[0]
-        if active == 0:
-            last[0] = 0.0
-        else:
-            resonate_delta(f, out[i : i + m], m, delta_rows(coef, state), active, last, meta[2] == 1)
-        i += m
-        if active > 0 and (start + i) % flush_period == 0:
-            meta[0] = flush_silent_delta(state[0], state[1], coef[2], active, floor)

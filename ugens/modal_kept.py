@@ -16,14 +16,38 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank, record_views
-from jassy.anytime_rank import ANY_EXPECTED, EVERY_PERIOD, FADING, Hearing, hearing_at, kicks_at, scan_forces
+from jassy.anytime_rank import (
+    ANY_EXPECTED,
+    DECISIONS,
+    EVERY_PERIOD,
+    FADING,
+    INLINE,
+    PEAK,
+    RENDERS,
+    Hearing,
+    has_force,
+    hearing_at,
+    kicks_at,
+    scan_forces,
+)
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
 from ugens import modal, modal_budget, modal_meta
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, flush_silent, has_force, mode_rows, resonate
-from ugens.modal_budget import FLOOR, KEPT_LANES, TABLE_FIELDS, compact_bank, settle_compact, tables_at
-from ugens.modal_meta import ACTIVE, ALLOWED, WIDTH
+from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, mode_rows, resonate, resonate_ramp
+from ugens.modal_budget import (
+    FLOOR,
+    KEPT_LANES,
+    TABLE_FIELDS,
+    Rates,
+    compact_bank,
+    decide,
+    decision_at,
+    load_impacts,
+    settle_compact,
+    tables_at,
+)
+from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 
 drop_stale_cache(
     __file__, [modal, modal_budget, modal_meta, anytime_rank, record_views]
@@ -112,7 +136,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
         m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
         f = force[i : i + m]
         o = out[i : i + m]
-        forced = last[0] != 0.0 or has_force(f, m)
+        forced = last[0] != 0.0 or has_force(f, 0, m)
         if forced:
             meta[ACTIVE] = width
         active = meta[ACTIVE]
@@ -140,30 +164,52 @@ def heard_lately(h, b):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def ramp_kept(t, b, force, out, start, n, ring_of_force):
+    """Bank b's kept modes over force[:n] into out[:n] while its coefficients ramp (its
+    RAMP_LEFT > 0): ugens.modal.resonate_ramp on its compact bank (every column, no
+    flushes), then the force into the ring of the period's force (empty: it is zero)."""
+    compact, meta = compact_bank(t, b), t.compact_meta[b]
+    meta[ACTIVE] = meta[WIDTH]
+    ramp = Ramp(compact[:4], compact[6:10], compact[10:])
+    last = t.last[b : b + 1]
+    t.meta[b, RAMP_LEFT] = resonate_ramp(
+        force, out, n, ramp, compact[4], compact[5], t.meta[b, RAMP_LEFT], meta[WIDTH], last
+    )
+    if ring_of_force.size:
+        hear(force, n, ring_of_force, start)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def render_kept(t, h, outputs, by_python, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
     its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
-    (gathered if stale) from the tables ``t`` (ugens.modal_budget). A bank with nothing to
-    compute (not :func:`heard_lately`, no mode sounding, no force sample before) writes
-    zeros. Returns the modes computed times frames (each bank's active count after
-    its span)."""
+    (gathered if stale) from the tables ``t`` (ugens.modal_budget), or :func:`ramp_kept`
+    while its coefficients ramp. A bank with nothing to compute (not
+    :func:`heard_lately`, no mode sounding, no force sample before, no ramp) writes
+    zeros. Returns the modes computed times frames (each bank's active count after its
+    span)."""
     work = 0
     for b in range(by_python.size):
         if by_python[b]:
             continue
         out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         busy = heard_lately(h, b)
-        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0:
+        ramping = t.meta[b, RAMP_LEFT] > 0
+        if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0 and not ramping:
             for i in range(n):
                 out[i] = 0.0
             continue
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
-        compact, meta = compact_bank(t, b), t.compact_meta[b]
         ring_of_force = t.rings[b] if busy else t.rings[b, :0]
-        kept_step(
-            force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
-        )
+        meta = t.compact_meta[b]
+        if ramping:
+            ramp_kept(t, b, force, out, start, n, ring_of_force)
+        else:
+            compact = compact_bank(t, b)
+            kept_step(
+                force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
+            )
         active = min(meta[ACTIVE], t.meta[b, ALLOWED])
         t.meta[b, ACTIVE] = active
         work += active * n
@@ -193,25 +239,60 @@ def expect_impacts(h, kicks, count, at, period, state):
 #: Fields of a :class:`jassy.anytime_rank.Hearing`.
 HEARING_FIELDS = len(Hearing._fields)
 
+#: Slots of a budget's step handle (jassy.record_views) where its records start: the
+#: tables (ugens.modal_budget.BudgetTables), the Hearing, the banks' output addresses and
+#: the by-Python mask, the Kicks (jassy.anytime_rank), the step state, the Decision.
+HEARING_AT = TABLE_FIELDS * FIELD
+OUTPUTS_AT = HEARING_AT + HEARING_FIELDS * FIELD
+KICKS_AT = OUTPUTS_AT + 2 * FIELD
+STATE_AT = KICKS_AT + 6 * FIELD
+DECISION_AT = STATE_AT + FIELD
+
 
 @nb.njit(cache=True)
-def advance_at(a, count, period, start, n, at, rendered):
+def impacts_at(a, count, at, period):
+    """ugens.modal_budget.load_impacts on the tables and Kicks of step handle ``a`` for a
+    decision at frame ``at`` (impacts count only at a period's start)."""
+    kicks = kicks_at(a, KICKS_AT)
+    return load_impacts(tables_at(a, 0), kicks, count, at, period if at % period == 0 else 0)
+
+
+@nb.njit(cache=True)
+def decide_at(a, rates):
+    """ugens.modal_budget.decide on the records of step handle ``a``, its impacts loaded
+    (:func:`impacts_at`), a force heard lately meaning in this or the last period; the
+    step state counts the decision and the most modes kept, and holds whether a mode
+    fades. Returns (whether a mode fades, modes computed)."""
+    t, h, d = tables_at(a, 0), hearing_at(a, HEARING_AT), decision_at(a, DECISION_AT)
+    state = int_row(a, STATE_AT)
+    for b in range(d.heard.size):
+        d.heard[b] = h.heard_now[b] or h.heard_before[b]
+    fading, total = decide(t, d, rates)
+    state[FADING] = fading
+    state[DECISIONS] += 1
+    state[PEAK] = max(state[PEAK], total)
+    return fading, total
+
+
+@nb.njit(cache=True)
+def advance_at(a, count, period, start, n, at, rendered, rates):
     """A mode budget's step over frames [at, start + n) of the sub-block [start, start + n)
-    (the banks rendered up to ``rendered``), in one compiled call, on the records of handle
-    ``a`` (jassy.record_views): the budget's tables, its Hearing, the banks' output
-    addresses, the by-Python mask, its Kicks and its step state, fields in that order. At
-    each period's start the impacts expected (:func:`expect_impacts`, from the first
-    ``count`` rows of the Kicks), in each stretch to the next period the forces
-    heard (jassy.anytime_rank.scan_forces), and the banks rendered (:func:`render_kept`)
-    up to the first frame where the budget decides: an impact comes in this or the next
-    period, a force was heard in the last one, a mode fades or every period is decided
-    (``state``: FADING, ANY_EXPECTED, EVERY_PERIOD of jassy.anytime_rank), or a force
-    nobody scheduled wakes a bank. Returns (that frame or the sub-block's end, the frame
-    rendered up to, modes computed times frames, whether to decide there)."""
-    i = (TABLE_FIELDS + HEARING_FIELDS) * FIELD
-    t, h = tables_at(a, 0), hearing_at(a, TABLE_FIELDS * FIELD)
-    outputs, by_python, kicks = int_row(a, i), bool_row(a, i + FIELD), kicks_at(a, i + 2 * FIELD)
-    state = int_row(a, i + 5 * FIELD)
+    (the banks rendered up to ``rendered``), in one compiled call, on the records of step
+    handle ``a`` (jassy.record_views; see DECISION_AT). At each period's start the
+    impacts expected (:func:`expect_impacts`, from the first ``count`` rows of the
+    Kicks), in each stretch to the next period the forces heard
+    (jassy.anytime_rank.scan_forces), and, if the step RENDERS, the banks rendered
+    (:func:`render_kept`) up to each frame where the budget decides: an impact comes in
+    this or the next period, a force was heard in the last one, a mode fades or every
+    period is decided (``state``: jassy.anytime_rank's step fields), or a force nobody
+    scheduled wakes a bank. With INLINE the step decides there itself (:func:`impacts_at`,
+    :func:`decide_at`, ``rates`` with the stretch's input samples) and goes on; else it
+    returns there. Returns (that frame or the sub-block's end, the frame rendered up to,
+    modes computed times frames, whether Python decides there)."""
+    t, h, kicks = tables_at(a, 0), hearing_at(a, HEARING_AT), kicks_at(a, KICKS_AT)
+    outputs, by_python = int_row(a, OUTPUTS_AT), bool_row(a, OUTPUTS_AT + FIELD)
+    state = int_row(a, STATE_AT)
+    renders = state[RENDERS] > 0
     end, work = start + n, 0
     while at < end:
         stop = min(end, (at // period + 1) * period)
@@ -219,15 +300,23 @@ def advance_at(a, count, period, start, n, at, rendered):
         coming = rotate and expect_impacts(h, kicks, count, at, period, state)
         heard, woken = scan_forces(h, at - start, stop - start, rotate)
         if woken or (rotate and (state[FADING] > 0 or state[EVERY_PERIOD] > 0 or coming or heard)):
-            if at > rendered:
+            if at > rendered and renders:
                 work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
                 h.unrendered[:] = False
-            return at, at, work, True
+            rendered = max(rendered, at)
+            if state[INLINE] == 0:
+                return at, rendered, work, True
+            impacts_at(a, count, at, period)
+            spans = Rates(
+                rates.sample_rate, rates.limit, rates.bonus, rates.shrink, at - start, stop - start,
+                rates.window_power,
+            )  # fmt: skip
+            decide_at(a, spans)
         at = stop
-    if end > rendered:
+    if end > rendered and renders:
         work += render_kept(t, h, outputs, by_python, rendered, end - rendered, rendered - start)
         h.unrendered[:] = False
-    return end, end, work, False
+    return end, max(rendered, end), work, False
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

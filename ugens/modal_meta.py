@@ -3,8 +3,9 @@
 A bank's meta (:class:`BankMeta`) says how many modes its kernels compute; an anytime
 budget's compact bank of the kept modes has its own (:class:`CompactMeta`), which
 :func:`ugens.modal.bank_step` reads as a bank's (the active count and its cap sit in the
-same slots). Kernels index the arrays by the slot constants below (cells.slot), which compile
-to the same loads as the numbers they replace.
+same slots), and so have the float32 modes of a mixed-precision bank (:class:`NarrowMeta`).
+Kernels index the arrays by the slot constants below (cells.slot), which compile to the
+same loads as the numbers they replace.
 """
 
 from __future__ import annotations
@@ -30,6 +31,15 @@ class CompactMeta(NamedTuple):
     width: int  #: the compact bank's modes (the kept ones padded to whole SIMD vectors)
 
 
+class NarrowMeta(NamedTuple):
+    """The int64 meta of a bank's float32 modes (ugens.modal.mixed_step), fields in this order."""
+
+    active: int  #: float32 modes computed, [0, active): the last audible one + 1
+    all: int  #: float32 modes in the rows (all become active when force arrives)
+    by_factor: int  #: 1: the decay-factor form (coefficient row 1 holds R^2 - c0); 0: the delta form
+
+
 ACTIVE, RAMP_LEFT, ALLOWED = (slot(BankMeta, key) for key in BankMeta._fields)
 GATHERED, WIDTH = (slot(CompactMeta, key) for key in ("gathered", "width"))
+NARROW_ACTIVE, NARROW_ALL, BY_FACTOR = (slot(NarrowMeta, key) for key in NarrowMeta._fields)
 assert (slot(CompactMeta, "active"), WIDTH) == (ACTIVE, ALLOWED)  # bank_step reads either

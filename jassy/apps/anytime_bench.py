@@ -77,7 +77,7 @@ def _timed_render(build, seconds: float, fraction: float | None):
             t = time.thread_time_ns()
             process(start, n, offset)
             if not stepping[0]:
-                spent[2] += n * int(bank.meta[0])  # modes active at the span's end (after flushing)
+                spent[2] += n * bank.active_modes()  # modes active at the span's end (after flushing)
             spent[0] += time.thread_time_ns() - t  # (the clock's own cost is the bank's, not the step's)
 
         return run

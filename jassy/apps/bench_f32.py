@@ -62,7 +62,7 @@ def _kernel_runner(
         state[:] = 0.0
         out[:] = 0.0
         last[0] = 0.0
-        resonate_delta(force, out, force.size, rows, g.size, last, by_factor)
+        resonate_delta(force, out, force.size, rows, g.size, None, 0, last, by_factor)
 
     run.output = out
     return run
@@ -77,6 +77,7 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
     from jassy.apps.bench import SAMPLE_RATE, _bank_runner, _best_times, random_model
     from jassy.apps.bench_c import c_runner, compile_modal_f32
     from ugens.modal import design, split_by_precision
+    from ugens.modal_meta import BY_FACTOR
 
     c_loop, note = compile_modal_f32()
     rows = []
@@ -87,7 +88,7 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
         c1, c2, s = design(model.frequencies, model.decays, SAMPLE_RATE)
         g = s * model.gains[0] / SAMPLE_RATE
         split = split_by_precision(np.stack([c1, c2, g, 0 * g, 0 * g, 0 * g]), SAMPLE_RATE)
-        by_factor = bool(split.rows.narrow_meta[2])
+        by_factor = bool(split.rows.narrow_meta[BY_FACTOR])
         kernel = _kernel_runner(force, c1, c2, g, by_factor)
         bank = _bank_runner(model, force, 1024, "mixed")
         row = {

@@ -2,7 +2,8 @@
 
 volume: 8-bit density volumes (NPZ/raw, procedural phantom); contact: voxel-sphere overlap
 kernels, brute-force moments, h inversion, Hertz friction and Russian-roulette erosion;
-octree: the multiresolution moment pyramid; loop: BurrSim (one haptic step), run_loop,
+octree: the multiresolution moment pyramid; update: one haptic step as one compiled call;
+loop: BurrSim (one haptic step), run_loop,
 the constant-force Descent and DrillTrack; bench: bench_burr.
 """
 

@@ -241,12 +241,12 @@ class ContactOptions(NamedTuple):
 
 
 CONTACT_VOXEL = np.dtype(
-    [("i", np.int64), ("j", np.int64), ("k", np.int64), ("dist2", np.float64), ("xi2", np.float64),
-     ("share", np.float64), ("radius", np.float64), ("removed", np.int64)]
+    [("i", np.int64), ("j", np.int64), ("k", np.int64), ("dist2", np.float64), ("dist", np.float64),
+     ("xi2", np.float64), ("share", np.float64), ("radius", np.float64), ("weight", np.float64)]
 )  # fmt: skip
-"""A gathered contact voxel: grid index (i, j, k), squared distance dist2 to the burr
-centre and xi2 to the axis along -n (voxel^2), surface share (voxel^2), contact-point
-radius (voxels) and the counter units eroded from it in this pass."""
+"""A gathered contact voxel: grid index (i, j, k), squared distance dist2 and distance dist
+to the burr centre and squared distance xi2 to the axis along -n (voxel^2, voxel), surface
+share (voxel^2), contact-point radius (voxels) and Hertz profile weight sqrt(1 - xi^2/a^2)."""
 
 
 CONTACT_TALLY = np.dtype(
@@ -259,19 +259,36 @@ CONTACT_TALLY = np.dtype(
 """What one surface pass adds up (SI): friction force (N) and torque (N m) about the burr
 centre, frictional power (W), expected and actual counter decrements, contact voxels, sum
 of their surface shares (m^2), the grid box [lo, hi] (inclusive; empty: lo > hi) of
-the voxels changed, and the number of voxels gathered into the scratch (each with its
-``removed`` decrement)."""
+the voxels changed, and the number of voxels gathered."""
+
+
+class Bricks(NamedTuple):
+    """The density's 2^shift-voxel bricks as an octree stores them: ``mom`` holds [m0, m1x,
+    m1y, m1z] per brick (m1 about the brick centre) from offset ``start``, ``by`` x ``bz``
+    bricks per i-slab and row. The surface pass subtracts each eroded voxel's decrement from
+    its brick. shift < 0: no bricks."""
+
+    mom: np.ndarray
+    start: int
+    shift: int
+    by: int
+    bz: int
+
+
+NO_BRICKS = Bricks(np.zeros(4), 0, -1, 1, 1)
 
 
 class ContactData(NamedTuple):
     """The eroding density (uint8 grid, modified in place), the roulette's splitmix64 state
     rng (1,) uint64, the scratch records of the gathered voxels (CONTACT_VOXEL; capacity:
-    the voxels of the burr ball's box) and the tally (one CONTACT_TALLY record)."""
+    the voxels of the burr ball's box), the tally (one CONTACT_TALLY record) and the
+    density's Bricks (NO_BRICKS without an octree)."""
 
     density: np.ndarray
     rng: np.ndarray
     voxels: np.ndarray
     tally: np.ndarray
+    bricks: Bricks
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -287,9 +304,22 @@ def _reset(d):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
+def _share(d2, R):
+    """(dsigma in voxel^2, radius of the contact point in voxels, distance d in voxels) of a
+    voxel at distance^2 d2: the intersection disc for voxels straddling the burr surface; the
+    voxel sphere's cross-section pi r^2 at the voxel's own position for voxels fully inside
+    the burr."""
+    r = R_VOXEL
+    d = math.sqrt(d2)
+    if r < R and d <= R - r:
+        return PI_R2, d, d
+    return disc_area(d, R, r), 0.5 * d + (R * R - r * r) / (2.0 * d), d
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
 def _gather(m, opt, d, defined, lo, hi):
     """Collect the occupied voxels in the burr ball (d < R + r) on the bone side (along -n)
-    into the scratch. Returns (count, max xi^2)."""
+    into the scratch, in grid order (i, then j, then k). Returns (count, max xi^2)."""
     dens, voxels = d.density, d.voxels
     cx, cy, cz = opt.centre[0], opt.centre[1], opt.centre[2]
     nvec = opt.normal
@@ -327,38 +357,26 @@ def _gather(m, opt, d, defined, lo, hi):
                 rec.k = k
                 rec.dist2 = d2
                 rec.xi2 = xi2
-                rec.removed = 0
                 xmax = max(xmax, xi2)
                 n += 1
     return n, xmax
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _share(d2, R):
-    """(dsigma in voxel^2, radius of the contact point in voxels) of a voxel at distance^2 d2:
-    the intersection disc for voxels straddling the burr surface; the voxel sphere's
-    cross-section pi r^2 at the voxel's own position for voxels fully inside the burr."""
-    r = R_VOXEL
-    d = math.sqrt(d2)
-    if r < R and d <= R - r:
-        return PI_R2, d
-    return disc_area(d, R, r), 0.5 * d + (R * R - r * r) / (2.0 * d)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def _shares(m, d, defined, count, a2):
-    """Surface share and contact radius of the gathered voxels inside the contact radius
-    (a2 = a^2); returns the sum of shares weighted by the Hertz profile sqrt(1 - xi^2/a^2)."""
+def _weights(d, defined, count, a2, R):
+    """Hertz profile weight sqrt(1 - xi^2/a^2) of each gathered voxel (1 with no normal),
+    a2 = a^2 > every xi^2; returns the sum of the shares times their weights."""
     voxels = d.voxels
     wsum = 0.0
     for n in range(count):
         rec = voxels[n]
-        if defined and rec.xi2 >= a2:
-            continue
-        ds, rc = _share(rec.dist2, m.radius)
+        ds, rc, dist = _share(rec.dist2, R)
         rec.share = ds
         rec.radius = rc
-        wsum += ds * (math.sqrt(1.0 - rec.xi2 / a2) if defined else 1.0)
+        rec.dist = dist
+        w = math.sqrt(1.0 - rec.xi2 / a2) if defined else 1.0
+        rec.weight = w
+        wsum += rec.share * w
     return wsum
 
 
@@ -373,10 +391,29 @@ def _grow_box(t, i, j, k):
     t.hi_k = max(t.hi_k, k)
 
 
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
+def _erode_brick(bricks, i, j, k, dec):
+    """Subtract a voxel's decrement from its brick's moments: m0 -= dec, m1 -= dec (x - c),
+    c the brick centre (integer counts times half-integer offsets: exact in float64)."""
+    mom, start, shift, by, bz = bricks
+    if shift < 0:
+        return
+    s = 1 << shift
+    half = 0.5 * (s - 1)
+    bi = i >> shift
+    bj = j >> shift
+    bk = k >> shift
+    q = start + ((bi * by + bj) * bz + bk) * 4
+    mom[q] -= dec
+    mom[q + 1] -= dec * (i - (bi * s + half))
+    mom[q + 2] -= dec * (j - (bj * s + half))
+    mom[q + 3] -= dec * (k - (bk * s + half))
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _apply(m, opt, d, defined, count, a2, p_scale):
-    """Friction, frictional power and (with opt.erode) erosion of each contact voxel under
-    the pressure p_scale * sqrt(1 - xi^2/a^2) (Pa)."""
+def _apply(m, opt, d, count, p_scale):
+    """Friction, frictional power and (with opt.erode) erosion of each gathered voxel under
+    the pressure p_scale * weight (Pa); eroded voxels leave their bricks too."""
     voxels, t = d.voxels, d.tally[0]
     cx, cy, cz = opt.centre[0], opt.centre[1], opt.centre[2]
     omega, vtool = opt.omega, opt.velocity
@@ -385,18 +422,14 @@ def _apply(m, opt, d, defined, count, a2, p_scale):
     s_state = d.rng[0]
     for n in range(count):
         rec = voxels[n]
-        xi2 = rec.xi2
-        if defined and xi2 >= a2:
-            continue
-        ds, rc = rec.share, rec.radius
+        ds = rec.share
         if ds <= 0.0:
             continue
-        w = math.sqrt(1.0 - xi2 / a2) if defined else 1.0
         i = rec.i
         j = rec.j
         k = rec.k
-        dist = math.sqrt(rec.dist2)
-        rp = rc / dist * voxel if dist > 0.0 else 0.0
+        dist = rec.dist
+        rp = rec.radius / dist * voxel if dist > 0.0 else 0.0
         px = (i - cx) * rp
         py = (j - cy) * rp
         pz = (k - cz) * rp
@@ -404,7 +437,7 @@ def _apply(m, opt, d, defined, count, a2, p_scale):
         vy = omega[2] * px - omega[0] * pz + vtool[1]
         vz = omega[0] * py - omega[1] * px + vtool[2]
         sp = math.sqrt(vx * vx + vy * vy + vz * vz)
-        fn = p_scale * w * ds * area_scale  # N of normal load on this voxel
+        fn = p_scale * rec.weight * ds * area_scale  # N of normal load on this voxel
         if sp > 0.0:
             f = mu * fn / sp
             fx = -f * vx
@@ -433,24 +466,16 @@ def _apply(m, opt, d, defined, count, a2, p_scale):
                 dec = float(c)
             if dec > 0.0:
                 dens[i, j, k] = np.uint8(int(c) - int(dec))
-                rec.removed = int(dec)
+                _erode_brick(d.bricks, i, j, k, dec)
                 t.removed += dec
                 _grow_box(t, i, j, k)
     d.rng[0] = s_state
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def surface_pass(model, options, data):
-    """:func:`contact_pass` on a BurrModel, ContactOptions and ContactData given as plain
-    tuples (numba types a plain tuple's fields in C, a NamedTuple's in Python: ~0.5 us a
-    field per call at haptic rate)."""
-    contact_pass(BurrModel(*model), ContactOptions(*options), ContactData(*data))
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
 def contact_pass(m, opt, d):
     """Hertz pressure, friction and erosion over the burr's contact voxels; fills d.tally
-    and the changed box.
+    and the changed box, and keeps d.bricks' moments equal to the eroded density's.
 
     Grid units in, SI out. Contact voxels: the occupied voxels in the burr ball on the bone
     side (along -n; all of them if the normal is zeros, i.e. undefined), each with a surface
@@ -477,9 +502,8 @@ def contact_pass(m, opt, d):
     count, xi2max = _gather(m, opt, d, defined, lo, hi)
     d.tally[0].gathered = count
     a = max(opt.a_hertz, math.sqrt(xi2max) + R_VOXEL)
-    a2 = a * a
-    wsum = _shares(m, d, defined, count, a2)
+    wsum = _weights(d, defined, count, a * a, R)
     if wsum <= 0.0 or opt.load <= 0.0:
         return
     p_scale = opt.load / (wsum * m.voxel * m.voxel)  # Pa per unit weight
-    _apply(m, opt, d, defined, count, a2, p_scale)
+    _apply(m, opt, d, count, p_scale)

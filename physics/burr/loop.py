@@ -1,6 +1,7 @@
 """The haptic-rate burr simulation: pose in, force out; and the constant-force descent.
 
-One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
+One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003), one compiled call
+(:func:`physics.burr.update.haptic_update`):
 
 1. moments m0, m1 of the density in the burr ball (octree or brute-force voxel sum);
 2. n = -m1/|m1| (out of the bone), h from m0 = pi rho0 R^3 (h/R)^2 (1 - h/(3R)) and the
@@ -9,9 +10,9 @@ One :meth:`BurrSim.step` (Agus et al., IEEE VR 2002/2003):
 3. the Hertz pressure P(xi) = P0 sqrt(1 - xi^2/a^2), a = sqrt(R h), P0 = 3|F_e|/(2 pi a^2)
    (normalised on the voxels), friction mu P dsigma against the sliding velocity of each
    voxel's burr-surface point (spin omega x p plus tool velocity) and the frictional power;
-4. erosion: each voxel loses K_er * power_i * dt kg (8-bit counter, Russian roulette), and
-   each eroded voxel's decrement is subtracted from its octree brick and the levels above
-   are rebuilt over the changed box.
+4. erosion: each voxel loses K_er * power_i * dt kg (8-bit counter, Russian roulette), its
+   decrement is subtracted from its octree brick as it is eroded, and the levels above are
+   rebuilt over the changed box.
 
 Units: SI (m, N, rad/s, kg); the volume's counters are density fractions of ``rho_full``.
 The force returned is the force of the bone on the burr (what the haptic device renders).
@@ -20,7 +21,6 @@ The force returned is the force of the bone on the burr (what the haptic device 
 from __future__ import annotations
 
 import math
-from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -28,20 +28,20 @@ import numpy as np
 
 from jassy.errors import JassyError
 from jassy.events import ContactTrack, HapticFrame
+from jassy.jit import specialise
 from physics.burr.contact import (
     CONTACT_TALLY,
     CONTACT_VOXEL,
+    NO_BRICKS,
     BurrModel,
     ContactData,
-    ContactOptions,
     brute_moments,
-    depth_from_m0,
-    surface_pass,
 )
-from physics.burr.octree import Octree
+from physics.burr.octree import Octree, Pyramid
+from physics.burr.update import STEP_RESULT, Burr, haptic_update, unpack
 from physics.burr.volume import Volume
 
-_Tally = namedtuple("_Tally", CONTACT_TALLY.names)  # a CONTACT_TALLY record as Python numbers
+_FLOAT64 = np.dtype(np.float64)
 
 
 @dataclass
@@ -107,21 +107,38 @@ class DrillTrack(ContactTrack):
 
 
 class BurrSim:
-    """A spherical burr against an eroding voxel volume (the volume's array is modified)."""
+    """A spherical burr against an eroding voxel volume (the volume's array is modified).
+    The params and the volume's voxel size and origin are read once, here."""
 
     def __init__(self, volume: Volume, params: BurrParams | None = None, seed: int = 0):
         self.volume = volume
-        self.params = params or BurrParams()
-        self.params.check()
-        self.octree = Octree(volume.density) if self.params.method == "octree" else None
+        self.params = p = params or BurrParams()
+        p.check()
+        self.octree = Octree(volume.density) if p.method == "octree" else None
         self._mom = np.zeros(4)
-        side = 2 * int(math.ceil(self.params.radius / volume.voxel + 1.0)) + 3
+        side = 2 * int(math.ceil(p.radius / volume.voxel + 1.0)) + 3
         cap = side**3
         rng = np.array([seed], dtype=np.uint64)
-        self.data = ContactData(volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY))
-        self._data_fields = tuple(self.data)
+        bricks = self.octree.bricks() if self.octree is not None else NO_BRICKS
+        self.data = ContactData(
+            volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY), bricks
+        )
         self.removed_total = 0.0
         self.work_total = 0.0
+        v = volume
+        leaf = int(p.leaf) if self.octree is not None else 0
+        burr = Burr(float(p.radius), p.radius / v.voxel, float(p.c_e), float(p.rho0), float(v.voxel),
+                    v.voxel**3, v.voxel**4, v.origin, leaf)  # fmt: skip
+        model = BurrModel(p.radius / v.voxel, float(v.voxel), float(p.mu), self.kmass)
+        if self.octree is not None:
+            moments = (tuple(self.octree.pyramid), self.octree.stack, np.zeros(4))
+        else:  # an empty pyramid of the right types; brute force reads the density
+            empty = Pyramid(v.density, 0, 0, np.zeros(4), np.zeros(2, np.int64), np.zeros((1, 3), np.int64))
+            moments = (tuple(empty), np.zeros((8, 4), np.int64), np.zeros(4))
+        self._result = np.zeros(1, STEP_RESULT)
+        self._fixed = (tuple(burr), tuple(model), moments)
+        self._data_fields = (*self.data[:4], tuple(bricks))
+        self._update = None  # haptic_update's typed entry point, found at the first step
 
     @property
     def kmass(self) -> float:
@@ -144,48 +161,44 @@ class BurrSim:
         """One haptic update at burr centre ``centre`` (m), spin ``omega`` (rad/s vector),
         tool velocity (m/s); erodes for ``dt`` seconds if ``erode``. Returns a ContactState."""
         p, v = self.params, self.volume
-        R = p.radius
-        m0, m1 = self.moments(centre)
-        norm = math.sqrt(float(m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2]))
-        normal = np.zeros(3)
-        if m0 > 0 and norm > 1e-9 * m0 * R:
-            normal = -m1 / norm
-        h = float(depth_from_m0(m0, p.rho0, R))
-        load = p.c_e * R * R * (h / R) ** 1.5
-        elastic = load * normal
-        a = math.sqrt(R * h) / v.voxel
-        g = v.to_grid(centre)
-        omega = omega if isinstance(omega, np.ndarray) else np.asarray(omega, dtype=np.float64)
-        velocity = velocity if isinstance(velocity, np.ndarray) else np.asarray(velocity, dtype=np.float64)
-        options = ContactOptions(g, normal, a, load, omega.astype(np.float64, copy=False),
-                                 velocity.astype(np.float64, copy=False), float(dt), bool(erode))  # fmt: skip
-        d = self.data
-        surface_pass(tuple(BurrModel(R / v.voxel, float(v.voxel), float(p.mu), self.kmass)), tuple(options),
-                     self._data_fields)  # fmt: skip
-        t = _Tally(*d.tally[0].item())
-        if self.octree is not None and t.removed > 0:
-            box = np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k], dtype=np.int64)
-            self.octree.erode(d.voxels, t.gathered, box)
-        friction = np.array([t.force_x, t.force_y, t.force_z])
-        power = t.power
-        removed = t.removed * v.mass_per_count
+        pose = (_vector(centre, "centre"), _vector(omega, "omega"), _vector(velocity, "velocity"), float(dt),
+                bool(erode))  # fmt: skip
+        burr, model, moments = self._fixed
+        args = (burr, model, moments, pose, self._data_fields, self._result)
+        if self._update is None:  # the same types at every step: one typed entry point
+            self._update = specialise(haptic_update, *args)
+        self._update(*args)
+        (force, elastic, friction, torque, normal, m1), scalars = unpack(self._result)
+        m0, h, load, power, removed, expected, area = scalars
+        removed *= v.mass_per_count
         self.removed_total += removed
         self.work_total += power * dt if erode else 0.0
         return ContactState(
-            force=elastic + friction,
+            force=force,
             elastic=elastic,
             friction=friction,
-            torque=np.array([t.torque_x, t.torque_y, t.torque_z]),
+            torque=torque,
             normal=normal,
             depth=h,
             m0=m0,
             m1=m1,
             power=power,
             removed=removed,
-            expected=t.expected * v.mass_per_count,
-            contact_area=t.area,
+            expected=expected * v.mass_per_count,
+            contact_area=area,
             slip_speed=power / (p.mu * load) if p.mu > 0 and load > 0 else 0.0,
         )
+
+
+def _vector(x, name: str) -> np.ndarray:
+    """``x`` as a writeable C-contiguous float64 array of shape (3,) (the update's types)."""
+    if type(x) is np.ndarray and x.dtype is _FLOAT64 and x.shape == (3,) and x.flags.c_contiguous \
+            and x.flags.writeable:  # fmt: skip
+        return x
+    v = np.array(x, dtype=np.float64)
+    if v.shape != (3,):
+        raise JassyError(f"BurrSim.step: {name}: expected 3 numbers, got shape {v.shape}")
+    return v
 
 
 Controller = Callable[[float, "ContactState | None"], tuple]

@@ -38,7 +38,16 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import specialise
-from physics.burr.contact import FASTMATH, R_VOXEL, Ball, Box, lens_centroid, lens_volume, voxel_moments
+from physics.burr.contact import (
+    FASTMATH,
+    R_VOXEL,
+    Ball,
+    Box,
+    Bricks,
+    lens_centroid,
+    lens_volume,
+    voxel_moments,
+)
 
 
 class Pyramid(NamedTuple):
@@ -160,11 +169,11 @@ def _update(dens, base, top, mom, off, dims, box):
             for bk in range(box[2] >> base, (box[5] >> base) + 1):
                 idx = off[base] + ((bi * by + bj) * bz + bk) * 4
                 _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
-    _build_parents(base, top, mom, off, dims, box)
+    build_parents(base, top, mom, off, dims, box)
 
 
 @nb.njit(cache=True)
-def _build_parents(base, top, mom, off, dims, box):
+def build_parents(base, top, mom, off, dims, box):
     """Recompute the blocks above ``base`` that hold voxels of box [i0, j0, k0, i1, j1, k1]."""
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
@@ -178,39 +187,8 @@ def _build_parents(base, top, mom, off, dims, box):
         _build_parent(level, mom, off, dims, lo, hi)
 
 
-@nb.njit(cache=True)
-def _erode(base, top, mom, off, dims, voxels, count, box):
-    """Refresh the pyramid after erosion: subtract each eroded voxel of the scratch records
-    voxels[:count] (fields i, j, k, removed) from its brick, m0 -= dec, m1 -= dec (x - c_I),
-    then rebuild the blocks above from the changed box [i0, j0, k0, i1, j1, k1]. The moments
-    are sums of integer counts times half-integer offsets, exact in float64, so this equals
-    re-reading the bricks (:func:`_update`) bit for bit."""
-    if box[3] < box[0]:
-        return
-    s = 1 << base
-    half = 0.5 * (s - 1)
-    by, bz = dims[base, 1], dims[base, 2]
-    for n in range(count):
-        rec = voxels[n]
-        dec = float(rec.removed)
-        if dec == 0.0:
-            continue
-        i = rec.i
-        j = rec.j
-        k = rec.k
-        bi = i >> base
-        bj = j >> base
-        bk = k >> base
-        idx = off[base] + ((bi * by + bj) * bz + bk) * 4
-        mom[idx] -= dec
-        mom[idx + 1] -= dec * (i - (bi * s + half))
-        mom[idx + 2] -= dec * (j - (bj * s + half))
-        mom[idx + 3] -= dec * (k - (bk * s + half))
-    _build_parents(base, top, mom, off, dims, box)
-
-
 @nb.njit(cache=True, fastmath=FASTMATH)
-def _descend(pyramid, ball, leaf, out, stack):
+def descend(pyramid, ball, leaf, out, stack):
     """Moments of the Pyramid's density inside the burr's Ball into out (module docstring);
     returns the blocks visited. stack: int64 scratch (8 (levels + 1), 4) of pending blocks."""
     dens, base, top, mom, off, dims = pyramid
@@ -355,10 +333,10 @@ class Octree:
         self.off = off
         self.mom = np.zeros(int(off[-1]))
         # a depth-first stack never holds more than 8 entries per level
-        self._stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
+        self.stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
         self._out = np.zeros(4)
-        self._pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
-        self._descend_run = None  # _descend's typed entry point, found at the first call
+        self.pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
+        self._descend_run = None  # descend's typed entry point, found at the first call
         self.rebuild()
 
     def rebuild(self) -> None:
@@ -376,20 +354,18 @@ class Octree:
         """Refresh after the voxels in box [i0, j0, k0, i1, j1, k1] (inclusive) changed."""
         _update(self.density, self.base, self.top, self.mom, self.off, self.dims, box)
 
-    def erode(self, voxels: np.ndarray, count: int, box: np.ndarray) -> None:
-        """Refresh after erosion: subtract the decrements recorded in voxels[:count]
-        (CONTACT_VOXEL records of :mod:`physics.burr.contact`, field ``removed``) from their
-        bricks without re-reading them, then rebuild the levels above over ``box`` [i0, j0,
-        k0, i1, j1, k1] (inclusive), the box of the changed voxels."""
-        _erode(self.base, self.top, self.mom, self.off, self.dims, voxels, int(count), box)
+    def bricks(self) -> Bricks:
+        """The base level, whose moments the surface pass erodes (a view of ``mom``)."""
+        d = self.dims[self.base]
+        return Bricks(self.mom, int(self.off[self.base]), self.base, int(d[1]), int(d[2]))
 
     def moments(self, centre, R: float, leaf: int = 1) -> tuple[np.ndarray, int]:
         """(m0, m1 about ``centre``) in grid units for a burr of radius R (voxels), and the
         number of blocks visited. ``leaf``: side (voxels) at or below which partial blocks
         use the partial-volume rule (1 = exact voxel sum)."""
         ball = Ball(float(centre[0]), float(centre[1]), float(centre[2]), float(R))
-        args = (self._pyramid, ball, int(leaf), self._out, self._stack)
+        args = (self.pyramid, ball, int(leaf), self._out, self.stack)
         if self._descend_run is None:  # the same types at every call: one typed entry point
-            self._descend_run = specialise(_descend, *args)
+            self._descend_run = specialise(descend, *args)
         visits = self._descend_run(*args)
         return self._out.copy(), int(visits)
