@@ -50,13 +50,25 @@ def parse_surface_point(value: Any, where: str) -> SurfacePoint:
     return SurfacePoint(float(value[0]), float(value[1]))
 
 
-def plate_shapes(orders_x: np.ndarray, orders_y: np.ndarray, u: Any, v: Any) -> np.ndarray:
+def plate_shapes(
+    orders_x: np.ndarray, orders_y: np.ndarray, u: Any, v: Any, pi_last: bool = False
+) -> np.ndarray:
     """phi_k(u, v) = sin(m_k pi u) sin(n_k pi v), the mode shapes of a simply supported
     rectangular plate (orders m_k, n_k) at (u, v) = (x / a, y / b): (modes,) for a point given
-    by two numbers, (points, modes) for arrays of u and v."""
+    by two numbers, (points, modes) for arrays of u and v.
+
+    Each sine's argument is rounded as (pi m) u, or as pi (m u) with ``pi_last``: the two
+    differ in the last bits. The runtime surface and the glass plate's model
+    file use the first, the files of :func:`patches.models_surface.ss_plate_model` were
+    written with the second, and each keeps its bits."""
     u = np.asarray(u, dtype=np.float64)[..., None]
     v = np.asarray(v, dtype=np.float64)[..., None]
-    return np.sin(np.pi * orders_x * u) * np.sin(np.pi * orders_y * v)
+    return np.sin(_sine_argument(orders_x, u, pi_last)) * np.sin(_sine_argument(orders_y, v, pi_last))
+
+
+def _sine_argument(orders: np.ndarray, x: np.ndarray, pi_last: bool) -> np.ndarray:
+    """pi m x, rounded as pi (m x) if ``pi_last`` else as (pi m) x (:func:`plate_shapes`)."""
+    return np.pi * (orders * x) if pi_last else np.pi * orders * x
 
 
 class PlateSurface(NamedTuple):

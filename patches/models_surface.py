@@ -38,22 +38,30 @@ gets exactly these gains and driving-point gains at any point, not only at the r
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from jassy.modal_model import ModalModel
 from jassy.surface import PlateSurface, plate_shapes
 
 
+class Plate(NamedTuple):
+    """A simply supported rectangular plate, orthotropic along its sides (SI units)."""
+
+    a: float  #: side along x (m)
+    b: float  #: side along y (m)
+    h: float  #: thickness (m)
+    rho: float  #: density (kg/m^3)
+    e1: float  #: Young's modulus along a (Pa)
+    e2: float  #: Young's modulus along b (Pa)
+    nu: float  #: Poisson's ratio
+    eta: float  #: loss factor
+    d0: float  #: constant decay (1/s): air and supports
+
+
 def ss_plate_model(
-    a: float,
-    b: float,
-    h: float,
-    rho: float,
-    e1: float,
-    e2: float,
-    nu: float,
-    eta: float,
-    d0: float,
+    plate: Plate,
     track: tuple[tuple[float, float], tuple[float, float]] | None,
     pickup: tuple[float, float],
     n_points: int = 9,
@@ -64,15 +72,14 @@ def ss_plate_model(
     between: int = 0,
     digits: int | None = None,
 ) -> ModalModel:
-    """The lowest ``n_modes`` modes below ``f_max`` Hz of a simply supported plate.
+    """The lowest ``n_modes`` modes below ``f_max`` Hz of a simply supported ``plate``.
 
-    a, b: sides (m); h: thickness (m); rho: density (kg/m^3); e1, e2: Young's moduli
-    along a and b (Pa); nu: Poisson's ratio; eta: loss factor; d0: constant decay (1/s).
     Locations: ``n_points`` points t0 .. t{n-1} evenly spaced on the straight ``track``
     between two (x/a, y/b) points, with ``between`` more in each interval (module docstring),
     or the named (x/a, y/b) ``points``; pickup: (x/a, y/b) of the listening point. ``digits``:
     round gains to that many significant digits (smaller files for dense tracks).
     """
+    a, b, h, rho, e1, e2, nu, eta, d0 = plate
     d1 = e1 * h**3 / (12 * (1 - nu**2))
     d2 = e2 * h**3 / (12 * (1 - nu**2))
     hub = np.sqrt(d1 * d2)
@@ -88,12 +95,12 @@ def ss_plate_model(
     if points is None:
         w, names = track_points(n_points, between)
         (u0, v0), (u1, v1) = track
-        at = plate_shapes(m, n, u0 + w * (u1 - u0), v0 + w * (v1 - v0))
+        at = plate_shapes(m, n, u0 + w * (u1 - u0), v0 + w * (v1 - v0), pi_last=True)
     else:
         uv = np.array(list(points.values()), dtype=np.float64)
-        at = plate_shapes(m, n, uv[:, 0], uv[:, 1])
+        at = plate_shapes(m, n, uv[:, 0], uv[:, 1], pi_last=True)
         names = tuple(points)
-    listen = plate_shapes(m, n, pickup[0], pickup[1])
+    listen = plate_shapes(m, n, pickup[0], pickup[1], pi_last=True)
     gains = at * listen / mass  # strike to pickup: signed
     # at the strike point itself, for contacts in a closed loop: a displacement receptance
     driving = at * at / (mass * 2 * np.pi * freqs)
@@ -122,7 +129,7 @@ def tin_sheet_model() -> ModalModel:
     x/a = (i + 0.5)/4, y/b = (j + 0.5)/3, for impacts spread over the sheet (rain, hail)."""
     grid = {f"x{i}y{j}": ((i + 0.5) / 4, (j + 0.5) / 3) for i in range(4) for j in range(3)}
     return ss_plate_model(
-        a=0.5, b=0.35, h=0.0008, rho=7850.0, e1=200e9, e2=200e9, nu=0.3, eta=1e-3, d0=3.0, track=None,
+        Plate(a=0.5, b=0.35, h=0.0008, rho=7850.0, e1=200e9, e2=200e9, nu=0.3, eta=1e-3, d0=3.0), track=None,
         pickup=(0.31, 0.43), n_modes=2000, f_max=16000.0, name="tin_sheet", points=grid,
     )  # fmt: skip
 
@@ -132,15 +139,7 @@ def steel_plate_model() -> ModalModel:
     for seconds. Track t0 .. t8 with 7 points between each pair (65 points, 7.5 mm apart: more
     than 4 per bending wavelength at 16 kHz, 35 mm); gains to 7 significant digits."""
     return ss_plate_model(
-        a=0.6,
-        b=0.45,
-        h=0.002,
-        rho=7850.0,
-        e1=200e9,
-        e2=200e9,
-        nu=0.3,
-        eta=2e-4,
-        d0=1.5,
+        Plate(a=0.6, b=0.45, h=0.002, rho=7850.0, e1=200e9, e2=200e9, nu=0.3, eta=2e-4, d0=1.5),
         track=((0.12, 0.3), (0.88, 0.62)),
         pickup=(0.37, 0.71),
         n_modes=1000,
@@ -157,15 +156,7 @@ def wood_board_model() -> ModalModel:
     t0 .. t8 with 3 points between each pair (33 points, 20 mm apart: 4 per bending
     wavelength along the grain at 20 kHz, 90 mm); gains to 7 significant digits."""
     return ss_plate_model(
-        a=0.8,
-        b=0.3,
-        h=0.018,
-        rho=450.0,
-        e1=10e9,
-        e2=0.8e9,
-        nu=0.3,
-        eta=0.015,
-        d0=8.0,
+        Plate(a=0.8, b=0.3, h=0.018, rho=450.0, e1=10e9, e2=0.8e9, nu=0.3, eta=0.015, d0=8.0),
         track=((0.1, 0.5), (0.9, 0.4)),
         pickup=(0.33, 0.62),
         n_modes=200,
@@ -189,7 +180,7 @@ def door_model() -> ModalModel:
         "hinge_edge": (0.08, 0.5),
     }
     return ss_plate_model(
-        a=0.8, b=2.0, h=0.04, rho=450.0, e1=0.8e9, e2=10e9, nu=0.3, eta=0.02, d0=6.0, track=None,
+        Plate(a=0.8, b=2.0, h=0.04, rho=450.0, e1=0.8e9, e2=10e9, nu=0.3, eta=0.02, d0=6.0), track=None,
         pickup=(0.4, 0.6), n_modes=1000, f_max=16000.0, name="door", points=points,
     )  # fmt: skip
 

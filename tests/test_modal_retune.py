@@ -131,3 +131,25 @@ def assert_retuned(coef, y1, y2, correction, want):
     np.testing.assert_allclose(y1, want[1], rtol=1e-12, atol=1e-13 * scale)
     np.testing.assert_allclose(y2, want[2], rtol=1e-12, atol=1e-13 * scale)
     assert abs(correction - want[3]) <= 1e-12 * abs(want[3]) + 1e-15
+
+
+def test_each_design_rounds_where_its_caller_runs():
+    """One resonator formula, two evaluations: ModalBank's compiled rows take libm's exp, sin
+    and cos per mode (Python's math module, the same library), ugens.modal.design numpy's
+    vectorised ones (with AVX-512 the two exps differ in some last bits, so renders keep
+    the bits of where their design ran)."""
+    import math
+
+    from ugens.modal import design, mode_poles
+
+    rng = np.random.default_rng(5)
+    freqs, decays = rng.uniform(20.0, 30000.0, 4000), rng.uniform(0.1, 3000.0, 4000)
+    c1, c2, s, _ = mode_poles(freqs, decays, FS)
+    per_mode = [(math.exp(-d / FS), 2.0 * math.pi * f / FS) for f, d in zip(freqs, decays, strict=True)]
+    libm = np.array([(2.0 * r * math.cos(t), r * r, r * math.sin(t)) for r, t in per_mode]).T
+    sounding = freqs < FS / 2
+    libm[:, ~sounding] = 0.0
+    np.testing.assert_array_equal(np.stack([c1, c2, s]), libm)
+    r, theta = np.exp(-decays / FS), 2.0 * np.pi * freqs / FS
+    vectorised = np.where(sounding, [2.0 * r * np.cos(theta), r * r, r * np.sin(theta)], 0.0)
+    np.testing.assert_array_equal(np.stack(design(freqs, decays, FS)), vectorised)

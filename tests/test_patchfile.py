@@ -163,10 +163,7 @@ def test_shipped_models_are_the_builders_output():
         built = builder()
         np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-15)
         np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-15)
-        # plate shapes near their nodal lines: the builder's product of sines rounds
-        # differently from the one the file was written with (<= 1.2e-14 of the peak)
-        peak = np.max(np.abs(built.gains))
-        np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15, atol=1e-13 * peak)
+        np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15)
         assert shipped.points == built.points
 
 

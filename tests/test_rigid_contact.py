@@ -800,6 +800,28 @@ def test_concave_body_rests_on_another_crosswise():
     assert np.max(np.abs(result.pos[-10:, 2] - rest)) < 2e-5
 
 
+def _run_data(world, opt, rec, steps=1, warm_contacts=st.MAX_CONTACTS):
+    """Data for ``steps`` steps of ``world`` from its initial state, as simulate builds it:
+    no kinematic bodies, the record buffer ``rec``, fresh statistics, no pose samples, an empty
+    warm start for ``warm_contacts`` contacts."""
+    state = world.initial_state()
+    return st.new_data(
+        world.model(),
+        opt,
+        state.pos,
+        state.quat,
+        state.phi,
+        np.zeros((steps + 1, 0, 3)),
+        np.zeros((steps + 1, 0, 4)),
+        rec,
+        st.new_stats(),
+        np.zeros((0, len(world.bodies), 13)),
+        1,
+        0,
+        new_warm_start(warm_contacts),
+    )
+
+
 def _drop(places, tiny_scratch, steps=600):
     """Balls (r = 2 cm, e = 0.5) dropped from ``places`` ((x, z) of their centres, m) on a
     floor for ``steps`` steps of 1 ms: (final state arrays, records); with ``tiny_scratch`` the
@@ -809,22 +831,8 @@ def _drop(places, tiny_scratch, steps=600):
     w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
     for k, (x, z) in enumerate(places):
         w.add(Body(f"ball{k}", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), Placement(position=(x, 0, z)))
-    model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
-    data = st.new_data(
-        model,
-        opt,
-        state.pos,
-        state.quat,
-        state.phi,
-        np.zeros((steps + 1, 0, 3)),
-        np.zeros((steps + 1, 0, 4)),
-        np.empty((1 << 14, codes.REC_WIDTH)),
-        st.new_stats(),
-        np.zeros((0, n, 13)),
-        1,
-        0,
-        new_warm_start(st.MAX_CONTACTS),
-    )
+    model, opt, n = w.model(), w.params.options(), len(w.bodies)
+    data = _run_data(w, opt, np.empty((1 << 14, codes.REC_WIDTH)), steps)
     if tiny_scratch:
         data = data._replace(
             sweep=data.sweep._replace(pairs=np.empty((1, 2), np.int64)),
@@ -833,7 +841,7 @@ def _drop(places, tiny_scratch, steps=600):
         )
     data, done, nrec = st.run(model, opt, data, 0, steps, 0)
     assert done == steps
-    return (state.pos, state.quat, state.phi), data.rec[:nrec]
+    return (data.pos, data.quat, data.phi), data.rec[:nrec]
 
 
 def _fall_height(t, g=9.81, r=0.02):
@@ -884,23 +892,9 @@ def test_grown_scratch_makes_room_for_the_rest_of_the_step_or_raises():
     w = World(StepParams(h=1e-3))
     w.add(Body("ground", Plane(), Material("g", 1000, 0.5, 0.3), kind="static"))
     w.add(Body("ball", Sphere(0.02), Material("b", 1000, 0.5, 0.3)), Placement(position=(0, 0, 0.05)))
-    model, opt, state, n = w.model(), w.params.options(), w.initial_state(), len(w.bodies)
+    opt, n = w.params.options(), len(w.bodies)
     rec = np.arange(100.0 * codes.REC_WIDTH).reshape(100, codes.REC_WIDTH)
-    data = st.new_data(
-        model,
-        opt,
-        state.pos,
-        state.quat,
-        state.phi,
-        np.zeros((2, 0, 3)),
-        np.zeros((2, 0, 4)),
-        rec,
-        st.new_stats(),
-        np.zeros((0, n, 13)),
-        1,
-        0,
-        new_warm_start(st.MAX_CONTACTS),
-    )
+    data = _run_data(w, opt, rec)
     contacts = 2 * data.solver.idx.shape[0]
     data.progress.need[:] = (0, contacts)
     grown = st._grown(data, opt, 0, 90)
@@ -918,25 +912,10 @@ def test_unknown_contact_model_code_is_an_error():
     """The stepper's contact stage accepts the codes of StepParams.contact only; any other code
     raises instead of running some model."""
     world = _ball_world(0.5)
-    model, opt = world.model(), world.params.options()._replace(contact=7)
-    state = world.initial_state()
-    data = st.new_data(
-        model,
-        opt,
-        state.pos,
-        state.quat,
-        state.phi,
-        np.zeros((2, 0, 3)),
-        np.zeros((2, 0, 4)),
-        np.empty((4096, codes.REC_WIDTH)),
-        st.new_stats(),
-        np.zeros((0, len(world.bodies), 13)),
-        1,
-        0,
-        new_warm_start(16),
-    )
+    opt = world.params.options()._replace(contact=7)
+    data = _run_data(world, opt, np.empty((4096, codes.REC_WIDTH)), warm_contacts=16)
     with pytest.raises(ValueError, match="unknown contact model"):
-        st.run_steps(model, opt, data, 0, 1, 0)
+        st.run_steps(world.model(), opt, data, 0, 1, 0)
 
 
 def test_a_run_without_records_matches_the_run_that_keeps_them():

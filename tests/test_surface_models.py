@@ -17,7 +17,7 @@ from scipy import signal
 from jassy import ContactTrack, Event, Graph, ModalModel, PatchError, render
 from jassy.events import track_events
 from jassy.patchfile import load_patch
-from patches.models_surface import ss_plate_model
+from patches.models_surface import Plate, ss_plate_model
 from ugens.mix import Mixer
 from ugens.modal import ModalBank
 from ugens.noise import WhiteNoise
@@ -433,7 +433,9 @@ def segment(x, t0, t1):
 
 def test_plate_model_matches_kirchhoff_formula():
     a, b, h, rho, e, nu = 0.5, 0.4, 0.002, 7850.0, 200e9, 0.3
-    m = ss_plate_model(a, b, h, rho, e, e, nu, 1e-4, 1.0, ((0.1, 0.1), (0.5, 0.5)), (0.3, 0.7), n_modes=5)
+    m = ss_plate_model(
+        Plate(a, b, h, rho, e, e, nu, 1e-4, 1.0), ((0.1, 0.1), (0.5, 0.5)), (0.3, 0.7), n_modes=5
+    )
     d = e * h**3 / (12 * (1 - nu**2))
     pairs = sorted(((i / a) ** 2 + (j / b) ** 2, i, j) for i in range(1, 6) for j in range(1, 6))[:5]
     expected = [np.pi / 2 * np.sqrt(d / (rho * h)) * s for s, _, _ in pairs]

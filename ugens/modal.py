@@ -106,6 +106,7 @@ from ugens.modal_retune import (
     TOP_BAND_SIN,
     TopBand,
     pole_rows,
+    resonator,
     retune_state,
     size_changes,
 )
@@ -384,9 +385,9 @@ def mixed_span(force, out, start, n, a, floor):
 
 def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
     """Rows (c1, c2, s, d / g) = (2 R cos theta, R^2, R sin theta, :func:`direct_ratio`) per
-    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs: the one design of every modal
-    resonator (:func:`ugens.modal_retune.pole_rows`, which ModalBank also calls with its
-    scales). Modes at or above Nyquist get zero coefficients and gain (silent)."""
+    mode, float64, R = exp(-d / fs), theta = 2 pi f / fs, compiled as ModalBank designs its
+    modes (:func:`ugens.modal_retune.pole_rows`, which ModalBank calls with its scales).
+    Modes at or above Nyquist get zero coefficients and gain (silent)."""
     freqs = np.ascontiguousarray(frequencies, dtype=np.float64)
     rows, sin2, inv = np.empty((4, freqs.size)), np.empty(freqs.size), np.empty(freqs.size)
     decays = np.ascontiguousarray(decays, dtype=np.float64)
@@ -395,12 +396,17 @@ def mode_poles(frequencies, decays, sample_rate, fit="taylor") -> np.ndarray:
 
 
 def design(frequencies, decays, sample_rate):
-    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64 (:func:`mode_poles`).
+    """(c1, c2, s) = (2 R cos theta, R^2, R sin theta) per mode, float64: the resonator
+    formula of :func:`ugens.modal_retune.resonator` evaluated by numpy, as the closed-loop
+    ugens (Friction, RathRoll) and the benches design their modes (ModalBank runs the same
+    formula compiled, :func:`mode_poles`; the two differ in the last bit of some modes).
 
     Modes at or above Nyquist get zero coefficients and gain (silent).
     """
-    c1, c2, s, _ = mode_poles(frequencies, decays, sample_rate)
-    return c1, c2, s
+    frequencies = np.asarray(frequencies, dtype=np.float64)
+    c1, c2, s, _ = resonator(frequencies, np.asarray(decays, dtype=np.float64), sample_rate)
+    sounding = frequencies < sample_rate / 2
+    return np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.0), np.where(sounding, s, 0.0)
 
 
 def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):

@@ -66,6 +66,20 @@ def band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin):
     return (w * num_c - g * num_d) / den / g
 
 
+def resonator(f, decay, fs):
+    """(c1, c2, s, theta) = (2 R cos theta, R^2, R sin theta, theta) of a mode of f Hz
+    decaying at ``decay`` 1/s, R = e^{-decay / fs}, theta = 2 pi f / fs: the one formula of
+    every modal resonator. Numbers or arrays; numpy's exp rounds differently from numba's
+    (libm's) in the last bit, so each caller keeps the bits of where it runs: compiled per
+    mode in :func:`pole_rows` (ModalBank), vectorised by numpy in ugens.modal.design."""
+    r = np.exp(-decay / fs)
+    theta = 2.0 * np.pi * f / fs
+    return 2.0 * r * np.cos(theta), r * r, r * np.sin(theta), theta
+
+
+compiled_resonator = nb.njit(cache=True, inline="always", error_model="numpy")(resonator)
+
+
 @nb.njit(cache=True, error_model="numpy")
 def pole_rows(freqs, decays, freq_scale, decay_scale, fs, fit_band, top_band, poles, sin2, inv):
     """Per mode into poles (4, K): c1 = 2 R cos theta, c2 = R^2, s = R sin theta and the
@@ -78,13 +92,9 @@ def pole_rows(freqs, decays, freq_scale, decay_scale, fs, fit_band, top_band, po
     for k in range(freqs.size):
         f = freqs[k] * freq_scale
         decay = decays[k] * decay_scale
-        r = math.exp(-decay / fs)
-        theta = 2.0 * math.pi * f / fs
-        c1 = c2 = s = ratio = 0.0
+        c1 = c2 = s = ratio = theta = 0.0
         if f < fs / 2:
-            c1 = 2.0 * r * math.cos(theta)
-            c2 = r * r
-            s = r * math.sin(theta)
+            c1, c2, s, theta = compiled_resonator(f, decay, fs)
         if c2 > 0.0:  # R underflows for decays beyond ~700 fs: silent
             if fit_band:
                 ratio = band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin)
