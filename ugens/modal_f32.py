@@ -32,8 +32,12 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from ugens import cells, kernels
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
+
+drop_stale_cache(__file__, [cells, kernels])  # its cache holds copies of two_pole
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.
