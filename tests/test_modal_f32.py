@@ -148,7 +148,8 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import ModeRows, resonate
+    from ugens.cells import ModeRows
+    from ugens.modal import resonate
 
     fn, note = compile_modal_f32()
     if fn is None:
