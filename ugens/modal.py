@@ -56,7 +56,7 @@ from jassy.record_views import FIELD, float32_table, float_row, float_table, han
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
-from ugens.cells import silent, two_pole
+from ugens.cells import mode_rows, silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
@@ -120,25 +120,6 @@ drop_stale_cache(
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
 
 
-class ModeRows(NamedTuple):
-    """A float64 bank's rows as :func:`resonate` reads them, one entry per mode: the
-    coefficients c1 = 2 R cos theta, c2 = R^2, input gain g = a R sin theta / fs (per N)
-    and direct gain d (module docstring), and the state y1 = y[n-1], y2 = y[n-2]."""
-
-    c1: np.ndarray
-    c2: np.ndarray
-    g: np.ndarray
-    d: np.ndarray
-    y1: np.ndarray
-    y2: np.ndarray
-
-
-@nb.njit(inline="always", cache=True)
-def mode_rows(bank):
-    """The ModeRows of a (6, K) bank array, whose rows are the record's fields in order."""
-    return ModeRows(bank[0], bank[1], bank[2], bank[3], bank[4], bank[5])
-
-
 class Ramp(NamedTuple):
     """A linear ramp of a bank's coefficients (c1, c2, g, d): (4, K) arrays of the current
     values, their per-sample increments and their final values."""
@@ -150,7 +131,7 @@ class Ramp(NamedTuple):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def resonate(force, out, n, rows, active, last):
-    """Run modes [0, active) of ``rows`` (ModeRows) over force[:n] into out[:n] (overwrites out).
+    """Run modes [0, active) of ``rows`` (ugens.cells.ModeRows) over force[:n] into out[:n] (overwrites out).
 
     last[0]: the force sample before force[0] (each resonator hears F[n-1]); left at
     force[n-1]. The direct term sum(d) F[n] is added once per sample; the sum is formed
@@ -334,14 +315,14 @@ def mixed_step(force, out, start, n, rows, floor, last):
             narrow = delta_rows(coef, state)
             by_factor = narrow_meta[BY_FACTOR] == 1
             if wide_meta[ALLOWED] > 0:
-                resonate_delta(f, o, m, narrow, active, wide_bank, wide_active, last, by_factor)
+                resonate_delta(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
             else:
                 resonate_delta(f, o, m, narrow, active, None, 0, last, by_factor)
         i += m
         if (start + i) % FLUSH_PERIOD == 0:
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
-            if active > 0:
+            if active > 0 and floor > 0.0:
                 narrow_meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
 
 

@@ -37,7 +37,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
+from physics.burr import contact
 from physics.burr.contact import (
     FASTMATH,
     R_VOXEL,
@@ -48,6 +49,8 @@ from physics.burr.contact import (
     lens_volume,
     voxel_moments,
 )
+
+drop_stale_cache(__file__, [contact])  # its cache holds copies of contact's kernels
 
 
 class Pyramid(NamedTuple):
