@@ -360,7 +360,7 @@ def mixed_rows_at(a, i):
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_span(force, out, start, n, a, floor):
     """:func:`mixed_step` on handle ``a``: a MixedRows, then the force sample before the
-    block (one array for Python to hand over instead of seven)."""
+    block (one array for Python to hand over instead of six)."""
     mixed_step(force, out, start, n, mixed_rows_at(a, 0), floor, float_row(a, MIXED_FIELDS * FIELD))
 
 
