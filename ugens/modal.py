@@ -839,11 +839,7 @@ class ModalBank(ModelParams, UGen):
                 kinks.append((at_size, self._retune(float(self._size_input.out[offset + at_size]))))
                 k += 1
             else:
-                frame, key, value, jump, ramp = pending.popleft()
-                changes = [(key, value)]
-                while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
-                    changes.append(pending.popleft()[1:3])
-                self._set_together(changes, jump, ramp)
+                self._apply_queued()
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
         for at, correction in kinks:
@@ -969,14 +965,36 @@ class ModalBank(ModelParams, UGen):
         call(inp, out, start, n, self._split_handle, self._floor)
         self._hold_steady(call, self._split_handle)
 
+    def _apply_queued(self) -> None:
+        """Apply the first queued parameter change (:meth:`set_param_at`) and those queued
+        for the same frame with the same jump and ramp, together."""
+        pending = self._pending
+        frame, key, value, jump, ramp = pending.popleft()
+        changes = [(key, value)]
+        while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
+            changes.append(pending.popleft()[1:3])
+        self._set_together(changes, jump, ramp)
+
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
         """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
-        runs coefficient ramps) can render the bank's next span: no parameter change
-        pending, no size input. (The compiled render may have ended a ramp: the flag
-        follows the bank's meta here, before any span of the bank in Python.)"""
+        runs coefficient ramps) can render the bank's spans: no size input (queued
+        parameter changes the budget applies between spans, :meth:`anytime_apply`). (The
+        compiled render may have ended a ramp: the flag follows the bank's meta here,
+        before any span of the bank in Python.)"""
         self._ramping = self.meta[RAMP_LEFT] > 0
-        return not (self._pending or self._size_input is not None)
+        return self._size_input is None
+
+    def anytime_changes(self, end: int) -> list[int]:
+        """The frames before ``end`` of the parameter changes queued (:meth:`set_param_at`)."""
+        return [change[0] for change in self._pending if change[0] < end]
+
+    def anytime_apply(self, frame: int) -> None:
+        """Apply the parameter changes queued for frames up to ``frame``: the budget has
+        rendered the bank up to there (as :meth:`process` does between its spans)."""
+        while self._pending and self._pending[0][0] <= frame:
+            self._apply_queued()
+        self._ramping = self.meta[RAMP_LEFT] > 0
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the
