@@ -38,7 +38,7 @@ class HapticSafety:
         return self.max_slew / sample_rate
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as jassy.safety.copy_finite
 def limit_force(buf, n, last, max_force, max_step):
     """Clamp |force| and its change per sample, channel by channel, in place.
 

@@ -29,7 +29,9 @@ def float_from_bits(typingctx, bits):
     return sig, codegen
 
 
-@nb.njit(cache=True, nogil=True)
+# Inlined into its callers (numba IR; the output stage of jassy.engines.callback): no
+# kernel of its own to compile on a first render. Same code, no fastmath either side.
+@nb.njit(cache=True, nogil=True, inline="always")
 def copy_finite(src, dst, n):
     """dst[:n] = src[:n] with NaN/Inf replaced by 0, on int64 views of float64 samples;
     returns (NaN/Inf count, magnitude bits of the largest finite |sample|). Magnitude bits
@@ -135,7 +137,7 @@ def limit(buf, n, state, ceiling, release_coeff):
     state[0] = g
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as copy_finite
 def pinned_samples(buf, n, ceiling, run):
     """Frames of buf[:, :n] where some channel sits at the limiter's ceiling (within 1e-9):
     (count, longest run, run still open at the end), runs carried over from ``run`` frames."""
@@ -162,7 +164,7 @@ def pinned_samples(buf, n, ceiling, run):
 INPUT_PEAK, PINNED, LONGEST, OPEN_RUN, METERED = range(5)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as copy_finite
 def limit_metered(buf, n, state, ceiling, release_coeff, peak, meter):
     """:func:`limit` over buf[:, :n] given the finite input peak ``peak`` of those frames,
     metered into ``meter`` (slots INPUT_PEAK .. METERED). A fully released limiter (gain

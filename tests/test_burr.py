@@ -198,16 +198,6 @@ def test_octree_coarse_leaf_against_closed_form_cap():
             assert low < m[0] / 255.0 / cap_volume(h, R) - 1.0 < high
 
 
-def test_octree_update_matches_rebuild():
-    rng = np.random.default_rng(4)
-    d = rng.integers(0, 256, (40, 40, 40)).astype(np.uint8)
-    o = Octree(d)
-    d[5:9, 30:33, 12:20] //= 3
-    o.update(np.array([5, 30, 12, 8, 32, 19]))
-    fresh = Octree(d.copy())
-    np.testing.assert_allclose(o.mom, fresh.mom, rtol=1e-12, atol=1e-9)
-
-
 def test_octree_follows_erosion_exactly():
     """The haptic loop refreshes the octree by subtracting each eroded voxel's decrement on
     its path to the root: after many eroding steps its moments equal a pyramid rebuilt from
@@ -230,7 +220,10 @@ def test_octree_follows_erosion_exactly():
 def test_one_call_step_equals_its_parts(method):
     """BurrSim.step runs moments, normal, depth and load in one compiled call: each equals the
     same quantity computed apart in Python (BurrSim.moments, n = -m1/|m1|, the cap-depth
-    inversion, F_e = c_e R^2 (h/R)^(3/2) n), bit for bit, over eroding steps."""
+    inversion, F_e = c_e R^2 (h/R)^(3/2) n), bit for bit, over eroding steps, and the force
+    is elastic + friction; a step with erode=False removes nothing and leaves the density
+    and octree as they were; a step out of contact (burr 1 voxel above the block) is all
+    zeros."""
     vol = uniform_block((40, 40, 40), 1e-4, 200, top=25)
     p = BurrParams(radius=1e-3, erosion=5e-5, method=method, leaf=4)
     sim = BurrSim(vol, p, seed=3)
@@ -244,6 +237,16 @@ def test_one_call_step_equals_its_parts(method):
         assert s.m0 == m0 and np.array_equal(s.m1, m1) and np.array_equal(s.normal, normal)
         elastic = p.c_e * p.radius**2 * (h / p.radius) ** 1.5 * normal
         assert s.depth == h and np.array_equal(s.elastic, elastic)
+        assert np.array_equal(s.force, s.elastic + s.friction) and np.any(s.friction != 0)
+    mom = sim.octree.mom.copy() if sim.octree is not None else None
+    density = vol.density.copy()
+    s = sim.step(centre, omega=(2000.0, 0, 2000.0), dt=1e-3, erode=False)
+    assert s.power > 0 and s.removed == 0 and s.expected == 0 and np.array_equal(vol.density, density)
+    assert mom is None or np.array_equal(sim.octree.mom, mom)
+    s = sim.step(vol.to_world([19.5, 19.5, 25.5 + 10 + 1]), omega=(2000.0, 0, 2000.0), dt=1e-3)
+    vectors = (s.force, s.elastic, s.friction, s.torque, s.normal, s.m1)
+    assert all(np.array_equal(v, np.zeros(3)) for v in vectors)
+    assert (s.m0, s.depth, s.power, s.removed, s.expected, s.contact_area, s.slip_speed) == (0,) * 7
 
 
 def test_erosion_bookkeeping_and_roulette_expectation():

@@ -76,7 +76,8 @@ def test_strike_attack_resamples_to_the_render_rate():
 
 def test_fit_keeps_a_contact_transient_and_plays_it_back():
     """Three known modes plus a 2 ms contact transient that no mode explains (a noise burst
-    under a raised-cosine window): the stored attack is that burst (correlation > 0.95), it
+    under a raised-cosine window): each mode is fitted once, the stored attack is that burst
+    (correlation > 0.95), it
     brings the model's first 3 ms within -20 dB of the recording (relative to the burst's
     energy) where the modes alone leave the burst (error within 3 dB of it), and a ModalBank
     with a StrikeAttack on the same unit impulse renders the model with its attack."""
@@ -102,6 +103,10 @@ def test_fit_keeps_a_contact_transient_and_plays_it_back():
         model.attack is not None and model.attack_rate == RATE and m / RATE < model.attack.size / RATE <= 0.02
     )
     assert np.corrcoef(model.attack[:m], burst)[0, 1] > 0.95
+    # each mode fitted once (not twice with cancelling amplitudes), with its gain within 1 dB
+    for f, a in zip(freqs, gains, strict=True):
+        near = np.flatnonzero(np.abs(model.frequencies - f) < 1.0)
+        assert near.size == 1 and abs(20 * np.log10(model.gains[0, near[0]] / a)) < 1.0
     head, tail = slice(pre, pre + int(0.003 * RATE)), slice(pre + int(0.005 * RATE), pre + int(0.1 * RATE))
 
     def err_db(y, span, ref):

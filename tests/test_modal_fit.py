@@ -144,6 +144,27 @@ def test_several_recordings_share_modes_and_get_one_gain_row_each():
     np.testing.assert_allclose(model.gains, rows, rtol=0.02)
 
 
+def test_progress_bar_ends_at_its_total(monkeypatch):
+    """The fit's bar never counts more steps than its total and ends at 100 % when the
+    search rounds stop early (a round that finds nothing skips the next)."""
+    import physics.modal.fit as fit
+
+    ends = []
+    close = fit._Work.close
+
+    def record(work):
+        ends.append((work.bar.n, work.bar.total))
+        close(work)
+        ends.append((work.bar.n, work.bar.total))
+
+    monkeypatch.setattr(fit._Work, "close", record)
+    rng = np.random.default_rng(5)
+    x = modal_sum(RATE, RATE, [300.0, 710.0], [2.0, 4.0], [1.0, 0.5], 0.02) + 1e-4 * rng.standard_normal(RATE)
+    fit_recordings(x, RATE, progress=True)
+    (taken, total), (shown, _) = ends
+    assert 0 < taken <= total and shown == total
+
+
 def test_resynthesis_and_cli(tmp_path, capsys):
     import soundfile as sf
 

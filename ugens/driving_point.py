@@ -6,7 +6,8 @@ driving-point gains g = a R sin(theta) / fs >= 0 (a: ModalModel.driving_at, m pe
 the contact displacement x[n] = sum_k y_k[n] = X + G f[n]: X the modes' free motion
 (:func:`free_motion`), G = sum_k g_k (m/N) what this sample's force adds. A contact law
 f(x) is solved for f from these two numbers, and :func:`settle` then commits the sample.
-Used by Friction (bristle friction) and the rolling forces (a contact spring).
+Used by Friction (bristle friction) and the rolling forces (a contact spring: :func:`press`
+for the micro-impacts, :func:`roll_over` for the rolling contact filter).
 """
 
 from __future__ import annotations
@@ -66,24 +67,22 @@ def settle(modes, scratch, force):
         y1[k] = scratch[k] + g[k] * force
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def press_surface(out, contact, n, modes, scratch, stiffness, gain_sum):
-    """The force out[:n] (N) delivered through a contact spring of ``stiffness`` k (N/m) to
-    a surface that gives way: f = out - k x while the ball touches (contact > 0), x the
-    surface's displacement at the contact under f. contact[:n] is moved by f - out.
+@nb.njit(inline="always", cache=True)
+def press(modes, scratch, free, drive, stiffness, gain_sum):
+    """One sample of a force ``drive`` (N) delivered through a contact spring of
+    ``stiffness`` k (N/m; 0 while the ball is off the surface) to a surface that gives
+    way: returns f = drive - k x, x the surface's displacement at the contact under f,
+    and commits the sample (:func:`settle`).
 
     modes: the surface's driving-point modes (:func:`driving_point_modes`), gain_sum their
-    G; x[n] = X + G f[n], solved exactly per sample, f = (out - k X) / (1 + k G) (no delay
-    in the loop). The open-loop force is k times the height the ball would ride over a
-    rigid surface; the surface's motion takes k x off it.
+    G; ``free`` = X, this sample's :func:`free_motion` (scratch holds its shares); x = X +
+    G f, solved exactly, f = (drive - k X) / (1 + k G) (no delay in the loop). The
+    open-loop force is k times the height the ball would ride over a rigid surface; the
+    surface's motion takes k x off it.
     """
-    for i in range(n):
-        free = free_motion(modes, scratch, 0.0)
-        k = stiffness if contact[i] > 0.0 else 0.0
-        f = (out[i] - k * free) / (1.0 + k * gain_sum)
-        settle(modes, scratch, f)
-        contact[i] += f - out[i]
-        out[i] = f
+    f = (drive - stiffness * free) / (1.0 + stiffness * gain_sum)
+    settle(modes, scratch, f)
+    return f
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

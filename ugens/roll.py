@@ -19,7 +19,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from ugens.cells import slot, store
-from ugens.driving_point import MODE_ROWS, driving_point_modes, press_surface, roll_over
+from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, press, roll_over
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
@@ -124,7 +124,7 @@ def surface_specs(stiffness: float, doc: str) -> dict[str, ParamSpec]:
 class GivingSurface(ModelParams):
     """Mixin of the rolling forces: with a ``model`` the force reaches the surface's
     driving-point modes at ``location`` through the contact spring ``contact_stiffness``
-    and the surface gives way under it (:func:`ugens.driving_point.press_surface`)."""
+    and the surface gives way under it (:mod:`ugens.driving_point`)."""
 
     driving_point = True
 
@@ -154,19 +154,6 @@ class GivingSurface(ModelParams):
         super()._reset()
         if self.surface is not None:
             self.surface[3:] = 0.0
-
-    def press(self, contact: np.ndarray, n: int) -> None:
-        """self.out[:n] through the contact spring while contact > 0 (contact moves with it)."""
-        if self.surface is not None:
-            press_surface(
-                self.out,
-                contact,
-                n,
-                self.surface,
-                self._scratch,
-                self.values["contact_stiffness"],
-                self._gain_sum,
-            )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         arrays = super().state_arrays()
@@ -232,7 +219,11 @@ class Roll(GivingSurface, Turning, NeedleContact):
     spring ``contact_stiffness`` k (and dashpot ``contact_damping``) over r, and the surface
     gives way under it, F = r / (1/k - 1/(m w^2) + alpha(w)). The output is then the
     dynamic contact force on the surface, to drive a ModalBank of the same model at the
-    same location.
+    same location. Use ``law = "height"`` (s = 1 while loaded and moving) with a model:
+    the filter already makes the force grow with speed (F = m w^2 r below the contact
+    resonance, w = 2 pi v / wavelength) and with the load (through k), so an amplitude law
+    on top would count them twice. The filter is linear: the spring may pull (F < -load)
+    where a real ball would leave the surface (the micro-impacts of RathRoll).
     """
 
     type_name = "Roll"
@@ -389,12 +380,27 @@ class RollingState(NamedTuple):
     s1: float  #: contact low-pass, first DF2T state
     s2: float  #: contact low-pass, second DF2T state
     phase: float  #: rotation phase (revolutions)
+    height: float  #: the flying ball's height above its take-off point (m)
+    takeoff: float  #: the surface's displacement at the contact at the take-off (m)
+    surface: float  #: the surface's displacement at the contact in the last sample (m)
 
 
 @nb.njit(inline="always", cache=True)
 def rolling_state(state):
     """The RollingState record held in ``state``."""
-    return RollingState(state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7])
+    return RollingState(
+        state[0],
+        state[1],
+        state[2],
+        state[3],
+        state[4],
+        state[5],
+        state[6],
+        state[7],
+        state[8],
+        state[9],
+        state[10],
+    )
 
 
 class RollingSetup(NamedTuple):
@@ -409,12 +415,23 @@ class RollingSetup(NamedTuple):
     ball: np.ndarray
 
 
+class SurfaceLaw(NamedTuple):
+    """How :func:`rolling_filter` meets a surface that gives way, stored in this order in
+    the float64 array ``law`` (unused without the surface's modes)."""
+
+    stiffness: float  #: the ball's contact spring k (N/m)
+    gain_sum: float  #: G, the surface's displacement per newton within a sample (m/N)
+    mass_fs2: float  #: m fs^2 (N/m): the ball's momentum per sample over a displacement
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
-    """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping.
+def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, modes, scratch, law):
+    """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping, on
+    a rigid surface or one that gives way.
 
     Forces (N), speeds (m/s) and the optional surface input per sample; ``state`` holds a
-    RollingState; ``setup``: a RollingSetup.
+    RollingState; ``setup``: a RollingSetup; ``modes``/``scratch`` the surface's driving-point
+    modes (:mod:`ugens.driving_point`; no columns: a rigid surface) and ``law`` a SurfaceLaw.
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -423,6 +440,18 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
     the ballistic landing time 2 B / W, as SDT): if ground > trace and decay > 0, launch
     with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
+
+    On a surface that gives way the ball lands on the surface, not at its ballistic time:
+    its height above the take-off point, h = sum of its momentum p = c - B (N samples;
+    trapezoid rule, exact for a constant W) over m fs^2, is compared with the surface's
+    displacement X at the contact (this sample's free motion, positive away from the
+    ball), and the ball lands in the first sample where the gap h + X - X_takeoff <= 0
+    (on a surface at rest that is c <= 0), with the impulse that stops it on the moving
+    surface: contact = max(0, B - c - m fs^2 (X - x_last)), the ball's downward momentum
+    plus the surface's upward one (on a surface at rest Rath's B - c). The (low-passed)
+    output then reaches the surface through the contact spring while contact > 0
+    (:func:`press`); the output and ``contact`` are the force on the moving surface. A
+    new turn lands a flight at once in either case.
     """
     prof, coef, cfg, ball = setup
     config = rolling_config(cfg)
@@ -435,6 +464,8 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
     smoothed = config.smoothed != 0.0
     per_metre = config.per_metre
     uneven = config.unevenness
+    giving = modes.shape[1] > 0
+    stiffness, gain_sum, mass_fs2 = SurfaceLaw(law[0], law[1], law[2])
     L = prof.shape[0]
     held = rolling_state(state)
     pos = held.pos
@@ -445,16 +476,21 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
     s1 = held.s1
     s2 = held.s2
     phase = held.phase
+    height = held.height
+    takeoff = held.takeoff
+    surface = held.surface
     weight = mass * GRAVITY
     turning = per_metre > 0.0 and not has_input
     for i in range(n):
         v = speeds[i]
         w = 1.0
+        turned = False
         if turning and phase >= 1.0:  # a new turn: the ball's surface from its start
             phase = 0.0
             pos = 0.0
             if airborne:
                 c = 0.0  # land in this sample (the flight's momentum still balances)
+                turned = True
         if per_metre > 0.0:
             w = turn_weight(ball, phase - math.floor(phase), uneven)
             phase += abs(v) * per_metre
@@ -470,11 +506,17 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
             x = read_profile(prof, pos, cubic)
         decay = min(2.0 * grain * abs(v), 2.0)
         ground = max(trace - decay, x)
+        free = free_motion(modes, scratch, 0.0) if giving else 0.0
         y = 0.0
         if airborne:
+            if giving:  # the ball's momentum before and after this sample, p = c - B
+                height += (c - bump - 0.5 * load) / mass_fs2
             c -= load
-            if c <= 0.0:
+            if not giving and c <= 0.0:
                 y = bump - c - load
+                airborne = False
+            elif giving and (turned or height + free - takeoff <= 0.0):  # the ball meets the surface
+                y = max(0.0, bump - c) - load
                 airborne = False
             else:
                 y = -load
@@ -485,17 +527,28 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup):
                 c = 2.0 * b
                 airborne = True
                 y += b
+                height = 0.0
+                takeoff = free
         trace = ground
         if smoothed:
             z = coef[0] * y + s1
             s1 = coef[1] * y - coef[3] * z + s2
             s2 = coef[2] * y - coef[4] * z
             y = z
+        touch = y + load
+        if giving:
+            f = press(modes, scratch, free, y, stiffness if touch > 0.0 else 0.0, gain_sum)
+            surface = free + gain_sum * f
+            touch += f - y
+            y = f
         out[i] = y
-        contact[i] = y + load
+        contact[i] = touch
         if not has_input:
             pos = wrap(pos + v * inv_dxfs, L)
-    store(state, RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase))
+    store(
+        state,
+        RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase, height, takeoff, surface),
+    )
 
 
 @register
@@ -562,7 +615,13 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
     surface through the ball's contact spring, ``contact_stiffness`` k, and the surface
     gives way: while the ball touches, the force is f - k x (f: the open-loop force above,
     x: the surface's displacement at the contact, from its driving-point modes, solved per
-    sample without delay; :func:`press_surface`). An open-loop force drives a lightly
+    sample without delay; :func:`ugens.driving_point.press`). A flight then ends when
+    the ball meets the moving surface, not at Rath's ballistic time, which assumes a
+    surface at rest (:func:`rolling_filter`): on the shipped steel plate the surface
+    moves more than the ball flies above about 1 m/s (1.2e-7 m RMS at the contact against
+    flights of 6e-8 m at 1.75 m/s), and a ball still rising when the surface meets it
+    lands without an impulse (the model drops the ball's small upward momentum, so the
+    force's mean is then slightly above zero). An open-loop force drives a lightly
     damped mode that one of its lines (or a burst of hops) lands on as if the surface were
     rigid, and the mode's response grows with its Q; a real surface moves away under the
     ball instead, which caps the force at resonance where the surface's receptance exceeds
@@ -642,6 +701,12 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             fc = min(v["contact_cutoff"], NYQUIST_FRACTION * self.sample_rate)
             design_biquad(0, fc, 1.0 / math.sqrt(2.0), 1.0 / self.sample_rate, self.coef)
         self._setup = RollingSetup(self.prof, self.coef, self.cfg, self.ball)
+        self._law = np.zeros(len(SurfaceLaw._fields))
+        self._prepare_surface()
+        if self.surface is None:  # a rigid surface: no modes
+            self._modes, self._modes_scratch = np.zeros((MODE_ROWS, 0)), np.zeros(0)
+        else:
+            self._modes, self._modes_scratch = self.surface, self._scratch
         self._kernel = specialise(
             rolling_filter,
             self.out,
@@ -652,14 +717,23 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
+            self._modes,
+            self._modes_scratch,
+            self._law,
         )
-        self._prepare_surface()
+
+    def _design_surface(self) -> None:
+        super()._design_surface()
+        self._law[:] = SurfaceLaw(
+            self.values["contact_stiffness"], self._gain_sum, self.values["mass"] * self.sample_rate**2
+        )
 
     def _reset(self) -> None:
         super()._reset()
         # start on the ground with the trace at the surface
         trace = self.prof[0] if "input" not in self.sources else 0.0
-        self.state[:] = RollingState(0.0, trace, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self.state[:] = 0.0
+        self.state[slot(RollingState, "trace")] = trace
 
     def process(self, start: int, n: int) -> None:
         forces, speeds = self._controls(start, n)
@@ -672,8 +746,10 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
+            self._modes,
+            self._modes_scratch,
+            self._law,
         )
-        self.press(self.extra["contact"], n)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {**super().state_arrays(), "state": self.state}

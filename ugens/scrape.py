@@ -11,9 +11,12 @@ force is shaped by a dimensionless contact factor
 
     s(F, v) = sqrt(F |v| / (f_ref v_ref))    (law = "sqrt", default: power ~ F v)
     s(F, v) = F |v| / (f_ref v_ref)          (law = "linear")
+    s(F, v) = 1                              (law = "height": the profile's own height)
 
-and s = 0 while |v| < ``min_speed`` (JASS: silent below vslide0), so at the reference
-contact (f_ref, v_ref) s = 1.
+and s = 0 while |v| < ``min_speed`` (JASS: silent below vslide0) or F <= 0, so at the
+reference contact (f_ref, v_ref) s = 1. "height" is for a contact filter that makes the
+force from the height itself (Roll with a ``model``), where an amplitude law would count
+the speed and the load a second time.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
 from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
 
-LAWS = ("sqrt", "linear")
+LAWS = ("sqrt", "linear", "height")
 #: Force per m of profile height of the needle contacts (Scrape, Roll).
 STIFFNESS_SPEC = ParamSpec(
     "float",
@@ -64,10 +67,12 @@ CUTOFF_STEP = 0.01
 # ------------------------------------------------------------------------------ kernels
 @nb.njit(fastmath=FASTMATH, cache=True)
 def contact_factor(force, speed, law, inv_ref, min_speed):
-    """s(F, v) of the module docstring (law 0 = sqrt, 1 = linear); inv_ref = 1/(f_ref v_ref)."""
+    """s(F, v) of the module docstring (law 0 = sqrt, 1 = linear, 2 = height); inv_ref = 1/(f_ref v_ref)."""
     av = abs(speed)
     if av < min_speed or force <= 0.0:
         return 0.0
+    if law == 2:
+        return 1.0
     p = force * av * inv_ref
     return math.sqrt(p) if law == 0 else p
 
@@ -294,7 +299,11 @@ def law_specs(v_ref: float = 1.0, min_speed: float = 1e-4):
     """Parameters of the amplitude law s(F, v) (module docstring)."""
     return {
         "law": ParamSpec(
-            "str", "sqrt", choices=LAWS, fixed=True, doc="amplitude law: sqrt(F v) (power ~ F v) or F v"
+            "str",
+            "sqrt",
+            choices=LAWS,
+            fixed=True,
+            doc="amplitude law: sqrt(F v) (power ~ F v), F v, or height (1 while loaded and moving)",
         ),
         "f_ref": ParamSpec(
             "float", 1.0, low=0.0, low_open=True, high=1e5, unit="N", fixed=True, doc="reference normal force"

@@ -11,7 +11,8 @@ decides).
   budget's steps (its bookkeeping, its render of the banks and its decisions), divided by
   the CPU time of the ModalBanks of the full render (which skip silent modes); the best of
   ``repeats`` runs of each, interleaved in the same process; "decisions": the share of
-  the decisions alone (importance, ranking, kept sets, impacts and periodograms);
+  the decisions taken in Python (importance, ranking, kept sets, impacts and
+  periodograms; those the compiled step takes itself count with the step);
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
   its cost were proportional to the modes it computes;

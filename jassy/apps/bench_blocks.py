@@ -4,11 +4,12 @@ without the graph)."""
 
 import numba as nb
 
+from jassy import anytime_rank
 from jassy.jit import drop_stale_cache
-from ugens import modal
+from ugens import cells, modal
 from ugens.modal import mode_rows, resonate
 
-drop_stale_cache(__file__, [modal])  # the cache holds a copy of resonate
+drop_stale_cache(__file__, [anytime_rank, cells, modal])  # the cache holds copies of resonate's kernels
 
 
 @nb.njit(cache=True)

@@ -64,7 +64,7 @@ QUEUE_RECORDS = 64
 POLE_KEYS = ("freq_scale", "decay_scale")
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")  # inlined, as callback.apply_event
 def prefetch_rows(out, at, m):
     """Ask for the cache lines of out[:, at : at + m] (float64 rows) ahead of their writes."""
     start = out.ctypes.data + at * out.itemsize

@@ -38,15 +38,16 @@ from physics.burr.contact import (
     brute_moments,
 )
 from physics.burr.octree import Octree, Pyramid
-from physics.burr.update import STEP_RESULT, Burr, haptic_update, unpack
+from physics.burr.update import STEP_RESULT, Burr, haptic_update
 from physics.burr.volume import Volume
 
 _FLOAT64 = np.dtype(np.float64)
 
 
-@dataclass
+@dataclass(frozen=True)
 class BurrParams:
-    """Burr and material constants (tunable; the papers' fitted values are not reproduced).
+    """Burr and material constants (tunable per simulation, fixed once it is built; the
+    papers' fitted values are not reproduced).
 
     radius (m); c_e (N/m^2): elastic constant of F_e = c_e R^2 (h/R)^(3/2), a haptic-scale
     stiffness rather than bone's (4/3) E*; mu: burr-bone friction coefficient; rho0 (counter
@@ -108,7 +109,10 @@ class DrillTrack(ContactTrack):
 
 class BurrSim:
     """A spherical burr against an eroding voxel volume (the volume's array is modified).
-    The params and the volume's voxel size and origin are read once, here."""
+
+    The params (frozen) and the volume's voxel size, origin (copied) and mass per counter
+    unit are read once, here: changing the Volume's fields afterwards does not move or
+    rescale the burr's grid; build a new BurrSim for that."""
 
     def __init__(self, volume: Volume, params: BurrParams | None = None, seed: int = 0):
         self.volume = volume
@@ -120,7 +124,8 @@ class BurrSim:
         cap = side**3
         rng = np.array([seed], dtype=np.uint64)
         bricks = self.octree.bricks() if self.octree is not None else NO_BRICKS
-        self.data = ContactData(
+        self._mass_per_count = volume.mass_per_count
+        data = ContactData(
             volume.density, rng, np.zeros(cap, CONTACT_VOXEL), np.zeros(1, CONTACT_TALLY), bricks
         )
         self.removed_total = 0.0
@@ -128,7 +133,7 @@ class BurrSim:
         v = volume
         leaf = int(p.leaf) if self.octree is not None else 0
         burr = Burr(float(p.radius), p.radius / v.voxel, float(p.c_e), float(p.rho0), float(v.voxel),
-                    v.voxel**3, v.voxel**4, v.origin, leaf)  # fmt: skip
+                    v.voxel**3, v.voxel**4, v.origin.copy(), leaf)  # fmt: skip
         model = BurrModel(p.radius / v.voxel, float(v.voxel), float(p.mu), self.kmass)
         if self.octree is not None:
             moments = (tuple(self.octree.pyramid), self.octree.stack, np.zeros(4))
@@ -137,30 +142,29 @@ class BurrSim:
             moments = (tuple(empty), np.zeros((8, 4), np.int64), np.zeros(4))
         self._result = np.zeros(1, STEP_RESULT)
         self._fixed = (tuple(burr), tuple(model), moments)
-        self._data_fields = (*self.data[:4], tuple(bricks))
+        self._burr = burr
+        self._data_fields = (*data[:4], tuple(bricks))  # a plain tuple, as haptic_update takes it
         self._update = None  # haptic_update's typed entry point, found at the first step
 
     @property
     def kmass(self) -> float:
         """Counter units removed per joule."""
-        return self.params.erosion / self.volume.mass_per_count
+        return self.params.erosion / self._mass_per_count
 
     def moments(self, centre) -> tuple[float, np.ndarray]:
         """(m0 in counter m^3, m1 about the centre in counter m^4) at world ``centre``."""
-        v = self.volume
-        g = v.to_grid(centre)
-        R = self.params.radius / v.voxel
+        b = self._burr
+        g = (np.asarray(centre, dtype=np.float64) - b.origin) / b.voxel
         if self.octree is not None:
-            mom, _ = self.octree.moments(g, R, self.params.leaf)
+            mom, _ = self.octree.moments(g, b.radius_grid, self.params.leaf)
         else:
-            brute_moments(v.density, g[0], g[1], g[2], R, self._mom)
+            brute_moments(self.volume.density, g[0], g[1], g[2], b.radius_grid, self._mom)
             mom = self._mom
-        return float(mom[0]) * v.voxel**3, mom[1:4] * v.voxel**4
+        return float(mom[0]) * b.voxel3, mom[1:4] * b.voxel4
 
     def step(self, centre, omega=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.0), dt: float = 1e-3, erode=True):
         """One haptic update at burr centre ``centre`` (m), spin ``omega`` (rad/s vector),
         tool velocity (m/s); erodes for ``dt`` seconds if ``erode``. Returns a ContactState."""
-        p, v = self.params, self.volume
         pose = (_vector(centre, "centre"), _vector(omega, "omega"), _vector(velocity, "velocity"), float(dt),
                 bool(erode))  # fmt: skip
         burr, model, moments = self._fixed
@@ -168,25 +172,25 @@ class BurrSim:
         if self._update is None:  # the same types at every step: one typed entry point
             self._update = specialise(haptic_update, *args)
         self._update(*args)
-        (force, elastic, friction, torque, normal, m1), scalars = unpack(self._result)
-        m0, h, load, power, removed, expected, area = scalars
-        removed *= v.mass_per_count
+        r = self._result.copy()  # the state's arrays are views of this copy
+        power, load, mu = float(r["power"][0]), float(r["load"][0]), self.params.mu
+        removed = float(r["removed"][0]) * self._mass_per_count
         self.removed_total += removed
         self.work_total += power * dt if erode else 0.0
         return ContactState(
-            force=force,
-            elastic=elastic,
-            friction=friction,
-            torque=torque,
-            normal=normal,
-            depth=h,
-            m0=m0,
-            m1=m1,
+            force=r["force"][0],
+            elastic=r["elastic"][0],
+            friction=r["friction"][0],
+            torque=r["torque"][0],
+            normal=r["normal"][0],
+            depth=float(r["depth"][0]),
+            m0=float(r["m0"][0]),
+            m1=r["m1"][0],
             power=power,
             removed=removed,
-            expected=expected * v.mass_per_count,
-            contact_area=area,
-            slip_speed=power / (p.mu * load) if p.mu > 0 and load > 0 else 0.0,
+            expected=float(r["expected"][0]) * self._mass_per_count,
+            contact_area=float(r["area"][0]),
+            slip_speed=power / (mu * load) if mu > 0 and load > 0 else 0.0,
         )
 
 

@@ -19,6 +19,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from physics.burr import contact, octree
 from physics.burr.contact import (
     Ball,
     Bricks,
@@ -31,25 +33,18 @@ from physics.burr.contact import (
 )
 from physics.burr.octree import Pyramid, build_parents, descend
 
-_VECTORS = ("force", "elastic", "friction", "torque", "normal", "m1")
-_SCALARS = ("m0", "depth", "load", "power", "removed", "expected", "area")
+# haptic_update's cache holds copies of the contact and octree kernels it calls
+drop_stale_cache(__file__, [contact, octree])
+
 STEP_RESULT = np.dtype(
-    [(f"{v}_{x}", np.float64) for v in _VECTORS for x in "xyz"] + [(s, np.float64) for s in _SCALARS]
+    [(name, np.float64, (3,)) for name in ("force", "elastic", "friction", "torque", "normal", "m1")]
+    + [(name, np.float64) for name in ("m0", "depth", "load", "power", "removed", "expected", "area")]
 )
-"""What one update returns, all float64 (read as one array by :func:`unpack`): the force of
-the bone on the burr = elastic + friction (N), friction torque about the centre (N m), the
-unit normal (zeros if undefined), m1 about the centre (counter m^4); m0 (counter m^3),
-depth h (m), load |F_e| (N), frictional power (W), removed and expected counter units,
-contact area (m^2)."""
-
-
-def unpack(result: np.ndarray) -> tuple:
-    """A STEP_RESULT record (1,) as (force, elastic, friction, torque, normal, m1) arrays (3,)
-    (views of one fresh copy) and the Python floats (m0, depth, load, power, removed,
-    expected, area)."""
-    v = result.view(np.float64).copy()
-    vectors = tuple(v[3 * n : 3 * n + 3] for n in range(len(_VECTORS)))
-    return vectors, v[3 * len(_VECTORS) :].tolist()
+"""What one update returns, by name, all float64: the force of the bone on the burr =
+elastic + friction (3,) (N), friction torque about the centre (3,) (N m), the unit normal
+(3,) (zeros if undefined), m1 about the centre (3,) (counter m^4); m0 (counter m^3), depth
+h (m), load |F_e| (N), frictional power (W), removed and expected counter units, contact
+area (m^2)."""
 
 
 class Burr(NamedTuple):
@@ -132,25 +127,16 @@ def update(burr, model, moments, pose, data, result):
         box = np.array([t.lo_i, t.lo_j, t.lo_k, t.hi_i, t.hi_j, t.hi_k])
         build_parents(p.base, p.top, p.mom, p.off, p.dims, box)
     r = result[0]
+    friction = (t.force_x, t.force_y, t.force_z)
+    torque = (t.torque_x, t.torque_y, t.torque_z)
+    for a in range(3):
+        r.m1[a] = mom[1 + a] * burr.voxel4
+        r.normal[a] = normal[a]
+        r.elastic[a] = load * normal[a]
+        r.friction[a] = friction[a]
+        r.force[a] = r.elastic[a] + friction[a]
+        r.torque[a] = torque[a]
     r.m0 = m0
-    r.m1_x = m1x
-    r.m1_y = m1y
-    r.m1_z = m1z
-    r.normal_x = normal[0]
-    r.normal_y = normal[1]
-    r.normal_z = normal[2]
-    r.elastic_x = load * normal[0]
-    r.elastic_y = load * normal[1]
-    r.elastic_z = load * normal[2]
-    r.friction_x = t.force_x
-    r.friction_y = t.force_y
-    r.friction_z = t.force_z
-    r.force_x = r.elastic_x + t.force_x
-    r.force_y = r.elastic_y + t.force_y
-    r.force_z = r.elastic_z + t.force_z
-    r.torque_x = t.torque_x
-    r.torque_y = t.torque_y
-    r.torque_z = t.torque_z
     r.depth = h
     r.load = load
     r.power = t.power

@@ -144,67 +144,68 @@ def refine(
 ):
     """Maximum-likelihood poles in white noise: poles shared by the ``signals`` (y[n] ~ sum_k
     c_k z_k^n, one set of c per signal; with ``real``, real signals y ~ Re(sum_k c_k z_k^n))
-    refined from ``z0`` jointly with the amplitudes by Levenberg-Marquardt with the analytic
-    Jacobian (d/ds z^n = n z^n / rate for s = -decay + i omega). ESPRIT alone is biased
-    towards undamped poles when much of the record is noise. Returns (poles, amplitudes per
-    signal)."""
+    refined from ``z0`` by Levenberg-Marquardt. ESPRIT alone is biased towards undamped
+    poles when much of the record is noise. Returns (poles, amplitudes per signal).
+
+    Variable projection (Golub & Pereyra 1973): the amplitudes are eliminated by least
+    squares per signal (one QR of its K basis columns), so the Levenberg-Marquardt problem
+    has 2 K unknowns (decay, angular frequency per pole), not 2 K (1 + signals), and its
+    Jacobian is Kaufman's (1975) -P_perp (dE/dtheta) c with d/ds z^n = n z^n / rate for
+    s = -decay + i omega. The minimum is the one of the joint (poles, amplitudes) problem."""
     from scipy.optimize import least_squares
 
     if z0.size == 0:
         return z0, [np.zeros(0, dtype=complex) for _ in signals]
     signals = [np.asarray(y[:max_samples]) for y in signals]
-    k, n_sig = z0.size, len(signals)
-    ns = [np.arange(y.size) for y in signals]
-
-    def powers(p, n):
-        s = -p[:k] + 1j * p[k : 2 * k]
-        return np.exp(np.outer(n, s / rate))
-
-    def amps_of(p):
-        c = p[2 * k :].reshape(n_sig, 2, k)
-        return c[:, 0] + 1j * c[:, 1]
+    k = z0.size
+    ns = [np.arange(y.size) / rate for y in signals]
+    # a step to a growing pole is held at e^50 over the longest signal (no overflow)
+    min_decay = -50.0 / max(max(t[-1] for t in ns if t.size), 1.0 / rate)
 
     def parts(r):
-        return r.real if real else np.concatenate([r.real, r.imag])
+        return r if real else np.concatenate([r.real, r.imag])
+
+    last: dict = {}
+
+    def solve(p):
+        # least_squares evaluates the residual and then the Jacobian at the same point
+        if last.get("p") is not None and np.array_equal(last["p"], p):
+            return last["out"]
+        s = -np.maximum(p[:k], min_decay) + 1j * p[k:]
+        out = []
+        for y, t in zip(signals, ns, strict=True):
+            e = np.exp(np.outer(t, s))
+            basis = np.hstack([e.real, -e.imag]) if real else e
+            q, r = np.linalg.qr(basis)
+            coef = np.linalg.lstsq(r, np.conj(q.T) @ y, rcond=None)[0]
+            c = coef[:k] + 1j * coef[k:] if real else coef
+            out.append((q, c, y - basis @ coef, e * c[None, :] * t[:, None]))
+        last["p"], last["out"] = p.copy(), out
+        return out
 
     def resid(p):
-        c = amps_of(p)
-        return np.concatenate(
-            [parts(powers(p, n) @ c[i] - y) for i, (y, n) in enumerate(zip(signals, ns, strict=True))]
-        )
+        return np.concatenate([parts(o[2]) for o in solve(p)])
 
     def jac(p):
-        c = amps_of(p)
         blocks = []
-        for i, n in enumerate(ns):
-            e = powers(p, n)
-            ce = e * c[i][None, :] * (n / rate)[:, None]
-            cols = np.zeros((n.size, 2 * k + 2 * k * n_sig), dtype=complex)
-            cols[:, :k] = -ce
-            cols[:, k : 2 * k] = 1j * ce
-            off = 2 * k + 2 * k * i
-            cols[:, off : off + k] = e
-            cols[:, off + k : off + 2 * k] = 1j * e
-            blocks.append(cols.real if real else np.vstack([cols.real, cols.imag]))
+        for q, _, _, v in solve(p):
+            # model columns' derivatives: d/d decay = -v, d/d omega = i v (real part if real)
+            dv = np.hstack([-v, 1j * v])
+            if real:
+                dv = dv.real
+            dv = dv - q @ (np.conj(q.T) @ dv)
+            blocks.append(-parts(dv))
         return np.vstack(blocks)
 
     logz = np.log(z0)
-    p_poles = np.concatenate([-logz.real * rate, logz.imag * rate])
-    c0 = []
-    for y, n in zip(signals, ns, strict=True):
-        e = np.exp(np.outer(n, logz))
-        if real:
-            basis = np.hstack([e.real, -e.imag])
-            a = np.linalg.lstsq(basis, y, rcond=None)[0]
-            c0.append([a[:k], a[k:]])
-        else:
-            a = np.linalg.lstsq(e, y, rcond=None)[0]
-            c0.append([a.real, a.imag])
-    p0 = np.concatenate([p_poles, np.asarray(c0, dtype=float).ravel()])
+    p0 = np.concatenate([-logz.real * rate, logz.imag * rate])
     try:
         sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-10, ftol=1e-12)
         p = sol.x if np.all(np.isfinite(sol.x)) else p0
+        amps = [o[1] for o in solve(p)]
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
         p = p0
-    z = np.exp((-p[:k] + 1j * p[k : 2 * k]) / rate)
-    return z, list(amps_of(p))
+        amps = [o[1] for o in solve(p)]
+    # the poles the cost and the amplitudes were computed with
+    z = np.exp((-np.maximum(p[:k], min_decay) + 1j * p[k:]) / rate)
+    return z, amps

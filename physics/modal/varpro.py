@@ -27,6 +27,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+#: Least decay (1/s) a refined pole takes: a step to d <= 0 would make z^N overflow.
+MIN_DECAY = 1e-3
+
 
 class Spectrum(NamedTuple):
     """Bins ``bins`` (indices m of a length-``n`` DFT) of one segment and its values ``y``."""
@@ -90,7 +93,7 @@ def refine(spectra: list[Spectrum], rate: float, freqs, decays, max_nfev: int = 
 
     def poles(p):
         # a step to d <= 0 would make z^N overflow: such poles are held at a tiny decay
-        return np.exp((-np.maximum(p[:k], 1e-3) + 1j * p[k:]) / rate)
+        return np.exp((-np.maximum(p[:k], MIN_DECAY) + 1j * p[k:]) / rate)
 
     last: dict = {}
 
@@ -139,7 +142,8 @@ def refine(spectra: list[Spectrum], rate: float, freqs, decays, max_nfev: int = 
     if not cost <= cost0:
         p, sols, cost = p0, solve(p0), cost0
     amps = [o[1].reshape(k, 2) @ np.array([1.0, 1j]) for o in sols]
-    return Refined(p[k:] / (2 * np.pi), p[:k], amps, cost, cost0)
+    # the decays the cost and the amplitudes were computed with
+    return Refined(p[k:] / (2 * np.pi), np.maximum(p[:k], MIN_DECAY), amps, cost, cost0)
 
 
 def fast_length(n: int) -> int:
