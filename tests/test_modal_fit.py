@@ -232,3 +232,17 @@ def test_noise_only_gives_a_clear_error():
     noise = np.random.default_rng(0).standard_normal(RATE)
     with pytest.raises(JassyError, match="no decaying modes found"):
         fit_recordings(noise, RATE)
+
+
+def test_distinct_merges_only_poles_the_refinement_put_together():
+    """Two modes half a half-width apart stay two; two poles on one mode become one; a pole
+    that moved onto another goes back to its value before the refinement."""
+    from physics.modal.fit import Pole, _distinct
+
+    assert _distinct([Pole(1000, 5), Pole(1002, 5.5)]) == [Pole(1000, 5), Pole(1002, 5.5)]
+    assert _distinct([Pole(1000, 70), Pole(1000.05, 72)]) == [Pole(1000, 70)]
+    before = [Pole(1000, 70), Pole(1060, 70)]
+    assert _distinct([Pole(1000, 70), Pole(1000.05, 72)], before) == before
+    # the earlier pole moved onto the later one: the earlier goes back
+    before = [Pole(940, 70), Pole(1000, 70)]
+    assert _distinct([Pole(1000.05, 72), Pole(1000, 70)], before) == before

@@ -314,12 +314,11 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     # the broadband noise level (a broad mode lifts the floor of the bins around it)
     noise = max(float(np.median(s.noise)) / s.x.size for s in segments)
     z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
-    fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    fz, dz = _frequency_decay(z, rate)
     z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]
     real = [r[:n] for r in residuals]
     z, _ = esprit.refine(real, rate, z, real=True)
-    with np.errstate(all="ignore"):
-        fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    fz, dz = _frequency_decay(z, rate)
     # faster poles are the contact: their part of the signal is left as noise for the others
     z = z[np.isfinite(dz) & (fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min) & (dz <= stage.d_max)]
     amps = [esprit.amplitudes(y, z) for y in real]
@@ -333,6 +332,12 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
         if snr >= MIN_SNR:
             out.append(Pole(float(f), float(d)))
     return out
+
+
+def _frequency_decay(z: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency Hz, decay 1/s) of poles z at ``rate`` Hz (decay inf for z = 0)."""
+    with np.errstate(divide="ignore"):
+        return np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
 
 
 def _local_noise(signals, z: np.ndarray, amps) -> list[np.ndarray]:
@@ -443,24 +448,37 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
     return out
 
 
-#: Two refined poles closer than this fraction of their summed half-power half-widths, with
-#: decays within it of each other, are one mode fitted twice (their amplitudes cancel).
+#: Two refined poles closer than this fraction of the half-power half-width of their summed
+#: decays, with decays within it of each other, are one mode fitted twice (their amplitudes
+#: cancel). 5x below :func:`_duplicate`'s 0.5, so a pair the detection accepted as two modes
+#: is never merged here unless the refinement moved them together.
 SAME_POLE = 0.1
 
 
-def _distinct(poles: list[Pole]) -> list[Pole]:
-    """``poles`` without the second of any two that refined onto the same mode: a pole may
-    move by up to its refinement window, which is wider than the spacing of a group, onto
-    a neighbour's peak. Two modes that close could not be told apart from the recording."""
-    out: list[Pole] = []
-    for p in poles:
-        if not any(
-            abs(p.frequency - q.frequency) < SAME_POLE * varpro.half_width(p.decay + q.decay)
-            and abs(p.decay - q.decay) < SAME_POLE * (p.decay + q.decay)
-            for q in out
-        ):
-            out.append(p)
-    return out
+def _same_pole(p: Pole, q: Pole) -> bool:
+    return abs(p.frequency - q.frequency) < SAME_POLE * varpro.half_width(p.decay + q.decay) and abs(
+        p.decay - q.decay
+    ) < SAME_POLE * (p.decay + q.decay)
+
+
+def _distinct(poles: list[Pole], before: list[Pole] | None = None) -> list[Pole]:
+    """``poles`` without duplicates the refinement made: a pole may move by up to its
+    refinement window, which is wider than the spacing of a group, onto a neighbour's peak,
+    merging two poles into one. Of two that collide, the one that moved goes back to its
+    value in ``before`` (the poles before the refinement, same order; default: ``poles``);
+    it is dropped only if that value also lies on a kept pole."""
+    before = poles if before is None else before
+    kept: list[list[Pole]] = []  # [value, value before the refinement]
+    for p, b in zip(poles, before, strict=True):
+        clash = [k for k in kept if _same_pole(p, k[0])]
+        if clash and p != b:
+            p, clash = b, [k for k in kept if _same_pole(b, k[0])]
+        for k in clash:
+            if k[0] != k[1] and not _same_pole(p, k[1]):
+                k[0] = k[1]  # the kept pole moved onto this one: it goes back instead
+        if not any(_same_pole(p, k[0]) for k in kept):
+            kept.append([p, b])
+    return [k[0] for k in kept]
 
 
 def _pole_groups(poles: list[Pole], bin_hz: float, max_size: int = 10) -> list[list[int]]:
@@ -527,9 +545,11 @@ def _spectral_refine(poles: list[Pole], segments, rate, f_lo, f_hi, work, sweeps
                 spectra.append(varpro.Spectrum(bins, spec[bins] + own, n))
             ref = varpro.refine(spectra, rate, f, d)
             for i, f_new, d_new, f_old, w in zip(idx, ref.frequencies, ref.decays, f, reach, strict=True):
-                if abs(f_new - f_old) <= w and f_lo <= f_new <= f_hi and 0 < d_new <= 2 * STAGES[-1].d_max:
+                # a decay at the clamp is a pole that stopped decaying (varpro holds d >= MIN_DECAY)
+                ok_d = varpro.MIN_DECAY < d_new <= 2 * STAGES[-1].d_max
+                if abs(f_new - f_old) <= w and f_lo <= f_new <= f_hi and ok_d:
                     new[i] = Pole(float(f_new), float(d_new))
-        out = _distinct(new)
+        out = _distinct(new, out)
     return out
 
 
