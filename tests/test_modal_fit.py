@@ -163,6 +163,18 @@ def test_progress_bar_ends_at_its_total(monkeypatch):
     fit_recordings(x, RATE, progress=True)
     (taken, total), (shown, _) = ends
     assert 0 < taken <= total and shown == total
+    # every search round finding a new pole: every step is taken, exactly the total
+    ends.clear()
+    detect = fit._detect
+
+    def detect_more(poles, *args):
+        out = detect(poles, *args)
+        return out + [fit.Pole(2000.0 + 100.0 * len(out), 3.0)] if len(out) == len(poles) else out
+
+    monkeypatch.setattr(fit, "_detect", detect_more)
+    fit_recordings(x, RATE, progress=True)
+    (taken, total), (shown, _) = ends
+    assert taken == total == shown
 
 
 def test_resynthesis_and_cli(tmp_path, capsys):
