@@ -6,9 +6,10 @@ numba cache), the constant-force descent of ``jassy bench burr`` (256^3 phantom,
 at 1 kHz, the burr in contact and eroding) with the octree at ``leaf`` 4 and 1, and times
 every step in CPU time (``time.process_time``) and, in a call of its own just before each
 step, the moments at that step's centre (``BurrSim.moments``, which a tree's step may or
-may not call itself); the first 50 steps (JIT warm-up) are left out. Printed per tree and
-leaf: the medians over rounds of the per-round medians (us), the final depth (mm), and the
-ratio to the first tree of each round.
+may not call itself; it reads the voxels and blocks the step then reads, so the step is
+timed with warm caches, alike in every tree); the first 50 steps (JIT warm-up) are left out.
+Printed per tree and leaf: the medians over rounds of the per-round medians (us), the final
+depth (mm), and the ratio to the first tree of each round.
 
     git archive 19a227f~1 | tar -x -C /tmp/burr_old   # the octree before the shallow refinement
     python benchmarks/burr_cpu.py . /tmp/burr_old --rounds 5

@@ -210,35 +210,50 @@ class ModeBudget:
         contact starting), so that its modes sound from the contact's first sample. The
         bookkeeping, the decisions and (when the budget renders the banks) the renders
         between them run in one compiled call (ugens.modal_kept.advance_at): a sub-block
-        is split only where a decision changes the kept sets. It returns to Python to
-        decide only when a bank renders through its own ``process`` (a parameter change,
-        ramp or size input pending: rendered over the same spans), a bank is fed by
-        another (credited in Python, jassy.anytime_chain) or a CPU budget adapts."""
+        is split only where a decision changes the kept sets, or where a bank has a
+        parameter change queued (applied there between two compiled calls). It returns
+        to Python to decide only when a bank renders through its own ``process`` (a size
+        input: rendered over the same spans), a bank is fed by another (credited in
+        Python, jassy.anytime_chain) or a CPU budget adapts."""
         if not self.active:
             return
         period, end = self.period, start + n
         count = self._load_kicks(self.listed())
         slow = self._python_banks() if self.renders else []
+        changes = self._queued_changes(start, end) if self.renders else {}
         state, at, rendered, addresses = self._state, start, start, self._step_handle
         state[INLINE] = not (slow or self._fed or self.cpu_fraction is not None)
-        while True:
-            was = rendered
-            at, rendered, work, deciding = self._advance(
-                addresses, count, period, start, n, at, rendered, self._rates
-            )
-            self.mode_samples += work
-            for i in slow:
-                if rendered > was:
-                    self._processes[i](was, rendered - was, was - start)
-                    self.mode_samples += (rendered - was) * self.banks[i].active_modes()
-            if not deciding:
-                break
-            stop = min(end, (at // period + 1) * period)
-            if at % period == 0 and self.cpu_fraction is not None:
-                self._adapt()
-            self._decide(at, count, at - start, stop - at)
-            at = stop
+        for limit in [*sorted(changes), end]:  # render up to each frame a bank's parameters change
+            while True:
+                was = rendered
+                at, rendered, work, deciding = self._advance(
+                    addresses, count, period, start, limit - start, at, rendered, self._rates
+                )
+                self.mode_samples += work
+                for i in slow:
+                    if rendered > was:
+                        self._processes[i](was, rendered - was, was - start)
+                        self.mode_samples += (rendered - was) * self.banks[i].active_modes()
+                if not deciding:
+                    break
+                stop = min(limit, (at // period + 1) * period)
+                if at % period == 0 and self.cpu_fraction is not None:
+                    self._adapt()
+                self._decide(at, count, at - start, stop - at)
+                at = stop
+            for bank in changes.get(limit, ()):
+                bank.anytime_apply(limit)
         self.decisions, self.peak_modes = int(state[DECISIONS]), int(state[PEAK])
+
+    def _queued_changes(self, start: int, end: int) -> dict[int, list]:
+        """Frame -> the banks rendered by the compiled step that have a parameter change
+        queued there, for the frames before ``end`` (those before ``start`` at ``start``)."""
+        changes: dict[int, list] = {}
+        for bank, slow in zip(self.banks, self._flags, strict=True):
+            if not slow:
+                for frame in bank.anytime_changes(end):
+                    changes.setdefault(max(frame, start), []).append(bank)
+        return changes
 
     def _python_banks(self) -> list[int]:
         """The banks the compiled render cannot render now (a parameter change, ramp or size

@@ -198,16 +198,6 @@ def test_octree_coarse_leaf_against_closed_form_cap():
             assert low < m[0] / 255.0 / cap_volume(h, R) - 1.0 < high
 
 
-def test_octree_update_matches_rebuild():
-    rng = np.random.default_rng(4)
-    d = rng.integers(0, 256, (40, 40, 40)).astype(np.uint8)
-    o = Octree(d)
-    d[5:9, 30:33, 12:20] //= 3
-    o.update(np.array([5, 30, 12, 8, 32, 19]))
-    fresh = Octree(d.copy())
-    np.testing.assert_allclose(o.mom, fresh.mom, rtol=1e-12, atol=1e-9)
-
-
 def test_octree_follows_erosion_exactly():
     """The haptic loop refreshes the octree by subtracting each eroded voxel's decrement on
     its path to the root: after many eroding steps its moments equal a pyramid rebuilt from

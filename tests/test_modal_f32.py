@@ -7,8 +7,10 @@ from helpers import ArraySource
 from test_modal_bank import FS, error_db, spread_model
 
 from jassy import Event, Graph, ModalModel, render
+from ugens.cells import ModeRows
 from ugens.modal import ModalBank, design, split_by_precision
 from ugens.modal_f32 import (
+    SMALL,
     TOLERANCE,
     DeltaRows,
     decay_factor_error,
@@ -17,7 +19,7 @@ from ugens.modal_f32 import (
     narrow_rows,
     resonate_delta,
 )
-from ugens.modal_meta import BY_FACTOR
+from ugens.modal_meta import BY_FACTOR, NARROW_ALL
 
 FREQS = np.geomspace(20.0, 20000.0, 7)
 DECAYS = np.geomspace(0.5, 500.0, 7)
@@ -98,11 +100,23 @@ def test_mixed_bank_passes_where_float32_two_pole_fails():
     assert error_db(mixed_impulse_response(model, 2.0, block=64)[1:], ref[1:]) < -80.0
 
 
-def render_noise(model, precision, score=(), seconds=0.5, block=64):
+def render_bank(model, precision, score=(), seconds=0.5, block=64):
+    """(audio, the ModalBank that rendered it) for a broadband force that then stops."""
     x = np.random.default_rng(0).standard_normal(int(seconds * FS))
     x[FS // 4 :] = 0.0  # then ring out (silent-mode skipping in both parts)
     bank = ModalBank(model, name="bank", precision=precision)(ArraySource(x))
-    return render(Graph(bank), list(score), seconds, FS, block, limiter=False).audio[0]
+    return render(Graph(bank), list(score), seconds, FS, block, limiter=False).audio[0], bank
+
+
+def render_noise(model, precision, score=(), seconds=0.5, block=64):
+    return render_bank(model, precision, score, seconds, block)[0]
+
+
+def takes_the_small_kernel(split):
+    """Whether ugens.modal_f32.resonate_delta runs this split's passes in _resonate_small:
+    no float64 modes, the decay-factor form, at most SMALL float32 modes."""
+    meta = split.rows.narrow_meta
+    return split.wide.size == 0 and meta[BY_FACTOR] == 1 and 0 < meta[NARROW_ALL] <= SMALL
 
 
 @pytest.mark.parametrize("block", [1, 64, 1000])
@@ -110,21 +124,63 @@ def render_noise(model, precision, score=(), seconds=0.5, block=64):
 def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, modes):
     """Broadband force, a ramped freq_scale change (run in float64, then back to mixed) and a
     location jump: within -60 dB of the float64 bank at any block size, with and without
-    float64 modes in the split, and for a bank small enough for the 16-mode kernel."""
+    float64 modes in the split, and for a bank small enough for the 16-mode kernel (which the
+    rendered bank's own split takes after the changes)."""
     model = spread_model(12 if modes == "small" else 40)
-    if modes != "split":
-        model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
-    if modes == "small":
-        c1, c2, s = design(model.frequencies, model.decays, FS)
-        split = split_by_precision(np.stack([c1, c2, s, 0 * s, 0 * s, 0 * s]), FS)
-        assert split.wide.size == 0 and split.rows.narrow_meta[BY_FACTOR] == 1
+    if modes != "split":  # (the small bank's modes kept below 10 kHz: at 24 kHz it would need float64)
+        top = 0.5 if modes == "small" else 1.0
+        model = ModalModel(top * model.frequencies, np.maximum(model.decays, 5.0), model.gains)
     score = [
         Event(0.1, "bank", "set", {"freq_scale": 1.2}, ramp=0.01),
         Event(0.2, "bank", "set", {"location": 1}, jump=True),
     ]
     ref = render_noise(model, "float64", score, block=block)
-    y = render_noise(model, "mixed", score, block=block)
+    y, bank = render_bank(model, "mixed", score, block=block)
+    assert takes_the_small_kernel(bank._split) == (modes == "small")
     assert error_db(y, ref) < -60.0
+
+
+@pytest.mark.parametrize("count", [15, 16, 17])
+def test_banks_of_up_to_16_float32_modes_take_the_small_kernel(count):
+    """Around the small kernel's bound (SMALL = 16 modes): the rendered bank's own split takes
+    it at 15 and 16 modes, the general kernel at 17, and each follows the float64 bank
+    within -60 dB."""
+    model = spread_model(count)
+    model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
+    ref = render_noise(model, "float64")
+    y, bank = render_bank(model, "mixed")
+    assert bank._split.rows.narrow_meta[NARROW_ALL] == count
+    assert takes_the_small_kernel(bank._split) == (count <= SMALL)
+    assert error_db(y, ref) < -60.0
+
+
+@pytest.mark.parametrize("count", [5, 16])
+def test_the_small_kernel_computes_what_the_general_kernel_does(count):
+    """_resonate_small (constant trip count) against resonate_delta's general loop (reached
+    with an empty set of float64 modes) on the same rows: same outputs and state to float32
+    rounding over calls of odd lengths (the 4-sample passes and the tail, the force sample
+    carried between calls), with the direct term."""
+    rng = np.random.default_rng(5)
+    f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
+    c1, c2, s = design(f, d, FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros(count)
+    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
+    none64 = ModeRows(*(np.zeros(0) for _ in ModeRows._fields))
+    force = rng.standard_normal(3001)
+    runs = []
+    for wide in (None, none64):
+        state = np.zeros((2, coef.shape[1]), np.float32)
+        rows, out, last, start = DeltaRows(*coef, *state), np.zeros(force.size), np.zeros(1), 0
+        for n in (1, 7, 1000, 993, 1000):
+            resonate_delta(force[start:], out[start:], n, rows, count, wide, 0, last, True)
+            start += n
+        runs.append((out, state, last[0]))
+    (out, state, last), (ref, ref_state, ref_last) = runs
+    assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
+    np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
+    state, ref_state = state[:, :count], ref_state[:, :count]  # (the padding modes run apart)
+    np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
 
 
 def test_zero_gain_modes_stay_in_float64_and_keep_ringing_after_their_gain_drops():
@@ -148,7 +204,7 @@ def test_the_benchmarks_c_float32_reference_computes_the_two_pole_recursion():
     """The bench's C loop (compiled now with cc) against the float64 kernel: it is the same
     recursion, to float32 rounding, on mid-band well-damped modes."""
     from jassy.apps.bench_c import c_runner, compile_modal_f32
-    from ugens.modal import ModeRows, resonate
+    from ugens.modal import resonate
 
     fn, note = compile_modal_f32()
     if fn is None:

@@ -13,8 +13,9 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
   (x samples after their onsets) kept as two running sums and a queue of pending onsets
   (the blast waves of Explosion, the firings of Engine);
 * :func:`two_pole`: one sample of a mode's impulse-invariant two-pole recursion (ModalBank,
-  Friction); :func:`state_step`: a mode's (displacement, velocity) pair through its 2x2
-  transition over a step (HuntCrossleyImpact, the heard output of closed loops);
+  Friction), and :class:`ModeRows` (:func:`mode_rows`): a float64 bank's rows by name;
+  :func:`state_step`: a mode's (displacement, velocity) pair through its 2x2 transition
+  over a step (HuntCrossleyImpact, the heard output of closed loops);
   :func:`silent`: the test by which silent modes are zeroed;
 * :func:`store`: a kernel's named state record written back to the float64 array that holds
   it (its fields in order; the record's reader is the inverse); :func:`slot`: where one
@@ -24,6 +25,7 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -121,6 +123,26 @@ def two_pole(c1, c2, y1, y2, x):
     """y[n] = c1 y[n-1] - c2 y[n-2] + x: a mode with c1 = 2 R cos(theta), c2 = R^2 driven by
     its scaled input x (ModalBank's recursion, module docstring of ugens.modal)."""
     return c1 * y1 - c2 * y2 + x
+
+
+class ModeRows(NamedTuple):
+    """A float64 bank's rows as ugens.modal.resonate reads them, one entry per mode: the
+    coefficients c1 = 2 R cos theta, c2 = R^2 of :func:`two_pole`, input gain g = a R sin
+    theta / fs (per N) and direct gain d (module docstring of ugens.modal), and the state
+    y1 = y[n-1], y2 = y[n-2]."""
+
+    c1: np.ndarray
+    c2: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    y1: np.ndarray
+    y2: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def mode_rows(bank):
+    """The ModeRows of a (6, K) bank array, whose rows are the record's fields in order."""
+    return ModeRows(bank[0], bank[1], bank[2], bank[3], bank[4], bank[5])
 
 
 @nb.njit(inline="always", cache=True)

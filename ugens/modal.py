@@ -56,7 +56,7 @@ from jassy.record_views import FIELD, float32_table, float_row, float_table, han
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
-from ugens.cells import silent, two_pole
+from ugens.cells import mode_rows, silent, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
@@ -120,25 +120,6 @@ drop_stale_cache(
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
 
 
-class ModeRows(NamedTuple):
-    """A float64 bank's rows as :func:`resonate` reads them, one entry per mode: the
-    coefficients c1 = 2 R cos theta, c2 = R^2, input gain g = a R sin theta / fs (per N)
-    and direct gain d (module docstring), and the state y1 = y[n-1], y2 = y[n-2]."""
-
-    c1: np.ndarray
-    c2: np.ndarray
-    g: np.ndarray
-    d: np.ndarray
-    y1: np.ndarray
-    y2: np.ndarray
-
-
-@nb.njit(inline="always", cache=True)
-def mode_rows(bank):
-    """The ModeRows of a (6, K) bank array, whose rows are the record's fields in order."""
-    return ModeRows(bank[0], bank[1], bank[2], bank[3], bank[4], bank[5])
-
-
 class Ramp(NamedTuple):
     """A linear ramp of a bank's coefficients (c1, c2, g, d): (4, K) arrays of the current
     values, their per-sample increments and their final values."""
@@ -150,7 +131,7 @@ class Ramp(NamedTuple):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def resonate(force, out, n, rows, active, last):
-    """Run modes [0, active) of ``rows`` (ModeRows) over force[:n] into out[:n] (overwrites out).
+    """Run modes [0, active) of ``rows`` (ugens.cells.ModeRows) over force[:n] into out[:n] (overwrites out).
 
     last[0]: the force sample before force[0] (each resonator hears F[n-1]); left at
     force[n-1]. The direct term sum(d) F[n] is added once per sample; the sum is formed
@@ -334,14 +315,14 @@ def mixed_step(force, out, start, n, rows, floor, last):
             narrow = delta_rows(coef, state)
             by_factor = narrow_meta[BY_FACTOR] == 1
             if wide_meta[ALLOWED] > 0:
-                resonate_delta(f, o, m, narrow, active, wide_bank, wide_active, last, by_factor)
+                resonate_delta(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
             else:
                 resonate_delta(f, o, m, narrow, active, None, 0, last, by_factor)
         i += m
         if (start + i) % FLUSH_PERIOD == 0:
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
-            if active > 0:
+            if active > 0 and floor > 0.0:
                 narrow_meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
 
 
@@ -379,7 +360,7 @@ def mixed_rows_at(a, i):
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_span(force, out, start, n, a, floor):
     """:func:`mixed_step` on handle ``a``: a MixedRows, then the force sample before the
-    block (one array for Python to hand over instead of seven)."""
+    block (one array for Python to hand over instead of six)."""
     mixed_step(force, out, start, n, mixed_rows_at(a, 0), floor, float_row(a, MIXED_FIELDS * FIELD))
 
 
@@ -858,11 +839,7 @@ class ModalBank(ModelParams, UGen):
                 kinks.append((at_size, self._retune(float(self._size_input.out[offset + at_size]))))
                 k += 1
             else:
-                frame, key, value, jump, ramp = pending.popleft()
-                changes = [(key, value)]
-                while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
-                    changes.append(pending.popleft()[1:3])
-                self._set_together(changes, jump, ramp)
+                self._apply_queued()
         if done < n:
             self._span(inp[done:], out[done:], start + done, n - done)
         for at, correction in kinks:
@@ -988,14 +965,36 @@ class ModalBank(ModelParams, UGen):
         call(inp, out, start, n, self._split_handle, self._floor)
         self._hold_steady(call, self._split_handle)
 
+    def _apply_queued(self) -> None:
+        """Apply the first queued parameter change (:meth:`set_param_at`) and those queued
+        for the same frame with the same jump and ramp, together."""
+        pending = self._pending
+        frame, key, value, jump, ramp = pending.popleft()
+        changes = [(key, value)]
+        while pending and pending[0][0] == frame and pending[0][3:] == (jump, ramp):
+            changes.append(pending.popleft()[1:3])
+        self._set_together(changes, jump, ramp)
+
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
         """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
-        runs coefficient ramps) can render the bank's next span: no parameter change
-        pending, no size input. (The compiled render may have ended a ramp: the flag
-        follows the bank's meta here, before any span of the bank in Python.)"""
+        runs coefficient ramps) can render the bank's spans: no size input (queued
+        parameter changes the budget applies between spans, :meth:`anytime_apply`). (The
+        compiled render may have ended a ramp: the flag follows the bank's meta here,
+        before any span of the bank in Python.)"""
         self._ramping = self.meta[RAMP_LEFT] > 0
-        return not (self._pending or self._size_input is not None)
+        return self._size_input is None
+
+    def anytime_changes(self, end: int) -> list[int]:
+        """The frames before ``end`` of the parameter changes queued (:meth:`set_param_at`)."""
+        return [change[0] for change in self._pending if change[0] < end]
+
+    def anytime_apply(self, frame: int) -> None:
+        """Apply the parameter changes queued for frames up to ``frame``: the budget has
+        rendered the bank up to there (as :meth:`process` does between its spans)."""
+        while self._pending and self._pending[0][0] <= frame:
+            self._apply_queued()
+        self._ramping = self.meta[RAMP_LEFT] > 0
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the

@@ -216,6 +216,26 @@ def delta_rows(coef, state):
     return DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
 
+@nb.njit(inline="always", cache=True)
+def _four_samples(c0, b, p, v, fp, f0, f1, f2, by_factor):
+    """A float32 mode with coefficients c0, b (:func:`_next_delta`) and scaled state p = y[n-2]
+    / g, v = Delta[n-1] / g over four samples whose preceding forces are fp, f0, f1, f2:
+    its new (p, v) and its four scaled outputs y[n] / g. Scalars in and out, so that the
+    callers' mode loops stay free of array references and vectorise (inlined, it takes
+    their fastmath flags)."""
+    u = p + v
+    v = _next_delta(v, p, u, c0, b, fp, by_factor)
+    p = u
+    u0 = u + v
+    v = _next_delta(v, p, u0, c0, b, f0, by_factor)
+    u1 = u0 + v
+    v = _next_delta(v, u0, u1, c0, b, f1, by_factor)
+    u2 = u1 + v
+    v = _next_delta(v, u1, u2, c0, b, f2, by_factor)
+    u3 = u2 + v
+    return u2, v, u0, u1, u2, u3
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _resonate_small(force, out, n, rows, last):
     """:func:`resonate_delta` for at most SMALL float32 modes in the decay-factor form and
@@ -236,30 +256,12 @@ def _resonate_small(force, out, n, rows, last):
         s2 = np.float32(0.0)
         s3 = np.float32(0.0)
         for k in range(SMALL):
-            a = c0[k]
-            b = b2[k]
             gk = g[k]
-            p = y[k]
-            v = dy[k]
-            u = p + v
-            v = _next_delta(v, p, u, a, b, fp, True)
-            p = u
-            u = u + v
-            s0 += gk * u
-            v = _next_delta(v, p, u, a, b, f0, True)
-            p = u
-            u = u + v
-            s1 += gk * u
-            v = _next_delta(v, p, u, a, b, f1, True)
-            p = u
-            u = u + v
-            s2 += gk * u
-            v = _next_delta(v, p, u, a, b, f2, True)
-            p = u
-            u = u + v
-            s3 += gk * u
-            y[k] = p
-            dy[k] = v
+            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, True)
+            s0 += gk * u0
+            s1 += gk * u1
+            s2 += gk * u2
+            s3 += gk * u3
         out[i] += s0
         out[i + 1] += s1
         out[i + 2] += s2
@@ -292,7 +294,7 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
 
     ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
     enters with an add instead of a multiply and g weighs the output sum with an FMA).
-    ``wide``: None, or float64 rows c1, c2, g, d, y1, y2 as a float64 bank's (ugens.modal),
+    ``wide``: None (no float64 modes), or the float64 modes' ugens.cells.ModeRows,
     updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
     bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
@@ -314,7 +316,7 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         direct += d[k]
     if wide is not None:
         for k in range(wide_active):
-            direct += wide[3, k]
+            direct += wide.d[k]
     i = 0
     while i + 4 <= n:
         # Only the loop's own values stay in registers across the float32 loop (scalars
@@ -329,30 +331,12 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         s2 = np.float32(0.0)
         s3 = np.float32(0.0)
         for k in range(active):
-            a = c0[k]
-            b = b2[k]
             gk = g[k]
-            p = y[k]
-            v = dy[k]
-            u = p + v
-            v = _next_delta(v, p, u, a, b, fp, by_factor)
-            p = u
-            u = u + v
-            s0 += gk * u
-            v = _next_delta(v, p, u, a, b, f0, by_factor)
-            p = u
-            u = u + v
-            s1 += gk * u
-            v = _next_delta(v, p, u, a, b, f1, by_factor)
-            p = u
-            u = u + v
-            s2 += gk * u
-            v = _next_delta(v, p, u, a, b, f2, by_factor)
-            p = u
-            u = u + v
-            s3 += gk * u
-            y[k] = p
-            dy[k] = v
+            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, by_factor)
+            s0 += gk * u0
+            s1 += gk * u1
+            s2 += gk * u2
+            s3 += gk * u3
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
@@ -363,17 +347,17 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
             w1 = force[i + 1]
             w2 = force[i + 2]
             for k in range(wide_active):
-                q1 = wide[0, k]
-                q2 = wide[1, k]
-                gk = wide[2, k]
-                u1 = wide[4, k]
-                u2 = wide[5, k]
+                q1 = wide.c1[k]
+                q2 = wide.c2[k]
+                gk = wide.g[k]
+                u1 = wide.y1[k]
+                u2 = wide.y2[k]
                 v0 = two_pole(q1, q2, u1, u2, gk * fw)
                 v1 = two_pole(q1, q2, v0, u1, gk * w0)
                 v2 = two_pole(q1, q2, v1, v0, gk * w1)
                 v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                wide[5, k] = v2
-                wide[4, k] = v3
+                wide.y2[k] = v2
+                wide.y1[k] = v3
                 t0 += v0
                 t1 += v1
                 t2 += v2
@@ -397,9 +381,9 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         t = 0.0
         if wide is not None:
             for k in range(wide_active):
-                v = two_pole(wide[0, k], wide[1, k], wide[4, k], wide[5, k], wide[2, k] * fw)
-                wide[5, k] = wide[4, k]
-                wide[4, k] = v
+                v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
+                wide.y2[k] = wide.y1[k]
+                wide.y1[k] = v
                 t += v
         out[i] += s + t
         i += 1

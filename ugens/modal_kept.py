@@ -32,9 +32,10 @@ from jassy.anytime_rank import (
 )
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
-from ugens import modal, modal_budget, modal_meta
+from ugens import cells, modal, modal_budget, modal_meta
+from ugens.cells import mode_rows
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, mode_rows, resonate, resonate_ramp
+from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, resonate, resonate_ramp
 from ugens.modal_budget import (
     FLOOR,
     KEPT_LANES,
@@ -50,7 +51,7 @@ from ugens.modal_budget import (
 from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 
 drop_stale_cache(
-    __file__, [modal, modal_budget, modal_meta, anytime_rank, record_views]
+    __file__, [cells, modal, modal_budget, modal_meta, anytime_rank, record_views]
 )  # the cache holds copies of their kernels
 
 

@@ -3,7 +3,9 @@
 A bank's meta (:class:`BankMeta`) says how many modes its kernels compute; an anytime
 budget's compact bank of the kept modes has its own (:class:`CompactMeta`), which
 :func:`ugens.modal.bank_step` reads as a bank's (the active count and its cap sit in the
-same slots), and so have the float32 modes of a mixed-precision bank (:class:`NarrowMeta`).
+same slots). The float32 modes of a mixed-precision bank have their own too
+(:class:`NarrowMeta`), read only by :func:`ugens.modal.mixed_step`, not by bank_step: its
+``by_factor`` flag sits in the slot of BankMeta's ``allowed`` and is no cap.
 Kernels index the arrays by the slot constants below (cells.slot), which compile to the
 same loads as the numbers they replace.
 """

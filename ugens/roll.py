@@ -219,7 +219,11 @@ class Roll(GivingSurface, Turning, NeedleContact):
     spring ``contact_stiffness`` k (and dashpot ``contact_damping``) over r, and the surface
     gives way under it, F = r / (1/k - 1/(m w^2) + alpha(w)). The output is then the
     dynamic contact force on the surface, to drive a ModalBank of the same model at the
-    same location.
+    same location. Use ``law = "height"`` (s = 1 while loaded and moving) with a model:
+    the filter already makes the force grow with speed (F = m w^2 r below the contact
+    resonance, w = 2 pi v / wavelength) and with the load (through k), so an amplitude law
+    on top would count them twice. The filter is linear: the spring may pull (F < -load)
+    where a real ball would leave the surface (the micro-impacts of RathRoll).
     """
 
     type_name = "Roll"

@@ -167,9 +167,10 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     from jassy.apps.bench_blocks import resonate_blocks
     from jassy.program import run_blocks
     from patches.models import bell_model
+    from ugens.cells import ModeRows
     from ugens.impact import ImpactForce
     from ugens.mix import Gain
-    from ugens.modal import ModalBank, ModeRows, line_aligned_zeros, resonate
+    from ugens.modal import ModalBank, line_aligned_zeros, resonate
 
     model = bell_model(n_modes)
     places = ["soundbow", "lip", "waist", "shoulder"]

@@ -253,13 +253,12 @@ CONTACT_TALLY = np.dtype(
     [("force_x", np.float64), ("force_y", np.float64), ("force_z", np.float64), ("torque_x", np.float64),
      ("torque_y", np.float64), ("torque_z", np.float64), ("power", np.float64), ("expected", np.float64),
      ("removed", np.float64), ("voxels", np.float64), ("area", np.float64), ("lo_i", np.int64),
-     ("lo_j", np.int64), ("lo_k", np.int64), ("hi_i", np.int64), ("hi_j", np.int64), ("hi_k", np.int64),
-     ("gathered", np.int64)]
+     ("lo_j", np.int64), ("lo_k", np.int64), ("hi_i", np.int64), ("hi_j", np.int64), ("hi_k", np.int64)]
 )  # fmt: skip
 """What one surface pass adds up (SI): friction force (N) and torque (N m) about the burr
 centre, frictional power (W), expected and actual counter decrements, contact voxels, sum
-of their surface shares (m^2), the grid box [lo, hi] (inclusive; empty: lo > hi) of
-the voxels changed, and the number of voxels gathered."""
+of their surface shares (m^2) and the grid box [lo, hi] (inclusive; empty: lo > hi) of
+the voxels changed."""
 
 
 class Bricks(NamedTuple):
@@ -300,7 +299,6 @@ def _reset(d):
     t.power = t.expected = t.removed = t.voxels = t.area = 0.0
     t.lo_i, t.lo_j, t.lo_k = d.density.shape
     t.hi_i = t.hi_j = t.hi_k = -1
-    t.gathered = 0
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -500,7 +498,6 @@ def contact_pass(m, opt, d):
     R = m.radius
     cap_box(c[0], c[1], c[2], R, nvec, -R_VOXEL / R, lo, hi, d.density.shape)  # bone-side hemisphere
     count, xi2max = _gather(m, opt, d, defined, lo, hi)
-    d.tally[0].gathered = count
     a = max(opt.a_hertz, math.sqrt(xi2max) + R_VOXEL)
     wsum = _weights(d, defined, count, a * a, R)
     if wsum <= 0.0 or opt.load <= 0.0:

@@ -159,23 +159,6 @@ def _build_parent(level, mom, off, dims, lo, hi):
 
 
 @nb.njit(cache=True)
-def _update(dens, base, top, mom, off, dims, box):
-    """Refresh the pyramid after voxels in box = [i0, j0, k0, i1, j1, k1] changed."""
-    if box[3] < box[0]:
-        return
-    s = 1 << base
-    half = 0.5 * (s - 1)
-    nx, ny, nz = dens.shape
-    by, bz = dims[base, 1], dims[base, 2]
-    for bi in range(box[0] >> base, (box[3] >> base) + 1):
-        for bj in range(box[1] >> base, (box[4] >> base) + 1):
-            for bk in range(box[2] >> base, (box[5] >> base) + 1):
-                idx = off[base] + ((bi * by + bj) * bz + bk) * 4
-                _brick(dens, Brick(bi, bj, bk, s, half), (nx, ny, nz), mom, idx)
-    build_parents(base, top, mom, off, dims, box)
-
-
-@nb.njit(cache=True)
 def build_parents(base, top, mom, off, dims, box):
     """Recompute the blocks above ``base`` that hold voxels of box [i0, j0, k0, i1, j1, k1]."""
     lo = np.empty(3, np.int64)
@@ -352,10 +335,6 @@ class Octree:
         d = self.dims[level]
         q = self.off[level] + ((i * d[1] + j) * d[2] + k) * 4
         return self.mom[q : q + 4]
-
-    def update(self, box: np.ndarray) -> None:
-        """Refresh after the voxels in box [i0, j0, k0, i1, j1, k1] (inclusive) changed."""
-        _update(self.density, self.base, self.top, self.mom, self.off, self.dims, box)
 
     def bricks(self) -> Bricks:
         """The base level, whose moments the surface pass erodes (a view of ``mom``)."""
