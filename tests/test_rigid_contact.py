@@ -909,13 +909,13 @@ def test_grown_scratch_makes_room_for_the_rest_of_the_step_or_raises():
 
 
 def test_unknown_contact_model_code_is_an_error():
-    """The stepper's contact stage accepts the codes of StepParams.contact only; any other code
+    """The stepper accepts the contact model codes of StepParams.contact only; any other code
     raises instead of running some model."""
     world = _ball_world(0.5)
     opt = world.params.options()._replace(contact=7)
     data = _run_data(world, opt, np.empty((4096, codes.REC_WIDTH)), warm_contacts=16)
     with pytest.raises(ValueError, match="unknown contact model"):
-        st.run_steps(world.model(), opt, data, 0, 1, 0)
+        st.run(world.model(), opt, data, 0, 1, 0)
 
 
 def test_a_run_without_records_matches_the_run_that_keeps_them():

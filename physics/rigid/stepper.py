@@ -12,7 +12,7 @@ outer step of h seconds (:func:`outer_step`) is:
 4. contact_stage: contacts touching (gap <= slop) resolved by the contact model, impulse
    (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
    rolling resistance, penetration recovery and a warm start) or a penalty force
-   (physics.rigid.penalty); an unknown model code is an error;
+   (physics.rigid.penalty); an unknown model code is an error (step_models);
 5. advance_stage: every body moves freely to the end of the step (integrate.advance_body_into).
    With the default integrator a body in flight follows the exact ballistic path (so impact
    times and speeds of a bouncing body are those of the closed form); a body held by a resting
@@ -25,17 +25,22 @@ outer step of h seconds (:func:`outer_step`) is:
    world moves to the earliest such time and goes back to 2. At most ``max_events`` such
    sub-steps per step; later impacts are resolved at the step end.
 
-The stages are inlined into run_steps (numba inline="always"): a called kernel is linked
-into its caller's module and optimised again there, so a chain of stage calls above the
-narrow phase would compile it once per level. The whole step allocates nothing and run_steps
-is compiled without reference counting (``_nrt=False``, passed on to every kernel it calls
-that sets no flag of its own): with it, every use of Model or Data counted a reference up and
-down for each array they hold. Its scratch (contact solve, sweep, pair bounds, the gap
-probe's saved poses) lives in Data; a sweep that finds more pairs, or a narrow phase more
-contacts, than the scratch holds stops the run inside its step (Data.progress says where and
-how much is needed), and :func:`run` grows the scratch and resumes the step there. Only the
-RK4 and adaptive integrators allocate (integrate.advance_body_into keeps reference counting
-for itself).
+The contact model and the free motion's integrator are picked by the types of two arguments
+of run_steps (:func:`step_models`, chosen from Options in Python; overloads resolved when
+run_steps is typed), not by branches inside it, so a run compiles only its own model and
+integrator (the wok's first compile no longer builds the penalty models, RK4 and the
+adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
+are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
+linked into its caller's module and optimised again there, so each level of kernel calls
+above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
+compile). The whole step allocates nothing and run_steps is compiled without reference
+counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
+with it, every use of Model or Data counted a reference up and down for each array they
+hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
+Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
+stops the run inside its step (Data.progress says where and how much is needed), and
+:func:`run` grows the scratch and resumes the step there. Only the RK4 and adaptive
+integrators allocate (integrate.advance_body_into keeps reference counting for itself).
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -50,6 +55,7 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
 from physics.rigid.broad import Sweep, new_sweep, sweep_pairs
 from physics.rigid.codes import (
@@ -249,9 +255,10 @@ def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) ->
     resuming it: (d with the grown scratch and records, steps done, record count); fewer steps
     than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
     again). The kinematic samples of the returned d start at the step it stopped in."""
+    contact, motion = step_models(opt)
     done = 0
     while True:
-        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec)
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact, motion)
         done += steps
         if not d.progress.need.any():
             return d, done, nrec
@@ -378,27 +385,56 @@ def _free_motion(m, opt, d):
 
 @nb.njit(cache=True, _nrt=False)
 def _move(f, i, tau, out_p, out_q, out_phi):
-    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion), into row
-    i of out_p, out_q, out_phi (a dynamic body held by a resting contact drifts: f.resting)."""
-    kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
-    method = f.method
-    if kind[i] == DYNAMIC:
-        body = FreeBody(pos[i], quat[i], phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
+    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion, any
+    integrator), into row i of out_p, out_q, out_phi (a dynamic body held by a resting contact
+    drifts: f.resting)."""
+    if f.kind[i] == DYNAMIC:
+        body = FreeBody(f.pos[i], f.quat[i], f.phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
         out = (out_p[i], out_q[i], out_phi[i])
-        if method == SEMI_IMPLICIT and tau > 0.0:
+        if f.method == SEMI_IMPLICIT and tau > 0.0:
             semi_implicit_into(body, tau, out, not f.resting[i])
         else:
-            advance_body_into(body, tau, method, f.adaptive_tolerance, out)
+            advance_body_into(body, tau, f.method, f.adaptive_tolerance, out)
     else:
-        for x in range(6):
-            out_phi[i, x] = phi[i, x]
-        for x in range(3):
-            out_p[i, x] = pos[i, x] + f.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
-        if kind[i] == KINEMATIC:
-            _turn(i, tau, quat, f.kin_w, out_q)
-        else:
-            for x in range(4):
-                out_q[i, x] = quat[i, x]
+        _move_fixed(f, i, tau, out_p, out_q, out_phi)
+
+
+@nb.njit(cache=True, _nrt=False)
+def _move_semi_implicit(f, i, tau, out_p, out_q, out_phi):
+    """_move with the semi-implicit integrator (f.method is SEMI_IMPLICIT): the other
+    integrators are not compiled into the step."""
+    if f.kind[i] == DYNAMIC:
+        if tau > 0.0:
+            body = FreeBody(f.pos[i], f.quat[i], f.phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
+            semi_implicit_into(body, tau, (out_p[i], out_q[i], out_phi[i]), not f.resting[i])
+        else:  # no time: the state as it is (integrate.advance_body)
+            _copy_row(f.pos, i, out_p)
+            _copy_row(f.quat, i, out_q)
+            _copy_row(f.phi, i, out_phi)
+    else:
+        _move_fixed(f, i, tau, out_p, out_q, out_phi)
+
+
+@nb.njit(cache=True, inline="always")
+def _copy_row(src, i, dst):
+    """dst[i] = src[i], element by element."""
+    for x in range(src.shape[1]):
+        dst[i, x] = src[i, x]
+
+
+@nb.njit(cache=True, inline="always")
+def _move_fixed(f, i, tau, out_p, out_q, out_phi):
+    """_move of a static or kinematic body: its twist kept, a kinematic one moved by it."""
+    kind, pos, quat, phi = f.kind, f.pos, f.quat, f.phi
+    for x in range(6):
+        out_phi[i, x] = phi[i, x]
+    for x in range(3):
+        out_p[i, x] = pos[i, x] + f.kin_v[i, x] * tau if kind[i] == KINEMATIC else pos[i, x]
+    if kind[i] == KINEMATIC:
+        _turn(i, tau, quat, f.kin_w, out_q)
+    else:
+        for x in range(4):
+            out_q[i, x] = quat[i, x]
 
 
 @nb.njit(cache=True, inline="always")
@@ -419,7 +455,7 @@ def _turn(i, tau, quat, kin_w, out_q):
     out_q[i, 0], out_q[i, 1], out_q[i, 2], out_q[i, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _pair_gap(geo, a, b, pos, rot, margin, probe):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
     buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
@@ -430,8 +466,8 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
     return best
 
 
-@nb.njit(cache=True, _nrt=False)
-def _gap_at(m, opt, d, a, b, tau, margin):
+@nb.njit(cache=True, inline="always")
+def _gap_at(m, opt, d, a, b, tau, margin, motion):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
@@ -443,7 +479,7 @@ def _gap_at(m, opt, d, a, b, tau, margin):
                 keep[side, 3 + 3 * x + y] = rot[i, x, y]
     f = _free_motion(m, opt, d)
     for i in (a, b):
-        _move(f, i, tau, mp, mq, mf)
+        move_body(motion, f, i, tau, mp, mq, mf)
     for i in (a, b):
         for x in range(3):
             pos[i, x] = mp[i, x]
@@ -459,8 +495,9 @@ def _gap_at(m, opt, d, a, b, tau, margin):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
-    """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi."""
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
+    """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
+    moved by ``motion``'s integrator, step_models)."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -468,7 +505,7 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin)
+        f = _gap_at(m, opt, d, a, b, t, margin, motion)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -606,7 +643,7 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
     return _apart(a, b, pos, geo.bound, margin)
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _detect(geo, slop, pos, rot, buf, pairs, near):
     """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
     near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
@@ -690,7 +727,7 @@ def broad_stage(m, opt, d, dt):
     return count
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def narrow_stage(m, opt, d, pairs, near, dt):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
     come within slop (_detect); returns their count."""
@@ -702,32 +739,118 @@ def narrow_stage(m, opt, d, pairs, near, dt):
 
 
 @nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, count, dt, time, step, nrec):
+def contact_stage(m, opt, d, count, dt, time, step, nrec, contact):
     """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
-    scratch d.solver (rows >= count): the one dispatch of contact models on opt.contact (an
-    unknown code is an error). Returns the record count, -1 when d.rec is full."""
-    solver = d.solver
+    scratch d.solver (rows >= count), the model picked by the type of ``contact``
+    (step_models). Returns the record count, -1 when d.rec is full."""
     d.stats.solves[0] += 1
+    return contact_response(contact, m, opt, d, count, dt, time, step, nrec)
+
+
+class ImpulseContacts(NamedTuple):
+    """run_steps' ``contact`` for the impulse model (impulses.resolve); its type picks it."""
+
+    code: int
+
+
+class PenaltyContacts(NamedTuple):
+    """run_steps' ``contact`` for a penalty model (physics.rigid.penalty: linear or
+    Hunt-Crossley by Options.contact); its type picks it."""
+
+    code: int
+
+
+class SemiImplicitMotion(NamedTuple):
+    """run_steps' ``motion`` for the semi-implicit integrator (_move_semi_implicit)."""
+
+    code: int
+
+
+class AnyMotion(NamedTuple):
+    """run_steps' ``motion`` for any integrator, chosen at run time from Options (_move)."""
+
+    code: int
+
+
+def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiImplicitMotion | AnyMotion]:
+    """run_steps' ``contact`` and ``motion`` arguments for ``opt``: numba compiles run_steps
+    once per pair of their types, with only that contact model and integrator in it (the other
+    overloads are never typed, so never compiled; named tuples of a module-level class keep
+    numba's cache valid across processes, where a kernel passed as an argument would not). An
+    unknown contact model code is an error."""
     if opt.contact == IMPULSE:
-        bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
-        state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
-        return resolve(bodies, opt, state, solver, count, dt, time, step, nrec)
-    if opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
-        d.stats.contacts[0] += count
-        return penalty(m, opt, d, solver, count, dt, time, step, nrec)
-    raise ValueError("stepper.contact_stage: unknown contact model code")
+        contact = ImpulseContacts(opt.contact)
+    elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
+        contact = PenaltyContacts(opt.contact)
+    else:
+        raise ValueError(f"stepper.step_models: unknown contact model code {opt.contact!r}")
+    motion = (
+        SemiImplicitMotion(opt.integrator) if opt.integrator == SEMI_IMPLICIT else AnyMotion(opt.integrator)
+    )
+    return contact, motion
+
+
+def contact_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """The response of the model ``contact`` (step_models) to d.contacts[:count]: compiled
+    only, inside run_steps (the overload below)."""
+    raise TypeError("stepper.contact_response runs compiled only")
+
+
+@overload(contact_response, inline="always")
+def _contact_response(contact, m, opt, d, count, dt, time, step, nrec):
+    model = getattr(contact, "instance_class", None)
+    if model is ImpulseContacts:
+
+        def impulse(contact, m, opt, d, count, dt, time, step, nrec):
+            bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+            state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+            return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
+
+        return impulse
+    if model is PenaltyContacts:
+
+        def penalty_force(contact, m, opt, d, count, dt, time, step, nrec):
+            d.stats.contacts[0] += count
+            return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
+
+        return penalty_force
+    return None
+
+
+def move_body(motion, f, i, tau, out_p, out_q, out_phi):
+    """Body i's free motion by the integrator of ``motion`` (step_models): compiled only."""
+    raise TypeError("stepper.move_body runs compiled only")
+
+
+@overload(move_body, inline="always")
+def _move_body(motion, f, i, tau, out_p, out_q, out_phi):
+    integrator = getattr(motion, "instance_class", None)
+    if integrator is SemiImplicitMotion:
+
+        def semi_implicit(motion, f, i, tau, out_p, out_q, out_phi):
+            _move_semi_implicit(f, i, tau, out_p, out_q, out_phi)
+
+        return semi_implicit
+    if integrator is AnyMotion:
+
+        def any_integrator(motion, f, i, tau, out_p, out_q, out_phi):
+            _move(f, i, tau, out_p, out_q, out_phi)
+
+        return any_integrator
+    return None
 
 
 @nb.njit(cache=True, inline="always")
-def advance_stage(m, opt, d, tau):
-    """Every body's pose and twist after tau seconds of free motion into d.new_*."""
+def advance_stage(m, opt, d, tau, motion):
+    """Every body's pose and twist after tau seconds of free motion (by ``motion``'s
+    integrator) into d.new_*."""
     f, new_pos, new_quat, new_phi = _free_motion(m, opt, d), d.new_pos, d.new_quat, d.new_phi
     for i in range(m.kind.shape[0]):
-        _move(f, i, tau, new_pos, new_quat, new_phi)
+        move_body(motion, f, i, tau, new_pos, new_quat, new_phi)
 
 
 @nb.njit(cache=True, inline="always")
-def impact_stage(m, opt, d, pairs, near, dt):
+def impact_stage(m, opt, d, pairs, near, dt, motion):
     """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
     the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
     threshold (module doc, step 6); dt when none."""
@@ -765,7 +888,7 @@ def impact_stage(m, opt, d, pairs, near, dt):
         g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within))
+        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
     return first_hit
 
 
@@ -799,7 +922,7 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, nrec):
+def outer_step(m, opt, d, step, nrec, contact, motion):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
     it stopped for more scratch: d.progress.need says how much)."""
@@ -823,14 +946,14 @@ def outer_step(m, opt, d, step, nrec):
             return _stop(progress, t_local, subs, nrec)
         progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec)
+        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, contact)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
-        advance_stage(m, opt, d, dt)
-        first_hit = impact_stage(m, opt, d, pairs, near, dt) if subs < max_events else dt
+        advance_stage(m, opt, d, dt, motion)
+        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion) if subs < max_events else dt
         if first_hit < dt:
-            advance_stage(m, opt, d, first_hit)
+            advance_stage(m, opt, d, first_hit, motion)
             _commit(d)
             t_local += first_hit
             subs += 1
@@ -854,18 +977,19 @@ def _stop(progress, t_local, subs, nrec):
 
 
 @nb.njit(cache=True, _nrt=False)
-def run_steps(m, opt, d, first, n_steps, nrec):
+def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
-    and inside a step that needs more scratch (module doc; :func:`run` resumes it)."""
+    and inside a step that needs more scratch (module doc; :func:`run` resumes it). The
+    types of ``contact`` and ``motion`` pick the contact model and integrator (step_models)."""
     for s in range(n_steps):
         resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
         if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
             return s, nrec
         if not resuming:
             kinematic_stage(m, opt, d, s)
-        nrec, stopped = outer_step(m, opt, d, first + s, nrec)
+        nrec, stopped = outer_step(m, opt, d, first + s, nrec, contact, motion)
         if stopped:
             return s, nrec
         sample_stage(d, first + s)

@@ -38,6 +38,7 @@ from physics.rigid.shapes import (
     bounding_radius,
     mass_properties,
 )
+from physics.rigid.step_units import compile_step_ahead
 
 
 @dataclass(frozen=True)
@@ -524,6 +525,8 @@ def simulate(
         )
         if last is not None:
             data = st.carry_scratch(data, last)  # the scratch grown so far, not grown again
+        else:
+            compile_step_ahead(model, opt, data)  # on an empty kernel cache: on two cores
         last, steps, nrec = st.run(model, opt, data, first + done, todo, nrec)
         rec = last.rec  # grown when a step resumed with too little room
         if steps < todo and not keep_records and nrec > 0:

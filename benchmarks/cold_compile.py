@@ -1,0 +1,82 @@
+"""Where a cold render's CPU goes: every function numba compiles in this process, with its
+CPU time inclusive and exclusive of the functions it compiles on the way (numba's
+``numba:compile`` events), LLVM's share (``numba:llvm_lock``), and the CPU of the helper
+processes the render forked and reaped (jassy.engines.coldstart). Point numba's cache at an
+empty folder to see a fresh install's first render:
+
+    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/cold_compile.py OUT.txt render wok -o /tmp/wok.wav -q
+
+OUT.txt: a summary line, then one line per function (exclusive s, inclusive s, compiles,
+qualified name), the most expensive first."""
+
+from __future__ import annotations
+
+import resource
+import sys
+import time
+from collections import defaultdict
+
+from numba.core import event
+
+
+class CompileTimes(event.Listener):
+    """CPU time per compiled function, exclusive of the compiles nested in it."""
+
+    def __init__(self):
+        self.stack: list[list] = []  # [name, start CPU, CPU of nested compiles]
+        self.inclusive: dict[str, float] = defaultdict(float)
+        self.exclusive: dict[str, float] = defaultdict(float)
+        self.count: dict[str, int] = defaultdict(int)
+
+    def on_start(self, ev):
+        function = ev.data["dispatcher"].py_func
+        self.stack.append([f"{function.__module__}.{function.__qualname__}", time.process_time(), 0.0])
+
+    def on_end(self, ev):
+        name, start, nested = self.stack.pop()
+        spent = time.process_time() - start
+        self.inclusive[name] += spent
+        self.exclusive[name] += spent - nested
+        self.count[name] += 1
+        if self.stack:
+            self.stack[-1][2] += spent
+
+
+class LockTime(event.Listener):
+    """CPU time spent holding numba's LLVM lock (LLVM's optimisation and code generation)."""
+
+    def __init__(self):
+        self.total = 0.0
+
+    def on_start(self, ev):
+        self.start = time.process_time()
+
+    def on_end(self, ev):
+        self.total += time.process_time() - self.start
+
+
+def main(argv: list[str]) -> int:
+    out, jassy_args = argv[0], argv[1:]
+    compiles, llvm = CompileTimes(), LockTime()
+    event.register("numba:compile", compiles)
+    event.register("numba:llvm_lock", llvm)
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    from jassy.apps.cli import main as jassy_main
+
+    status = jassy_main(jassy_args)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    helpers = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with open(out, "w") as f:
+        f.write(
+            f"main process CPU {cpu:.2f} s, helpers CPU {helpers.ru_utime + helpers.ru_stime:.2f} s, "
+            f"wall {wall:.1f} s, LLVM {llvm.total:.2f} s, {len(compiles.count)} functions / "
+            f"{sum(compiles.count.values())} specialisations compiled\n"
+        )
+        for name in sorted(compiles.exclusive, key=lambda k: -compiles.exclusive[k]):
+            own, whole, count = compiles.exclusive[name], compiles.inclusive[name], compiles.count[name]
+            f.write(f"{own:8.2f} {whole:8.2f} {count:3d} {name}\n")
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
