@@ -424,14 +424,24 @@ class SurfaceLaw(NamedTuple):
     mass_fs2: float  #: m fs^2 (N/m): the ball's momentum per sample over a displacement
 
 
+class YieldingSurface(NamedTuple):
+    """The surface under :func:`rolling_filter`: its driving-point ``modes`` at the contact
+    (MODE_ROWS, K; :mod:`ugens.driving_point`; K = 0: a rigid surface), their ``scratch``
+    (K) and ``law``, a float64 array holding a SurfaceLaw."""
+
+    modes: np.ndarray
+    scratch: np.ndarray
+    law: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, modes, scratch, law):
+def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yielding):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping, on
     a rigid surface or one that gives way.
 
     Forces (N), speeds (m/s) and the optional surface input per sample; ``state`` holds a
-    RollingState; ``setup``: a RollingSetup; ``modes``/``scratch`` the surface's driving-point
-    modes (:mod:`ugens.driving_point`; no columns: a rigid surface) and ``law`` a SurfaceLaw.
+    RollingState; ``setup``: a RollingSetup; ``yielding``: a YieldingSurface (its modes
+    without columns: a rigid surface).
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -454,6 +464,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, modes,
     new turn lands a flight at once in either case.
     """
     prof, coef, cfg, ball = setup
+    modes, scratch, law = yielding
     config = rolling_config(cfg)
     inv_dxfs = config.inv_dxfs
     mass = config.mass
@@ -704,9 +715,9 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         self._law = np.zeros(len(SurfaceLaw._fields))
         self._prepare_surface()
         if self.surface is None:  # a rigid surface: no modes
-            self._modes, self._modes_scratch = np.zeros((MODE_ROWS, 0)), np.zeros(0)
+            self._yielding = YieldingSurface(np.zeros((MODE_ROWS, 0)), np.zeros(0), self._law)
         else:
-            self._modes, self._modes_scratch = self.surface, self._scratch
+            self._yielding = YieldingSurface(self.surface, self._scratch, self._law)
         self._kernel = specialise(
             rolling_filter,
             self.out,
@@ -717,9 +728,7 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
-            self._modes,
-            self._modes_scratch,
-            self._law,
+            self._yielding,
         )
 
     def _design_surface(self) -> None:
@@ -746,9 +755,7 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
-            self._modes,
-            self._modes_scratch,
-            self._law,
+            self._yielding,
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
