@@ -19,7 +19,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from ugens.cells import slot, store
-from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, press, roll_over
+from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, move_contact, press, roll_over
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
@@ -145,10 +145,16 @@ class GivingSurface(ModelParams):
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if key == "location":
-            if self.surface is not None:
-                self._design_surface()  # the gains jump; the surface's motion is kept
+            if self.surface is not None:  # the gains jump; the surface's modes keep their motion
+                gains_before = self.surface[2].copy()
+                self._design_surface()
+                self._contact_moved(*move_contact(self.surface, gains_before))
         else:
             super()._param_changed(key, value, jump)
+
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """The contact displacement in the last two samples changed by ``last``,
+        ``previous`` (m) as the contact moved (:func:`move_contact`)."""
 
     def _reset(self) -> None:
         super()._reset()
@@ -308,6 +314,12 @@ class Roll(GivingSurface, Turning, NeedleContact):
         super()._reset()
         self.turn[0] = 0.0
         self._ball_motion[:] = 0.0
+
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """The ball follows the surface at the new contact (x away from the ball, y its rise):
+        y - x and so the compression d = r - y - x are kept."""
+        self._ball_motion[0] -= last
+        self._ball_motion[1] -= previous
 
     def process(self, start: int, n: int) -> None:
         super().process(start, n)
@@ -736,6 +748,11 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         self._law[:] = SurfaceLaw(
             self.values["contact_stiffness"], self._gain_sum, self.values["mass"] * self.sample_rate**2
         )
+
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """A flight's gap and the landing's momentum are measured from the new contact."""
+        self.state[slot(RollingState, "takeoff")] += last
+        self.state[slot(RollingState, "surface")] += last
 
     def _reset(self) -> None:
         super()._reset()
