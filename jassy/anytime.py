@@ -176,9 +176,9 @@ class ModeBudget:
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
-        #: the banks' anytime_compiled, the flags last written to by_python, those banks
-        self._compiled = [bank.anytime_compiled for bank in banks]
-        self._flags, self._slow = [False] * len(banks), []
+        #: the banks the compiled render cannot render (a size input), marked in by_python
+        self._slow = [i for i, bank in enumerate(banks) if not bank.anytime_compiled()]
+        self._by_python[self._slow] = True
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
         self._kick_table = self._empty_kicks(16, 0)
         self._loaded, self._loaded_rows = None, 0  # the listing in the Kicks table, its rows
@@ -219,7 +219,7 @@ class ModeBudget:
             return
         period, end = self.period, start + n
         count = self._load_kicks(self.listed())
-        slow = self._python_banks() if self.renders else []
+        slow = self._slow if self.renders else []
         changes = self._queued_changes(start, end) if self.renders else {}
         state, at, rendered, addresses = self._state, start, start, self._step_handle
         state[INLINE] = not (slow or self._fed or self.cpu_fraction is not None)
@@ -249,20 +249,11 @@ class ModeBudget:
         """Frame -> the banks rendered by the compiled step that have a parameter change
         queued there, for the frames before ``end`` (those before ``start`` at ``start``)."""
         changes: dict[int, list] = {}
-        for bank, slow in zip(self.banks, self._flags, strict=True):
+        for bank, slow in zip(self.banks, self._by_python, strict=True):
             if not slow:
                 for frame in bank.anytime_changes(end):
                     changes.setdefault(max(frame, start), []).append(bank)
         return changes
-
-    def _python_banks(self) -> list[int]:
-        """The banks the compiled render cannot render now (a parameter change, ramp or size
-        input pending), marked in ``by_python``."""
-        flags = [not compiled() for compiled in self._compiled]
-        if flags != self._flags:
-            self._by_python[:] = self._flags = flags
-            self._slow = [i for i, python in enumerate(flags) if python]
-        return self._slow
 
     def _load_kicks(self, listed: tuple) -> int:
         """The score's impacts (``listed``: frames, impacts (frame, nodes, impulse, location))

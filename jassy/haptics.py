@@ -91,7 +91,7 @@ def channel_delays(
     return np.array([da] * n_audio + [dh] * n_haptic, dtype=np.int64)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as jassy.safety.copy_finite
 def delay_channels(buf, n, history, delays, pos):
     """Delay each channel of buf[:, :n] by delays[c] frames in place.
 

@@ -116,7 +116,7 @@ class ParamSpec:
         return value
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as jassy.engines.callback.apply_event
 def ramp_fill(ramp, out, n):
     """Write n per-sample values of a linear ramp into out[:n] and advance it.
 

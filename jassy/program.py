@@ -380,7 +380,7 @@ def node_function_address(kind: int) -> int:
     return compiled.address
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")  # inlined, as callback.apply_event
 def run_program(prog, start, n):
     """Run every node of the program, in order, for frames start .. start + n - 1."""
     table = prog.ctypes.data

@@ -23,7 +23,7 @@ from jassy.ugen import UGen
 from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_amplitude, raised_cosine
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as jassy.engines.callback.apply_event
 def render_pulses(out, start, n, pulses, count):
     """Write the sum of active pulses for frames start..start+n-1; return pulses left.
 

@@ -978,11 +978,10 @@ class ModalBank(ModelParams, UGen):
     # ------------------------------------------------------------ anytime synthesis
     def anytime_compiled(self) -> bool:
         """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
-        runs coefficient ramps) can render the bank's spans: no size input (queued
-        parameter changes the budget applies between spans, :meth:`anytime_apply`). (The
-        compiled render may have ended a ramp: the flag follows the bank's meta here,
-        before any span of the bank in Python.)"""
-        self._ramping = self.meta[RAMP_LEFT] > 0
+        runs coefficient ramps) can render the bank's spans throughout a render: no size
+        input (queued parameter changes the budget applies between spans,
+        :meth:`anytime_apply`; ``_ramping``, read only by :meth:`process`, which the
+        budget then never calls, follows the bank's meta there)."""
         return self._size_input is None
 
     def anytime_changes(self, end: int) -> list[int]:

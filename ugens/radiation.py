@@ -41,7 +41,7 @@ def radiation_response(freqs, radius: float, c: float = SPEED_OF_SOUND) -> np.nd
     return ka / np.sqrt(1.0 + ka * ka)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")  # inlined, as jassy.engines.callback.apply_event
 def radiate(x, out, n, coef, state):
     """The two first-order sections over x[:n]; state = [x1, y1, z1]. No fastmath: a
     recurrence has nothing to vectorise, and reassociation across unrolled iterations
