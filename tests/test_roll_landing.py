@@ -19,6 +19,7 @@ from ugens.roll import (
     RollingSetup,
     RollingState,
     SurfaceLaw,
+    YieldingSurface,
     rolling_filter,
 )
 
@@ -58,9 +59,8 @@ def fly(amplitude, freq, phase, rise=0.01, n=400):
     law = np.array(SurfaceLaw(stiffness=0.0, gain_sum=0.0, mass_fs2=MASS * FS**2))
     out, contact = np.zeros(n), np.zeros(n)
     state = np.zeros(len(RollingState._fields))
-    rolling_filter(
-        out, contact, n, np.zeros(n), np.full(n, SPEED), x, state, setup, modes, np.zeros(modes.shape[1]), law
-    )
+    surface = YieldingSurface(modes, np.zeros(modes.shape[1]), law)
+    rolling_filter(out, contact, n, np.zeros(n), np.full(n, SPEED), x, state, setup, surface)
     return out
 
 

@@ -39,6 +39,23 @@ def driving_point_modes(model: ModalModel, location, sample_rate: float, modes: 
     return float(np.sum(modes[2]))
 
 
+def move_contact(modes: np.ndarray, gains_before: np.ndarray) -> tuple[float, float]:
+    """Carry the surface's motion to a new contact: ``modes`` holds the new driving-point
+    gains (row g), ``gains_before`` the old ones. Mode k's output at the contact is
+    phi_k(p) q_k (q_k its modal displacement, phi_k its shape at the contact p, g_k ~
+    phi_k^2), so the modes keep q_k and their past outputs are rescaled by
+    |phi_k(new) / phi_k(old)| = sqrt(g_new / g_old) (0 where g_old = 0: q_k is not seen
+    there). The shapes' signs are not in the gains (taken as kept). Keeping the outputs
+    instead would hand the new contact a mode whose gain fell from g_old to g_new with
+    g_old / g_new times its energy. Returns the change of the contact displacement in the
+    last two samples (m)."""
+    before = float(np.sum(modes[3])), float(np.sum(modes[4]))
+    ratio = np.zeros_like(gains_before)
+    np.divide(modes[2], gains_before, out=ratio, where=gains_before > 0.0)
+    modes[3:] *= np.sqrt(ratio)
+    return float(np.sum(modes[3])) - before[0], float(np.sum(modes[4])) - before[1]
+
+
 @nb.njit(inline="always", cache=True)
 def free_motion(modes, scratch, drive):
     """The contact displacement X (m) this sample would have under the force ``drive`` (N)

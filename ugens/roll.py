@@ -19,7 +19,7 @@ from jassy.jit import specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from ugens.cells import slot, store
-from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, press, roll_over
+from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, move_contact, press, roll_over
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
@@ -145,10 +145,16 @@ class GivingSurface(ModelParams):
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if key == "location":
-            if self.surface is not None:
-                self._design_surface()  # the gains jump; the surface's motion is kept
+            if self.surface is not None:  # the gains jump; the surface's modes keep their motion
+                gains_before = self.surface[2].copy()
+                self._design_surface()
+                self._contact_moved(*move_contact(self.surface, gains_before))
         else:
             super()._param_changed(key, value, jump)
+
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """The contact displacement in the last two samples changed by ``last``,
+        ``previous`` (m) as the contact moved (:func:`move_contact`)."""
 
     def _reset(self) -> None:
         super()._reset()
@@ -309,6 +315,12 @@ class Roll(GivingSurface, Turning, NeedleContact):
         self.turn[0] = 0.0
         self._ball_motion[:] = 0.0
 
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """The ball follows the surface at the new contact (x away from the ball, y its rise):
+        y - x and so the compression d = r - y - x are kept."""
+        self._ball_motion[0] -= last
+        self._ball_motion[1] -= previous
+
     def process(self, start: int, n: int) -> None:
         super().process(start, n)
         if self._per_metre > 0.0:
@@ -424,14 +436,24 @@ class SurfaceLaw(NamedTuple):
     mass_fs2: float  #: m fs^2 (N/m): the ball's momentum per sample over a displacement
 
 
+class YieldingSurface(NamedTuple):
+    """The surface under :func:`rolling_filter`: its driving-point ``modes`` at the contact
+    (MODE_ROWS, K; :mod:`ugens.driving_point`; K = 0: a rigid surface), their ``scratch``
+    (K) and ``law``, a float64 array holding a SurfaceLaw."""
+
+    modes: np.ndarray
+    scratch: np.ndarray
+    law: np.ndarray
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
-def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, modes, scratch, law):
+def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yielding):
     """Rath's rolling filter (SDT ``SDTRolling_dsp``) with exact momentum bookkeeping, on
     a rigid surface or one that gives way.
 
     Forces (N), speeds (m/s) and the optional surface input per sample; ``state`` holds a
-    RollingState; ``setup``: a RollingSetup; ``modes``/``scratch`` the surface's driving-point
-    modes (:mod:`ugens.driving_point`; no columns: a rigid surface) and ``law`` a SurfaceLaw.
+    RollingState; ``setup``: a RollingSetup; ``yielding``: a YieldingSurface (its modes
+    without columns: a rigid surface).
     Per sample: w = 1 + unevenness g(phase) (1 without rotation); W = (m g + F) w;
     x = input or profile; decay = clip(2 grain |v|, 0, 2); ground = max(trace - decay, x).
     Airborne: c -= W; the ball lands in this sample once c <= 0 (output B - c - W, and it
@@ -454,6 +476,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, modes,
     new turn lands a flight at once in either case.
     """
     prof, coef, cfg, ball = setup
+    modes, scratch, law = yielding
     config = rolling_config(cfg)
     inv_dxfs = config.inv_dxfs
     mass = config.mass
@@ -704,9 +727,9 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         self._law = np.zeros(len(SurfaceLaw._fields))
         self._prepare_surface()
         if self.surface is None:  # a rigid surface: no modes
-            self._modes, self._modes_scratch = np.zeros((MODE_ROWS, 0)), np.zeros(0)
+            self._yielding = YieldingSurface(np.zeros((MODE_ROWS, 0)), np.zeros(0), self._law)
         else:
-            self._modes, self._modes_scratch = self.surface, self._scratch
+            self._yielding = YieldingSurface(self.surface, self._scratch, self._law)
         self._kernel = specialise(
             rolling_filter,
             self.out,
@@ -717,9 +740,7 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
-            self._modes,
-            self._modes_scratch,
-            self._law,
+            self._yielding,
         )
 
     def _design_surface(self) -> None:
@@ -727,6 +748,11 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         self._law[:] = SurfaceLaw(
             self.values["contact_stiffness"], self._gain_sum, self.values["mass"] * self.sample_rate**2
         )
+
+    def _contact_moved(self, last: float, previous: float) -> None:
+        """A flight's gap and the landing's momentum are measured from the new contact."""
+        self.state[slot(RollingState, "takeoff")] += last
+        self.state[slot(RollingState, "surface")] += last
 
     def _reset(self) -> None:
         super()._reset()
@@ -746,9 +772,7 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
             self.input_buffer("input"),
             self.state,
             self._setup,
-            self._modes,
-            self._modes_scratch,
-            self._law,
+            self._yielding,
         )
 
     def state_arrays(self) -> dict[str, np.ndarray]:
