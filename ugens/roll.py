@@ -298,6 +298,9 @@ class Roll(GivingSurface, Turning, NeedleContact):
         """kc = fc0 / v0 (Hz per m/s)."""
         return self.values["fc0"] / self.values["v0"]
 
+    def _filters_height(self) -> bool:
+        return self.values["model"] is not None
+
     def _prepare(self) -> None:
         super()._prepare()
         v = self.values
