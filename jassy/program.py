@@ -28,7 +28,7 @@ import numpy as np
 from numba.core import types
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
-from jassy import anytime_rank, params
+from jassy import anytime_rank, jit, params
 from jassy.graph import Graph
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
@@ -45,7 +45,7 @@ from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact
 #: The modules whose kernels the program calls (a change there drops its numba cache).
 KERNEL_MODULES = [anytime_rank, params, cells, filters, impact, mix, modal, modal_meta, noise, pressure,
                   radiation, scrape]  # fmt: skip
-drop_stale_cache(__file__, KERNEL_MODULES)
+drop_stale_cache(__file__, [jit, *KERNEL_MODULES])
 
 #: int64 slots per node record: a Header, its kind's slots record (zero-padded), and last the
 #: address of its kind's compiled function.
