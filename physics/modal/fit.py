@@ -25,8 +25,9 @@ frequency resolutions, each on what the previous ones left:
    the noise and what the poles leave under its own envelope (:func:`_local_noise`).
    Limit: the burst stays in that residual, so the test does not separate a contact from
    broad modes in general (a 2 ms noise burst beside one slow mode still gives a few
-   spurious 700-1200 /s modes), and a 1000-3000 /s mode near a pole found earlier is
-   taken for that pole's leftover (:func:`_duplicate` uses their mean half-width).
+   spurious 700-1200 /s modes). A new pole is the leftover of one found earlier only
+   inside the narrower one's resonance (:func:`_duplicate`), so a broad mode is kept
+   beside slow poles 60-150 Hz away.
 5. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
    all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
    around each group of overlapping poles, the other poles subtracted; a pole the
@@ -217,8 +218,11 @@ def _z(poles: list[Pole], rate: float) -> np.ndarray:
 
 
 def _duplicate(p: Pole, poles: list[Pole]) -> bool:
-    """Within the half-power half-width of a pole already found (a leftover of subtracting it)."""
-    return any(abs(p.frequency - q.frequency) < max(0.5, (p.decay + q.decay) / (4 * np.pi)) for q in poles)
+    """Closer to a pole already found than the narrower one's half-power half-width d / (2 pi)
+    (at least 0.5 Hz): the leftover of subtracting that pole. Not the mean of the two widths:
+    a narrow pole resolves a broad one beyond its own width, so a broad mode (800 /s, 127 Hz
+    half-width) 60 Hz from a slow pole is a mode of its own, not that pole's leftover."""
+    return any(abs(p.frequency - q.frequency) < max(0.5, min(p.decay, q.decay) / (2 * np.pi)) for q in poles)
 
 
 def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
@@ -457,8 +461,8 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
 
 #: Two refined poles closer than this fraction of the half-power half-width of their summed
 #: decays, with decays within it of each other, are one mode fitted twice (their amplitudes
-#: cancel). 5x below :func:`_duplicate`'s 0.5, so a pair the detection accepted as two modes
-#: is never merged here unless the refinement moved them together.
+#: cancel). For equal decays 5x below :func:`_duplicate`'s width, so a pair the detection
+#: accepted as two modes is never merged here unless the refinement moved them together.
 SAME_POLE = 0.1
 
 
