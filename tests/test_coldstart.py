@@ -1,6 +1,7 @@
-"""A cold render's compile units run on two cores (jassy.engines.coldstart): every unit runs, the two
-processes share them, the helper is always reaped, and a render whose kernels came from the
-helper sounds the same as one that compiled them itself."""
+"""A cold render's compile units run on two cores (jassy.forked_compile, with the units of
+jassy.engines.coldstart): every unit runs, the two processes share them, the helper is always
+reaped, and a render whose kernels came from the helper sounds the same as one that compiled
+them itself."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import threading
 
 import pytest
 
-from jassy.engines.coldstart import may_fork_helper
+from jassy.forked_compile import may_fork_helper
 
 TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 
@@ -19,7 +20,7 @@ TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 #: thread), and then no helper is forked.
 UNITS = """
 import os, sys
-from jassy.engines.coldstart import compile_on_two_cores
+from jassy.forked_compile import compile_on_two_cores
 
 folder = sys.argv[1]
 here = os.getpid()
@@ -99,7 +100,7 @@ def test_no_helper_for_one_unit_or_with_other_threads_running():
 COLD_RENDER = """
 import hashlib, sys
 import numpy as np
-from jassy.engines import coldstart
+from jassy import forked_compile
 from jassy.patchfile import load_patch
 from jassy.engines.offline import OfflineEngine
 from numba.core import event
@@ -110,7 +111,7 @@ class Compiles(event.Listener):
         compiled_after.append(compile_event.data["dispatcher"].py_func.__qualname__)
     def on_end(self, compile_event):
         pass
-original = coldstart.compile_on_two_cores
+original = forked_compile.compile_on_two_cores
 def counted(units):
     forked.append(original(units))
     if forked[-1]:
@@ -134,7 +135,7 @@ def test_a_render_with_kernels_from_the_helper_sounds_like_one_compiling_alone(t
 
     def render(cache, helper=True):
         env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-        alone = "coldstart.may_fork_helper = lambda units: False\n"  # the caller compiles it all
+        alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
         code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
         out = subprocess.run(
             [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=550
