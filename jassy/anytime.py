@@ -43,6 +43,7 @@ rendering takes that fraction of real time (non-deterministic by nature).
 from __future__ import annotations
 
 import math
+import operator
 import time
 from dataclasses import dataclass, field
 
@@ -52,7 +53,7 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
-from jassy.record_views import handle
+from jassy.record_views import FIELD, handle
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
 #: margin do not swap at every decision (each swap regathers a bank and cuts a mode).
@@ -97,8 +98,14 @@ class ModeBudget:
             raise PatchError(
                 f"cpu_budget: expected a fraction of real time in (0, 10], got {self.cpu_fraction!r}"
             )
-        if not isinstance(self.period, int) or self.period < 8 or self.period & (self.period - 1):
-            raise PatchError(f"budget period: expected a power of two >= 8 frames, got {self.period!r}")
+        try:
+            self.period = operator.index(self.period)  # an int or numpy integer, as an int
+        except TypeError:
+            raise PatchError(
+                f"ModeBudget period: expected a power of two >= 8 frames, got {self.period!r}"
+            ) from None
+        if self.period < 8 or self.period & (self.period - 1):
+            raise PatchError(f"ModeBudget period: expected a power of two >= 8 frames, got {self.period!r}")
         if self.weighting not in ("flat", "A"):
             raise PatchError(f"budget weighting: expected 'flat' or 'A', got {self.weighting!r}")
         if not 0 < self.horizon <= 60:
@@ -198,10 +205,13 @@ class ModeBudget:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
         Hearing, the banks' outputs, the by-Python mask, the impacts, the step state and
         the Decision (ugens.modal_kept.DECISION_AT)."""
+        from ugens.modal_kept import DECISION_AT
+
         self._step_handle = handle(
             self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,),
             self._decision,
         )  # fmt: skip
+        assert self._step_handle.size == DECISION_AT + len(self._decision) * FIELD, "step handle layout"
 
     def step(self, start: int, n: int) -> None:
         """Graph step for frames [start, start + n), after every node the banks hear:
@@ -271,7 +281,7 @@ class ModeBudget:
                 if slot >= 0 and location is not None:
                     at = located.get((slot, location))
                     if at is None:
-                        row = self.banks[slot]._location_row(location)
+                        row = self.banks[slot].anytime_gains(location)
                         at = located[(slot, location)] = size
                         gains.append(row)
                         size += row.size

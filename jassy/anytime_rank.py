@@ -87,8 +87,8 @@ def kicks_at(a, i):
 #: every period (it adapts its size to a CPU budget); the step takes its decisions itself
 #: (no Python needed: no bank renders through Python, no bank is fed by another, no CPU
 #: budget); the step renders the banks; decisions taken; the most modes a decision kept.
-FADING, ANY_EXPECTED, EVERY_PERIOD, INLINE, RENDERS, DECISIONS, PEAK = range(7)
-STEP_STATE = 7
+STEP_SLOTS = FADING, ANY_EXPECTED, EVERY_PERIOD, INLINE, RENDERS, DECISIONS, PEAK = tuple(range(7))
+STEP_STATE = len(STEP_SLOTS)
 
 
 @nb.njit(cache=True, inline="always")

@@ -5,16 +5,17 @@ from __future__ import annotations
 import ctypes
 import fcntl
 import os
+import sys
 from collections.abc import Callable
 from types import ModuleType
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
 from llvmlite import ir as llvmir
 from numba.core import caching, cgutils, codegen, dispatcher, errors, targetconfig, types
-from numba.core.typing import typeof as numba_typeof
+from numba.core.compiler import Flags
 from numba.extending import intrinsic
 
 
@@ -227,19 +228,19 @@ def _no_c_wrappers_for_kernels() -> None:
     compiler._customize_flags = customise_without_c_wrapper
 
 
-def _faster_flag_comparisons() -> None:
-    """Compare numba's compiler flags without building a dict of every option per compare.
+class FlagComparison(NamedTuple):
+    """How a ``TargetConfig`` (numba's compiler flags) lists, compares and hashes its options."""
 
-    Typing a call looks its implementation up in a cache keyed by the compiler flags, and
-    numba's ``TargetConfig`` hashes and compares flags by building ``{option: value}`` for
-    all ~20 options through their properties, twice per compare (tens of thousands of
-    compares in a first render). Same results here: ``values()`` is the class's defaults
-    overlaid with the options set (the same dict, in the same order), flags with equal set
-    options are equal without building it, and the hash is the sorted option names', as
-    numba's (a constant per class)."""
-    config = getattr(targetconfig, "TargetConfig", None)
-    if config is None or getattr(config.values, "overlays_defaults", False):
-        return
+    values: Callable  #: flags -> {option name: value}, every option in the class's order
+    equal: Callable  #: (flags, other) -> bool, or NotImplemented
+    hashed: Callable  #: flags -> int
+
+
+def _overlaid_flag_comparison(config: type) -> FlagComparison:
+    """``TargetConfig`` comparisons without building a dict of every option per compare:
+    ``values()`` is the class's defaults overlaid with the options set (the same dict, in
+    the same order), flags with equal set options are equal without building it, and the
+    hash is the sorted option names', as numba's (a constant per class)."""
     defaults: dict[type, dict] = {}
     hashes: dict[type, int] = {}
 
@@ -267,17 +268,70 @@ def _faster_flag_comparisons() -> None:
         return found
 
     values.overlays_defaults = True
-    config.values, config.__eq__, config.__hash__ = values, equal, hashed
+    return FlagComparison(values, equal, hashed)
+
+
+def flag_variants() -> list:
+    """numba ``Flags``: the defaults, fastmath set on and off, nrt set on and off (off is its
+    default: equal to the defaults with different options set), and both set."""
+    variants = [Flags() for _ in range(6)]
+    variants[1].fastmath = True
+    variants[2].fastmath = False
+    variants[3].nrt = True
+    variants[4].nrt = False
+    variants[5].fastmath = True
+    variants[5].nrt = True
+    return variants
+
+
+def flag_comparisons_agree(reference: FlagComparison, candidate: FlagComparison, variants: list) -> bool:
+    """Whether ``candidate`` lists (same keys, same order as the class's options), compares and
+    hashes every one of ``variants`` (and every pair of them) as ``reference`` does."""
+    for flags in variants:
+        listed = candidate.values(flags)
+        if list(listed) != list(type(flags).options) or listed != reference.values(flags):
+            return False
+        if candidate.hashed(flags) != reference.hashed(flags):
+            return False
+        for other in variants:
+            if candidate.equal(flags, other) != reference.equal(flags, other):
+                return False
+    return True
+
+
+def _faster_flag_comparisons() -> None:
+    """Compare numba's compiler flags without building a dict of every option per compare.
+
+    Typing a call looks its implementation up in a cache keyed by the compiler flags, and
+    numba's ``TargetConfig`` hashes and compares flags by building ``{option: value}`` for
+    all ~20 options through their properties, twice per compare (tens of thousands of
+    compares in a first render). Installs :func:`_overlaid_flag_comparison` only where it
+    gives numba's results on :func:`flag_variants` (another numba version may differ)."""
+    config = getattr(targetconfig, "TargetConfig", None)
+    if config is None or getattr(config.values, "overlays_defaults", False):
+        return
+    if "_values" not in getattr(config, "__slots__", ()):
+        return
+    numbas = FlagComparison(config.values, config.__eq__, config.__hash__)
+    faster = _overlaid_flag_comparison(config)
+    try:
+        agree = flag_comparisons_agree(numbas, faster, flag_variants())
+    except (AttributeError, KeyError, TypeError, ValueError):  # flags shaped otherwise
+        agree = False
+    if agree:
+        config.values, config.__eq__, config.__hash__ = faster
 
 
 def _plain_error_text() -> None:
-    """Build numba's typing-error messages without terminal colours.
+    """Build numba's error messages without terminal colours, for the whole process.
 
     Typing a call tries each candidate implementation and keeps an error message for every
     one that does not fit (thousands in a first render, nearly all discarded); with
     colorama installed each message is wrapped for colours, which initialises colorama's
-    stream wrappers again per message. Messages that reach a user read the same, uncoloured
-    (as with numba's ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING``)."""
+    stream wrappers again per message. This switches numba's error colouring off in every
+    numba module (each keeps its colour scheme as a module global ``_termcolor``), as
+    ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING`` would: messages that reach a user read the
+    same, uncoloured."""
 
     class PlainText:
         def code(self, message):
@@ -286,9 +340,10 @@ def _plain_error_text() -> None:
         errmsg = filename = indicate = highlight = reset = code
 
     plain = PlainText()
-    errors._termcolor_inst = plain
-    if hasattr(numba_typeof, "_termcolor"):
-        numba_typeof._termcolor = plain
+    errors._termcolor_inst = plain  # what errors.termcolor() returns, also to modules imported later
+    for name, module in list(sys.modules.items()):
+        if name.startswith("numba.") and hasattr(module, "_termcolor"):
+            module._termcolor = plain
 
 
 _keep_linked_copies_private()

@@ -122,6 +122,12 @@ def test_a_weighting_is_normalised_and_shaped():
 def test_budget_options_are_validated_and_reach_the_cli(tmp_path, capsys):
     with pytest.raises(PatchError, match="mode_budget: expected an integer >= 1"):
         ModeBudget(max_modes=0)
+    for period in (3000, 4, 2048.0):
+        with pytest.raises(
+            PatchError, match=rf"ModeBudget period: expected a power of two >= 8 frames, got {period}"
+        ):
+            ModeBudget(max_modes=10, period=period)
+    assert ModeBudget(max_modes=10, period=np.int64(1024)).period == 1024
     assert (
         main(
             [
@@ -141,10 +147,25 @@ def test_budget_options_are_validated_and_reach_the_cli(tmp_path, capsys):
 
 
 def test_cpu_budget_adapts_the_mode_count():
-    budget = ModeBudget(cpu_fraction=1e-4)  # impossible to meet: shrinks to the floor of 16 modes
+    """A CPU budget impossible to meet starts from every mode and shrinks to the floor of
+    16 modes; from then on the banks compute at most those plus the modes still fading
+    out of the last decision."""
+    budget = ModeBudget(cpu_fraction=1e-4)
     graph, score = scene(budget, seconds=1.0)
+    banks, step, adapted = [graph.nodes[f"b{b}"] for b in range(6)], budget.step, []
+
+    def watched_step(start, n):
+        step(start, n)
+        if budget.limit == 16:
+            fading = int(budget._decision.fade.sum())
+            adapted.append((sum(bank.active_modes() for bank in banks), fading))
+
+    budget.step = watched_step
     render(graph, score, 1.0, FS, 64, limiter=False)
-    assert budget.limit == 16 and budget.peak_modes <= 900
+    assert budget.limit == 16 and budget.peak_modes > 16 * 4  # it started far above the floor
+    assert len(adapted) > 0.5 * FS / 64  # the floor is reached within the first half second
+    assert all(computed <= 16 + fading for computed, fading in adapted), max(adapted)
+    assert max(fading for _, fading in adapted) > 0  # modes do fade out there
 
 
 def error_db(y, reference):
@@ -218,39 +239,73 @@ def test_ranking_keeps_exactly_the_highest_positive_scores():
             assert score[~keep].max() <= positive[limit - 1]
 
 
-def test_a_budgeted_bank_is_split_only_where_the_budget_decides():
-    """Six bells struck 30 times, blocks of 4096 and decisions every 2048 frames: the
-    budget's step runs once per sub-block (the scheduler does not cut sub-blocks at
-    every period), takes its decisions inside it, and the output equals a render whose
-    sub-blocks are all cut at every period (block 2048) within rounding."""
+def test_a_budgeted_bank_is_split_only_where_the_budget_decides(monkeypatch):
+    """Six bells struck 30 times, blocks of 4096 and decisions every 2048 frames, one bell
+    rendered through its own ``process`` (over the spans the budget renders): a sub-block
+    is split only where the budget decides inside it (the scheduler does not cut
+    sub-blocks at every period), and the output equals a render whose sub-blocks are all
+    cut at every period (block 2048) within rounding."""
     graph, score = scene(ModeBudget(max_modes=120), seconds=2.0)
-    budget, starts, step = graph.budget, [], graph.budget.step
+    budget, slow, spans, steps = graph.budget, graph.nodes["b0"], [], []
+    monkeypatch.setattr(slow, "anytime_compiled", lambda: False)
+    process, step = slow.process, budget.step
+
+    def counted_process(start, n, offset):
+        spans.append(start)
+        process(start, n, offset)
 
     def counted_step(start, n):
-        starts.append(start)
+        spans_before, decisions_before = len(spans), budget.decisions
         step(start, n)
+        inner_periods = len(range((start // 2048 + 1) * 2048, start + n, 2048))
+        steps.append((len(spans) - spans_before, budget.decisions - decisions_before, inner_periods))
 
+    monkeypatch.setattr(slow, "process", counted_process)
     budget.step = counted_step
     y = render(graph, score, 2.0, FS, 4096, limiter=False).audio
-    assert budget.decisions > 0
-    assert len(starts) < 2.0 * FS / 2048  # fewer than one per period
+    assert budget.decisions > 0 and len(steps) == 24 and len(spans) >= len(steps)
+    assert all(pieces <= 1 + decisions for pieces, decisions, _ in steps)
+    # a split at every period would break that: some sub-block holds a period start but no decision
+    assert any(inner > decisions for _, decisions, inner in steps)
     graph, score = scene(ModeBudget(max_modes=120), seconds=2.0)
     cut = render(graph, score, 2.0, FS, 2048, limiter=False).audio
     assert max_abs_diff(y, cut) < 1e-6
 
 
+def changing_scene(budget):
+    """:func:`scene` over one second with parameter changes: a frequency ramp, a jump of
+    the gain, a move of the contact (where the next impacts strike) and a decay ramp
+    queued exactly at a period start (frame 20480)."""
+    graph, score = scene(budget, seconds=1.0)
+    score += [
+        Event(0.2, "b1", "set", {"freq_scale": 1.05}, ramp=0.1),
+        Event(0.35, "b2", "set", {"gain": 0.5}, jump=True),
+        Event(0.3, "b3", "set", {"location": 3}),
+        Event(20480 / FS, "b4", "set", {"decay_scale": 2.0}, ramp=0.05),
+    ]
+    return graph, sorted(score, key=lambda event: event.time)
+
+
 def test_the_compiled_render_of_all_banks_matches_each_bank_rendering_itself(monkeypatch):
-    """The budget renders its banks in one compiled call over its tables; with every bank
-    sent through its own ``process`` instead (as banks with a pending parameter change
-    are) the output is the same: six bells struck 30 times, a quarter of their modes."""
-    graph, score = scene(ModeBudget(max_modes=225), seconds=1.0)
-    compiled = render(graph, score, 1.0, FS, 4096, limiter=False).audio
-    assert graph.budget.decisions > 0 and graph.budget.mode_samples > 0
-    monkeypatch.setattr(ModalBank, "anytime_compiled", lambda self: False)
-    graph, score = scene(ModeBudget(max_modes=225), seconds=1.0)
-    by_python = render(graph, score, 1.0, FS, 4096, limiter=False).audio
-    assert np.max(np.abs(compiled)) > 1e-3
-    assert max_abs_diff(compiled, by_python) < 1e-12 * np.max(np.abs(compiled))
+    """The budget renders its banks in one compiled call over its tables (a bank's queued
+    parameter changes applied between two calls, its ramps by
+    ugens.modal_kept.ramp_kept); with every bank sent through its own ``process`` instead
+    (as banks with a size input are) the output is the same: six bells struck 30 times,
+    a quarter of their modes, their parameters ramping, jumping and the contact moving.
+    A change queued exactly at a period start is applied before that period's decision
+    in the compiled path and after it through ``process``: the decision sees the old or
+    the new coefficients, both within rounding of each other here."""
+    for changing in (False, True):
+        make = changing_scene if changing else lambda budget: scene(budget, seconds=1.0)
+        graph, score = make(ModeBudget(max_modes=225))
+        compiled = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+        assert graph.budget.decisions > 0 and graph.budget.mode_samples > 0
+        with monkeypatch.context() as patched:
+            patched.setattr(ModalBank, "anytime_compiled", lambda self: False)
+            graph, score = make(ModeBudget(max_modes=225))
+            by_python = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+        assert np.max(np.abs(compiled)) > 1e-3
+        assert max_abs_diff(compiled, by_python) < 1e-12 * np.max(np.abs(compiled)), changing
 
 
 def chained_bells(budget):
@@ -310,3 +365,77 @@ def test_the_compiled_periodogram_at_the_modes_bins_matches_numpy():
     assert np.allclose(psd, 0.75 * 2.0 + 0.25 * expected, rtol=1e-9)
     mb.psd_at_bins(re, im, bins, mb.PSD_SMOOTHING, 7.0, 0.75, False, psd)
     assert np.allclose(psd, expected, rtol=1e-9)
+
+
+def test_impacts_load_as_numpy_sums():
+    """ugens.modal_budget.load_impacts against sums in numpy: per bank, the squared
+    impulses at its current location this period and the next, and the squared
+    amplitudes per mode of impacts elsewhere; impacts before the period, two periods on,
+    with impulse <= 0 or on none of the banks (slot -1) count nowhere."""
+    from jassy.anytime_rank import Kicks
+    from ugens import modal_budget as mb
+
+    period, at, counts = 16, 32, [5, 7]
+    t = mb.budget_tables(counts, period)
+    t.values[mb.GAIN_LEVEL] = (2.0, 3.0)
+    t.values[mb.SIZE] = (4.0, 9.0)
+    gains = np.random.default_rng(2).normal(size=14)  # bank 1 at two locations: rows at 0 and 7
+    rows = [  # frame, slot, impulse, where its gains start (-1: current location)
+        (at - 1, 0, 9.0, -1), (at, 0, 0.5, -1), (at + 3, 0, 0.25, -1), (at + period, 0, 0.75, -1),
+        (at + 4, 0, -0.5, -1), (at + 5, 1, 0.0, 0), (at + 6, -1, 2.0, -1), (at + 7, 1, 0.3, 0),
+        (at + 8, 1, 0.2, 7), (at + period + 1, 1, 0.4, 7), (at + period + 2, 1, 0.6, -1),
+        (at + 2 * period, 0, 5.0, -1), (at + 2 * period, 1, 5.0, 0),
+    ]  # fmt: skip
+    frames, slots, impulses, located = (np.array(column) for column in zip(*rows, strict=True))
+    kicks = Kicks(frames, slots, impulses > 0, impulses.astype(float), located, gains)
+    t.values[mb.KICK_NOW] = 7.0  # stale values of an earlier decision are cleared
+    t.rows[mb.ELSEWHERE_NOW] = 7.0
+    assert mb.load_impacts(t, kicks, len(rows), at, period)
+    window = [(frames >= at + p * period) & (frames < at + (p + 1) * period) & (impulses > 0) for p in (0, 1)]
+    for b, k in enumerate(counts):
+        o = sum(counts[:b])
+        for later in (0, 1):
+            here = window[later] & (slots == b) & (located < 0)
+            assert t.values[mb.KICK_NOW + later, b] == pytest.approx(np.sum(impulses[here] ** 2), abs=0)
+            elsewhere = np.flatnonzero(window[later] & (slots == b) & (located >= 0))
+            assert t.values[mb.HAS_ELSEWHERE_NOW + later, b] == float(elsewhere.size > 0)
+            if elsewhere.size:
+                amplitude = (
+                    gains[located[elsewhere, None] + np.arange(k)]
+                    * impulses[elsewhere, None]
+                    * t.values[mb.GAIN_LEVEL, b]
+                )
+                expected = np.sum(amplitude**2, axis=0) / t.values[mb.SIZE, b]
+                assert np.allclose(t.rows[mb.ELSEWHERE_NOW + later, o : o + k], expected, rtol=1e-14)
+    assert not mb.load_impacts(t, kicks, len(rows), at, 0)  # between period starts: none
+    assert np.all(t.values[mb.KICK_NOW : mb.HAS_ELSEWHERE_NEXT + 1] == 0.0)
+
+
+def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
+    """ugens.modal_budget.periodogram on real tables (two banks, the second's columns
+    after the first's) against numpy.fft.rfft of the ring centred and Hann-windowed,
+    smoothed over the neighbouring bins; the second transform is blended with the first."""
+    from ugens import modal_budget as mb
+
+    period, counts, window_power = 256, [11, 23], 3.5
+    t = mb.budget_tables(counts, period)
+    rng = np.random.default_rng(4)
+    t.bins[:] = rng.integers(0, period // 2 + 1, sum(counts))
+    t.bins[11], t.bins[-1] = 0, period // 2  # taps past either end count as zero
+
+    def expected_psd(ring, bins):
+        spectrum = np.fft.rfft((ring - ring.mean()) * np.hanning(period))
+        padded = np.pad(np.abs(spectrum) ** 2, 2)
+        return padded[bins[:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / window_power
+
+    bins, first = t.bins[11:], []
+    for memory in (False, True):
+        t.rings[1] = rng.normal(size=period) + 0.2
+        mb.periodogram(t, 1, window_power)
+        psd = expected_psd(t.rings[1], bins)
+        if memory:
+            psd = mb.PSD_MEMORY * first[0] + (1 - mb.PSD_MEMORY) * psd
+        first.append(psd)
+        assert np.allclose(t.rows[mb.SPECTRUM, 11:], psd, rtol=1e-10)
+        assert t.values[mb.REMEMBERED, 1] == 1.0
+    assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched

@@ -1,9 +1,14 @@
-"""jassy.jit.specialise: the typed entry point, remembered by a cheap key of the argument types."""
+"""jassy.jit: specialise (the typed entry point, remembered by a cheap key of the argument
+types) and the process-wide changes to numba it installs (flag comparisons, plain error text)."""
+
+import sys
 
 import numba as nb
 import numpy as np
+import pytest
+from numba.core import errors, targetconfig
 
-from jassy.jit import specialise
+from jassy.jit import FlagComparison, flag_comparisons_agree, flag_variants, specialise
 
 
 @nb.njit(cache=True)
@@ -41,3 +46,65 @@ def test_arguments_without_a_cheap_key_still_get_their_entry_point():
     a = np.arange(4.0)
     entry = specialise(_total, a, np.float64(2.0), (a,))  # a numpy scalar: typed by numba each time
     assert entry(a, np.float64(2.0), (a,)) == 18.0  # 6 * 2 + 6
+
+
+def _numbas_values(flags):
+    return {name: getattr(flags, name) for name in type(flags).options}  # through the properties
+
+
+def _numbas_equal(flags, other):
+    if not isinstance(other, targetconfig.TargetConfig):
+        return NotImplemented
+    return _numbas_values(flags) == _numbas_values(other)
+
+
+#: numba's own TargetConfig definitions (numba/core/targetconfig.py), written out here.
+NUMBAS = FlagComparison(
+    _numbas_values, _numbas_equal, lambda flags: hash(tuple(sorted(_numbas_values(flags))))
+)
+
+
+def test_installed_flag_comparison_agrees_with_numbas():
+    config = targetconfig.TargetConfig
+    assert config.values.overlays_defaults  # installed on this numba version
+    installed = FlagComparison(config.values, config.__eq__, config.__hash__)
+    variants = flag_variants()
+    assert flag_comparisons_agree(NUMBAS, installed, variants)
+    default, fast, _, nrt, nrt_default, _ = variants
+    assert default == nrt_default and hash(default) == hash(nrt_default)  # set to its default
+    assert default != fast and default != nrt and {default, fast, nrt} == {nrt_default, fast, nrt}
+
+
+def test_flag_check_rejects_a_comparison_that_differs():
+    def defaults_only(flags):
+        return {name: option.default for name, option in type(flags).options.items()}
+
+    def reordered(flags):
+        return dict(reversed(_numbas_values(flags).items()))
+
+    variants = flag_variants()
+    ignores_set_options = NUMBAS._replace(values=defaults_only, equal=lambda a, b: True)
+    assert not flag_comparisons_agree(NUMBAS, ignores_set_options, variants)
+    assert not flag_comparisons_agree(NUMBAS, NUMBAS._replace(values=reordered), variants)
+    assert not flag_comparisons_agree(NUMBAS, NUMBAS._replace(hashed=lambda flags: 0), variants)
+
+
+def test_numba_error_text_is_plain_in_every_module():
+    schemes = [errors.termcolor()]
+    schemes += [
+        module._termcolor
+        for name, module in sys.modules.items()
+        if name.startswith("numba.") and hasattr(module, "_termcolor")
+    ]
+    assert len(schemes) > 1
+    for scheme in schemes:
+        for part in ("code", "errmsg", "filename", "indicate", "highlight", "reset"):
+            assert getattr(scheme, part)("text") == "text"
+
+    @nb.njit
+    def no_such_attribute(x):
+        return x.no_such_attribute
+
+    with pytest.raises(errors.TypingError) as raised:
+        no_such_attribute(1.0)
+    assert "no_such_attribute" in str(raised.value) and "\x1b" not in str(raised.value)

@@ -163,6 +163,18 @@ def test_progress_bar_ends_at_its_total(monkeypatch):
     fit_recordings(x, RATE, progress=True)
     (taken, total), (shown, _) = ends
     assert 0 < taken <= total and shown == total
+    # every search round finding a new pole: every step is taken, exactly the total
+    ends.clear()
+    detect = fit._detect
+
+    def detect_more(poles, *args):
+        out = detect(poles, *args)
+        return out + [fit.Pole(2000.0 + 100.0 * len(out), 3.0)] if len(out) == len(poles) else out
+
+    monkeypatch.setattr(fit, "_detect", detect_more)
+    fit_recordings(x, RATE, progress=True)
+    (taken, total), (shown, _) = ends
+    assert taken == total == shown
 
 
 def test_resynthesis_and_cli(tmp_path, capsys):
@@ -232,3 +244,17 @@ def test_noise_only_gives_a_clear_error():
     noise = np.random.default_rng(0).standard_normal(RATE)
     with pytest.raises(JassyError, match="no decaying modes found"):
         fit_recordings(noise, RATE)
+
+
+def test_distinct_merges_only_poles_the_refinement_put_together():
+    """Two modes half a half-width apart stay two; two poles on one mode become one; a pole
+    that moved onto another goes back to its value before the refinement."""
+    from physics.modal.fit import Pole, _distinct
+
+    assert _distinct([Pole(1000, 5), Pole(1002, 5.5)]) == [Pole(1000, 5), Pole(1002, 5.5)]
+    assert _distinct([Pole(1000, 70), Pole(1000.05, 72)]) == [Pole(1000, 70)]
+    before = [Pole(1000, 70), Pole(1060, 70)]
+    assert _distinct([Pole(1000, 70), Pole(1000.05, 72)], before) == before
+    # the earlier pole moved onto the later one: the earlier goes back
+    before = [Pole(940, 70), Pole(1000, 70)]
+    assert _distinct([Pole(1000.05, 72), Pole(1000, 70)], before) == before

@@ -60,3 +60,27 @@ def test_fast_length_is_five_smooth_and_close():
             while m % p == 0:
                 m //= p
         assert m == 1
+
+
+class _NoProgress:
+    def step(self, label):
+        pass
+
+
+def test_steady_tone_keeps_its_pre_sweep_pole():
+    """An undamped tone refines to the decay clamp (varpro.MIN_DECAY): that is a pole that
+    stopped decaying, so it keeps its value from before the sweep; the decaying mode beside
+    it is still refined towards its true decay."""
+    from physics.modal.fit import Pole, Segment, _spectral_refine
+    from physics.modal.strikes import Hit
+
+    rate, n = 8000.0, 8000
+    t = np.arange(n) / rate
+    rng = np.random.default_rng(3)
+    x = np.sin(2 * np.pi * 500.0 * t) + np.exp(-20.0 * t) * np.sin(2 * np.pi * 530.0 * t + 0.3)
+    x += 1e-3 * rng.standard_normal(n)
+    seg = Segment(0, 0, Hit(0, 0, n), x, np.zeros(0, np.int64), np.ones(n + 1), 2 * n)
+    start = [Pole(500.0, 0.5), Pole(530.5, 24.0)]
+    out = _spectral_refine(start, [seg], rate, 20.0, 3000.0, _NoProgress(), sweeps=1)
+    assert out[0] == start[0]
+    assert abs(out[1].decay - 20.0) < abs(start[1].decay - 20.0)

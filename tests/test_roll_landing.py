@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from ugens.cells import slot
 from ugens.driving_point import MODE_ROWS
 from ugens.roll import (
     BALL_POINTS,
@@ -33,7 +34,8 @@ def fly(amplitude, freq, phase, rise=0.01, n=400):
     """Rath's filter over a surface signal with one step up (one take-off), the ball on a
     surface moving as X[n] = amplitude sin(2 pi freq n / fs + phase) (m; a lossless mode
     the ball's force does not move, and no contact spring) or, with amplitude None, on a
-    rigid surface (no modes). Returns the output force (N)."""
+    rigid surface (no modes). Run one sample per call; returns the output force (N) and
+    whether the ball is in the air after each sample (RollingState.airborne)."""
     x = np.zeros(n)
     x[TAKEOFF:] = rise
     config = RollingConfig(
@@ -60,15 +62,19 @@ def fly(amplitude, freq, phase, rise=0.01, n=400):
     out, contact = np.zeros(n), np.zeros(n)
     state = np.zeros(len(RollingState._fields))
     surface = YieldingSurface(modes, np.zeros(modes.shape[1]), law)
-    rolling_filter(out, contact, n, np.zeros(n), np.full(n, SPEED), x, state, setup, surface)
-    return out
+    forces, speeds = np.zeros(n), np.full(n, SPEED)
+    airborne = np.zeros(n, dtype=bool)
+    for i in range(n):
+        at = slice(i, i + 1)
+        rolling_filter(out[at], contact[at], 1, forces[at], speeds[at], x[at], state, setup, surface)
+        airborne[i] = state[slot(RollingState, "airborne")] != 0.0
+    return out, airborne
 
 
-def landing(out):
-    """The landing sample: the first after the take-off whose force is not -W."""
-    weight = MASS * GRAVITY
-    after = np.flatnonzero(~np.isclose(out[TAKEOFF + 1 :], -weight, rtol=0, atol=1e-12))
-    return TAKEOFF + 1 + after[0]
+def landing(airborne):
+    """The landing sample: the first after the take-off that ends with the ball down."""
+    assert airborne[TAKEOFF] and not airborne[:TAKEOFF].any()
+    return TAKEOFF + 1 + np.flatnonzero(~airborne[TAKEOFF + 1 :])[0]
 
 
 def closed_form_landing(bump, amplitude, freq, phase):
@@ -81,12 +87,12 @@ def closed_form_landing(bump, amplitude, freq, phase):
 
 
 def test_a_surface_at_rest_gives_the_ballistic_flight():
-    rigid = fly(None, 0.0, 0.0)
+    rigid, airborne = fly(None, 0.0, 0.0)
     bump = rigid[TAKEOFF]
     weight = MASS * GRAVITY
-    assert landing(rigid) == TAKEOFF + math.ceil(2 * bump / weight)
+    assert landing(airborne) == TAKEOFF + math.ceil(2 * bump / weight)
     assert 10 < 2 * bump / weight < 100  # a flight of tens of samples
-    np.testing.assert_allclose(fly(0.0, 700.0, 0.3), rigid, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fly(0.0, 700.0, 0.3)[0], rigid, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("phase", np.linspace(0.0, 2 * math.pi, 7, endpoint=False))
@@ -96,18 +102,32 @@ def test_the_ball_lands_when_the_surface_meets_it(phase):
     the landing impulse stops the ball's own downward momentum m (g t - u) (none when
     the surface catches it still rising)."""
     amplitude, freq = 1e-7, 700.0
-    out = fly(amplitude, freq, phase)
+    out, airborne = fly(amplitude, freq, phase)
     bump = out[TAKEOFF]
     weight = MASS * GRAVITY
-    land = landing(out)
+    land = landing(airborne)
     assert land == closed_form_landing(bump, amplitude, freq, phase)
     j = land - TAKEOFF
     assert out[land] == pytest.approx(max(0.0, weight * j - bump) - weight, abs=1e-9)
 
 
+@pytest.mark.parametrize("phase", [0.4 * math.pi, 0.5 * math.pi])
+def test_a_ball_caught_still_rising_lands_without_an_impulse(phase):
+    """A surface coming up at 3e-7 m meets the ball before the top of its flight (j W < B;
+    3 and 2 samples after the take-off of a 12-sample ballistic flight): it lands there,
+    at the gap's closing, and its force that sample is -W, as in flight."""
+    amplitude, freq = 3e-7, 700.0
+    out, airborne = fly(amplitude, freq, phase)
+    bump = out[TAKEOFF]
+    weight = MASS * GRAVITY
+    land = landing(airborne)
+    assert land == closed_form_landing(bump, amplitude, freq, phase)
+    assert weight * (land - TAKEOFF) < bump  # still rising
+    assert out[land] == -weight
+
+
 def test_landings_move_both_ways_with_the_surface():
     """Over the phases the surface meets the ball early (coming up) and late (moving away)."""
-    rigid = fly(None, 0.0, 0.0)
-    ballistic = landing(rigid)
-    lands = [landing(fly(1e-7, 700.0, p)) for p in np.linspace(0.0, 2 * math.pi, 7, endpoint=False)]
+    ballistic = landing(fly(None, 0.0, 0.0)[1])
+    lands = [landing(fly(1e-7, 700.0, p)[1]) for p in np.linspace(0.0, 2 * math.pi, 7, endpoint=False)]
     assert min(lands) < ballistic - 3 and max(lands) > ballistic + 3

@@ -106,7 +106,7 @@ def test_centroid_changes_smoothly_over_other_profiles(seed):
     assert np.max(steps) < 1.3, (speeds[np.argmax(steps)], np.max(steps))
 
 
-@nb.njit(cache=True)
+@nb.njit  # not cached: its cache would keep an old copy of the inlined press
 def pressed(out, contact, n, modes, scratch, stiffness, gain_sum):
     """out[:n] through ``press``, one sample at a time, the spring acting while contact > 0."""
     for i in range(n):

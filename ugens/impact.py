@@ -17,10 +17,14 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells
 from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_amplitude, raised_cosine
+
+drop_stale_cache(__file__, [cells])  # render_pulses inlines cells.raised_cosine
 
 
 @nb.njit(cache=True, inline="always")  # inlined, as jassy.engines.callback.apply_event

@@ -72,7 +72,6 @@ from ugens.modal_budget import (
     TRANSFORMED,
     WEIGHT,
     BudgetTables,
-    compact_bank,
     line_aligned_zeros,
 )
 from ugens.modal_f32 import (
@@ -95,7 +94,6 @@ from ugens.modal_meta import (
     NARROW_ACTIVE,
     NARROW_ALL,
     RAMP_LEFT,
-    WIDTH,
     BankMeta,
     CompactMeta,
     NarrowMeta,
@@ -679,7 +677,7 @@ class ModalBank(ModelParams, UGen):
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
-            gains = poles[2] * scale * self._location_row(v["location"])
+            gains = poles[2] * scale * self.anytime_gains(v["location"])
             out = np.empty_like(poles)
             out[:2] = poles[:2]
             out[2] = gains
@@ -687,8 +685,9 @@ class ModalBank(ModelParams, UGen):
             self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
-    def _location_row(self, location: Any) -> np.ndarray:
-        """The model's gains at ``location`` in internal mode order, kept per location (a
+    def anytime_gains(self, location: Any) -> np.ndarray:
+        """The model's gains at ``location`` in internal mode order (also the mode budget's
+        impact gains), kept per location (a
         retune at every crumple event redesigns the gains, not the location)."""
         row = self._location_rows.get(location)
         if row is None:
@@ -939,19 +938,8 @@ class ModalBank(ModelParams, UGen):
     def _span_kept(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
         bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
-        excitation)."""
-        if not self._ramping:
-            self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
-            return
-        compact, meta = self._compact_of(self._tables, self._slot), self._compact_meta
-        meta[ACTIVE] = meta[WIDTH]
-        ramp = Ramp(compact[:4], compact[6:10], compact[10:])
-        self.meta[RAMP_LEFT] = resonate_ramp(
-            inp, out, n, ramp, compact[4], compact[5], self.meta[RAMP_LEFT], meta[WIDTH], self.last
-        )
-        self._ramping = self.meta[RAMP_LEFT] > 0
-        self._hear(inp, n, self._heard, start)
-        self.meta[ACTIVE] = min(meta[ACTIVE], self.meta[ALLOWED])
+        excitation), its coefficients ramping while the bank's meta says so."""
+        self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -980,8 +968,7 @@ class ModalBank(ModelParams, UGen):
         """Whether the budget's compiled render (ugens.modal_kept.render_kept, which also
         runs coefficient ramps) can render the bank's spans throughout a render: no size
         input (queued parameter changes the budget applies between spans,
-        :meth:`anytime_apply`; ``_ramping``, read only by :meth:`process`, which the
-        budget then never calls, follows the bank's meta there)."""
+        :meth:`anytime_apply`; a budgeted bank's ramp is read from its meta's RAMP_LEFT)."""
         return self._size_input is None
 
     def anytime_changes(self, end: int) -> list[int]:
@@ -993,7 +980,6 @@ class ModalBank(ModelParams, UGen):
         rendered the bank up to there (as :meth:`process` does between its spans)."""
         while self._pending and self._pending[0][0] <= frame:
             self._apply_queued()
-        self._ramping = self.meta[RAMP_LEFT] > 0
 
     def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the
@@ -1044,9 +1030,7 @@ class ModalBank(ModelParams, UGen):
         from ugens import modal_kept  # (not at the top: it imports this module)
 
         self._tables_handle = handle(tables)
-        self._compact_of = specialise(compact_bank, tables, slot)
         self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
-        self._hear = modal_kept.hear
         self._kept_span = specialise(
             modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
         )

@@ -25,6 +25,7 @@ from jassy.anytime_rank import (
     PEAK,
     RENDERS,
     Hearing,
+    Kicks,
     has_force,
     hearing_at,
     kicks_at,
@@ -32,7 +33,7 @@ from jassy.anytime_rank import (
 )
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
-from ugens import cells, modal, modal_budget, modal_meta
+from ugens import cells, kernels, modal, modal_budget, modal_meta, real_fft
 from ugens.cells import mode_rows
 from ugens.kernels import FASTMATH
 from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, resonate, resonate_ramp
@@ -51,8 +52,8 @@ from ugens.modal_budget import (
 from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 
 drop_stale_cache(
-    __file__, [cells, modal, modal_budget, modal_meta, anytime_rank, record_views]
-)  # the cache holds copies of their kernels
+    __file__, [anytime_rank, cells, kernels, modal, modal_budget, modal_meta, real_fft, record_views]
+)  # the cache holds copies of their kernels (real_fft through modal_budget.decide) and FASTMATH
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -245,8 +246,8 @@ HEARING_FIELDS = len(Hearing._fields)
 #: the by-Python mask, the Kicks (jassy.anytime_rank), the step state, the Decision.
 HEARING_AT = TABLE_FIELDS * FIELD
 OUTPUTS_AT = HEARING_AT + HEARING_FIELDS * FIELD
-KICKS_AT = OUTPUTS_AT + 2 * FIELD
-STATE_AT = KICKS_AT + 6 * FIELD
+KICKS_AT = OUTPUTS_AT + 2 * FIELD  # the outputs' addresses and the by-Python mask
+STATE_AT = KICKS_AT + len(Kicks._fields) * FIELD
 DECISION_AT = STATE_AT + FIELD
 
 
@@ -325,10 +326,15 @@ def kept_span(a, b, force, out, start, n):
     """Budgeted bank b (its rows in the tables of handle ``a``, jassy.record_views) over
     force[:n] into out[:n], frames [start, start + n), as :func:`render_kept` renders it
     (for a bank that renders through its own ``process``): :func:`kept_step` on its
-    compact bank, gathered if stale; the force goes to its ring."""
+    compact bank, gathered if stale, or :func:`ramp_kept` while its coefficients ramp;
+    the force goes to its ring."""
     t = tables_at(a, 0)
-    compact, meta = compact_bank(t, b), t.compact_meta[b]
-    kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
+    meta = t.compact_meta[b]
+    if t.meta[b, RAMP_LEFT] > 0:
+        ramp_kept(t, b, force, out, start, n, t.rings[b])
+    else:
+        compact = compact_bank(t, b)
+        kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
     t.meta[b, ACTIVE] = min(meta[ACTIVE], t.meta[b, ALLOWED])
 
 

@@ -18,10 +18,6 @@ import numba as nb
 import numpy as np
 
 
-def is_power_of_two(n: int) -> bool:
-    return n >= 4 and n & (n - 1) == 0
-
-
 def twiddles(n: int) -> np.ndarray:
     """(2, n/2 + 1): cos and sin of 2 pi k / n, k = 0 .. n/2, for :func:`real_spectrum`."""
     angle = 2.0 * np.pi * np.arange(n // 2 + 1) / n

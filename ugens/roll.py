@@ -15,9 +15,10 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
+from ugens import cells, driving_point, kernels, scrape
 from ugens.cells import slot, store
 from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, move_contact, press, roll_over
 from ugens.filters import design_biquad
@@ -35,6 +36,10 @@ from ugens.scrape import (
     read_profile,
     wrap,
 )
+
+# rolling_filter (cache=True) inlines free_motion, press and settle, the cells' and the
+# profile's helpers; Roll's kernel calls roll_over.
+drop_stale_cache(__file__, [cells, driving_point, kernels, scrape])
 
 #: Standard gravity, m/s^2 (SDT_EARTH).
 GRAVITY = 9.81
@@ -293,6 +298,9 @@ class Roll(GivingSurface, Turning, NeedleContact):
         """kc = fc0 / v0 (Hz per m/s)."""
         return self.values["fc0"] / self.values["v0"]
 
+    def _filters_height(self) -> bool:
+        return self.values["model"] is not None
+
     def _prepare(self) -> None:
         super()._prepare()
         v = self.values
@@ -394,7 +402,6 @@ class RollingState(NamedTuple):
     phase: float  #: rotation phase (revolutions)
     height: float  #: the flying ball's height above its take-off point (m)
     takeoff: float  #: the surface's displacement at the contact at the take-off (m)
-    surface: float  #: the surface's displacement at the contact in the last sample (m)
 
 
 @nb.njit(inline="always", cache=True)
@@ -411,7 +418,6 @@ def rolling_state(state):
         state[7],
         state[8],
         state[9],
-        state[10],
     )
 
 
@@ -468,12 +474,11 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
     trapezoid rule, exact for a constant W) over m fs^2, is compared with the surface's
     displacement X at the contact (this sample's free motion, positive away from the
     ball), and the ball lands in the first sample where the gap h + X - X_takeoff <= 0
-    (on a surface at rest that is c <= 0), with the impulse that stops it on the moving
-    surface: contact = max(0, B - c - m fs^2 (X - x_last)), the ball's downward momentum
-    plus the surface's upward one (on a surface at rest Rath's B - c). The (low-passed)
-    output then reaches the surface through the contact spring while contact > 0
-    (:func:`press`); the output and ``contact`` are the force on the moving surface. A
-    new turn lands a flight at once in either case.
+    (on a surface at rest that is c <= 0), with Rath's impulse B - c, the ball's own
+    downward momentum (0 if still rising): contact = max(0, B - c); the surface's velocity
+    is not added. The (low-passed) output then reaches the surface through the contact
+    spring while contact > 0 (:func:`press`); the output and ``contact`` are the force on
+    the moving surface. A new turn lands a flight at once in either case.
     """
     prof, coef, cfg, ball = setup
     modes, scratch, law = yielding
@@ -501,7 +506,6 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
     phase = held.phase
     height = held.height
     takeoff = held.takeoff
-    surface = held.surface
     weight = mass * GRAVITY
     turning = per_metre > 0.0 and not has_input
     for i in range(n):
@@ -561,7 +565,6 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
         touch = y + load
         if giving:
             f = press(modes, scratch, free, y, stiffness if touch > 0.0 else 0.0, gain_sum)
-            surface = free + gain_sum * f
             touch += f - y
             y = f
         out[i] = y
@@ -570,7 +573,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
             pos = wrap(pos + v * inv_dxfs, L)
     store(
         state,
-        RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase, height, takeoff, surface),
+        RollingState(pos, trace, 1.0 if airborne else 0.0, c, bump, s1, s2, phase, height, takeoff),
     )
 
 
@@ -750,9 +753,8 @@ class RathRoll(GivingSurface, Turning, ProfileContact):
         )
 
     def _contact_moved(self, last: float, previous: float) -> None:
-        """A flight's gap and the landing's momentum are measured from the new contact."""
+        """A flight's gap is measured from the new contact."""
         self.state[slot(RollingState, "takeoff")] += last
-        self.state[slot(RollingState, "surface")] += last
 
     def _reset(self) -> None:
         super()._reset()

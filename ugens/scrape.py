@@ -303,7 +303,8 @@ def law_specs(v_ref: float = 1.0, min_speed: float = 1e-4):
             "sqrt",
             choices=LAWS,
             fixed=True,
-            doc="amplitude law: sqrt(F v) (power ~ F v), F v, or height (1 while loaded and moving)",
+            doc="amplitude law: sqrt(F v) (power ~ F v), F v, or height (1 while loaded and moving; "
+            "only under a contact filter, Roll with a model)",
         ),
         "f_ref": ParamSpec(
             "float", 1.0, low=0.0, low_open=True, high=1e5, unit="N", fixed=True, doc="reference normal force"
@@ -480,8 +481,18 @@ class ContactControls(UGen):
             return self._forces[:n], self._speeds[:n]
         return self._force.fill(self._forces, n), self._speed.fill(self._speeds, n)
 
+    def _filters_height(self) -> bool:
+        """True when a contact filter makes the force from the height (Roll with a
+        ``model``): only then may ``law`` be "height"."""
+        return False
+
     def _law_config(self) -> tuple[float, float, float]:
         v = self.values
+        if v["law"] == "height" and not self._filters_height():
+            raise PatchError(
+                f"nodes.{self.name}.law: 'height' (force = stiffness x height, with no speed or "
+                "load dependence) needs a contact filter (Roll with a model); expected 'sqrt' or 'linear'"
+            )
         return float(LAWS.index(v["law"])), 1.0 / (v["f_ref"] * v["v_ref"]), float(v["min_speed"])
 
     def state_arrays(self) -> dict[str, np.ndarray]:

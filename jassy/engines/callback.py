@@ -38,7 +38,7 @@ from llvmlite import ir as llvmir
 from numba import types
 from numba.extending import intrinsic
 
-from jassy import haptics, program, safety
+from jassy import haptics, jit, program, safety
 from jassy.engines import hapticframes
 from jassy.engines.hapticframes import FLAG_WATCHDOG
 from jassy.engines.memlock import resident
@@ -75,7 +75,7 @@ from ugens.modal import ModalBank
 from ugens.modal_meta import RAMP_LEFT
 from ugens.scrape import ResonantScrape, Scrape
 
-drop_stale_cache(__file__, [program, safety, haptics, hapticframes, *KERNEL_MODULES])
+drop_stale_cache(__file__, [jit, program, safety, haptics, hapticframes, *KERNEL_MODULES])
 
 # control slots (int64)
 (

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy import haptics, jit, safety
+from jassy import haptics, jit, program, safety
 from jassy.engines import callback
 from jassy.engines.callback import (
     BLOCK,
@@ -46,7 +46,7 @@ from ugens.cells import with_room
 from ugens.impact import ImpactForce
 from ugens.modal import ModalBank
 
-drop_stale_cache(__file__, [callback, haptics, jit, safety, *KERNEL_MODULES])
+drop_stale_cache(__file__, [callback, haptics, jit, program, safety, *KERNEL_MODULES])
 
 #: Bytes of staged modal designs after which translation waits for the render to apply them.
 DESIGN_BYTES = 1 << 24

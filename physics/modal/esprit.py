@@ -154,9 +154,9 @@ def refine(
     s = -decay + i omega. The minimum is the one of the joint (poles, amplitudes) problem."""
     from scipy.optimize import least_squares
 
-    if z0.size == 0:
-        return z0, [np.zeros(0, dtype=complex) for _ in signals]
     signals = [np.asarray(y[:max_samples]) for y in signals]
+    if z0.size == 0 or not any(y.size for y in signals):
+        return z0, [np.zeros(z0.size, dtype=complex) for _ in signals]
     k = z0.size
     ns = [np.arange(y.size) / rate for y in signals]
     # a step to a growing pole is held at e^50 over the longest signal (no overflow)
@@ -195,17 +195,21 @@ def refine(
                 dv = dv.real
             dv = dv - q @ (np.conj(q.T) @ dv)
             blocks.append(-parts(dv))
-        return np.vstack(blocks)
+        out = np.vstack(blocks)
+        out[:, :k][:, p[:k] < min_decay] = 0.0  # a clamped decay does not move the model
+        return out
 
     logz = np.log(z0)
     p0 = np.concatenate([-logz.real * rate, logz.imag * rate])
     try:
         sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-10, ftol=1e-12)
         p = sol.x if np.all(np.isfinite(sol.x)) else p0
-        amps = [o[1] for o in solve(p)]
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
         p = p0
+    try:
         amps = [o[1] for o in solve(p)]
+    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
+        amps = [np.zeros(k, dtype=complex) for _ in signals]
     # the poles the cost and the amplitudes were computed with
     z = np.exp((-np.maximum(p[:k], min_decay) + 1j * p[k:]) / rate)
     return z, amps

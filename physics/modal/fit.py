@@ -21,10 +21,16 @@ frequency resolutions, each on what the previous ones left:
 4. **Full rate** (the first 40 ms, minus everything found so far): modes up to 3000 /s
    (wood, small objects, high frequencies), with no band filter in the way. Faster
    "modes" (T60 < 2.3 ms) are the contact itself: a noise burst fits as dozens of them,
-   so they are left to the attack.
+   so they are left to the attack; each remaining pole must stand out of the larger of
+   the noise and what the poles leave under its own envelope (:func:`_local_noise`).
+   Limit: the burst stays in that residual, so the test does not separate a contact from
+   broad modes in general (a 2 ms noise burst beside one slow mode still gives a few
+   spurious 700-1200 /s modes), and a 1000-3000 /s mode near a pole found earlier is
+   taken for that pole's leftover (:func:`_duplicate` uses their mean half-width).
 5. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
    all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
-   around each group of overlapping poles, the other poles subtracted), then the stages
+   around each group of overlapping poles, the other poles subtracted; a pole the
+   refinement moved onto another goes back, :func:`_distinct`), then the stages
    again on what the refined poles leave (a weak mode on a strong one's skirt, a cluster's
    missed member), and the joint refinement again with what they found (up to
    ``EXTRA_PASSES`` such rounds).
@@ -314,12 +320,11 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     # the broadband noise level (a broad mode lifts the floor of the bins around it)
     noise = max(float(np.median(s.noise)) / s.x.size for s in segments)
     z = esprit.esprit_poles(gram, rows, noise, margin, max_order=width // 2)
-    fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    fz, dz = _frequency_decay(z, rate)
     z = z[(fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min / 2) & (dz <= 2 * stage.d_max)]
     real = [r[:n] for r in residuals]
     z, _ = esprit.refine(real, rate, z, real=True)
-    with np.errstate(all="ignore"):
-        fz, dz = np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+    fz, dz = _frequency_decay(z, rate)
     # faster poles are the contact: their part of the signal is left as noise for the others
     z = z[np.isfinite(dz) & (fz >= f_lo) & (fz <= f_hi) & (dz > stage.d_min) & (dz <= stage.d_max)]
     amps = [esprit.amplitudes(y, z) for y in real]
@@ -335,9 +340,16 @@ def _full_rate_poles(stage: Stage, residuals, segments, rate, f_lo, f_hi, margin
     return out
 
 
+def _frequency_decay(z: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency Hz, decay 1/s) of poles z at ``rate`` Hz (decay inf for z = 0)."""
+    with np.errstate(divide="ignore"):
+        return np.angle(z) * rate / (2 * np.pi), -np.log(np.abs(z)) * rate
+
+
 def _local_noise(signals, z: np.ndarray, amps) -> list[np.ndarray]:
-    """Per signal and pole: the variance per sample of what the poles leave of the signal,
-    weighted by the pole's own energy envelope |z|^(2n) (where the pole has its energy). A
+    """Per signal and pole: the mean square per sample (signal units^2) of what the poles
+    leave of the signal, weighted by the pole's own energy envelope |z|^(2n) (where the
+    pole has its energy). A
     pole fitted to a contact's noise burst explains a few of its degrees of freedom and
     leaves the rest beside it; a damped sinusoid leaves only the noise."""
     out = []
@@ -443,24 +455,37 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
     return out
 
 
-#: Two refined poles closer than this fraction of their summed half-power half-widths, with
-#: decays within it of each other, are one mode fitted twice (their amplitudes cancel).
+#: Two refined poles closer than this fraction of the half-power half-width of their summed
+#: decays, with decays within it of each other, are one mode fitted twice (their amplitudes
+#: cancel). 5x below :func:`_duplicate`'s 0.5, so a pair the detection accepted as two modes
+#: is never merged here unless the refinement moved them together.
 SAME_POLE = 0.1
 
 
-def _distinct(poles: list[Pole]) -> list[Pole]:
-    """``poles`` without the second of any two that refined onto the same mode: a pole may
-    move by up to its refinement window, which is wider than the spacing of a group, onto
-    a neighbour's peak. Two modes that close could not be told apart from the recording."""
-    out: list[Pole] = []
-    for p in poles:
-        if not any(
-            abs(p.frequency - q.frequency) < SAME_POLE * varpro.half_width(p.decay + q.decay)
-            and abs(p.decay - q.decay) < SAME_POLE * (p.decay + q.decay)
-            for q in out
-        ):
-            out.append(p)
-    return out
+def _same_pole(p: Pole, q: Pole) -> bool:
+    return abs(p.frequency - q.frequency) < SAME_POLE * varpro.half_width(p.decay + q.decay) and abs(
+        p.decay - q.decay
+    ) < SAME_POLE * (p.decay + q.decay)
+
+
+def _distinct(poles: list[Pole], before: list[Pole] | None = None) -> list[Pole]:
+    """``poles`` without duplicates the refinement made: a pole may move by up to its
+    refinement window, which is wider than the spacing of a group, onto a neighbour's peak,
+    merging two poles into one. Of two that collide, the one that moved goes back to its
+    value in ``before`` (the poles before the refinement, same order; default: ``poles``);
+    it is dropped only if that value also lies on a kept pole."""
+    before = poles if before is None else before
+    kept: list[list[Pole]] = []  # [value, value before the refinement]
+    for p, b in zip(poles, before, strict=True):
+        clash = [k for k in kept if _same_pole(p, k[0])]
+        if clash and p != b:
+            p, clash = b, [k for k in kept if _same_pole(b, k[0])]
+        for k in clash:
+            if k[0] != k[1] and not _same_pole(p, k[1]):
+                k[0] = k[1]  # the kept pole moved onto this one: it goes back instead
+        if not any(_same_pole(p, k[0]) for k in kept):
+            kept.append([p, b])
+    return [k[0] for k in kept]
 
 
 def _pole_groups(poles: list[Pole], bin_hz: float, max_size: int = 10) -> list[list[int]]:
@@ -527,9 +552,11 @@ def _spectral_refine(poles: list[Pole], segments, rate, f_lo, f_hi, work, sweeps
                 spectra.append(varpro.Spectrum(bins, spec[bins] + own, n))
             ref = varpro.refine(spectra, rate, f, d)
             for i, f_new, d_new, f_old, w in zip(idx, ref.frequencies, ref.decays, f, reach, strict=True):
-                if abs(f_new - f_old) <= w and f_lo <= f_new <= f_hi and 0 < d_new <= 2 * STAGES[-1].d_max:
+                # a decay at the clamp is a pole that stopped decaying (varpro holds d >= MIN_DECAY)
+                ok_d = varpro.MIN_DECAY < d_new <= 2 * STAGES[-1].d_max
+                if abs(f_new - f_old) <= w and f_lo <= f_new <= f_hi and ok_d:
                     new[i] = Pole(float(f_new), float(d_new))
-        out = _distinct(new)
+        out = _distinct(new, out)
     return out
 
 
@@ -604,7 +631,7 @@ class _Work:
 
     def close(self) -> None:
         """The bar to its end (search rounds that found nothing skip their steps), then off."""
-        self.bar.update(self.bar.total - self.bar.n)
+        self.bar.update(max(0, self.bar.total - self.bar.n))
         self.bar.close()
 
 

@@ -127,7 +127,9 @@ def refine(spectra: list[Spectrum], rate: float, freqs, decays, max_nfev: int = 
                 v = np.vstack([v.real, v.imag]) / rate
                 cols.append(-(v - q @ (q.T @ v)))
             blocks.append(np.hstack(cols))
-        return np.vstack(blocks)
+        out = np.vstack(blocks)
+        out[:, :k][:, p[:k] < MIN_DECAY] = 0.0  # a clamped decay does not move the model
+        return out
 
     p0 = np.concatenate([decays, 2 * np.pi * freqs])
     r0 = resid(p0)
