@@ -85,6 +85,31 @@ def test_a_failing_unit_here_propagates_and_a_failing_helper_unit_is_left_to_the
     assert done == "True" and reaped == "True" and (2, int(here)) in _ran(tmp_path)
 
 
+#: A host that reaps its children itself (a SIGCHLD handler): the helper is gone before
+#: compile_on_two_cores waits for it.
+REAPING_HOST = """
+import os, signal, time
+from jassy.forked_compile import compile_on_two_cores
+
+def reap(signum, frame):
+    try:
+        while os.waitpid(-1, os.WNOHANG)[0]:
+            pass
+    except ChildProcessError:
+        pass
+
+signal.signal(signal.SIGCHLD, reap)
+print(compile_on_two_cores([lambda: time.sleep(0.5), lambda: None]))
+"""
+
+
+@pytest.mark.skipif(not TWO_CORES, reason="needs two usable cores")
+def test_a_host_reaping_its_children_does_not_break_the_wait_for_the_helper():
+    out = subprocess.run([sys.executable, "-c", REAPING_HOST], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True"]
+
+
 def test_no_helper_for_one_unit_or_with_other_threads_running():
     assert not may_fork_helper([print])
     stop = threading.Event()
