@@ -32,7 +32,21 @@ from jassy import anytime_rank, jit, params
 from jassy.graph import Graph
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import ramp_fill
-from ugens import cells, filters, impact, mix, modal, modal_meta, noise, pressure, radiation, scrape
+from ugens import (
+    cells,
+    filters,
+    impact,
+    kernels,
+    mix,
+    modal,
+    modal_f32,
+    modal_meta,
+    noise,
+    pressure,
+    radiation,
+    scrape,
+    tonal_level,
+)
 from ugens.filters import Biquad, biquad, biquad_ramp, design_biquad
 from ugens.impact import ImpactForce, render_pulses
 from ugens.mix import Gain, Mixer, Multiply, accumulate, multiply, scale, scale_ramp
@@ -42,9 +56,11 @@ from ugens.pressure import SoundPressure, sound_pressure
 from ugens.radiation import Radiation, radiate
 from ugens.scrape import NOISE_CFG_SIZE, ResonantScrape, Scrape, profile_contact, resonant_noise
 
-#: The modules whose kernels the program calls (a change there drops its numba cache).
-KERNEL_MODULES = [anytime_rank, params, cells, filters, impact, mix, modal, modal_meta, noise, pressure,
-                  radiation, scrape]  # fmt: skip
+#: The modules whose kernels the program calls, directly or through another kernel (a change
+#: there drops its numba cache): modal.bank_step steps mixed banks with modal_f32's kernels,
+#: scrape.resonant_noise reads tonal_level's table, ``kernels`` holds their FASTMATH flags.
+KERNEL_MODULES = [anytime_rank, params, cells, filters, impact, kernels, mix, modal, modal_f32, modal_meta,
+                  noise, pressure, radiation, scrape, tonal_level]  # fmt: skip
 drop_stale_cache(__file__, [jit, *KERNEL_MODULES])
 
 #: int64 slots per node record: a Header, its kind's slots record (zero-padded), and last the
