@@ -1,7 +1,7 @@
 """Where a cold render's CPU goes: every function numba compiles in this process, with its
 CPU time inclusive and exclusive of the functions it compiles on the way (numba's
 ``numba:compile`` events), LLVM's share (``numba:llvm_lock``), and the CPU of the helper
-processes the render forked and reaped (jassy.engines.coldstart). Point numba's cache at an
+processes the render forked and reaped (jassy.forked_compile). Point numba's cache at an
 empty folder to see a fresh install's first render:
 
     NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/cold_compile.py OUT.txt render wok -o /tmp/wok.wav -q
@@ -43,16 +43,23 @@ class CompileTimes(event.Listener):
 
 
 class LockTime(event.Listener):
-    """CPU time spent holding numba's LLVM lock (LLVM's optimisation and code generation)."""
+    """CPU time spent holding numba's LLVM lock (LLVM's optimisation and code generation).
+    The lock is re-entrant: a nested hold is counted once, from the outermost start to its
+    end (a depth counter)."""
 
     def __init__(self):
         self.total = 0.0
+        self.depth = 0
 
     def on_start(self, ev):
-        self.start = time.process_time()
+        if self.depth == 0:
+            self.start = time.process_time()
+        self.depth += 1
 
     def on_end(self, ev):
-        self.total += time.process_time() - self.start
+        self.depth -= 1
+        if self.depth == 0:
+            self.total += time.process_time() - self.start
 
 
 def main(argv: list[str]) -> int:

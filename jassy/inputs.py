@@ -12,10 +12,12 @@ option) and the key, and says what was expected, so the CLI prints one line and 
 * :func:`number` accepts int/float only (not booleans, strings or arrays), finite, within
   the range given, integral where a count is meant; a 20-digit integer or 1e308 is a range
   error, never an overflow later.
+* :func:`require_extra`: an optional package an option needs is installed (before any work).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import stat
@@ -195,3 +197,13 @@ def text_value(value: Any, where: str, what: str = "a string") -> str:
     if not isinstance(value, str) or not value or "\0" in value:
         raise JassyError(f"{where}: expected {what}, got {value!r}")
     return value
+
+
+def require_extra(module: str, extra: str, option: str) -> None:
+    """Fail before any work if the optional ``module`` is missing, naming the extra to install."""
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise JassyError(f"{option}: {module} is not installed; install it with pip install 'jassy[{extra}]'")

@@ -118,17 +118,38 @@ def specialise(kernel: Callable, *example_args) -> Callable:
     return entry
 
 
+#: The callee modules each module passed to :func:`drop_stale_cache`, by its ``__file__``.
+_RECORDED_CALLEES: dict[str, tuple[ModuleType, ...]] = {}
+
+
+def callee_closure(module_file: str) -> list[ModuleType]:
+    """The modules recorded as callees of ``module_file``, their recorded callees, and so on
+    (sorted by name, without ``module_file``'s own module)."""
+    found: dict[str, ModuleType] = {}
+    pending = list(_RECORDED_CALLEES.get(module_file, ()))
+    while pending:
+        module = pending.pop()
+        if module.__name__ in found or module.__file__ == module_file:
+            continue
+        found[module.__name__] = module
+        pending.extend(_RECORDED_CALLEES.get(module.__file__, ()))
+    return [found[name] for name in sorted(found)]
+
+
 def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
     """Delete numba's cache of ``module_file`` if a module whose kernels it calls changed.
 
     numba caches a function together with copies of the kernels it calls but checks only
     its own file's time stamp, so after an edit of a callee the cached copy would run the
     old kernel. Call at the top of a module whose functions call kernels of ``callees``
-    (before any of them is compiled or loaded)."""
+    (before any of them is compiled or loaded), listing the modules it calls directly: the
+    callees' own recorded callees (imported, so recorded, before this call) are stamped
+    too. The stamp is one line ``name mtime_ns size`` per module of the closure."""
+    _RECORDED_CALLEES[module_file] = tuple(callees)
     folder = os.path.join(os.path.dirname(module_file), "__pycache__")
     stem = os.path.splitext(os.path.basename(module_file))[0]
     stamps = []
-    for module in callees:
+    for module in callee_closure(module_file):
         info = os.stat(module.__file__)
         stamps.append(f"{module.__name__} {info.st_mtime_ns} {info.st_size}")
     stamp = "\n".join(stamps)

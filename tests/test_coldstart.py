@@ -1,6 +1,7 @@
-"""A cold render's compile units run on two cores (jassy.engines.coldstart): every unit runs, the two
-processes share them, the helper is always reaped, and a render whose kernels came from the
-helper sounds the same as one that compiled them itself."""
+"""A cold render's compile units run on two cores (jassy.forked_compile, with the units of
+jassy.engines.coldstart): every unit runs, the two processes share them, the helper is always
+reaped, and a render whose kernels came from the helper sounds the same as one that compiled
+them itself."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import threading
 
 import pytest
 
-from jassy.engines.coldstart import may_fork_helper
+from jassy.forked_compile import may_fork_helper
 
 TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 
@@ -19,7 +20,7 @@ TWO_CORES = len(os.sched_getaffinity(0)) >= 2
 #: thread), and then no helper is forked.
 UNITS = """
 import os, sys
-from jassy.engines.coldstart import compile_on_two_cores
+from jassy.forked_compile import compile_on_two_cores
 
 folder = sys.argv[1]
 here = os.getpid()
@@ -84,6 +85,31 @@ def test_a_failing_unit_here_propagates_and_a_failing_helper_unit_is_left_to_the
     assert done == "True" and reaped == "True" and (2, int(here)) in _ran(tmp_path)
 
 
+#: A host that reaps its children itself (a SIGCHLD handler): the helper is gone before
+#: compile_on_two_cores waits for it.
+REAPING_HOST = """
+import os, signal, time
+from jassy.forked_compile import compile_on_two_cores
+
+def reap(signum, frame):
+    try:
+        while os.waitpid(-1, os.WNOHANG)[0]:
+            pass
+    except ChildProcessError:
+        pass
+
+signal.signal(signal.SIGCHLD, reap)
+print(compile_on_two_cores([lambda: time.sleep(0.5), lambda: None]))
+"""
+
+
+@pytest.mark.skipif(not TWO_CORES, reason="needs two usable cores")
+def test_a_host_reaping_its_children_does_not_break_the_wait_for_the_helper():
+    out = subprocess.run([sys.executable, "-c", REAPING_HOST], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True"]
+
+
 def test_no_helper_for_one_unit_or_with_other_threads_running():
     assert not may_fork_helper([print])
     stop = threading.Event()
@@ -99,7 +125,7 @@ def test_no_helper_for_one_unit_or_with_other_threads_running():
 COLD_RENDER = """
 import hashlib, sys
 import numpy as np
-from jassy.engines import coldstart
+from jassy import forked_compile
 from jassy.patchfile import load_patch
 from jassy.engines.offline import OfflineEngine
 from numba.core import event
@@ -110,7 +136,7 @@ class Compiles(event.Listener):
         compiled_after.append(compile_event.data["dispatcher"].py_func.__qualname__)
     def on_end(self, compile_event):
         pass
-original = coldstart.compile_on_two_cores
+original = forked_compile.compile_on_two_cores
 def counted(units):
     forked.append(original(units))
     if forked[-1]:
@@ -134,7 +160,7 @@ def test_a_render_with_kernels_from_the_helper_sounds_like_one_compiling_alone(t
 
     def render(cache, helper=True):
         env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-        alone = "coldstart.may_fork_helper = lambda units: False\n"  # the caller compiles it all
+        alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
         code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
         out = subprocess.run(
             [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=550

@@ -918,6 +918,16 @@ def test_unknown_contact_model_code_is_an_error():
         st.run(world.model(), opt, data, 0, 1, 0)
 
 
+def test_unknown_integrator_code_is_an_error():
+    """Likewise the integrator codes of StepParams.integrator only (integrate.METHODS): any
+    other code raises instead of running RK4's or the adaptive integrator's branch."""
+    world = _ball_world(0.5)
+    opt = world.params.options()._replace(integrator=7)
+    data = _run_data(world, opt, np.empty((4096, codes.REC_WIDTH)), warm_contacts=16)
+    with pytest.raises(ValueError, match="unknown integrator code 7"):
+        st.run(world.model(), opt, data, 0, 1, 0)
+
+
 def test_a_run_without_records_matches_the_run_that_keeps_them():
     """keep_records=False writes the records over one reused buffer (here more than once) and
     returns none: the motion and every count are those of the run that keeps them."""

@@ -39,14 +39,17 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, stochastic
 from ugens.cells import slot, with_room
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec
 from ugens.stochastic import next_event, u01
+
+drop_stale_cache(__file__, [cells, stochastic])  # its cache holds copies of their kernels
 
 #: Radius at which a bubble at depth 1 has amplitude 1 (m).
 R_REF = 1e-3

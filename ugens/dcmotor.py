@@ -36,13 +36,16 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, noise
 from ugens.cells import slot, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [cells, noise])  # its cache holds copies of their kernels
 
 #: Reference speed (rad/s) and current (A) of the component levels.
 REFERENCE_SPEED = 2.0 * math.pi * 50.0

@@ -27,14 +27,18 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
 from jassy.levels import ForceSpectrum, band_line_power, response_power, tonal_level_factor
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import noise, tonal_level
 from ugens.cells import slot
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
+
+drop_stale_cache(__file__, [noise, tonal_level])  # its cache holds copies of their kernels
 
 MAX_HARMONICS = 64
 #: The reference operating point of a calibrated level: a light cut, 1 N of normal force

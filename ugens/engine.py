@@ -58,14 +58,16 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
-from ugens import engine_noise
+from ugens import cells, engine_noise, noise
 from ugens.cells import add_onset, decay_sums, drop_row, slot, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [cells, noise])  # its cache holds copies of their kernels
 
 #: Largest firing delay, as a fraction of the firing interval, at irregularity 1.
 JITTER = 0.25

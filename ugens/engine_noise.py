@@ -32,10 +32,14 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
 from jassy.params import ParamSpec
+from ugens import filters, noise
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
+
+drop_stale_cache(__file__, [filters, noise])  # its cache holds copies of their kernels
 
 #: Reference speed (1/min) of the noise levels.
 REFERENCE_RPM = 3000.0

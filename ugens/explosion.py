@@ -39,14 +39,17 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, filters, noise
 from ugens.cells import add_onset, decay_sums, drop_row, slot, store, with_room
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [cells, filters, noise])  # its cache holds copies of their kernels
 
 #: Capacity of the queue of blasts travelling to the listener.
 QUEUE = 32

@@ -14,11 +14,15 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
+from jassy.jit import drop_stale_cache
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells
 from ugens.cells import store
 from ugens.kernels import FASTMATH
+
+drop_stale_cache(__file__, [cells])  # its cache holds copies of their kernels
 
 MODES = ("lowpass", "highpass", "bandpass")
 _LOWPASS, _HIGHPASS = 0, 1

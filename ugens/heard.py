@@ -16,8 +16,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from ugens import cells
 from ugens.cells import state_step
 from ugens.kernels import FASTMATH
+
+drop_stale_cache(__file__, [cells])  # its cache holds copies of their kernels
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

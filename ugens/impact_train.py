@@ -41,10 +41,14 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
+from jassy.jit import drop_stale_cache
 from jassy.params import ParamSpec
 from jassy.registry import register
+from ugens import noise
 from ugens.impact import PulseSource
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [noise])  # its cache holds copies of their kernels
 
 #: 2 (15/16)^(2/5) int_0^1 (1 - s^(5/2))^(-1/2) ds (Johnson 1985, eq. 11.24 for a sphere).
 HERTZ_CONSTANT = 2.868

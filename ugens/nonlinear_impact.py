@@ -61,14 +61,17 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, heard
 from ugens.cells import silent, slot, state_step, store
 from ugens.heard import heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
+
+drop_stale_cache(__file__, [cells, heard])  # its cache holds copies of their kernels
 
 
 class HammerState(NamedTuple):

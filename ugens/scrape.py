@@ -28,17 +28,20 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.levels import ForceSpectrum
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import cells, filters, noise, tonal_level
 from ugens.cells import store
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
 from ugens.tonal_level import LEVEL_POINTS, TONAL_LEVEL_SPECS, TonalLevel, log_table
+
+drop_stale_cache(__file__, [cells, filters, noise, tonal_level])  # its cache holds copies of their kernels
 
 LAWS = ("sqrt", "linear", "height")
 #: Force per m of profile height of the needle contacts (Scrape, Roll).

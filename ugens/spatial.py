@@ -50,13 +50,16 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import pitchshift
 from ugens.cells import slot
 from ugens.kernels import FASTMATH
 from ugens.pitchshift import MIN_DELAY, hermite_read
+
+drop_stale_cache(__file__, [pitchshift])  # its cache holds copies of their kernels
 
 #: Air-absorption low-pass cut-off at 1 m (Hz), falling as 1 / sqrt(r).
 ABSORPTION_CUTOFF = 53800.0

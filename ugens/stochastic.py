@@ -36,13 +36,16 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
+from ugens import cells, noise
 from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine, slot
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [cells, noise])  # its cache holds copies of their kernels
 
 #: Rate of the exponential energy distribution of SDT's crumpling (lambda = 1.45).
 ENERGY_LAMBDA = 1.45

@@ -42,14 +42,17 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import filters, noise
 from ugens.cells import slot
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
+
+drop_stale_cache(__file__, [filters, noise])  # its cache holds copies of their kernels
 
 #: Reference speed of the ``level`` parameter (m/s).
 REFERENCE_SPEED = 10.0

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib.util
 import inspect
 import math
 import signal
@@ -24,7 +23,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from jassy.errors import JassyError
-from jassy.inputs import number, parse_toml, seconds
+from jassy.inputs import number, parse_toml, require_extra, seconds
 from jassy.limits import check_memory, check_seconds, configure
 
 #: Sample rates accepted on the command line (Hz).
@@ -60,16 +59,6 @@ def add_limit_options(subparsers) -> None:
         group.add_argument(
             "--max-variants", metavar="N", help="refuse batches of more than N variants (default 100000)"
         )
-
-
-def require_extra(module: str, extra: str, option: str) -> None:
-    """Fail before any work if the optional ``module`` is missing, naming the extra to install."""
-    try:
-        found = importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        found = False
-    if not found:
-        raise JassyError(f"{option}: {module} is not installed; install it with pip install 'jassy[{extra}]'")
 
 
 def _infinite_defaults(parser: argparse.ArgumentParser) -> set[str]:

@@ -1,24 +1,4 @@
-"""A cold render's kernels compiled on two cores.
-
-On a fresh install the first render compiles every numba kernel it calls, one after the
-other (0.1-1 s of CPU each, almost all of it numba's typing and lowering in Python, which
-one process cannot spread over cores). Kernels that do not call each other can be compiled
-in different processes, and numba's cache (``cache=True``) carries them from one to the
-other. :func:`compile_on_two_cores` takes a list of compile units (callables that compile,
-or load, some kernels), forks one helper process and works through the list from both ends:
-this process from the front, the helper from the back, each claiming a unit (in memory the
-two share) before it runs it, until they meet. Then it waits for the helper and returns;
-what the caller does next loads the helper's kernels from the cache instead of compiling
-them.
-
-The helper is forked only where that is safe and can help: a POSIX ``fork``, a single
-thread in this process (``fork`` copies only the calling thread, so a lock held by another
-one would stay held in the helper), more than one usable core, at least two units, numba's
-JIT enabled, and not in a worker of ``multiprocessing`` (already one of several processes).
-The helper writes only numba's cache files, which numba writes to a temporary name and
-renames (jassy.jit locks the folder around numba's index update); it prints nothing,
-ignores its own errors (this process then compiles what is missing) and leaves with
-``os._exit``; this process always reaps it.
+"""A cold render's compile units (run by :func:`jassy.forked_compile.compile_on_two_cores`).
 
 :func:`graph_units` gives the units of the graph of a
 :class:`jassy.engines.offline.OfflineEngine`: one per kind of node the graph's program holds
@@ -26,100 +6,21 @@ ignores its own errors (this process then compiles what is missing) and leaves w
 design, the render loop's two stages (event application and the output stage: C functions
 the loop calls through their addresses, so each compiles on its own) and last the render
 loop itself, compiled for its argument types without running (it needs neither the graph
-nor the stages compiled). Before the fork this process compiles one trivial function, so
-that numba's one-off set-up (typing and target contexts, LLVM) is inherited by the helper
-instead of being done again there.
+nor the stages compiled).
 """
 
 from __future__ import annotations
 
-import mmap
-import multiprocessing
 import os
-import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
 
-#: Claim marks of a unit in the shared memory.
-FREE, MINE, HELPERS = 0, 1, 2
-#: True while units run (here, or in the helper): a unit that builds an engine neither forks
-#: a helper nor asks for units of its own.
-_running_units = False
+from jassy.forked_compile import running_units
+
 #: Set once numba's cache was found filled (:func:`kernels_cached`).
 _cache_found = False
-
-
-def may_fork_helper(units: Sequence[Callable[[], object]]) -> bool:
-    """Whether :func:`compile_on_two_cores` would fork a helper for ``units`` here and now."""
-    if _running_units or len(units) < 2 or not hasattr(os, "fork"):
-        return False
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    if threading.active_count() != 1 or cores < 2:
-        return False
-    if multiprocessing.parent_process() is not None:  # already one of several workers
-        return False
-    from numba.core import config
-
-    return not config.DISABLE_JIT
-
-
-def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
-    """Run every unit once, here and in a forked helper from the list's two ends (see the
-    module docstring); False (and the units left to the caller's own code) if no helper
-    may be forked. An exception of a unit run here propagates after the helper is reaped."""
-    global _running_units
-    if not may_fork_helper(units):
-        return False
-    _set_up_numba()
-    claims = mmap.mmap(-1, len(units))  # anonymous and shared: the helper sees these bytes
-    claims[0] = MINE  # this process starts at the front, the helper at the back
-    pid = os.fork()
-    if pid == 0:
-        _help(units, claims)  # never returns
-    _running_units = True
-    try:
-        units[0]()
-        for i in range(1, len(units)):
-            if claims[i] == FREE:
-                claims[i] = MINE
-                units[i]()
-    finally:
-        for i in range(len(units)):  # nothing left for the helper: it stops after its unit
-            if claims[i] == FREE:
-                claims[i] = MINE
-        os.waitpid(pid, 0)
-        claims.close()
-        _running_units = False
-    return True
-
-
-def _set_up_numba() -> None:
-    """Compile one trivial function (not cached): numba's one-off set-up of a process, about
-    0.35 s of CPU, done once before the fork instead of in both processes."""
-    import numba
-
-    numba.njit(lambda values: values[0] + 1.0)(np.zeros(1))
-
-
-def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
-    """The helper process: units from the back while they are free, silently; then exit."""
-    global _running_units
-    _running_units = True
-    try:
-        quiet = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(quiet, 1)
-        os.dup2(quiet, 2)
-        for i in reversed(range(len(units))):
-            if claims[i] != FREE:
-                break
-            claims[i] = HELPERS
-            units[i]()
-    except BaseException:  # noqa: BLE001 - the caller compiles whatever is missing
-        pass
-    finally:
-        os._exit(0)
 
 
 def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
@@ -129,7 +30,7 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
     meet with about half the work each: this process starts with the modal node function
     (the largest unit) and the output stage, the helper with the render loop and event
     application."""
-    if _running_units or graph.budget is not None or not engine_options.get("program", True):
+    if running_units() or graph.budget is not None or not engine_options.get("program", True):
         return []
     if kernels_cached():
         return []

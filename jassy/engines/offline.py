@@ -23,10 +23,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jassy import stopflag
-from jassy.engines.coldstart import compile_on_two_cores, graph_units
+from jassy.engines.coldstart import graph_units
 from jassy.errors import PatchError
 from jassy.events import Event
 from jassy.files import AtomicAudioWriter, audio_format, write_signal
+from jassy.forked_compile import compile_on_two_cores
 from jassy.graph import Graph
 from jassy.haptics import ChannelDelay, HapticSafety, channel_delays, limit_force
 from jassy.safety import CEILING, LimiterMeter, peak_abs, release_coefficient, scan_chunk, zero_nonfinite

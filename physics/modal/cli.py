@@ -193,8 +193,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if args.plot and os.path.splitext(args.plot)[1].lower() not in (".png", ".pdf", ".svg"):
         raise JassyError(f"--plot: {args.plot}: expected a .png, .pdf or .svg file name")
     if args.plot:
-        from jassy.apps.cli_checks import require_extra
         from jassy.files import check_distinct, check_output
+        from jassy.inputs import require_extra
 
         require_extra("matplotlib", "plot", "--plot")
         check_output(args.plot, "--plot")

@@ -3,8 +3,8 @@ record row (stepper module doc), laid out from their names and widths in RECORD_
 
 DYNAMIC, STATIC, KINEMATIC = 0, 1, 2
 
-#: Contact model codes by StepParams.contact name (Options.contact; the stepper's
-#: contact_stage dispatches on them and rejects any other code).
+#: Contact model codes by StepParams.contact name (Options.contact; stepper.step_models picks
+#: the contact model by them and rejects any other code).
 CONTACT_MODELS = {"impulse": 0, "linear": 1, "hunt-crossley": 2}
 IMPULSE, LINEAR, HUNT_CROSSLEY = (CONTACT_MODELS[k] for k in ("impulse", "linear", "hunt-crossley"))
 

@@ -21,6 +21,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import codes, integrate
 from physics.rigid.codes import (
     DYNAMIC,
     KINEMATIC,
@@ -42,6 +44,8 @@ from physics.rigid.codes import (
     REC_TIME,
 )
 from physics.rigid.integrate import SEMI_IMPLICIT
+
+drop_stale_cache(__file__, [codes, integrate])  # its cache holds copies of their kernels and constants
 
 
 @nb.njit(cache=True, _nrt=False)

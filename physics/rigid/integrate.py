@@ -23,7 +23,11 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import spatial
 from physics.rigid.spatial import mtv, mv, newton_euler, quat_mul, quat_to_mat
+
+drop_stale_cache(__file__, [spatial])  # its cache holds copies of spatial's kernels
 
 SEMI_IMPLICIT = 0
 RK4 = 1

@@ -39,6 +39,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import meshgrid, shapes
 from physics.rigid.meshgrid import (
     GridView,
     grid_closest,
@@ -48,6 +50,8 @@ from physics.rigid.meshgrid import (
     triangle_weights,
 )
 from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
+
+drop_stale_cache(__file__, [meshgrid, shapes])  # its cache holds copies of their kernels and constants
 
 NO_BARY = (0.0, 0.0, 0.0)  # barycentric weights of a contact not on a mesh triangle
 PIECE = 100000  # features of a compound's k-th convex piece are offset by PIECE * k

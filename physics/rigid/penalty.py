@@ -21,6 +21,8 @@ import math
 
 import numba as nb
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import codes, impulses, integrate
 from physics.rigid.codes import HUNT_CROSSLEY, LINEAR
 from physics.rigid.impulses import (
     Outcome,
@@ -32,6 +34,8 @@ from physics.rigid.impulses import (
     world_velocities,
     write_record,
 )
+
+drop_stale_cache(__file__, [codes, impulses, integrate])  # its cache holds copies of their kernels
 
 
 @nb.njit(cache=True, inline="always")

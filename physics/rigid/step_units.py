@@ -7,7 +7,7 @@ and numba's cache (``cache=True``) carries them from one process to another, so 
 subtrees can compile side by side: :func:`step_units` lists them as compile units for the
 exact argument types run_steps passes (taken from the run's own Model, Options and Data
 records), and :func:`compile_step_ahead` hands them to
-:func:`jassy.engines.coldstart.compile_on_two_cores` (a forked helper takes units from the
+:func:`jassy.forked_compile.compile_on_two_cores` (a forked helper takes units from the
 back of the list while this process works from the front). run_steps then compiles here,
 loading its callees from the cache instead of compiling them.
 
@@ -29,7 +29,9 @@ from functools import partial
 from typing import NamedTuple
 
 import numpy as np
+from numba.core import config
 
+from jassy.forked_compile import compile_on_two_cores
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
@@ -77,11 +79,12 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
 def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:
     """Compile run_steps' large callees for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it; True if the units ran."""
+    it; True if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the kernels
+    are plain Python functions, nothing to compile)."""
+    if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
+        return False
     if st.run_steps.signatures or _cached(st.run_steps):
         return False
-    from jassy.engines.coldstart import compile_on_two_cores
-
     return compile_on_two_cores([partial(_compile, unit) for unit in step_units(m, opt, d)])
 
 

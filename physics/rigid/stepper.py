@@ -57,6 +57,20 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import (
+    broad,
+    codes,
+    impulses,
+    integrate,
+    meshgrid,
+    narrow,
+    shapes,
+    spatial,
+)
+from physics.rigid import (
+    penalty as penalty_model,
+)
 from physics.rigid.broad import Sweep, new_sweep, sweep_pairs
 from physics.rigid.codes import (
     DYNAMIC,
@@ -75,6 +89,11 @@ from physics.rigid.model import Model, Options
 from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
 from physics.rigid.penalty import penalty
 from physics.rigid.shapes import PLANE, SPHERE
+
+#: numba's cache of this module holds copies of these modules' kernels (and constants).
+drop_stale_cache(
+    __file__, [broad, codes, impulses, integrate, meshgrid, narrow, penalty_model, shapes, spatial]
+)
 
 MAX_CONTACTS = 1 << 16
 PROBE_CONTACTS = 256  # contact rows of one pair's gap probe (impact times)
@@ -385,16 +404,12 @@ def _free_motion(m, opt, d):
 
 @nb.njit(cache=True, _nrt=False)
 def _move(f, i, tau, out_p, out_q, out_phi):
-    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion, any
-    integrator), into row i of out_p, out_q, out_phi (a dynamic body held by a resting contact
-    drifts: f.resting)."""
+    """Pose and twist of body i after tau seconds of free motion (``f``: FreeMotion, by the
+    integrator f.method: RK4 or adaptive, AnyMotion; the semi-implicit one has
+    _move_semi_implicit), into row i of out_p, out_q, out_phi."""
     if f.kind[i] == DYNAMIC:
         body = FreeBody(f.pos[i], f.quat[i], f.phi[i], f.inertia[i], f.mass[i], f.gravity, f.no_wrench)
-        out = (out_p[i], out_q[i], out_phi[i])
-        if f.method == SEMI_IMPLICIT and tau > 0.0:
-            semi_implicit_into(body, tau, out, not f.resting[i])
-        else:
-            advance_body_into(body, tau, f.method, f.adaptive_tolerance, out)
+        advance_body_into(body, tau, f.method, f.adaptive_tolerance, (out_p[i], out_q[i], out_phi[i]))
     else:
         _move_fixed(f, i, tau, out_p, out_q, out_phi)
 
@@ -777,66 +792,83 @@ def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiIm
     once per pair of their types, with only that contact model and integrator in it (the other
     overloads are never typed, so never compiled; named tuples of a module-level class keep
     numba's cache valid across processes, where a kernel passed as an argument would not). An
-    unknown contact model code is an error."""
+    unknown contact model or integrator code is an error."""
     if opt.contact == IMPULSE:
         contact = ImpulseContacts(opt.contact)
     elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
         contact = PenaltyContacts(opt.contact)
     else:
         raise ValueError(f"stepper.step_models: unknown contact model code {opt.contact!r}")
-    motion = (
-        SemiImplicitMotion(opt.integrator) if opt.integrator == SEMI_IMPLICIT else AnyMotion(opt.integrator)
-    )
+    if opt.integrator == SEMI_IMPLICIT:
+        motion = SemiImplicitMotion(opt.integrator)
+    elif opt.integrator in integrate.METHODS.values():
+        motion = AnyMotion(opt.integrator)
+    else:
+        raise ValueError(
+            f"stepper.step_models: unknown integrator code {opt.integrator!r}, "
+            f"expected one of {sorted(integrate.METHODS.values())} (integrate.METHODS)"
+        )
     return contact, motion
 
 
+def _impulse_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """contact_response of the impulse model (impulses.resolve)."""
+    bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
+    state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
+    return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
+
+
+def _penalty_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """contact_response of a penalty model (physics.rigid.penalty)."""
+    d.stats.contacts[0] += count
+    return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
+
+
 def contact_response(contact, m, opt, d, count, dt, time, step, nrec):
-    """The response of the model ``contact`` (step_models) to d.contacts[:count]: compiled
-    only, inside run_steps (the overload below)."""
-    raise TypeError("stepper.contact_response runs compiled only")
+    """The response of the model ``contact`` (step_models) to d.contacts[:count]. Compiled,
+    the overload below picks the model by the argument's type when run_steps is typed; this
+    body runs only with numba's JIT off (NUMBA_DISABLE_JIT=1)."""
+    if isinstance(contact, ImpulseContacts):
+        return _impulse_response(contact, m, opt, d, count, dt, time, step, nrec)
+    return _penalty_response(contact, m, opt, d, count, dt, time, step, nrec)
 
 
 @overload(contact_response, inline="always")
 def _contact_response(contact, m, opt, d, count, dt, time, step, nrec):
     model = getattr(contact, "instance_class", None)
     if model is ImpulseContacts:
-
-        def impulse(contact, m, opt, d, count, dt, time, step, nrec):
-            bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
-            state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
-            return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
-
-        return impulse
+        return _impulse_response
     if model is PenaltyContacts:
-
-        def penalty_force(contact, m, opt, d, count, dt, time, step, nrec):
-            d.stats.contacts[0] += count
-            return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
-
-        return penalty_force
+        return _penalty_response
     return None
 
 
+def _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi):
+    """move_body with the semi-implicit integrator."""
+    _move_semi_implicit(f, i, tau, out_p, out_q, out_phi)
+
+
+def _move_any_body(motion, f, i, tau, out_p, out_q, out_phi):
+    """move_body with the integrator f.method (RK4 or adaptive)."""
+    _move(f, i, tau, out_p, out_q, out_phi)
+
+
 def move_body(motion, f, i, tau, out_p, out_q, out_phi):
-    """Body i's free motion by the integrator of ``motion`` (step_models): compiled only."""
-    raise TypeError("stepper.move_body runs compiled only")
+    """Body i's free motion by the integrator of ``motion`` (step_models). Compiled, the
+    overload below picks it by the argument's type; this body runs only with numba's JIT off."""
+    if isinstance(motion, SemiImplicitMotion):
+        _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi)
+    else:
+        _move_any_body(motion, f, i, tau, out_p, out_q, out_phi)
 
 
 @overload(move_body, inline="always")
 def _move_body(motion, f, i, tau, out_p, out_q, out_phi):
     integrator = getattr(motion, "instance_class", None)
     if integrator is SemiImplicitMotion:
-
-        def semi_implicit(motion, f, i, tau, out_p, out_q, out_phi):
-            _move_semi_implicit(f, i, tau, out_p, out_q, out_phi)
-
-        return semi_implicit
+        return _move_semi_implicit_body
     if integrator is AnyMotion:
-
-        def any_integrator(motion, f, i, tau, out_p, out_q, out_phi):
-            _move(f, i, tau, out_p, out_q, out_phi)
-
-        return any_integrator
+        return _move_any_body
     return None
 
 

@@ -26,7 +26,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from jassy.jit import drop_stale_cache
+from physics.rod import band
 from physics.rod.band import band_lu, band_residual, band_solve, band_solve_vec
+
+drop_stale_cache(__file__, [band])  # its cache holds copies of their kernels
 
 
 @numba.njit(cache=True)

@@ -28,10 +28,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from jassy.errors import JassyError
-from jassy.jit import specialise
-from physics.rod import arc
+from jassy.jit import drop_stale_cache, specialise
+from physics.rod import arc, band
 from physics.rod.band import band_fill, band_lu, band_solve, band_solve_vec
 from physics.rod.model import BC_ROWS, Arcs, Dynamics, FormulationBase, RodModel, RodState, sparse_from_blocks
+
+drop_stale_cache(__file__, [arc, band])  # its cache holds copies of their kernels
 
 BAND = 4
 """Half-bandwidth of the KKT matrix in MixedRod.perm order: a gluing multiplier sits between the
