@@ -25,9 +25,9 @@ frequency resolutions, each on what the previous ones left:
    the noise and what the poles leave under its own envelope (:func:`_local_noise`).
    Limit: the burst stays in that residual, so the test does not separate a contact from
    broad modes in general (a 2 ms noise burst beside one slow mode still gives a few
-   spurious 700-1200 /s modes). A new pole is the leftover of one found earlier only
-   inside the narrower one's resonance (:func:`_duplicate`), so a broad mode is kept
-   beside slow poles 60-150 Hz away.
+   spurious 700-1200 /s modes). A new pole here is the leftover of one found earlier
+   only within the window's resolution (25 Hz) or the narrower one's half-width
+   (:func:`_duplicate`), so a broad mode is kept beside slow poles 60-150 Hz away.
 5. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
    all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
    around each group of overlapping poles, the other poles subtracted; a pole the
@@ -217,12 +217,24 @@ def _z(poles: list[Pole], rate: float) -> np.ndarray:
     return np.exp((-d + 2j * np.pi * f) / rate)
 
 
-def _duplicate(p: Pole, poles: list[Pole]) -> bool:
-    """Closer to a pole already found than the narrower one's half-power half-width d / (2 pi)
-    (at least 0.5 Hz): the leftover of subtracting that pole. Not the mean of the two widths:
-    a narrow pole resolves a broad one beyond its own width, so a broad mode (800 /s, 127 Hz
-    half-width) 60 Hz from a slow pole is a mode of its own, not that pole's leftover."""
-    return any(abs(p.frequency - q.frequency) < max(0.5, min(p.decay, q.decay) / (2 * np.pi)) for q in poles)
+def _duplicate(p: Pole, poles: list[Pole], resolution: float | None = None) -> bool:
+    """Whether ``p`` is the leftover of subtracting a pole already found.
+
+    Default (the band stages): within the mean of the two half-power half-widths d / (2 pi)
+    (at least 0.5 Hz). There a damped pole beside a slow one is most often what a cluster of
+    slow modes that beat leaves (``jassy bench fit``: the narrower width instead lost 10
+    decays within 5 %, 7 of them in one 55-63 Hz cluster). With ``resolution`` (Hz; the
+    full-rate stage, 1 / its window): within the larger of that and the narrower pole's
+    half-width. A broad mode (800 /s, 127 Hz half-width) 60 Hz from a slow pole, beyond
+    what the window resolves, is a mode of its own, not that pole's leftover."""
+    if resolution is None:
+        return any(
+            abs(p.frequency - q.frequency) < max(0.5, (p.decay + q.decay) / (4 * np.pi)) for q in poles
+        )
+    return any(
+        abs(p.frequency - q.frequency) < max(0.5, resolution, min(p.decay, q.decay) / (2 * np.pi))
+        for q in poles
+    )
 
 
 def _band_centres(stage: Stage, f_lo: float, f_hi: float) -> np.ndarray:
@@ -373,7 +385,8 @@ def _detect(poles: list[Pole], segments, rate, f_lo, f_hi, margin, work) -> list
         res = _residuals(segments, z, rate, stage.seconds)
         finder = _band_poles if stage.spacing else _full_rate_poles
         new = finder(stage, res, segments, rate, f_lo, f_hi, margin, work)
-        poles.extend(p for p in new if not _duplicate(p, poles))
+        resolution = None if stage.spacing else 1.0 / stage.seconds
+        poles.extend(p for p in new if not _duplicate(p, poles, resolution))
         if not stage.spacing:
             work.step(stage.name)
     return poles
@@ -461,7 +474,7 @@ def _polish(poles: list[Pole], segments, rate, f_lo, f_hi, work) -> list[Pole]:
 
 #: Two refined poles closer than this fraction of the half-power half-width of their summed
 #: decays, with decays within it of each other, are one mode fitted twice (their amplitudes
-#: cancel). For equal decays 5x below :func:`_duplicate`'s width, so a pair the detection
+#: cancel). For equal decays 5x below :func:`_duplicate`'s widths, so a pair the detection
 #: accepted as two modes is never merged here unless the refinement moved them together.
 SAME_POLE = 0.1
 
