@@ -177,7 +177,7 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         window_power = self.sample_rate * float(np.sum(tables.spectra[mb.WINDOW] ** 2))
         self._rates = mb.Rates(
-            float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, window_power
+            float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, window_power, 0
         )
         from ugens import modal_kept as mk
 
@@ -306,8 +306,10 @@ class ModeBudget:
             for fields in self._chain_fields:
                 credit_fed_banks(self._tables, self._fed, fields, self.sample_rate)
         rates = self._rates
-        if rates.limit != self.limit or rates.begin != offset or rates.end != offset + n:
-            rates = self._rates = rates._replace(limit=int(self.limit), begin=offset, end=offset + n)
+        if rates.limit != self.limit or rates.begin != offset or rates.end != offset + n or rates.frame != at:
+            rates = self._rates = rates._replace(
+                limit=int(self.limit), begin=offset, end=offset + n, frame=at
+            )
         self._decide_all(self._step_handle, rates)
 
     def _adapt(self) -> None:

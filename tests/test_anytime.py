@@ -357,7 +357,9 @@ def test_the_compiled_periodogram_at_the_modes_bins_matches_numpy():
     padded = np.pad(np.abs(spectrum) ** 2, 2)
     expected = padded[bins[:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / 7.0
     windowed, psd = np.zeros(period), np.full(k, 2.0)
-    mb.centred_windowed(force, window, windowed)
+    mb.centred_windowed(force, window, windowed, 300)  # a ring whose earliest frame is at 300
+    assert max_abs_diff(np.roll(windowed, -300), (np.roll(force, -300) - force.mean()) * window) < 1e-12
+    mb.centred_windowed(force, window, windowed, 0)
     assert max_abs_diff(windowed, (force - force.mean()) * window) < 1e-12
     re, im, half = np.zeros(period // 2 + 1), np.zeros(period // 2 + 1), np.zeros(period // 2)
     real_spectrum(windowed, *twiddles(period), half, half.copy(), re, im)
@@ -413,8 +415,9 @@ def test_impacts_load_as_numpy_sums():
 
 def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
     """ugens.modal_budget.periodogram on real tables (two banks, the second's columns
-    after the first's) against numpy.fft.rfft of the ring centred and Hann-windowed,
-    smoothed over the neighbouring bins; the second transform is blended with the first."""
+    after the first's) against numpy.fft.rfft of the ring in time order (its earliest
+    frame the decision's modulo the period), centred and Hann-windowed, smoothed over the
+    neighbouring bins; the second transform is blended with the first."""
     from ugens import modal_budget as mb
 
     period, counts, window_power = 256, [11, 23], 3.5
@@ -429,10 +432,10 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
         return padded[bins[:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / window_power
 
     bins, first = t.bins[11:], []
-    for memory in (False, True):
+    for memory, frame in ((False, 3 * period), (True, 5 * period + 40)):  # the second mid-period
         t.rings[1] = rng.normal(size=period) + 0.2
-        mb.periodogram(t, 1, window_power)
-        psd = expected_psd(t.rings[1], bins)
+        mb.periodogram(t, 1, window_power, frame)
+        psd = expected_psd(np.roll(t.rings[1], -(frame % period)), bins)  # in time order
         if memory:
             psd = mb.PSD_MEMORY * first[0] + (1 - mb.PSD_MEMORY) * psd
         first.append(psd)

@@ -248,16 +248,20 @@ def settle_compact(t, b):
 
 
 @nb.njit(fastmath=True, cache=True)
-def centred_windowed(force, window, out):
-    """out = (force - its mean) * window: a period's force ready for its periodogram (a
-    steady load makes no sound)."""
+def centred_windowed(force, window, out, oldest):
+    """out = (force - its mean) * window, the window starting at sample ``oldest`` of the
+    ring ``force`` (its earliest frame) and wrapping around: a period's force ready for
+    its periodogram (a steady load makes no sound; the transform's magnitudes do not
+    depend on where the ring starts, the window's taper does)."""
     n = force.size
     mean = 0.0
     for i in range(n):
         mean += force[i]
     mean /= n
-    for i in range(n):
-        out[i] = (force[i] - mean) * window[i]
+    for i in range(oldest, n):
+        out[i] = (force[i] - mean) * window[i - oldest]
+    for i in range(oldest):
+        out[i] = (force[i] - mean) * window[i + n - oldest]
 
 
 @nb.njit(cache=True)
@@ -313,8 +317,8 @@ class Decision(NamedTuple):
 class Rates(NamedTuple):
     """Scalars of a decision: sample rate (Hz), the modes the budget may compute, the bonus
     of a kept mode against churn, the amplitude factor per sample of a fading mode, the
-    input samples [begin, end) an onset is judged by, and the periodogram's scale (the
-    sample rate times the window's energy: a PSD in N^2/Hz)."""
+    input samples [begin, end) an onset is judged by, the periodogram's scale (the
+    sample rate times the window's energy: a PSD in N^2/Hz) and the decision's frame."""
 
     sample_rate: float
     limit: int
@@ -323,6 +327,7 @@ class Rates(NamedTuple):
     begin: int
     end: int
     window_power: float
+    frame: int
 
 
 @nb.njit(cache=True)
@@ -336,14 +341,15 @@ def decision_at(a, i):
 
 
 @nb.njit(cache=True)
-def periodogram(t, b, window_power):
-    """The power spectral density (N^2/Hz) of bank b's force over the last period (its
-    ring; centred, Hann-windowed) at each of its modes' bins (:attr:`BudgetTables.bins`),
-    smoothed over PSD_SMOOTHING and blended with the last one by PSD_MEMORY, into its
-    SPECTRUM row (ugens.real_fft: no Python between the force and the row)."""
+def periodogram(t, b, window_power, frame):
+    """The power spectral density (N^2/Hz) of bank b's force over the period before
+    ``frame`` (its ring; centred, Hann-windowed from its earliest frame) at each of its
+    modes' bins (:attr:`BudgetTables.bins`), smoothed over PSD_SMOOTHING and blended with
+    the last one by PSD_MEMORY, into its SPECTRUM row (ugens.real_fft: no Python between
+    the force and the row)."""
     s = t.spectra
     half = s.shape[1] // 2
-    centred_windowed(t.rings[b], s[WINDOW], s[WINDOWED])
+    centred_windowed(t.rings[b], s[WINDOW], s[WINDOWED], frame % s.shape[1])
     re, im = s[SPECTRUM_RE, : half + 1], s[SPECTRUM_IM, : half + 1]
     real_spectrum(s[WINDOWED], s[COS], s[SIN], s[PACKED_RE, :half], s[PACKED_IM, :half], re, im)
     o, k = t.layout[FIRST, b], t.layout[MODES, b]
@@ -534,7 +540,7 @@ def decide(t, d, rates):
         if t.values[TRANSFORMED, b] > 0.0:
             spectral = d.heard[b] and not d.onset[b]
             if spectral:
-                periodogram(t, b, rates.window_power)
+                periodogram(t, b, rates.window_power, rates.frame)
             t.values[SPECTRAL, b] = 1.0 if spectral else 0.0
     for b in range(count):
         kicked = False

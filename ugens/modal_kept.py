@@ -311,7 +311,7 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
             impacts_at(a, count, at, period)
             spans = Rates(
                 rates.sample_rate, rates.limit, rates.bonus, rates.shrink, at - start, stop - start,
-                rates.window_power,
+                rates.window_power, at,
             )  # fmt: skip
             decide_at(a, spans)
         at = stop
