@@ -73,14 +73,28 @@ def pulse_amplitude(impulse, fs, t0, T):
     return impulse * fs / pulse_sum(t0, T)
 
 
+class Pulse(NamedTuple):
+    """A row of a pulse table: the 1 - cos pulse A (1 - cos(2 pi (t - t0) / T)), t0 < t < t0 + T
+    (t in samples)."""
+
+    t0: float  #: start (fractional sample)
+    length: float  #: T (samples)
+    amplitude: float  #: A
+
+
+#: Columns of a pulse table (rows, PULSE_COLUMNS), one Pulse per row.
+PULSE_T0, PULSE_LENGTH, PULSE_AMPLITUDE = (Pulse._fields.index(key) for key in Pulse._fields)
+PULSE_COLUMNS = len(Pulse._fields)
+
+
 @nb.njit(cache=True)
 def append_pulse(pulses, count, t0, T, amplitude):
     """Row ``count`` of a (t0, T, A) pulse table set to (t0, T, amplitude); returns the table
     (a larger copy if it was full)."""
     pulses = with_room(pulses, count + 1)
-    pulses[count, 0] = t0
-    pulses[count, 1] = T
-    pulses[count, 2] = amplitude
+    pulses[count, PULSE_T0] = t0
+    pulses[count, PULSE_LENGTH] = T
+    pulses[count, PULSE_AMPLITUDE] = amplitude
     return pulses
 
 

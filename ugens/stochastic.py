@@ -40,7 +40,17 @@ from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
 from ugens import cells, noise
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine, slot
+from ugens.cells import (
+    MIN_PULSE_SAMPLES,
+    PULSE_AMPLITUDE,
+    PULSE_LENGTH,
+    PULSE_T0,
+    append_pulse,
+    pulse_amplitude,
+    pulse_sum,
+    raised_cosine,
+    slot,
+)
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -157,22 +167,22 @@ def next_event(st, rng, rate, pos):
 def pulse_frame(pulses, count, idx):
     """Sum of the active 1 - cos pulses at frame idx; finished ones are dropped.
 
-    pulses[p] = (t0, T, A): A (1 - cos(2 pi (idx - t0) / T)) for t0 < idx < t0 + T.
+    pulses[p]: a cells.Pulse (t0, T, A): A (1 - cos(2 pi (idx - t0) / T)) for t0 < idx < t0 + T.
     Returns (sum, pulses still active after idx).
     """
     s = 0.0
     kept = 0
     for p in range(count):
-        t0 = pulses[p, 0]
-        T = pulses[p, 1]
+        t0 = pulses[p, PULSE_T0]
+        T = pulses[p, PULSE_LENGTH]
         x = idx - t0
         if 0.0 < x < T:
-            s += pulses[p, 2] * raised_cosine(x, T)
+            s += pulses[p, PULSE_AMPLITUDE] * raised_cosine(x, T)
         if t0 + T > idx + 1:
             if kept != p:
-                pulses[kept, 0] = t0
-                pulses[kept, 1] = T
-                pulses[kept, 2] = pulses[p, 2]
+                pulses[kept, PULSE_T0] = t0
+                pulses[kept, PULSE_LENGTH] = T
+                pulses[kept, PULSE_AMPLITUDE] = pulses[p, PULSE_AMPLITUDE]
             kept += 1
     return s, kept
 
