@@ -122,13 +122,25 @@ def add_onset(s1, s2, amp, x, log_r):
     return s1 + e, s2 + x * e
 
 
+class Onset(NamedTuple):
+    """A row of an onset queue: a pulse waiting for its onset (:func:`add_onset`)."""
+
+    at: float  #: onset (fractional sample)
+    amplitude: float  #: the pulse's amplitude
+
+
+#: Columns of an onset queue (rows, ONSET_COLUMNS), one Onset per row.
+ONSET_AT, ONSET_AMPLITUDE = (Onset._fields.index(key) for key in Onset._fields)
+ONSET_COLUMNS = len(Onset._fields)
+
+
 @nb.njit(inline="always", cache=True)
 def drop_row(queue, k, count):
-    """Remove row k of the first ``count`` rows of a two-column queue (the last row takes its
+    """Remove row k of the first ``count`` rows of an onset queue (the last row takes its
     place); returns the new count."""
     count -= 1
-    queue[k, 0] = queue[count, 0]
-    queue[k, 1] = queue[count, 1]
+    queue[k, ONSET_AT] = queue[count, ONSET_AT]
+    queue[k, ONSET_AMPLITUDE] = queue[count, ONSET_AMPLITUDE]
     return count
 
 
