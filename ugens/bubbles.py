@@ -87,7 +87,8 @@ class StreamState(NamedTuple):
 
 
 class ScheduledBubble(NamedTuple):
-    """A row of the float64 array ``pending``, in this order."""
+    """A row of the float64 arrays ``pending`` (scheduled bubbles) and ``log`` (stream births),
+    in this order."""
 
     at: float  #: birth time (samples, fractional)
     radius: float  #: radius (m)
@@ -127,7 +128,7 @@ class BubbleData(NamedTuple):
     pending: np.ndarray  #: (rows, 3) scheduled bubbles, a ScheduledBubble per row, in time order
     st: np.ndarray  #: stream state: accumulated rate, threshold, held radius (m)
     rng: np.ndarray  #: splitmix64 state, one uint64
-    log: np.ndarray  #: (rows, 3) stream births: t0 (samples), radius (m), depth
+    log: np.ndarray  #: (rows, 3) stream births, a ScheduledBubble per row
 
 
 def minnaert_frequency(radius):
@@ -270,9 +271,9 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
             meta[_BIRTHS] += 1
             k = meta[_LOGGED]
             if k < log.shape[0]:
-                log[k, 0] = t0
-                log[k, 1] = radius
-                log[k, 2] = depth
+                log[k, _AT] = t0
+                log[k, _BUBBLE_RADIUS] = radius
+                log[k, _DEPTH] = depth
                 meta[_LOGGED] = k + 1
     meta[_ACTIVE] = active
 
@@ -311,7 +312,7 @@ class _Bubbles(UGen):
         self.pending = np.zeros((8, len(ScheduledBubble._fields)))
         self.st = np.zeros(len(StreamState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.log = np.zeros((int(self.log_capacity), 3))
+        self.log = np.zeros((int(self.log_capacity), len(ScheduledBubble._fields)))
         self._rates = np.zeros(self.max_block)
         self._radii = np.zeros(self.max_block)
         self.par = np.zeros(len(BubbleParams._fields))
@@ -343,7 +344,7 @@ class _Bubbles(UGen):
     def birth_log(self) -> np.ndarray:
         """Logged stream births as rows (time s, radius m, depth); set ``log_capacity`` first."""
         rows = self.log[: int(self.meta[_LOGGED])].copy()
-        rows[:, 0] /= self.sample_rate
+        rows[:, _AT] /= self.sample_rate
         return rows
 
     def _update_params(self) -> None:

@@ -94,6 +94,18 @@ _ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _SPEED, _NEXT = (
 _EVENTS, _LOGGED = (slot(Counters, key) for key in Counters._fields)
 
 
+class LoggedImpact(NamedTuple):
+    """A row of the event log ``log``, in this order."""
+
+    at: float  #: start (samples; seconds in :meth:`_MicroImpacts.event_log`)
+    energy: float  #: energy (J)
+    size: float  #: fragment size
+    impulse: float  #: impulse (N s)
+
+
+_LOG_AT, _LOG_ENERGY, _LOG_SIZE, _LOG_IMPULSE = (slot(LoggedImpact, key) for key in LoggedImpact._fields)
+
+
 class GrainSettings(NamedTuple):
     """Step settings of :func:`micro_impacts`."""
 
@@ -192,10 +204,10 @@ def log_event(log, cnt, t0, energy, size, impulse):
     """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
     k = cnt[_LOGGED]
     if k < log.shape[0]:
-        log[k, 0] = t0
-        log[k, 1] = energy
-        log[k, 2] = size
-        log[k, 3] = impulse
+        log[k, _LOG_AT] = t0
+        log[k, _LOG_ENERGY] = energy
+        log[k, _LOG_SIZE] = size
+        log[k, _LOG_IMPULSE] = impulse
         cnt[_LOGGED] = k + 1
 
 
@@ -353,7 +365,7 @@ class _MicroImpacts(PulseSource):
         self.st = np.zeros(len(ImpactState._fields))
         self.cnt = np.zeros(len(Counters._fields), dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.log = np.zeros((int(self.log_capacity), 4))
+        self.log = np.zeros((int(self.log_capacity), len(LoggedImpact._fields)))
         self._constant: dict[int, float] = {}
         self._impact_data = ImpactData(self.st, self.cnt, self.rng, self.count, self.log)
         self._opt = None  # the kernel's settings record, rebuilt after a parameter change
@@ -392,7 +404,7 @@ class _MicroImpacts(PulseSource):
         ``log_capacity`` events are kept. For analysis and tests; not part of the state.
         """
         rows = self.log[: int(self.cnt[_LOGGED])].copy()
-        rows[:, 0] /= self.sample_rate
+        rows[:, _LOG_AT] /= self.sample_rate
         return rows
 
     def state_arrays(self) -> dict[str, np.ndarray]:
