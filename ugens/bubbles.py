@@ -86,9 +86,19 @@ class StreamState(NamedTuple):
     radius: float  #: the last bubble's radius, held on the radius output (m)
 
 
+class ScheduledBubble(NamedTuple):
+    """A row of the float64 arrays ``pending`` (scheduled bubbles) and ``log`` (stream births),
+    in this order."""
+
+    at: float  #: birth time (samples, fractional)
+    radius: float  #: radius (m)
+    depth: float  #: depth factor
+
+
 _ZR, _ZI, _CR, _CI, _QR, _QI, _END = (slot(VoiceRows, key) for key in VoiceRows._fields)
 _ACTIVE, _PENDING, _BIRTHS, _LOGGED = (slot(BubbleCounts, key) for key in BubbleCounts._fields)
 _ACC, _TARGET, _RADIUS = (slot(StreamState, key) for key in StreamState._fields)
+_AT, _BUBBLE_RADIUS, _DEPTH = (slot(ScheduledBubble, key) for key in ScheduledBubble._fields)
 
 
 class BubbleParams(NamedTuple):
@@ -115,10 +125,10 @@ class BubbleData(NamedTuple):
 
     voices: np.ndarray  #: (7, max voices): phasor, its factor and rotation, end level per voice
     meta: np.ndarray  #: int64 counts: active voices, pending bubbles, births, logged births
-    pending: np.ndarray  #: (rows, 3) scheduled bubbles: t0 (samples), radius (m), depth
+    pending: np.ndarray  #: (rows, 3) scheduled bubbles, a ScheduledBubble per row, in time order
     st: np.ndarray  #: stream state: accumulated rate, threshold, held radius (m)
     rng: np.ndarray  #: splitmix64 state, one uint64
-    log: np.ndarray  #: (rows, 3) stream births: t0 (samples), radius (m), depth
+    log: np.ndarray  #: (rows, 3) stream births, a ScheduledBubble per row
 
 
 def minnaert_frequency(radius):
@@ -224,8 +234,8 @@ def power_law_radius(u, lo, hi, exponent):
 def bubbles(out, radius_out, start, n, fs, rate, par, d):
     """Frames start .. start + n - 1 of scheduled bubbles (pending) plus a Poisson stream.
 
-    d: a BubbleData; pending[j] = (t0 in samples, radius, depth), in time order; a bubble
-    sounds from the first frame after t0. Stream births in [idx, idx + 1) start at frame
+    d: a BubbleData; pending[j] = a ScheduledBubble (at, radius, depth), in time order; a bubble
+    sounds from the first frame after ``at``. Stream births in [idx, idx + 1) start at frame
     idx + 1. par holds a BubbleParams; rate: births per second at each frame.
     """
     voices, meta, pending, st, rng, log = d
@@ -234,14 +244,16 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
     active = meta[_ACTIVE]
     for i in range(n):
         idx = start + i
-        while meta[_PENDING] > 0 and math.floor(pending[0, 0]) + 1 <= idx:
-            t = (idx - pending[0, 0]) / fs
-            active = spawn(voices, active, t, fs, pending[0, 1], pending[0, 2], rise, gain, floor)
+        while meta[_PENDING] > 0 and math.floor(pending[0, _AT]) + 1 <= idx:
+            t = (idx - pending[0, _AT]) / fs
+            active = spawn(
+                voices, active, t, fs, pending[0, _BUBBLE_RADIUS], pending[0, _DEPTH], rise, gain, floor
+            )
             meta[_PENDING] -= 1
             for j in range(meta[_PENDING]):
-                pending[j, 0] = pending[j + 1, 0]
-                pending[j, 1] = pending[j + 1, 1]
-                pending[j, 2] = pending[j + 1, 2]
+                pending[j, _AT] = pending[j + 1, _AT]
+                pending[j, _BUBBLE_RADIUS] = pending[j + 1, _BUBBLE_RADIUS]
+                pending[j, _DEPTH] = pending[j + 1, _DEPTH]
         s, active = voices_frame(voices, active)
         out[i] = s
         radius_out[i] = st[_RADIUS]
@@ -259,9 +271,9 @@ def bubbles(out, radius_out, start, n, fs, rate, par, d):
             meta[_BIRTHS] += 1
             k = meta[_LOGGED]
             if k < log.shape[0]:
-                log[k, 0] = t0
-                log[k, 1] = radius
-                log[k, 2] = depth
+                log[k, _AT] = t0
+                log[k, _BUBBLE_RADIUS] = radius
+                log[k, _DEPTH] = depth
                 meta[_LOGGED] = k + 1
     meta[_ACTIVE] = active
 
@@ -297,10 +309,10 @@ class _Bubbles(UGen):
     def _prepare(self) -> None:
         self.voices = np.zeros((len(VoiceRows._fields), self.values["max_voices"]))
         self.meta = np.zeros(len(BubbleCounts._fields), dtype=np.int64)
-        self.pending = np.zeros((8, 3))
+        self.pending = np.zeros((8, len(ScheduledBubble._fields)))
         self.st = np.zeros(len(StreamState._fields))
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.log = np.zeros((int(self.log_capacity), 3))
+        self.log = np.zeros((int(self.log_capacity), len(ScheduledBubble._fields)))
         self._rates = np.zeros(self.max_block)
         self._radii = np.zeros(self.max_block)
         self.par = np.zeros(len(BubbleParams._fields))
@@ -332,7 +344,7 @@ class _Bubbles(UGen):
     def birth_log(self) -> np.ndarray:
         """Logged stream births as rows (time s, radius m, depth); set ``log_capacity`` first."""
         rows = self.log[: int(self.meta[_LOGGED])].copy()
-        rows[:, 0] /= self.sample_rate
+        rows[:, _AT] /= self.sample_rate
         return rows
 
     def _update_params(self) -> None:
@@ -402,7 +414,7 @@ class Bubble(_Bubbles):
             return super().act(action, args, sample_time)
         k = int(self.meta[_PENDING])
         self.pending = with_room(self.pending, k + 1)
-        self.pending[k] = (sample_time, args["radius"], args["depth"])
+        self.pending[k] = ScheduledBubble(sample_time, args["radius"], args["depth"])
         self.meta[_PENDING] = k + 1
 
     def process(self, start: int, n: int) -> None:

@@ -73,14 +73,28 @@ def pulse_amplitude(impulse, fs, t0, T):
     return impulse * fs / pulse_sum(t0, T)
 
 
+class Pulse(NamedTuple):
+    """A row of a pulse table: the 1 - cos pulse A (1 - cos(2 pi (t - t0) / T)), t0 < t < t0 + T
+    (t in samples)."""
+
+    t0: float  #: start (fractional sample)
+    length: float  #: T (samples)
+    amplitude: float  #: A
+
+
+#: Columns of a pulse table (rows, PULSE_COLUMNS), one Pulse per row.
+PULSE_T0, PULSE_LENGTH, PULSE_AMPLITUDE = (Pulse._fields.index(key) for key in Pulse._fields)
+PULSE_COLUMNS = len(Pulse._fields)
+
+
 @nb.njit(cache=True)
 def append_pulse(pulses, count, t0, T, amplitude):
     """Row ``count`` of a (t0, T, A) pulse table set to (t0, T, amplitude); returns the table
     (a larger copy if it was full)."""
     pulses = with_room(pulses, count + 1)
-    pulses[count, 0] = t0
-    pulses[count, 1] = T
-    pulses[count, 2] = amplitude
+    pulses[count, PULSE_T0] = t0
+    pulses[count, PULSE_LENGTH] = T
+    pulses[count, PULSE_AMPLITUDE] = amplitude
     return pulses
 
 
@@ -108,13 +122,25 @@ def add_onset(s1, s2, amp, x, log_r):
     return s1 + e, s2 + x * e
 
 
+class Onset(NamedTuple):
+    """A row of an onset queue: a pulse waiting for its onset (:func:`add_onset`)."""
+
+    at: float  #: onset (fractional sample)
+    amplitude: float  #: the pulse's amplitude
+
+
+#: Columns of an onset queue (rows, ONSET_COLUMNS), one Onset per row.
+ONSET_AT, ONSET_AMPLITUDE = (Onset._fields.index(key) for key in Onset._fields)
+ONSET_COLUMNS = len(Onset._fields)
+
+
 @nb.njit(inline="always", cache=True)
 def drop_row(queue, k, count):
-    """Remove row k of the first ``count`` rows of a two-column queue (the last row takes its
+    """Remove row k of the first ``count`` rows of an onset queue (the last row takes its
     place); returns the new count."""
     count -= 1
-    queue[k, 0] = queue[count, 0]
-    queue[k, 1] = queue[count, 1]
+    queue[k, ONSET_AT] = queue[count, ONSET_AT]
+    queue[k, ONSET_AMPLITUDE] = queue[count, ONSET_AMPLITUDE]
     return count
 
 

@@ -63,7 +63,7 @@ from jassy.params import Control, ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, engine_noise, noise
-from ugens.cells import add_onset, decay_sums, drop_row, slot, store
+from ugens.cells import ONSET_AMPLITUDE, ONSET_AT, ONSET_COLUMNS, add_onset, decay_sums, drop_row, slot, store
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -157,7 +157,7 @@ class EngineData(NamedTuple):
     """The arrays :func:`engine_run` updates."""
 
     st: np.ndarray  #: an EngineState
-    queue: np.ndarray  #: (QUEUE, 2): onset sample time and amplitude of the queued firings
+    queue: np.ndarray  #: (QUEUE, ONSET_COLUMNS): the queued firings, a cells.Onset per row
     ist: np.ndarray  #: int64 [queued firings, ring write slot]
     rng: np.ndarray  #: uint64 [splitmix64 state]
     ring: np.ndarray  #: the exhaust pipe's delay line
@@ -168,7 +168,7 @@ def engine_data(delay: float) -> EngineData:
     """Zeroed EngineData for a pipe of ``delay`` samples one way."""
     return EngineData(
         np.zeros(len(EngineState._fields)),
-        np.zeros((QUEUE, 2)),
+        np.zeros((QUEUE, ONSET_COLUMNS)),
         np.zeros(2, dtype=np.int64),
         np.zeros(1, dtype=np.uint64),
         np.zeros(int(math.ceil(2.0 * delay)) + 2),
@@ -241,22 +241,22 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, data, par, blamp):
             if 0.5 * (u3 + 1.0) < mis:
                 amp = 0.0
             if count < queue.shape[0]:
-                queue[count, 0] = crossing + irr * JITTER * 0.5 * (u1 + 1.0) / inc
-                queue[count, 1] = amp
+                queue[count, ONSET_AT] = crossing + irr * JITTER * 0.5 * (u1 + 1.0) / inc
+                queue[count, ONSET_AMPLITUDE] = amp
                 count += 1
         # propagate the pulse sum to frame t, then start the pulses whose onset has come
         s1, s2 = decay_sums(s1, s2, r)
         k = 0
         while k < count:
-            onset = queue[k, 0]
+            onset = queue[k, ONSET_AT]
             if onset <= t:
                 x = t - onset
-                s1, s2 = add_onset(s1, s2, queue[k, 1], x, log_r)
+                s1, s2 = add_onset(s1, s2, queue[k, ONSET_AMPLITUDE], x, log_r)
                 # band-limited corner: slope norm * A per sample at the onset
                 q = x * phases
                 row = min(int(q), phases - 1)
                 w1 = q - row
-                slope = norm * queue[k, 1]
+                slope = norm * queue[k, ONSET_AMPLITUDE]
                 for j in range(2 * half):
                     c = (1.0 - w1) * blamp[row, j] + w1 * blamp[row + 1, j]
                     lead[int(start + i - half + j) % span] += slope * c

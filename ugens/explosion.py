@@ -44,7 +44,18 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, filters, noise
-from ugens.cells import add_onset, decay_sums, drop_row, slot, store, with_room
+from ugens.cells import (
+    ONSET_AMPLITUDE,
+    ONSET_AT,
+    ONSET_COLUMNS,
+    Onset,
+    add_onset,
+    decay_sums,
+    drop_row,
+    slot,
+    store,
+    with_room,
+)
 from ugens.filters import design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -109,7 +120,7 @@ def positive_impulse(peak: float, blast_time: float, decay: float = 1.0) -> floa
 @nb.njit(fastmath=FASTMATH, cache=True)
 def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
     """n samples from absolute frame ``start``; st holds an ExplosionState, par an
-    ExplosionParams; queue rows (arrival sample time, peak), count[0] blasts queued;
+    ExplosionParams; queue: a cells.Onset per row (arrival, peak), count[0] blasts queued;
     absorb/rumble: low-pass coefficients [b0, b1, b2, a1, a2]."""
     c = explosion_params(par)
     r = c.r
@@ -133,9 +144,9 @@ def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
         s1, s2 = decay_sums(s1, s2, r)
         k = 0
         while k < k_count:
-            onset = queue[k, 0]
+            onset = queue[k, ONSET_AT]
             if onset <= t:
-                s1, s2 = add_onset(s1, s2, queue[k, 1], t - onset, log_r)
+                s1, s2 = add_onset(s1, s2, queue[k, ONSET_AMPLITUDE], t - onset, log_r)
                 k_count = drop_row(queue, k, k_count)
             else:
                 k += 1
@@ -225,7 +236,7 @@ class Explosion(UGen):
         )
         self.par = np.array(params, dtype=np.float64)
         self.st = np.zeros(len(ExplosionState._fields))
-        self.queue = np.zeros((QUEUE, 2))
+        self.queue = np.zeros((QUEUE, ONSET_COLUMNS))
         self.count = np.zeros(1, dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
         self._run = specialise(
@@ -259,7 +270,7 @@ class Explosion(UGen):
             return super().act(action, args, sample_time)
         k = int(self.count[0])
         self.queue = with_room(self.queue, k + 1)
-        self.queue[k] = (sample_time + self.delay, args["overpressure"] / self.values["distance"])
+        self.queue[k] = Onset(sample_time + self.delay, args["overpressure"] / self.values["distance"])
         self.count[0] = k + 1
 
     def process(self, start: int, n: int) -> None:

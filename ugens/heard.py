@@ -23,6 +23,13 @@ from ugens.kernels import FASTMATH
 
 drop_stale_cache(__file__, [cells])  # its cache holds copies of their kernels
 
+#: Rows of a heard coefficient array (6, K): the transition [[PHI11, PHI12], [PHI21, PHI22]]
+#: of (q, p) and the force gains G_Q, G_P (c0 .. c5 above; the first six rows of
+#: ugens.nonlinear_impact.ModeSteps).
+PHI11, PHI12, PHI21, PHI22, G_Q, G_P = 0, 1, 2, 3, 4, 5
+#: Rows of a mode state array (2, K): the two states q and p.
+STATE_Q, STATE_P = 0, 1
+
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def heard_run(force, out, n, coef, state):
@@ -32,15 +39,26 @@ def heard_run(force, out, n, coef, state):
         f = force[i]
         total = 0.0
         for k in range(k_modes):
-            q, p = state_step(coef[0, k], coef[1, k], coef[2, k], coef[3, k], state[0, k], state[1, k])
-            q += coef[4, k] * f
-            state[0, k] = q
-            state[1, k] = p + coef[5, k] * f
+            q, p = state_step(
+                coef[PHI11, k],
+                coef[PHI12, k],
+                coef[PHI21, k],
+                coef[PHI22, k],
+                state[STATE_Q, k],
+                state[STATE_P, k],
+            )
+            q += coef[G_Q, k] * f
+            state[STATE_Q, k] = q
+            state[STATE_P, k] = p + coef[G_P, k] * f
             total += q
         out[i] = total
 
 
 def impulse_invariant(c1: np.ndarray, c2: np.ndarray, g: np.ndarray) -> np.ndarray:
     """Coefficients of q[n] = c1 q[n-1] - c2 q[n-2] + g f[n] (state: q[n-1], q[n-2])."""
-    zero = np.zeros_like(c1)
-    return np.array([c1, -c2, np.ones_like(c1), zero, g, zero])
+    coef = np.zeros((6, *np.shape(c1)))
+    coef[PHI11] = c1
+    coef[PHI12] = -c2
+    coef[PHI21] = 1.0
+    coef[G_Q] = g
+    return coef

@@ -22,7 +22,17 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, append_pulses, pulse_amplitude, raised_cosine
+from ugens.cells import (
+    MIN_PULSE_SAMPLES,
+    PULSE_AMPLITUDE,
+    PULSE_COLUMNS,
+    PULSE_LENGTH,
+    PULSE_T0,
+    append_pulse,
+    append_pulses,
+    pulse_amplitude,
+    raised_cosine,
+)
 
 drop_stale_cache(__file__, [cells])  # render_pulses inlines cells.raised_cosine
 
@@ -31,14 +41,14 @@ drop_stale_cache(__file__, [cells])  # render_pulses inlines cells.raised_cosine
 def render_pulses(out, start, n, pulses, count):
     """Write the sum of active pulses for frames start..start+n-1; return pulses left.
 
-    pulses[i] = (t0, T, A). Finished pulses are removed (order kept).
+    pulses[i]: a cells.Pulse (t0, T, A). Finished pulses are removed (order kept).
     """
     for i in range(n):
         out[i] = 0.0
     for p in range(count):
-        t0 = pulses[p, 0]
-        T = pulses[p, 1]
-        A = pulses[p, 2]
+        t0 = pulses[p, PULSE_T0]
+        T = pulses[p, PULSE_LENGTH]
+        A = pulses[p, PULSE_AMPLITUDE]
         first = max(start, int(math.floor(t0)) + 1)
         last = min(start + n, int(math.ceil(t0 + T)))
         for idx in range(first, last):
@@ -48,8 +58,8 @@ def render_pulses(out, start, n, pulses, count):
     kept = 0
     end = start + n
     for p in range(count):
-        if pulses[p, 0] + pulses[p, 1] > end:
-            for c in range(3):  # element-wise: a row slice copy compiles numba's shape-error text
+        if pulses[p, PULSE_T0] + pulses[p, PULSE_LENGTH] > end:
+            for c in range(PULSE_COLUMNS):  # element-wise: a row slice copy compiles numba's shape-error text
                 pulses[kept, c] = pulses[p, c]
             kept += 1
     return kept
@@ -60,7 +70,7 @@ class PulseSource(UGen):
     the table, its growth, rendering and saved state."""
 
     def _prepare(self) -> None:
-        self.pulses = np.zeros((16, 3))
+        self.pulses = np.zeros((16, PULSE_COLUMNS))
         self.count = np.zeros(1, dtype=np.int64)
         self._idle = False
 

@@ -99,6 +99,14 @@ from ugens.modal_meta import (
     NarrowMeta,
 )
 from ugens.modal_retune import (
+    COEF_C1,
+    COEF_C2,
+    COEF_DIRECT,
+    COEF_GAIN,
+    POLE_C1,
+    POLE_C2,
+    POLE_RATIO,
+    POLE_SIN,
     TOP_BAND,
     TOP_BAND_COS,
     TOP_BAND_SIN,
@@ -197,7 +205,7 @@ def resonate_ramp(force, out, n, ramp, y1, y2, remaining, active, last):
     """
     K = active
     coef, delta, target = ramp
-    c1, c2, g, d = coef[0], coef[1], coef[2], coef[3]
+    c1, c2, g, d = coef[COEF_C1], coef[COEF_C2], coef[COEF_GAIN], coef[COEF_DIRECT]
     fp = last[0]
     for i in range(n):
         f = force[i]
@@ -321,7 +329,9 @@ def mixed_step(force, out, start, n, rows, floor, last):
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
             if active > 0 and floor > 0.0:
-                narrow_meta[NARROW_ACTIVE] = flush_silent_delta(state[0], state[1], coef[2], active, floor)
+                narrow_meta[NARROW_ACTIVE] = flush_silent_delta(
+                    state[0], state[1], coef[COEF_GAIN], active, floor
+                )
 
 
 class BankArrays(NamedTuple):
@@ -407,7 +417,7 @@ def direct_ratio(frequencies, decays, sample_rate, fit="taylor"):
     frequencies of about 0.5 theta^2 / 12 of a mode's static response (0.03 % at 1 kHz,
     3 % at 8 kHz, at 48 kHz).
     """
-    return mode_poles(frequencies, decays, sample_rate, fit)[3]
+    return mode_poles(frequencies, decays, sample_rate, fit)[POLE_RATIO]
 
 
 class MixedSplit(NamedTuple):
@@ -677,11 +687,12 @@ class ModalBank(ModelParams, UGen):
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
             scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
-            gains = poles[2] * scale * self.anytime_gains(v["location"])
+            gains = poles[POLE_SIN] * scale * self.anytime_gains(v["location"])
             out = np.empty_like(poles)
-            out[:2] = poles[:2]
-            out[2] = gains
-            out[3] = gains * poles[3]
+            out[COEF_C1] = poles[POLE_C1]
+            out[COEF_C2] = poles[POLE_C2]
+            out[COEF_GAIN] = gains
+            out[COEF_DIRECT] = gains * poles[POLE_RATIO]
             self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
@@ -758,7 +769,7 @@ class ModalBank(ModelParams, UGen):
         _, _, sin2, inv = self._poles
         rows, period = self._mode_rows_view, self._heard.size
         rows[SIN2], rows[INV] = sin2, inv
-        rows[DECAY] = self._fresh[1] ** period
+        rows[DECAY] = self._fresh[COEF_C2] ** period
         freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
         decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
         self._psd_bins[:] = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2)

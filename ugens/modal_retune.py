@@ -33,6 +33,16 @@ class TopBand(NamedTuple):
     sin: np.ndarray
 
 
+#: Rows of a bank's coefficient array ``coef`` (4, K) and of a design ``fresh``: the
+#: recursion's c1 = 2 R cos theta and c2 = R^2, the input gain g and the direct gain d.
+COEF_C1, COEF_C2, COEF_GAIN, COEF_DIRECT = 0, 1, 2, 3
+#: Rows of a pole design ``poles`` (4, K) (:func:`pole_rows`): c1, c2, s = R sin theta
+#: and the direct ratio d / g.
+POLE_C1, POLE_C2, POLE_SIN, POLE_RATIO = 0, 1, 2, 3
+#: Rows of ``tuning`` (6, K) (:func:`retune_state`): c1, c2 of the last new tuning and its
+#: cos theta, sin theta, theta and ln R.
+TUNE_C1, TUNE_C2, TUNE_COS, TUNE_SIN, TUNE_THETA, TUNE_LOG_R = 0, 1, 2, 3, 4, 5
+
 #: Longest ring-out (s, to -60 dB) of a mode that a retune moves to or above Nyquist.
 LEAVING_FADE = 1e-3
 
@@ -100,10 +110,10 @@ def pole_rows(freqs, decays, freq_scale, decay_scale, fs, fit_band, top_band, po
                 ratio = band_ratio(f, decay, c1, c2, s, fs, band, band_cos, band_sin)
             else:
                 ratio = theta / (12.0 * s)
-        poles[0, k] = c1
-        poles[1, k] = c2
-        poles[2, k] = s
-        poles[3, k] = ratio
+        poles[POLE_C1, k] = c1
+        poles[POLE_C2, k] = c2
+        poles[POLE_SIN, k] = s
+        poles[POLE_RATIO, k] = ratio
         if c2 > 0.0:
             sn = max(1.0 - c1 * c1 / (4.0 * c2), 1e-12)
             sin2[k] = sn
@@ -143,18 +153,18 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs, tuning):
     fade = math.exp(-math.log(1000.0) / (LEAVING_FADE * fs))
     correction = 0.0
     for k in range(coef.shape[1]):
-        c1 = coef[0, k]
-        c2 = coef[1, k]
-        g_old = coef[2, k]
-        kink_old = old_poles[3, k] * old_poles[2, k]
-        kink_new = new_poles[3, k] * new_poles[2, k]
-        n1 = fresh[0, k]
-        n2 = fresh[1, k]
-        coef[2, k] = fresh[2, k]
-        coef[3, k] = fresh[3, k]
+        c1 = coef[COEF_C1, k]
+        c2 = coef[COEF_C2, k]
+        g_old = coef[COEF_GAIN, k]
+        kink_old = old_poles[POLE_RATIO, k] * old_poles[POLE_SIN, k]
+        kink_new = new_poles[POLE_RATIO, k] * new_poles[POLE_SIN, k]
+        n1 = fresh[COEF_C1, k]
+        n2 = fresh[COEF_C2, k]
+        coef[COEF_GAIN, k] = fresh[COEF_GAIN, k]
+        coef[COEF_DIRECT, k] = fresh[COEF_DIRECT, k]
         if not c2 > 0.0:  # silent before: stays silent until the next force
-            coef[0, k] = n1
-            coef[1, k] = n2
+            coef[COEF_C1, k] = n1
+            coef[COEF_C2, k] = n2
             y1[k] = 0.0
             y2[k] = 0.0
             continue
@@ -164,27 +174,27 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs, tuning):
             n1 = c1 * shrink
             n2 = c2 * shrink * shrink
             kink_new = kink_old
-        coef[0, k] = n1
-        coef[1, k] = n2
+        coef[COEF_C1, k] = n1
+        coef[COEF_C2, k] = n2
         if not n2 > 0.0:  # the fade itself underflowed
             y1[k] = 0.0
             y2[k] = 0.0
             continue
-        if c1 == tuning[0, k] and c2 == tuning[1, k]:
-            cos_t = tuning[2, k]
-            sin_t = tuning[3, k]
-            theta = tuning[4, k]
-            log_r = tuning[5, k]
+        if c1 == tuning[TUNE_C1, k] and c2 == tuning[TUNE_C2, k]:
+            cos_t = tuning[TUNE_COS, k]
+            sin_t = tuning[TUNE_SIN, k]
+            theta = tuning[TUNE_THETA, k]
+            log_r = tuning[TUNE_LOG_R, k]
         else:
             cos_t, sin_t, theta, log_r = tuning_of(c1, r)
         r_new = math.sqrt(n2)
         cos_n, sin_n, theta_new, log_r_new = tuning_of(n1, r_new)
-        tuning[0, k] = n1
-        tuning[1, k] = n2
-        tuning[2, k] = cos_n
-        tuning[3, k] = sin_n
-        tuning[4, k] = theta_new
-        tuning[5, k] = log_r_new
+        tuning[TUNE_C1, k] = n1
+        tuning[TUNE_C2, k] = n2
+        tuning[TUNE_COS, k] = cos_n
+        tuning[TUNE_SIN, k] = sin_n
+        tuning[TUNE_THETA, k] = theta_new
+        tuning[TUNE_LOG_R, k] = log_r_new
         u1 = y1[k]
         # Z at the last output sample, then frame n0 at the old tuning
         zr = (u1 * cos_t - r * y2[k]) / sin_t + fp * g_old / (r * sin_t)
@@ -192,7 +202,7 @@ def retune_state(coef, fresh, old_poles, new_poles, y1, y2, fp, fs, tuning):
         z0r = r * (cos_t * zr - sin_t * zi)
         z0i = r * (cos_t * zi + sin_t * zr)
         # divide by the new pole, remove the force's entry at the new tuning
-        vr = (cos_n * z0r + sin_n * z0i) / r_new - fp * coef[2, k] / (r_new * sin_n)
+        vr = (cos_n * z0r + sin_n * z0i) / r_new - fp * coef[COEF_GAIN, k] / (r_new * sin_n)
         vi = (cos_n * z0i - sin_n * z0r) / r_new
         y1[k] = vi
         y2[k] = (cos_n * vi - sin_n * vr) / r_new

@@ -67,7 +67,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, heard
 from ugens.cells import silent, slot, state_step, store
-from ugens.heard import heard_run
+from ugens.heard import STATE_P, STATE_Q, heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
 
@@ -364,8 +364,8 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
     wp = steps.w_p
     dec = steps.decay
     inv_w = steps.inv_w
-    qs = d.state[0]
-    ps = d.state[1]
+    qs = d.state[STATE_Q]
+    ps = d.state[STATE_P]
     meta = d.meta
     h = hammer_state(d.hammer)
     xh, vh, xn, fp, en, vn, fpp, sp = h.xh, h.vh, h.xn, h.fp, h.en, h.vn, h.fpp, h.sp
@@ -466,9 +466,13 @@ def commit_force(state, hammer, coef):
     if h.fp != 0.0:
         steps = mode_steps(coef)
         for j in range(state.shape[1]):
-            state[0, j] += steps.g_q[j] * h.fp
-            state[1, j] += steps.g_p[j] * h.fp
+            state[STATE_Q, j] += steps.g_q[j] * h.fp
+            state[STATE_P, j] += steps.g_p[j] * h.fp
     store(hammer, HammerState(h.xh, h.vh, h.xn, 0.0, h.en, h.active, h.vn, 0.0, h.sp))
+
+
+#: Rows of hc_run_substeps' scratch (3, M): a sample's sub-step outputs, forces, energies.
+SUB_OUT, SUB_FORCE, SUB_ENERGY = 0, 1, 2
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -493,19 +497,19 @@ def hc_run_substeps(out, force_out, energy_out, start, n, full, sub, d, scratch)
         if h.xn > 0.0 or near:
             commit_force(d.state, d.hammer, full.coef)
             end = strike_stats(d.stats).end
-            hc_run(scratch[0], scratch[1], scratch[2], 0, m_sub, sub, d)
+            hc_run(scratch[SUB_OUT], scratch[SUB_FORCE], scratch[SUB_ENERGY], 0, m_sub, sub, d)
             s = strike_stats(d.stats)
             if s.end != end:  # the contact ended in this sample: its sub-step, in frames
                 ended = frame + s.end / m_sub
                 store(d.stats, StrikeStats(s.start, ended, s.vin, s.vout, s.peak, s.contacts, s.corrections,
                                            s.touching, s.measured))  # fmt: skip
             commit_force(d.state, d.hammer, sub.coef)
-            out[i] = scratch[0, m_sub - 1]
+            out[i] = scratch[SUB_OUT, m_sub - 1]
             mean = 0.0
             for m in range(m_sub):
-                mean += scratch[1, m]
+                mean += scratch[SUB_FORCE, m]
             force_out[i] = mean / m_sub  # the sample's impulse / T
-            energy_out[i] = scratch[2, m_sub - 1]
+            energy_out[i] = scratch[SUB_ENERGY, m_sub - 1]
         else:
             hc_run(out[i:], force_out[i:], energy_out[i:], frame, 1, full, d)
 
@@ -700,8 +704,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
         v0 = args["speed"]
         frame = math.ceil(sample_time - 1e-6)  # the frame the scheduler applies the event at
         lead = max(frame - sample_time, 0.0) / self.sample_rate  # s of contact before that frame
-        xc = float(np.sum(self.state[0]))
-        vc = float(np.sum(self.state[1]))
+        xc = float(np.sum(self.state[STATE_Q]))
+        vc = float(np.sum(self.state[STATE_P]))
         xn = v0 * lead
         self.hammer[:] = HammerState(*self.hammer)._replace(
             xh=xc + v0 * lead,
@@ -725,8 +729,8 @@ class HuntCrossleyImpact(ModelParams, UGen):
         computed here in Python from the state arrays (independent of the kernel's sums)."""
         h = HammerState(*self.hammer)
         steps = ModeSteps(*self.coef)
-        q = self.state[0] + steps.g_q * h.fp
-        p = self.state[1] + steps.g_p * h.fp
+        q = self.state[STATE_Q] + steps.g_q * h.fp
+        p = self.state[STATE_P] + steps.g_p * h.fp
         modal = float(np.sum(steps.w_q * q * q + steps.w_p * p * p))
         x = h.xh - float(np.sum(q))
         m, k, alpha = self.params.mass, self.params.stiffness, self.params.alpha

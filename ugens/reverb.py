@@ -54,6 +54,12 @@ SPREAD = (0.61, 0.73, 0.82, 0.95, 1.04, 1.17, 1.31, 1.49)
 #: Signs with which the input enters the lines (irregular, so no line pair cancels).
 INPUT_SIGNS = np.array([1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0])
 _LOW_SHELF, _PEAK, _HIGH_SHELF = 0, 1, 2
+#: Coefficient slots of one section (axis 1 of Network.sections, the last axis of
+#: :func:`rbj_section`): y = (b0 + b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2) x.
+B0, B1, B2, A1, A2 = 0, 1, 2, 3, 4
+#: State slots of one section (axis 1 of ReverbData.filter_state): the two delays of
+#: direct form II transposed.
+S1, S2 = 0, 1
 
 
 def crossover_frequencies() -> np.ndarray:
@@ -105,12 +111,15 @@ def rbj_section(kind: int, freq: float, gain_db: float, fs: float) -> np.ndarray
             -s * 2 * ((a - 1) + s * (a + 1) * cw),
             (a + 1) + s * (a - 1) * cw - k,
         ]
-    return np.array([b[0], b[1], b[2], den[1], den[2]]) / den[0]
+    coef = np.empty(5)
+    coef[[B0, B1, B2]] = b
+    coef[[A1, A2]] = den[1:]
+    return coef / den[0]
 
 
 def _response_db(coef: np.ndarray, freqs: np.ndarray, fs: float) -> np.ndarray:
     z = np.exp(-2j * np.pi * freqs / fs)
-    h = (coef[0] + coef[1] * z + coef[2] * z * z) / (1.0 + coef[3] * z + coef[4] * z * z)
+    h = (coef[B0] + coef[B1] * z + coef[B2] * z * z) / (1.0 + coef[A1] * z + coef[A2] * z * z)
     return 20.0 * np.log10(np.abs(h))
 
 
@@ -140,7 +149,7 @@ def absorption_filter(attenuation_db: np.ndarray, fs: float) -> np.ndarray:
         solution = np.linalg.lstsq(basis, target, rcond=None)[0]
         flat, gains = solution[0], solution[1:]
     sections = np.array([rbj_section(kind, f, g, fs) for (kind, f), g in zip(layout, gains, strict=True)])
-    sections[0, :3] *= 10.0 ** (flat / 20.0)
+    sections[0, [B0, B1, B2]] *= 10.0 ** (flat / 20.0)
     return sections
 
 
@@ -148,27 +157,27 @@ def absorption_filter(attenuation_db: np.ndarray, fs: float) -> np.ndarray:
 def _absorb(y, m, sections, filter_state, j):
     """y[:m] through line j's SECTIONS = 7 biquads (direct form II transposed), sample by
     sample through the whole cascade so the sections' recurrences overlap."""
-    b00, b10, b20 = sections[0, 0, j], sections[0, 1, j], sections[0, 2, j]
-    a10, a20 = sections[0, 3, j], sections[0, 4, j]
-    s10, s20 = filter_state[0, 0, j], filter_state[0, 1, j]
-    b01, b11, b21 = sections[1, 0, j], sections[1, 1, j], sections[1, 2, j]
-    a11, a21 = sections[1, 3, j], sections[1, 4, j]
-    s11, s21 = filter_state[1, 0, j], filter_state[1, 1, j]
-    b02, b12, b22 = sections[2, 0, j], sections[2, 1, j], sections[2, 2, j]
-    a12, a22 = sections[2, 3, j], sections[2, 4, j]
-    s12, s22 = filter_state[2, 0, j], filter_state[2, 1, j]
-    b03, b13, b23 = sections[3, 0, j], sections[3, 1, j], sections[3, 2, j]
-    a13, a23 = sections[3, 3, j], sections[3, 4, j]
-    s13, s23 = filter_state[3, 0, j], filter_state[3, 1, j]
-    b04, b14, b24 = sections[4, 0, j], sections[4, 1, j], sections[4, 2, j]
-    a14, a24 = sections[4, 3, j], sections[4, 4, j]
-    s14, s24 = filter_state[4, 0, j], filter_state[4, 1, j]
-    b05, b15, b25 = sections[5, 0, j], sections[5, 1, j], sections[5, 2, j]
-    a15, a25 = sections[5, 3, j], sections[5, 4, j]
-    s15, s25 = filter_state[5, 0, j], filter_state[5, 1, j]
-    b06, b16, b26 = sections[6, 0, j], sections[6, 1, j], sections[6, 2, j]
-    a16, a26 = sections[6, 3, j], sections[6, 4, j]
-    s16, s26 = filter_state[6, 0, j], filter_state[6, 1, j]
+    b00, b10, b20 = sections[0, B0, j], sections[0, B1, j], sections[0, B2, j]
+    a10, a20 = sections[0, A1, j], sections[0, A2, j]
+    s10, s20 = filter_state[0, S1, j], filter_state[0, S2, j]
+    b01, b11, b21 = sections[1, B0, j], sections[1, B1, j], sections[1, B2, j]
+    a11, a21 = sections[1, A1, j], sections[1, A2, j]
+    s11, s21 = filter_state[1, S1, j], filter_state[1, S2, j]
+    b02, b12, b22 = sections[2, B0, j], sections[2, B1, j], sections[2, B2, j]
+    a12, a22 = sections[2, A1, j], sections[2, A2, j]
+    s12, s22 = filter_state[2, S1, j], filter_state[2, S2, j]
+    b03, b13, b23 = sections[3, B0, j], sections[3, B1, j], sections[3, B2, j]
+    a13, a23 = sections[3, A1, j], sections[3, A2, j]
+    s13, s23 = filter_state[3, S1, j], filter_state[3, S2, j]
+    b04, b14, b24 = sections[4, B0, j], sections[4, B1, j], sections[4, B2, j]
+    a14, a24 = sections[4, A1, j], sections[4, A2, j]
+    s14, s24 = filter_state[4, S1, j], filter_state[4, S2, j]
+    b05, b15, b25 = sections[5, B0, j], sections[5, B1, j], sections[5, B2, j]
+    a15, a25 = sections[5, A1, j], sections[5, A2, j]
+    s15, s25 = filter_state[5, S1, j], filter_state[5, S2, j]
+    b06, b16, b26 = sections[6, B0, j], sections[6, B1, j], sections[6, B2, j]
+    a16, a26 = sections[6, A1, j], sections[6, A2, j]
+    s16, s26 = filter_state[6, S1, j], filter_state[6, S2, j]
     for t in range(m):
         u = y[t]
         v = b00 * u + s10
@@ -200,13 +209,13 @@ def _absorb(y, m, sections, filter_state, j):
         s26 = b26 * u - a26 * v
         u = v
         y[t] = u
-    filter_state[0, 0, j], filter_state[0, 1, j] = s10, s20
-    filter_state[1, 0, j], filter_state[1, 1, j] = s11, s21
-    filter_state[2, 0, j], filter_state[2, 1, j] = s12, s22
-    filter_state[3, 0, j], filter_state[3, 1, j] = s13, s23
-    filter_state[4, 0, j], filter_state[4, 1, j] = s14, s24
-    filter_state[5, 0, j], filter_state[5, 1, j] = s15, s25
-    filter_state[6, 0, j], filter_state[6, 1, j] = s16, s26
+    filter_state[0, S1, j], filter_state[0, S2, j] = s10, s20
+    filter_state[1, S1, j], filter_state[1, S2, j] = s11, s21
+    filter_state[2, S1, j], filter_state[2, S2, j] = s12, s22
+    filter_state[3, S1, j], filter_state[3, S2, j] = s13, s23
+    filter_state[4, S1, j], filter_state[4, S2, j] = s14, s24
+    filter_state[5, S1, j], filter_state[5, S2, j] = s15, s25
+    filter_state[6, S1, j], filter_state[6, S2, j] = s16, s26
 
 
 class Network(NamedTuple):

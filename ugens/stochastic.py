@@ -40,7 +40,17 @@ from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec, Smoothed
 from jassy.registry import register
 from ugens import cells, noise
-from ugens.cells import MIN_PULSE_SAMPLES, append_pulse, pulse_amplitude, pulse_sum, raised_cosine, slot
+from ugens.cells import (
+    MIN_PULSE_SAMPLES,
+    PULSE_AMPLITUDE,
+    PULSE_LENGTH,
+    PULSE_T0,
+    append_pulse,
+    pulse_amplitude,
+    pulse_sum,
+    raised_cosine,
+    slot,
+)
 from ugens.impact import PulseSource
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
@@ -82,6 +92,18 @@ _ACC, _TARGET, _LEFT, _BUDGET, _RUNNING, _SIZE, _SPEED, _NEXT = (
     slot(ImpactState, key) for key in ImpactState._fields
 )
 _EVENTS, _LOGGED = (slot(Counters, key) for key in Counters._fields)
+
+
+class LoggedImpact(NamedTuple):
+    """A row of the event log ``log``, in this order."""
+
+    at: float  #: start (samples; seconds in :meth:`_MicroImpacts.event_log`)
+    energy: float  #: energy (J)
+    size: float  #: fragment size
+    impulse: float  #: impulse (N s)
+
+
+_LOG_AT, _LOG_ENERGY, _LOG_SIZE, _LOG_IMPULSE = (slot(LoggedImpact, key) for key in LoggedImpact._fields)
 
 
 class GrainSettings(NamedTuple):
@@ -157,22 +179,22 @@ def next_event(st, rng, rate, pos):
 def pulse_frame(pulses, count, idx):
     """Sum of the active 1 - cos pulses at frame idx; finished ones are dropped.
 
-    pulses[p] = (t0, T, A): A (1 - cos(2 pi (idx - t0) / T)) for t0 < idx < t0 + T.
+    pulses[p]: a cells.Pulse (t0, T, A): A (1 - cos(2 pi (idx - t0) / T)) for t0 < idx < t0 + T.
     Returns (sum, pulses still active after idx).
     """
     s = 0.0
     kept = 0
     for p in range(count):
-        t0 = pulses[p, 0]
-        T = pulses[p, 1]
+        t0 = pulses[p, PULSE_T0]
+        T = pulses[p, PULSE_LENGTH]
         x = idx - t0
         if 0.0 < x < T:
-            s += pulses[p, 2] * raised_cosine(x, T)
+            s += pulses[p, PULSE_AMPLITUDE] * raised_cosine(x, T)
         if t0 + T > idx + 1:
             if kept != p:
-                pulses[kept, 0] = t0
-                pulses[kept, 1] = T
-                pulses[kept, 2] = pulses[p, 2]
+                pulses[kept, PULSE_T0] = t0
+                pulses[kept, PULSE_LENGTH] = T
+                pulses[kept, PULSE_AMPLITUDE] = pulses[p, PULSE_AMPLITUDE]
             kept += 1
     return s, kept
 
@@ -182,10 +204,10 @@ def log_event(log, cnt, t0, energy, size, impulse):
     """Record (t0 in samples, energy J, size, impulse N s) while the log has room."""
     k = cnt[_LOGGED]
     if k < log.shape[0]:
-        log[k, 0] = t0
-        log[k, 1] = energy
-        log[k, 2] = size
-        log[k, 3] = impulse
+        log[k, _LOG_AT] = t0
+        log[k, _LOG_ENERGY] = energy
+        log[k, _LOG_SIZE] = size
+        log[k, _LOG_IMPULSE] = impulse
         cnt[_LOGGED] = k + 1
 
 
@@ -343,7 +365,7 @@ class _MicroImpacts(PulseSource):
         self.st = np.zeros(len(ImpactState._fields))
         self.cnt = np.zeros(len(Counters._fields), dtype=np.int64)
         self.rng = np.zeros(1, dtype=np.uint64)
-        self.log = np.zeros((int(self.log_capacity), 4))
+        self.log = np.zeros((int(self.log_capacity), len(LoggedImpact._fields)))
         self._constant: dict[int, float] = {}
         self._impact_data = ImpactData(self.st, self.cnt, self.rng, self.count, self.log)
         self._opt = None  # the kernel's settings record, rebuilt after a parameter change
@@ -382,7 +404,7 @@ class _MicroImpacts(PulseSource):
         ``log_capacity`` events are kept. For analysis and tests; not part of the state.
         """
         rows = self.log[: int(self.cnt[_LOGGED])].copy()
-        rows[:, 0] /= self.sample_rate
+        rows[:, _LOG_AT] /= self.sample_rate
         return rows
 
     def state_arrays(self) -> dict[str, np.ndarray]:

@@ -67,7 +67,14 @@ from jassy.program import (
 )
 from jassy.safety import CEILING, METERED, copy_finite, float_from_bits, limit_metered, release_coefficient
 from jassy.scheduler import apply_frame, prepare_score, ramp_seconds, validate_event
-from ugens.cells import MIN_PULSE_SAMPLES, pulse_amplitude
+from ugens.cells import (
+    MIN_PULSE_SAMPLES,
+    PULSE_AMPLITUDE,
+    PULSE_COLUMNS,
+    PULSE_LENGTH,
+    PULSE_T0,
+    pulse_amplitude,
+)
 from ugens.filters import Biquad, design_biquad
 from ugens.impact import ImpactForce
 from ugens.mix import Gain
@@ -178,13 +185,13 @@ def apply_event(prog, ev, control):
             design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(filt.coef, 5))
     elif op == STRIKE:
         impact = ImpactSlots(*kind_slots(prog, base)[:3])
-        pulses = _f64_rows(impact.pulses, impact.capacity, 3)
+        pulses = _f64_rows(impact.pulses, impact.capacity, PULSE_COLUMNS)
         count = _i64(impact.count, 1)
         c = count[0]
         if c < pulses.shape[0]:
-            pulses[c, 0] = ev[3]
-            pulses[c, 1] = ev[4]
-            pulses[c, 2] = ev[5]
+            pulses[c, PULSE_T0] = ev[3]
+            pulses[c, PULSE_LENGTH] = ev[4]
+            pulses[c, PULSE_AMPLITUDE] = ev[5]
             count[0] = c + 1
         else:
             control[DROPPED] += 1
@@ -756,7 +763,7 @@ class CallbackRenderer(ProgramRun):
         graph.prepare(float(sample_rate), int(block))
         for node in graph.order:
             if isinstance(node, ImpactForce):  # a fixed table: the callback never allocates
-                node.pulses = np.zeros((PULSE_CAPACITY, 3))
+                node.pulses = np.zeros((PULSE_CAPACITY, PULSE_COLUMNS))
         params = [
             CEILING,
             release_coefficient(0.05, sample_rate),

@@ -26,7 +26,8 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from jassy.errors import JassyError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
+from physics.rigid import aba as aba_kernels
 from physics.rigid.aba import (
     ABA_BAD_FEXT,
     ABA_BAD_Q,
@@ -41,6 +42,8 @@ from physics.rigid.aba import (
     aba_into,
     new_aba_data,
 )
+
+drop_stale_cache(__file__, [aba_kernels])  # its cache holds copies of aba's kernels
 
 
 @numba.njit(cache=True)

@@ -14,10 +14,14 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
+from jassy.jit import drop_stale_cache
+from physics.rigid import aba as aba_kernels
 from physics.rigid.aba import aba_into, new_aba_data
 from physics.rigid.articulated import aba, dense_forward_dynamics, pendulum_chain
 from physics.rigid.lcp import lemke
 from physics.rigid.pgs import solve_friction_pgs
+
+drop_stale_cache(__file__, [aba_kernels])  # its cache holds copies of aba's kernels
 
 
 def _best_time(fn, repeats: int) -> float:
