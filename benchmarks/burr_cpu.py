@@ -79,7 +79,10 @@ def main() -> None:
         print(json.dumps(child([4, 1])))
         return
     if len(args.trees) < 2 or args.rounds < 1:
-        sys.exit("burr_cpu.py: expected two or more checkout directories and --rounds >= 1")
+        p.error("expected two or more checkout directories and --rounds >= 1")
+    for tree in args.trees:
+        if not os.path.isdir(os.path.join(tree, "physics", "burr")):
+            p.error(f"{tree}: expected a jassy checkout (a directory holding physics/burr)")
     trees = [os.path.abspath(t) for t in args.trees]
     runs: dict[tuple[str, int], list[dict]] = {}
     for r in range(args.rounds):

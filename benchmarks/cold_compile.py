@@ -11,6 +11,7 @@ qualified name), the most expensive first."""
 
 from __future__ import annotations
 
+import argparse
 import resource
 import sys
 import time
@@ -63,7 +64,14 @@ class LockTime(event.Listener):
 
 
 def main(argv: list[str]) -> int:
-    out, jassy_args = argv[0], argv[1:]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", metavar="OUT.txt", help="where the summary and per-function table go")
+    parser.add_argument("jassy_args", nargs=argparse.REMAINDER, metavar="JASSY ARGS",
+                        help="the jassy command to run, e.g. render wok -o /tmp/wok.wav -q")  # fmt: skip
+    args = parser.parse_args(argv)
+    if not args.jassy_args:
+        parser.error("expected a jassy command after OUT.txt, e.g. render bell -o /tmp/bell.wav")
+    out, jassy_args = args.out, args.jassy_args
     compiles, llvm = CompileTimes(), LockTime()
     event.register("numba:compile", compiles)
     event.register("numba:llvm_lock", llvm)
