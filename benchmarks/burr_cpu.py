@@ -89,7 +89,11 @@ def main() -> None:
         for tree in trees:
             env = dict(os.environ, PYTHONPATH=tree)
             out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child"], cwd=tree, env=env,
-                                 capture_output=True, text=True, check=True)  # fmt: skip
+                                 capture_output=True, text=True)  # fmt: skip
+            if out.returncode:
+                sys.exit(
+                    f"burr_cpu.py: {tree}: the timing run exited {out.returncode}:\n{out.stderr[-2000:]}"
+                )
             for row in json.loads(out.stdout.strip().splitlines()[-1]):
                 runs.setdefault((tree, row["leaf"]), []).append(row)
             print(f"round {r + 1} {tree} done (load {os.getloadavg()[0]:.1f})", file=sys.stderr)

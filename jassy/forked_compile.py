@@ -123,3 +123,12 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
 def running_units() -> bool:
     """Whether compile units run now, in this process (a unit must not fork or list units)."""
     return _running_units
+
+
+def cache_holds(kernel) -> bool:
+    """Whether numba's cache holds any compiled version of ``kernel`` (its index file exists;
+    True for a numba without this cache layout, so that nothing is compiled ahead for it)."""
+    try:
+        return os.path.exists(kernel._cache._cache_file._index_path)
+    except AttributeError:
+        return True

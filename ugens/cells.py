@@ -83,7 +83,7 @@ class Pulse(NamedTuple):
 
 
 #: Columns of a pulse table (rows, PULSE_COLUMNS), one Pulse per row.
-PULSE_T0, PULSE_LENGTH, PULSE_AMPLITUDE = (Pulse._fields.index(key) for key in Pulse._fields)
+PULSE_T0, PULSE_LENGTH, PULSE_AMPLITUDE = range(len(Pulse._fields))
 PULSE_COLUMNS = len(Pulse._fields)
 
 
@@ -130,7 +130,7 @@ class Onset(NamedTuple):
 
 
 #: Columns of an onset queue (rows, ONSET_COLUMNS), one Onset per row.
-ONSET_AT, ONSET_AMPLITUDE = (Onset._fields.index(key) for key in Onset._fields)
+ONSET_AT, ONSET_AMPLITUDE = range(len(Onset._fields))
 ONSET_COLUMNS = len(Onset._fields)
 
 

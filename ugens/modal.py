@@ -711,22 +711,25 @@ class ModalBank(ModelParams, UGen):
         """Move the state of a budget's compact bank or of a precision split back into
         ``self.bank`` (float64), before anything reads or changes the bank's coefficients
         or state (which ends process's fast path until the next plain span)."""
-        self._steady = None
+        split = self._split
+        self._forget_split()
         if self._compact_meta[GATHERED]:
             self._settle_compact(self._tables_handle, self._slot)
-        split = self._split
         if split is None:
             return
-        self._split = None
-        self._split_handle = None
         self.y[:, split.wide] = split.rows.wide_bank[4:]
         self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 
-    def _reset(self) -> None:
+    def _forget_split(self) -> None:
+        """Drop what is derived from the bank's current layout: the precision split, its
+        record handle and process's fast path (rebuilt on the next plain span)."""
         self._split = None
         self._split_handle = None
         self._steady = None
+
+    def _reset(self) -> None:
+        self._forget_split()
         self._compact_meta[GATHERED] = 0
         if self._tables is not None:
             self._kept_mask[:] = True
@@ -1062,7 +1065,5 @@ class ModalBank(ModelParams, UGen):
         }
 
     def _state_restored(self) -> None:
-        self._split = None
-        self._split_handle = None
-        self._steady = None
+        self._forget_split()
         self._ramping = self.meta[RAMP_LEFT] > 0

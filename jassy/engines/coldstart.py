@@ -11,13 +11,12 @@ nor the stages compiled).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from functools import partial
 
 import numpy as np
 
-from jassy.forked_compile import running_units
+from jassy.forked_compile import cache_holds, running_units
 
 #: Set once numba's cache was found filled (:func:`kernels_cached`).
 _cache_found = False
@@ -84,8 +83,5 @@ def kernels_cached() -> bool:
         return True
     from jassy.safety import limit
 
-    try:
-        _cache_found = os.path.exists(limit._cache._cache_file._index_path)
-    except AttributeError:  # a numba without this cache layout: say nothing
-        _cache_found = True
+    _cache_found = cache_holds(limit)  # a numba without this cache layout: say nothing
     return _cache_found

@@ -23,7 +23,6 @@ kernels. A unit compiled for other types than run_steps asks for would only cost
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
@@ -31,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 from numba.core import config
 
-from jassy.forked_compile import compile_on_two_cores
+from jassy.forked_compile import cache_holds, compile_on_two_cores
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
@@ -83,7 +82,7 @@ def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:
     are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
-    if st.run_steps.signatures or _cached(st.run_steps):
+    if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
     return compile_on_two_cores([partial(_compile, unit) for unit in step_units(m, opt, d)])
 
@@ -94,11 +93,3 @@ def _compile(unit: list[KernelCall]) -> None:
     for call in unit:
         with contextlib.suppress(Exception):
             specialise(call.kernel, *call.args)
-
-
-def _cached(kernel) -> bool:
-    """Whether numba's cache holds any compiled version of ``kernel`` (its index file)."""
-    try:
-        return os.path.exists(kernel._cache._cache_file._index_path)
-    except AttributeError:  # a numba without this cache layout: assume it is filled
-        return True
