@@ -51,6 +51,7 @@ frame, and the normal.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numba as nb
@@ -58,6 +59,7 @@ import numpy as np
 from numba.extending import overload
 
 from jassy.jit import drop_stale_cache
+from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import (
     broad,
     codes,
@@ -244,14 +246,21 @@ def _grown(d: Data, opt: Options, steps: int, nrec: int) -> Data:
             f"run: a step needs scratch for {pairs} pairs, {contacts} contacts; it cannot grow"
         )
     d.progress.most[0] = max(d.progress.most[0], contacts)
-    room = record_room(opt, d.progress.most[0])
-    if rec.shape[0] - nrec < room:
-        rec = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
-        rec[:nrec] = d.rec[:nrec]
+    rec = with_record_room(rec, nrec, record_room(opt, d.progress.most[0]))
     d.progress.need[:] = 0
     return d._replace(
         kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], rec=rec, sweep=sweep, near=near, solver=solver
     )
+
+
+def with_record_room(rec: np.ndarray, nrec: int, room: int) -> np.ndarray:
+    """``rec`` if it has ``room`` rows free after its first nrec, else a copy of those rows in
+    a buffer twice as long (or as long as needed)."""
+    if rec.shape[0] - nrec >= room:
+        return rec
+    grown = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
+    grown[:nrec] = rec[:nrec]
+    return grown
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -274,10 +283,11 @@ def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) ->
     resuming it: (d with the grown scratch and records, steps done, record count); fewer steps
     than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
     again). The kinematic samples of the returned d start at the step it stopped in."""
-    contact, motion = step_models(opt)
+    motion = step_models(opt)[1]
+    entries = step_entries(m, opt, d)
     done = 0
     while True:
-        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact, motion)
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, entries, motion)
         done += steps
         if not d.progress.need.any():
             return d, done, nrec
@@ -471,10 +481,10 @@ def _turn(i, tau, quat, kin_w, out_q):
 
 
 @nb.njit(cache=True, inline="always")
-def _pair_gap(geo, a, b, pos, rot, margin, probe):
+def _pair_gap(geo, a, b, pos, rot, margin, probe, contacts):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
-    buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
-    count = pair_contacts(a, b, pos, rot, geo, margin, probe, np.int64(0))  # not a literal 0: one compile
+    buffers ``probe``, by pair_contacts through its entry point ``contacts``)."""
+    count = call_apart(contacts, (a, b, pos, rot, geo, margin, probe, np.int64(0)), nb.int64)
     best = margin
     for c in range(count):
         best = min(best, probe.gaps[c])
@@ -482,7 +492,7 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
 
 
 @nb.njit(cache=True, inline="always")
-def _gap_at(m, opt, d, a, b, tau, margin, motion):
+def _gap_at(m, opt, d, a, b, tau, margin, motion, contacts):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
@@ -499,7 +509,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
         for x in range(3):
             pos[i, x] = mp[i, x]
         _rotation(mq, i, rot)
-    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe)
+    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe, contacts)
     for side in range(2):
         i = a if side == 0 else b
         for x in range(3):
@@ -510,9 +520,10 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion, contacts):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``motion``'s integrator, step_models)."""
+    moved by ``motion``'s integrator, step_models; contacts by pair_contacts through its entry
+    point ``contacts``)."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -520,7 +531,7 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin, motion)
+        f = _gap_at(m, opt, d, a, b, t, margin, motion, contacts)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -659,9 +670,10 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _detect(geo, slop, pos, rot, buf, pairs, near):
-    """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
-    near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
+def _detect(geo, slop, pos, rot, buf, pairs, near, contacts):
+    """Contacts (into ``buf``, narrow.Contacts, by pair_contacts through its entry point
+    ``contacts``; returns their count) of all pairs within margin = slop + near.reach[p] (m,
+    how far the pair can close in the step). near.gap[p]: a lower bound of
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop."""
@@ -675,7 +687,7 @@ def _detect(geo, slop, pos, rot, buf, pairs, near):
         if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
-        count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
+        count = call_apart(contacts, (a, b, pos, rot, geo, margin, buf, count), nb.int64)
         for c in range(before, count):
             gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
@@ -743,36 +755,24 @@ def broad_stage(m, opt, d, dt):
 
 
 @nb.njit(cache=True, inline="always")
-def narrow_stage(m, opt, d, pairs, near, dt):
+def narrow_stage(m, opt, d, pairs, near, dt, contacts):
     """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
-    come within slop (_detect); returns their count."""
+    come within slop (_detect, through ``contacts``: pair_contacts' entry point); returns
+    their count."""
     reach = near.reach
     for p in range(pairs.shape[0]):
         reach[p] = 0.0
     _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
-    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
+    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near, contacts)
 
 
 @nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, count, dt, time, step, nrec, contact):
+def contact_stage(m, opt, d, count, dt, time, step, nrec, response):
     """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
-    scratch d.solver (rows >= count), the model picked by the type of ``contact``
-    (step_models). Returns the record count, -1 when d.rec is full."""
+    scratch d.solver (rows >= count), through ``response``, the model's entry point
+    (step_models, StepEntries). Returns the record count, -1 when d.rec is full."""
     d.stats.solves[0] += 1
-    return contact_response(contact, m, opt, d, count, dt, time, step, nrec)
-
-
-class ImpulseContacts(NamedTuple):
-    """run_steps' ``contact`` for the impulse model (impulses.resolve); its type picks it."""
-
-    code: int
-
-
-class PenaltyContacts(NamedTuple):
-    """run_steps' ``contact`` for a penalty model (physics.rigid.penalty: linear or
-    Hunt-Crossley by Options.contact); its type picks it."""
-
-    code: int
+    return call_apart(response, (m, opt, d, count, dt, time, step, nrec), nb.int64)
 
 
 class SemiImplicitMotion(NamedTuple):
@@ -787,16 +787,16 @@ class AnyMotion(NamedTuple):
     code: int
 
 
-def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiImplicitMotion | AnyMotion]:
-    """run_steps' ``contact`` and ``motion`` arguments for ``opt``: numba compiles run_steps
-    once per pair of their types, with only that contact model and integrator in it (the other
-    overloads are never typed, so never compiled; named tuples of a module-level class keep
-    numba's cache valid across processes, where a kernel passed as an argument would not). An
-    unknown contact model or integrator code is an error."""
+def step_models(opt: Options) -> tuple[Callable, SemiImplicitMotion | AnyMotion]:
+    """The contact model kernel (impulse_response or penalty_response, called apart through
+    StepEntries.response) and run_steps' ``motion`` argument for ``opt``: numba compiles
+    run_steps once per type of ``motion``, with only that integrator in it (named tuples of a
+    module-level class keep numba's cache valid across processes, where a kernel passed as
+    an argument would not). An unknown contact model or integrator code is an error."""
     if opt.contact == IMPULSE:
-        contact = ImpulseContacts(opt.contact)
+        response = impulse_response
     elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
-        contact = PenaltyContacts(opt.contact)
+        response = penalty_response
     else:
         raise ValueError(f"stepper.step_models: unknown contact model code {opt.contact!r}")
     if opt.integrator == SEMI_IMPLICIT:
@@ -808,39 +808,65 @@ def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiIm
             f"stepper.step_models: unknown integrator code {opt.integrator!r}, "
             f"expected one of {sorted(integrate.METHODS.values())} (integrate.METHODS)"
         )
-    return contact, motion
+    return response, motion
 
 
-def _impulse_response(contact, m, opt, d, count, dt, time, step, nrec):
-    """contact_response of the impulse model (impulses.resolve)."""
+@nb.njit(cache=True, _nrt=False)
+def impulse_response(m, opt, d, count, dt, time, step, nrec):
+    """The impulse model's response (impulses.resolve) to d.contacts[:count] over dt (s) at
+    ``time`` (s) of step ``step``; returns the record count (-1: d.rec is full)."""
     bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
     state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
     return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
 
 
-def _penalty_response(contact, m, opt, d, count, dt, time, step, nrec):
-    """contact_response of a penalty model (physics.rigid.penalty)."""
+@nb.njit(cache=True, _nrt=False)
+def penalty_response(m, opt, d, count, dt, time, step, nrec):
+    """A penalty model's response (physics.rigid.penalty), as impulse_response."""
     d.stats.contacts[0] += count
     return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
 
 
-def contact_response(contact, m, opt, d, count, dt, time, step, nrec):
-    """The response of the model ``contact`` (step_models) to d.contacts[:count]. Compiled,
-    the overload below picks the model by the argument's type when run_steps is typed; this
-    body runs only with numba's JIT off (NUMBA_DISABLE_JIT=1)."""
-    if isinstance(contact, ImpulseContacts):
-        return _impulse_response(contact, m, opt, d, count, dt, time, step, nrec)
-    return _penalty_response(contact, m, opt, d, count, dt, time, step, nrec)
+class KernelCall(NamedTuple):
+    """A kernel and example arguments of the types run_steps calls it with."""
+
+    kernel: Callable
+    args: tuple
 
 
-@overload(contact_response, inline="always")
-def _contact_response(contact, m, opt, d, count, dt, time, step, nrec):
-    model = getattr(contact, "instance_class", None)
-    if model is ImpulseContacts:
-        return _impulse_response
-    if model is PenaltyContacts:
-        return _penalty_response
-    return None
+class StepCalls(NamedTuple):
+    """The kernels run_steps calls apart (jassy.unlinked: each compiled alone, not linked into
+    run_steps), with arguments of the types it passes."""
+
+    pair_contacts: KernelCall  # narrow.pair_contacts (also called by _time_of_impact)
+    response: KernelCall  # the contact model (step_models)
+    impact_time: KernelCall  # _time_of_impact
+
+
+class StepEntries(NamedTuple):
+    """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of StepCalls."""
+
+    pair_contacts: Entry
+    response: Entry
+    impact_time: Entry
+
+
+def step_calls(m: Model, opt: Options, d: Data) -> StepCalls:
+    """The calls run_steps makes apart for a run of ``m``, ``opt``, ``d`` (their types)."""
+    whole, count, dt = np.int64(0), np.int64(0), 0.0
+    response, motion = step_models(opt)
+    no_entry = Entry(0, 0)
+    return StepCalls(
+        KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
+        KernelCall(response, (m, opt, d, count, dt, dt, whole, whole)),
+        KernelCall(_time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, motion, no_entry)),
+    )
+
+
+def step_entries(m: Model, opt: Options, d: Data) -> StepEntries:
+    """The entry points run_steps calls for this run, each kernel compiled (or loaded from
+    numba's cache) here for its call's types."""
+    return StepEntries(*(entry(call.kernel, *call.args) for call in step_calls(m, opt, d)))
 
 
 def _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi):
@@ -882,10 +908,10 @@ def advance_stage(m, opt, d, tau, motion):
 
 
 @nb.njit(cache=True, inline="always")
-def impact_stage(m, opt, d, pairs, near, dt, motion):
+def impact_stage(m, opt, d, pairs, near, dt, motion, entries):
     """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
     the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
-    threshold (module doc, step 6); dt when none."""
+    threshold (module doc, step 6); dt when none. ``entries``: StepEntries."""
     slop, bounce = opt.slop, opt.bounce_threshold
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
     # count per array it holds)
@@ -913,14 +939,15 @@ def impact_stage(m, opt, d, pairs, near, dt, motion):
         if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
             continue
         checks[0] += 1
-        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe)
+        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe, entries.pair_contacts)
         if g1 >= -slop:
             continue
         within = reach[p] + 4.0 * slop
-        g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
+        g0 = _pair_gap(geo, a, b, pos, rot, within, probe, entries.pair_contacts)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
+        call = (m, opt, d, a, b, dt, g0, g1, within, motion, entries.pair_contacts)
+        first_hit = min(first_hit, call_apart(entries.impact_time, call, nb.float64))
     return first_hit
 
 
@@ -954,7 +981,7 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, nrec, contact, motion):
+def outer_step(m, opt, d, step, nrec, entries, motion):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
     it stopped for more scratch: d.progress.need says how much)."""
@@ -972,18 +999,18 @@ def outer_step(m, opt, d, step, nrec, contact, motion):
             progress.need[0] = count
             return _stop(progress, t_local, subs, nrec)
         pairs, near = d.sweep.pairs[:count], d.near
-        count = narrow_stage(m, opt, d, pairs, near, dt)
+        count = narrow_stage(m, opt, d, pairs, near, dt, entries.pair_contacts)
         if count > d.solver.idx.shape[0]:
             progress.need[1] = count
             return _stop(progress, t_local, subs, nrec)
         progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, contact)
+        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, entries.response)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
         advance_stage(m, opt, d, dt, motion)
-        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion) if subs < max_events else dt
+        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion, entries) if subs < max_events else dt
         if first_hit < dt:
             advance_stage(m, opt, d, first_hit, motion)
             _commit(d)
@@ -1009,19 +1036,20 @@ def _stop(progress, t_local, subs, nrec):
 
 
 @nb.njit(cache=True, _nrt=False)
-def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
+def run_steps(m, opt, d, first, n_steps, nrec, entries, motion):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
     and inside a step that needs more scratch (module doc; :func:`run` resumes it). The
-    types of ``contact`` and ``motion`` pick the contact model and integrator (step_models)."""
+    contact model is the one of ``entries`` (StepEntries), the integrator the one of
+    ``motion``'s type (step_models)."""
     for s in range(n_steps):
         resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
         if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
             return s, nrec
         if not resuming:
             kinematic_stage(m, opt, d, s)
-        nrec, stopped = outer_step(m, opt, d, first + s, nrec, contact, motion)
+        nrec, stopped = outer_step(m, opt, d, first + s, nrec, entries, motion)
         if stopped:
             return s, nrec
         sample_stage(d, first + s)
