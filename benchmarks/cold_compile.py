@@ -7,11 +7,14 @@ empty folder to see a fresh install's first render:
     NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/cold_compile.py OUT.txt render wok -o /tmp/wok.wav -q
 
 OUT.txt: a summary line, then one line per function (exclusive s, inclusive s, compiles,
-qualified name), the most expensive first."""
+qualified name), the most expensive first; then the same table for each forked helper (its
+compile events, written by the helper as it goes to OUT.txt.helper-PID and gathered here)."""
 
 from __future__ import annotations
 
 import argparse
+import glob
+import os
 import resource
 import sys
 import time
@@ -23,11 +26,29 @@ from numba.core import event
 class CompileTimes(event.Listener):
     """CPU time per compiled function, exclusive of the compiles nested in it."""
 
-    def __init__(self):
+    def __init__(self, out: str):
+        self.out = out
+        self.helper_file = ""  # set in a forked helper: where it writes its table
         self.stack: list[list] = []  # [name, start CPU, CPU of nested compiles]
         self.inclusive: dict[str, float] = defaultdict(float)
         self.exclusive: dict[str, float] = defaultdict(float)
         self.count: dict[str, int] = defaultdict(int)
+        os.register_at_fork(after_in_child=self._forked)
+
+    def _forked(self):
+        """In a forked helper: count its compiles alone, into OUT.txt.helper-PID (a helper
+        leaves with os._exit, so the table is rewritten after each outermost compile)."""
+        self.helper_file = f"{self.out}.helper-{os.getpid()}"
+        self.stack.clear()
+        for table in (self.inclusive, self.exclusive, self.count):
+            table.clear()
+
+    def table(self) -> list[str]:
+        """One line per function: exclusive s, inclusive s, compiles, name; costliest first."""
+        return [
+            f"{self.exclusive[name]:8.2f} {self.inclusive[name]:8.2f} {self.count[name]:3d} {name}\n"
+            for name in sorted(self.exclusive, key=lambda k: -self.exclusive[k])
+        ]
 
     def on_start(self, ev):
         function = ev.data["dispatcher"].py_func
@@ -41,6 +62,9 @@ class CompileTimes(event.Listener):
         self.count[name] += 1
         if self.stack:
             self.stack[-1][2] += spent
+        elif self.helper_file:
+            with open(self.helper_file, "w") as f:
+                f.writelines(self.table())
 
 
 class LockTime(event.Listener):
@@ -72,7 +96,9 @@ def main(argv: list[str]) -> int:
     if not args.jassy_args:
         parser.error("expected a jassy command after OUT.txt, e.g. render bell -o /tmp/bell.wav")
     out, jassy_args = args.out, args.jassy_args
-    compiles, llvm = CompileTimes(), LockTime()
+    for stale in glob.glob(f"{out}.helper-*"):
+        os.remove(stale)
+    compiles, llvm = CompileTimes(out), LockTime()
     event.register("numba:compile", compiles)
     event.register("numba:llvm_lock", llvm)
     cpu0, wall0 = time.process_time(), time.perf_counter()
@@ -87,9 +113,11 @@ def main(argv: list[str]) -> int:
             f"wall {wall:.1f} s, LLVM {llvm.total:.2f} s, {len(compiles.count)} functions / "
             f"{sum(compiles.count.values())} specialisations compiled\n"
         )
-        for name in sorted(compiles.exclusive, key=lambda k: -compiles.exclusive[k]):
-            own, whole, count = compiles.exclusive[name], compiles.inclusive[name], compiles.count[name]
-            f.write(f"{own:8.2f} {whole:8.2f} {count:3d} {name}\n")
+        f.writelines(compiles.table())
+        for helper in sorted(glob.glob(f"{out}.helper-*")):
+            with open(helper) as lines:
+                f.write(f"helper {helper.rsplit('-', 1)[1]}:\n" + lines.read())
+            os.remove(helper)
     return status
 
 

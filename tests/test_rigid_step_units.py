@@ -17,7 +17,6 @@ import pytest
 
 from physics.rigid import stepper as st
 from physics.rigid.impulses import new_warm_start
-from physics.rigid.narrow import pair_contacts
 from physics.rigid.shapes import Plane, Sphere
 from physics.rigid.step_units import step_units
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
@@ -76,7 +75,7 @@ def _unit_calls(world: World) -> list:
 def test_units_compile_the_types_the_run_asks_for(integrator, contact, response):
     world = _world(integrator, contact)
     calls = _unit_calls(world)
-    assert {call.kernel for call in calls} == {pair_contacts, st._time_of_impact, response, st.run_steps}
+    assert {call.kernel for call in calls} == {st.narrow_stage, st.impact_stage, response, st.run_steps}
     before = {call.kernel: set(_cached_signatures(call.kernel)) for call in calls}
     simulate(world, 0.01)  # the units compiled (on two cores, on an empty cache) or loaded
     for call in calls:

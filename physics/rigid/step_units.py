@@ -1,21 +1,21 @@
 """The rigid step's first compile shared by two cores.
 
 On an empty numba cache the first :func:`physics.rigid.world.simulate` compiles
-``stepper.run_steps`` and every kernel it calls. Its large callees, the narrow phase
-(``narrow.pair_contacts``), the contact model (``stepper.impulse_response`` or
-``penalty_response``) and the impact-time search (``stepper._time_of_impact``), are called
-apart (jassy.unlinked: through their entry points, not linked into run_steps), so each
-compiles alone and none needs another's code: :func:`step_units` lists them and run_steps
-itself as compile units for the exact argument types of this run (taken from its own Model,
-Options and Data records), and :func:`compile_step_ahead` hands them to
+``stepper.run_steps`` and every kernel it calls. Its large callees, the narrow and impact
+stages (``stepper.narrow_stage`` and ``impact_stage``, each with ``narrow.pair_contacts``
+linked in) and the contact model (``stepper.impulse_response`` or ``penalty_response``), are
+called apart (jassy.unlinked: through their entry points, not linked into run_steps), so
+run_steps compiles without their code and they without its: :func:`step_units` lists them
+and run_steps as compile units for the exact argument types of this run (taken from its own
+Model, Options and Data records), and :func:`compile_step_ahead` hands them to
 :func:`jassy.forked_compile.compile_on_two_cores` (a forked helper takes units from the back
 of the list while this process works from the front). numba's cache carries each from one
 process to the other; the run then loads them.
 
-The split (CPU of each unit's first compile on the wok, one cold run): this process takes
-the narrow phase (the largest unit), the helper the contact model, run_steps and the
-impact-time search. A unit compiled for other types than the run asks for would only cost
-time (the run would compile its own): tests/test_rigid_step_units.py checks that they agree.
+The split: this process takes the narrow and impact stages (one unit: both need the narrow
+phase, compiled once; ~35 s of CPU on the wok), the helper the contact model (~20 s) and
+run_steps. A unit compiled for other types than the run asks for would only cost time (the
+run would compile its own): tests/test_rigid_step_units.py checks that they agree.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[st.KernelCall]]:
     no_entry = st.Entry(0, 0)
     entries = st.StepEntries(no_entry, no_entry, no_entry)
     steps = st.KernelCall(st.run_steps, (m, opt, d, 0, 0, 0, entries, st.step_models(opt)[1]))
-    return [[calls.pair_contacts], [calls.impact_time], [steps], [calls.response]]
+    return [[calls.narrow, calls.impact], [steps], [calls.response]]
 
 
 def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:

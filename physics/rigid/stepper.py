@@ -25,17 +25,20 @@ outer step of h seconds (:func:`outer_step`) is:
    world moves to the earliest such time and goes back to 2. At most ``max_events`` such
    sub-steps per step; later impacts are resolved at the step end.
 
-The contact model and the free motion's integrator are picked by the types of two arguments
-of run_steps (:func:`step_models`, chosen from Options in Python; overloads resolved when
-run_steps is typed), not by branches inside it, so a run compiles only its own model and
-integrator (the wok's first compile no longer builds the penalty models, RK4 and the
-adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
-are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
-linked into its caller's module and optimised again there, so each level of kernel calls
-above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
-compile). The whole step allocates nothing and run_steps is compiled without reference
-counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
-with it, every use of Model or Data counted a reference up and down for each array they
+The large stages are called apart (jassy.unlinked.call_apart, through entry points passed
+in :class:`StepEntries`): the narrow stage and the impact stage (each with
+narrow.pair_contacts linked in) and the contact model's response. A called kernel is
+otherwise linked into its caller's module and optimised again there, at every level above
+it; apart, each compiles once, and run_steps needs none of their code to compile, so a first compile can spread them over two cores (physics.rigid.step_units). The
+contact model is picked in Python (:func:`step_models`: the entry point of
+:func:`impulse_response` or :func:`penalty_response`), the free motion's integrator by the
+type of run_steps' ``motion`` argument (an overload resolved when run_steps is typed), so a
+run compiles only its own model and integrator. The other stages are inlined into
+run_steps (numba inline="always").
+
+The whole step allocates nothing and run_steps is compiled without reference counting
+(``_nrt=False``, passed on to every kernel it calls that sets no flag of its own): with it,
+every use of Model or Data counted a reference up and down for each array they
 hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
 Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
 stops the run inside its step (Data.progress says where and how much is needed), and
@@ -481,10 +484,10 @@ def _turn(i, tau, quat, kin_w, out_q):
 
 
 @nb.njit(cache=True, inline="always")
-def _pair_gap(geo, a, b, pos, rot, margin, probe, contacts):
+def _pair_gap(geo, a, b, pos, rot, margin, probe):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
-    buffers ``probe``, by pair_contacts through its entry point ``contacts``)."""
-    count = call_apart(contacts, (a, b, pos, rot, geo, margin, probe, np.int64(0)), nb.int64)
+    buffers ``probe``)."""
+    count = pair_contacts(a, b, pos, rot, geo, margin, probe, np.int64(0))  # not a literal 0: one compile
     best = margin
     for c in range(count):
         best = min(best, probe.gaps[c])
@@ -492,7 +495,7 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe, contacts):
 
 
 @nb.njit(cache=True, inline="always")
-def _gap_at(m, opt, d, a, b, tau, margin, motion, contacts):
+def _gap_at(m, opt, d, a, b, tau, margin, motion):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
     moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
@@ -509,7 +512,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion, contacts):
         for x in range(3):
             pos[i, x] = mp[i, x]
         _rotation(mq, i, rot)
-    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe, contacts)
+    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe)
     for side in range(2):
         i = a if side == 0 else b
         for x in range(3):
@@ -519,11 +522,10 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion, contacts):
     return gap
 
 
-@nb.njit(cache=True, _nrt=False)
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion, contacts):
+@nb.njit(cache=True, inline="always")
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``motion``'s integrator, step_models; contacts by pair_contacts through its entry
-    point ``contacts``)."""
+    moved by ``motion``'s integrator, step_models)."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -531,7 +533,7 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion, contacts):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin, motion, contacts)
+        f = _gap_at(m, opt, d, a, b, t, margin, motion)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -670,10 +672,9 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _detect(geo, slop, pos, rot, buf, pairs, near, contacts):
-    """Contacts (into ``buf``, narrow.Contacts, by pair_contacts through its entry point
-    ``contacts``; returns their count) of all pairs within margin = slop + near.reach[p] (m,
-    how far the pair can close in the step). near.gap[p]: a lower bound of
+def _detect(geo, slop, pos, rot, buf, pairs, near):
+    """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin
+    = slop + near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop."""
@@ -687,7 +688,7 @@ def _detect(geo, slop, pos, rot, buf, pairs, near, contacts):
         if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
-        count = call_apart(contacts, (a, b, pos, rot, geo, margin, buf, count), nb.int64)
+        count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
         for c in range(before, count):
             gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
@@ -754,16 +755,18 @@ def broad_stage(m, opt, d, dt):
     return count
 
 
-@nb.njit(cache=True, inline="always")
-def narrow_stage(m, opt, d, pairs, near, dt, contacts):
-    """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
-    come within slop (_detect, through ``contacts``: pair_contacts' entry point); returns
-    their count."""
+@nb.njit(cache=True, _nrt=False)
+def narrow_stage(m, opt, d, count, dt):
+    """How far each of the broad phase's first ``count`` pairs (d.sweep.pairs) can close in dt
+    (d.near.reach), then the contacts of the pairs that can come within slop (_detect);
+    returns their count. Called apart (StepEntries.narrow): once per (sub-)step, with the
+    narrow phase linked in."""
+    pairs, near = d.sweep.pairs[:count], d.near
     reach = near.reach
     for p in range(pairs.shape[0]):
         reach[p] = 0.0
     _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
-    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near, contacts)
+    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
 
 
 @nb.njit(cache=True, inline="always")
@@ -838,28 +841,27 @@ class StepCalls(NamedTuple):
     """The kernels run_steps calls apart (jassy.unlinked: each compiled alone, not linked into
     run_steps), with arguments of the types it passes."""
 
-    pair_contacts: KernelCall  # narrow.pair_contacts (also called by _time_of_impact)
+    narrow: KernelCall  # narrow_stage (with narrow.pair_contacts linked in)
     response: KernelCall  # the contact model (step_models)
-    impact_time: KernelCall  # _time_of_impact
+    impact: KernelCall  # impact_stage (with narrow.pair_contacts linked in)
 
 
 class StepEntries(NamedTuple):
     """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of StepCalls."""
 
-    pair_contacts: Entry
+    narrow: Entry
     response: Entry
-    impact_time: Entry
+    impact: Entry
 
 
 def step_calls(m: Model, opt: Options, d: Data) -> StepCalls:
     """The calls run_steps makes apart for a run of ``m``, ``opt``, ``d`` (their types)."""
     whole, count, dt = np.int64(0), np.int64(0), 0.0
     response, motion = step_models(opt)
-    no_entry = Entry(0, 0)
     return StepCalls(
-        KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
+        KernelCall(narrow_stage, (m, opt, d, count, dt)),
         KernelCall(response, (m, opt, d, count, dt, dt, whole, whole)),
-        KernelCall(_time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, motion, no_entry)),
+        KernelCall(impact_stage, (m, opt, d, count, dt, motion)),
     )
 
 
@@ -907,11 +909,13 @@ def advance_stage(m, opt, d, tau, motion):
         move_body(motion, f, i, tau, new_pos, new_quat, new_phi)
 
 
-@nb.njit(cache=True, inline="always")
-def impact_stage(m, opt, d, pairs, near, dt, motion, entries):
-    """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
-    the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
-    threshold (module doc, step 6); dt when none. ``entries``: StepEntries."""
+@nb.njit(cache=True, _nrt=False)
+def impact_stage(m, opt, d, count, dt, motion):
+    """The earliest time of impact (s, within dt) of the broad phase's first ``count`` pairs
+    (d.sweep.pairs) that were apart at the start of the (sub-)step and penetrate after it
+    (d.new_*) having closed faster than the bounce threshold (module doc, step 6); dt when
+    none. Called apart (StepEntries.impact), with the narrow phase linked in."""
+    pairs, near = d.sweep.pairs[:count], d.near
     slop, bounce = opt.slop, opt.bounce_threshold
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
     # count per array it holds)
@@ -939,15 +943,14 @@ def impact_stage(m, opt, d, pairs, near, dt, motion, entries):
         if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
             continue
         checks[0] += 1
-        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe, entries.pair_contacts)
+        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe)
         if g1 >= -slop:
             continue
         within = reach[p] + 4.0 * slop
-        g0 = _pair_gap(geo, a, b, pos, rot, within, probe, entries.pair_contacts)
+        g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        call = (m, opt, d, a, b, dt, g0, g1, within, motion, entries.pair_contacts)
-        first_hit = min(first_hit, call_apart(entries.impact_time, call, nb.float64))
+        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
     return first_hit
 
 
@@ -998,8 +1001,8 @@ def outer_step(m, opt, d, step, nrec, entries, motion):
         if count > d.sweep.pairs.shape[0] or count > d.near.reach.shape[0]:
             progress.need[0] = count
             return _stop(progress, t_local, subs, nrec)
-        pairs, near = d.sweep.pairs[:count], d.near
-        count = narrow_stage(m, opt, d, pairs, near, dt, entries.pair_contacts)
+        n_pairs = count
+        count = call_apart(entries.narrow, (m, opt, d, n_pairs, dt), nb.int64)
         if count > d.solver.idx.shape[0]:
             progress.need[1] = count
             return _stop(progress, t_local, subs, nrec)
@@ -1010,7 +1013,9 @@ def outer_step(m, opt, d, step, nrec, entries, motion):
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
         advance_stage(m, opt, d, dt, motion)
-        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion, entries) if subs < max_events else dt
+        first_hit = dt
+        if subs < max_events:
+            first_hit = call_apart(entries.impact, (m, opt, d, n_pairs, dt, motion), nb.float64)
         if first_hit < dt:
             advance_stage(m, opt, d, first_hit, motion)
             _commit(d)
