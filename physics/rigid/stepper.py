@@ -29,7 +29,8 @@ The large stages are called apart (jassy.unlinked.call_apart, through entry poin
 in :class:`StepEntries`): the narrow stage and the impact stage (each with
 narrow.pair_contacts linked in) and the contact model's response. A called kernel is
 otherwise linked into its caller's module and optimised again there, at every level above
-it; apart, each compiles once, and run_steps needs none of their code to compile, so a first compile can spread them over two cores (physics.rigid.step_units). The
+it; apart, each compiles once, and run_steps needs none of their code to compile, so a
+first compile can spread them over two cores (physics.rigid.step_units). The
 contact model is picked in Python (:func:`step_models`: the entry point of
 :func:`impulse_response` or :func:`penalty_response`), the free motion's integrator by the
 type of run_steps' ``motion`` argument (an overload resolved when run_steps is typed), so a
