@@ -785,6 +785,12 @@ class ModalBank(ModelParams, UGen):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if self._held:  # more keys of the same change follow (:meth:`_set_together`)
             return
+        if self._tables is not None and self._jumps_gains_only(jump):
+            self._refresh_design_cache()
+            self._jump_kept(self._tables_handle, self._slot)
+            self.meta[RAMP_LEFT] = 0
+            self._ramping = False
+            return
         self._settle()
         before = self._poles
         self._refresh_design_cache()
@@ -803,6 +809,16 @@ class ModalBank(ModelParams, UGen):
             self.delta[:] = (self.target - self.coef) / ramp
             self.meta[RAMP_LEFT] = ramp
         self._ramping = self.meta[RAMP_LEFT] > 0
+
+    def _jumps_gains_only(self, jump: bool) -> bool:
+        """Whether a change jumps to a design with the current poles (a new location or
+        gain at each impact of a rigid scene): then a budgeted bank's coefficients jump to
+        the fresh design in its tables and its compact bank's kept columns in place
+        (ugens.modal_budget.jump_to_fresh), which is what writing the compact bank back,
+        jumping and gathering it again gives."""
+        v = self.values
+        key = (v["freq_scale"], v["decay_scale"], self._size)
+        return self._poles is not None and self._poles[0] == key and (jump or self.ramp_samples() < 1)
 
     def _jump_poles(self, old_poles: np.ndarray) -> None:
         """A jump of freq_scale or decay_scale: each ringing mode keeps its amplitude and
@@ -1045,6 +1061,7 @@ class ModalBank(ModelParams, UGen):
 
         self._tables_handle = handle(tables)
         self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
+        self._jump_kept = specialise(modal_budget.jump_at, self._tables_handle, slot)
         self._kept_span = specialise(
             modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
         )
