@@ -47,10 +47,11 @@ def _float64_reference(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.
 def _kernel_runner(
     force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray, by_factor: bool
 ) -> Callable[[], None]:
-    """ugens.modal_f32.resonate_delta over ``force`` in one call, fresh state, no direct term
-    (the C loop has none), every mode in float32 in the form ModalBank chose, on rows laid
-    out as ModalBank's (:func:`narrow_rows`)."""
-    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta
+    """ugens.modal_f32.resonate_narrow (the kernel ModalBank runs) over ``force`` in one
+    call, fresh state, no direct term (the C loop has none), every mode in float32 in the
+    form ModalBank chose, on rows laid out as ModalBank's (:func:`narrow_rows`); it writes
+    ``out`` as the C loop does."""
+    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_narrow
 
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros_like(g)
@@ -60,9 +61,8 @@ def _kernel_runner(
 
     def run():
         state[:] = 0.0
-        out[:] = 0.0
         last[0] = 0.0
-        resonate_delta(force, out, force.size, rows, g.size, None, 0, last, by_factor)
+        resonate_narrow(force, out, force.size, rows, g.size, None, 0, last, by_factor)
 
     run.output = out
     return run

@@ -114,9 +114,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
         patch.graph.budget = ModeBudget(max_modes=args.mode_budget)
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
+    from jassy.engines.coldstart import program_cached
+
     engine = OfflineEngine(
         patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
-        offsets_ms=offsets,
+        offsets_ms=offsets, program=program_cached(),  # node by node until compiled: the same bits
     )  # fmt: skip
     if args.normalise:
         from jassy.apps.loudness import TARGETS, render_normalised
