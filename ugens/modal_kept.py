@@ -38,8 +38,12 @@ from ugens.cells import ModeRows, mode_rows, two_pole
 from ugens.kernels import FASTMATH
 from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, resonate, resonate_ramp
 from ugens.modal_budget import (
+    BANK_ROWS,
+    COEF_ROWS,
     FLOOR,
     KEPT_LANES,
+    RAMP_DELTA,
+    RAMP_TARGET,
     TABLE_FIELDS,
     Rates,
     compact_bank,
@@ -132,7 +136,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
     FLUSH_PERIOD on the clock, so the output does not depend on the block size), with
     force-free stretches by :func:`ring`. The force also goes to the budget period's ring
     ``heard`` (empty: the force is zero and the ring holds zeros)."""
-    width = meta[WIDTH]
+    width, rows = meta[WIDTH], mode_rows(compact)
     meta[ACTIVE] = min((meta[ACTIVE] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES, width)
     i = 0
     while i < n:
@@ -149,12 +153,12 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
                 o[j] = 0.0
             last[0] = 0.0
         elif forced:
-            resonate(f, o, m, mode_rows(compact), active, last)
+            resonate(f, o, m, rows, active, last)
         else:
-            ring(o, m, compact[0], compact[1], compact[4], compact[5], active)
+            ring(o, m, rows.c1, rows.c2, rows.y1, rows.y2, active)
         i += m
         if active > 0 and (start + i) % FLUSH_PERIOD == 0:
-            meta[ACTIVE] = flush_silent(compact[4], compact[5], active, floor)
+            meta[ACTIVE] = flush_silent(rows.y1, rows.y2, active, floor)
     if heard.size:
         hear(force, n, heard, start)
 
@@ -237,22 +241,39 @@ def ramp_kept(t, b, force, out, start, n, ring_of_force):
     then the force into the ring of the period's force (empty: it is zero)."""
     compact, meta = compact_bank(t, b), t.compact_meta[b]
     meta[ACTIVE] = meta[WIDTH]
-    ramp = Ramp(compact[:4], compact[6:10], compact[10:])
-    last = t.last[b : b + 1]
+    ramp = Ramp(compact[:COEF_ROWS], compact[RAMP_DELTA:RAMP_TARGET], compact[RAMP_TARGET:])
+    rows, last = mode_rows(compact), t.last[b : b + 1]
     t.meta[b, RAMP_LEFT] = ramp_passes(
-        force, out, n, ramp, compact[4], compact[5], t.meta[b, RAMP_LEFT], meta[WIDTH], last
+        force, out, n, ramp, rows.y1, rows.y2, t.meta[b, RAMP_LEFT], meta[WIDTH], last
     )
     if ring_of_force.size:
         hear(force, n, ring_of_force, start)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def render_bank(t, b, force, out, start, n, ring_of_force):
+    """Budgeted bank b (its rows in the tables ``t``) over force[:n] into out[:n], frames
+    [start, start + n): :func:`kept_step` on its compact bank (gathered if stale), or
+    :func:`ramp_kept` while its coefficients ramp; the force into ``ring_of_force`` (empty:
+    it is zero). Returns its active modes after the span (also its meta's)."""
+    meta = t.compact_meta[b]
+    if t.meta[b, RAMP_LEFT] > 0:
+        ramp_kept(t, b, force, out, start, n, ring_of_force)
+    else:
+        compact = compact_bank(t, b)
+        floor, last = t.values[FLOOR, b], t.last[b : b + 1]
+        kept_step(force, out, start, n, compact[:BANK_ROWS], meta, floor, last, ring_of_force)
+    active = min(meta[ACTIVE], t.meta[b, ALLOWED])
+    t.meta[b, ACTIVE] = active
+    return active
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def render_kept(t, h, outputs, by_python, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
-    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
-    (gathered if stale) from the tables ``t`` (ugens.modal_budget), or :func:`ramp_kept`
-    while its coefficients ramp. A bank with nothing to compute (not
+    its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
+    (ugens.modal_budget). A bank with nothing to compute (not
     :func:`heard_lately`, no mode sounding, no force sample before, no ramp) writes
     zeros. Returns the modes computed times frames (each bank's active count after its
     span)."""
@@ -269,17 +290,7 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
             continue
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         ring_of_force = t.rings[b] if busy else t.rings[b, :0]
-        meta = t.compact_meta[b]
-        if ramping:
-            ramp_kept(t, b, force, out, start, n, ring_of_force)
-        else:
-            compact = compact_bank(t, b)
-            kept_step(
-                force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
-            )
-        active = min(meta[ACTIVE], t.meta[b, ALLOWED])
-        t.meta[b, ACTIVE] = active
-        work += active * n
+        work += render_bank(t, b, force, out, start, n, ring_of_force) * n
     return work
 
 
@@ -390,17 +401,10 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
 def kept_span(a, b, force, out, start, n):
     """Budgeted bank b (its rows in the tables of handle ``a``, jassy.record_views) over
     force[:n] into out[:n], frames [start, start + n), as :func:`render_kept` renders it
-    (for a bank that renders through its own ``process``): :func:`kept_step` on its
-    compact bank, gathered if stale, or :func:`ramp_kept` while its coefficients ramp;
-    the force goes to its ring."""
+    (for a bank that renders through its own ``process``): :func:`render_bank`, the force
+    into its ring."""
     t = tables_at(a, 0)
-    meta = t.compact_meta[b]
-    if t.meta[b, RAMP_LEFT] > 0:
-        ramp_kept(t, b, force, out, start, n, t.rings[b])
-    else:
-        compact = compact_bank(t, b)
-        kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
-    t.meta[b, ACTIVE] = min(meta[ACTIVE], t.meta[b, ALLOWED])
+    render_bank(t, b, force, out, start, n, t.rings[b])
 
 
 @nb.njit(cache=True)
