@@ -272,6 +272,40 @@ def settle_compact(t, b):
         meta[GATHERED] = 0
 
 
+@nb.njit(cache=True)
+def jump_to_fresh(t, b):
+    """Bank b's coefficients jump to its fresh design (a new location or gain: the poles
+    and every mode's state stay): its rows' current coefficients and ramp targets become
+    the fresh ones, and so do the kept modes' columns of its compact bank if gathered, so
+    the compact bank keeps its state in place (no write-back, no gather again)."""
+    k, o = t.layout[MODES, b], t.layout[FIRST, b]
+    bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
+    bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
+    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
+    fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
+    for r in range(4):
+        for i in range(k):
+            bank[r, i] = fresh[r, i]
+            target[r, i] = fresh[r, i]
+    meta = t.compact_meta[b]
+    if meta[GATHERED]:
+        width, at = meta[WIDTH], t.layout[COMPACT_AT, b]
+        compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
+        kept, j = t.kept[o : o + k], 0
+        for i in range(k):
+            if kept[i]:
+                for r in range(4):
+                    compact[r, j] = fresh[r, i]
+                    compact[10 + r, j] = fresh[r, i]
+                j += 1
+
+
+@nb.njit(cache=True)
+def jump_at(a, b):
+    """:func:`jump_to_fresh` of bank b on the tables of handle ``a`` (jassy.record_views)."""
+    jump_to_fresh(tables_at(a, 0), b)
+
+
 @nb.njit(fastmath=True, cache=True)
 def centred_windowed(force, window, out, oldest):
     """out = (force - its mean) * window, the window starting at sample ``oldest`` of the
