@@ -483,8 +483,9 @@ def resonate_held(force, out, n, rows, active, last):
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
     """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
     :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
-    HELD_MODES float32 modes), else out cleared and resonate_delta."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES:
+    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
+    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
+    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
         resonate_held(force, out, n, rows, active, last)
         return
     for i in range(n):
