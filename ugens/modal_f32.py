@@ -234,6 +234,39 @@ def _four_samples(c0, b, p, v, fp, f0, f1, f2, by_factor):
     return u2, v, u0, u1, u2, u3
 
 
+@nb.njit(inline="always", cache=True)
+def _wide_one(wide, count, fw):
+    """One sample of the float64 modes [0, count) of ``wide`` whose preceding force is fw (as
+    :func:`_wide_four`): the output sum."""
+    t = 0.0
+    for k in range(count):
+        v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
+        wide.y2[k] = wide.y1[k]
+        wide.y1[k] = v
+        t += v
+    return t
+
+
+@nb.njit(inline="always", cache=True)
+def _direct_gain(d, count, direct):
+    """``direct`` + d[0] + ... + d[count - 1] in float64, in that order: the direct gain of
+    ``count`` modes added to ``direct``."""
+    for k in range(count):
+        direct += d[k]
+    return direct
+
+
+@nb.njit(inline="always", cache=True)
+def _finish(force, out, n, direct, last):
+    """Add the direct term direct F[i] to out[:n] (after the passes: a scalar held across the
+    mode loops takes a vector register) and leave last[0] at force[n - 1]."""
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor):
     """Add the float32 delta-form modes [0, active) of ``rows`` and the float64 modes [0,
@@ -246,25 +279,18 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
     bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
-    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %. With None,
-    the decay-factor form and at most HELD_MODES modes: :func:`resonate_held`.
+    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
     force and out float64. last[0]: the force sample before force[0], left at
     force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
     passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
     multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
     the flush: exact zeros that stay zero without force, and with force every mode is
     active)."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES:
-        resonate_held(force, out, n, rows, active, last)
-        return
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
-    direct = 0.0
-    for k in range(active):
-        direct += d[k]
+    direct = _direct_gain(d, active, 0.0)
     if wide is not None:
-        for k in range(wide_active):
-            direct += wide.d[k]
+        direct = _direct_gain(wide.d, wide_active, direct)
     i = 0
     while i + 4 <= n:
         # Only the loop's own values stay in registers across the float32 loop (scalars
@@ -328,18 +354,10 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
             s += g[k] * (u + v)
         t = 0.0
         if wide is not None:
-            for k in range(wide_active):
-                v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
-                wide.y2[k] = wide.y1[k]
-                wide.y1[k] = v
-                t += v
+            t = _wide_one(wide, wide_active, fw)
         out[i] += s + t
         i += 1
-    if direct != 0.0:
-        for i in range(n):
-            out[i] += direct * force[i]
-    if n > 0:
-        last[0] = force[n - 1]
+    _finish(force, out, n, direct, last)
 
 
 class HeldRows(NamedTuple):
@@ -355,10 +373,14 @@ class HeldRows(NamedTuple):
 
 @nb.njit(inline="always", cache=True)
 def _held_passes(force, out, n, rows, held, last):
-    """:func:`resonate_delta` in the decay-factor form without float64 modes for the float32
-    modes [0, width) of ``rows``, copied to ``held`` (HeldRows of constant ``width``, on the
-    stack) for the passes, the state copied back after: the mode loops unroll to whole
-    vectors and the rows stay in registers across the passes."""
+    """Write the float32 modes [0, width) of ``rows`` over force[:n] (with their direct term)
+    to out[:n] (as :func:`resonate_delta` adds them), in the decay-factor form: the rows
+    copied to ``held`` (HeldRows of constant ``width``, on the stack) for the passes, the
+    state copied back after, so that the mode loops unroll to whole vectors and the rows
+    stay in registers across the passes. Writing instead of adding saves clearing ``out``
+    and reading it back. The direct term is added after the passes: added as each sample
+    is written (in float64, or in float32 from the force samples of the pass), it made
+    the kernel 4-13 % slower at 16 and 64 modes."""
     c0, b2, g, y, dy = held
     count = c0.size
     direct = 0.0
@@ -386,10 +408,10 @@ def _held_passes(force, out, n, rows, held, last):
             s1 += gk * u1
             s2 += gk * u2
             s3 += gk * u3
-        out[i] += s0
-        out[i + 1] += s1
-        out[i + 2] += s2
-        out[i + 3] += s3
+        out[i] = s0
+        out[i + 1] = s1
+        out[i + 2] = s2
+        out[i + 3] = s3
         i += 4
     while i < n:
         fp = np.float32(force[i - 1] if i > 0 else last[0])
@@ -401,7 +423,7 @@ def _held_passes(force, out, n, rows, held, last):
             y[k] = u
             dy[k] = v
             s += g[k] * (u + v)
-        out[i] += s
+        out[i] = s
         i += 1
     for k in range(count):
         rows.y[k] = y[k]
@@ -443,11 +465,11 @@ def held_width(active):
 
 @nb.njit(cache=True)
 def resonate_held(force, out, n, rows, active, last):
-    """:func:`resonate_delta` for 1 .. HELD_MODES float32 modes in the decay-factor form and
-    no float64 modes: the modes [0, :func:`held_width`) held on the stack
-    (:func:`_held_passes`; the padding and silenced modes beyond ``active`` hold exact
-    zeros, as in the general loop). The general loop, like the C two-pole loop, loads and
-    stores every mode's state on every pass."""
+    """Write (not add) 1 .. HELD_MODES float32 modes in the decay-factor form over force[:n]
+    to out[:n], as :func:`resonate_delta` computes them with no float64 modes: the modes [0,
+    :func:`held_width`) held on the stack (:func:`_held_passes`; the padding and silenced
+    modes beyond ``active`` hold exact zeros, as in the general loop). The general loop,
+    like the C two-pole loop, loads and stores every mode's state on every pass."""
     width = held_width(active)
     if width == 16:
         _held_16(force, out, n, rows, last)
@@ -455,6 +477,20 @@ def resonate_held(force, out, n, rows, active, last):
         _held_32(force, out, n, rows, last)
     else:
         _held_64(force, out, n, rows, last)
+
+
+@nb.njit(cache=True)
+def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
+    :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
+    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
+    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
+    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+        resonate_held(force, out, n, rows, active, last)
+        return
+    for i in range(n):
+        out[i] = 0.0
+    resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)
 
 
 @nb.njit(cache=True)
