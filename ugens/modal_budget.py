@@ -279,11 +279,8 @@ def jump_to_fresh(t, b):
     the fresh ones, and so do the kept modes' columns of its compact bank if gathered, so
     the compact bank keeps its state in place (no write-back, no gather again)."""
     k, o = t.layout[MODES, b], t.layout[FIRST, b]
-    bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
-    bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
-    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
-    fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
-    for r in range(4):
+    bank, target, fresh = bank_rows(t, b), coef_rows(t.target, t, b), coef_rows(t.fresh, t, b)
+    for r in range(COEF_ROWS):
         for i in range(k):
             bank[r, i] = fresh[r, i]
             target[r, i] = fresh[r, i]
@@ -294,9 +291,9 @@ def jump_to_fresh(t, b):
         kept, j = t.kept[o : o + k], 0
         for i in range(k):
             if kept[i]:
-                for r in range(4):
+                for r in range(COEF_ROWS):
                     compact[r, j] = fresh[r, i]
-                    compact[10 + r, j] = fresh[r, i]
+                    compact[RAMP_TARGET + r, j] = fresh[r, i]
                 j += 1
 
 
