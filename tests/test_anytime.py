@@ -478,6 +478,39 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
 
 
+def test_a_bank_that_keeps_hearing_a_force_transforms_it_every_psd_every_th_decision():
+    """ugens.modal_budget.decide on tables whose second bank hears a new force at each of
+    six decisions: its periodogram is taken at the first and then at every PSD_EVERY-th
+    decision (the PSD numpy gives for that ring, blended with the one remembered), and
+    the decisions between rank by the remembered PSD unchanged."""
+    from ugens import modal_budget as mb
+
+    period, counts, window_power = 256, [11, 23], 3.5
+    t = mb.budget_tables(counts, period)
+    t.values[mb.TRANSFORMED, 1] = 1.0
+    t.meta[:, 2] = counts  # every mode allowed
+    t.rows[mb.SIN2] = 0.5
+    rng = np.random.default_rng(5)
+    t.bins[:] = rng.integers(2, period // 2 - 2, sum(counts))
+    masks = (np.zeros(sum(counts), dtype=bool) for _ in range(3))
+    d = mb.Decision(np.zeros(2, dtype=bool), np.array([False, True]), np.zeros(2, dtype=np.intp),
+                    np.zeros((3, sum(counts))), *masks)  # fmt: skip
+    rates = mb.Rates(float(FS), 20, 1.25, 0.99, 0, 0, window_power, 0)
+    remembered = None
+    for k in range(6):
+        t.rings[1] = rng.normal(size=period) * (k + 1)
+        spectrum = np.fft.rfft((t.rings[1] - t.rings[1].mean()) * np.hanning(period))
+        padded = np.pad(np.abs(spectrum) ** 2, 2)
+        fresh = padded[t.bins[11:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / window_power
+        mb.decide(t, d, rates)
+        if k % mb.PSD_EVERY == 0:
+            remembered = (
+                fresh if remembered is None else mb.PSD_MEMORY * remembered + (1 - mb.PSD_MEMORY) * fresh
+            )
+        assert np.allclose(t.rows[mb.SPECTRUM, 11:], remembered, rtol=1e-10), k
+        assert t.values[mb.SPECTRAL, 1] == 1.0
+
+
 def rubbed_bell(budget):
     """A bell of 150 modes rubbed by white noise (a steady contact force)."""
     from ugens.noise import WhiteNoise

@@ -78,12 +78,17 @@ MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
 #: and its fragment size (an impact's amplitude per mode elsewhere is its location's
 #: gain times impulse times the first, over the root of the second); 1.0 once SPECTRUM
 #: holds a smoothed PSD to blend the next with; 1.0 if the bank judges a force by its
-#: periodogram (more modes than FLAT_SPECTRUM_MODES).
+#: periodogram (more modes than FLAT_SPECTRUM_MODES); decisions since its last periodogram.
 (
     KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2, GAIN_LEVEL, SIZE,
-    REMEMBERED, TRANSFORMED,
-) = range(11)  # fmt: skip
-BANK_VALUES = 11
+    REMEMBERED, TRANSFORMED, PSD_AGE,
+) = range(12)  # fmt: skip
+BANK_VALUES = 12
+
+#: A bank that keeps hearing a force takes a periodogram at every this-many-th decision
+#: and ranks by its remembered (smoothed) PSD in between: the transform is most of a
+#: decision's cost (~20 of ~40 us on the wok's 241 modes).
+PSD_EVERY = 2
 
 #: Banks of at most this many modes judge a continuous force by its power alone (spread
 #: flat over frequency), without a transform.
@@ -575,7 +580,8 @@ def decide(t, d, rates):
     """One decision over every bank of the tables ``t``: importance of every mode, the
     ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A bank judging
     its force by a transform (TRANSFORMED) that heard one lately, and was not woken now,
-    takes its :func:`periodogram` first (SPECTRAL). A quiet bank's
+    takes its :func:`periodogram` first (SPECTRAL; at every PSD_EVERY-th such decision,
+    its remembered PSD at the others). A quiet bank's
     scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
     the force in its input samples [begin, end), another bank that heard a force lately
     judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
@@ -586,7 +592,11 @@ def decide(t, d, rates):
         if t.values[TRANSFORMED, b] > 0.0:
             spectral = d.heard[b] and not d.onset[b]
             if spectral:
-                periodogram(t, b, rates.window_power, rates.frame)
+                if t.values[REMEMBERED, b] > 0.0 and t.values[PSD_AGE, b] + 1.0 < PSD_EVERY:
+                    t.values[PSD_AGE, b] += 1.0
+                else:
+                    periodogram(t, b, rates.window_power, rates.frame)
+                    t.values[PSD_AGE, b] = 0.0
             t.values[SPECTRAL, b] = 1.0 if spectral else 0.0
     for b in range(count):
         kicked = False
