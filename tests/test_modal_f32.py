@@ -15,6 +15,7 @@ from ugens.modal_f32 import (
     DeltaRows,
     decay_factor_error,
     delta_coefficients,
+    factor_coefficient,
     float32_error,
     narrow_rows,
     resonate_delta,
@@ -185,6 +186,29 @@ def test_the_held_kernels_compute_what_the_general_kernel_does(count):
     np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
     state, ref_state = state[:, :count], ref_state[:, :count]  # (the padding modes run apart)
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
+
+
+def test_rows_shorter_than_a_held_kernel_take_the_general_loop():
+    """20 modes on rows of exactly 20 (not padded by narrow_rows to 32): the 32-mode held
+    kernel would read past them, so resonate_narrow runs the general loop (resonate_delta,
+    which stops at the rows' end) and writes what it adds."""
+    rng = np.random.default_rng(7)
+    count = 20
+    c1, c2, s = design(np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count), FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    coef = np.stack([c0, b2, s, 0.1 * s]).astype(np.float32)
+    coef[1] = factor_coefficient(c0, b2)
+    force = rng.standard_normal(1001)
+    outs = []
+    for kernel, out in (
+        (resonate_narrow, np.full(force.size, np.nan)),
+        (resonate_delta, np.zeros(force.size)),
+    ):
+        rows = DeltaRows(*coef, *np.zeros((2, count), np.float32))
+        kernel(force, out, force.size, rows, count, None, 0, np.zeros(1), True)
+        outs.append(out)
+    assert np.max(np.abs(outs[1])) > 0
+    np.testing.assert_array_equal(outs[0], outs[1])
 
 
 def test_zero_gain_modes_stay_in_float64_and_keep_ringing_after_their_gain_drops():

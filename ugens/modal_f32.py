@@ -234,6 +234,39 @@ def _four_samples(c0, b, p, v, fp, f0, f1, f2, by_factor):
     return u2, v, u0, u1, u2, u3
 
 
+@nb.njit(inline="always", cache=True)
+def _wide_one(wide, count, fw):
+    """One sample of the float64 modes [0, count) of ``wide`` whose preceding force is fw (as
+    :func:`_wide_four`): the output sum."""
+    t = 0.0
+    for k in range(count):
+        v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
+        wide.y2[k] = wide.y1[k]
+        wide.y1[k] = v
+        t += v
+    return t
+
+
+@nb.njit(inline="always", cache=True)
+def _direct_gain(d, count, direct):
+    """``direct`` + d[0] + ... + d[count - 1] in float64, in that order: the direct gain of
+    ``count`` modes added to ``direct``."""
+    for k in range(count):
+        direct += d[k]
+    return direct
+
+
+@nb.njit(inline="always", cache=True)
+def _finish(force, out, n, direct, last):
+    """Add the direct term direct F[i] to out[:n] (after the passes: a scalar held across the
+    mode loops takes a vector register) and leave last[0] at force[n - 1]."""
+    if direct != 0.0:
+        for i in range(n):
+            out[i] += direct * force[i]
+    if n > 0:
+        last[0] = force[n - 1]
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor):
     """Add the float32 delta-form modes [0, active) of ``rows`` and the float64 modes [0,
@@ -255,12 +288,9 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     active)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
-    direct = 0.0
-    for k in range(active):
-        direct += d[k]
+    direct = _direct_gain(d, active, 0.0)
     if wide is not None:
-        for k in range(wide_active):
-            direct += wide.d[k]
+        direct = _direct_gain(wide.d, wide_active, direct)
     i = 0
     while i + 4 <= n:
         # Only the loop's own values stay in registers across the float32 loop (scalars
@@ -324,18 +354,10 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
             s += g[k] * (u + v)
         t = 0.0
         if wide is not None:
-            for k in range(wide_active):
-                v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
-                wide.y2[k] = wide.y1[k]
-                wide.y1[k] = v
-                t += v
+            t = _wide_one(wide, wide_active, fw)
         out[i] += s + t
         i += 1
-    if direct != 0.0:
-        for i in range(n):
-            out[i] += direct * force[i]
-    if n > 0:
-        last[0] = force[n - 1]
+    _finish(force, out, n, direct, last)
 
 
 class HeldRows(NamedTuple):
@@ -461,8 +483,9 @@ def resonate_held(force, out, n, rows, active, last):
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
     """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
     :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
-    HELD_MODES float32 modes), else out cleared and resonate_delta."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES:
+    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
+    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
+    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
         resonate_held(force, out, n, rows, active, last)
         return
     for i in range(n):
