@@ -145,10 +145,23 @@ def counted(units):
 import jassy.engines.offline
 jassy.engines.offline.compile_on_two_cores = counted
 patch = load_patch("bell")
-audio = OfflineEngine(patch.graph, patch.score, 48000).render(1.0).audio
+audio = OfflineEngine(patch.graph, patch.score, 48000, program=sys.argv[1] == "program").render(1.0).audio
 digest = hashlib.sha256(np.ascontiguousarray(audio).tobytes()).hexdigest()
 print(forked[-1], digest, ",".join(compiled_after) or "-")
 """
+
+
+def _render_bell(cache, path="program", helper=True):
+    """(helper forked, SHA-256 of 1 s of the bell's audio, kernels compiled after the units)
+    of a fresh process rendering on numba's cache ``cache`` as a program or node by node."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
+    code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
+    out = subprocess.run(
+        [sys.executable, "-c", code, path], env=env, capture_output=True, text=True, timeout=550
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout.split()
 
 
 @pytest.mark.timeout(600)
@@ -157,22 +170,27 @@ def test_a_render_with_kernels_from_the_helper_sounds_like_one_compiling_alone(t
     """The bell on an empty cache (units shared with a helper), then on a second empty cache
     compiled here alone (no helper), then loading the first cache: one sound. With the
     helper, the render after the units compiles nothing (the units cover every kernel)."""
-
-    def render(cache, helper=True):
-        env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-        alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
-        code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
-        out = subprocess.run(
-            [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=550
-        )
-        assert out.returncode == 0, out.stderr[-2000:]
-        return out.stdout.split()
-
     shared, alone = tmp_path / "shared", tmp_path / "alone"
     shared.mkdir()
     alone.mkdir()
-    first = render(shared)
+    first = _render_bell(shared)
     assert first[0] == "True"  # a helper was forked
     assert first[2] == "-", f"compiled after the units: {first[2]}"
-    assert render(alone, helper=False) == ["False", first[1], "-"]
-    assert render(shared)[1] == first[1]  # every kernel loaded from the cache
+    assert _render_bell(alone, helper=False) == ["False", first[1], "-"]
+    assert _render_bell(shared)[1] == first[1]  # every kernel loaded from the cache
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.skipif(not TWO_CORES, reason="needs two usable cores")
+def test_a_cold_render_node_by_node_shares_its_kernels_and_sounds_like_the_program(tmp_path):
+    """Node by node on an empty cache (as `jassy render` renders until the program's kernels
+    are compiled): a helper takes its share, every kernel of the graph's nodes, the strikes
+    and the output stage comes from the units, and the sound is the program's, bit for bit."""
+    program, nodes = tmp_path / "program", tmp_path / "nodes"
+    program.mkdir()
+    nodes.mkdir()
+    forked, digest, after = _render_bell(nodes, "nodes")
+    assert forked == "True"
+    # only numba's own helpers (e.g. np.zeros' implementation) may compile after the units
+    assert all(name == "-" or "<locals>" in name for name in after.split(",")), after
+    assert _render_bell(program, helper=False)[1] == digest

@@ -62,3 +62,36 @@ def test_kept_modes_match_the_full_bank_kernel_with_forces_and_silences():
     assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))
     assert kept_meta[0] == full_meta[0] == 0  # every mode fell silent and was flushed
     assert np.array_equal(ring[(np.arange(4096, 6000)) % 2048], force[4096:6000])
+
+
+def test_ramp_passes_match_the_per_sample_ramp():
+    """Coefficients ramping linearly under a force, the ramp ending inside a call and
+    calls of lengths that are not multiples of four: the four-sample passes give
+    ugens.modal.resonate_ramp's output (the same recursion, each sample with the
+    current coefficients) to rounding, end the ramp on the same sample, on the target."""
+    from ugens.modal import Ramp, resonate_ramp
+    from ugens.modal_kept import ramp_passes
+
+    rng = np.random.default_rng(3)
+    width, frames, length = 16, 3000, 1234
+    start, _ = ringing_rows(width, rng)
+    end, _ = ringing_rows(width, rng)
+    coef = np.vstack([start[:2], rng.uniform(0.5, 1.5, (2, width))])
+    target = np.vstack([end[:2], rng.uniform(0.5, 1.5, (2, width))])
+    force = rng.normal(size=frames)
+    outputs, lefts = [], []
+    for kernel in (resonate_ramp, ramp_passes):
+        c = coef.copy()
+        ramp = Ramp(c, (target - coef) / length, target.copy())
+        y1, y2 = start[4].copy(), start[5].copy()
+        out, last, left, at = np.zeros(frames), np.zeros(1), length, 0
+        for size in (7, 1001, 3, 226, 1763):  # the ramp ends inside the fourth call
+            left = kernel(force[at : at + size], out[at : at + size], size, ramp, y1, y2, left, width, last)
+            lefts.append(left)
+            at += size
+        assert np.array_equal(c, target)
+        outputs.append(out)
+    reference, passes = outputs
+    assert np.max(np.abs(reference)) > 1.0
+    assert np.max(np.abs(passes - reference)) < 1e-11 * np.max(np.abs(reference))
+    assert lefts[:5] == lefts[5:] and lefts[4] == 0
