@@ -6,16 +6,17 @@ kind of node the program holds (its node function with every kernel it calls), t
 first, a modal bank's pole design, the render loop's two stages (event application and the
 output stage: C functions the loop calls through their addresses, so each compiles on its
 own) and last the render loop itself, compiled for its argument types without running (it
-needs neither the graph nor the stages compiled). For a graph rendered node by node: the
-modal banks' kernel first, then the pole design, the strike kernels and a stand-in render of
-a silent tap through an engine with the same options (the block loop's and the output
-stage's kernels). :func:`program_cached` says whether the program's kernels are compiled
+needs neither the graph nor the stages compiled). For a graph rendered node by node: a copy
+of one node of each kind, fed by silence, prepared and run for a block (a modal bank first:
+its pole design and span kernel), the strike kernels and a stand-in render of a silent tap
+through an engine with the same options (the block loop's and the output stage's kernels). :func:`program_cached` says whether the program's kernels are compiled
 already (``jassy render`` renders node by node until they are: the same bits, for a
 fraction of the compiling).
 """
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from functools import partial
 
@@ -62,35 +63,42 @@ def _program_units(graph) -> list[Callable[[], object]]:
 
 
 def _node_units(graph, engine_options: dict) -> list[Callable[[], object]]:
-    """Units of a graph rendered node by node: each modal bank kernel the graph's banks call
-    (ugens.modal.bank_span, or mixed_span for mixed precision), the pole design, the strike
-    kernels (with the pulse table's growth) and a stand-in render through an engine with the
-    same options. The graph's other small kernels (gains, filters) compile as the render
-    meets them."""
+    """Units of a graph rendered node by node: one node of each kind processed alone (a
+    modal bank first), the strike kernels (with the pulse table's growth) and a stand-in
+    render through an engine with the same options."""
     from ugens.impact import ImpactForce
-    from ugens.modal import ModalBank, bank_span, mixed_span
+    from ugens.modal import ModalBank
 
-    banks = [node for node in graph.order if isinstance(node, ModalBank)]
-    precisions = {bank.initial["precision"] == "mixed" for bank in banks}
-    units: list[Callable[[], object]] = [
-        partial(_compile_bank_kernel, kernel) for kernel, mixed in ((bank_span, False), (mixed_span, True))
-        if mixed in precisions
-    ]  # fmt: skip
-    if banks:
-        units.append(_compile_pole_design)
-    if any(isinstance(node, ImpactForce) for node in graph.order):
+    kinds = {type(node): node for node in reversed(graph.order)}  # the first node of each kind
+    firsts = sorted(kinds.values(), key=lambda node: not isinstance(node, ModalBank))
+    rate, block = float(engine_options["sample_rate"]), engine_options["block"]
+    units: list[Callable[[], object]] = [partial(_process_alone, node, rate, block) for node in firsts]
+    if ImpactForce in kinds:
         units.append(partial(_compile_strike_records, grow=True))
     return [*units, partial(_render_stand_in, bool(graph.haptic), engine_options)]
 
 
-def _compile_bank_kernel(kernel) -> None:
-    """Compile a modal bank's span kernel (ugens.modal.bank_span or mixed_span) for the
-    types ModalBank passes it: its force and output buffers, frame numbers, its handle
-    (jassy.record_views) and its floor."""
-    from jassy.jit import specialise
+class _Silence:
+    """A silent input for :func:`_process_alone`: an output buffer of zeros."""
 
-    buffer = np.zeros(1)
-    specialise(kernel, buffer, buffer, 0, 0, np.zeros(1, dtype=np.int64), 0.0)
+    def __init__(self, block: int):
+        self.out = np.zeros(block)
+        self.extra: dict[str, np.ndarray] = {}
+
+
+def _process_alone(node, sample_rate: float, block: int) -> None:
+    """Compile the kernels ``node`` calls by preparing a copy of it fed by silence and
+    processing one block: the same kernels, for the same argument types, as the render
+    (a modal bank: its pole design and its span kernel). The node itself is not touched. A
+    node that cannot run alone (an input it reads more of than its output) is left to the
+    render, which compiles its kernels as it meets them."""
+    silence = {id(source): _Silence(block) for source in node.sources.values()}
+    try:
+        alone = copy.deepcopy(node, silence)
+        alone.prepare(sample_rate, block)
+        alone.process(0, block)
+    except Exception:  # noqa: BLE001 - compiling ahead is an optimisation; the render reports errors
+        pass
 
 
 def _compile_pole_design() -> None:
