@@ -143,9 +143,9 @@ class ModeBudget:
         flags = (np.zeros(count, dtype=bool) for _ in range(6))
         self._hearing = Hearing(
             np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
-            np.array([not renders for _ in banks], dtype=bool), *flags,
+            np.array([not renders for _ in banks], dtype=bool), *flags, np.zeros(count),
         )  # fmt: skip
-        self._state = np.zeros(STEP_STATE, dtype=np.int64)  # FADING .. PEAK (jassy.anytime_rank)
+        self._state = np.zeros(STEP_STATE, dtype=np.int64)  # FADING .. UNDECIDED (jassy.anytime_rank)
         self._state[EVERY_PERIOD] = self.cpu_fraction is not None
         self._state[RENDERS] = self.renders
         for bank in banks:

@@ -476,3 +476,78 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
         assert np.allclose(t.rows[mb.SPECTRUM, 11:], psd, rtol=1e-10)
         assert t.values[mb.REMEMBERED, 1] == 1.0
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
+
+
+def rubbed_bell(budget):
+    """A bell of 150 modes rubbed by white noise (a steady contact force)."""
+    from ugens.noise import WhiteNoise
+
+    noise = WhiteNoise(name="rub", amp=1.0, seed=2)
+    return Graph(ModalBank(bell_model(150), name="bell", gain=0.01)(noise), budget=budget)
+
+
+def test_a_steady_force_is_not_decided_every_period():
+    """A bell rubbed by steady noise over 24 budget periods: periods whose only news is the
+    force heard again are left undecided (jassy.anytime_rank.steady_forces), at least
+    every STEADY_PERIODS-th and whenever the force's power rises past STEADY_POWER; the
+    error stays within 0.5 dB of deciding every period (a slow gain ramp keeps the
+    budget deciding: its gains move). A force whose power rises fourfold every period
+    is decided every period."""
+    from jassy.anytime_rank import STEADY_PERIODS, STEADY_POWER
+
+    periods = 24
+    seconds = periods * 2048 / FS
+    creeping = [Event(0.0, "bell", "set", {"gain": 0.0100001}, ramp=seconds)]
+    rising = [Event(k * 2048 / FS, "rub", "set", {"amp": 2.0**k}, jump=True) for k in range(periods)]
+    assert STEADY_POWER < 4.0
+    results = {}
+    for name, score in (("steady", []), ("creeping", creeping), ("rising", rising)):
+        full = render(rubbed_bell(None), score, seconds, FS, 4096, limiter=False).audio[0]
+        budget = ModeBudget(max_modes=40)
+        y = render(rubbed_bell(budget), score, seconds, FS, 4096, limiter=False).audio[0]
+        results[name] = budget.decisions, error_db(y, full)
+    assert results["creeping"][0] == periods and results["rising"][0] == periods
+    assert periods // STEADY_PERIODS <= results["steady"][0] <= periods // 2
+    assert abs(results["steady"][1] - results["creeping"][1]) < 0.5
+
+
+def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
+    """The policy alone on two banks' rings: a period is left undecided while each heard
+    force's power is at most STEADY_POWER times its power at the last decision (a weaker
+    one too), no heard bank ramps, and fewer than STEADY_PERIODS periods in a row."""
+    from jassy.anytime_rank import (
+        STEADY_PERIODS,
+        STEADY_POWER,
+        STEP_STATE,
+        UNDECIDED,
+        Hearing,
+        note_decided,
+        steady_forces,
+    )
+
+    rng = np.random.default_rng(1)
+    rings = rng.normal(size=(2, 2048))
+    flags = [np.zeros(2, dtype=bool) for _ in range(7)]
+    h = Hearing(np.zeros(2, dtype=np.intp), 2048, *flags, np.zeros(2))
+    state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
+    h.heard_before[:] = True
+    note_decided(h, rings, np.array([True, False]), state)
+    power = np.mean((rings[0] - rings[0].mean()) ** 2)
+    assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
+    assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
+    note_decided(h, rings, np.array([True, True]), state)
+    for scale, steady in (
+        (0.1, True),
+        (0.99 * np.sqrt(STEADY_POWER), True),
+        (1.01 * np.sqrt(STEADY_POWER), False),
+    ):
+        state[UNDECIDED] = 0
+        assert steady_forces(h, rings * np.array([[scale], [1.0]]), ramp_left, state) == steady, scale
+    state[UNDECIDED] = 0
+    assert [steady_forces(h, rings, ramp_left, state) for _ in range(STEADY_PERIODS)] == [True] * (
+        STEADY_PERIODS - 1
+    ) + [False]
+    state[UNDECIDED], ramp_left[1] = 0, 5
+    assert not steady_forces(h, rings, ramp_left, state)
+    h.heard_before[1] = False  # a ramping bank that heard nothing does not count
+    assert steady_forces(h, rings, ramp_left, state)

@@ -33,11 +33,11 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import drop_stale_cache
-from ugens import cells, kernels, stack_rows
+from ugens import cells, kernels, stack_rows, vector_pass
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 
-drop_stale_cache(__file__, [cells, kernels, stack_rows])  # its cache holds copies of two_pole, stack_row
+drop_stale_cache(__file__, [cells, kernels, stack_rows, vector_pass])  # its cache holds their code
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.
@@ -372,51 +372,29 @@ class HeldRows(NamedTuple):
 
 
 @nb.njit(inline="always", cache=True)
-def _held_passes(force, out, n, rows, held, last):
-    """Write the float32 modes [0, width) of ``rows`` over force[:n] (with their direct term)
-    to out[:n] (as :func:`resonate_delta` adds them), in the decay-factor form: the rows
-    copied to ``held`` (HeldRows of constant ``width``, on the stack) for the passes, the
-    state copied back after, so that the mode loops unroll to whole vectors and the rows
-    stay in registers across the passes. Writing instead of adding saves clearing ``out``
-    and reading it back. The direct term is added after the passes: added as each sample
-    is written (in float64, or in float32 from the force samples of the pass), it made
-    the kernel 4-13 % slower at 16 and 64 modes."""
+def _hold(rows, held):
+    """Copy the float32 modes [0, width) of ``rows`` (DeltaRows) to ``held`` (HeldRows of
+    constant width, on the stack); return their direct gain sum(d) in float64."""
     c0, b2, g, y, dy = held
-    count = c0.size
     direct = 0.0
-    for k in range(count):
+    for k in range(c0.size):
         c0[k] = rows.c0[k]
         b2[k] = rows.b2[k]
         g[k] = rows.g[k]
         y[k] = rows.y[k]
         dy[k] = rows.dy[k]
         direct += rows.d[k]
-    i = 0
-    while i + 4 <= n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        for k in range(count):
-            gk = g[k]
-            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, True)
-            s0 += gk * u0
-            s1 += gk * u1
-            s2 += gk * u2
-            s3 += gk * u3
-        out[i] = s0
-        out[i + 1] = s1
-        out[i + 2] = s2
-        out[i + 3] = s3
-        i += 4
+    return direct
+
+
+@nb.njit(inline="always", cache=True)
+def _held_tail(force, out, i, n, held, last):
+    """Write samples i .. n - 1 (fewer than four) of the held modes, one at a time."""
+    c0, b2, g, y, dy = held
     while i < n:
         fp = np.float32(force[i - 1] if i > 0 else last[0])
         s = np.float32(0.0)
-        for k in range(count):
+        for k in range(c0.size):
             p = y[k]
             u = p + dy[k]
             v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
@@ -425,35 +403,62 @@ def _held_passes(force, out, n, rows, held, last):
             s += g[k] * (u + v)
         out[i] = s
         i += 1
-    for k in range(count):
-        rows.y[k] = y[k]
-        rows.dy[k] = dy[k]
+
+
+@nb.njit(inline="always", cache=True)
+def _release(force, out, start, n, rows, held, direct, last):
+    """Copy the held state back to ``rows``, add the direct term to out[start:n] and leave
+    last[0] at force[n - 1]. The direct term is added after the passes: added as each
+    sample is written (in float64, or in float32 from the force samples of the pass), it
+    made the kernel 4-13 % slower at 16 and 64 modes."""
+    for k in range(held.y.size):
+        rows.y[k] = held.y[k]
+        rows.dy[k] = held.dy[k]
     if direct != 0.0:
-        for i in range(n):
+        for i in range(start, n):
             out[i] += direct * force[i]
     if n > 0:
         last[0] = force[n - 1]
+
+
+@nb.njit(inline="always", cache=True)
+def _held_passes(force, out, n, rows, held, last, width):
+    """Write the float32 modes [0, width) of ``rows`` over force[:n] (with their direct term)
+    to out[:n] (as :func:`resonate_delta` adds them), in the decay-factor form, on their
+    copies in ``held`` (HeldRows of the literal ``width``, on the stack), where LLVM keeps
+    them in vector registers across the passes. Each pass in explicit vectors
+    (ugens.vector_pass.write_four: the four output sums reduced together, the direct term
+    added and the four samples converted and stored as one vector)."""
+    direct = _hold(rows, held)
+    c0, b2, g, y, dy = held
+    i = 0
+    while i + 4 <= n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        vector_pass.write_four(width, c0, b2, g, y, dy, fp, force, out, i, direct)
+        i += 4
+    _held_tail(force, out, i, n, held, last)
+    _release(force, out, i, n, rows, held, direct, last)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_16(force, out, n, rows, last):
     """:func:`_held_passes` for 16 modes (one AVX-512 vector per row)."""
     row = stack_rows.stack_row
-    _held_passes(force, out, n, rows, HeldRows(row(16), row(16), row(16), row(16), row(16)), last)
+    _held_passes(force, out, n, rows, HeldRows(row(16), row(16), row(16), row(16), row(16)), last, 16)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_32(force, out, n, rows, last):
     """:func:`_held_passes` for 32 modes."""
     row = stack_rows.stack_row
-    _held_passes(force, out, n, rows, HeldRows(row(32), row(32), row(32), row(32), row(32)), last)
+    _held_passes(force, out, n, rows, HeldRows(row(32), row(32), row(32), row(32), row(32)), last, 32)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_64(force, out, n, rows, last):
     """:func:`_held_passes` for 64 modes."""
     row = stack_rows.stack_row
-    _held_passes(force, out, n, rows, HeldRows(row(64), row(64), row(64), row(64), row(64)), last)
+    _held_passes(force, out, n, rows, HeldRows(row(64), row(64), row(64), row(64), row(64)), last, 64)
 
 
 @nb.njit(cache=True)

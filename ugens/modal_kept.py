@@ -29,7 +29,9 @@ from jassy.anytime_rank import (
     has_force,
     hearing_at,
     kicks_at,
+    note_decided,
     scan_forces,
+    steady_forces,
 )
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
@@ -346,6 +348,7 @@ def decide_at(a, rates):
     for b in range(d.heard.size):
         d.heard[b] = h.heard_now[b] or h.heard_before[b]
     fading, total = decide(t, d, rates)
+    note_decided(h, t.rings, d.heard, state)
     state[FADING] = fading
     state[DECISIONS] += 1
     state[PEAK] = max(state[PEAK], total)
@@ -382,6 +385,10 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
                 work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
                 h.unrendered[:] = False
             rendered = max(rendered, at)
+            only_heard = not (woken or coming or state[FADING] > 0 or state[EVERY_PERIOD] > 0)
+            if only_heard and renders and steady_forces(h, t.rings, t.meta[:, RAMP_LEFT], state):
+                at = stop
+                continue
             if state[INLINE] == 0:
                 return at, rendered, work, True
             impacts_at(a, count, at, period)
