@@ -163,3 +163,75 @@ def write_four(typingctx, width, c0, b, g, y, dy, fp, force, out, i, direct):
         return context.get_dummy_value()
 
     return types.none(width, c0, b, g, y, dy, fp, force, out, i, direct), codegen
+
+
+def _row_pointer(context, builder, array_type, value, at, vector):
+    """The address of element ``at`` of a C-contiguous array as a pointer to ``vector``."""
+    data = context.make_array(array_type)(context, builder, value).data
+    return builder.bitcast(builder.gep(data, [at]), vector.as_pointer())
+
+
+def _contiguous(*arrays) -> bool:
+    return all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
+
+
+@intrinsic
+def add_chunk(typingctx, width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3):
+    """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
+    of it) of the float32 rows c0, b (= R^2 - c0), g, y (= y[n-2] / g), dy (= Delta[n-1] /
+    g) by four samples whose preceding forces are fp, f0, f1, f2 (float32), storing y and
+    dy, and add g_k y_k / g_k of sample j to the lanes of the float32 row s_j (of
+    ``width`` lanes: per-lane partial sums over the chunks of a pass, :func:`add_sums`).
+    Rows on 64-byte lines (ugens.modal_f32.narrow_rows, ugens.stack_rows)."""
+    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
+        return None
+    if not _contiguous(c0, b, g, y, dy, s0, s1, s2, s3):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        vector = ir.VectorType(_FLOAT, lanes)
+        at = args[6]
+        rows = [
+            _row_pointer(context, builder, t, value, at, vector)
+            for value, t in zip(args[1:6], signature.args[1:6], strict=True)
+        ]
+        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in rows)
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, args[7:11])
+        builder.store(y_next, rows[3], align=64)
+        builder.store(v, rows[4], align=64)
+        for value, t, uj in zip(args[11:15], signature.args[11:15], outputs, strict=True):
+            sums = _row_pointer(context, builder, t, value, cgutils.intp_t(0), vector)
+            builder.store(_fma(builder, gv, uj, builder.load(sums, align=64)), sums, align=64)
+        return context.get_dummy_value()
+
+    return types.none(width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3), codegen
+
+
+@intrinsic
+def write_sums(typingctx, width, s0, s1, s2, s3, out, i, t0, t1, t2, t3):
+    """out[i + j] = sum(s_j) + t_j for j = 0 .. 3: the four float32 rows of ``width`` lanes
+    (a literal multiple of VECTOR) of :func:`add_chunk` reduced together, converted and
+    stored as one vector, with the float64 t_j (the float64 modes' outputs) added."""
+    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
+        return None
+    if not _contiguous(s0, s1, s2, s3, out):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        vector = ir.VectorType(_FLOAT, lanes)
+        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        sums = [
+            builder.load(_row_pointer(context, builder, t, value, cgutils.intp_t(0), vector), align=64)
+            for value, t in zip(args[1:5], signature.args[1:5], strict=True)
+        ]
+        total = builder.fpext(_sum_four(builder, *(_fold(builder, s, lanes) for s in sums)), four_doubles)
+        wide = ir.Constant(four_doubles, ir.Undefined)
+        for j, tj in enumerate(args[7:11]):
+            wide = builder.insert_element(wide, tj, _INDEX(j))
+        target = _row_pointer(context, builder, signature.args[5], args[5], args[6], four_doubles)
+        builder.store(builder.fadd(total, wide), target, align=8)
+        return context.get_dummy_value()
+
+    return types.none(width, s0, s1, s2, s3, out, i, t0, t1, t2, t3), codegen
