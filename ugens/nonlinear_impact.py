@@ -129,6 +129,10 @@ class ContactData(NamedTuple):
     meta: np.ndarray  #: int64 [modes to compute (0 once all are silent and the hammer retired)]
 
 
+#: The slot of ContactData.meta: the modes to compute.
+COMPUTED_MODES = 0
+
+
 class StepSize(NamedTuple):
     """A step size's coefficients: a (10, K) ModeSteps array and a HammerParams array."""
 
@@ -411,7 +415,7 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
     corrections, touching, measured = st.corrections, st.touching, st.measured
     measuring = False  # whether a stat changed
     for i in range(n):
-        kmodes = meta[0]
+        kmodes = meta[COMPUTED_MODES]
         sq, sp, s0, s1 = modal_pass(qs, ps, steps, kmodes, fp)
         xh_free = xh + tt * vh
         x0 = xn
@@ -458,7 +462,7 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
             if active and vh <= 0.0 and xh + modes_reach(qs, ps, steps, kmodes) < 0.0:
                 active = False  # moving away, and no free, damped mode can reach it again
             if not active:
-                meta[0] = flush_silent_modes(qs, ps, steps.inv_w, kmodes, floor)
+                meta[COMPUTED_MODES] = flush_silent_modes(qs, ps, steps.inv_w, kmodes, floor)
     store(d.hammer, HammerState(xh, vh, xn, fp, en, 1.0 if active else 0.0, vn, fpp, sp))
     if measuring:  # (most calls are one sample between contacts: nothing to write back)
         store(
@@ -688,7 +692,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.state[:] = 0.0
         self.hammer[:] = 0.0
         self.stats[:] = 0.0
-        self.meta[0] = 0
+        self.meta[COMPUTED_MODES] = 0
 
     def _commit_force(self) -> None:
         """Apply the last sample's force to the stored mode states (before coefficients change)."""
@@ -724,7 +728,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
             active=1.0,
         )
         self.stats[:] = StrikeStats(*np.zeros(len(StrikeStats._fields)))._replace(start=sample_time, vin=v0)
-        self.meta[0] = self.model.n_modes
+        self.meta[COMPUTED_MODES] = self.model.n_modes
         self._set_energy()
 
     def _set_energy(self) -> None:
@@ -797,7 +801,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     def _silent(self) -> bool:
         """No mode left to compute and the hammer retired (read once per block: one field)."""
-        return self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0
+        return self.meta[COMPUTED_MODES] == 0 and self.hammer[_ACTIVE] == 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
