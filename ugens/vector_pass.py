@@ -181,8 +181,10 @@ def add_chunk(typingctx, width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, 
     of it) of the float32 rows c0, b (= R^2 - c0), g, y (= y[n-2] / g), dy (= Delta[n-1] /
     g) by four samples whose preceding forces are fp, f0, f1, f2 (float32), storing y and
     dy, and add g_k y_k / g_k of sample j to the lanes of the float32 row s_j (of
-    ``width`` lanes: per-lane partial sums over the chunks of a pass, :func:`add_sums`).
-    Rows on 64-byte lines (ugens.modal_f32.narrow_rows, ugens.stack_rows)."""
+    ``width`` lanes: per-lane partial sums over the chunks of a pass, :func:`write_sums`).
+    The mode rows may lie anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines,
+    a caller's own rows may not be: loads aligned to 64 bytes faulted on them); the sums
+    must be on 64-byte lines (ugens.stack_rows)."""
     if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
         return None
     if not _contiguous(c0, b, g, y, dy, s0, s1, s2, s3):
@@ -196,10 +198,10 @@ def add_chunk(typingctx, width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, 
             _row_pointer(context, builder, t, value, at, vector)
             for value, t in zip(args[1:6], signature.args[1:6], strict=True)
         ]
-        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in rows)
+        c0v, bv, gv, p, v = (builder.load(row, align=4) for row in rows)
         y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, args[7:11])
-        builder.store(y_next, rows[3], align=64)
-        builder.store(v, rows[4], align=64)
+        builder.store(y_next, rows[3], align=4)
+        builder.store(v, rows[4], align=4)
         for value, t, uj in zip(args[11:15], signature.args[11:15], outputs, strict=True):
             sums = _row_pointer(context, builder, t, value, cgutils.intp_t(0), vector)
             builder.store(_fma(builder, gv, uj, builder.load(sums, align=64)), sums, align=64)
