@@ -9,6 +9,9 @@ stored the four sums one by one and added the direct term in a pass of its own.
 the lanes at each step: about half the shuffles and adds), adds the direct term to the
 four at once and converts and stores them as one vector: against the C two-pole loop,
 0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
+Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_factor), run
+:func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
+:func:`write_sums` at the end of each pass.
 
 The arithmetic per mode is ugens.modal_f32's decay-factor update (``_four_samples``):
 with p = y[n-2] / g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2,
