@@ -151,6 +151,11 @@ LANES = 32
 #: AVX-512, five rows and the four output sums fit the 32 vector registers.
 HELD_MODES = 64
 
+#: Whether the kernels written with LLVM intrinsics (ugens.stack_rows, ugens.vector_pass)
+#: run: not with numba's JIT disabled (NUMBA_DISABLE_JIT=1, where kernels run as Python and
+#: intrinsics cannot), which takes the general loop instead.
+EXPLICIT_VECTORS = not nb.config.DISABLE_JIT
+
 #: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
 #: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
 #: the same low 12 address bits (4K aliasing): the kernel ran at half speed or full speed
@@ -561,16 +566,18 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
 
 @nb.njit(cache=True)
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
-    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
-    :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
-    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
-    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
-        resonate_held(force, out, n, rows, active, last)
-        return
-    if by_factor and rows.c0.size % LANES == 0:
-        resonate_factor(force, out, n, rows, active, wide, wide_active, last)
-        return
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n].
+    In the decay-factor form: :func:`resonate_held` for 1 .. HELD_MODES float32 modes and
+    no float64 modes (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them), else :func:`resonate_factor` (on rows of whole LANES); otherwise (or
+    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
+    if EXPLICIT_VECTORS and by_factor:
+        if wide is None and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+            resonate_held(force, out, n, rows, active, last)
+            return
+        if rows.c0.size % LANES == 0:
+            resonate_factor(force, out, n, rows, active, wide, wide_active, last)
+            return
     for i in range(n):
         out[i] = 0.0
     resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)
