@@ -10,6 +10,7 @@ import os
 import pathlib
 import types
 
+import numba
 from numba.core.dispatcher import Dispatcher
 
 from jassy.jit import callee_closure, drop_stale_cache
@@ -99,6 +100,29 @@ def test_an_edit_of_a_callee_of_a_callee_drops_the_cache(tmp_path, monkeypatch):
     os.utime(a.__file__, ns=(info.st_atime_ns, info.st_mtime_ns + 10**9))
     drop_stale_cache(c.__file__, [b])
     assert not kept.exists()
+
+
+def test_an_edit_of_a_callee_drops_the_cache_in_numba_cache_dir(tmp_path, monkeypatch):
+    """With NUMBA_CACHE_DIR set numba caches outside the source tree: the cache it wrote
+    there (found by listing that folder) goes when a listed callee changes."""
+    source, cache = tmp_path / "source", tmp_path / "cache"
+    source.mkdir()
+    (source / "a_dir_stale.py").write_text("X = 1\n")
+    (source / "c_dir_stale.py").write_text(
+        "import numba\n\n\n@numba.njit(cache=True)\ndef plus_one(x):\n    return x + 1\n"
+    )
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(cache))
+    monkeypatch.syspath_prepend(str(source))
+    a, c = (importlib.import_module(f"{stem}_dir_stale") for stem in "ac")
+    drop_stale_cache(c.__file__, [a])
+    assert c.plus_one(1) == 2
+    assert list(cache.rglob("c_dir_stale.plus_one-*.nbi"))  # numba cached it there
+    drop_stale_cache(c.__file__, [a])
+    assert list(cache.rglob("c_dir_stale.plus_one-*.nbi"))  # nothing changed
+    info = os.stat(a.__file__)
+    os.utime(a.__file__, ns=(info.st_atime_ns, info.st_mtime_ns + 10**9))
+    drop_stale_cache(c.__file__, [a])
+    assert not list(cache.rglob("c_dir_stale.*.nb[ic]"))
 
 
 def test_every_called_kernel_module_is_listed():
