@@ -145,20 +145,26 @@ def counted(units):
 import jassy.engines.offline
 jassy.engines.offline.compile_on_two_cores = counted
 patch = load_patch("bell")
-audio = OfflineEngine(patch.graph, patch.score, 48000, program=sys.argv[1] == "program").render(1.0).audio
+engine = OfflineEngine(patch.graph, patch.score, 48000, program=sys.argv[1] == "program")
+audio = engine.render(float(sys.argv[2])).audio
 digest = hashlib.sha256(np.ascontiguousarray(audio).tobytes()).hexdigest()
 print(forked[-1], digest, ",".join(compiled_after) or "-")
 """
 
 
-def _render_bell(cache, path="program", helper=True):
-    """(helper forked, SHA-256 of 1 s of the bell's audio, kernels compiled after the units)
-    of a fresh process rendering on numba's cache ``cache`` as a program or node by node."""
+def _render_bell(cache, path="program", helper=True, seconds=1.0):
+    """(helper forked, SHA-256 of the bell's first ``seconds`` of audio, kernels compiled
+    after the units) of a fresh process rendering on numba's cache ``cache`` as a program
+    or node by node."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
     code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
     out = subprocess.run(
-        [sys.executable, "-c", code, path], env=env, capture_output=True, text=True, timeout=550
+        [sys.executable, "-c", code, path, repr(seconds)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=550,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout.split()
@@ -184,13 +190,14 @@ def test_a_render_with_kernels_from_the_helper_sounds_like_one_compiling_alone(t
 @pytest.mark.skipif(not TWO_CORES, reason="needs two usable cores")
 def test_a_cold_render_node_by_node_shares_its_kernels_and_sounds_like_the_program(tmp_path):
     """Node by node on an empty cache (as `jassy render` renders until the program's kernels
-    are compiled): a helper takes its share, every kernel of the graph's nodes, the strikes
-    and the output stage comes from the units, and the sound is the program's, bit for bit."""
+    are compiled): a helper takes its share, every kernel of the graph's nodes (the gain's
+    fade too), the strikes and the output stage comes from the units, and the sound is the
+    program's, bit for bit."""
     program, nodes = tmp_path / "program", tmp_path / "nodes"
     program.mkdir()
     nodes.mkdir()
-    forked, digest, after = _render_bell(nodes, "nodes")
+    forked, digest, after = _render_bell(nodes, "nodes", seconds=8.0)  # with the gain's fade at 6 s
     assert forked == "True"
     # only numba's own helpers (e.g. np.zeros' implementation) may compile after the units
     assert all(name == "-" or "<locals>" in name for name in after.split(",")), after
-    assert _render_bell(program, helper=False)[1] == digest
+    assert _render_bell(program, helper=False, seconds=8.0)[1] == digest

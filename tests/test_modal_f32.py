@@ -188,6 +188,44 @@ def test_the_held_kernels_compute_what_the_general_kernel_does(count):
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
 
 
+@pytest.mark.parametrize("count, wide_count", [(20, 2), (100, 0), (100, 3)])
+def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count):
+    """resonate_narrow's decay-factor kernel for banks a held kernel does not take (more than
+    64 float32 modes, or float64 modes: resonate_factor, 32 modes per explicit vector step;
+    it writes the output) against resonate_delta's general loop (which adds to it) on the
+    same rows: same outputs and states to float32 rounding over calls of odd lengths, with
+    the direct term and float64 modes updated in the same passes."""
+    rng = np.random.default_rng(6)
+    f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
+    c1, c2, s = design(f, d, FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros(count)
+    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
+    w1, w2, ws = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    force = rng.standard_normal(3001)
+    runs = []
+    for kernel, out in (
+        (resonate_narrow, np.full(force.size, np.nan)),
+        (resonate_delta, np.zeros(force.size)),
+    ):
+        state = np.zeros((2, coef.shape[1]), np.float32)
+        z = np.zeros(wide_count)
+        wide = ModeRows(w1, w2, ws, 0.1 * ws, z.copy(), z.copy()) if wide_count else None
+        rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
+        for n in (1, 7, 1000, 993, 1000):
+            kernel(force[start:], out[start:], n, rows, count, wide, wide_count, last, True)
+            start += n
+        runs.append((out, state, wide, last[0]))
+    (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
+    assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
+    np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
+    state, ref_state = state[:, :count], ref_state[:, :count]
+    np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
+    if wide_count:
+        assert np.max(np.abs(ref_wide.y1)) > 0
+        np.testing.assert_array_equal(wide.y1, ref_wide.y1)
+
+
 def test_rows_shorter_than_a_held_kernel_take_the_general_loop():
     """20 modes on rows of exactly 20 (not padded by narrow_rows to 32): the 32-mode held
     kernel would read past them, so resonate_narrow runs the general loop (resonate_delta,

@@ -95,3 +95,39 @@ def test_ramp_passes_match_the_per_sample_ramp():
     assert np.max(np.abs(reference)) > 1.0
     assert np.max(np.abs(passes - reference)) < 1e-11 * np.max(np.abs(reference))
     assert lefts[:5] == lefts[5:] and lefts[4] == 0
+
+
+def test_force_scan_finds_every_kind_of_nonzero_sample():
+    """jassy.anytime_rank.has_force (the kept and full bank kernels' and the budget's
+    force test, a vectorised sum of magnitudes) against numpy's ``!= 0`` on stretches
+    holding one sample of each awkward kind (a subnormal, -0.0, NaN, inf) at positions
+    around its 64-sample blocks, and on samples whose signed sum cancels or overflows."""
+    from jassy.anytime_rank import has_force
+
+    rng = np.random.default_rng(4)
+    kinds = (5e-324, -5e-324, -0.0, np.nan, np.inf, -np.inf, 1e300, -2.0)
+    checked = found = 0
+    for size in (0, 1, 63, 64, 65, 200, 4096):
+        for kind in kinds:
+            for at in sorted({0, size // 2, size - 1, 63, 64, 127}):
+                if not 0 <= at < size:
+                    continue
+                force = np.zeros(size)
+                force[at] = kind
+                for begin, end in (
+                    (0, size),
+                    (at, at + 1),
+                    (at + 1, size),
+                    (0, at),
+                    (at // 2, min(size, at + 70)),
+                ):
+                    expected = bool(np.any(force[begin:end] != 0.0))
+                    assert has_force(force, begin, end) == expected, (size, kind, at, begin, end)
+                    checked += 1
+                    found += expected
+    big = rng.normal(size=4096) * 1e300  # magnitudes whose sum overflows to inf
+    assert has_force(big, 0, 4096) and not has_force(np.zeros(4096), 0, 4096)
+    cancelling = np.zeros(128)
+    cancelling[[70, 71]] = 1.0, -1.0  # a signed sum would miss them
+    assert has_force(cancelling, 0, 128) and has_force(cancelling, 64, 128)
+    assert checked > 900 and 0 < found < checked

@@ -151,6 +151,11 @@ LANES = 32
 #: AVX-512, five rows and the four output sums fit the 32 vector registers.
 HELD_MODES = 64
 
+#: Whether the kernels written with LLVM intrinsics (ugens.stack_rows, ugens.vector_pass)
+#: run: not with numba's JIT disabled (NUMBA_DISABLE_JIT=1, where kernels run as Python and
+#: intrinsics cannot), which takes the general loop instead.
+EXPLICIT_VECTORS = not nb.config.DISABLE_JIT
+
 #: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
 #: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
 #: the same low 12 address bits (4K aliasing): the kernel ran at half speed or full speed
@@ -361,8 +366,9 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
 
 
 class HeldRows(NamedTuple):
-    """The rows :func:`_held_passes` works on, copies of a :class:`DeltaRows`' (without the
-    direct gains) on the kernel's stack (ugens.stack_rows), all of one constant width."""
+    """A :class:`DeltaRows` without the direct gains, as ugens.vector_pass takes the modes:
+    in :func:`_held_passes` copies on the kernel's stack (ugens.stack_rows) of one
+    constant width, in :func:`resonate_factor` the bank's own rows."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -406,8 +412,8 @@ def _held_tail(force, out, i, n, held, last):
 
 
 @nb.njit(inline="always", cache=True)
-def _release(force, out, n, rows, held, direct, last):
-    """Copy the held state back to ``rows``, add the direct term to out[:n] and leave
+def _release(force, out, start, n, rows, held, direct, last):
+    """Copy the held state back to ``rows``, add the direct term to out[start:n] and leave
     last[0] at force[n - 1]. The direct term is added after the passes: added as each
     sample is written (in float64, or in float32 from the force samples of the pass), it
     made the kernel 4-13 % slower at 16 and 64 modes."""
@@ -415,83 +421,50 @@ def _release(force, out, n, rows, held, direct, last):
         rows.y[k] = held.y[k]
         rows.dy[k] = held.dy[k]
     if direct != 0.0:
-        for i in range(n):
+        for i in range(start, n):
             out[i] += direct * force[i]
     if n > 0:
         last[0] = force[n - 1]
 
 
 @nb.njit(inline="always", cache=True)
-def _held_passes(force, out, n, rows, held, last):
+def _held_passes(force, out, n, rows, held, last, width):
     """Write the float32 modes [0, width) of ``rows`` over force[:n] (with their direct term)
     to out[:n] (as :func:`resonate_delta` adds them), in the decay-factor form, on their
-    copies in ``held`` (HeldRows of constant width, on the stack): the mode loops unroll to
-    whole vectors and the rows stay in registers across the passes. Writing instead of
-    adding saves clearing ``out`` and reading it back."""
+    copies in ``held`` (HeldRows of the literal ``width``, on the stack), where LLVM keeps
+    them in vector registers across the passes. Each pass in explicit vectors
+    (ugens.vector_pass.write_four: the four output sums reduced together, the direct term
+    added and the four samples converted and stored as one vector)."""
     direct = _hold(rows, held)
     c0, b2, g, y, dy = held
     i = 0
     while i + 4 <= n:
         fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        for k in range(c0.size):
-            gk = g[k]
-            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, True)
-            s0 += gk * u0
-            s1 += gk * u1
-            s2 += gk * u2
-            s3 += gk * u3
-        out[i] = s0
-        out[i + 1] = s1
-        out[i + 2] = s2
-        out[i + 3] = s3
+        vector_pass.write_four(width, held, fp, force, out, i, direct)
         i += 4
     _held_tail(force, out, i, n, held, last)
-    _release(force, out, n, rows, held, direct, last)
+    _release(force, out, i, n, rows, held, direct, last)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_16(force, out, n, rows, last):
     """:func:`_held_passes` for 16 modes (one AVX-512 vector per row)."""
     row = stack_rows.stack_row
-    _held_passes(force, out, n, rows, HeldRows(row(16), row(16), row(16), row(16), row(16)), last)
+    _held_passes(force, out, n, rows, HeldRows(row(16), row(16), row(16), row(16), row(16)), last, 16)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_32(force, out, n, rows, last):
     """:func:`_held_passes` for 32 modes."""
     row = stack_rows.stack_row
-    _held_passes(force, out, n, rows, HeldRows(row(32), row(32), row(32), row(32), row(32)), last)
+    _held_passes(force, out, n, rows, HeldRows(row(32), row(32), row(32), row(32), row(32)), last, 32)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _held_64(force, out, n, rows, last):
-    """:func:`_held_passes` for 64 modes, each pass in explicit vectors
-    (ugens.vector_pass: its four output sums reduced together, 0.94x -> 0.99x the C loop)."""
+    """:func:`_held_passes` for 64 modes."""
     row = stack_rows.stack_row
-    held = HeldRows(row(64), row(64), row(64), row(64), row(64))
-    direct = _hold(rows, held)
-    c0, b2, g, y, dy = held
-    i = 0
-    while i + 4 <= n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
-        s0, s1, s2, s3 = vector_pass.four_samples(64, c0, b2, g, y, dy, fp, f0, f1, f2)
-        out[i] = s0
-        out[i + 1] = s1
-        out[i + 2] = s2
-        out[i + 3] = s3
-        i += 4
-    _held_tail(force, out, i, n, held, last)
-    _release(force, out, n, rows, held, direct, last)
+    _held_passes(force, out, n, rows, HeldRows(row(64), row(64), row(64), row(64), row(64)), last, 64)
 
 
 @nb.njit(cache=True)
@@ -517,15 +490,99 @@ def resonate_held(force, out, n, rows, active, last):
         _held_64(force, out, n, rows, last)
 
 
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
+    """Write (not add) what :func:`resonate_delta` computes in the decay-factor form
+    (``by_factor``) to out[:n], each pass's float32 modes in explicit vectors
+    (ugens.vector_pass.add_chunk, 32 modes at a time, their per-lane sums kept in four
+    stack rows; write_sums reduces the four together and stores the four samples as one
+    vector): LLVM's code reduced and stored the four samples one by one. The float64
+    modes' pass is written out here as in resonate_delta: as an inlined helper it made a
+    256-mode bank with two float64 modes 20 % slower."""
+    c0, b2, g, d, y, dy = rows
+    active = min(-(-active // LANES) * LANES, c0.size)
+    direct = _direct_gain(d, active, 0.0)
+    if wide is not None:
+        direct = _direct_gain(wide.d, wide_active, direct)
+    modes = HeldRows(c0, b2, g, y, dy)
+    row = stack_rows.stack_row
+    s0, s1, s2, s3 = row(LANES), row(LANES), row(LANES), row(LANES)
+    sums = (s0, s1, s2, s3)
+    i = 0
+    while i + 4 <= n:
+        forces = (
+            np.float32(force[i - 1] if i > 0 else last[0]),
+            np.float32(force[i]),
+            np.float32(force[i + 1]),
+            np.float32(force[i + 2]),
+        )
+        for lane in range(LANES):
+            s0[lane] = 0.0
+            s1[lane] = 0.0
+            s2[lane] = 0.0
+            s3[lane] = 0.0
+        for k in range(0, active, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums)
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        t3 = 0.0
+        if wide is not None:
+            fw = force[i - 1] if i > 0 else last[0]
+            w0 = force[i]
+            w1 = force[i + 1]
+            w2 = force[i + 2]
+            for k in range(wide_active):
+                q1 = wide.c1[k]
+                q2 = wide.c2[k]
+                gk = wide.g[k]
+                u1 = wide.y1[k]
+                u2 = wide.y2[k]
+                v0 = two_pole(q1, q2, u1, u2, gk * fw)
+                v1 = two_pole(q1, q2, v0, u1, gk * w0)
+                v2 = two_pole(q1, q2, v1, v0, gk * w1)
+                v3 = two_pole(q1, q2, v2, v1, gk * w2)
+                wide.y2[k] = v2
+                wide.y1[k] = v3
+                t0 += v0
+                t1 += v1
+                t2 += v2
+                t3 += v3
+        vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
+        i += 4
+    while i < n:
+        fw = force[i - 1] if i > 0 else last[0]
+        fp = np.float32(fw)
+        s = np.float32(0.0)
+        for k in range(active):
+            p = y[k]
+            u = p + dy[k]
+            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
+            y[k] = u
+            dy[k] = v
+            s += g[k] * (u + v)
+        t = 0.0
+        if wide is not None:
+            t = _wide_one(wide, wide_active, fw)
+        out[i] = s + t
+        i += 1
+    _finish(force, out, n, direct, last)
+
+
 @nb.njit(cache=True)
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
-    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
-    :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
-    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
-    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
-        resonate_held(force, out, n, rows, active, last)
-        return
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n].
+    In the decay-factor form: :func:`resonate_held` for 1 .. HELD_MODES float32 modes and
+    no float64 modes (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them), else :func:`resonate_factor` (on rows of whole LANES); otherwise (or
+    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
+    if EXPLICIT_VECTORS and by_factor:
+        if wide is None and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+            resonate_held(force, out, n, rows, active, last)
+            return
+        if rows.c0.size % LANES == 0:
+            resonate_factor(force, out, n, rows, active, wide, wide_active, last)
+            return
     for i in range(n):
         out[i] = 0.0
     resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)

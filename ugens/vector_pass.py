@@ -1,13 +1,17 @@
 """One four-sample pass of float32 decay-factor modes written as explicit LLVM vectors.
 
-ugens.modal_f32's held kernels keep a bank's rows on the stack, where LLVM holds them in
-vector registers across the passes. At 64 modes (four AVX-512 vectors per row), the code
-LLVM vectorises from the per-mode loop sums each of the pass's four output samples over
-the lanes on its own (four horizontal reductions, each a chain of extracts, shuffles and
-adds); :func:`four_samples` reduces the four together (pairs of vectors interleaved,
-halving the lanes at each step: about half the shuffles and adds), which took the
-64-mode kernel from 0.94x to 0.99x the C two-pole loop. At 16 and 32 modes LLVM's own
-code was faster (0.98x against 0.94x at 16), so only the 64-mode kernel uses this.
+ugens.modal_f32's held kernels keep a bank's rows (16, 32 or 64 modes) on the stack, where
+LLVM holds them in vector registers across the passes. From the per-mode loop, LLVM's
+vectoriser summed each of the pass's four output samples over the lanes on its own (four
+horizontal reductions, each a chain of extracts, shuffles and adds), then converted and
+stored the four sums one by one and added the direct term in a pass of its own.
+:func:`write_four` reduces the four sums together (pairs of vectors interleaved, halving
+the lanes at each step: about half the shuffles and adds), adds the direct term to the
+four at once and converts and stores them as one vector: against the C two-pole loop,
+0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
+Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_factor), run
+:func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
+:func:`write_sums` at the end of each pass.
 
 The arithmetic per mode is ugens.modal_f32's decay-factor update (``_four_samples``):
 with p = y[n-2] / g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2,
@@ -89,48 +93,155 @@ def _sum_four(builder, a0, a1, a2, a3):
     return z
 
 
+def _pass(builder, lanes, c0v, bv, p, v, forces):
+    """The four-sample update of vectors of modes with rows c0, b and state p = y[n-2] / g,
+    v = Delta[n-1] / g, whose preceding forces are ``forces`` (four float32 scalars):
+    (the new p, the new v, the four outputs y / g)."""
+    minus_c0 = builder.fneg(c0v)
+
+    def next_delta(v, p, f):  # b v + (f - c0 p)
+        return _fma(builder, bv, v, _fma(builder, minus_c0, p, _broadcast(builder, f, lanes)))
+
+    fp, f0, f1, f2 = forces
+    u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
+    v = next_delta(v, p, fp)
+    u0 = builder.fadd(u, v, flags=_UPDATE_FLAGS)
+    v = next_delta(v, u, f0)
+    u1 = builder.fadd(u0, v, flags=_UPDATE_FLAGS)
+    v = next_delta(v, u0, f1)
+    u2 = builder.fadd(u1, v, flags=_UPDATE_FLAGS)
+    v = next_delta(v, u1, f2)
+    u3 = builder.fadd(u2, v, flags=_UPDATE_FLAGS)
+    return u2, v, (u0, u1, u2, u3)
+
+
+def _is_literal_width(width) -> bool:
+    return isinstance(width, types.IntegerLiteral) and width.literal_value % VECTOR == 0
+
+
+def _contiguous_arrays(record, count: int) -> bool:
+    """Whether ``record`` is a tuple type of ``count`` C-contiguous arrays."""
+    return (
+        isinstance(record, types.BaseTuple)
+        and len(record) == count
+        and all(isinstance(t, types.Array) and t.layout == "C" for t in record.types)
+    )
+
+
+def _contiguous(array) -> bool:
+    return isinstance(array, types.Array) and array.layout == "C"
+
+
+def _row_pointer(context, builder, array_type, value, at, vector):
+    """The address of element ``at`` of a C-contiguous array as a pointer to ``vector``."""
+    data = context.make_array(array_type)(context, builder, value).data
+    return builder.bitcast(builder.gep(data, [at]), vector.as_pointer())
+
+
+def _row_pointers(context, builder, record_type, record, at, vector):
+    """:func:`_row_pointer` of each array of a record (a tuple of arrays)."""
+    values = cgutils.unpack_tuple(builder, record, len(record_type))
+    return [
+        _row_pointer(context, builder, t, v, at, vector)
+        for t, v in zip(record_type.types, values, strict=True)
+    ]
+
+
 @intrinsic
-def four_samples(typingctx, width, c0, b, g, y, dy, fp, f0, f1, f2):
-    """Advance the first ``width`` (a literal multiple of VECTOR) modes of the float32 rows
-    c0, b (= R^2 - c0), g, y (= y[n-2] / g), dy (= Delta[n-1] / g) by four samples whose
-    preceding forces are fp, f0, f1, f2 (float32), storing y and dy; return the four
-    output sums sum_k g_k y_k[n + j] (float32). The rows must start on 64-byte lines (the
-    held kernels' stack rows do, ugens.stack_rows)."""
-    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
+def write_four(typingctx, width, rows, fp, force, out, i, direct):
+    """Advance the first ``width`` (a literal multiple of VECTOR) modes of ``rows``, float32
+    rows (c0, b = R^2 - c0, g, y = y[n-2] / g, dy = Delta[n-1] / g) on 64-byte lines (the
+    held kernels' stack rows, ugens.stack_rows), by the samples i .. i + 3 of ``force``
+    (float64; fp = the force before sample i, float32), storing y and dy, and write
+    out[i + j] = sum_k g_k y_k + direct force[i + j] (float64 out; the sums rounded to
+    float32, the direct term added in float32)."""
+    if not (
+        _is_literal_width(width) and _contiguous_arrays(rows, 5) and _contiguous(force) and _contiguous(out)
+    ):
         return None
     lanes = width.literal_value
-    result = types.UniTuple(types.float32, 4)
 
     def codegen(context, builder, signature, args):
+        _, rows, fp, force, out, at, direct = args
         vector = ir.VectorType(_FLOAT, lanes)
-
-        def load_row(value, array_type):
-            data = context.make_array(array_type)(context, builder, value).data
-            return builder.bitcast(data, vector.as_pointer())
-
-        rows = [load_row(value, t) for value, t in zip(args[1:6], signature.args[1:6], strict=True)]
-        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in rows)
-        minus_c0 = builder.fneg(c0v)
-
-        def next_delta(v, p, f):  # b v + (f - c0 p)
-            return _fma(builder, bv, v, _fma(builder, minus_c0, p, _broadcast(builder, f, lanes)))
-
-        fp, f0, f1, f2 = args[6:]
-        u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
-        v = next_delta(v, p, fp)
-        u0 = builder.fadd(u, v, flags=_UPDATE_FLAGS)
-        v = next_delta(v, u, f0)
-        u1 = builder.fadd(u0, v, flags=_UPDATE_FLAGS)
-        v = next_delta(v, u0, f1)
-        u2 = builder.fadd(u1, v, flags=_UPDATE_FLAGS)
-        v = next_delta(v, u1, f2)
-        u3 = builder.fadd(u2, v, flags=_UPDATE_FLAGS)
-        builder.store(u2, rows[3], align=64)
-        builder.store(v, rows[4], align=64)
-        terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in (u0, u1, u2, u3)]
+        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        pointers = _row_pointers(context, builder, signature.args[1], rows, cgutils.intp_t(0), vector)
+        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in pointers)
+        samples = _row_pointer(context, builder, signature.args[3], force, at, four_doubles)
+        forces = builder.fptrunc(builder.load(samples, align=8), ir.VectorType(_FLOAT, 4))
+        f0, f1, f2 = (builder.extract_element(forces, _INDEX(j)) for j in range(3))
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, (fp, f0, f1, f2))
+        builder.store(y_next, pointers[3], align=64)
+        builder.store(v, pointers[4], align=64)
+        terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in outputs]
         total = _sum_four(builder, *(_fold(builder, t, lanes) for t in terms))
-        return context.make_tuple(
-            builder, result, [builder.extract_element(total, _INDEX(j)) for j in range(4)]
-        )
+        total = _fma(builder, _broadcast(builder, builder.fptrunc(direct, _FLOAT), 4), forces, total)
+        target = _row_pointer(context, builder, signature.args[4], out, at, four_doubles)
+        builder.store(builder.fpext(total, four_doubles), target, align=8)
+        return context.get_dummy_value()
 
-    return result(width, c0, b, g, y, dy, fp, f0, f1, f2), codegen
+    return types.none(width, rows, fp, force, out, i, direct), codegen
+
+
+@intrinsic
+def add_chunk(typingctx, width, rows, k, forces, sums):
+    """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
+    of it) of ``rows`` (c0, b, g, y, dy as in :func:`write_four`) by four samples whose
+    preceding forces are ``forces`` (four float32), storing y and dy, and add g_k y_k / g_k
+    of sample j to the lanes of sums[j] (four float32 rows of ``width`` lanes: per-lane
+    partial sums over the chunks of a pass, :func:`write_sums`). The mode rows may lie
+    anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a caller's own rows
+    may not be: loads aligned to 64 bytes faulted on them); the sums must be on 64-byte
+    lines (ugens.stack_rows)."""
+    if not (_is_literal_width(width) and _contiguous_arrays(rows, 5) and _contiguous_arrays(sums, 4)):
+        return None
+    if not (isinstance(forces, types.BaseTuple) and len(forces) == 4):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        _, rows, at, forces, sums = args
+        vector = ir.VectorType(_FLOAT, lanes)
+        pointers = _row_pointers(context, builder, signature.args[1], rows, at, vector)
+        c0v, bv, gv, p, v = (builder.load(row, align=4) for row in pointers)
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, cgutils.unpack_tuple(builder, forces, 4))
+        builder.store(y_next, pointers[3], align=4)
+        builder.store(v, pointers[4], align=4)
+        for row, uj in zip(
+            _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), vector),
+            outputs,
+            strict=True,
+        ):
+            builder.store(_fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
+        return context.get_dummy_value()
+
+    return types.none(width, rows, k, forces, sums), codegen
+
+
+@intrinsic
+def write_sums(typingctx, width, sums, out, i, wide):
+    """out[i + j] = sum(sums[j]) + wide[j] for j = 0 .. 3: the four float32 rows of ``width``
+    lanes (a literal multiple of VECTOR) of :func:`add_chunk` reduced together, converted
+    and stored as one vector, with the four float64 ``wide`` (the float64 modes' outputs)
+    added."""
+    if not (_is_literal_width(width) and _contiguous_arrays(sums, 4) and _contiguous(out)):
+        return None
+    if not (isinstance(wide, types.BaseTuple) and len(wide) == 4):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        _, sums, out, at, wide = args
+        vector = ir.VectorType(_FLOAT, lanes)
+        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        pointers = _row_pointers(context, builder, signature.args[1], sums, cgutils.intp_t(0), vector)
+        rows = [_fold(builder, builder.load(row, align=64), lanes) for row in pointers]
+        total = builder.fpext(_sum_four(builder, *rows), four_doubles)
+        wide_vector = ir.Constant(four_doubles, ir.Undefined)
+        for j, tj in enumerate(cgutils.unpack_tuple(builder, wide, 4)):
+            wide_vector = builder.insert_element(wide_vector, tj, _INDEX(j))
+        target = _row_pointer(context, builder, signature.args[2], out, at, four_doubles)
+        builder.store(builder.fadd(total, wide_vector), target, align=8)
+        return context.get_dummy_value()
+
+    return types.none(width, sums, out, i, wide), codegen

@@ -7,18 +7,21 @@ first, a modal bank's pole design, the render loop's two stages (event applicati
 output stage: C functions the loop calls through their addresses, so each compiles on its
 own) and last the render loop itself, compiled for its argument types without running (it
 needs neither the graph nor the stages compiled). For a graph rendered node by node: a copy
-of one node of each kind, fed by silence, prepared and run for a block (a modal bank first:
-its pole design and span kernel), the strike kernels and a stand-in render of a silent tap
-through an engine with the same options (the block loop's and the output stage's kernels). :func:`program_cached` says whether the program's kernels are compiled
-already (``jassy render`` renders node by node until they are: the same bits, for a
-fraction of the compiling).
+of one node of each kind, fed by silence, prepared and run for a block and once more after
+each kind of parameter change the score makes to it (a modal bank first: its pole design and
+span kernel), the strike kernels and a stand-in render of a silent tap through an engine with
+the same options (the block loop's and the output stage's kernels). :func:`program_cached`
+says whether the program's kernels are compiled already (``jassy render`` renders node by
+node until they are: the same bits, for a fraction of the compiling).
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Sequence
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 
@@ -28,9 +31,9 @@ from jassy.forked_compile import cache_holds, running_units
 _cache_found = False
 
 
-def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
-    """Compile units of a render of ``graph`` by an OfflineEngine built with
-    ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
+def graph_units(graph, engine_options: dict, score: Sequence = ()) -> list[Callable[[], object]]:
+    """Compile units of a render of ``graph`` through ``score`` by an OfflineEngine built
+    with ``engine_options`` (its keyword arguments): empty unless numba's cache is still empty
     (:func:`kernels_cached`). Ordered so that the two ends meet with about half the work
     each: this process starts with the modal kernels (the largest unit), the helper with
     the engine's own kernels."""
@@ -40,7 +43,7 @@ def graph_units(graph, engine_options: dict) -> list[Callable[[], object]]:
 
     if engine_options.get("program", True) and program.why_not_compiled(graph) is None:
         return _program_units(graph)
-    return _node_units(graph, engine_options)
+    return _node_units(graph, engine_options, score)
 
 
 def _program_units(graph) -> list[Callable[[], object]]:
@@ -62,20 +65,46 @@ def _program_units(graph) -> list[Callable[[], object]]:
     return [*units, callback.next_cut_address, _compile_render_loop]
 
 
-def _node_units(graph, engine_options: dict) -> list[Callable[[], object]]:
+def _node_units(graph, engine_options: dict, score: Sequence) -> list[Callable[[], object]]:
     """Units of a graph rendered node by node: one node of each kind processed alone (a
-    modal bank first), the strike kernels (with the pulse table's growth) and a stand-in
-    render through an engine with the same options."""
+    modal bank first) with the parameter changes the score makes to its kind, the strike
+    kernels (with the pulse table's growth) and a stand-in render through an engine with
+    the same options."""
     from ugens.impact import ImpactForce
     from ugens.modal import ModalBank
 
     kinds = {type(node): node for node in reversed(graph.order)}  # the first node of each kind
     firsts = sorted(kinds.values(), key=lambda node: not isinstance(node, ModalBank))
+    changes = _score_changes(graph, score)
     rate, block = float(engine_options["sample_rate"]), engine_options["block"]
-    units: list[Callable[[], object]] = [partial(_process_alone, node, rate, block) for node in firsts]
+    units: list[Callable[[], object]] = [
+        partial(_process_alone, node, rate, block, changes.get(type(node), [])) for node in firsts
+    ]
     if ImpactForce in kinds:
         units.append(partial(_compile_strike_records, grow=True))
     return [*units, partial(_render_stand_in, bool(graph.haptic), engine_options)]
+
+
+class Change(NamedTuple):
+    """A parameter change of a score's ``set`` event: new values by name, whether it jumps,
+    its ramp (s, or None for the node's own smoothing)."""
+
+    values: dict
+    jump: bool
+    ramp: float | None
+
+
+def _score_changes(graph, score: Sequence) -> dict[type, list[Change]]:
+    """Per kind of node, one Change of each shape (the keys it sets, jump or not, with a
+    ramp or not) among the score's ``set`` events on nodes of that kind."""
+    shapes: dict[type, dict[tuple, Change]] = {}
+    for event in score:
+        node = graph.nodes.get(event.node) if event.action == "set" else None
+        if node is not None:
+            shape = (tuple(sorted(event.args)), bool(event.jump), event.ramp is None)
+            kind = shapes.setdefault(type(node), {})
+            kind.setdefault(shape, Change(dict(event.args), bool(event.jump), event.ramp))
+    return {kind: list(found.values()) for kind, found in shapes.items()}
 
 
 class _Silence:
@@ -86,19 +115,34 @@ class _Silence:
         self.extra: dict[str, np.ndarray] = {}
 
 
-def _process_alone(node, sample_rate: float, block: int) -> None:
+def _process_alone(node, sample_rate: float, block: int, changes: Sequence[Change] = ()) -> None:
     """Compile the kernels ``node`` calls by preparing a copy of it fed by silence and
-    processing one block: the same kernels, for the same argument types, as the render
-    (a modal bank: its pole design and its span kernel). The node itself is not touched. A
-    node that cannot run alone (an input it reads more of than its output) is left to the
-    render, which compiles its kernels as it meets them."""
+    processing a block, then a block after each of ``changes`` (applied at that block's
+    first frame, as the scheduler applies a score's events): the same kernels, for the same
+    argument types, as the render (a modal bank: its pole design and its span kernel; a
+    ramped change: the ramp's kernels). The node itself is not touched. A node that cannot
+    run alone (an input it reads more of than its output) is left to the render, which
+    compiles its kernels as it meets them."""
     silence = {id(source): _Silence(block) for source in node.sources.values()}
     try:
-        alone = copy.deepcopy(node, silence)
-        alone.prepare(sample_rate, block)
-        alone.process(0, block)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):  # silence may be out of range
+            warnings.simplefilter("ignore")
+            _run_alone(copy.deepcopy(node, silence), sample_rate, block, changes)
     except Exception:  # noqa: BLE001 - compiling ahead is an optimisation; the render reports errors
         pass
+
+
+def _run_alone(alone, sample_rate: float, block: int, changes: Sequence[Change]) -> None:
+    """Prepare node ``alone`` and process a block, then a block after each change."""
+    alone.prepare(sample_rate, block)
+    alone.process(0, block)
+    for i, change in enumerate(changes, start=1):
+        for key, value in change.values.items():
+            if alone.inline_events:
+                alone.set_param_at(i * block, key, value, change.jump, change.ramp)
+            else:
+                alone.set_param(key, value, jump=change.jump, ramp=change.ramp)
+        alone.process(i * block, block)
 
 
 def _compile_pole_design() -> None:
