@@ -151,6 +151,11 @@ LANES = 32
 #: AVX-512, five rows and the four output sums fit the 32 vector registers.
 HELD_MODES = 64
 
+#: Whether the kernels written with LLVM intrinsics (ugens.stack_rows, ugens.vector_pass)
+#: run: not with numba's JIT disabled (NUMBA_DISABLE_JIT=1, where kernels run as Python and
+#: intrinsics cannot), which takes the general loop instead.
+EXPLICIT_VECTORS = not nb.config.DISABLE_JIT
+
 #: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
 #: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
 #: the same low 12 address bits (4K aliasing): the kernel ran at half speed or full speed
@@ -361,8 +366,9 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
 
 
 class HeldRows(NamedTuple):
-    """The rows :func:`_held_passes` works on, copies of a :class:`DeltaRows`' (without the
-    direct gains) on the kernel's stack (ugens.stack_rows), all of one constant width."""
+    """A :class:`DeltaRows` without the direct gains, as ugens.vector_pass takes the modes:
+    in :func:`_held_passes` copies on the kernel's stack (ugens.stack_rows) of one
+    constant width, in :func:`resonate_factor` the bank's own rows."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -434,7 +440,7 @@ def _held_passes(force, out, n, rows, held, last, width):
     i = 0
     while i + 4 <= n:
         fp = np.float32(force[i - 1] if i > 0 else last[0])
-        vector_pass.write_four(width, c0, b2, g, y, dy, fp, force, out, i, direct)
+        vector_pass.write_four(width, held, fp, force, out, i, direct)
         i += 4
     _held_tail(force, out, i, n, held, last)
     _release(force, out, i, n, rows, held, direct, last)
@@ -498,21 +504,25 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
     direct = _direct_gain(d, active, 0.0)
     if wide is not None:
         direct = _direct_gain(wide.d, wide_active, direct)
+    modes = HeldRows(c0, b2, g, y, dy)
     row = stack_rows.stack_row
     s0, s1, s2, s3 = row(LANES), row(LANES), row(LANES), row(LANES)
+    sums = (s0, s1, s2, s3)
     i = 0
     while i + 4 <= n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
+        forces = (
+            np.float32(force[i - 1] if i > 0 else last[0]),
+            np.float32(force[i]),
+            np.float32(force[i + 1]),
+            np.float32(force[i + 2]),
+        )
         for lane in range(LANES):
             s0[lane] = 0.0
             s1[lane] = 0.0
             s2[lane] = 0.0
             s3[lane] = 0.0
         for k in range(0, active, LANES):
-            vector_pass.add_chunk(LANES, c0, b2, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3)
+            vector_pass.add_chunk(LANES, modes, k, forces, sums)
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
@@ -538,7 +548,7 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
                 t1 += v1
                 t2 += v2
                 t3 += v3
-        vector_pass.write_sums(LANES, s0, s1, s2, s3, out, i, t0, t1, t2, t3)
+        vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
         i += 4
     while i < n:
         fw = force[i - 1] if i > 0 else last[0]
@@ -561,16 +571,18 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
 
 @nb.njit(cache=True)
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
-    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
-    :func:`resonate_held` where it applies (no float64 modes, the decay-factor form, 1 ..
-    HELD_MODES float32 modes, rows at least :func:`held_width` long, as
-    :func:`narrow_rows` pads them), else out cleared and resonate_delta."""
-    if wide is None and by_factor and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
-        resonate_held(force, out, n, rows, active, last)
-        return
-    if by_factor and rows.c0.size % LANES == 0:
-        resonate_factor(force, out, n, rows, active, wide, wide_active, last)
-        return
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n].
+    In the decay-factor form: :func:`resonate_held` for 1 .. HELD_MODES float32 modes and
+    no float64 modes (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them), else :func:`resonate_factor` (on rows of whole LANES); otherwise (or
+    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
+    if EXPLICIT_VECTORS and by_factor:
+        if wide is None and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+            resonate_held(force, out, n, rows, active, last)
+            return
+        if rows.c0.size % LANES == 0:
+            resonate_factor(force, out, n, rows, active, wide, wide_active, last)
+            return
     for i in range(n):
         out[i] = 0.0
     resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)

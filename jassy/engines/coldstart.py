@@ -18,6 +18,7 @@ node until they are: the same bits, for a fraction of the compiling).
 from __future__ import annotations
 
 import copy
+import warnings
 from collections.abc import Callable, Sequence
 from functools import partial
 from typing import NamedTuple
@@ -124,18 +125,24 @@ def _process_alone(node, sample_rate: float, block: int, changes: Sequence[Chang
     compiles its kernels as it meets them."""
     silence = {id(source): _Silence(block) for source in node.sources.values()}
     try:
-        alone = copy.deepcopy(node, silence)
-        alone.prepare(sample_rate, block)
-        alone.process(0, block)
-        for i, change in enumerate(changes, start=1):
-            for key, value in change.values.items():
-                if alone.inline_events:
-                    alone.set_param_at(i * block, key, value, change.jump, change.ramp)
-                else:
-                    alone.set_param(key, value, jump=change.jump, ramp=change.ramp)
-            alone.process(i * block, block)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):  # silence may be out of range
+            warnings.simplefilter("ignore")
+            _run_alone(copy.deepcopy(node, silence), sample_rate, block, changes)
     except Exception:  # noqa: BLE001 - compiling ahead is an optimisation; the render reports errors
         pass
+
+
+def _run_alone(alone, sample_rate: float, block: int, changes: Sequence[Change]) -> None:
+    """Prepare node ``alone`` and process a block, then a block after each change."""
+    alone.prepare(sample_rate, block)
+    alone.process(0, block)
+    for i, change in enumerate(changes, start=1):
+        for key, value in change.values.items():
+            if alone.inline_events:
+                alone.set_param_at(i * block, key, value, change.jump, change.ramp)
+            else:
+                alone.set_param(key, value, jump=change.jump, ramp=change.ramp)
+        alone.process(i * block, block)
 
 
 def _compile_pole_design() -> None:
