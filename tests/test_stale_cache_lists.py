@@ -12,6 +12,7 @@ import types
 
 import numba
 from numba.core.dispatcher import Dispatcher
+from numba.core.extending import _Intrinsic
 
 from jassy.jit import callee_closure, drop_stale_cache
 
@@ -50,15 +51,26 @@ def global_names(code: types.CodeType) -> set[str]:
     return names
 
 
+def defining_module(value: object) -> str | None:
+    """The module defining ``value`` if it is compiled into the kernels that call it: a numba
+    kernel (a dispatcher) or a numba intrinsic (its code generator emits the caller's code)."""
+    if isinstance(value, Dispatcher):
+        return value.py_func.__module__
+    if isinstance(value, _Intrinsic):
+        return value._defn.__module__
+    return None
+
+
 def called_modules(module: types.ModuleType) -> set[str]:
-    """Project modules whose kernels ``module``'s kernels can have copies of: those defining
-    the other modules' dispatchers among its globals, and those defining the dispatchers
-    its kernels reach through a project module global (``cells.two_pole`` inside a kernel,
-    also when ``cells`` only re-exports ``two_pole``)."""
+    """Project modules whose kernels or intrinsics ``module``'s kernels can have copies of:
+    those defining the other modules' dispatchers and intrinsics among its globals, and those
+    defining the ones its kernels reach through a project module global (``cells.two_pole``
+    inside a kernel, also when ``cells`` only re-exports ``two_pole``)."""
     found = set()
     for value in vars(module).values():
-        if isinstance(value, Dispatcher) and is_project(value.py_func.__module__):
-            found.add(value.py_func.__module__)
+        defined_in = defining_module(value)
+        if defined_in is not None and is_project(defined_in):
+            found.add(defined_in)
     for kernel in own_kernels(module):
         names = global_names(kernel.py_func.__code__)
         for name in names:
@@ -66,9 +78,9 @@ def called_modules(module: types.ModuleType) -> set[str]:
             if not (isinstance(value, types.ModuleType) and is_project(value.__name__)):
                 continue
             for attribute in names:  # cells.two_pole: 'two_pole' is among the names too
-                kernel_used = getattr(value, attribute, None)
-                if isinstance(kernel_used, Dispatcher) and is_project(kernel_used.py_func.__module__):
-                    found.add(kernel_used.py_func.__module__)
+                defined_in = defining_module(getattr(value, attribute, None))
+                if defined_in is not None and is_project(defined_in):
+                    found.add(defined_in)
     found.discard(module.__name__)
     return found
 
@@ -79,6 +91,15 @@ def test_the_finder_sees_imported_kernels_and_kernel_modules():
     assert called_modules(importlib.import_module("ugens.filters")) == {"ugens.cells"}
     assert {"ugens.cells", "ugens.noise"} <= called_modules(importlib.import_module("ugens.scrape"))
     assert not called_modules(importlib.import_module("ugens.cells"))
+
+
+def test_the_finder_sees_intrinsics():
+    """ugens.modal_f32's kernels call the intrinsics of ugens.stack_rows and ugens.vector_pass
+    (through the modules); jassy.record_views' views call jassy.jit.void_pointer (imported)."""
+    assert {"ugens.stack_rows", "ugens.vector_pass"} <= called_modules(
+        importlib.import_module("ugens.modal_f32")
+    )
+    assert called_modules(importlib.import_module("jassy.record_views")) == {"jassy.jit"}
 
 
 def test_an_edit_of_a_callee_of_a_callee_drops_the_cache(tmp_path, monkeypatch):
