@@ -52,6 +52,7 @@ def _lanes(builder, a, b, picks):
 
 
 def _broadcast(builder, x, width):
+    """A vector of ``width`` float32 lanes, each the float32 scalar x (insert, shuffle)."""
     vector = ir.VectorType(_FLOAT, width)
     one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
     return _lanes(builder, one, ir.Constant(vector, ir.Undefined), [0] * width)
@@ -116,20 +117,30 @@ def _pass(builder, lanes, c0v, bv, p, v, forces):
 
 
 def _is_literal_width(width) -> bool:
+    """Whether ``width`` is a literal int, a multiple of VECTOR (the lanes the code folds to)."""
     return isinstance(width, types.IntegerLiteral) and width.literal_value % VECTOR == 0
 
 
-def _contiguous_arrays(record, count: int) -> bool:
-    """Whether ``record`` is a tuple type of ``count`` C-contiguous arrays."""
+def _contiguous(array, dtype) -> bool:
+    """Whether ``array`` is a 1-D C-contiguous array of ``dtype``: the intrinsics read and
+    write its data as vectors of that type (float32 rows and sums, float64 force and out)."""
+    return isinstance(array, types.Array) and array.ndim == 1 and array.layout == "C" and array.dtype == dtype
+
+
+def _contiguous_arrays(record, count: int, dtype) -> bool:
+    """Whether ``record`` is a tuple type of ``count`` arrays passing :func:`_contiguous`."""
     return (
         isinstance(record, types.BaseTuple)
         and len(record) == count
-        and all(isinstance(t, types.Array) and t.layout == "C" for t in record.types)
+        and all(_contiguous(t, dtype) for t in record.types)
     )
 
 
-def _contiguous(array) -> bool:
-    return isinstance(array, types.Array) and array.layout == "C"
+def _scalars(record, count: int, dtype) -> bool:
+    """Whether ``record`` is a tuple type of ``count`` scalars of ``dtype``."""
+    return (
+        isinstance(record, types.BaseTuple) and len(record) == count and all(t == dtype for t in record.types)
+    )
 
 
 def _row_pointer(context, builder, array_type, value, at, vector):
@@ -152,11 +163,18 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
     """Advance the first ``width`` (a literal multiple of VECTOR) modes of ``rows``, float32
     rows (c0, b = R^2 - c0, g, y = y[n-2] / g, dy = Delta[n-1] / g) on 64-byte lines (the
     held kernels' stack rows, ugens.stack_rows), by the samples i .. i + 3 of ``force``
-    (float64; fp = the force before sample i, float32), storing y and dy, and write
-    out[i + j] = sum_k g_k y_k + direct force[i + j] (float64 out; the sums rounded to
-    float32, the direct term added in float32)."""
+    (float64, N; fp = the force before sample i, float32), storing y and dy, and write
+    out[i + j] = sum_k g_k y_k + direct force[i + j] (float64 out in the bank's output
+    units; the sums rounded to float32, the direct term added in float32). Typing refuses
+    (numba raises a TypingError) other dtypes, non-contiguous arrays and other widths."""
     if not (
-        _is_literal_width(width) and _contiguous_arrays(rows, 5) and _contiguous(force) and _contiguous(out)
+        _is_literal_width(width)
+        and _contiguous_arrays(rows, 5, types.float32)
+        and fp == types.float32
+        and _contiguous(force, types.float64)
+        and _contiguous(out, types.float64)
+        and isinstance(i, types.Integer)
+        and direct == types.float64
     ):
         return None
     lanes = width.literal_value
@@ -187,15 +205,19 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
 def add_chunk(typingctx, width, rows, k, forces, sums):
     """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
     of it) of ``rows`` (c0, b, g, y, dy as in :func:`write_four`) by four samples whose
-    preceding forces are ``forces`` (four float32), storing y and dy, and add g_k y_k / g_k
+    preceding forces are ``forces`` (four float32, N), storing y and dy, and add g_k y_k / g_k
     of sample j to the lanes of sums[j] (four float32 rows of ``width`` lanes: per-lane
     partial sums over the chunks of a pass, :func:`write_sums`). The mode rows may lie
     anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a caller's own rows
     may not be: loads aligned to 64 bytes faulted on them); the sums must be on 64-byte
     lines (ugens.stack_rows)."""
-    if not (_is_literal_width(width) and _contiguous_arrays(rows, 5) and _contiguous_arrays(sums, 4)):
-        return None
-    if not (isinstance(forces, types.BaseTuple) and len(forces) == 4):
+    if not (
+        _is_literal_width(width)
+        and _contiguous_arrays(rows, 5, types.float32)
+        and isinstance(k, types.Integer)
+        and _scalars(forces, 4, types.float32)
+        and _contiguous_arrays(sums, 4, types.float32)
+    ):
         return None
     lanes = width.literal_value
 
@@ -222,11 +244,15 @@ def add_chunk(typingctx, width, rows, k, forces, sums):
 def write_sums(typingctx, width, sums, out, i, wide):
     """out[i + j] = sum(sums[j]) + wide[j] for j = 0 .. 3: the four float32 rows of ``width``
     lanes (a literal multiple of VECTOR) of :func:`add_chunk` reduced together, converted
-    and stored as one vector, with the four float64 ``wide`` (the float64 modes' outputs)
-    added."""
-    if not (_is_literal_width(width) and _contiguous_arrays(sums, 4) and _contiguous(out)):
-        return None
-    if not (isinstance(wide, types.BaseTuple) and len(wide) == 4):
+    and stored as one vector in ``out`` (float64, the bank's output units), with the four
+    float64 ``wide`` (the float64 modes' outputs) added."""
+    if not (
+        _is_literal_width(width)
+        and _contiguous_arrays(sums, 4, types.float32)
+        and _contiguous(out, types.float64)
+        and isinstance(i, types.Integer)
+        and _scalars(wide, 4, types.float64)
+    ):
         return None
     lanes = width.literal_value
 
