@@ -136,6 +136,22 @@ def callee_closure(module_file: str) -> list[ModuleType]:
     return [found[name] for name in sorted(found)]
 
 
+def cache_folder(module_file: str) -> str | None:
+    """The folder numba caches ``module_file``'s functions in, found by numba's own cache
+    locators in numba's order (``NUMBA_CACHE_DIR``'s mirror of the source folder if set,
+    else the module's ``__pycache__`` if writable, else the user-wide cache folder), or None
+    if none accepts the file. Creates the folder, as numba does when it caches there."""
+
+    def stand_in():
+        """A function of ``module_file`` as numba's locators see it (its code's file name)."""
+
+    stand_in.__code__ = stand_in.__code__.replace(co_filename=module_file)
+    try:
+        return caching.CompileResultCacheImpl(stand_in).locator.get_cache_path()
+    except RuntimeError:  # no locator available for the file
+        return None
+
+
 def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
     """Delete numba's cache of ``module_file`` if a module whose kernels it calls changed.
 
@@ -146,7 +162,9 @@ def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
     callees' own recorded callees (imported, so recorded, before this call) are stamped
     too. The stamp is one line ``name mtime_ns size`` per module of the closure."""
     _RECORDED_CALLEES[module_file] = tuple(callees)
-    folder = os.path.join(os.path.dirname(module_file), "__pycache__")
+    folder = cache_folder(module_file)
+    if folder is None:
+        return  # numba does not cache this file's functions either
     stem = os.path.splitext(os.path.basename(module_file))[0]
     stamps = []
     for module in callee_closure(module_file):

@@ -478,6 +478,45 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
 
 
+def test_a_remembered_psd_stands_for_one_period():
+    """ugens.modal_budget.decide on tables whose second bank hears a new force at each
+    decision, one budget period apart (six decisions), then two apart (three): its
+    periodogram (the PSD numpy gives for that ring, blended with the one remembered) is
+    taken at every other decision while they come every period and at each when they
+    come further apart (PSD_REUSE_PERIODS); the decisions between rank by the remembered
+    PSD unchanged."""
+    from ugens import modal_budget as mb
+
+    period, counts, window_power = 256, [11, 23], 3.5
+    t = mb.budget_tables(counts, period)
+    t.values[mb.TRANSFORMED, 1] = 1.0
+    t.meta[:, 2] = counts  # every mode allowed
+    t.rows[mb.SIN2] = 0.5
+    rng = np.random.default_rng(5)
+    t.bins[:] = rng.integers(2, period // 2 - 2, sum(counts))
+    masks = (np.zeros(sum(counts), dtype=bool) for _ in range(3))
+    d = mb.Decision(np.zeros(2, dtype=bool), np.array([False, True]), np.zeros(2, dtype=np.intp),
+                    np.zeros((3, sum(counts))), *masks)  # fmt: skip
+    assert mb.PSD_REUSE_PERIODS == 1
+    remembered, transforms = None, []
+    for k, frame in enumerate([*range(0, 6 * period, period), *range(7 * period, 13 * period, 2 * period)]):
+        t.rings[1] = rng.normal(size=period) * (k + 1)
+        spectrum = np.fft.rfft((t.rings[1] - t.rings[1].mean()) * np.hanning(period))
+        padded = np.pad(np.abs(spectrum) ** 2, 2)
+        fresh = padded[t.bins[11:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / window_power
+        before = t.rows[mb.SPECTRUM, 11:].copy()
+        mb.decide(t, d, mb.Rates(float(FS), 20, 1.25, 0.99, 0, 0, window_power, frame))
+        transformed = not np.array_equal(before, t.rows[mb.SPECTRUM, 11:])
+        transforms.append(transformed)
+        if transformed:
+            remembered = (
+                fresh if remembered is None else mb.PSD_MEMORY * remembered + (1 - mb.PSD_MEMORY) * fresh
+            )
+        assert np.allclose(t.rows[mb.SPECTRUM, 11:], remembered, rtol=1e-10), k
+        assert t.values[mb.SPECTRAL, 1] == 1.0
+    assert transforms == [True, False] * 3 + [True] * 3
+
+
 def rubbed_bell(budget):
     """A bell of 150 modes rubbed by white noise (a steady contact force)."""
     from ugens.noise import WhiteNoise
@@ -490,7 +529,7 @@ def test_a_steady_force_is_not_decided_every_period():
     """A bell rubbed by steady noise over 24 budget periods: periods whose only news is the
     force heard again are left undecided (jassy.anytime_rank.steady_forces), at least
     every STEADY_PERIODS-th and whenever the force's power rises past STEADY_POWER; the
-    error stays within 0.5 dB of deciding every period (a slow gain ramp keeps the
+    error stays within 1 dB of deciding every period (a slow gain ramp keeps the
     budget deciding: its gains move). A force whose power rises fourfold every period
     is decided every period."""
     from jassy.anytime_rank import STEADY_PERIODS, STEADY_POWER
@@ -507,8 +546,9 @@ def test_a_steady_force_is_not_decided_every_period():
         y = render(rubbed_bell(budget), score, seconds, FS, 4096, limiter=False).audio[0]
         results[name] = budget.decisions, error_db(y, full)
     assert results["creeping"][0] == periods and results["rising"][0] == periods
-    assert periods // STEADY_PERIODS <= results["steady"][0] <= periods // 2
-    assert abs(results["steady"][1] - results["creeping"][1]) < 0.5
+    # at least one period in STEADY_PERIODS decided, at least a quarter of them left undecided
+    assert periods // STEADY_PERIODS <= results["steady"][0] <= 3 * periods // 4, results
+    assert abs(results["steady"][1] - results["creeping"][1]) < 1.0
 
 
 def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
@@ -516,6 +556,7 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     force's power is at most STEADY_POWER times its power at the last decision (a weaker
     one too), no heard bank ramps, and fewer than STEADY_PERIODS periods in a row."""
     from jassy.anytime_rank import (
+        POWER_STRIDE,
         STEADY_PERIODS,
         STEADY_POWER,
         STEP_STATE,
@@ -532,7 +573,8 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
     h.heard_before[:] = True
     note_decided(h, rings, np.array([True, False]), state)
-    power = np.mean((rings[0] - rings[0].mean()) ** 2)
+    sampled = rings[0, ::POWER_STRIDE]
+    power = np.mean((sampled - sampled.mean()) ** 2)
     assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
     assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
     note_decided(h, rings, np.array([True, True]), state)

@@ -226,6 +226,26 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
         np.testing.assert_array_equal(wide.y1, ref_wide.y1)
 
 
+@pytest.mark.parametrize("wrong", ["force", "out"])
+def test_the_explicit_vector_kernels_refuse_float32_force_or_output(wrong):
+    """The explicit-vector passes (ugens.vector_pass) read the force and write the output
+    as float64 vectors: resonate_narrow with a float32 force or output is refused at typing
+    (at 16 modes it gave a relative error of 0.62 and read or wrote past the array)."""
+    count = 16
+    from numba.core.errors import TypingError
+
+    c1, c2, s = design(np.geomspace(100.0, 15000.0, count), np.full(count, 20.0), FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros(count)
+    coef, state = narrow_rows(c0, b2, s, zeros, zeros, zeros, decay_factor=True)
+    arrays = {"force": np.ones(64), "out": np.zeros(64)}
+    arrays[wrong] = arrays[wrong].astype(np.float32)
+    with pytest.raises(TypingError, match="write_four|add_chunk|write_sums"):
+        resonate_narrow(
+            arrays["force"], arrays["out"], 64, DeltaRows(*coef, *state), count, None, 0, np.zeros(1), True
+        )
+
+
 def test_rows_shorter_than_a_held_kernel_take_the_general_loop():
     """20 modes on rows of exactly 20 (not padded by narrow_rows to 32): the 32-mode held
     kernel would read past them, so resonate_narrow runs the general loop (resonate_delta,

@@ -747,10 +747,15 @@ class ModalBank(ModelParams, UGen):
         also in its tables, with the per-mode rows that depend on the poles)."""
         self._fresh = self._design()
         if self._tables is not None:
-            self._fresh_rows[:] = self._fresh
-            values, slot = self._tables.values, self._slot
-            values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
+            self._design_to_tables()
             self._refresh_forcing()
+
+    def _design_to_tables(self) -> None:
+        """Copy the current design into the budget's tables: the fresh rows, and the gain
+        times the level gain and the fragment size (an impact elsewhere is ranked by them)."""
+        self._fresh_rows[:] = self._fresh
+        values, slot = self._tables.values, self._slot
+        values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
 
     def _refresh_forcing(self) -> None:
         """Per mode (internal order), in the budget's rows: sin^2 theta, 1 / (R^2 sin^2
@@ -995,8 +1000,10 @@ class ModalBank(ModelParams, UGen):
         :meth:`anytime_apply`; a budgeted bank's ramp is read from its meta's RAMP_LEFT)."""
         return self._size_input is None
 
-    def anytime_changes(self, end: int) -> list[int]:
+    def anytime_changes(self, end: int) -> list[int] | tuple:
         """The frames before ``end`` of the parameter changes queued (:meth:`set_param_at`)."""
+        if not self._pending:
+            return ()
         return [change[0] for change in self._pending if change[0] < end]
 
     def anytime_apply(self, frame: int) -> None:
@@ -1023,7 +1030,7 @@ class ModalBank(ModelParams, UGen):
         self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
         self.coef, self.y = self.bank[:4], self.bank[4:]
         self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
-        self._fresh_rows[:] = self._fresh
+        self._design_to_tables()
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
         tables.last[slot] = self.last[0]
@@ -1045,10 +1052,6 @@ class ModalBank(ModelParams, UGen):
         self._psd_bins = tables.bins[cut]
         tables.values[REMEMBERED, slot] = 0.0
         tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
-        tables.values[GAIN_LEVEL, slot], tables.values[SIZE, slot] = (
-            self.values["gain"] * self._level_gain,
-            self._size,
-        )
         self._horizon = horizon
         self._forcing_key = None
         from ugens import modal_kept  # (not at the top: it imports this module)

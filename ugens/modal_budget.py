@@ -78,12 +78,19 @@ MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
 #: and its fragment size (an impact's amplitude per mode elsewhere is its location's
 #: gain times impulse times the first, over the root of the second); 1.0 once SPECTRUM
 #: holds a smoothed PSD to blend the next with; 1.0 if the bank judges a force by its
-#: periodogram (more modes than FLAT_SPECTRUM_MODES).
+#: periodogram (more modes than FLAT_SPECTRUM_MODES); the frame of its last periodogram.
 (
     KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2, GAIN_LEVEL, SIZE,
-    REMEMBERED, TRANSFORMED,
-) = range(11)  # fmt: skip
-BANK_VALUES = 11
+    REMEMBERED, TRANSFORMED, PSD_FRAME,
+) = range(12)  # fmt: skip
+BANK_VALUES = 12
+
+#: A bank that keeps hearing a force ranks by its remembered (smoothed) PSD at a decision
+#: at most this many budget periods after its last periodogram, so that decisions every
+#: period (impacts coming) transform at every other one: the transform is most of a
+#: decision's cost (~20 of ~40 us on the wok's 241 modes). (Scaling the remembered PSD to
+#: the force's power now was tried: the wok's bursty contacts then lost 0.4-0.7 dB.)
+PSD_REUSE_PERIODS = 1
 
 #: Banks of at most this many modes judge a continuous force by its power alone (spread
 #: flat over frequency), without a transform.
@@ -279,11 +286,8 @@ def jump_to_fresh(t, b):
     the fresh ones, and so do the kept modes' columns of its compact bank if gathered, so
     the compact bank keeps its state in place (no write-back, no gather again)."""
     k, o = t.layout[MODES, b], t.layout[FIRST, b]
-    bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
-    bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
-    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
-    fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
-    for r in range(4):
+    bank, target, fresh = bank_rows(t, b), coef_rows(t.target, t, b), coef_rows(t.fresh, t, b)
+    for r in range(COEF_ROWS):
         for i in range(k):
             bank[r, i] = fresh[r, i]
             target[r, i] = fresh[r, i]
@@ -294,9 +298,9 @@ def jump_to_fresh(t, b):
         kept, j = t.kept[o : o + k], 0
         for i in range(k):
             if kept[i]:
-                for r in range(4):
+                for r in range(COEF_ROWS):
                     compact[r, j] = fresh[r, i]
-                    compact[10 + r, j] = fresh[r, i]
+                    compact[RAMP_TARGET + r, j] = fresh[r, i]
                 j += 1
 
 
@@ -578,7 +582,9 @@ def decide(t, d, rates):
     """One decision over every bank of the tables ``t``: importance of every mode, the
     ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A bank judging
     its force by a transform (TRANSFORMED) that heard one lately, and was not woken now,
-    takes its :func:`periodogram` first (SPECTRAL). A quiet bank's
+    takes its :func:`periodogram` first (SPECTRAL; its remembered PSD if its last was
+    taken up to PSD_REUSE_PERIODS periods before). A
+    quiet bank's
     scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
     the force in its input samples [begin, end), another bank that heard a force lately
     judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
@@ -589,7 +595,10 @@ def decide(t, d, rates):
         if t.values[TRANSFORMED, b] > 0.0:
             spectral = d.heard[b] and not d.onset[b]
             if spectral:
-                periodogram(t, b, rates.window_power, rates.frame)
+                since = rates.frame - t.values[PSD_FRAME, b]
+                if t.values[REMEMBERED, b] == 0.0 or since > PSD_REUSE_PERIODS * t.rings.shape[1]:
+                    periodogram(t, b, rates.window_power, rates.frame)
+                    t.values[PSD_FRAME, b] = rates.frame
             t.values[SPECTRAL, b] = 1.0 if spectral else 0.0
     for b in range(count):
         kicked = False

@@ -89,6 +89,7 @@ def decay_factor_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np
 
 
 def _rounding_error(c1, c2, sample_rate: float, decay_factor: bool) -> np.ndarray:
+    """:func:`float32_error` (sample_rate in Hz) of the delta or (``decay_factor``) decay-factor form."""
     sounding = c2 > 0.0
     c0, b2 = delta_coefficients(np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.25))
     theta, rho = _pole(c0, b2)
@@ -262,11 +263,45 @@ def _direct_gain(d, count, direct):
 
 
 @nb.njit(inline="always", cache=True)
-def _finish(force, out, n, direct, last):
-    """Add the direct term direct F[i] to out[:n] (after the passes: a scalar held across the
-    mode loops takes a vector register) and leave last[0] at force[n - 1]."""
+def _one_sample(rows, count, fp, by_factor):
+    """One sample of the float32 modes [0, count) of ``rows`` (DeltaRows or HeldRows) whose
+    preceding force is fp (float32, N): their state advanced, their output sum (float32)."""
+    s = np.float32(0.0)
+    for k in range(count):
+        p = rows.y[k]
+        u = p + rows.dy[k]
+        v = _next_delta(rows.dy[k], p, u, rows.c0[k], rows.b2[k], fp, by_factor)
+        rows.y[k] = u
+        rows.dy[k] = v
+        s += rows.g[k] * (u + v)
+    return s
+
+
+@nb.njit(inline="always", cache=True)
+def _tail(force, out, i, n, rows, count, wide, wide_active, last, by_factor, add):
+    """The samples i .. n - 1 after the four-sample passes (fewer than four), one at a time:
+    the float32 modes [0, count) of ``rows`` (:func:`_one_sample`) and the float64 modes
+    [0, wide_active) of ``wide`` (None: none) over force (N), their sum added to out (the
+    bank's output units) with ``add``, else written."""
+    while i < n:
+        fw = force[i - 1] if i > 0 else last[0]
+        s = _one_sample(rows, count, np.float32(fw), by_factor)
+        if wide is not None:
+            s = s + _wide_one(wide, wide_active, fw)
+        if add:
+            out[i] += s
+        else:
+            out[i] = s
+        i += 1
+
+
+@nb.njit(inline="always", cache=True)
+def _finish(force, out, start, n, direct, last):
+    """Add the direct term direct F[i] (force in N) to out[start:n] (after the passes: a
+    scalar held across the mode loops takes a vector register) and leave last[0] at
+    force[n - 1]."""
     if direct != 0.0:
-        for i in range(n):
+        for i in range(start, n):
             out[i] += direct * force[i]
     if n > 0:
         last[0] = force[n - 1]
@@ -285,12 +320,12 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
     numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
-    force and out float64. last[0]: the force sample before force[0], left at
-    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
-    passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
-    multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
-    the flush: exact zeros that stay zero without force, and with force every mode is
-    active)."""
+    force (N) and out (the bank's output units) float64, C-contiguous. last[0]: the force
+    sample before force[0] (N), left at force[n-1]. The direct term sum(d) F[n] is added as
+    in ugens.modal.resonate, after the passes. Four samples per pass over the modes, as
+    there. The float32 modes run up to the next multiple of LANES within the rows
+    (:func:`narrow_rows`' padding, or modes silenced by the flush: exact zeros that stay
+    zero without force, and with force every mode is active)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
     direct = _direct_gain(d, active, 0.0)
@@ -346,28 +381,14 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         out[i + 2] += s2 + t2
         out[i + 3] += s3 + t3
         i += 4
-    while i < n:
-        fw = force[i - 1] if i > 0 else last[0]
-        fp = np.float32(fw)
-        s = np.float32(0.0)
-        for k in range(active):
-            p = y[k]
-            u = p + dy[k]
-            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, by_factor)
-            y[k] = u
-            dy[k] = v
-            s += g[k] * (u + v)
-        t = 0.0
-        if wide is not None:
-            t = _wide_one(wide, wide_active, fw)
-        out[i] += s + t
-        i += 1
-    _finish(force, out, n, direct, last)
+    _tail(force, out, i, n, rows, active, wide, wide_active, last, by_factor, True)
+    _finish(force, out, 0, n, direct, last)
 
 
 class HeldRows(NamedTuple):
-    """The rows :func:`_held_passes` works on, copies of a :class:`DeltaRows`' (without the
-    direct gains) on the kernel's stack (ugens.stack_rows), all of one constant width."""
+    """A :class:`DeltaRows` without the direct gains, as ugens.vector_pass takes the modes:
+    in :func:`_held_passes` copies on the kernel's stack (ugens.stack_rows) of one
+    constant width, in :func:`resonate_factor` the bank's own rows."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -393,37 +414,15 @@ def _hold(rows, held):
 
 
 @nb.njit(inline="always", cache=True)
-def _held_tail(force, out, i, n, held, last):
-    """Write samples i .. n - 1 (fewer than four) of the held modes, one at a time."""
-    c0, b2, g, y, dy = held
-    while i < n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        s = np.float32(0.0)
-        for k in range(c0.size):
-            p = y[k]
-            u = p + dy[k]
-            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
-            y[k] = u
-            dy[k] = v
-            s += g[k] * (u + v)
-        out[i] = s
-        i += 1
-
-
-@nb.njit(inline="always", cache=True)
 def _release(force, out, start, n, rows, held, direct, last):
     """Copy the held state back to ``rows``, add the direct term to out[start:n] and leave
-    last[0] at force[n - 1]. The direct term is added after the passes: added as each
-    sample is written (in float64, or in float32 from the force samples of the pass), it
-    made the kernel 4-13 % slower at 16 and 64 modes."""
+    last[0] at force[n - 1] (:func:`_finish`). The direct term is added after the passes:
+    added as each sample is written (in float64, or in float32 from the force samples of
+    the pass), it made the kernel 4-13 % slower at 16 and 64 modes."""
     for k in range(held.y.size):
         rows.y[k] = held.y[k]
         rows.dy[k] = held.dy[k]
-    if direct != 0.0:
-        for i in range(start, n):
-            out[i] += direct * force[i]
-    if n > 0:
-        last[0] = force[n - 1]
+    _finish(force, out, start, n, direct, last)
 
 
 @nb.njit(inline="always", cache=True)
@@ -435,13 +434,12 @@ def _held_passes(force, out, n, rows, held, last, width):
     (ugens.vector_pass.write_four: the four output sums reduced together, the direct term
     added and the four samples converted and stored as one vector)."""
     direct = _hold(rows, held)
-    c0, b2, g, y, dy = held
     i = 0
     while i + 4 <= n:
         fp = np.float32(force[i - 1] if i > 0 else last[0])
-        vector_pass.write_four(width, c0, b2, g, y, dy, fp, force, out, i, direct)
+        vector_pass.write_four(width, held, fp, force, out, i, direct)
         i += 4
-    _held_tail(force, out, i, n, held, last)
+    _tail(force, out, i, n, held, held.c0.size, None, 0, last, True, False)
     _release(force, out, i, n, rows, held, direct, last)
 
 
@@ -476,10 +474,11 @@ def held_width(active):
 @nb.njit(cache=True)
 def resonate_held(force, out, n, rows, active, last):
     """Write (not add) 1 .. HELD_MODES float32 modes in the decay-factor form over force[:n]
-    to out[:n], as :func:`resonate_delta` computes them with no float64 modes: the modes [0,
-    :func:`held_width`) held on the stack (:func:`_held_passes`; the padding and silenced
-    modes beyond ``active`` hold exact zeros, as in the general loop). The general loop,
-    like the C two-pole loop, loads and stores every mode's state on every pass."""
+    (float64, N) to out[:n] (float64, the bank's output units), as :func:`resonate_delta`
+    computes them with no float64 modes: the modes [0, :func:`held_width`) held on the
+    stack (:func:`_held_passes`; the padding and silenced modes beyond ``active`` hold
+    exact zeros, as in the general loop). The general loop, like the C two-pole loop,
+    loads and stores every mode's state on every pass."""
     width = held_width(active)
     if width == 16:
         _held_16(force, out, n, rows, last)
@@ -503,21 +502,25 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
     direct = _direct_gain(d, active, 0.0)
     if wide is not None:
         direct = _direct_gain(wide.d, wide_active, direct)
+    modes = HeldRows(c0, b2, g, y, dy)
     row = stack_rows.stack_row
     s0, s1, s2, s3 = row(LANES), row(LANES), row(LANES), row(LANES)
+    sums = (s0, s1, s2, s3)
     i = 0
     while i + 4 <= n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
+        forces = (
+            np.float32(force[i - 1] if i > 0 else last[0]),
+            np.float32(force[i]),
+            np.float32(force[i + 1]),
+            np.float32(force[i + 2]),
+        )
         for lane in range(LANES):
             s0[lane] = 0.0
             s1[lane] = 0.0
             s2[lane] = 0.0
             s3[lane] = 0.0
         for k in range(0, active, LANES):
-            vector_pass.add_chunk(LANES, c0, b2, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3)
+            vector_pass.add_chunk(LANES, modes, k, forces, sums)
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
@@ -543,25 +546,10 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
                 t1 += v1
                 t2 += v2
                 t3 += v3
-        vector_pass.write_sums(LANES, s0, s1, s2, s3, out, i, t0, t1, t2, t3)
+        vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
         i += 4
-    while i < n:
-        fw = force[i - 1] if i > 0 else last[0]
-        fp = np.float32(fw)
-        s = np.float32(0.0)
-        for k in range(active):
-            p = y[k]
-            u = p + dy[k]
-            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
-            y[k] = u
-            dy[k] = v
-            s += g[k] * (u + v)
-        t = 0.0
-        if wide is not None:
-            t = _wide_one(wide, wide_active, fw)
-        out[i] = s + t
-        i += 1
-    _finish(force, out, n, direct, last)
+    _tail(force, out, i, n, modes, active, wide, wide_active, last, True, False)
+    _finish(force, out, 0, n, direct, last)
 
 
 @nb.njit(cache=True)

@@ -9,6 +9,9 @@ stored the four sums one by one and added the direct term in a pass of its own.
 the lanes at each step: about half the shuffles and adds), adds the direct term to the
 four at once and converts and stores them as one vector: against the C two-pole loop,
 0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
+Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_factor), run
+:func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
+:func:`write_sums` at the end of each pass.
 
 The arithmetic per mode is ugens.modal_f32's decay-factor update (``_four_samples``):
 with p = y[n-2] / g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2,
@@ -49,6 +52,7 @@ def _lanes(builder, a, b, picks):
 
 
 def _broadcast(builder, x, width):
+    """A vector of ``width`` float32 lanes, each the float32 scalar x (insert, shuffle)."""
     vector = ir.VectorType(_FLOAT, width)
     one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
     return _lanes(builder, one, ir.Constant(vector, ir.Undefined), [0] * width)
@@ -112,57 +116,31 @@ def _pass(builder, lanes, c0v, bv, p, v, forces):
     return u2, v, (u0, u1, u2, u3)
 
 
-@intrinsic
-def write_four(typingctx, width, c0, b, g, y, dy, fp, force, out, i, direct):
-    """Advance the first ``width`` (a literal multiple of VECTOR) modes of the float32 rows
-    c0, b (= R^2 - c0), g, y (= y[n-2] / g), dy (= Delta[n-1] / g) by the four samples i ..
-    i + 3 of ``force`` (float64; fp = the force before sample i, float32), storing y and
-    dy, and write out[i + j] = sum_k g_k y_k + direct force[i + j] (float64 out; the sums,
-    rounded to float32, and the direct term in float32). The rows must start on 64-byte
-    lines (the held kernels' stack rows do, ugens.stack_rows)."""
-    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
-        return None
-    if any(not isinstance(a, types.Array) or a.layout != "C" for a in (c0, b, g, y, dy, force, out)):
-        return None
-    lanes = width.literal_value
+def _is_literal_width(width) -> bool:
+    """Whether ``width`` is a literal int, a multiple of VECTOR (the lanes the code folds to)."""
+    return isinstance(width, types.IntegerLiteral) and width.literal_value % VECTOR == 0
 
-    def codegen(context, builder, signature, args):
-        vector = ir.VectorType(_FLOAT, lanes)
-        four_doubles = ir.VectorType(ir.DoubleType(), 4)
 
-        def data(value, array_type):
-            return context.make_array(array_type)(context, builder, value).data
+def _contiguous(array, dtype) -> bool:
+    """Whether ``array`` is a 1-D C-contiguous array of ``dtype``: the intrinsics read and
+    write its data as vectors of that type (float32 rows and sums, float64 force and out)."""
+    return isinstance(array, types.Array) and array.ndim == 1 and array.layout == "C" and array.dtype == dtype
 
-        rows = [
-            builder.bitcast(data(value, t), vector.as_pointer())
-            for value, t in zip(args[1:6], signature.args[1:6], strict=True)
-        ]
-        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in rows)
-        at = args[9]
-        forces = builder.fptrunc(
-            builder.load(
-                builder.bitcast(
-                    builder.gep(data(args[7], signature.args[7]), [at]), four_doubles.as_pointer()
-                ),
-                align=8,
-            ),
-            ir.VectorType(_FLOAT, 4),
-        )
-        f0, f1, f2 = (builder.extract_element(forces, _INDEX(j)) for j in range(3))
-        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, (args[6], f0, f1, f2))
-        builder.store(y_next, rows[3], align=64)
-        builder.store(v, rows[4], align=64)
-        terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in outputs]
-        total = _sum_four(builder, *(_fold(builder, t, lanes) for t in terms))
-        direct = _broadcast(builder, builder.fptrunc(args[10], _FLOAT), 4)
-        total = _fma(builder, direct, forces, total)
-        target = builder.gep(data(args[8], signature.args[8]), [at])
-        builder.store(
-            builder.fpext(total, four_doubles), builder.bitcast(target, four_doubles.as_pointer()), align=8
-        )
-        return context.get_dummy_value()
 
-    return types.none(width, c0, b, g, y, dy, fp, force, out, i, direct), codegen
+def _contiguous_arrays(record, count: int, dtype) -> bool:
+    """Whether ``record`` is a tuple type of ``count`` arrays passing :func:`_contiguous`."""
+    return (
+        isinstance(record, types.BaseTuple)
+        and len(record) == count
+        and all(_contiguous(t, dtype) for t in record.types)
+    )
+
+
+def _scalars(record, count: int, dtype) -> bool:
+    """Whether ``record`` is a tuple type of ``count`` scalars of ``dtype``."""
+    return (
+        isinstance(record, types.BaseTuple) and len(record) == count and all(t == dtype for t in record.types)
+    )
 
 
 def _row_pointer(context, builder, array_type, value, at, vector):
@@ -171,69 +149,125 @@ def _row_pointer(context, builder, array_type, value, at, vector):
     return builder.bitcast(builder.gep(data, [at]), vector.as_pointer())
 
 
-def _contiguous(*arrays) -> bool:
-    return all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
+def _row_pointers(context, builder, record_type, record, at, vector):
+    """:func:`_row_pointer` of each array of a record (a tuple of arrays)."""
+    values = cgutils.unpack_tuple(builder, record, len(record_type))
+    return [
+        _row_pointer(context, builder, t, v, at, vector)
+        for t, v in zip(record_type.types, values, strict=True)
+    ]
 
 
 @intrinsic
-def add_chunk(typingctx, width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3):
-    """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
-    of it) of the float32 rows c0, b (= R^2 - c0), g, y (= y[n-2] / g), dy (= Delta[n-1] /
-    g) by four samples whose preceding forces are fp, f0, f1, f2 (float32), storing y and
-    dy, and add g_k y_k / g_k of sample j to the lanes of the float32 row s_j (of
-    ``width`` lanes: per-lane partial sums over the chunks of a pass, :func:`write_sums`).
-    The mode rows may lie anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines,
-    a caller's own rows may not be: loads aligned to 64 bytes faulted on them); the sums
-    must be on 64-byte lines (ugens.stack_rows)."""
-    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
-        return None
-    if not _contiguous(c0, b, g, y, dy, s0, s1, s2, s3):
+def write_four(typingctx, width, rows, fp, force, out, i, direct):
+    """Advance the first ``width`` (a literal multiple of VECTOR) modes of ``rows``, float32
+    rows (c0, b = R^2 - c0, g, y = y[n-2] / g, dy = Delta[n-1] / g) on 64-byte lines (the
+    held kernels' stack rows, ugens.stack_rows), by the samples i .. i + 3 of ``force``
+    (float64, N; fp = the force before sample i, float32), storing y and dy, and write
+    out[i + j] = sum_k g_k y_k + direct force[i + j] (float64 out in the bank's output
+    units; the sums rounded to float32, the direct term added in float32). Typing refuses
+    (numba raises a TypingError) other dtypes, non-contiguous arrays and other widths."""
+    if not (
+        _is_literal_width(width)
+        and _contiguous_arrays(rows, 5, types.float32)
+        and fp == types.float32
+        and _contiguous(force, types.float64)
+        and _contiguous(out, types.float64)
+        and isinstance(i, types.Integer)
+        and direct == types.float64
+    ):
         return None
     lanes = width.literal_value
 
     def codegen(context, builder, signature, args):
-        vector = ir.VectorType(_FLOAT, lanes)
-        at = args[6]
-        rows = [
-            _row_pointer(context, builder, t, value, at, vector)
-            for value, t in zip(args[1:6], signature.args[1:6], strict=True)
-        ]
-        c0v, bv, gv, p, v = (builder.load(row, align=4) for row in rows)
-        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, args[7:11])
-        builder.store(y_next, rows[3], align=4)
-        builder.store(v, rows[4], align=4)
-        for value, t, uj in zip(args[11:15], signature.args[11:15], outputs, strict=True):
-            sums = _row_pointer(context, builder, t, value, cgutils.intp_t(0), vector)
-            builder.store(_fma(builder, gv, uj, builder.load(sums, align=64)), sums, align=64)
-        return context.get_dummy_value()
-
-    return types.none(width, c0, b, g, y, dy, k, fp, f0, f1, f2, s0, s1, s2, s3), codegen
-
-
-@intrinsic
-def write_sums(typingctx, width, s0, s1, s2, s3, out, i, t0, t1, t2, t3):
-    """out[i + j] = sum(s_j) + t_j for j = 0 .. 3: the four float32 rows of ``width`` lanes
-    (a literal multiple of VECTOR) of :func:`add_chunk` reduced together, converted and
-    stored as one vector, with the float64 t_j (the float64 modes' outputs) added."""
-    if not isinstance(width, types.IntegerLiteral) or width.literal_value % VECTOR:
-        return None
-    if not _contiguous(s0, s1, s2, s3, out):
-        return None
-    lanes = width.literal_value
-
-    def codegen(context, builder, signature, args):
+        _, rows, fp, force, out, at, direct = args
         vector = ir.VectorType(_FLOAT, lanes)
         four_doubles = ir.VectorType(ir.DoubleType(), 4)
-        sums = [
-            builder.load(_row_pointer(context, builder, t, value, cgutils.intp_t(0), vector), align=64)
-            for value, t in zip(args[1:5], signature.args[1:5], strict=True)
-        ]
-        total = builder.fpext(_sum_four(builder, *(_fold(builder, s, lanes) for s in sums)), four_doubles)
-        wide = ir.Constant(four_doubles, ir.Undefined)
-        for j, tj in enumerate(args[7:11]):
-            wide = builder.insert_element(wide, tj, _INDEX(j))
-        target = _row_pointer(context, builder, signature.args[5], args[5], args[6], four_doubles)
-        builder.store(builder.fadd(total, wide), target, align=8)
+        pointers = _row_pointers(context, builder, signature.args[1], rows, cgutils.intp_t(0), vector)
+        c0v, bv, gv, p, v = (builder.load(row, align=64) for row in pointers)
+        samples = _row_pointer(context, builder, signature.args[3], force, at, four_doubles)
+        forces = builder.fptrunc(builder.load(samples, align=8), ir.VectorType(_FLOAT, 4))
+        f0, f1, f2 = (builder.extract_element(forces, _INDEX(j)) for j in range(3))
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, (fp, f0, f1, f2))
+        builder.store(y_next, pointers[3], align=64)
+        builder.store(v, pointers[4], align=64)
+        terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in outputs]
+        total = _sum_four(builder, *(_fold(builder, t, lanes) for t in terms))
+        total = _fma(builder, _broadcast(builder, builder.fptrunc(direct, _FLOAT), 4), forces, total)
+        target = _row_pointer(context, builder, signature.args[4], out, at, four_doubles)
+        builder.store(builder.fpext(total, four_doubles), target, align=8)
         return context.get_dummy_value()
 
-    return types.none(width, s0, s1, s2, s3, out, i, t0, t1, t2, t3), codegen
+    return types.none(width, rows, fp, force, out, i, direct), codegen
+
+
+@intrinsic
+def add_chunk(typingctx, width, rows, k, forces, sums):
+    """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
+    of it) of ``rows`` (c0, b, g, y, dy as in :func:`write_four`) by four samples whose
+    preceding forces are ``forces`` (four float32, N), storing y and dy, and add g_k y_k / g_k
+    of sample j to the lanes of sums[j] (four float32 rows of ``width`` lanes: per-lane
+    partial sums over the chunks of a pass, :func:`write_sums`). The mode rows may lie
+    anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a caller's own rows
+    may not be: loads aligned to 64 bytes faulted on them); the sums must be on 64-byte
+    lines (ugens.stack_rows)."""
+    if not (
+        _is_literal_width(width)
+        and _contiguous_arrays(rows, 5, types.float32)
+        and isinstance(k, types.Integer)
+        and _scalars(forces, 4, types.float32)
+        and _contiguous_arrays(sums, 4, types.float32)
+    ):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        _, rows, at, forces, sums = args
+        vector = ir.VectorType(_FLOAT, lanes)
+        pointers = _row_pointers(context, builder, signature.args[1], rows, at, vector)
+        c0v, bv, gv, p, v = (builder.load(row, align=4) for row in pointers)
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, cgutils.unpack_tuple(builder, forces, 4))
+        builder.store(y_next, pointers[3], align=4)
+        builder.store(v, pointers[4], align=4)
+        for row, uj in zip(
+            _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), vector),
+            outputs,
+            strict=True,
+        ):
+            builder.store(_fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
+        return context.get_dummy_value()
+
+    return types.none(width, rows, k, forces, sums), codegen
+
+
+@intrinsic
+def write_sums(typingctx, width, sums, out, i, wide):
+    """out[i + j] = sum(sums[j]) + wide[j] for j = 0 .. 3: the four float32 rows of ``width``
+    lanes (a literal multiple of VECTOR) of :func:`add_chunk` reduced together, converted
+    and stored as one vector in ``out`` (float64, the bank's output units), with the four
+    float64 ``wide`` (the float64 modes' outputs) added."""
+    if not (
+        _is_literal_width(width)
+        and _contiguous_arrays(sums, 4, types.float32)
+        and _contiguous(out, types.float64)
+        and isinstance(i, types.Integer)
+        and _scalars(wide, 4, types.float64)
+    ):
+        return None
+    lanes = width.literal_value
+
+    def codegen(context, builder, signature, args):
+        _, sums, out, at, wide = args
+        vector = ir.VectorType(_FLOAT, lanes)
+        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        pointers = _row_pointers(context, builder, signature.args[1], sums, cgutils.intp_t(0), vector)
+        rows = [_fold(builder, builder.load(row, align=64), lanes) for row in pointers]
+        total = builder.fpext(_sum_four(builder, *rows), four_doubles)
+        wide_vector = ir.Constant(four_doubles, ir.Undefined)
+        for j, tj in enumerate(cgutils.unpack_tuple(builder, wide, 4)):
+            wide_vector = builder.insert_element(wide_vector, tj, _INDEX(j))
+        target = _row_pointer(context, builder, signature.args[2], out, at, four_doubles)
+        builder.store(builder.fadd(total, wide_vector), target, align=8)
+        return context.get_dummy_value()
+
+    return types.none(width, sums, out, i, wide), codegen

@@ -39,6 +39,7 @@ def _frames(modes: int) -> int:
 
 
 def _error_db(y: np.ndarray, ref: np.ndarray) -> float:
+    """Peak |y - ref| in dB of the peak |ref| (outputs in the bank's output units)."""
     return float(20 * np.log10(np.max(np.abs(y - ref)) / np.max(np.abs(ref))))
 
 
@@ -135,6 +136,7 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
 
 
 def print_float32(rows: list[dict]) -> None:
+    """Print :func:`float32_bench`'s rows: rates in mode-samples/s, speed ratios to C, errors in dB."""
     print(
         "float32 modal bank vs a C float32 loop compiled now "
         f"({rows[0]['c_note']}); ratios min / median / max over interleaved rounds"
