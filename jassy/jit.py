@@ -136,6 +136,22 @@ def callee_closure(module_file: str) -> list[ModuleType]:
     return [found[name] for name in sorted(found)]
 
 
+def cache_folder(module_file: str) -> str | None:
+    """The folder numba caches ``module_file``'s functions in, found by numba's own cache
+    locators in numba's order (``NUMBA_CACHE_DIR``'s mirror of the source folder if set,
+    else the module's ``__pycache__`` if writable, else the user-wide cache folder), or None
+    if none accepts the file. Creates the folder, as numba does when it caches there."""
+
+    def stand_in():
+        """A function of ``module_file`` as numba's locators see it (its code's file name)."""
+
+    stand_in.__code__ = stand_in.__code__.replace(co_filename=module_file)
+    try:
+        return caching.CompileResultCacheImpl(stand_in).locator.get_cache_path()
+    except RuntimeError:  # no locator available for the file
+        return None
+
+
 def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
     """Delete numba's cache of ``module_file`` if a module whose kernels it calls changed.
 
@@ -146,7 +162,9 @@ def drop_stale_cache(module_file: str, callees: list[ModuleType]) -> None:
     callees' own recorded callees (imported, so recorded, before this call) are stamped
     too. The stamp is one line ``name mtime_ns size`` per module of the closure."""
     _RECORDED_CALLEES[module_file] = tuple(callees)
-    folder = os.path.join(os.path.dirname(module_file), "__pycache__")
+    folder = cache_folder(module_file)
+    if folder is None:
+        return  # numba does not cache this file's functions either
     stem = os.path.splitext(os.path.basename(module_file))[0]
     stamps = []
     for module in callee_closure(module_file):
@@ -367,8 +385,51 @@ def _plain_error_text() -> None:
             module._termcolor = plain
 
 
+def _blas_checked_when_used() -> None:
+    """Let numba decide whether it has a BLAS by finding scipy's BLAS module, not importing it.
+
+    numba imports its array library the first time a process compiles or loads a kernel, and
+    that import asks whether np.dot and friends can be offered by importing
+    ``scipy.linalg.cython_blas`` (which imports ``scipy.linalg``: about 0.15 s of CPU per
+    process, for kernels that use no linear algebra). During that one import, numba's check
+    only looks for the module's file in scipy's folder; afterwards numba's own check
+    runs, as before, where a kernel really calls BLAS or LAPACK (and raises there if scipy's
+    module cannot be imported)."""
+    from importlib.machinery import EXTENSION_SUFFIXES
+    from importlib.util import find_spec
+
+    from numba.core import cpu
+
+    load = cpu.CPUContext.load_additional_registries
+
+    def blas_present():
+        scipy = find_spec("scipy")  # finding a submodule would import its package
+        folders = (scipy.submodule_search_locations or ()) if scipy is not None else ()
+        names = [
+            os.path.join(folder, "linalg", "cython_blas" + end)
+            for folder in folders
+            for end in EXTENSION_SUFFIXES
+        ]
+        if not any(os.path.exists(name) for name in names):
+            raise ImportError("scipy 0.16+ is required for linear algebra")
+
+    def load_additional_registries(self):
+        if "numba.np.arraymath" in sys.modules:
+            return load(self)
+        from numba.np import linalg  # imported here by numba anyway, not at jassy's import
+
+        check, linalg.ensure_blas = linalg.ensure_blas, blas_present
+        try:
+            return load(self)
+        finally:
+            linalg.ensure_blas = check
+
+    cpu.CPUContext.load_additional_registries = load_additional_registries
+
+
 _keep_linked_copies_private()
 _lock_cache_index_updates()
 _no_c_wrappers_for_kernels()
 _faster_flag_comparisons()
 _plain_error_text()
+_blas_checked_when_used()

@@ -116,23 +116,44 @@ class ParamSpec:
         return value
 
 
+#: Fields of a ramp array (Smoothed.ramp and the ramps in jassy.program's records): the value
+#: of the next sample, the target, the increment per sample and the samples left.
+RAMP_NEXT, RAMP_TARGET, RAMP_INCREMENT, RAMP_SAMPLES = range(4)
+
+
 @nb.njit(cache=True, inline="always")  # inlined, as jassy.engines.callback.apply_event
 def ramp_fill(ramp, out, n):
     """Write n per-sample values of a linear ramp into out[:n] and advance it.
 
-    ramp = [value of the next sample, target, increment, samples left]. A ramp of m samples
-    set at frame e outputs the old value at e and the target from e + m on: the parameter
-    is the straight line through (e, old) and (e + m, new), sampled.
+    ramp: the RAMP_* fields. A ramp of m samples set at frame e outputs the old value at e
+    and the target from e + m on: the parameter is the straight line through (e, old) and
+    (e + m, new), sampled.
     """
-    cur = ramp[0]
-    remaining = int(ramp[3])
+    cur = ramp[RAMP_NEXT]
+    remaining = int(ramp[RAMP_SAMPLES])
     for i in range(n):
         out[i] = cur
         if remaining > 0:
             remaining -= 1
-            cur = ramp[1] if remaining == 0 else cur + ramp[2]
-    ramp[0] = cur
-    ramp[3] = remaining
+            cur = ramp[RAMP_TARGET] if remaining == 0 else cur + ramp[RAMP_INCREMENT]
+    ramp[RAMP_NEXT] = cur
+    ramp[RAMP_SAMPLES] = remaining
+
+
+@nb.njit(cache=True, inline="always")
+def ramp_to(ramp, value, samples):
+    """Move a ramp (RAMP_* fields) to ``value``: at once if ``samples`` < 1, else linearly
+    over ``samples`` samples from its next value (Smoothed.set in compiled code)."""
+    if samples < 1:
+        ramp[RAMP_NEXT] = value
+        ramp[RAMP_TARGET] = value
+        ramp[RAMP_INCREMENT] = 0.0
+        ramp[RAMP_SAMPLES] = 0.0
+    else:
+        cur = ramp[RAMP_NEXT]
+        ramp[RAMP_TARGET] = value
+        ramp[RAMP_INCREMENT] = (value - cur) / samples
+        ramp[RAMP_SAMPLES] = samples
 
 
 class Smoothed:
@@ -150,21 +171,21 @@ class Smoothed:
 
     @property
     def target(self) -> float:
-        return float(self.ramp[1])
+        return float(self.ramp[RAMP_TARGET])
 
     def set(self, value: float, ramp_samples: int, jump: bool = False) -> None:
         """Move to ``value``: at once if ``jump`` or ramp_samples < 1, else linearly."""
         if jump or ramp_samples < 1:
             self.ramp[:] = (value, value, 0.0, 0.0)
         else:
-            cur = self.ramp[0]
+            cur = self.ramp[RAMP_NEXT]
             self.ramp[:] = (cur, value, (value - cur) / ramp_samples, ramp_samples)
         self.sync()
 
     def sync(self) -> None:
         """Refresh ``steady``/``value`` after the ramp array changed (e.g. state restore)."""
-        self.steady = bool(self.ramp[3] == 0)
-        self.value = float(self.ramp[0])
+        self.steady = bool(self.ramp[RAMP_SAMPLES] == 0)
+        self.value = float(self.ramp[RAMP_NEXT])
 
     def fill(self, out: np.ndarray, n: int) -> np.ndarray:
         """Per-sample values for the next n samples (advances the ramp; see ramp_fill)."""

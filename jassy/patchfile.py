@@ -224,11 +224,8 @@ def _names(value: Any, key: str) -> list[str]:
     return items
 
 
-def build_patch(
-    data: dict, source: str = "patch", base: Path = Path("."), overrides: list[str] | tuple[str, ...] = ()
-) -> Patch:
-    """Build a validated :class:`Patch` from parsed TOML data."""
-    where = source
+def _check_keys(data: dict, where: str) -> dict:
+    """Refuse unknown top-level and ``[patch]`` keys; return the ``[patch]`` table."""
     for key in data:
         if key not in TOP_KEYS:
             raise PatchError(
@@ -242,7 +239,11 @@ def build_patch(
                 f"{where}: patch.{key}: unknown key; expected {', '.join(sorted(PATCH_KEYS))}"
                 f"{suggest(key, PATCH_KEYS)}"
             )
-    models = _load_models(_table(data, "models", where), where, base)
+    return meta
+
+
+def _node_tables(data: dict, where: str, overrides: list[str] | tuple[str, ...]) -> dict:
+    """The ``[nodes.NAME]`` tables (copies) with the ``--set NODE.PARAM=VALUE`` overrides applied."""
     tables = _table(data, "nodes", where)
     if not tables:
         raise PatchError(f"{where}: nodes: expected at least one [nodes.NAME] table")
@@ -256,51 +257,64 @@ def build_patch(
         if param in ("type", "input", "inputs"):
             raise PatchError(f"--set {text}: only parameters can be overridden, not {param!r}")
         tables[node][param] = value
+    return tables
 
+
+def _build_node(name: str, table: Any, models: dict, key: str) -> tuple[UGen, dict[str, str]]:
+    """One node from its table (``key`` names it in errors): the ugen and its input wiring
+    (input name -> source node name)."""
+    if not isinstance(table, dict) or not isinstance(table.get("type"), str):
+        raise PatchError(f"{key}.type: expected the name of a ugen type")
+    cls = ugen_class(table["type"], f"{key}.type")
+    params = {k: v for k, v in table.items() if k != "type"}
+    allowed = set(cls.all_specs()) | set(cls.inputs) | ({"inputs"} if cls.variadic else set())
+    for pkey in params:
+        if pkey not in allowed:
+            raise PatchError(
+                f"{key}: unknown parameter {pkey!r}; "
+                f"expected one of {', '.join(sorted(allowed))}{suggest(pkey, allowed)}"
+            )
+    connect = {}
+    if cls.variadic:
+        if "inputs" not in params:
+            raise PatchError(
+                f"{key}.inputs: expected a list of node names ({cls.type_name} mixes any number)"
+            )
+        connect = {f"in{i}": n for i, n in enumerate(_names(params.pop("inputs"), f"{key}.inputs"))}
+    else:
+        for inp in cls.inputs:
+            if inp in params:
+                value = params.pop(inp)
+                if not isinstance(value, str):
+                    raise PatchError(f"{key}.{inp}: expected the name of the source node, got {value!r}")
+                connect[inp] = value
+    for pkey, spec in cls.all_specs().items():
+        if spec.kind == "model" and pkey in params:
+            ref = params[pkey]
+            if not isinstance(ref, str) or ref not in models:
+                known = ", ".join(models) or "none (add [models.NAME])"
+                raise PatchError(
+                    f"{key}.{pkey}: unknown model {ref!r}; models are {known}{suggest(ref, models)}"
+                )
+            params[pkey] = models[ref]
+    return cls(name=name, where=key, **params), connect
+
+
+def _build_nodes(tables: dict, models: dict, where: str) -> dict[str, UGen]:
+    """Every node of the patch, connected to its inputs."""
     nodes, wiring = {}, {}
     for name, table in tables.items():
-        key = f"{where}: nodes.{name}"
-        if not isinstance(table, dict) or not isinstance(table.get("type"), str):
-            raise PatchError(f"{key}.type: expected the name of a ugen type")
-        cls = ugen_class(table["type"], f"{key}.type")
-        params = {k: v for k, v in table.items() if k != "type"}
-        allowed = set(cls.all_specs()) | set(cls.inputs) | ({"inputs"} if cls.variadic else set())
-        for pkey in params:
-            if pkey not in allowed:
-                raise PatchError(
-                    f"{key}: unknown parameter {pkey!r}; "
-                    f"expected one of {', '.join(sorted(allowed))}{suggest(pkey, allowed)}"
-                )
-        connect = {}
-        if cls.variadic:
-            if "inputs" not in params:
-                raise PatchError(
-                    f"{key}.inputs: expected a list of node names ({cls.type_name} mixes any number)"
-                )
-            connect = {f"in{i}": n for i, n in enumerate(_names(params.pop("inputs"), f"{key}.inputs"))}
-        else:
-            for inp in cls.inputs:
-                if inp in params:
-                    value = params.pop(inp)
-                    if not isinstance(value, str):
-                        raise PatchError(f"{key}.{inp}: expected the name of the source node, got {value!r}")
-                    connect[inp] = value
-        for pkey, spec in cls.all_specs().items():
-            if spec.kind == "model" and pkey in params:
-                ref = params[pkey]
-                if not isinstance(ref, str) or ref not in models:
-                    known = ", ".join(models) or "none (add [models.NAME])"
-                    raise PatchError(
-                        f"{key}.{pkey}: unknown model {ref!r}; models are {known}{suggest(ref, models)}"
-                    )
-                params[pkey] = models[ref]
-        nodes[name] = cls(name=name, where=key, **params)
-        wiring[name] = connect
+        nodes[name], wiring[name] = _build_node(name, table, models, f"{where}: nodes.{name}")
     for name, connect in wiring.items():
         for inp, src in connect.items():
             label = "inputs" if nodes[name].variadic else inp
             nodes[name].connect(_reference(nodes, src, f"{where}: nodes.{name}.{label}"), inp)
+    return nodes
 
+
+def _build_graph(data: dict, meta: dict, nodes: dict[str, UGen], where: str) -> Graph:
+    """The graph from the ``[outputs]`` table and the ``[patch]`` mode/CPU budget; every node
+    must reach an output."""
     outputs = _table(data, "outputs", where)
     for key in outputs:
         if key not in ("audio", "haptic"):
@@ -324,11 +338,21 @@ def build_patch(
         graph = Graph(picked["audio"], picked["haptic"], budget)
     except PatchError as exc:
         raise PatchError(f"{where}: {exc}") from None
-
     unused = sorted(set(nodes) - set(graph.nodes))
     if unused:
         raise PatchError(f"{where}: nodes.{unused[0]}: not connected to any output")
+    return graph
 
+
+def build_patch(
+    data: dict, source: str = "patch", base: Path = Path("."), overrides: list[str] | tuple[str, ...] = ()
+) -> Patch:
+    """Build a validated :class:`Patch` from parsed TOML data."""
+    where = source
+    meta = _check_keys(data, where)
+    models = _load_models(_table(data, "models", where), where, base)
+    nodes = _build_nodes(_node_tables(data, where, overrides), models, where)
+    graph = _build_graph(data, meta, nodes, where)
     duration = meta.get("duration")
     rate = meta.get("sample_rate")
     try:

@@ -15,7 +15,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from jassy.jit import void_pointer
+from jassy import jit
+from jassy.jit import drop_stale_cache, void_pointer
+
+drop_stale_cache(__file__, [jit])  # its views hold copies of jit.void_pointer's code
 
 #: int64 slots per field of a handle: address (or an integer's value), then two extents.
 FIELD = 3

@@ -58,9 +58,9 @@ def plate_shapes(
     by two numbers, (points, modes) for arrays of u and v.
 
     Each sine's argument is rounded as (pi m) u, or as pi (m u) with ``pi_last``: the two
-    differ in the last bits. The runtime surface and the glass plate's model
-    file use the first, the files of :func:`patches.models_surface.ss_plate_model` were
-    written with the second, and each keeps its bits."""
+    differ in the last bits. The runtime surface and the glass plate's model file use the
+    first, the files of :func:`patches.models_surface.ss_plate_model` were written with the
+    second; the flag stays because no single order reproduces every shipped file's gains."""
     u = np.asarray(u, dtype=np.float64)[..., None]
     v = np.asarray(v, dtype=np.float64)[..., None]
     return np.sin(_sine_argument(orders_x, u, pi_last)) * np.sin(_sine_argument(orders_y, v, pi_last))

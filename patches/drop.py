@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -46,9 +47,90 @@ def bar_model(
     return ModalModel(f, decays, gains[None, :], name=name)
 
 
+class Throw(NamedTuple):
+    """One thrown object: its rigid shape and material (physics.rigid's table), its modal
+    material and overrides (physics.modal's table), bar length (m) for its modes, start
+    position (m) and velocity (m/s), and its hit duration (s)."""
+
+    name: str
+    shape: object
+    rigid: str
+    modal: tuple[str, dict]
+    size: float
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float]
+    hit: float
+
+
+def throws() -> list[Throw]:
+    """The scene's seven objects with their throws."""
+    from physics.rigid.shapes import Box, Capsule, Convex, Sphere
+
+    die = Convex(trimesh.creation.icosahedron().vertices * 0.015)
+    rubber = ("plastic", {"youngs": 5e7, "loss": 0.15})
+    return [
+        Throw(
+            "steel_ball",
+            Sphere(0.02),
+            "steel",
+            ("steel", {}),
+            0.04,
+            (-0.35, -0.2, 0.40),
+            (0.45, 0.3, 0.0),
+            2e-4,
+        ),
+        Throw(
+            "glass_marble",
+            Sphere(0.008),
+            "glass",
+            ("glass", {}),
+            0.016,
+            (-0.2, 0.25, 0.30),
+            (0.5, -0.2, 0.0),
+            1.5e-4,
+        ),
+        Throw(
+            "wood_block",
+            Box((0.04, 0.025, 0.015)),
+            "wood",
+            ("wood", {}),
+            0.08,
+            (0.1, -0.25, 0.15),
+            (-0.9, 0.2, 0.0),
+            6e-4,
+        ),
+        Throw(
+            "ceramic_tile",
+            Box((0.03, 0.03, 0.004)),
+            "ceramic",
+            ("ceramic", {}),
+            0.06,
+            (0.25, 0.2, 0.2),
+            (-1.1, -0.3, 0.0),
+            2e-4,
+        ),
+        Throw(
+            "rubber_ball", Sphere(0.025), "rubber", rubber, 0.05, (0.35, -0.1, 0.55), (-0.2, 0.1, 0.0), 3e-3
+        ),
+        Throw(
+            "plastic_die", die, "plastic", ("plastic", {}), 0.03, (-0.05, 0.0, 0.35), (0.3, 0.2, 0.0), 5e-4
+        ),
+        Throw(
+            "ceramic_roller",
+            Capsule(0.015, 0.03),
+            "ceramic",
+            ("ceramic", {}),
+            0.09,
+            (0.0, 0.3, 0.25),
+            (0.1, -0.6, 0.0),
+            2e-4,
+        ),
+    ]
+
+
 def build_world(seed: int = 0, h: float = 1e-3):
     """(world, voices): the table and seven objects with their throws."""
-    from physics.rigid.shapes import Box, Capsule, Convex, Sphere, mass_properties
+    from physics.rigid.shapes import Box, mass_properties
     from physics.rigid.world import MATERIALS, Body, Material, Placement, StepParams, World
 
     rng = np.random.default_rng(seed)
@@ -64,93 +146,21 @@ def build_world(seed: int = 0, h: float = 1e-3):
             board, hit_duration=8e-4, scrape_roughness=3e-6, roll_roughness=1.5e-5, stiffness=500.0, level=1.0
         )
     }
-    objects = [  # name, shape, rigid material, (modal material, overrides), size m, position, velocity, hit s
-        (
-            "steel_ball",
-            Sphere(0.02),
-            "steel",
-            ("steel", {}),
-            0.04,
-            (-0.35, -0.2, 0.40),
-            (0.45, 0.3, 0.0),
-            2e-4,
-        ),
-        (
-            "glass_marble",
-            Sphere(0.008),
-            "glass",
-            ("glass", {}),
-            0.016,
-            (-0.2, 0.25, 0.30),
-            (0.5, -0.2, 0.0),
-            1.5e-4,
-        ),
-        (
-            "wood_block",
-            Box((0.04, 0.025, 0.015)),
-            "wood",
-            ("wood", {}),
-            0.08,
-            (0.1, -0.25, 0.15),
-            (-0.9, 0.2, 0.0),
-            6e-4,
-        ),
-        (
-            "ceramic_tile",
-            Box((0.03, 0.03, 0.004)),
-            "ceramic",
-            ("ceramic", {}),
-            0.06,
-            (0.25, 0.2, 0.2),
-            (-1.1, -0.3, 0.0),
-            2e-4,
-        ),
-        (
-            "rubber_ball",
-            Sphere(0.025),
-            "rubber",
-            ("plastic", {"youngs": 5e7, "loss": 0.15}),
-            0.05,
-            (0.35, -0.1, 0.55),
-            (-0.2, 0.1, 0.0),
-            3e-3,
-        ),
-        (
-            "plastic_die",
-            Convex(trimesh.creation.icosahedron().vertices * 0.015),
-            "plastic",
-            ("plastic", {}),
-            0.03,
-            (-0.05, 0.0, 0.35),
-            (0.3, 0.2, 0.0),
-            5e-4,
-        ),
-        (
-            "ceramic_roller",
-            Capsule(0.015, 0.03),
-            "ceramic",
-            ("ceramic", {}),
-            0.09,
-            (0.0, 0.3, 0.25),
-            (0.1, -0.6, 0.0),
-            2e-4,
-        ),
-    ]
-    for name, shape, rigid, modal, size, pos, vel, hit in objects:
-        mat = MATERIALS[rigid]
-        mass = mass_properties(shape, mat.density).mass
+    for throw in throws():
+        mat = MATERIALS[throw.rigid]
+        mass = mass_properties(throw.shape, mat.density).mass
         place = Placement(
-            position=pos,
+            position=throw.position,
             quaternion=tuple(rng.normal(size=4)),
-            velocity=vel,
+            velocity=throw.velocity,
             angular_velocity=tuple(rng.normal(size=3) * 4.0),
         )
-        model = bar_model(name, size, mass, *modal)
-        idx = world.add(Body(name, shape, mat), place)
+        model = bar_model(throw.name, throw.size, mass, *throw.modal)
+        idx = world.add(Body(throw.name, throw.shape, mat), place)
         if model is not None:
             voices[idx] = Voice(
                 model,
-                hit_duration=hit,
+                hit_duration=throw.hit,
                 scrape_roughness=2e-6,
                 roll_roughness=1e-5,
                 stiffness=300.0,

@@ -308,6 +308,40 @@ def test_the_compiled_render_of_all_banks_matches_each_bank_rendering_itself(mon
         assert max_abs_diff(compiled, by_python) < 1e-12 * np.max(np.abs(compiled)), changing
 
 
+def test_a_location_jump_keeps_the_compact_bank_in_place(monkeypatch):
+    """A budgeted bank's location jump (the poles stay) sets its coefficients, and its
+    compact bank's kept columns, to the new design in place (modal_budget.jump_to_fresh):
+    the same output, bit for bit, as writing the compact bank back, jumping and
+    gathering it again; six bells at a quarter of their modes, 40 jumps between struck
+    locations, some while the banks ring."""
+    rng = np.random.default_rng(3)
+    jumps = [
+        Event(float(t), f"b{int(b)}", "set", {"location": int(loc)}, jump=True)
+        for t, b, loc in zip(
+            rng.uniform(0, 1.0, 40), rng.integers(0, 6, 40), rng.integers(0, 4, 40), strict=True
+        )
+    ]
+    taken = []
+    in_place = ModalBank._jumps_gains_only
+
+    def counted(self, jump):
+        taken.append(in_place(self, jump))
+        return taken[-1]
+
+    def run(jumping):
+        graph, score = scene(ModeBudget(max_modes=225), seconds=1.0)
+        score = sorted(score + (jumps if jumping else []), key=lambda event: event.time)
+        return render(graph, score, 1.0, FS, 4096, limiter=False).audio
+
+    monkeypatch.setattr(ModalBank, "_jumps_gains_only", counted)
+    fast = run(True)
+    assert sum(taken) == len(jumps)
+    monkeypatch.setattr(ModalBank, "_jumps_gains_only", lambda self, jump: False)
+    settled = run(True)
+    assert np.array_equal(fast, settled)
+    assert max_abs_diff(fast, run(False)) > 1e-3 * np.max(np.abs(fast))  # the jumps are heard
+
+
 def chained_bells(budget):
     """Bell ``b`` (100 modes) hears bell ``a`` (150 modes), which a hammer strikes 4 times;
     only ``b`` is heard."""
@@ -442,3 +476,120 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
         assert np.allclose(t.rows[mb.SPECTRUM, 11:], psd, rtol=1e-10)
         assert t.values[mb.REMEMBERED, 1] == 1.0
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
+
+
+def test_a_remembered_psd_stands_for_one_period():
+    """ugens.modal_budget.decide on tables whose second bank hears a new force at each
+    decision, one budget period apart (six decisions), then two apart (three): its
+    periodogram (the PSD numpy gives for that ring, blended with the one remembered) is
+    taken at every other decision while they come every period and at each when they
+    come further apart (PSD_REUSE_PERIODS); the decisions between rank by the remembered
+    PSD unchanged."""
+    from ugens import modal_budget as mb
+
+    period, counts, window_power = 256, [11, 23], 3.5
+    t = mb.budget_tables(counts, period)
+    t.values[mb.TRANSFORMED, 1] = 1.0
+    t.meta[:, 2] = counts  # every mode allowed
+    t.rows[mb.SIN2] = 0.5
+    rng = np.random.default_rng(5)
+    t.bins[:] = rng.integers(2, period // 2 - 2, sum(counts))
+    masks = (np.zeros(sum(counts), dtype=bool) for _ in range(3))
+    d = mb.Decision(np.zeros(2, dtype=bool), np.array([False, True]), np.zeros(2, dtype=np.intp),
+                    np.zeros((3, sum(counts))), *masks)  # fmt: skip
+    assert mb.PSD_REUSE_PERIODS == 1
+    remembered, transforms = None, []
+    for k, frame in enumerate([*range(0, 6 * period, period), *range(7 * period, 13 * period, 2 * period)]):
+        t.rings[1] = rng.normal(size=period) * (k + 1)
+        spectrum = np.fft.rfft((t.rings[1] - t.rings[1].mean()) * np.hanning(period))
+        padded = np.pad(np.abs(spectrum) ** 2, 2)
+        fresh = padded[t.bins[11:, None] + np.arange(5)] @ mb.PSD_SMOOTHING / window_power
+        before = t.rows[mb.SPECTRUM, 11:].copy()
+        mb.decide(t, d, mb.Rates(float(FS), 20, 1.25, 0.99, 0, 0, window_power, frame))
+        transformed = not np.array_equal(before, t.rows[mb.SPECTRUM, 11:])
+        transforms.append(transformed)
+        if transformed:
+            remembered = (
+                fresh if remembered is None else mb.PSD_MEMORY * remembered + (1 - mb.PSD_MEMORY) * fresh
+            )
+        assert np.allclose(t.rows[mb.SPECTRUM, 11:], remembered, rtol=1e-10), k
+        assert t.values[mb.SPECTRAL, 1] == 1.0
+    assert transforms == [True, False] * 3 + [True] * 3
+
+
+def rubbed_bell(budget):
+    """A bell of 150 modes rubbed by white noise (a steady contact force)."""
+    from ugens.noise import WhiteNoise
+
+    noise = WhiteNoise(name="rub", amp=1.0, seed=2)
+    return Graph(ModalBank(bell_model(150), name="bell", gain=0.01)(noise), budget=budget)
+
+
+def test_a_steady_force_is_not_decided_every_period():
+    """A bell rubbed by steady noise over 24 budget periods: periods whose only news is the
+    force heard again are left undecided (jassy.anytime_rank.steady_forces), at least
+    every STEADY_PERIODS-th and whenever the force's power rises past STEADY_POWER; the
+    error stays within 1 dB of deciding every period (a slow gain ramp keeps the
+    budget deciding: its gains move). A force whose power rises fourfold every period
+    is decided every period."""
+    from jassy.anytime_rank import STEADY_PERIODS, STEADY_POWER
+
+    periods = 24
+    seconds = periods * 2048 / FS
+    creeping = [Event(0.0, "bell", "set", {"gain": 0.0100001}, ramp=seconds)]
+    rising = [Event(k * 2048 / FS, "rub", "set", {"amp": 2.0**k}, jump=True) for k in range(periods)]
+    assert STEADY_POWER < 4.0
+    results = {}
+    for name, score in (("steady", []), ("creeping", creeping), ("rising", rising)):
+        full = render(rubbed_bell(None), score, seconds, FS, 4096, limiter=False).audio[0]
+        budget = ModeBudget(max_modes=40)
+        y = render(rubbed_bell(budget), score, seconds, FS, 4096, limiter=False).audio[0]
+        results[name] = budget.decisions, error_db(y, full)
+    assert results["creeping"][0] == periods and results["rising"][0] == periods
+    # at least one period in STEADY_PERIODS decided, at least a quarter of them left undecided
+    assert periods // STEADY_PERIODS <= results["steady"][0] <= 3 * periods // 4, results
+    assert abs(results["steady"][1] - results["creeping"][1]) < 1.0
+
+
+def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
+    """The policy alone on two banks' rings: a period is left undecided while each heard
+    force's power is at most STEADY_POWER times its power at the last decision (a weaker
+    one too), no heard bank ramps, and fewer than STEADY_PERIODS periods in a row."""
+    from jassy.anytime_rank import (
+        POWER_STRIDE,
+        STEADY_PERIODS,
+        STEADY_POWER,
+        STEP_STATE,
+        UNDECIDED,
+        Hearing,
+        note_decided,
+        steady_forces,
+    )
+
+    rng = np.random.default_rng(1)
+    rings = rng.normal(size=(2, 2048))
+    flags = [np.zeros(2, dtype=bool) for _ in range(7)]
+    h = Hearing(np.zeros(2, dtype=np.intp), 2048, *flags, np.zeros(2))
+    state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
+    h.heard_before[:] = True
+    note_decided(h, rings, np.array([True, False]), state)
+    sampled = rings[0, ::POWER_STRIDE]
+    power = np.mean((sampled - sampled.mean()) ** 2)
+    assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
+    assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
+    note_decided(h, rings, np.array([True, True]), state)
+    for scale, steady in (
+        (0.1, True),
+        (0.99 * np.sqrt(STEADY_POWER), True),
+        (1.01 * np.sqrt(STEADY_POWER), False),
+    ):
+        state[UNDECIDED] = 0
+        assert steady_forces(h, rings * np.array([[scale], [1.0]]), ramp_left, state) == steady, scale
+    state[UNDECIDED] = 0
+    assert [steady_forces(h, rings, ramp_left, state) for _ in range(STEADY_PERIODS)] == [True] * (
+        STEADY_PERIODS - 1
+    ) + [False]
+    state[UNDECIDED], ramp_left[1] = 0, 5
+    assert not steady_forces(h, rings, ramp_left, state)
+    h.heard_before[1] = False  # a ramping bank that heard nothing does not count
+    assert steady_forces(h, rings, ramp_left, state)

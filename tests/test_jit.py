@@ -1,6 +1,8 @@
 """jassy.jit: specialise (the typed entry point, remembered by a cheap key of the argument
-types) and the process-wide changes to numba it installs (flag comparisons, plain error text)."""
+types) and the process-wide changes to numba it installs (flag comparisons, plain error text,
+the BLAS check when used)."""
 
+import subprocess
 import sys
 
 import numba as nb
@@ -108,3 +110,23 @@ def test_numba_error_text_is_plain_in_every_module():
     with pytest.raises(errors.TypingError) as raised:
         no_such_attribute(1.0)
     assert "no_such_attribute" in str(raised.value) and "\x1b" not in str(raised.value)
+
+
+#: A fresh process: numba's first compile without scipy.linalg, then a kernel calling BLAS.
+BLAS_WHEN_USED = """
+import sys
+import numba as nb
+import numpy as np
+import jassy
+
+nb.njit(lambda x: x + 1.0)(1.0)
+from numba.np import arraymath
+print("scipy.linalg" in sys.modules, arraymath._HAVE_BLAS)
+print(nb.njit(lambda a, b: np.dot(a, b))(np.arange(3.0), np.arange(3.0)), "scipy.linalg" in sys.modules)
+"""
+
+
+def test_numba_offers_blas_without_importing_scipy_linalg_until_a_kernel_uses_it():
+    out = subprocess.run([sys.executable, "-c", BLAS_WHEN_USED], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["False", "True", "5.0", "True"]

@@ -10,14 +10,16 @@ from jassy import Event, Graph, ModalModel, render
 from ugens.cells import ModeRows
 from ugens.modal import ModalBank, design, split_by_precision
 from ugens.modal_f32 import (
-    SMALL,
+    HELD_MODES,
     TOLERANCE,
     DeltaRows,
     decay_factor_error,
     delta_coefficients,
+    factor_coefficient,
     float32_error,
     narrow_rows,
     resonate_delta,
+    resonate_narrow,
 )
 from ugens.modal_meta import BY_FACTOR, NARROW_ALL
 
@@ -67,8 +69,8 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     coef, state = narrow_rows(c0, b2, s, zero, zero, zero, decay_factor)
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
-    out = np.zeros(x.size)
-    resonate_delta(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), decay_factor)
+    out = np.full(x.size, np.nan)  # (written, not added to)
+    resonate_narrow(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), decay_factor)
     return out
 
 
@@ -112,11 +114,12 @@ def render_noise(model, precision, score=(), seconds=0.5, block=64):
     return render_bank(model, precision, score, seconds, block)[0]
 
 
-def takes_the_small_kernel(split):
-    """Whether ugens.modal_f32.resonate_delta runs this split's passes in _resonate_small:
-    no float64 modes, the decay-factor form, at most SMALL float32 modes."""
+def takes_a_held_kernel(split):
+    """Whether ugens.modal_f32.resonate_narrow runs this split's passes with the rows held on
+    the stack (resonate_held): no float64 modes, the decay-factor form, at most HELD_MODES
+    float32 modes."""
     meta = split.rows.narrow_meta
-    return split.wide.size == 0 and meta[BY_FACTOR] == 1 and 0 < meta[NARROW_ALL] <= SMALL
+    return split.wide.size == 0 and meta[BY_FACTOR] == 1 and 0 < meta[NARROW_ALL] <= HELD_MODES
 
 
 @pytest.mark.parametrize("block", [1, 64, 1000])
@@ -124,7 +127,7 @@ def takes_the_small_kernel(split):
 def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(block, modes):
     """Broadband force, a ramped freq_scale change (run in float64, then back to mixed) and a
     location jump: within -60 dB of the float64 bank at any block size, with and without
-    float64 modes in the split, and for a bank small enough for the 16-mode kernel (which the
+    float64 modes in the split, and for a bank small enough for a held kernel (which the
     rendered bank's own split takes after the changes)."""
     model = spread_model(12 if modes == "small" else 40)
     if modes != "split":  # (the small bank's modes kept below 10 kHz: at 24 kHz it would need float64)
@@ -136,44 +139,46 @@ def test_mixed_bank_follows_the_float64_bank_with_noise_and_parameter_changes(bl
     ]
     ref = render_noise(model, "float64", score, block=block)
     y, bank = render_bank(model, "mixed", score, block=block)
-    assert takes_the_small_kernel(bank._split) == (modes == "small")
+    assert takes_a_held_kernel(bank._split) == (modes == "small")
     assert error_db(y, ref) < -60.0
 
 
-@pytest.mark.parametrize("count", [15, 16, 17])
-def test_banks_of_up_to_16_float32_modes_take_the_small_kernel(count):
-    """Around the small kernel's bound (SMALL = 16 modes): the rendered bank's own split takes
-    it at 15 and 16 modes, the general kernel at 17, and each follows the float64 bank
-    within -60 dB."""
+@pytest.mark.parametrize("count", [16, 17, 64, 65])
+def test_banks_of_up_to_64_float32_modes_take_a_held_kernel(count):
+    """Around the held kernels' sizes (16, 32, 64 modes; HELD_MODES = 64): the rendered
+    bank's own split holds its rows on the stack up to 64 modes, runs the general kernel
+    at 65, and each follows the float64 bank within -60 dB."""
     model = spread_model(count)
-    model = ModalModel(model.frequencies, np.maximum(model.decays, 5.0), model.gains)
+    model = ModalModel(0.5 * model.frequencies, np.maximum(model.decays, 5.0), model.gains)
     ref = render_noise(model, "float64")
     y, bank = render_bank(model, "mixed")
     assert bank._split.rows.narrow_meta[NARROW_ALL] == count
-    assert takes_the_small_kernel(bank._split) == (count <= SMALL)
+    assert takes_a_held_kernel(bank._split) == (count <= HELD_MODES)
     assert error_db(y, ref) < -60.0
 
 
-@pytest.mark.parametrize("count", [5, 16])
-def test_the_small_kernel_computes_what_the_general_kernel_does(count):
-    """_resonate_small (constant trip count) against resonate_delta's general loop (reached
-    with an empty set of float64 modes) on the same rows: same outputs and state to float32
-    rounding over calls of odd lengths (the 4-sample passes and the tail, the force sample
-    carried between calls), with the direct term."""
+@pytest.mark.parametrize("count", [5, 16, 17, 40, 64])
+def test_the_held_kernels_compute_what_the_general_kernel_does(count):
+    """resonate_narrow's held kernels (rows on the stack, 16, 32 or 64 of them; they write
+    the output) against resonate_delta's general loop (which adds to it) on the same rows:
+    same outputs and state to float32 rounding over calls of odd lengths (the 4-sample
+    passes and the tail, the force sample carried between calls), with the direct term."""
     rng = np.random.default_rng(5)
     f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
     c1, c2, s = design(f, d, FS)
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros(count)
     coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
-    none64 = ModeRows(*(np.zeros(0) for _ in ModeRows._fields))
     force = rng.standard_normal(3001)
     runs = []
-    for wide in (None, none64):
+    for kernel, out in (
+        (resonate_narrow, np.full(force.size, np.nan)),
+        (resonate_delta, np.zeros(force.size)),
+    ):
         state = np.zeros((2, coef.shape[1]), np.float32)
-        rows, out, last, start = DeltaRows(*coef, *state), np.zeros(force.size), np.zeros(1), 0
+        rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
         for n in (1, 7, 1000, 993, 1000):
-            resonate_delta(force[start:], out[start:], n, rows, count, wide, 0, last, True)
+            kernel(force[start:], out[start:], n, rows, count, None, 0, last, True)
             start += n
         runs.append((out, state, last[0]))
     (out, state, last), (ref, ref_state, ref_last) = runs
@@ -181,6 +186,87 @@ def test_the_small_kernel_computes_what_the_general_kernel_does(count):
     np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
     state, ref_state = state[:, :count], ref_state[:, :count]  # (the padding modes run apart)
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
+
+
+@pytest.mark.parametrize("count, wide_count", [(20, 2), (100, 0), (100, 3)])
+def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count):
+    """resonate_narrow's decay-factor kernel for banks a held kernel does not take (more than
+    64 float32 modes, or float64 modes: resonate_factor, 32 modes per explicit vector step;
+    it writes the output) against resonate_delta's general loop (which adds to it) on the
+    same rows: same outputs and states to float32 rounding over calls of odd lengths, with
+    the direct term and float64 modes updated in the same passes."""
+    rng = np.random.default_rng(6)
+    f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
+    c1, c2, s = design(f, d, FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros(count)
+    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
+    w1, w2, ws = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    force = rng.standard_normal(3001)
+    runs = []
+    for kernel, out in (
+        (resonate_narrow, np.full(force.size, np.nan)),
+        (resonate_delta, np.zeros(force.size)),
+    ):
+        state = np.zeros((2, coef.shape[1]), np.float32)
+        z = np.zeros(wide_count)
+        wide = ModeRows(w1, w2, ws, 0.1 * ws, z.copy(), z.copy()) if wide_count else None
+        rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
+        for n in (1, 7, 1000, 993, 1000):
+            kernel(force[start:], out[start:], n, rows, count, wide, wide_count, last, True)
+            start += n
+        runs.append((out, state, wide, last[0]))
+    (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
+    assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
+    np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
+    state, ref_state = state[:, :count], ref_state[:, :count]
+    np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
+    if wide_count:
+        assert np.max(np.abs(ref_wide.y1)) > 0
+        np.testing.assert_array_equal(wide.y1, ref_wide.y1)
+
+
+@pytest.mark.parametrize("wrong", ["force", "out"])
+def test_the_explicit_vector_kernels_refuse_float32_force_or_output(wrong):
+    """The explicit-vector passes (ugens.vector_pass) read the force and write the output
+    as float64 vectors: resonate_narrow with a float32 force or output is refused at typing
+    (at 16 modes it gave a relative error of 0.62 and read or wrote past the array)."""
+    count = 16
+    from numba.core.errors import TypingError
+
+    c1, c2, s = design(np.geomspace(100.0, 15000.0, count), np.full(count, 20.0), FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    zeros = np.zeros(count)
+    coef, state = narrow_rows(c0, b2, s, zeros, zeros, zeros, decay_factor=True)
+    arrays = {"force": np.ones(64), "out": np.zeros(64)}
+    arrays[wrong] = arrays[wrong].astype(np.float32)
+    with pytest.raises(TypingError, match="write_four|add_chunk|write_sums"):
+        resonate_narrow(
+            arrays["force"], arrays["out"], 64, DeltaRows(*coef, *state), count, None, 0, np.zeros(1), True
+        )
+
+
+def test_rows_shorter_than_a_held_kernel_take_the_general_loop():
+    """20 modes on rows of exactly 20 (not padded by narrow_rows to 32): the 32-mode held
+    kernel would read past them, so resonate_narrow runs the general loop (resonate_delta,
+    which stops at the rows' end) and writes what it adds."""
+    rng = np.random.default_rng(7)
+    count = 20
+    c1, c2, s = design(np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count), FS)
+    c0, b2 = delta_coefficients(c1, c2)
+    coef = np.stack([c0, b2, s, 0.1 * s]).astype(np.float32)
+    coef[1] = factor_coefficient(c0, b2)
+    force = rng.standard_normal(1001)
+    outs = []
+    for kernel, out in (
+        (resonate_narrow, np.full(force.size, np.nan)),
+        (resonate_delta, np.zeros(force.size)),
+    ):
+        rows = DeltaRows(*coef, *np.zeros((2, count), np.float32))
+        kernel(force, out, force.size, rows, count, None, 0, np.zeros(1), True)
+        outs.append(out)
+    assert np.max(np.abs(outs[1])) > 0
+    np.testing.assert_array_equal(outs[0], outs[1])
 
 
 def test_zero_gain_modes_stay_in_float64_and_keep_ringing_after_their_gain_drops():

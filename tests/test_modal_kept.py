@@ -62,3 +62,72 @@ def test_kept_modes_match_the_full_bank_kernel_with_forces_and_silences():
     assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))
     assert kept_meta[0] == full_meta[0] == 0  # every mode fell silent and was flushed
     assert np.array_equal(ring[(np.arange(4096, 6000)) % 2048], force[4096:6000])
+
+
+def test_ramp_passes_match_the_per_sample_ramp():
+    """Coefficients ramping linearly under a force, the ramp ending inside a call and
+    calls of lengths that are not multiples of four: the four-sample passes give
+    ugens.modal.resonate_ramp's output (the same recursion, each sample with the
+    current coefficients) to rounding, end the ramp on the same sample, on the target."""
+    from ugens.modal import Ramp, resonate_ramp
+    from ugens.modal_kept import ramp_passes
+
+    rng = np.random.default_rng(3)
+    width, frames, length = 16, 3000, 1234
+    start, _ = ringing_rows(width, rng)
+    end, _ = ringing_rows(width, rng)
+    coef = np.vstack([start[:2], rng.uniform(0.5, 1.5, (2, width))])
+    target = np.vstack([end[:2], rng.uniform(0.5, 1.5, (2, width))])
+    force = rng.normal(size=frames)
+    outputs, lefts = [], []
+    for kernel in (resonate_ramp, ramp_passes):
+        c = coef.copy()
+        ramp = Ramp(c, (target - coef) / length, target.copy())
+        y1, y2 = start[4].copy(), start[5].copy()
+        out, last, left, at = np.zeros(frames), np.zeros(1), length, 0
+        for size in (7, 1001, 3, 226, 1763):  # the ramp ends inside the fourth call
+            left = kernel(force[at : at + size], out[at : at + size], size, ramp, y1, y2, left, width, last)
+            lefts.append(left)
+            at += size
+        assert np.array_equal(c, target)
+        outputs.append(out)
+    reference, passes = outputs
+    assert np.max(np.abs(reference)) > 1.0
+    assert np.max(np.abs(passes - reference)) < 1e-11 * np.max(np.abs(reference))
+    assert lefts[:5] == lefts[5:] and lefts[4] == 0
+
+
+def test_force_scan_finds_every_kind_of_nonzero_sample():
+    """jassy.anytime_rank.has_force (the kept and full bank kernels' and the budget's
+    force test, a vectorised sum of magnitudes) against numpy's ``!= 0`` on stretches
+    holding one sample of each awkward kind (a subnormal, -0.0, NaN, inf) at positions
+    around its 64-sample blocks, and on samples whose signed sum cancels or overflows."""
+    from jassy.anytime_rank import has_force
+
+    rng = np.random.default_rng(4)
+    kinds = (5e-324, -5e-324, -0.0, np.nan, np.inf, -np.inf, 1e300, -2.0)
+    checked = found = 0
+    for size in (0, 1, 63, 64, 65, 200, 4096):
+        for kind in kinds:
+            for at in sorted({0, size // 2, size - 1, 63, 64, 127}):
+                if not 0 <= at < size:
+                    continue
+                force = np.zeros(size)
+                force[at] = kind
+                for begin, end in (
+                    (0, size),
+                    (at, at + 1),
+                    (at + 1, size),
+                    (0, at),
+                    (at // 2, min(size, at + 70)),
+                ):
+                    expected = bool(np.any(force[begin:end] != 0.0))
+                    assert has_force(force, begin, end) == expected, (size, kind, at, begin, end)
+                    checked += 1
+                    found += expected
+    big = rng.normal(size=4096) * 1e300  # magnitudes whose sum overflows to inf
+    assert has_force(big, 0, 4096) and not has_force(np.zeros(4096), 0, 4096)
+    cancelling = np.zeros(128)
+    cancelling[[70, 71]] = 1.0, -1.0  # a signed sum would miss them
+    assert has_force(cancelling, 0, 128) and has_force(cancelling, 64, 128)
+    assert checked > 900 and 0 < found < checked

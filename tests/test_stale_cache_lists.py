@@ -10,7 +10,9 @@ import os
 import pathlib
 import types
 
+import numba
 from numba.core.dispatcher import Dispatcher
+from numba.core.extending import _Intrinsic
 
 from jassy.jit import callee_closure, drop_stale_cache
 
@@ -49,15 +51,26 @@ def global_names(code: types.CodeType) -> set[str]:
     return names
 
 
+def defining_module(value: object) -> str | None:
+    """The module defining ``value`` if it is compiled into the kernels that call it: a numba
+    kernel (a dispatcher) or a numba intrinsic (its code generator emits the caller's code)."""
+    if isinstance(value, Dispatcher):
+        return value.py_func.__module__
+    if isinstance(value, _Intrinsic):
+        return value._defn.__module__
+    return None
+
+
 def called_modules(module: types.ModuleType) -> set[str]:
-    """Project modules whose kernels ``module``'s kernels can have copies of: those defining
-    the other modules' dispatchers among its globals, and those defining the dispatchers
-    its kernels reach through a project module global (``cells.two_pole`` inside a kernel,
-    also when ``cells`` only re-exports ``two_pole``)."""
+    """Project modules whose kernels or intrinsics ``module``'s kernels can have copies of:
+    those defining the other modules' dispatchers and intrinsics among its globals, and those
+    defining the ones its kernels reach through a project module global (``cells.two_pole``
+    inside a kernel, also when ``cells`` only re-exports ``two_pole``)."""
     found = set()
     for value in vars(module).values():
-        if isinstance(value, Dispatcher) and is_project(value.py_func.__module__):
-            found.add(value.py_func.__module__)
+        defined_in = defining_module(value)
+        if defined_in is not None and is_project(defined_in):
+            found.add(defined_in)
     for kernel in own_kernels(module):
         names = global_names(kernel.py_func.__code__)
         for name in names:
@@ -65,9 +78,9 @@ def called_modules(module: types.ModuleType) -> set[str]:
             if not (isinstance(value, types.ModuleType) and is_project(value.__name__)):
                 continue
             for attribute in names:  # cells.two_pole: 'two_pole' is among the names too
-                kernel_used = getattr(value, attribute, None)
-                if isinstance(kernel_used, Dispatcher) and is_project(kernel_used.py_func.__module__):
-                    found.add(kernel_used.py_func.__module__)
+                defined_in = defining_module(getattr(value, attribute, None))
+                if defined_in is not None and is_project(defined_in):
+                    found.add(defined_in)
     found.discard(module.__name__)
     return found
 
@@ -78,6 +91,15 @@ def test_the_finder_sees_imported_kernels_and_kernel_modules():
     assert called_modules(importlib.import_module("ugens.filters")) == {"ugens.cells"}
     assert {"ugens.cells", "ugens.noise"} <= called_modules(importlib.import_module("ugens.scrape"))
     assert not called_modules(importlib.import_module("ugens.cells"))
+
+
+def test_the_finder_sees_intrinsics():
+    """ugens.modal_f32's kernels call the intrinsics of ugens.stack_rows and ugens.vector_pass
+    (through the modules); jassy.record_views' views call jassy.jit.void_pointer (imported)."""
+    assert {"ugens.stack_rows", "ugens.vector_pass"} <= called_modules(
+        importlib.import_module("ugens.modal_f32")
+    )
+    assert called_modules(importlib.import_module("jassy.record_views")) == {"jassy.jit"}
 
 
 def test_an_edit_of_a_callee_of_a_callee_drops_the_cache(tmp_path, monkeypatch):
@@ -99,6 +121,29 @@ def test_an_edit_of_a_callee_of_a_callee_drops_the_cache(tmp_path, monkeypatch):
     os.utime(a.__file__, ns=(info.st_atime_ns, info.st_mtime_ns + 10**9))
     drop_stale_cache(c.__file__, [b])
     assert not kept.exists()
+
+
+def test_an_edit_of_a_callee_drops_the_cache_in_numba_cache_dir(tmp_path, monkeypatch):
+    """With NUMBA_CACHE_DIR set numba caches outside the source tree: the cache it wrote
+    there (found by listing that folder) goes when a listed callee changes."""
+    source, cache = tmp_path / "source", tmp_path / "cache"
+    source.mkdir()
+    (source / "a_dir_stale.py").write_text("X = 1\n")
+    (source / "c_dir_stale.py").write_text(
+        "import numba\n\n\n@numba.njit(cache=True)\ndef plus_one(x):\n    return x + 1\n"
+    )
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(cache))
+    monkeypatch.syspath_prepend(str(source))
+    a, c = (importlib.import_module(f"{stem}_dir_stale") for stem in "ac")
+    drop_stale_cache(c.__file__, [a])
+    assert c.plus_one(1) == 2
+    assert list(cache.rglob("c_dir_stale.plus_one-*.nbi"))  # numba cached it there
+    drop_stale_cache(c.__file__, [a])
+    assert list(cache.rglob("c_dir_stale.plus_one-*.nbi"))  # nothing changed
+    info = os.stat(a.__file__)
+    os.utime(a.__file__, ns=(info.st_atime_ns, info.st_mtime_ns + 10**9))
+    drop_stale_cache(c.__file__, [a])
+    assert not list(cache.rglob("c_dir_stale.*.nb[ic]"))
 
 
 def test_every_called_kernel_module_is_listed():

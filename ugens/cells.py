@@ -16,7 +16,8 @@ caller's fastmath flags and compiles to the same instructions as the code it rep
   Friction), and :class:`ModeRows` (:func:`mode_rows`): a float64 bank's rows by name;
   :func:`state_step`: a mode's (displacement, velocity) pair through its 2x2 transition
   over a step (HuntCrossleyImpact, the heard output of closed loops);
-  :func:`silent`: the test by which silent modes are zeroed;
+  :func:`silent`: the test by which silent modes are zeroed, at the flush frames
+  (FLUSH_PERIOD; :func:`until_flush`, :func:`is_flush_frame`);
 * :func:`store`: a kernel's named state record written back to the float64 array that holds
   it (its fields in order; the record's reader is the inverse); :func:`slot`: where one
   field of such a record sits in its array.
@@ -183,6 +184,25 @@ def silent(a, b, floor):
     """Whether a mode whose two states (in one unit) are a and b is below ``floor`` (it is
     then zeroed and no longer computed)."""
     return abs(a) < floor and abs(b) < floor
+
+
+#: Silent modes are looked for at every multiple of this many frames on the clock (ModalBank
+#: and its variants, HuntCrossleyImpact): the flush frames, hence the output, do not depend
+#: on the block size.
+FLUSH_PERIOD = 1024
+
+
+@nb.njit(inline="always", cache=True)
+def until_flush(frame, left):
+    """Frames from ``frame`` up to the next flush frame (a multiple of FLUSH_PERIOD), at most
+    ``left``: the piece of a block a kernel runs before it next looks for silent modes."""
+    return min(left, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+
+
+@nb.njit(inline="always", cache=True)
+def is_flush_frame(frame):
+    """Whether silent modes are looked for at ``frame`` (a multiple of FLUSH_PERIOD)."""
+    return frame % FLUSH_PERIOD == 0
 
 
 @nb.njit(inline="always", cache=True)

@@ -153,12 +153,16 @@ def engine_state(st):
     return EngineState(st[0], st[1], st[2], st[3], st[4])
 
 
+#: Slots of EngineData.ist: the queued firings and the exhaust ring's write slot.
+QUEUED, RING_WRITE = 0, 1
+
+
 class EngineData(NamedTuple):
     """The arrays :func:`engine_run` updates."""
 
     st: np.ndarray  #: an EngineState
     queue: np.ndarray  #: (QUEUE, ONSET_COLUMNS): the queued firings, a cells.Onset per row
-    ist: np.ndarray  #: int64 [queued firings, ring write slot]
+    ist: np.ndarray  #: int64 [queued firings, ring write slot] (QUEUED, RING_WRITE)
     rng: np.ndarray  #: uint64 [splitmix64 state]
     ring: np.ndarray  #: the exhaust pipe's delay line
     lead: np.ndarray  #: the pulse train with its band-limiting corrections, by frame modulo its length
@@ -219,8 +223,8 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, data, par, blamp):
     s2 = state.s2
     lp_back = state.lp_back
     lp_out = state.lp_out
-    count = ist[0]
-    w = ist[1]
+    count = ist[QUEUED]
+    w = ist[RING_WRITE]
     s = rng[0]
     size = ring.size
     log_r = math.log(r)
@@ -282,8 +286,8 @@ def engine_run(out, pulses_out, start, n, rpms, throttles, data, par, blamp):
         out[i] = gain * (front - lp_out)
         pulses_out[i] = gain * p
     store(st, EngineState(phase, s1, s2, lp_back, lp_out))
-    ist[0] = count
-    ist[1] = w
+    ist[QUEUED] = count
+    ist[RING_WRITE] = w
     rng[0] = s
 
 

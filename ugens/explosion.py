@@ -56,7 +56,7 @@ from ugens.cells import (
     store,
     with_room,
 )
-from ugens.filters import design_biquad
+from ugens.filters import biquad_coefficients, biquad_step, design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -121,7 +121,7 @@ def positive_impulse(peak: float, blast_time: float, decay: float = 1.0) -> floa
 def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
     """n samples from absolute frame ``start``; st holds an ExplosionState, par an
     ExplosionParams; queue: a cells.Onset per row (arrival, peak), count[0] blasts queued;
-    absorb/rumble: low-pass coefficients [b0, b1, b2, a1, a2]."""
+    absorb/rumble: low-pass coefficients (ugens.filters.BiquadCoefficients)."""
     c = explosion_params(par)
     r = c.r
     inv_tp = c.inv_tp
@@ -139,6 +139,8 @@ def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
     s = rng[0]
     k_count = count[0]
     tail_gain = c.tail_gain
+    rumble_lowpass = biquad_coefficients(rumble)
+    absorb_lowpass = biquad_coefficients(absorb)
     for i in range(n):
         t = float(start + i)
         s1, s2 = decay_sums(s1, s2, r)
@@ -154,14 +156,9 @@ def explosion_run(out, start, n, st, queue, count, rng, par, absorb, rumble):
         energy = scatter * energy + (1.0 - scatter) * p * p
         s, u = uniform(s)
         x = tail_gain * math.sqrt(energy) * u
-        tail = rumble[0] * x + t1
-        t1 = rumble[1] * x - rumble[3] * tail + t2
-        t2 = rumble[2] * x - rumble[4] * tail
+        tail, t1, t2 = biquad_step(rumble_lowpass, x, t1, t2)
         x = (1.0 - dispersion) * p + dispersion * tail
-        y = absorb[0] * x + a1
-        a1 = absorb[1] * x - absorb[3] * y + a2
-        a2 = absorb[2] * x - absorb[4] * y
-        out[i] = y
+        out[i], a1, a2 = biquad_step(absorb_lowpass, x, a1, a2)
     store(st, ExplosionState(s1, s2, energy, a1, a2, t1, t2))
     rng[0] = s
     count[0] = k_count

@@ -58,6 +58,14 @@ def biquad_state(state):
     return BiquadState(state[0], state[1])
 
 
+@nb.njit(inline="always", cache=True)
+def biquad_step(c, x, s1, s2):
+    """One sample of Direct Form II transposed with coefficients ``c`` (a BiquadCoefficients
+    record): (output y, state s1, state s2) after input x."""
+    y = c.b0 * x + s1
+    return y, c.b1 * x - c.a1 * y + s2, c.b2 * x - c.a2 * y
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def design_biquad(mode, freq, q, inv_fs, coef):
     """RBJ cookbook coefficients normalised by a0 into ``coef`` (a BiquadCoefficients).
@@ -94,14 +102,10 @@ def biquad(x, out, n, coef, state):
     Compiled without fastmath, as is :func:`biquad_ramp`: a recurrence has nothing to
     vectorise, and reassociation across unrolled iterations made the output depend on
     where a block was cut."""
-    b0, b1, b2, a1, a2 = biquad_coefficients(coef)
+    c = biquad_coefficients(coef)
     s1, s2 = biquad_state(state)
     for i in range(n):
-        xi = x[i]
-        y = b0 * xi + s1
-        s1 = b1 * xi - a1 * y + s2
-        s2 = b2 * xi - a2 * y
-        out[i] = y
+        out[i], s1, s2 = biquad_step(c, x[i], s1, s2)
     store(state, BiquadState(s1, s2))
 
 
@@ -111,12 +115,7 @@ def biquad_ramp(x, out, n, mode, freqs, qs, inv_fs, coef, state):
     s1, s2 = biquad_state(state)
     for i in range(n):
         design_biquad(mode, freqs[i], qs[i], inv_fs, coef)
-        b0, b1, b2, a1, a2 = biquad_coefficients(coef)
-        xi = x[i]
-        y = b0 * xi + s1
-        s1 = b1 * xi - a1 * y + s2
-        s2 = b2 * xi - a2 * y
-        out[i] = y
+        out[i], s1, s2 = biquad_step(biquad_coefficients(coef), x[i], s1, s2)
     store(state, BiquadState(s1, s2))
 
 

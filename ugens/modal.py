@@ -56,7 +56,7 @@ from jassy.record_views import FIELD, float32_table, float_row, float_table, han
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
-from ugens.cells import mode_rows, silent, two_pole
+from ugens.cells import is_flush_frame, mode_rows, silent, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
@@ -83,7 +83,7 @@ from ugens.modal_f32 import (
     float32_error,
     flush_silent_delta,
     narrow_rows,
-    resonate_delta,
+    resonate_narrow,
     unscaled_state,
 )
 from ugens.modal_meta import (
@@ -246,10 +246,6 @@ def flush_silent(y1, y2, active, floor):
     return last
 
 
-#: Silent modes are looked for at every multiple of this many frames on the clock.
-FLUSH_PERIOD = 1024
-
-
 @nb.njit(fastmath=FASTMATH, cache=True)
 def bank_step(force, out, start, n, bank, meta, floor, last):
     """One sub-block without ramps. bank rows: c1, c2, g, d, y1, y2; meta: a BankMeta (the
@@ -264,8 +260,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
     so neither does the output."""
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
         if last[0] != 0.0 or has_force(f, 0, m):
@@ -278,7 +273,7 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
         else:
             resonate(f, o, m, mode_rows(bank), active, last)
         i += m
-        if active > 0 and floor > 0.0 and (start + i) % FLUSH_PERIOD == 0:
+        if active > 0 and floor > 0.0 and is_flush_frame(start + i):
             meta[ACTIVE] = flush_silent(bank[4], bank[5], active, floor)
 
 
@@ -298,34 +293,33 @@ class MixedRows(NamedTuple):
 @nb.njit(fastmath=FASTMATH, cache=True)
 def mixed_step(force, out, start, n, rows, floor, last):
     """One sub-block of a bank split by precision (``rows``: MixedRows) into out[:n]: the
-    float32 and the float64 modes in the same passes (ugens.modal_f32.resonate_delta),
+    float32 and the float64 modes in the same passes (ugens.modal_f32.resonate_narrow),
     with the silent-mode skipping and flush frames of :func:`bank_step` for each group;
     last[0] as in bank_step."""
     wide_bank, wide_meta, coef, state, narrow_meta = rows
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
-        for j in range(m):
-            o[j] = 0.0
         if last[0] != 0.0 or has_force(f, 0, m):
             wide_meta[ACTIVE] = wide_meta[ALLOWED]
             narrow_meta[NARROW_ACTIVE] = narrow_meta[NARROW_ALL]
         wide_active = wide_meta[ACTIVE]
         active = narrow_meta[NARROW_ACTIVE]
         if active == 0 and wide_active == 0:
+            for j in range(m):
+                o[j] = 0.0
             last[0] = 0.0
         else:
             narrow = delta_rows(coef, state)
             by_factor = narrow_meta[BY_FACTOR] == 1
             if wide_meta[ALLOWED] > 0:
-                resonate_delta(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
             else:
-                resonate_delta(f, o, m, narrow, active, None, 0, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, None, 0, last, by_factor)
         i += m
-        if (start + i) % FLUSH_PERIOD == 0:
+        if is_flush_frame(start + i):
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
             if active > 0 and floor > 0.0:
@@ -753,10 +747,15 @@ class ModalBank(ModelParams, UGen):
         also in its tables, with the per-mode rows that depend on the poles)."""
         self._fresh = self._design()
         if self._tables is not None:
-            self._fresh_rows[:] = self._fresh
-            values, slot = self._tables.values, self._slot
-            values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
+            self._design_to_tables()
             self._refresh_forcing()
+
+    def _design_to_tables(self) -> None:
+        """Copy the current design into the budget's tables: the fresh rows, and the gain
+        times the level gain and the fragment size (an impact elsewhere is ranked by them)."""
+        self._fresh_rows[:] = self._fresh
+        values, slot = self._tables.values, self._slot
+        values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
 
     def _refresh_forcing(self) -> None:
         """Per mode (internal order), in the budget's rows: sin^2 theta, 1 / (R^2 sin^2
@@ -785,6 +784,12 @@ class ModalBank(ModelParams, UGen):
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if self._held:  # more keys of the same change follow (:meth:`_set_together`)
             return
+        if self._tables is not None and self._jumps_gains_only(jump):
+            self._refresh_design_cache()
+            self._jump_kept(self._tables_handle, self._slot)
+            self.meta[RAMP_LEFT] = 0
+            self._ramping = False
+            return
         self._settle()
         before = self._poles
         self._refresh_design_cache()
@@ -803,6 +808,16 @@ class ModalBank(ModelParams, UGen):
             self.delta[:] = (self.target - self.coef) / ramp
             self.meta[RAMP_LEFT] = ramp
         self._ramping = self.meta[RAMP_LEFT] > 0
+
+    def _jumps_gains_only(self, jump: bool) -> bool:
+        """Whether a change jumps to a design with the current poles (a new location or
+        gain at each impact of a rigid scene): then a budgeted bank's coefficients jump to
+        the fresh design in its tables and its compact bank's kept columns in place
+        (ugens.modal_budget.jump_to_fresh), which is what writing the compact bank back,
+        jumping and gathering it again gives."""
+        v = self.values
+        key = (v["freq_scale"], v["decay_scale"], self._size)
+        return self._poles is not None and self._poles[0] == key and (jump or self.ramp_samples() < 1)
 
     def _jump_poles(self, old_poles: np.ndarray) -> None:
         """A jump of freq_scale or decay_scale: each ringing mode keeps its amplitude and
@@ -985,8 +1000,10 @@ class ModalBank(ModelParams, UGen):
         :meth:`anytime_apply`; a budgeted bank's ramp is read from its meta's RAMP_LEFT)."""
         return self._size_input is None
 
-    def anytime_changes(self, end: int) -> list[int]:
+    def anytime_changes(self, end: int) -> list[int] | tuple:
         """The frames before ``end`` of the parameter changes queued (:meth:`set_param_at`)."""
+        if not self._pending:
+            return ()
         return [change[0] for change in self._pending if change[0] < end]
 
     def anytime_apply(self, frame: int) -> None:
@@ -1013,7 +1030,7 @@ class ModalBank(ModelParams, UGen):
         self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
         self.coef, self.y = self.bank[:4], self.bank[4:]
         self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
-        self._fresh_rows[:] = self._fresh
+        self._design_to_tables()
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
         tables.last[slot] = self.last[0]
@@ -1035,16 +1052,13 @@ class ModalBank(ModelParams, UGen):
         self._psd_bins = tables.bins[cut]
         tables.values[REMEMBERED, slot] = 0.0
         tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
-        tables.values[GAIN_LEVEL, slot], tables.values[SIZE, slot] = (
-            self.values["gain"] * self._level_gain,
-            self._size,
-        )
         self._horizon = horizon
         self._forcing_key = None
         from ugens import modal_kept  # (not at the top: it imports this module)
 
         self._tables_handle = handle(tables)
         self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
+        self._jump_kept = specialise(modal_budget.jump_at, self._tables_handle, slot)
         self._kept_span = specialise(
             modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
         )

@@ -35,17 +35,22 @@ from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
-from ugens import modal_meta, real_fft
+from ugens import cells, modal_meta, modal_retune, real_fft
+from ugens.cells import mode_rows
 from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH
+from ugens.modal_retune import COEF_GAIN
 from ugens.real_fft import real_spectrum, twiddles
 
 drop_stale_cache(
-    __file__, [anytime_rank, modal_meta, real_fft, record_views]
+    __file__, [anytime_rank, cells, modal_meta, modal_retune, real_fft, record_views]
 )  # its cache holds copies of their kernels
 
-#: Rows of a compact bank: c1, c2, g, d, y1, y2 (as ModalBank.bank), then the ramp's
-#: per-sample increments and targets of c1, c2, g, d.
-COMPACT_ROWS = 14
+#: Rows of a compact bank: c1, c2, g, d, y1, y2 (BANK_ROWS as ModalBank.bank,
+#: ugens.cells.ModeRows), then the ramp's per-sample increments (from row RAMP_DELTA) and
+#: targets (from row RAMP_TARGET) of the COEF_ROWS coefficients c1, c2, g, d.
+BANK_ROWS, COEF_ROWS = 6, 4
+RAMP_DELTA, RAMP_TARGET = BANK_ROWS, BANK_ROWS + COEF_ROWS
+COMPACT_ROWS = BANK_ROWS + 2 * COEF_ROWS
 
 #: The compact bank of the kept modes is padded to a multiple of this many modes: the mode
 #: loop then runs in whole SIMD vectors (30 modes cost 1.5x 32 without it).
@@ -73,12 +78,19 @@ MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
 #: and its fragment size (an impact's amplitude per mode elsewhere is its location's
 #: gain times impulse times the first, over the root of the second); 1.0 once SPECTRUM
 #: holds a smoothed PSD to blend the next with; 1.0 if the bank judges a force by its
-#: periodogram (more modes than FLAT_SPECTRUM_MODES).
+#: periodogram (more modes than FLAT_SPECTRUM_MODES); the frame of its last periodogram.
 (
     KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2, GAIN_LEVEL, SIZE,
-    REMEMBERED, TRANSFORMED,
-) = range(11)  # fmt: skip
-BANK_VALUES = 11
+    REMEMBERED, TRANSFORMED, PSD_FRAME,
+) = range(12)  # fmt: skip
+BANK_VALUES = 12
+
+#: A bank that keeps hearing a force ranks by its remembered (smoothed) PSD at a decision
+#: at most this many budget periods after its last periodogram, so that decisions every
+#: period (impacts coming) transform at every other one: the transform is most of a
+#: decision's cost (~20 of ~40 us on the wok's 241 modes). (Scaling the remembered PSD to
+#: the force's power now was tried: the wok's bursty contacts then lost 0.4-0.7 dB.)
+PSD_REUSE_PERIODS = 1
 
 #: Banks of at most this many modes judge a continuous force by its power alone (spread
 #: flat over frequency), without a transform.
@@ -162,8 +174,8 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
     for b, k in enumerate(mode_counts):
         layout[:, b] = (k, first, bank_at, coef_at, compact_at)
         first += k
-        bank_at += aligned(6 * k)
-        coef_at += aligned(4 * k)
+        bank_at += aligned(BANK_ROWS * k)
+        coef_at += aligned(COEF_ROWS * k)
         compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
     return BudgetTables(
         layout, line_aligned_zeros((bank_at,)), np.zeros(coef_at), np.zeros(coef_at), np.zeros(coef_at),
@@ -184,6 +196,28 @@ def spectra_rows(period: int) -> np.ndarray:
 
 
 @nb.njit(cache=True)
+def bank_rows(t, b):
+    """Bank b's (BANK_ROWS, modes) rows c1, c2, g, d, y1, y2 in the tables ``t``."""
+    k, at = t.layout[MODES, b], t.layout[BANK_AT, b]
+    return t.bank[at : at + BANK_ROWS * k].reshape((BANK_ROWS, k))
+
+
+@nb.njit(cache=True)
+def coef_rows(store, t, b):
+    """Bank b's (COEF_ROWS, modes) rows c1, c2, g, d in ``store`` (the tables' target,
+    delta or fresh)."""
+    k, at = t.layout[MODES, b], t.layout[COEF_AT, b]
+    return store[at : at + COEF_ROWS * k].reshape((COEF_ROWS, k))
+
+
+@nb.njit(inline="always", cache=True)
+def squared_amplitude(c1, c2, y1, y2):
+    """A^2 sin^2 theta of the decaying sine through a mode's last two state samples y1,
+    y2 (c1 = 2 R cos theta, c2 = R^2): y1^2 - c1 y1 y2 + c2 y2^2."""
+    return y1 * y1 - c1 * y1 * y2 + c2 * y2 * y2
+
+
+@nb.njit(cache=True)
 def gather_kept(bank, delta, target, kept, compact):
     """Copy the rows of the modes ``kept`` (a mask) into the first columns of ``compact``
     (bank rows 0-5, delta rows 6-9, target rows 10-13); its further columns become
@@ -192,11 +226,11 @@ def gather_kept(bank, delta, target, kept, compact):
     j = 0
     for k in range(kept.size):
         if kept[k]:
-            for r in range(6):
+            for r in range(BANK_ROWS):
                 compact[r, j] = bank[r, k]
-            for r in range(4):
-                compact[6 + r, j] = delta[r, k]
-                compact[10 + r, j] = target[r, k]
+            for r in range(COEF_ROWS):
+                compact[RAMP_DELTA + r, j] = delta[r, k]
+                compact[RAMP_TARGET + r, j] = target[r, k]
             j += 1
 
 
@@ -212,11 +246,9 @@ def compact_bank(t, b):
     k, o = t.layout[MODES, b], t.layout[FIRST, b]
     width = (t.meta[b, ALLOWED] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES
     compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
-    bank_at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
-    bank = t.bank[bank_at : bank_at + 6 * k].reshape((6, k))
-    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
-    delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
-    gather_kept(bank, delta, target, t.kept[o : o + k], compact)
+    gather_kept(
+        bank_rows(t, b), coef_rows(t.delta, t, b), coef_rows(t.target, t, b), t.kept[o : o + k], compact
+    )
     meta[ACTIVE] = t.meta[b, ACTIVE]
     meta[GATHERED] = 1
     meta[WIDTH] = width
@@ -229,7 +261,7 @@ def scatter_kept(compact, kept, bank):
     j = 0
     for k in range(kept.size):
         if kept[k]:
-            for r in range(6):
+            for r in range(BANK_ROWS):
                 bank[r, k] = compact[r, j]
             j += 1
 
@@ -241,10 +273,41 @@ def settle_compact(t, b):
     meta = t.compact_meta[b]
     if meta[GATHERED]:
         k, o = t.layout[MODES, b], t.layout[FIRST, b]
-        width, at, bank_at = meta[WIDTH], t.layout[COMPACT_AT, b], t.layout[BANK_AT, b]
+        width, at = meta[WIDTH], t.layout[COMPACT_AT, b]
         compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
-        scatter_kept(compact, t.kept[o : o + k], t.bank[bank_at : bank_at + 6 * k].reshape((6, k)))
+        scatter_kept(compact, t.kept[o : o + k], bank_rows(t, b))
         meta[GATHERED] = 0
+
+
+@nb.njit(cache=True)
+def jump_to_fresh(t, b):
+    """Bank b's coefficients jump to its fresh design (a new location or gain: the poles
+    and every mode's state stay): its rows' current coefficients and ramp targets become
+    the fresh ones, and so do the kept modes' columns of its compact bank if gathered, so
+    the compact bank keeps its state in place (no write-back, no gather again)."""
+    k, o = t.layout[MODES, b], t.layout[FIRST, b]
+    bank, target, fresh = bank_rows(t, b), coef_rows(t.target, t, b), coef_rows(t.fresh, t, b)
+    for r in range(COEF_ROWS):
+        for i in range(k):
+            bank[r, i] = fresh[r, i]
+            target[r, i] = fresh[r, i]
+    meta = t.compact_meta[b]
+    if meta[GATHERED]:
+        width, at = meta[WIDTH], t.layout[COMPACT_AT, b]
+        compact = t.compact[at : at + COMPACT_ROWS * width].reshape((COMPACT_ROWS, width))
+        kept, j = t.kept[o : o + k], 0
+        for i in range(k):
+            if kept[i]:
+                for r in range(COEF_ROWS):
+                    compact[r, j] = fresh[r, i]
+                    compact[RAMP_TARGET + r, j] = fresh[r, i]
+                j += 1
+
+
+@nb.njit(cache=True)
+def jump_at(a, b):
+    """:func:`jump_to_fresh` of bank b on the tables of handle ``a`` (jassy.record_views)."""
+    jump_to_fresh(tables_at(a, 0), b)
 
 
 @nb.njit(fastmath=True, cache=True)
@@ -419,32 +482,24 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
     for m in range(o, o + k):
         amp2[m] = 0.0
         scores[2, m] = 0.0
-    if t.compact_meta[b, GATHERED]:  # the state is in the compact bank
-        width, at = t.compact_meta[b, WIDTH], t.layout[COMPACT_AT, b]
+    if t.compact_meta[b, GATHERED]:  # the state is in the compact bank, kept modes in order
+        c = mode_rows(compact_bank(t, b))
         j = 0
         for m in range(o, o + k):
             if kept[m]:
-                c1, c2 = t.compact[at + j], t.compact[at + width + j]
-                y1, y2 = t.compact[at + 4 * width + j], t.compact[at + 5 * width + j]
-                amp2[m] = (y1 * y1 - c1 * y1 * y2 + c2 * y2 * y2) / rows[SIN2, m]
+                amp2[m] = squared_amplitude(c.c1[j], c.c2[j], c.y1[j], c.y2[j]) / rows[SIN2, m]
                 j += 1
     else:  # in the bank's rows (modes not kept hold zero state)
-        at = t.layout[BANK_AT, b]
+        r = mode_rows(bank_rows(t, b))
         for i in range(k):
             m = o + i
             if kept[m]:
-                c1, c2, y1, y2 = (
-                    t.bank[at + i],
-                    t.bank[at + k + i],
-                    t.bank[at + 4 * k + i],
-                    t.bank[at + 5 * k + i],
-                )
-                amp2[m] = (y1 * y1 - c1 * y1 * y2 + c2 * y2 * y2) / rows[SIN2, m]
+                amp2[m] = squared_amplitude(r.c1[i], r.c2[i], r.y1[i], r.y2[i]) / rows[SIN2, m]
     spectral = t.values[SPECTRAL, b] > 0.0
     has_now, has_next = t.values[HAS_ELSEWHERE_NOW, b] > 0.0, t.values[HAS_ELSEWHERE_NEXT, b] > 0.0
     kick_now, kick_next = t.values[KICK_NOW, b], t.values[KICK_NEXT, b]
     left = float(t.meta[b, RAMP_LEFT])
-    gains = t.layout[COEF_AT, b] + 2 * k  # row g of target and delta
+    target, delta = coef_rows(t.target, t, b)[COEF_GAIN], coef_rows(t.delta, t, b)[COEF_GAIN]
     for i in range(k):
         m = o + i
         a = amp2[m]
@@ -452,7 +507,7 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
             a = 0.0
         elif a > floor2:
             scores[2, m] = 1.0
-        g = (t.target[gains + i] - left * t.delta[gains + i]) * sample_rate
+        g = (target[i] - left * delta[i]) * sample_rate
         unit2 = g * g * rows[INV, m]
         s = rows[SPECTRUM, m] if spectral else flat_psd
         forced = unit2 * s * rows[GROWTH, m]
@@ -488,34 +543,32 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
             break
     if same:
         return -1
-    at, coef_at = t.layout[BANK_AT, b], t.layout[COEF_AT, b]
-    bank = t.bank[at : at + 6 * k].reshape((6, k))
-    target = t.target[coef_at : coef_at + 4 * k].reshape((4, k))
-    delta = t.delta[coef_at : coef_at + 4 * k].reshape((4, k))
-    fresh = t.fresh[coef_at : coef_at + 4 * k].reshape((4, k))
+    bank = bank_rows(t, b)
+    rows = mode_rows(bank)
+    target, delta, fresh = coef_rows(t.target, t, b), coef_rows(t.delta, t, b), coef_rows(t.fresh, t, b)
     settle_compact(t, b)
     count = 0
     for i in range(k):
         m = o + i
         if faded[m]:
-            for r in range(4):
+            for r in range(COEF_ROWS):
                 target[r, i] = fresh[r, i]
                 delta[r, i] = 0.0
         if keep[m]:
             if not kept[m] or faded[m]:
-                for r in range(4):
+                for r in range(COEF_ROWS):
                     bank[r, i] = target[r, i] - ramp_left * delta[r, i]
-        elif fade[m]:
-            bank[0, i] *= shrink
-            bank[1, i] *= shrink * shrink
-            bank[2, i] = 0.0
-            bank[3, i] = 0.0
-            for r in range(4):
+        elif fade[m]:  # R -> R shrink: c1 = 2 R cos theta, c2 = R^2; no input
+            rows.c1[i] *= shrink
+            rows.c2[i] *= shrink * shrink
+            rows.g[i] = 0.0
+            rows.d[i] = 0.0
+            for r in range(COEF_ROWS):
                 target[r, i] = bank[r, i]
                 delta[r, i] = 0.0
         else:
-            bank[4, i] = 0.0
-            bank[5, i] = 0.0
+            rows.y1[i] = 0.0
+            rows.y2[i] = 0.0
         faded[m] = fade[m]
         kept[m] = keep[m] or fade[m]
         if kept[m]:
@@ -529,7 +582,9 @@ def decide(t, d, rates):
     """One decision over every bank of the tables ``t``: importance of every mode, the
     ranking (jassy.anytime_rank.rank_modes) and each bank's new kept set. A bank judging
     its force by a transform (TRANSFORMED) that heard one lately, and was not woken now,
-    takes its :func:`periodogram` first (SPECTRAL). A quiet bank's
+    takes its :func:`periodogram` first (SPECTRAL; its remembered PSD if its last was
+    taken up to PSD_REUSE_PERIODS periods before). A
+    quiet bank's
     scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
     the force in its input samples [begin, end), another bank that heard a force lately
     judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
@@ -540,7 +595,10 @@ def decide(t, d, rates):
         if t.values[TRANSFORMED, b] > 0.0:
             spectral = d.heard[b] and not d.onset[b]
             if spectral:
-                periodogram(t, b, rates.window_power, rates.frame)
+                since = rates.frame - t.values[PSD_FRAME, b]
+                if t.values[REMEMBERED, b] == 0.0 or since > PSD_REUSE_PERIODS * t.rings.shape[1]:
+                    periodogram(t, b, rates.window_power, rates.frame)
+                    t.values[PSD_FRAME, b] = rates.frame
             t.values[SPECTRAL, b] = 1.0 if spectral else 0.0
     for b in range(count):
         kicked = False

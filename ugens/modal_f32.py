@@ -33,11 +33,11 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import drop_stale_cache
-from ugens import cells, kernels
+from ugens import cells, kernels, stack_rows, vector_pass
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 
-drop_stale_cache(__file__, [cells, kernels])  # its cache holds copies of two_pole
+drop_stale_cache(__file__, [cells, kernels, stack_rows, vector_pass])  # its cache holds their code
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.
@@ -89,6 +89,7 @@ def decay_factor_error(c1: np.ndarray, c2: np.ndarray, sample_rate: float) -> np
 
 
 def _rounding_error(c1, c2, sample_rate: float, decay_factor: bool) -> np.ndarray:
+    """:func:`float32_error` (sample_rate in Hz) of the delta or (``decay_factor``) decay-factor form."""
     sounding = c2 > 0.0
     c0, b2 = delta_coefficients(np.where(sounding, c1, 0.0), np.where(sounding, c2, 0.25))
     theta, rho = _pole(c0, b2)
@@ -146,12 +147,15 @@ def _next_delta(v, p, u, c0, b, f, by_factor):
 #: modes, 30 of them took half the time of the other 224).
 LANES = 32
 
-#: Banks of at most this many float32 modes (one vector of 16 float32 lanes with AVX-512),
-#: all in the decay-factor form, run a mode loop of exactly this trip count: LLVM then runs
-#: it as one vector instead of two (the second all padding), 0.72 -> 0.85x the C loop at
-#: 16 modes.
-SMALL = 16
+#: Banks of at most this many float32 modes and no float64 modes run with their rows held
+#: on the kernel's stack (:func:`resonate_held`): 4 vectors of 16 float32 lanes per row with
+#: AVX-512, five rows and the four output sums fit the 32 vector registers.
+HELD_MODES = 64
 
+#: Whether the kernels written with LLVM intrinsics (ugens.stack_rows, ugens.vector_pass)
+#: run: not with numba's JIT disabled (NUMBA_DISABLE_JIT=1, where kernels run as Python and
+#: intrinsics cannot), which takes the general loop instead.
+EXPLICIT_VECTORS = not nb.config.DISABLE_JIT
 
 #: The rows of a float32 bank start this many bytes apart modulo 4 KiB. Rows a multiple of
 #: 4 KiB apart (1024 modes) made the loads of one row wait on the stores to another with
@@ -236,51 +240,68 @@ def _four_samples(c0, b, p, v, fp, f0, f1, f2, by_factor):
     return u2, v, u0, u1, u2, u3
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
-def _resonate_small(force, out, n, rows, last):
-    """:func:`resonate_delta` for at most SMALL float32 modes in the decay-factor form and
-    no float64 modes: the mode loop's trip count is the constant SMALL, which LLVM runs as
-    one vector (the general loop takes two, the second all padding)."""
-    c0, b2, g, d, y, dy = rows
-    direct = 0.0
-    for k in range(SMALL):
+@nb.njit(inline="always", cache=True)
+def _wide_one(wide, count, fw):
+    """One sample of the float64 modes [0, count) of ``wide`` whose preceding force is fw (as
+    :func:`_wide_four`): the output sum."""
+    t = 0.0
+    for k in range(count):
+        v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
+        wide.y2[k] = wide.y1[k]
+        wide.y1[k] = v
+        t += v
+    return t
+
+
+@nb.njit(inline="always", cache=True)
+def _direct_gain(d, count, direct):
+    """``direct`` + d[0] + ... + d[count - 1] in float64, in that order: the direct gain of
+    ``count`` modes added to ``direct``."""
+    for k in range(count):
         direct += d[k]
-    i = 0
-    while i + 4 <= n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        f0 = np.float32(force[i])
-        f1 = np.float32(force[i + 1])
-        f2 = np.float32(force[i + 2])
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        for k in range(SMALL):
-            gk = g[k]
-            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, True)
-            s0 += gk * u0
-            s1 += gk * u1
-            s2 += gk * u2
-            s3 += gk * u3
-        out[i] += s0
-        out[i + 1] += s1
-        out[i + 2] += s2
-        out[i + 3] += s3
-        i += 4
+    return direct
+
+
+@nb.njit(inline="always", cache=True)
+def _one_sample(rows, count, fp, by_factor):
+    """One sample of the float32 modes [0, count) of ``rows`` (DeltaRows or HeldRows) whose
+    preceding force is fp (float32, N): their state advanced, their output sum (float32)."""
+    s = np.float32(0.0)
+    for k in range(count):
+        p = rows.y[k]
+        u = p + rows.dy[k]
+        v = _next_delta(rows.dy[k], p, u, rows.c0[k], rows.b2[k], fp, by_factor)
+        rows.y[k] = u
+        rows.dy[k] = v
+        s += rows.g[k] * (u + v)
+    return s
+
+
+@nb.njit(inline="always", cache=True)
+def _tail(force, out, i, n, rows, count, wide, wide_active, last, by_factor, add):
+    """The samples i .. n - 1 after the four-sample passes (fewer than four), one at a time:
+    the float32 modes [0, count) of ``rows`` (:func:`_one_sample`) and the float64 modes
+    [0, wide_active) of ``wide`` (None: none) over force (N), their sum added to out (the
+    bank's output units) with ``add``, else written."""
     while i < n:
-        fp = np.float32(force[i - 1] if i > 0 else last[0])
-        s = np.float32(0.0)
-        for k in range(SMALL):
-            p = y[k]
-            u = p + dy[k]
-            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, True)
-            y[k] = u
-            dy[k] = v
-            s += g[k] * (u + v)
-        out[i] += s
+        fw = force[i - 1] if i > 0 else last[0]
+        s = _one_sample(rows, count, np.float32(fw), by_factor)
+        if wide is not None:
+            s = s + _wide_one(wide, wide_active, fw)
+        if add:
+            out[i] += s
+        else:
+            out[i] = s
         i += 1
+
+
+@nb.njit(inline="always", cache=True)
+def _finish(force, out, start, n, direct, last):
+    """Add the direct term direct F[i] (force in N) to out[start:n] (after the passes: a
+    scalar held across the mode loops takes a vector register) and leave last[0] at
+    force[n - 1]."""
     if direct != 0.0:
-        for i in range(n):
+        for i in range(start, n):
             out[i] += direct * force[i]
     if n > 0:
         last[0] = force[n - 1]
@@ -298,25 +319,18 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     updated by the two-pole recursion of ugens.modal.resonate in the same passes (a mixed
     bank's few very-high-Q modes: in a pass of their own, 2 modes cost 10 % of 256; here
     their scalar updates fill the float32 loop's waits). With None (a type of its own)
-    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %. With None,
-    the decay-factor form and at most SMALL modes: :func:`_resonate_small`.
-    force and out float64. last[0]: the force sample before force[0], left at
-    force[n-1]. The direct term sum(d) F[n] is added as in ugens.modal.resonate, after the
-    passes. Four samples per pass over the modes, as there. The float32 modes run up to the next
-    multiple of LANES within the rows (:func:`narrow_rows`' padding, or modes silenced by
-    the flush: exact zeros that stay zero without force, and with force every mode is
-    active)."""
-    if wide is None and by_factor and 0 < active <= SMALL:
-        _resonate_small(force, out, n, rows, last)
-        return
+    numba compiles a kernel without that loop: at 64 modes its presence cost 5 %.
+    force (N) and out (the bank's output units) float64, C-contiguous. last[0]: the force
+    sample before force[0] (N), left at force[n-1]. The direct term sum(d) F[n] is added as
+    in ugens.modal.resonate, after the passes. Four samples per pass over the modes, as
+    there. The float32 modes run up to the next multiple of LANES within the rows
+    (:func:`narrow_rows`' padding, or modes silenced by the flush: exact zeros that stay
+    zero without force, and with force every mode is active)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
-    direct = 0.0
-    for k in range(active):
-        direct += d[k]
+    direct = _direct_gain(d, active, 0.0)
     if wide is not None:
-        for k in range(wide_active):
-            direct += wide.d[k]
+        direct = _direct_gain(wide.d, wide_active, direct)
     i = 0
     while i + 4 <= n:
         # Only the loop's own values stay in registers across the float32 loop (scalars
@@ -367,31 +381,194 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         out[i + 2] += s2 + t2
         out[i + 3] += s3 + t3
         i += 4
-    while i < n:
-        fw = force[i - 1] if i > 0 else last[0]
-        fp = np.float32(fw)
-        s = np.float32(0.0)
-        for k in range(active):
-            p = y[k]
-            u = p + dy[k]
-            v = _next_delta(dy[k], p, u, c0[k], b2[k], fp, by_factor)
-            y[k] = u
-            dy[k] = v
-            s += g[k] * (u + v)
-        t = 0.0
+    _tail(force, out, i, n, rows, active, wide, wide_active, last, by_factor, True)
+    _finish(force, out, 0, n, direct, last)
+
+
+class HeldRows(NamedTuple):
+    """A :class:`DeltaRows` without the direct gains, as ugens.vector_pass takes the modes:
+    in :func:`_held_passes` copies on the kernel's stack (ugens.stack_rows) of one
+    constant width, in :func:`resonate_factor` the bank's own rows."""
+
+    c0: np.ndarray
+    b2: np.ndarray
+    g: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+
+
+@nb.njit(inline="always", cache=True)
+def _hold(rows, held):
+    """Copy the float32 modes [0, width) of ``rows`` (DeltaRows) to ``held`` (HeldRows of
+    constant width, on the stack); return their direct gain sum(d) in float64."""
+    c0, b2, g, y, dy = held
+    direct = 0.0
+    for k in range(c0.size):
+        c0[k] = rows.c0[k]
+        b2[k] = rows.b2[k]
+        g[k] = rows.g[k]
+        y[k] = rows.y[k]
+        dy[k] = rows.dy[k]
+        direct += rows.d[k]
+    return direct
+
+
+@nb.njit(inline="always", cache=True)
+def _release(force, out, start, n, rows, held, direct, last):
+    """Copy the held state back to ``rows``, add the direct term to out[start:n] and leave
+    last[0] at force[n - 1] (:func:`_finish`). The direct term is added after the passes:
+    added as each sample is written (in float64, or in float32 from the force samples of
+    the pass), it made the kernel 4-13 % slower at 16 and 64 modes."""
+    for k in range(held.y.size):
+        rows.y[k] = held.y[k]
+        rows.dy[k] = held.dy[k]
+    _finish(force, out, start, n, direct, last)
+
+
+@nb.njit(inline="always", cache=True)
+def _held_passes(force, out, n, rows, held, last, width):
+    """Write the float32 modes [0, width) of ``rows`` over force[:n] (with their direct term)
+    to out[:n] (as :func:`resonate_delta` adds them), in the decay-factor form, on their
+    copies in ``held`` (HeldRows of the literal ``width``, on the stack), where LLVM keeps
+    them in vector registers across the passes. Each pass in explicit vectors
+    (ugens.vector_pass.write_four: the four output sums reduced together, the direct term
+    added and the four samples converted and stored as one vector)."""
+    direct = _hold(rows, held)
+    i = 0
+    while i + 4 <= n:
+        fp = np.float32(force[i - 1] if i > 0 else last[0])
+        vector_pass.write_four(width, held, fp, force, out, i, direct)
+        i += 4
+    _tail(force, out, i, n, held, held.c0.size, None, 0, last, True, False)
+    _release(force, out, i, n, rows, held, direct, last)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _held_16(force, out, n, rows, last):
+    """:func:`_held_passes` for 16 modes (one AVX-512 vector per row)."""
+    row = stack_rows.stack_row
+    _held_passes(force, out, n, rows, HeldRows(row(16), row(16), row(16), row(16), row(16)), last, 16)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _held_32(force, out, n, rows, last):
+    """:func:`_held_passes` for 32 modes."""
+    row = stack_rows.stack_row
+    _held_passes(force, out, n, rows, HeldRows(row(32), row(32), row(32), row(32), row(32)), last, 32)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _held_64(force, out, n, rows, last):
+    """:func:`_held_passes` for 64 modes."""
+    row = stack_rows.stack_row
+    _held_passes(force, out, n, rows, HeldRows(row(64), row(64), row(64), row(64), row(64)), last, 64)
+
+
+@nb.njit(cache=True)
+def held_width(active):
+    """The mode count :func:`resonate_held` runs for ``active`` float32 modes (1 ..
+    HELD_MODES): the next of 16, 32, 64."""
+    return 16 if active <= 16 else (32 if active <= 32 else 64)
+
+
+@nb.njit(cache=True)
+def resonate_held(force, out, n, rows, active, last):
+    """Write (not add) 1 .. HELD_MODES float32 modes in the decay-factor form over force[:n]
+    (float64, N) to out[:n] (float64, the bank's output units), as :func:`resonate_delta`
+    computes them with no float64 modes: the modes [0, :func:`held_width`) held on the
+    stack (:func:`_held_passes`; the padding and silenced modes beyond ``active`` hold
+    exact zeros, as in the general loop). The general loop, like the C two-pole loop,
+    loads and stores every mode's state on every pass."""
+    width = held_width(active)
+    if width == 16:
+        _held_16(force, out, n, rows, last)
+    elif width == 32:
+        _held_32(force, out, n, rows, last)
+    else:
+        _held_64(force, out, n, rows, last)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
+    """Write (not add) what :func:`resonate_delta` computes in the decay-factor form
+    (``by_factor``) to out[:n], each pass's float32 modes in explicit vectors
+    (ugens.vector_pass.add_chunk, 32 modes at a time, their per-lane sums kept in four
+    stack rows; write_sums reduces the four together and stores the four samples as one
+    vector): LLVM's code reduced and stored the four samples one by one. The float64
+    modes' pass is written out here as in resonate_delta: as an inlined helper it made a
+    256-mode bank with two float64 modes 20 % slower."""
+    c0, b2, g, d, y, dy = rows
+    active = min(-(-active // LANES) * LANES, c0.size)
+    direct = _direct_gain(d, active, 0.0)
+    if wide is not None:
+        direct = _direct_gain(wide.d, wide_active, direct)
+    modes = HeldRows(c0, b2, g, y, dy)
+    row = stack_rows.stack_row
+    s0, s1, s2, s3 = row(LANES), row(LANES), row(LANES), row(LANES)
+    sums = (s0, s1, s2, s3)
+    i = 0
+    while i + 4 <= n:
+        forces = (
+            np.float32(force[i - 1] if i > 0 else last[0]),
+            np.float32(force[i]),
+            np.float32(force[i + 1]),
+            np.float32(force[i + 2]),
+        )
+        for lane in range(LANES):
+            s0[lane] = 0.0
+            s1[lane] = 0.0
+            s2[lane] = 0.0
+            s3[lane] = 0.0
+        for k in range(0, active, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums)
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        t3 = 0.0
         if wide is not None:
+            fw = force[i - 1] if i > 0 else last[0]
+            w0 = force[i]
+            w1 = force[i + 1]
+            w2 = force[i + 2]
             for k in range(wide_active):
-                v = two_pole(wide.c1[k], wide.c2[k], wide.y1[k], wide.y2[k], wide.g[k] * fw)
-                wide.y2[k] = wide.y1[k]
-                wide.y1[k] = v
-                t += v
-        out[i] += s + t
-        i += 1
-    if direct != 0.0:
-        for i in range(n):
-            out[i] += direct * force[i]
-    if n > 0:
-        last[0] = force[n - 1]
+                q1 = wide.c1[k]
+                q2 = wide.c2[k]
+                gk = wide.g[k]
+                u1 = wide.y1[k]
+                u2 = wide.y2[k]
+                v0 = two_pole(q1, q2, u1, u2, gk * fw)
+                v1 = two_pole(q1, q2, v0, u1, gk * w0)
+                v2 = two_pole(q1, q2, v1, v0, gk * w1)
+                v3 = two_pole(q1, q2, v2, v1, gk * w2)
+                wide.y2[k] = v2
+                wide.y1[k] = v3
+                t0 += v0
+                t1 += v1
+                t2 += v2
+                t3 += v3
+        vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
+        i += 4
+    _tail(force, out, i, n, modes, active, wide, wide_active, last, True, False)
+    _finish(force, out, 0, n, direct, last)
+
+
+@nb.njit(cache=True)
+def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n].
+    In the decay-factor form: :func:`resonate_held` for 1 .. HELD_MODES float32 modes and
+    no float64 modes (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them), else :func:`resonate_factor` (on rows of whole LANES); otherwise (or
+    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
+    if EXPLICIT_VECTORS and by_factor:
+        if wide is None and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+            resonate_held(force, out, n, rows, active, last)
+            return
+        if rows.c0.size % LANES == 0:
+            resonate_factor(force, out, n, rows, active, wide, wide_active, last)
+            return
+    for i in range(n):
+        out[i] = 0.0
+    resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)
 
 
 @nb.njit(cache=True)

@@ -29,17 +29,23 @@ from jassy.anytime_rank import (
     has_force,
     hearing_at,
     kicks_at,
+    note_decided,
     scan_forces,
+    steady_forces,
 )
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
-from ugens import cells, kernels, modal, modal_budget, modal_meta, real_fft
-from ugens.cells import mode_rows
+from ugens import cells, kernels, modal, modal_budget, modal_meta, modal_retune, real_fft
+from ugens.cells import ModeRows, is_flush_frame, mode_rows, two_pole, until_flush
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, resonate, resonate_ramp
+from ugens.modal import Ramp, flush_silent, resonate, resonate_ramp
 from ugens.modal_budget import (
+    BANK_ROWS,
+    COEF_ROWS,
     FLOOR,
     KEPT_LANES,
+    RAMP_DELTA,
+    RAMP_TARGET,
     TABLE_FIELDS,
     Rates,
     compact_bank,
@@ -50,9 +56,11 @@ from ugens.modal_budget import (
     tables_at,
 )
 from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
+from ugens.modal_retune import COEF_C1, COEF_C2, COEF_DIRECT, COEF_GAIN
 
 drop_stale_cache(
-    __file__, [anytime_rank, cells, kernels, modal, modal_budget, modal_meta, real_fft, record_views]
+    __file__,
+    [anytime_rank, cells, kernels, modal, modal_budget, modal_meta, modal_retune, real_fft, record_views],
 )  # the cache holds copies of their kernels (real_fft through modal_budget.decide) and FASTMATH
 
 
@@ -130,12 +138,11 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
     FLUSH_PERIOD on the clock, so the output does not depend on the block size), with
     force-free stretches by :func:`ring`. The force also goes to the budget period's ring
     ``heard`` (empty: the force is zero and the ring holds zeros)."""
-    width = meta[WIDTH]
+    width, rows = meta[WIDTH], mode_rows(compact)
     meta[ACTIVE] = min((meta[ACTIVE] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES, width)
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
         forced = last[0] != 0.0 or has_force(f, 0, m)
@@ -147,12 +154,12 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
                 o[j] = 0.0
             last[0] = 0.0
         elif forced:
-            resonate(f, o, m, mode_rows(compact), active, last)
+            resonate(f, o, m, rows, active, last)
         else:
-            ring(o, m, compact[0], compact[1], compact[4], compact[5], active)
+            ring(o, m, rows.c1, rows.c2, rows.y1, rows.y2, active)
         i += m
-        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
-            meta[ACTIVE] = flush_silent(compact[4], compact[5], active, floor)
+        if active > 0 and is_flush_frame(start + i):
+            meta[ACTIVE] = flush_silent(rows.y1, rows.y2, active, floor)
     if heard.size:
         hear(force, n, heard, start)
 
@@ -166,28 +173,108 @@ def heard_lately(h, b):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def ramp_passes(force, out, n, ramp, y1, y2, remaining, active, last):
+    """As ugens.modal.resonate_ramp (each sample with the current coefficients, which then
+    step by their increments; ``remaining`` samples to the ramp's target) over modes
+    [0, active), four samples per pass over the modes while the ramp goes on past them:
+    each mode's coefficients, increments and state are loaded and stored once per four
+    samples (resonate_ramp loads and stores the four coefficient rows every sample, and
+    reduces the sums across the mode vector every sample: 4x the cost of the steady
+    recursion). The same products and sums (reassociated); the sample where the ramp ends
+    by resonate_ramp, the samples after it by ugens.modal.resonate. Returns the samples
+    of the ramp left."""
+    coef, delta, _ = ramp
+    c1, c2, g, d = coef[COEF_C1], coef[COEF_C2], coef[COEF_GAIN], coef[COEF_DIRECT]
+    e1, e2, eg, ed = delta[COEF_C1], delta[COEF_C2], delta[COEF_GAIN], delta[COEF_DIRECT]
+    fp = last[0]
+    i = 0
+    while i + 4 <= n and remaining > 4:
+        f0 = force[i]
+        f1 = force[i + 1]
+        f2 = force[i + 2]
+        f3 = force[i + 3]
+        s0 = s1 = s2 = s3 = 0.0
+        t0 = t1 = t2 = t3 = 0.0  # the direct gains' sums at each sample
+        for k in range(active):
+            p, q, gk, dk = c1[k], c2[k], g[k], d[k]
+            a, b, h, e = e1[k], e2[k], eg[k], ed[k]
+            u1 = y1[k]
+            u2 = y2[k]
+            v0 = two_pole(p, q, u1, u2, gk * fp)
+            t0 += dk
+            v1 = two_pole(p + a, q + b, v0, u1, (gk + h) * f0)
+            t1 += dk + e
+            v2 = two_pole(p + 2.0 * a, q + 2.0 * b, v1, v0, (gk + 2.0 * h) * f1)
+            t2 += dk + 2.0 * e
+            v3 = two_pole(p + 3.0 * a, q + 3.0 * b, v2, v1, (gk + 3.0 * h) * f2)
+            t3 += dk + 3.0 * e
+            c1[k] = p + 4.0 * a
+            c2[k] = q + 4.0 * b
+            g[k] = gk + 4.0 * h
+            d[k] = dk + 4.0 * e
+            y2[k] = v2
+            y1[k] = v3
+            s0 += v0
+            s1 += v1
+            s2 += v2
+            s3 += v3
+        out[i] = s0 + t0 * f0
+        out[i + 1] = s1 + t1 * f1
+        out[i + 2] = s2 + t2 * f2
+        out[i + 3] = s3 + t3 * f3
+        fp = f3
+        remaining -= 4
+        i += 4
+    last[0] = fp
+    if i < n and remaining > 0:
+        m = min(n - i, remaining)
+        remaining = resonate_ramp(force[i : i + m], out[i : i + m], m, ramp, y1, y2, remaining, active, last)
+        i += m
+    if i < n:
+        resonate(force[i:n], out[i:n], n - i, ModeRows(c1, c2, g, d, y1, y2), active, last)
+    return remaining
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def ramp_kept(t, b, force, out, start, n, ring_of_force):
     """Bank b's kept modes over force[:n] into out[:n] while its coefficients ramp (its
-    RAMP_LEFT > 0): ugens.modal.resonate_ramp on its compact bank (every column, no
-    flushes), then the force into the ring of the period's force (empty: it is zero)."""
+    RAMP_LEFT > 0): :func:`ramp_passes` on its compact bank (every column, no flushes),
+    then the force into the ring of the period's force (empty: it is zero)."""
     compact, meta = compact_bank(t, b), t.compact_meta[b]
     meta[ACTIVE] = meta[WIDTH]
-    ramp = Ramp(compact[:4], compact[6:10], compact[10:])
-    last = t.last[b : b + 1]
-    t.meta[b, RAMP_LEFT] = resonate_ramp(
-        force, out, n, ramp, compact[4], compact[5], t.meta[b, RAMP_LEFT], meta[WIDTH], last
+    ramp = Ramp(compact[:COEF_ROWS], compact[RAMP_DELTA:RAMP_TARGET], compact[RAMP_TARGET:])
+    rows, last = mode_rows(compact), t.last[b : b + 1]
+    t.meta[b, RAMP_LEFT] = ramp_passes(
+        force, out, n, ramp, rows.y1, rows.y2, t.meta[b, RAMP_LEFT], meta[WIDTH], last
     )
     if ring_of_force.size:
         hear(force, n, ring_of_force, start)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def render_bank(t, b, force, out, start, n, ring_of_force):
+    """Budgeted bank b (its rows in the tables ``t``) over force[:n] into out[:n], frames
+    [start, start + n): :func:`kept_step` on its compact bank (gathered if stale), or
+    :func:`ramp_kept` while its coefficients ramp; the force into ``ring_of_force`` (empty:
+    it is zero). Returns its active modes after the span (also its meta's)."""
+    meta = t.compact_meta[b]
+    if t.meta[b, RAMP_LEFT] > 0:
+        ramp_kept(t, b, force, out, start, n, ring_of_force)
+    else:
+        compact = compact_bank(t, b)
+        floor, last = t.values[FLOOR, b], t.last[b : b + 1]
+        kept_step(force, out, start, n, compact[:BANK_ROWS], meta, floor, last, ring_of_force)
+    active = min(meta[ACTIVE], t.meta[b, ALLOWED])
+    t.meta[b, ACTIVE] = active
+    return active
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def render_kept(t, h, outputs, by_python, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
-    its output (float64 arrays at ``outputs``), by :func:`kept_step` on its compact bank
-    (gathered if stale) from the tables ``t`` (ugens.modal_budget), or :func:`ramp_kept`
-    while its coefficients ramp. A bank with nothing to compute (not
+    its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
+    (ugens.modal_budget). A bank with nothing to compute (not
     :func:`heard_lately`, no mode sounding, no force sample before, no ramp) writes
     zeros. Returns the modes computed times frames (each bank's active count after its
     span)."""
@@ -204,17 +291,7 @@ def render_kept(t, h, outputs, by_python, start, n, offset):
             continue
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         ring_of_force = t.rings[b] if busy else t.rings[b, :0]
-        meta = t.compact_meta[b]
-        if ramping:
-            ramp_kept(t, b, force, out, start, n, ring_of_force)
-        else:
-            compact = compact_bank(t, b)
-            kept_step(
-                force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], ring_of_force
-            )
-        active = min(meta[ACTIVE], t.meta[b, ALLOWED])
-        t.meta[b, ACTIVE] = active
-        work += active * n
+        work += render_bank(t, b, force, out, start, n, ring_of_force) * n
     return work
 
 
@@ -270,6 +347,7 @@ def decide_at(a, rates):
     for b in range(d.heard.size):
         d.heard[b] = h.heard_now[b] or h.heard_before[b]
     fading, total = decide(t, d, rates)
+    note_decided(h, t.rings, d.heard, state)
     state[FADING] = fading
     state[DECISIONS] += 1
     state[PEAK] = max(state[PEAK], total)
@@ -306,6 +384,10 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
                 work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
                 h.unrendered[:] = False
             rendered = max(rendered, at)
+            only_heard = not (woken or coming or state[FADING] > 0 or state[EVERY_PERIOD] > 0)
+            if only_heard and renders and steady_forces(h, t.rings, t.meta[:, RAMP_LEFT], state):
+                at = stop
+                continue
             if state[INLINE] == 0:
                 return at, rendered, work, True
             impacts_at(a, count, at, period)
@@ -325,17 +407,10 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
 def kept_span(a, b, force, out, start, n):
     """Budgeted bank b (its rows in the tables of handle ``a``, jassy.record_views) over
     force[:n] into out[:n], frames [start, start + n), as :func:`render_kept` renders it
-    (for a bank that renders through its own ``process``): :func:`kept_step` on its
-    compact bank, gathered if stale, or :func:`ramp_kept` while its coefficients ramp;
-    the force goes to its ring."""
+    (for a bank that renders through its own ``process``): :func:`render_bank`, the force
+    into its ring."""
     t = tables_at(a, 0)
-    meta = t.compact_meta[b]
-    if t.meta[b, RAMP_LEFT] > 0:
-        ramp_kept(t, b, force, out, start, n, t.rings[b])
-    else:
-        compact = compact_bank(t, b)
-        kept_step(force, out, start, n, compact[:6], meta, t.values[FLOOR, b], t.last[b : b + 1], t.rings[b])
-    t.meta[b, ACTIVE] = min(meta[ACTIVE], t.meta[b, ALLOWED])
+    render_bank(t, b, force, out, start, n, t.rings[b])
 
 
 @nb.njit(cache=True)

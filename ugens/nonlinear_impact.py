@@ -66,7 +66,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, heard
-from ugens.cells import silent, slot, state_step, store
+from ugens.cells import FLUSH_PERIOD, silent, slot, state_step, store
 from ugens.heard import STATE_P, STATE_Q, heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
@@ -129,6 +129,10 @@ class ContactData(NamedTuple):
     meta: np.ndarray  #: int64 [modes to compute (0 once all are silent and the hammer retired)]
 
 
+#: The slot of ContactData.meta: the modes to compute.
+COMPUTED_MODES = 0
+
+
 class StepSize(NamedTuple):
     """A step size's coefficients: a (10, K) ModeSteps array and a HammerParams array."""
 
@@ -167,8 +171,6 @@ def mode_steps(coef):
     return ModeSteps(coef[0], coef[1], coef[2], coef[3], coef[4], coef[5], coef[6], coef[7], coef[8], coef[9])
 
 
-#: Silent modes are looked for once per this many frames of the clock (as ModalBank).
-FLUSH_PERIOD = 1024
 #: Sub-steps per sample while the hammer touches or may touch within the sample.
 SUBSTEPS = 8
 #: Default approach speed of ``strike`` (m/s): the default 10 g hammer then carries 1e-3 N s,
@@ -341,6 +343,54 @@ def hammer_params(prm):
     return HammerParams(prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
 
 
+@nb.njit(inline="always", cache=True)
+def modal_pass(qs, ps, steps, kmodes, fp):
+    """The first ``kmodes`` modes (positions qs, velocities ps) one step on (``steps``: a
+    ModeSteps), the pending force fp applied first. Returns the sums the step's solve and
+    energy need: (contact displacement sum q (m), contact velocity sum q' (m/s), modal energy
+    S0 (J), modal energy per force S1 (J/N))."""
+    sq = 0.0
+    sp = 0.0
+    s0 = 0.0
+    s1 = 0.0
+    for j in range(kmodes):
+        q = qs[j] + steps.g_q[j] * fp
+        pj = ps[j] + steps.g_p[j] * fp
+        qn, pn = state_step(steps.phi11[j], steps.phi12[j], steps.phi21[j], steps.phi22[j], q, pj)
+        qs[j] = qn
+        ps[j] = pn
+        sq += qn
+        sp += pn
+        s0 += steps.w_q[j] * qn * qn + steps.w_p[j] * pn * pn
+        s1 += steps.w_q[j] * steps.g_q[j] * qn + steps.w_p[j] * steps.g_p[j] * pn
+    return sq, sp, s0, 2.0 * s1
+
+
+@nb.njit(inline="always", cache=True)
+def modes_reach(qs, ps, steps, kmodes):
+    """The largest contact displacement (m) the free, damped modes can still reach: mode j is
+    e^{-dt}(A cos wt + B sin wt), |.| <= sqrt(A^2 + B^2), A = q, B = (q' + d q) / w."""
+    reach = 0.0
+    for j in range(kmodes):
+        b = (ps[j] + steps.decay[j] * qs[j]) * steps.inv_w[j]
+        reach += math.sqrt(qs[j] * qs[j] + b * b)
+    return reach
+
+
+@nb.njit(inline="always", cache=True)
+def flush_silent_modes(qs, ps, inv_w, kmodes, floor):
+    """Zero the modes below ``floor`` (position and velocity / w, both displacements in m);
+    return the count of modes up to the last audible one."""
+    last = 0
+    for j in range(kmodes):
+        if silent(qs[j], ps[j] * inv_w[j], floor):
+            qs[j] = 0.0
+            ps[j] = 0.0
+        else:
+            last = j + 1
+    return last
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def hc_run(out, force_out, energy_out, start, n, step, d):
     """Frames start..start+n-1: per sample, one pass over the modes, then the scalar solve.
@@ -354,16 +404,6 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
     kk, gg, floor = p.compliance, p.gain_sum, p.floor
     inv_t = 1.0 / tt
     steps = mode_steps(step.coef)
-    a11 = steps.phi11
-    a12 = steps.phi12
-    a21 = steps.phi21
-    a22 = steps.phi22
-    g1 = steps.g_q
-    g2 = steps.g_p
-    wq = steps.w_q
-    wp = steps.w_p
-    dec = steps.decay
-    inv_w = steps.inv_w
     qs = d.state[STATE_Q]
     ps = d.state[STATE_P]
     meta = d.meta
@@ -375,22 +415,8 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
     corrections, touching, measured = st.corrections, st.touching, st.measured
     measuring = False  # whether a stat changed
     for i in range(n):
-        kmodes = meta[0]
-        sq = 0.0
-        sp = 0.0
-        s0 = 0.0
-        s1 = 0.0
-        for j in range(kmodes):
-            q = qs[j] + g1[j] * fp
-            pj = ps[j] + g2[j] * fp
-            qn, pn = state_step(a11[j], a12[j], a21[j], a22[j], q, pj)
-            qs[j] = qn
-            ps[j] = pn
-            sq += qn
-            sp += pn
-            s0 += wq[j] * qn * qn + wp[j] * pn * pn
-            s1 += wq[j] * g1[j] * qn + wp[j] * g2[j] * pn
-        s1 *= 2.0
+        kmodes = meta[COMPUTED_MODES]
+        sq, sp, s0, s1 = modal_pass(qs, ps, steps, kmodes, fp)
         xh_free = xh + tt * vh
         x0 = xn
         x_free = xh_free - sq
@@ -433,24 +459,10 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
         force_out[i] = f
         energy_out[i] = e1
         if frame % FLUSH_PERIOD == FLUSH_PERIOD - 1 and f == 0.0:
-            if active and vh <= 0.0:
-                # retire a hammer moving away that no free, damped mode can reach again: mode j
-                # is e^{-dt}(A cos wt + B sin wt), |.| <= sqrt(A^2 + B^2), A = q, B = (p + d q) / w
-                reach = 0.0
-                for j in range(kmodes):
-                    b = (ps[j] + dec[j] * qs[j]) * inv_w[j]
-                    reach += math.sqrt(qs[j] * qs[j] + b * b)
-                if xh + reach < 0.0:
-                    active = False
+            if active and vh <= 0.0 and xh + modes_reach(qs, ps, steps, kmodes) < 0.0:
+                active = False  # moving away, and no free, damped mode can reach it again
             if not active:
-                last = 0
-                for j in range(kmodes):
-                    if silent(qs[j], ps[j] * inv_w[j], floor):  # velocity / w: a displacement
-                        qs[j] = 0.0
-                        ps[j] = 0.0
-                    else:
-                        last = j + 1
-                meta[0] = last
+                meta[COMPUTED_MODES] = flush_silent_modes(qs, ps, steps.inv_w, kmodes, floor)
     store(d.hammer, HammerState(xh, vh, xn, fp, en, 1.0 if active else 0.0, vn, fpp, sp))
     if measuring:  # (most calls are one sample between contacts: nothing to write back)
         store(
@@ -680,7 +692,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
         self.state[:] = 0.0
         self.hammer[:] = 0.0
         self.stats[:] = 0.0
-        self.meta[0] = 0
+        self.meta[COMPUTED_MODES] = 0
 
     def _commit_force(self) -> None:
         """Apply the last sample's force to the stored mode states (before coefficients change)."""
@@ -716,7 +728,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
             active=1.0,
         )
         self.stats[:] = StrikeStats(*np.zeros(len(StrikeStats._fields)))._replace(start=sample_time, vin=v0)
-        self.meta[0] = self.model.n_modes
+        self.meta[COMPUTED_MODES] = self.model.n_modes
         self._set_energy()
 
     def _set_energy(self) -> None:
@@ -789,7 +801,7 @@ class HuntCrossleyImpact(ModelParams, UGen):
 
     def _silent(self) -> bool:
         """No mode left to compute and the hammer retired (read once per block: one field)."""
-        return self.meta[0] == 0 and self.hammer[_ACTIVE] == 0.0
+        return self.meta[COMPUTED_MODES] == 0 and self.hammer[_ACTIVE] == 0.0
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {

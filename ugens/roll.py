@@ -18,10 +18,10 @@ from jassy.errors import PatchError
 from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
-from ugens import cells, driving_point, kernels, scrape
+from ugens import cells, driving_point, filters, kernels, scrape
 from ugens.cells import slot, store
 from ugens.driving_point import MODE_ROWS, driving_point_modes, free_motion, move_contact, press, roll_over
-from ugens.filters import design_biquad
+from ugens.filters import biquad_coefficients, biquad_step, design_biquad
 from ugens.kernels import FASTMATH
 from ugens.modal import ModelParams
 from ugens.scrape import (
@@ -39,7 +39,7 @@ from ugens.scrape import (
 
 # rolling_filter (cache=True) inlines free_motion, press and settle, the cells' and the
 # profile's helpers; Roll's kernel calls roll_over.
-drop_stale_cache(__file__, [cells, driving_point, kernels, scrape])
+drop_stale_cache(__file__, [cells, driving_point, filters, kernels, scrape])
 
 #: Standard gravity, m/s^2 (SDT_EARTH).
 GRAVITY = 9.81
@@ -442,6 +442,46 @@ class SurfaceLaw(NamedTuple):
     mass_fs2: float  #: m fs^2 (N/m): the ball's momentum per sample over a displacement
 
 
+@nb.njit(inline="always", cache=True)
+def surface_law(law):
+    """The SurfaceLaw record held in ``law``."""
+    return SurfaceLaw(law[0], law[1], law[2])
+
+
+@nb.njit(inline="always", cache=True)
+def profile_under(prof, pos, v, inv_dxfs, turning, cubic):
+    """The surface height (m) under the contact at profile position ``pos`` (points) at speed
+    ``v`` (m/s): on a turning ball the highest point of its surface over this sample's travel,
+    else the profile read at ``pos``."""
+    if turning:
+        step = v * inv_dxfs
+        return highest(prof, pos if step >= 0.0 else pos + step, abs(step))
+    return read_profile(prof, pos, cubic)
+
+
+@nb.njit(inline="always", cache=True)
+def flight_step(c, bump, load, height, mass_fs2, giving, turned, free, takeoff):
+    """One sample of a flight: c -= W (``load``); returns (output, still airborne, c, height).
+
+    On a rigid surface the ball lands once c <= 0 (output B - c - W, B = ``bump``), else
+    outputs -W. On a surface that gives way it lands on the surface, not at its ballistic
+    time: its height above the take-off point, h = sum of its momentum p = c - B (N samples;
+    trapezoid rule, exact for a constant W) over m fs^2 (``mass_fs2``), is compared with the
+    surface's displacement X at the contact (``free``: this sample's free motion, positive
+    away from the ball), and the ball lands in the first sample where the gap
+    h + X - X_takeoff <= 0 (on a surface at rest that is c <= 0), with Rath's impulse B - c,
+    the ball's own downward momentum (0 if still rising): output max(0, B - c) - W; the
+    surface's velocity is not added. A new turn (``turned``) lands it at once."""
+    if giving:  # the ball's momentum before and after this sample, p = c - B
+        height += (c - bump - 0.5 * load) / mass_fs2
+    c -= load
+    if not giving and c <= 0.0:
+        return bump - c - load, False, c, height
+    if giving and (turned or height + free - takeoff <= 0.0):  # the ball meets the surface
+        return max(0.0, bump - c) - load, False, c, height
+    return -load, True, c, height
+
+
 class YieldingSurface(NamedTuple):
     """The surface under :func:`rolling_filter`: its driving-point ``modes`` at the contact
     (MODE_ROWS, K; :mod:`ugens.driving_point`; K = 0: a rigid surface), their ``scratch``
@@ -469,31 +509,21 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
     with B = (ground - trace) depth (m v^2 / 2) w / sqrt(decay), c = 2 B (output + B).
     contact = output + W (0 in flight). With smoothing, the output is low-passed first.
 
-    On a surface that gives way the ball lands on the surface, not at its ballistic time:
-    its height above the take-off point, h = sum of its momentum p = c - B (N samples;
-    trapezoid rule, exact for a constant W) over m fs^2, is compared with the surface's
-    displacement X at the contact (this sample's free motion, positive away from the
-    ball), and the ball lands in the first sample where the gap h + X - X_takeoff <= 0
-    (on a surface at rest that is c <= 0), with Rath's impulse B - c, the ball's own
-    downward momentum (0 if still rising): contact = max(0, B - c); the surface's velocity
-    is not added. The (low-passed) output then reaches the surface through the contact
-    spring while contact > 0 (:func:`press`); the output and ``contact`` are the force on
-    the moving surface. A new turn lands a flight at once in either case.
+    On a surface that gives way the ball lands on the surface (:func:`flight_step`), and
+    the (low-passed) output then reaches the surface through the contact spring while
+    contact > 0 (:func:`press`); the output and ``contact`` are the force on the moving
+    surface. A new turn lands a flight at once in either case.
     """
     prof, coef, cfg, ball = setup
     modes, scratch, law = yielding
     config = rolling_config(cfg)
-    inv_dxfs = config.inv_dxfs
-    mass = config.mass
-    grain = config.grain
-    depth = config.depth
+    inv_dxfs, mass, per_metre = config.inv_dxfs, config.mass, config.per_metre
     has_input = config.has_input != 0.0
     cubic = config.cubic != 0.0
     smoothed = config.smoothed != 0.0
-    per_metre = config.per_metre
-    uneven = config.unevenness
     giving = modes.shape[1] > 0
-    stiffness, gain_sum, mass_fs2 = SurfaceLaw(law[0], law[1], law[2])
+    stiffness, gain_sum, mass_fs2 = surface_law(law)
+    lowpass = biquad_coefficients(coef)
     L = prof.shape[0]
     held = rolling_state(state)
     pos = held.pos
@@ -519,36 +549,22 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
                 c = 0.0  # land in this sample (the flight's momentum still balances)
                 turned = True
         if per_metre > 0.0:
-            w = turn_weight(ball, phase - math.floor(phase), uneven)
+            w = turn_weight(ball, phase - math.floor(phase), config.unevenness)
             phase += abs(v) * per_metre
             if not turning:
                 phase -= math.floor(phase)
         load = (weight + forces[i]) * w
-        if has_input:
-            x = inputs[i]
-        elif turning:  # the highest point of the ball's surface under the contact
-            step = v * inv_dxfs
-            x = highest(prof, pos if step >= 0.0 else pos + step, abs(step))
-        else:
-            x = read_profile(prof, pos, cubic)
-        decay = min(2.0 * grain * abs(v), 2.0)
+        x = inputs[i] if has_input else profile_under(prof, pos, v, inv_dxfs, turning, cubic)
+        decay = min(2.0 * config.grain * abs(v), 2.0)
         ground = max(trace - decay, x)
         free = free_motion(modes, scratch, 0.0) if giving else 0.0
         y = 0.0
         if airborne:
-            if giving:  # the ball's momentum before and after this sample, p = c - B
-                height += (c - bump - 0.5 * load) / mass_fs2
-            c -= load
-            if not giving and c <= 0.0:
-                y = bump - c - load
-                airborne = False
-            elif giving and (turned or height + free - takeoff <= 0.0):  # the ball meets the surface
-                y = max(0.0, bump - c) - load
-                airborne = False
-            else:
-                y = -load
+            y, airborne, c, height = flight_step(
+                c, bump, load, height, mass_fs2, giving, turned, free, takeoff
+            )
         if not airborne and ground > trace and decay > 0.0:
-            b = (ground - trace) * depth * 0.5 * mass * v * v * w / math.sqrt(decay)
+            b = (ground - trace) * config.depth * 0.5 * mass * v * v * w / math.sqrt(decay)
             if b > 0.0:
                 bump = b
                 c = 2.0 * b
@@ -558,10 +574,7 @@ def rolling_filter(out, contact, n, forces, speeds, inputs, state, setup, yieldi
                 takeoff = free
         trace = ground
         if smoothed:
-            z = coef[0] * y + s1
-            s1 = coef[1] * y - coef[3] * z + s2
-            s2 = coef[2] * y - coef[4] * z
-            y = z
+            y, s1, s2 = biquad_step(lowpass, y, s1, s2)
         touch = y + load
         if giving:
             f = press(modes, scratch, free, y, stiffness if touch > 0.0 else 0.0, gain_sum)

@@ -35,7 +35,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, filters, noise, tonal_level
 from ugens.cells import store
-from ugens.filters import design_biquad
+from ugens.filters import biquad_coefficients, biquad_step, design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 from ugens.profile import ProfileError, fractal_profile, load_profile
@@ -228,10 +228,7 @@ def profile_contact(out, n, forces, speeds, prof, state, coef, cfg):
             if abs(fc - fc_coef) > CUTOFF_STEP * fc_coef:
                 design_biquad(0, fc, _BUTTERWORTH_Q, inv_fs, coef)
                 fc_coef = fc
-            y = coef[0] * h + s1
-            s1 = coef[1] * h - coef[3] * y + s2
-            s2 = coef[2] * h - coef[4] * y
-            h = y
+            h, s1, s2 = biquad_step(biquad_coefficients(coef), h, s1, s2)
         out[i] = gain * contact_factor(forces[i], v, law, inv_ref, min_speed) * h
         pos = wrap(pos + v * inv_dxfs, L)
     store(state, NeedleState(pos, s1, s2, fc_coef))

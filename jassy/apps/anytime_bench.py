@@ -147,7 +147,7 @@ def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeat
     (ugens.modal.bank_step) against the compact bank of ``fraction`` of them
     (ugens.modal_kept.kept_step, its width rounded up to whole vectors), best of ``repeats``."""
     from ugens.modal import bank_step
-    from ugens.modal_budget import COMPACT_ROWS, KEPT_LANES, line_aligned_zeros
+    from ugens.modal_budget import BANK_ROWS, COMPACT_ROWS, KEPT_LANES, line_aligned_zeros
     from ugens.modal_kept import kept_step
 
     rng = np.random.default_rng(0)
@@ -170,7 +170,7 @@ def kernel_floor(modes: int, fraction: float = 0.25, frames: int = BLOCK, repeat
 
     def kept_modes():
         meta = np.array([width, 0, width])
-        kept_step(force, out, 0, frames, compact[:6], meta, 1e-10, np.zeros(1), ring)
+        kept_step(force, out, 0, frames, compact[:BANK_ROWS], meta, 1e-10, np.zeros(1), ring)
 
     for _ in range(repeats):
         for name, run in (("all", every_mode), ("kept", kept_modes)):

@@ -149,6 +149,48 @@ def modal_bench(mode_counts=(64, 1024, 16384), seconds: float = 1.0, block: int 
     return rows
 
 
+def _bell_graph(model: ModalModel, floor: float) -> Graph:
+    """The bell patch's graph (clapper -> bell -> out) with silent modes skipped below ``floor``."""
+    from ugens.impact import ImpactForce
+    from ugens.mix import Gain
+    from ugens.modal import ModalBank
+
+    clapper = ImpactForce(name="clapper", duration=0.0008)
+    out = Gain(ModalBank(model, name="bell", floor=floor)(clapper), gain=0.05, name="out")
+    return Graph(out, haptic=clapper)
+
+
+def _bare_kernel_runs(force: np.ndarray, final_bank: np.ndarray, block: int, held: list):
+    """Two timed runs of the bare modal kernel on ``force`` from a copy of ``final_bank``'s
+    coefficients (rows c1, c2, g, d, y1, y2) at a fresh address each run (kept in ``held``):
+    one call over the whole force, and compiled calls per ``block``."""
+    from jassy.apps.bench_blocks import resonate_blocks
+    from ugens.cells import ModeRows
+    from ugens.modal import line_aligned_zeros, resonate
+
+    frames = force.size
+    last = np.zeros(1)
+    out = np.zeros(frames)
+
+    def fresh_bank() -> np.ndarray:
+        state = line_aligned_zeros(final_bank.shape)  # the bank's own layout and alignment
+        state[:4] = final_bank[:4]
+        held.append(state)
+        return state
+
+    def run_kernel():
+        state = fresh_bank()
+        last[0] = 0.0
+        resonate(force, out, frames, ModeRows(*state), state.shape[1], last)
+
+    def run_kernel_blocks():
+        state = fresh_bank()
+        last[0] = 0.0
+        resonate_blocks(force, out, state, block, last)
+
+    return run_kernel, run_kernel_blocks
+
+
 def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> dict:
     """The bell patch with an n-mode bell, rendered whole, vs the bare kernel on the same force.
 
@@ -164,13 +206,8 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
     stage, which is what the device callback runs per block. Three rounds of interleaved
     best-of-5 timings; the round with the median ratio is reported.
     """
-    from jassy.apps.bench_blocks import resonate_blocks
     from jassy.program import run_blocks
     from patches.models import bell_model
-    from ugens.cells import ModeRows
-    from ugens.impact import ImpactForce
-    from ugens.mix import Gain
-    from ugens.modal import ModalBank, line_aligned_zeros, resonate
 
     model = bell_model(n_modes)
     places = ["soundbow", "lip", "waist", "shoulder"]
@@ -178,13 +215,7 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
         Event(0.05 + 1.25 * i, "clapper", "impact", {"impulse": 0.5, "location": places[i % 4]})
         for i in range(int(seconds / 1.25))
     ]
-
-    def bell_graph(floor: float) -> Graph:
-        clapper = ImpactForce(name="clapper", duration=0.0008)
-        out = Gain(ModalBank(model, name="bell", floor=floor)(clapper), gain=0.05, name="out")
-        return Graph(out, haptic=clapper)
-
-    graph, graph_full = bell_graph(1e-10), bell_graph(0.0)
+    graph, graph_full = _bell_graph(model, 1e-10), _bell_graph(model, 0.0)
     result = {}
     held = []  # every bank used so far, so that each run allocates a new one
 
@@ -209,30 +240,11 @@ def graph_bench(n_modes: int = 1000, seconds: float = 10.0, block: int = 64) -> 
 
     run_graph()
     force = result["rendering"].haptic[0].copy()
-    final_bank = graph.nodes["bell"].bank.copy()  # rows c1, c2, g, d, y1, y2
+    run_kernel, run_kernel_blocks = _bare_kernel_runs(force, graph.nodes["bell"].bank.copy(), block, held)
     frames = force.size
-    last = np.zeros(1)
-    out = np.zeros(frames)
     whole = frames // block
     signals = np.zeros((2, whole * block))  # the graph's audio and haptic outputs
     program_times: list[float] = []
-
-    def fresh_bank() -> np.ndarray:
-        state = line_aligned_zeros(final_bank.shape)  # the bank's own layout and alignment
-        state[:4] = final_bank[:4]
-        held.append(state)
-        return state
-
-    def run_kernel():
-        state = fresh_bank()
-        last[0] = 0.0
-        resonate(force, out, frames, ModeRows(*state), state.shape[1], last)
-
-    def run_kernel_blocks():
-        state = fresh_bank()
-        last[0] = 0.0
-        resonate_blocks(force, out, state, block, last)
-
     rounds = []
     for _ in range(3):  # this VM's speed drifts by tens of % over seconds: median of 3 rounds
         program_times.clear()
@@ -383,22 +395,10 @@ def _busy_python(seconds: float) -> int:
     return count
 
 
-def live_bench(
-    seconds: float = 60.0,
-    n_modes: int = 5000,
-    block: int = 64,
-    ring_blocks: float = 2.5,
-    mode: str = "auto",
-    floor: bool = False,
-) -> dict:
-    """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
-    the main thread does heavy Python work; the mode (callback or ring), underruns (and
-    jackd's late cycles by cause), latency and audio-haptic skew at a tap's onset
-    (measured on the frames the callback handed to the device). ``floor``: then as long a
-    run of a callback that only writes silence (jassy.apps.bench_floor): the underruns the
-    host causes on its own."""
-    from jassy.engines.jackserver import dummy_jack, server_xruns
-    from jassy.engines.live import LiveEngine
+def _live_scene(seconds: float, n_modes: int) -> tuple[Graph, list[Event], float, float]:
+    """The live bench's scene: a scrape (speed swept up and down, force varied) and a tap
+    into a ``n_modes`` plate; ``seconds`` - 5 s in, scraping stops and the plate is damped to
+    silence, then tapped 2 s later. Returns (graph, score, quiet time s, tap time s)."""
     from ugens.impact import ImpactForce
     from ugens.mix import Gain, Mixer
     from ugens.modal import ModalBank
@@ -426,9 +426,53 @@ def live_bench(
     score.append(Event(quiet_at + 1.0, "plate", "set", {"decay_scale": 1.0}, jump=True))
     tap_at = quiet_at + 2.0
     score.append(Event(tap_at, "tap", "impact", {"impulse": 0.01}))
+    return graph, score, quiet_at, tap_at
+
+
+def _engine_figures(live, stats, busy, before, late) -> dict:
+    """The live engine's counters at the end of a run: mode, callbacks and underruns, the
+    server's late cycles (``late`` - ``before``), callback load (``busy``, callback mode) and
+    latencies (ms)."""
+    return {
+        "mode": stats.mode,
+        "mode_reason": live.mode_reason,
+        "callbacks": stats.callbacks,
+        "underrun_callbacks": stats.underrun_callbacks,
+        "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
+        "device_underflows": stats.device_underflows,
+        "server_driver_xruns": late.driver - before.driver,
+        "server_client_xruns": late.client - before.client,
+        "callback_busy_max_ms": busy.busy_max * 1e3 if busy else None,
+        "callback_busy_mean_ms": busy.busy_mean * 1e3 if busy else None,
+        "callbacks_longer_than_a_buffer": busy.busy_over if busy else None,
+        "longest_callback_index": busy.busy_max_at if busy else None,
+        "realtime": stats.realtime,
+        "latency_ms": stats.latency * 1e3,
+        "ring_ms": stats.ring_latency * 1e3,
+        "device_ms": stats.device_latency * 1e3,
+    }
+
+
+def live_bench(
+    seconds: float = 60.0,
+    n_modes: int = 5000,
+    block: int = 64,
+    ring_blocks: float = 2.5,
+    mode: str = "auto",
+    floor: bool = False,
+) -> dict:
+    """A scraping contact on a ``n_modes`` bank played live on a JACK dummy server while
+    the main thread does heavy Python work; the mode (callback or ring), underruns (and
+    jackd's late cycles by cause), latency and audio-haptic skew at a tap's onset
+    (measured on the frames the callback handed to the device). ``floor``: then as long a
+    run of a callback that only writes silence (jassy.apps.bench_floor): the underruns the
+    host causes on its own."""
     from jassy.apps.bench_haptic import frame_stats, loop_latency
     from jassy.engines.hapticframes import FrameRecorder
+    from jassy.engines.jackserver import dummy_jack, server_xruns
+    from jassy.engines.live import LiveEngine
 
+    graph, score, quiet_at, tap_at = _live_scene(seconds, n_modes)
     recorder = FrameRecorder(process=True)  # the UDP haptic frames, as a device receives them
     with dummy_jack(f"jassy-bench-{__import__('os').getpid()}", SAMPLE_RATE, block, channels=2) as server:
         live = LiveEngine(
@@ -467,22 +511,7 @@ def live_bench(
         "seconds": seconds,
         "modes": n_modes,
         "block": block,
-        "mode": stats.mode,
-        "mode_reason": live.mode_reason,
-        "callbacks": stats.callbacks,
-        "underrun_callbacks": stats.underrun_callbacks,
-        "underrun_percent": 100.0 * stats.underrun_callbacks / max(stats.callbacks, 1),
-        "device_underflows": stats.device_underflows,
-        "server_driver_xruns": late.driver - before.driver,
-        "server_client_xruns": late.client - before.client,
-        "callback_busy_max_ms": busy.busy_max * 1e3 if busy else None,
-        "callback_busy_mean_ms": busy.busy_mean * 1e3 if busy else None,
-        "callbacks_longer_than_a_buffer": busy.busy_over if busy else None,
-        "longest_callback_index": busy.busy_max_at if busy else None,
-        "realtime": stats.realtime,
-        "latency_ms": stats.latency * 1e3,
-        "ring_ms": stats.ring_latency * 1e3,
-        "device_ms": stats.device_latency * 1e3,
+        **_engine_figures(live, stats, busy, before, late),
         "tap_audio_device_frame": audio_on,
         "tap_haptic_device_frame": haptic_on,
         "skew_samples": audio_on - haptic_on if min(audio_on, haptic_on) >= 0 else None,

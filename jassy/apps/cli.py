@@ -114,9 +114,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
         patch.graph.budget = ModeBudget(max_modes=args.mode_budget)
     t0 = time.perf_counter()
     safety, offsets = _haptic_options(args)
+    from jassy.engines.coldstart import program_cached
+
     engine = OfflineEngine(
         patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
-        offsets_ms=offsets,
+        offsets_ms=offsets, program=program_cached(patch.graph),  # node by node until compiled: the same bits
     )  # fmt: skip
     if args.normalise:
         from jassy.apps.loudness import TARGETS, render_normalised
@@ -359,10 +361,8 @@ def _add_haptic_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = LineParser(prog="jassy", description="Physically based sound synthesis.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def _add_render(sub: argparse._SubParsersAction) -> None:
+    """``jassy render``: a patch to an audio file (and haptic track, plot, CSV)."""
     p = sub.add_parser("render", help="render a patch to a WAV/FLAC file")
     p.add_argument("patch", help="patch file (.toml) or built-in patch name (see 'jassy list')")
     p.add_argument("-o", "--output", required=True, help="output file (.wav or .flac)")
@@ -408,6 +408,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
     p.set_defaults(func=_cmd_render)
 
+
+def _add_play(sub: argparse._SubParsersAction) -> None:
+    """``jassy play``: a patch live on the audio device (and haptic outputs, OSC control)."""
     p = sub.add_parser("play", help="play a patch live (audio + haptic channels on one clock)")
     p.add_argument("patch", help="patch file (.toml) or built-in patch name")
     p.add_argument("--device", help="output device index or name substring (see 'jassy devices')")
@@ -432,6 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no running counters")
     p.set_defaults(func=_cmd_play)
 
+
+def _add_demo(sub: argparse._SubParsersAction) -> None:
+    """``jassy demo``: the interactive probe on a steel plate."""
     p = sub.add_parser(
         "demo", help="interactive probe on a steel plate: click to tap, drag to scrape or roll"
     )
@@ -445,6 +451,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--headless", action="store_true", help="no window: play until stopped (UDP probe input)")
     p.set_defaults(func=_cmd_demo)
 
+
+def _add_haptic_bridge(sub: argparse._SubParsersAction) -> None:
+    """``jassy haptic-bridge``: the reference UDP haptic device."""
     p = sub.add_parser(
         "haptic-bridge",
         help="reference UDP haptic device: sends probe poses, receives forces, lets go safely",
@@ -460,9 +469,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--log", metavar="FILE.csv", help="write every tick: time, position, force, frame age")
     p.set_defaults(func=_cmd_haptic_bridge)
 
-    p = sub.add_parser("devices", help="list audio output devices")
-    p.set_defaults(func=_cmd_devices)
 
+def _add_application_commands(sub: argparse._SubParsersAction) -> None:
+    """The subcommands the applications' own modules register (batch, analysis, study, modal)."""
     from jassy import batch
     from jassy.apps import analyze, audiocheck, doc, preview
     from jassy.study.cli import add_command as add_study
@@ -476,15 +485,20 @@ def build_parser() -> argparse.ArgumentParser:
     add_study(sub)
     add_modal(sub)
 
+
+def _add_list_and_info(sub: argparse._SubParsersAction) -> None:
+    """``jassy list`` (patches, ugen types, objects) and ``jassy info`` (one patch or model)."""
     p = sub.add_parser("list", help="list built-in patches and ugen types (or --objects)")
     p.add_argument("--objects", action="store_true", help="the object library: models of everyday objects")
     p.set_defaults(func=_cmd_list)
-
     p = sub.add_parser("info", help="show a patch's graph, models and score, or a model file's modes")
     p.add_argument("patch")
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE")
     p.set_defaults(func=_cmd_info)
 
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
+    """``jassy bench NAME``: throughput against references."""
     from jassy.apps.benches import BENCHES, bench_help, run_bench
 
     p = sub.add_parser("bench", help="measure throughput against references")
@@ -508,16 +522,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=run_bench)
 
+
+def _add_warm_and_rod(sub: argparse._SubParsersAction) -> None:
+    """``jassy warm`` (compile scenes' kernels ahead) and ``jassy rod`` (2D-rod experiments)."""
     p = sub.add_parser("warm", help="compile the numba kernels of scenes ahead of their first render")
     p.add_argument("scenes", nargs="*", default=["bell", "wok"], help="patches or scenes (default: bell wok)")
     p.add_argument("--jobs", type=int, help="scenes compiled at once (default: one per core)")
     p.set_defaults(func=_cmd_warm)
-
     p = sub.add_parser("rod", help="run a 2D-rod experiment (prints JSON)")
     p.add_argument("name", help="experiment name (see 'jassy rod list')")
     p.add_argument("--plot", metavar="PNG", help="also write a plot")
     p.add_argument("--quick", action="store_true", help="smaller sizes")
     p.set_defaults(func=_cmd_rod)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``jassy`` command line: every subcommand, in the order ``--help`` lists them."""
+    parser = LineParser(prog="jassy", description="Physically based sound synthesis.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_render(sub)
+    _add_play(sub)
+    _add_demo(sub)
+    _add_haptic_bridge(sub)
+    sub.add_parser("devices", help="list audio output devices").set_defaults(func=_cmd_devices)
+    _add_application_commands(sub)
+    _add_list_and_info(sub)
+    _add_bench(sub)
+    _add_warm_and_rod(sub)
     from jassy.apps.cli_checks import add_limit_options
 
     add_limit_options(sub)

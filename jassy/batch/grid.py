@@ -36,6 +36,7 @@ import json
 import math
 import os
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -625,14 +626,8 @@ def variant_id(variant: Variant, model_digests: dict[str, str]) -> str:
     return sha256_bytes(canonical(payload).encode())
 
 
-def load_grid(path: str | os.PathLike) -> Grid:
-    """Parse and check a grid file; expand it into variants (duplicates merged)."""
-    grid_path = Path(path)
-    try:
-        data = load_toml(grid_path, "grid file")
-    except JassyError as exc:
-        raise GridError(str(exc)) from None
-    where = str(grid_path)
+def _grid_meta(data: dict, where: str) -> dict:
+    """Refuse unknown top-level and ``[batch]`` keys; return the ``[batch]`` table."""
     for key in data:
         if key not in GRID_KEYS:
             raise GridError(
@@ -648,6 +643,124 @@ def load_grid(path: str | os.PathLike) -> Grid:
                 f"{where}: batch.{key}: unknown key; expected {', '.join(sorted(BATCH_KEYS))}"
                 f"{suggest(key, BATCH_KEYS)}"
             )
+    return meta
+
+
+def _parse_sweeps(
+    data: dict, where: str, grid_path: Path, inline: dict, render: RenderOptions
+) -> list[_Sweep]:
+    """The ``[[sweep]]`` tables, or the one sweep given at the top level."""
+    top = [k for k in ("patch", "set", "grid", "random") if k in data]
+    if "sweep" not in data:
+        return [_parse_sweep(data, where, grid_path, inline, render)]
+    if top:
+        raise GridError(f"{where}: {top[0]}: give either [[sweep]] tables or a top-level sweep, not both")
+    tables = data["sweep"]
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise GridError(f"{where}: sweep: expected an array of tables ([[sweep]])")
+    sweeps = []
+    for i, table in enumerate(tables):
+        for key in table:
+            if key not in SWEEP_KEYS:
+                raise GridError(
+                    f"{where}: sweep[{i}].{key}: unknown key; expected {', '.join(sorted(SWEEP_KEYS))}"
+                    f"{suggest(key, SWEEP_KEYS)}"
+                )
+        sweeps.append(_parse_sweep(table, f"{where}: sweep[{i}]", grid_path, inline, render))
+    return sweeps
+
+
+def _grid_columns(sweeps: list[_Sweep]) -> list[str]:
+    """The manifest's parameter columns: every fixed, factor and random key, first seen first."""
+    columns: list[str] = []
+    for sweep in sweeps:
+        names = list(sweep.fixed)
+        for factor in sweep.factors:
+            names += ([factor.name] if factor.keys != [factor.name] else []) + factor.keys
+        names += list(sweep.random)
+        columns += [name for name in dict.fromkeys(names) if name not in columns]
+    return columns
+
+
+def _sweep_cells(sweep: _Sweep) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
+    """Each combination of the sweep's factor levels: (overrides, manifest labels)."""
+    for combo in itertools.product(*(f.levels for f in sweep.factors)):
+        cell: dict[str, Any] = dict(sweep.fixed)
+        labels: dict[str, Any] = dict(sweep.fixed)
+        for factor, (label, overrides) in zip(sweep.factors, combo, strict=True):
+            cell.update(overrides)
+            if factor.keys != [factor.name]:
+                labels[factor.name] = label
+            labels.update(overrides)
+        yield cell, labels
+
+
+def _make_variant(
+    sweep: _Sweep,
+    patch: PatchSource,
+    overrides: dict,
+    labels: dict,
+    index: int,
+    grid_path: Path,
+    digests: _Digests,
+) -> Variant:
+    """One checked variant with its model files, their digests and its id."""
+    for key, value in overrides.items():
+        check_value(key, value, patch, f'{sweep.where}: "{key}" = {value!r}')
+    opts = _apply_render(sweep.render, overrides, sweep.where)
+    variant = Variant(index, patch, overrides, {**labels, **overrides}, opts)
+    model_data = apply_overrides(
+        {"models": patch.data.get("models", {})},
+        {k: v for k, v in overrides.items() if k.startswith("models.")},
+        grid_path.parent,
+    )
+    variant.model_files = _model_files(model_data, patch.base)
+    model_digests = {
+        name: digests(p, f"{sweep.where} (patch {patch.name}, models.{name})")
+        for name, p in variant.model_files.items()
+    }
+    variant.model_digests = model_digests
+    variant.id = variant_id(variant, model_digests)
+    return variant
+
+
+def _expand(sweeps: list[_Sweep], grid_path: Path, digests: _Digests) -> tuple[list[Variant], int]:
+    """Every sweep's variants (patches x factor levels x random draws), duplicates merged:
+    (variants, how many duplicates were dropped)."""
+    variants: list[Variant] = []
+    seen_ids: set[str] = set()
+    duplicates = 0
+    for sweep in sweeps:
+        for patch in sweep.patches:
+            for cell, labels in _sweep_cells(sweep):
+                for j in range(max(sweep.n_random, 1)):
+                    overrides = dict(cell)
+                    for key, (kind, arg) in sweep.random.items():
+                        overrides[key] = draw(kind, arg, [sweep.seed, patch.name, cell, j, key])
+                    variant = _make_variant(
+                        sweep, patch, overrides, labels, len(variants), grid_path, digests
+                    )
+                    if variant.id in seen_ids:
+                        duplicates += 1
+                        continue
+                    seen_ids.add(variant.id)
+                    stem = f"{_safe(patch.name)}-{variant.id[:12]}"
+                    variant.filename = f"{stem}.{variant.render.container}"
+                    haptic = variant.render.haptic
+                    variant.haptic_filename = f"{stem}.force.{haptic}" if haptic else ""
+                    variants.append(variant)
+    return variants, duplicates
+
+
+def load_grid(path: str | os.PathLike) -> Grid:
+    """Parse and check a grid file; expand it into variants (duplicates merged)."""
+    grid_path = Path(path)
+    try:
+        data = load_toml(grid_path, "grid file")
+    except JassyError as exc:
+        raise GridError(str(exc)) from None
+    where = str(grid_path)
+    meta = _grid_meta(data, where)
     manifest = meta.get("manifest", "csv")
     if manifest not in ("csv", "parquet"):
         raise GridError(f"{where}: batch.manifest: expected 'csv' or 'parquet', got {manifest!r}")
@@ -655,26 +768,7 @@ def load_grid(path: str | os.PathLike) -> Grid:
     inline = data.get("patches", {})
     if not isinstance(inline, dict):
         raise GridError(f"{where}: patches: expected tables [patches.NAME] (inline patches)")
-
-    top = [k for k in ("patch", "set", "grid", "random") if k in data]
-    if "sweep" in data:
-        if top:
-            raise GridError(f"{where}: {top[0]}: give either [[sweep]] tables or a top-level sweep, not both")
-        tables = data["sweep"]
-        if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
-            raise GridError(f"{where}: sweep: expected an array of tables ([[sweep]])")
-        sweeps = []
-        for i, table in enumerate(tables):
-            for key in table:
-                if key not in SWEEP_KEYS:
-                    raise GridError(
-                        f"{where}: sweep[{i}].{key}: unknown key; expected {', '.join(sorted(SWEEP_KEYS))}"
-                        f"{suggest(key, SWEEP_KEYS)}"
-                    )
-            sweeps.append(_parse_sweep(table, f"{where}: sweep[{i}]", grid_path, inline, render))
-    else:
-        sweeps = [_parse_sweep(data, where, grid_path, inline, render)]
-
+    sweeps = _parse_sweeps(data, where, grid_path, inline, render)
     planned = sum(
         len(sw.patches) * math.prod(len(f.levels) for f in sw.factors) * max(sw.n_random, 1) for sw in sweeps
     )
@@ -683,62 +777,7 @@ def load_grid(path: str | os.PathLike) -> Grid:
     except JassyError as exc:
         raise GridError(str(exc)) from None
     digests = _Digests()
-    variants: list[Variant] = []
-    seen_ids: set[str] = set()
-    columns: list[str] = []
-    duplicates = 0
-
-    def add_column(name: str) -> None:
-        if name not in columns:
-            columns.append(name)
-
-    for sweep in sweeps:
-        for key in sweep.fixed:
-            add_column(key)
-        for factor in sweep.factors:
-            if factor.keys != [factor.name]:
-                add_column(factor.name)
-            for key in factor.keys:
-                add_column(key)
-        for key in sweep.random:
-            add_column(key)
-        for patch in sweep.patches:
-            for combo in itertools.product(*(f.levels for f in sweep.factors)):
-                cell: dict[str, Any] = dict(sweep.fixed)
-                labels: dict[str, Any] = dict(sweep.fixed)
-                for factor, (label, overrides) in zip(sweep.factors, combo, strict=True):
-                    cell.update(overrides)
-                    if factor.keys != [factor.name]:
-                        labels[factor.name] = label
-                    labels.update(overrides)
-                for j in range(max(sweep.n_random, 1)):
-                    overrides = dict(cell)
-                    for key, (kind, arg) in sweep.random.items():
-                        overrides[key] = draw(kind, arg, [sweep.seed, patch.name, cell, j, key])
-                    for key, value in overrides.items():
-                        check_value(key, value, patch, f'{sweep.where}: "{key}" = {value!r}')
-                    opts = _apply_render(sweep.render, overrides, sweep.where)
-                    variant = Variant(len(variants), patch, overrides, {**labels, **overrides}, opts)
-                    model_data = apply_overrides(
-                        {"models": patch.data.get("models", {})},
-                        {k: v for k, v in overrides.items() if k.startswith("models.")},
-                        grid_path.parent,
-                    )
-                    variant.model_files = _model_files(model_data, patch.base)
-                    model_digests = {
-                        name: digests(p, f"{sweep.where} (patch {patch.name}, models.{name})")
-                        for name, p in variant.model_files.items()
-                    }
-                    variant.model_digests = model_digests
-                    variant.id = variant_id(variant, model_digests)
-                    if variant.id in seen_ids:
-                        duplicates += 1
-                        continue
-                    seen_ids.add(variant.id)
-                    stem = f"{_safe(patch.name)}-{variant.id[:12]}"
-                    variant.filename = f"{stem}.{opts.container}"
-                    variant.haptic_filename = f"{stem}.force.{opts.haptic}" if opts.haptic else ""
-                    variants.append(variant)
+    variants, duplicates = _expand(sweeps, grid_path, digests)
     _check_models(digests)
     return Grid(
         grid_path,
@@ -746,7 +785,7 @@ def load_grid(path: str | os.PathLike) -> Grid:
         str(meta.get("description", "")),
         manifest,
         variants,
-        columns,
+        _grid_columns(sweeps),
         duplicates,
     )
 

@@ -41,12 +41,14 @@ from numba.extending import intrinsic
 from jassy import haptics, jit, program, safety
 from jassy.engines import hapticframes
 from jassy.engines.hapticframes import FLAG_WATCHDOG
+from jassy.engines.hapticsender import LOG_COLUMNS, LOG_DAC, LOG_FLAGS, LOG_FRAMES, LOG_START
 from jassy.engines.memlock import resident
 from jassy.errors import JassyError
 from jassy.events import Event
 from jassy.graph import Graph
 from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
+from jassy.params import RAMP_NEXT, ramp_to
 from jassy.program import (
     HEADER,
     KERNEL_MODULES,
@@ -138,6 +140,14 @@ CONTROL = QUEUES + QUEUE_SLOTS * N_QUEUES
 CEIL, RELEASE, MAX_FORCE, MAX_STEP = range(4)
 EVENT = 8
 SET_RAMP, SET_BIQUAD, STRIKE, MODAL_TARGET = 1, 2, 3, 4
+#: Columns of an event record: the frame it applies at, the node's record in the program
+#: table, the opcode, then the opcode's arguments (module docstring), named per opcode below.
+EVENT_FRAME, EVENT_NODE, EVENT_OPCODE, EVENT_A, EVENT_B, EVENT_C = range(6)
+SET_SLOT, SET_VALUE, SET_SAMPLES = EVENT_A, EVENT_B, EVENT_C  # SET_RAMP, SET_BIQUAD
+STRIKE_T0, STRIKE_LENGTH, STRIKE_AMPLITUDE = EVENT_A, EVENT_B, EVENT_C  # STRIKE
+MODAL_STAGED, MODAL_SAMPLES = EVENT_A, EVENT_B  # MODAL_TARGET
+#: A Biquad's setup array (jassy.program.BiquadSlots.setup): [filter mode, 1/fs].
+BIQUAD_MODE, BIQUAD_PERIOD = 0, 1
 OUTPUT_UNDERFLOW = 4  # PortAudio's paOutputUnderflow status flag
 #: Bits of the OUTPUT slot: the limits the output stage applies.
 LIMIT_AUDIO, LIMIT_HAPTIC = 1, 2
@@ -161,37 +171,32 @@ def program_table(control):
 @nb.njit(cache=True, nogil=True, inline="always")
 def apply_event(prog, ev, control):
     """Apply one event record (see the module docstring) to the program's arrays."""
-    base = int(ev[1])
-    op = int(ev[2])
+    base = int(ev[EVENT_NODE])
+    op = int(ev[EVENT_OPCODE])
     if op in (SET_RAMP, SET_BIQUAD):
-        ramp = _f64(prog[base + int(ev[3])], 4)
-        value = ev[4]
-        m = int(ev[5])
-        if m < 1:
-            ramp[0] = value
-            ramp[1] = value
-            ramp[2] = 0.0
-            ramp[3] = 0.0
-        else:
-            cur = ramp[0]
-            ramp[1] = value
-            ramp[2] = (value - cur) / m
-            ramp[3] = m
+        ramp = _f64(prog[base + int(ev[SET_SLOT])], 4)
+        ramp_to(ramp, ev[SET_VALUE], int(ev[SET_SAMPLES]))
         if op == SET_BIQUAD:
             filt = BiquadSlots(*kind_slots(prog, base)[:8])
             setup = _f64(filt.setup, 2)
             freq = _f64(filt.freq_ramp, 4)
             q = _f64(filt.q_ramp, 4)
-            design_biquad(int(setup[0]), freq[0], q[0], setup[1], _f64(filt.coef, 5))
+            design_biquad(
+                int(setup[BIQUAD_MODE]),
+                freq[RAMP_NEXT],
+                q[RAMP_NEXT],
+                setup[BIQUAD_PERIOD],
+                _f64(filt.coef, 5),
+            )
     elif op == STRIKE:
         impact = ImpactSlots(*kind_slots(prog, base)[:3])
         pulses = _f64_rows(impact.pulses, impact.capacity, PULSE_COLUMNS)
         count = _i64(impact.count, 1)
         c = count[0]
         if c < pulses.shape[0]:
-            pulses[c, PULSE_T0] = ev[3]
-            pulses[c, PULSE_LENGTH] = ev[4]
-            pulses[c, PULSE_AMPLITUDE] = ev[5]
+            pulses[c, PULSE_T0] = ev[STRIKE_T0]
+            pulses[c, PULSE_LENGTH] = ev[STRIKE_LENGTH]
+            pulses[c, PULSE_AMPLITUDE] = ev[STRIKE_AMPLITUDE]
             count[0] = c + 1
         else:
             control[DROPPED] += 1
@@ -202,8 +207,8 @@ def apply_event(prog, ev, control):
         delta = _f64_rows(modal.delta, 4, k)
         target = _f64_rows(modal.target, 4, k)
         meta = _i64(modal.meta, 3)
-        staged = _f64_rows(int(ev[3]), 4, k)
-        m = int(ev[4])
+        staged = _f64_rows(int(ev[MODAL_STAGED]), 4, k)
+        m = int(ev[MODAL_SAMPLES])
         for r in range(4):
             for j in range(k):
                 target[r, j] = staged[r, j]
@@ -230,13 +235,13 @@ def _next_cut(control, queue_index, pos, stop, prog):
     r = control[slot + 3]
     while r < w:
         ev = records[r % cap]
-        frame = int(ev[0])
-        if frame <= pos or (frame < stop and int(ev[2]) == STRIKE):
-            if frame < pos and int(ev[2]) == STRIKE:
+        frame = int(ev[EVENT_FRAME])
+        if frame <= pos or (frame < stop and int(ev[EVENT_OPCODE]) == STRIKE):
+            if frame < pos and int(ev[EVENT_OPCODE]) == STRIKE:
                 # stamped with a frame already played (its poster was preempted between
                 # reading the frame and pushing): the whole pulse starts now instead of
                 # being cut or lost; a whole-frame shift keeps its fractional onset
-                ev[3] += pos - frame
+                ev[STRIKE_T0] += pos - frame
                 control[LATE_STRIKES] += 1
             apply_event(prog, ev, control)
             r += 1
@@ -433,18 +438,18 @@ def tap_callback(control, out, frames, dac, flags):
     ch, na = control[CHANNELS], control[N_AUDIO]
     nh = ch - na
     lrows, hrows = control[TAP_LOG_ROWS], control[TAP_HAPTIC_ROWS]
-    log = _f64_rows(control[TAP_LOG], lrows, 4)
-    ring = _f64_rows(control[TAP_LOG] + lrows * 4 * 8, hrows, max(nh, 1))
+    log = _f64_rows(control[TAP_LOG], lrows, LOG_COLUMNS)
+    ring = _f64_rows(control[TAP_LOG] + lrows * LOG_COLUMNS * 8, hrows, max(nh, 1))
     logged = _i64(control[TAP_LOGGED], 1)
     p = control[PLAYED]
     for i in range(frames):
         for c in range(nh):
             ring[(p + i) % hrows, c] = out[i * ch + na + c]
     row = logged[0] % lrows
-    log[row, 0] = p
-    log[row, 1] = frames
-    log[row, 2] = dac
-    log[row, 3] = flags
+    log[row, LOG_START] = p
+    log[row, LOG_FRAMES] = frames
+    log[row, LOG_DAC] = dac
+    log[row, LOG_FLAGS] = flags
     logged[0] += 1
 
 

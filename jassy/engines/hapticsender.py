@@ -33,8 +33,9 @@ from jassy.engines.hapticframes import FLAG_FINAL, encode
 #: (its send buffer full, or an error), counted instead of blocking the sender.
 CLOCK_OFFSET, STOP_AT, SENT, LOST, DONE, LOGGED_SENDS, LATE, REALTIME, SEND_DROPPED = range(9)
 CONTROL_SLOTS = 9
-#: Callback log columns.
+#: Callback log columns: first stream frame, frames, DAC time (s, stream clock), flags.
 LOG_START, LOG_FRAMES, LOG_DAC, LOG_FLAGS = range(4)
+LOG_COLUMNS = 4
 #: Seconds between polls while waiting for the callback to hand over more samples.
 POLL = 0.0002
 #: SCHED_FIFO priority of the sender where the OS grants it (above the producer's 40,
@@ -50,7 +51,7 @@ class StreamTap(NamedTuple):
     """Shared-memory views the device callback writes and the sender reads.
 
     header/logged_slot: the callback's counters and the slot counting logged callbacks;
-    log: (callbacks, 4) ring (LOG_* columns); played: (frames, haptic channels) ring of
+    log: (callbacks, LOG_COLUMNS) ring (LOG_* columns); played: (frames, haptic channels) ring of
     the samples handed to the device, row = stream frame % rows; control: CONTROL_SLOTS
     values (CLOCK_OFFSET = monotonic - stream time, s; STOP_AT = stream frame to finish
     at, -1 while running; counters); send_times: ring of monotonic send times (s)."""

@@ -47,6 +47,11 @@ from jassy.engines.hapticsender import (
     CLOCK_OFFSET,
     CONTROL_SLOTS,
     DONE,
+    LOG_COLUMNS,
+    LOG_DAC,
+    LOG_FLAGS,
+    LOG_FRAMES,
+    LOG_START,
     STOP_AT,
     StreamTap,
     child_setup,
@@ -93,7 +98,7 @@ def ring_callback(inp, out, frames, time_info, status, user):
     nh = hdr[HAPTIC_CH]  # then, if nh > 0, one channel of the producer's limiter flags
     f32 = nb.carray(user, (DATA_OFFSET_F32 + cap * ch + mcap * dch,), np.float32)
     toff, lrows, hrows = hdr[TAIL_OFFSET], hdr[LOG_ROWS], hdr[HAPTIC_ROWS]
-    tail = nb.carray(user, (toff + lrows * 4 + hrows * nh,), np.float64)
+    tail = nb.carray(user, (toff + lrows * LOG_COLUMNS + hrows * nh,), np.float64)
     dac = nb.carray(time_info, (3,), np.float64)[2]  # outputBufferDacTime (s, stream clock)
     o = nb.carray(out, (frames * dch,), np.float32)
     hdr[CALLBACKS] += 1
@@ -130,7 +135,7 @@ def ring_callback(inp, out, frames, time_info, status, user):
                 x = 0.0
             o[i * dch + c] = min(max(x, -1.0), 1.0)
         left = hdr[FADE_LEFT]
-        hbase = toff + lrows * 4 + ((p + i) % hrows) * nh
+        hbase = toff + lrows * LOG_COLUMNS + ((p + i) % hrows) * nh
         for c in range(nh):
             y = f64[LAST + c]
             if feed:
@@ -157,11 +162,11 @@ def ring_callback(inp, out, frames, time_info, status, user):
         hdr[UNDER_FRAMES] += frames - n
         hdr[UNDER_CALLBACKS] += 1
     hdr[READ] = r + n
-    row = toff + (hdr[LOGGED] % lrows) * 4
-    tail[row] = p
-    tail[row + 1] = frames
-    tail[row + 2] = dac
-    tail[row + 3] = flags
+    row = toff + (hdr[LOGGED] % lrows) * LOG_COLUMNS
+    tail[row + LOG_START] = p
+    tail[row + LOG_FRAMES] = frames
+    tail[row + LOG_DAC] = dac
+    tail[row + LOG_FLAGS] = flags
     hdr[LOGGED] += 1
     if mcap > 0:
         mbase = DATA_OFFSET_F32 + cap * ch
@@ -298,7 +303,7 @@ class LiveEngine:
         floats = DATA_OFFSET_F32 + self.capacity * self.ring_channels + self.monitor_capacity * self.channels
         self._index_start = (floats + 1) // 2  # int64 slot of the monitor's frame index
         tail = self._index_start + self.monitor_capacity  # float64 slot: callback log, haptic ring
-        control = tail + CALLBACK_LOG_ROWS * 4 + HAPTIC_RING_ROWS * n_haptic
+        control = tail + CALLBACK_LOG_ROWS * LOG_COLUMNS + HAPTIC_RING_ROWS * n_haptic
         sends = control + CONTROL_SLOTS
         # anonymous shared memory: seen by forked producer and sender processes at the same address
         self._mmap = mmap.mmap(-1, (sends + send_log_frames + 16) * 8)
@@ -322,8 +327,8 @@ class LiveEngine:
         self.tap = StreamTap(
             self.header,
             LOGGED,
-            raw[tail : tail + CALLBACK_LOG_ROWS * 4].reshape(CALLBACK_LOG_ROWS, 4),
-            raw[tail + CALLBACK_LOG_ROWS * 4 : control].reshape(HAPTIC_RING_ROWS, n_haptic),
+            raw[tail : tail + CALLBACK_LOG_ROWS * LOG_COLUMNS].reshape(CALLBACK_LOG_ROWS, LOG_COLUMNS),
+            raw[tail + CALLBACK_LOG_ROWS * LOG_COLUMNS : control].reshape(HAPTIC_RING_ROWS, n_haptic),
             raw[control:sends],
             raw[sends : sends + send_log_frames],
         )

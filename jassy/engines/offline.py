@@ -108,7 +108,7 @@ class OfflineEngine:
         self.sample_rate = float(sample_rate)
         options = dict(sample_rate=sample_rate, block=block, limiter=limiter, release=release)
         options.update(haptic_safety=haptic_safety, offsets_ms=offsets_ms, program=program)
-        compile_on_two_cores(graph_units(graph, options))  # a cold cache: half the compiling
+        compile_on_two_cores(graph_units(graph, options, score))  # a cold cache: half the compiling
         graph.prepare(self.sample_rate, block)
         from jassy.program import why_not_compiled  # imports the ugens: not at import time
 

@@ -37,7 +37,7 @@ from physics.burr.contact import (
     ContactData,
     brute_moments,
 )
-from physics.burr.octree import Octree, Pyramid
+from physics.burr.octree import BLOCK_COLUMNS, Octree, Pyramid
 from physics.burr.update import STEP_RESULT, Burr, haptic_update
 from physics.burr.volume import Volume
 
@@ -139,7 +139,7 @@ class BurrSim:
             moments = (tuple(self.octree.pyramid), self.octree.stack, np.zeros(4))
         else:  # an empty pyramid of the right types; brute force reads the density
             empty = Pyramid(v.density, 0, 0, np.zeros(4), np.zeros(2, np.int64), np.zeros((1, 3), np.int64))
-            moments = (tuple(empty), np.zeros((8, 4), np.int64), np.zeros(4))
+            moments = (tuple(empty), np.zeros((8, BLOCK_COLUMNS), np.int64), np.zeros(4))
         self._result = np.zeros(1, STEP_RESULT)
         self._fixed = (tuple(burr), tuple(model), moments)
         self._burr = burr

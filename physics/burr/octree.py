@@ -173,10 +173,77 @@ def build_parents(base, top, mom, off, dims, box):
         _build_parent(level, mom, off, dims, lo, hi)
 
 
+#: Columns of descend's stack of pending blocks: pyramid level and block index (i, j, k).
+BLOCK_LEVEL, BLOCK_I, BLOCK_J, BLOCK_K = range(4)
+BLOCK_COLUMNS = 4
+
+
+@nb.njit(inline="always", cache=True)
+def push_block(stack, sp, level, bi, bj, bk):
+    """Push block (bi, bj, bk) of ``level`` on the stack at ``sp``; return the new top."""
+    stack[sp, BLOCK_LEVEL] = level
+    stack[sp, BLOCK_I] = bi
+    stack[sp, BLOCK_J] = bj
+    stack[sp, BLOCK_K] = bk
+    return sp + 1
+
+
+@nb.njit(inline="always", cache=True)
+def push_children(stack, sp, cl, bi, bj, bk, dims):
+    """Push the (up to 8) children at level ``cl`` of block (bi, bj, bk) that lie inside the
+    volume (``dims``: blocks per axis per level); return the new top."""
+    for a in range(2):
+        ci = 2 * bi + a
+        if ci >= dims[cl, 0]:
+            continue
+        for b in range(2):
+            cj = 2 * bj + b
+            if cj >= dims[cl, 1]:
+                continue
+            for c in range(2):
+                ck = 2 * bk + c
+                if ck >= dims[cl, 2]:
+                    continue
+                sp = push_block(stack, sp, cl, ci, cj, ck)
+    return sp
+
+
+@nb.njit(inline="always", cache=True)
+def lens_block(mom, idx, s, r, R, bcx, bcy, bcz):
+    """Partial-volume contribution of a block of side ``s`` voxels (voxel radius ``r``, centre
+    (bcx, bcy, bcz) relative to the ball of radius ``R``, moments at mom[idx:idx + 4]) taken as
+    a sphere of equal volume, with its density gradient: (mass, centroid x, y, z relative to
+    the ball) after whether the lens holds any volume."""
+    rb = s * r
+    d = math.sqrt(bcx * bcx + bcy * bcy + bcz * bcz)
+    dv = lens_volume(d, R, rb)
+    if dv <= 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0
+    vol = float(s * s * s)
+    t = lens_centroid(d, R, rb)
+    if d > 0.0:
+        ux = bcx / d * t
+        uy = bcy / d * t
+        uz = bcz / d * t
+    else:
+        ux = 0.0
+        uy = 0.0
+        uz = 0.0
+    # centroid relative to the block centre
+    gx = ux - bcx
+    gy = uy - bcy
+    gz = uz - bcz
+    w0 = mom[idx]
+    grad = 12.0 / (s * s) * (mom[idx + 1] * gx + mom[idx + 2] * gy + mom[idx + 3] * gz)
+    dm0 = dv / vol * (w0 + grad)
+    return True, min(max(dm0, 0.0), w0), ux, uy, uz
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def descend(pyramid, ball, leaf, out, stack):
     """Moments of the Pyramid's density inside the burr's Ball into out (module docstring);
-    returns the blocks visited. stack: int64 scratch (8 (levels + 1), 4) of pending blocks."""
+    returns the blocks visited. stack: int64 scratch (8 (levels + 1), BLOCK_COLUMNS) of
+    pending blocks."""
     dens, base, top, mom, off, dims = pyramid
     cx, cy, cz, R = ball
     r = R_VOXEL
@@ -189,18 +256,13 @@ def descend(pyramid, ball, leaf, out, stack):
     my = 0.0
     mz = 0.0
     visits = 0
-    sp = 0
-    stack[0, 0] = top
-    stack[0, 1] = 0
-    stack[0, 2] = 0
-    stack[0, 3] = 0
-    sp = 1
+    sp = push_block(stack, 0, top, 0, 0, 0)
     while sp > 0:
         sp -= 1
-        level = stack[sp, 0]
-        bi = stack[sp, 1]
-        bj = stack[sp, 2]
-        bk = stack[sp, 3]
+        level = stack[sp, BLOCK_LEVEL]
+        bi = stack[sp, BLOCK_I]
+        bj = stack[sp, BLOCK_J]
+        bk = stack[sp, BLOCK_K]
         visits += 1
         idx = off[level] + ((bi * dims[level, 1] + bj) * dims[level, 2] + bk) * 4
         w0 = mom[idx]
@@ -235,29 +297,9 @@ def descend(pyramid, ball, leaf, out, stack):
         shallow = reach - math.sqrt(qx * qx + qy * qy + qz * qz) < s
         graded = mom[idx + 1] != 0.0 or mom[idx + 2] != 0.0 or mom[idx + 3] != 0.0
         if s <= leaf and not (shallow or graded):
-            # partial-volume contribution of the block as a sphere of equal volume
-            rb = s * r
-            d = math.sqrt(bcx * bcx + bcy * bcy + bcz * bcz)
-            dv = lens_volume(d, R, rb)
-            if dv <= 0.0:
+            inside, dm0, ux, uy, uz = lens_block(mom, idx, s, r, R, bcx, bcy, bcz)
+            if not inside:
                 continue
-            vol = float(s * s * s)
-            t = lens_centroid(d, R, rb)
-            if d > 0.0:
-                ux = bcx / d * t
-                uy = bcy / d * t
-                uz = bcz / d * t
-            else:
-                ux = 0.0
-                uy = 0.0
-                uz = 0.0
-            # centroid relative to the block centre
-            gx = ux - bcx
-            gy = uy - bcy
-            gz = uz - bcz
-            grad = 12.0 / (s * s) * (mom[idx + 1] * gx + mom[idx + 2] * gy + mom[idx + 3] * gz)
-            dm0 = dv / vol * (w0 + grad)
-            dm0 = min(max(dm0, 0.0), w0)
             m0 += dm0
             mx += dm0 * ux
             my += dm0 * uy
@@ -271,24 +313,7 @@ def descend(pyramid, ball, leaf, out, stack):
             my += by
             mz += bz
             continue
-        cl = level - 1
-        for a in range(2):
-            ci = 2 * bi + a
-            if ci >= dims[cl, 0]:
-                continue
-            for b in range(2):
-                cj = 2 * bj + b
-                if cj >= dims[cl, 1]:
-                    continue
-                for c in range(2):
-                    ck = 2 * bk + c
-                    if ck >= dims[cl, 2]:
-                        continue
-                    stack[sp, 0] = cl
-                    stack[sp, 1] = ci
-                    stack[sp, 2] = cj
-                    stack[sp, 3] = ck
-                    sp += 1
+        sp = push_children(stack, sp, level - 1, bi, bj, bk, dims)
     out[0] = m0
     out[1] = mx
     out[2] = my
@@ -319,7 +344,7 @@ class Octree:
         self.off = off
         self.mom = np.zeros(int(off[-1]))
         # a depth-first stack never holds more than 8 entries per level
-        self.stack = np.zeros((8 * (self.top + 2), 4), dtype=np.int64)
+        self.stack = np.zeros((8 * (self.top + 2), BLOCK_COLUMNS), dtype=np.int64)
         self._out = np.zeros(4)
         self.pyramid = Pyramid(self.density, self.base, self.top, self.mom, self.off, self.dims)
         self._descend_run = None  # descend's typed entry point, found at the first call

@@ -29,6 +29,42 @@ def _groove_path(centre, half_length, depths, step, rng, tremor):
     return path + tremor * rng.normal(size=path.shape)
 
 
+def _anterior_capsule():
+    """The anterior capsule: a 4.5 mm disc membrane 3 mm above the lens centre, rim (outer 72
+    particles) anchored, the particles within 0.5 mm of the centre grasped (scripted).
+    Returns (particle positions m, membrane, grasped particle indices)."""
+    pts, tri = disc_mesh(4.5e-3, 12)
+    pts[:, 2] += 3.0e-3
+    rim = np.arange(len(pts) - 72, len(pts))
+    grasp = np.flatnonzero(np.linalg.norm(pts[:, :2], axis=1) < 0.5e-3)
+    mem = membrane_from_mesh(
+        pts,
+        tri,
+        thickness=15e-6,
+        density=1000.0,
+        stiffness=0.01,
+        damping=0.0,
+        tear_strain=0.25,
+        anchored=rim,
+        scripted=grasp,
+        viscosity=20.0,
+    )
+    return pts, mem, grasp
+
+
+def _forceps(g0: np.ndarray, rhexis_time: float):
+    """The forceps' script t -> grasped positions (m): from ``g0`` lift 1 mm over 0.2 s, then
+    move out to a 2.5 mm radius over 0.1 s while circling once by ``rhexis_time`` s."""
+
+    def forceps(t):
+        lift = min(t / 0.2, 1.0) * 1e-3
+        ang = max(t - 0.2, 0.0) * 2 * np.pi / max((rhexis_time - 0.2), 1e-9)
+        r = 2.5e-3 * min(max(t - 0.2, 0.0) / 0.1, 1.0)
+        return g0 + [r * np.cos(ang), r * np.sin(ang), lift]
+
+    return forceps
+
+
 def cataract_demo(
     steps: int = 2500,
     seed: int = 0,
@@ -55,31 +91,9 @@ def cataract_demo(
     t_start = time.perf_counter()
     mesh = lens_mesh(spacing=spacing)
     sim = FragmentSim(mesh, FragmentParams(), Boundaries(bag_radius=6e-3))
-    pts, tri = disc_mesh(4.5e-3, 12)
-    pts[:, 2] += 3.0e-3
-    rim = np.arange(len(pts) - 72, len(pts))
-    grasp = np.flatnonzero(np.linalg.norm(pts[:, :2], axis=1) < 0.5e-3)
-    mem = membrane_from_mesh(
-        pts,
-        tri,
-        thickness=15e-6,
-        density=1000.0,
-        stiffness=0.01,
-        damping=0.0,
-        tear_strain=0.25,
-        anchored=rim,
-        scripted=grasp,
-        viscosity=20.0,
-    )
+    pts, mem, grasp = _anterior_capsule()
     mst = mem.initial_state()
-    g0 = pts[grasp]
-
-    def forceps(t):
-        lift = min(t / 0.2, 1.0) * 1e-3
-        ang = max(t - 0.2, 0.0) * 2 * np.pi / max((rhexis_steps * h - 0.2), 1e-9)
-        r = 2.5e-3 * min(max(t - 0.2, 0.0) / 0.1, 1.0)
-        return g0 + [r * np.cos(ang), r * np.sin(ang), lift]
-
+    forceps = _forceps(pts[grasp], rhexis_steps * h)
     settle = 100
     path = None
     impacts, tears = [], []

@@ -457,6 +457,49 @@ def _cross(a, b, out):
 
 
 @numba.njit(cache=True)
+def _first_contacts(body, cid, nc, nb):
+    """first[b]: the first of the nc contact rows (sorted by body) on body b or after it;
+    first[nb] = nc, so body b's rows are first[b]:first[b + 1]."""
+    first = np.full(nb + 1, nc)
+    for k in range(nc - 1, -1, -1):
+        first[body[cid[k]]] = k
+    for b in range(nb - 1, -1, -1):
+        first[b] = min(first[b], first[b + 1])
+    return first
+
+
+@numba.njit(cache=True)
+def _slip(vc, w, r, n, vrel, t):
+    """The tangential slip speed (m/s) of the contact point at arm ``r`` (from the centre of
+    mass; body velocity vc, angular velocity w) over normal ``n``; its unit direction is left
+    in ``t`` (vrel: scratch, the point's velocity)."""
+    _cross(w, r, t)
+    for a in range(3):
+        vrel[a] = vc[a] + t[a]
+    vn = vrel[0] * n[0] + vrel[1] * n[1] + vrel[2] * n[2]
+    for a in range(3):
+        t[a] = vrel[a] - vn * n[a]
+    st = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
+    if st != 0:
+        for a in range(3):
+            t[a] /= st
+    return st
+
+
+@numba.njit(cache=True)
+def _add_rigid_motion(x, v, particles, c, dv, dw):
+    """Add a rigid velocity change (dv at the centre c, angular dw) to the ``particles``."""
+    arm = np.empty(3)
+    turn = np.empty(3)
+    for i in particles:
+        for a in range(3):
+            arm[a] = x[i, a] - c[a]
+        _cross(dw, arm, turn)
+        for a in range(3):
+            v[i, a] += dv[a] + turn[a]
+
+
+@numba.njit(cache=True)
 def _contact_impulses(x, v, model, rows, nc, opt, cimp):
     """Sequential impulses on each body's rigid motion (mass M, inertia about its centre)
     at its first nc contacts (rows): normal impulses >= 0 stop approach (restitution),
@@ -469,11 +512,7 @@ def _contact_impulses(x, v, model, rows, nc, opt, cimp):
     cid, cn, cdep = rows.particle, rows.normal, rows.depth
     rest, mu, iters, bias, h = opt
     nb = starts.size - 1
-    first = np.full(nb + 1, nc)
-    for k in range(nc - 1, -1, -1):
-        first[body[cid[k]]] = k
-    for b in range(nb - 1, -1, -1):
-        first[b] = min(first[b], first[b + 1])
+    first = _first_contacts(body, cid, nc, nb)
     c = np.empty(3)
     vc = np.empty(3)
     L = np.empty(3)
@@ -523,17 +562,9 @@ def _contact_impulses(x, v, model, rows, nc, opt, cimp):
                     w[a] += dl * irn[k, a]
                 if mu <= 0:
                     continue
-                _cross(w, r[k], tmp)
-                for a in range(3):
-                    vrel[a] = vc[a] + tmp[a]
-                vn = vrel[0] * cn[k, 0] + vrel[1] * cn[k, 1] + vrel[2] * cn[k, 2]
-                for a in range(3):
-                    tmp[a] = vrel[a] - vn * cn[k, a]
-                st = math.sqrt(tmp[0] * tmp[0] + tmp[1] * tmp[1] + tmp[2] * tmp[2])
+                st = _slip(vc, w, r[k], cn[k], vrel, tmp)
                 if st == 0:
                     continue
-                for a in range(3):
-                    tmp[a] /= st
                 _cross(r[k], tmp, rt)
                 kt = 1.0 / M
                 for a in range(3):
@@ -554,15 +585,7 @@ def _contact_impulses(x, v, model, rows, nc, opt, cimp):
                 _cross(r[k], tmp, rt)
                 for a in range(3):
                     w[a] += iinv[a, 0] * rt[0] + iinv[a, 1] * rt[1] + iinv[a, 2] * rt[2]
-        dv = vc - v0
-        dw = w - w0
-        for j in range(starts[b], starts[b + 1]):
-            i = order[j]
-            for a in range(3):
-                tmp[a] = x[i, a] - c[a]
-            _cross(dw, tmp, rt)
-            for a in range(3):
-                v[i, a] += dv[a] + rt[a]
+        _add_rigid_motion(x, v, order[starts[b] : starts[b + 1]], c, vc - v0, w - w0)
 
 
 @dataclass(frozen=True)

@@ -69,8 +69,8 @@ def fem_bytes(elements: float, modes: int) -> float:
     return 35e3 * elements * max(1.0, elements / 8000) ** (1 / 3) + 96.0 * modes * elements
 
 
-def cmd_modes(args: argparse.Namespace) -> int:
-    """``jassy modes MESH --material NAME -o MODEL``: finite element modes of a mesh."""
+def _check_modes_arguments(args: argparse.Namespace) -> dict:
+    """Refuse bad ``jassy modes`` arguments before any work; return the ``--point`` locations."""
     _check_output(args.output)
     _positive("--modes", args.modes, integer=True)
     if args.modes > MAX_MODES:
@@ -97,26 +97,26 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
     if args.elements is not None:
         check_memory(fem_bytes(args.elements, args.modes), f"--elements {args.elements}")
+    return points
 
+
+def _load_modes_mesh(args: argparse.Namespace):
+    """The mesh to analyse: a built-in shape or a mesh file, scaled by ``--scale``."""
     from physics.modal import meshes
-    from physics.modal.fem import modes_from_mesh
-    from physics.modal.materials import material
 
-    mat = material(
-        args.material,
-        youngs=args.youngs,
-        poisson=args.poisson,
-        density=args.density,
-        loss=args.loss,
-        d0=args.d0,
-        beta=args.beta,
-    )
     if not os.path.exists(args.mesh) and args.mesh in SHAPES:
         mesh = getattr(meshes, args.mesh)()
         if args.scale != 1.0:
             mesh.apply_scale(args.scale)
-    else:
-        mesh = meshes.load_mesh(args.mesh, args.scale)
+        return mesh
+    return meshes.load_mesh(args.mesh, args.scale)
+
+
+def _plan_subdivision(args: argparse.Namespace, mesh, points: dict) -> int:
+    """Subdivision steps of the sampled surface (``--subdivide`` or automatic), after checking
+    the mesh encloses a volume and the FEM and surface fit in memory."""
+    from jassy.limits import check_memory
+
     subdivide = args.subdivide
     if subdivide is None:  # auto: refine coarse meshes up to ~2000 control vertices (at most 3 times)
         subdivide, n = 0, len(mesh.vertices)
@@ -136,6 +136,45 @@ def cmd_modes(args: argparse.Namespace) -> int:
         surface_vertices * (args.modes * 32 + 1024),
         f"--subdivide {subdivide} ({surface_vertices:.3g} vertices)",
     )
+    return subdivide
+
+
+def _print_modes_summary(args: argparse.Namespace, model, report, surface, mat, seconds: float) -> None:
+    """What ``jassy modes`` wrote: modes, band, material, time, the FEM report and notes."""
+    print(
+        f"wrote {args.output}: {model.n_modes} modes {model.frequencies.min():.1f}-"
+        f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s), {mat.name} "
+        f"(E {mat.youngs:.3g} Pa, nu {mat.poisson:g}, rho {mat.density:g} kg/m^3) "
+        f"in {seconds:.2f} s"
+    )
+    print(report.summary())
+    if report.dropped_voxels:
+        print(f"note: {report.dropped_voxels} voxel(s) not face-connected to the body were dropped")
+    if report.families():
+        print(report.families())
+    if model.n_points > 2000 and args.output.lower().endswith(".toml"):
+        print(f"note: {model.n_points} locations x {model.n_modes} modes; .npz is more compact than .toml")
+    if args.surface:
+        print(f"surface with {len(surface.vertices)} vertices (vertex i = model row i) -> {args.surface}")
+
+
+def cmd_modes(args: argparse.Namespace) -> int:
+    """``jassy modes MESH --material NAME -o MODEL``: finite element modes of a mesh."""
+    points = _check_modes_arguments(args)
+    from physics.modal.fem import modes_from_mesh
+    from physics.modal.materials import material
+
+    mat = material(
+        args.material,
+        youngs=args.youngs,
+        poisson=args.poisson,
+        density=args.density,
+        loss=args.loss,
+        d0=args.d0,
+        beta=args.beta,
+    )
+    mesh = _load_modes_mesh(args)
+    subdivide = _plan_subdivision(args, mesh, points)
     t0 = time.perf_counter()
     model, report, surface = modes_from_mesh(
         mesh,
@@ -157,23 +196,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
         except Exception as exc:  # trimesh raises ValueError/KeyError for unknown formats
             raise JassyError(f"--surface: {args.surface}: cannot write mesh ({exc})") from None
     if not args.quiet:
-        print(
-            f"wrote {args.output}: {model.n_modes} modes {model.frequencies.min():.1f}-"
-            f"{model.frequencies.max():.1f} Hz, {model.n_points} location(s), {mat.name} "
-            f"(E {mat.youngs:.3g} Pa, nu {mat.poisson:g}, rho {mat.density:g} kg/m^3) "
-            f"in {time.perf_counter() - t0:.2f} s"
-        )
-        print(report.summary())
-        if report.dropped_voxels:
-            print(f"note: {report.dropped_voxels} voxel(s) not face-connected to the body were dropped")
-        if report.families():
-            print(report.families())
-        if model.n_points > 2000 and args.output.lower().endswith(".toml"):
-            print(
-                f"note: {model.n_points} locations x {model.n_modes} modes; .npz is more compact than .toml"
-            )
-        if args.surface:
-            print(f"surface with {len(surface.vertices)} vertices (vertex i = model row i) -> {args.surface}")
+        _print_modes_summary(args, model, report, surface, mat, time.perf_counter() - t0)
     return 0
 
 

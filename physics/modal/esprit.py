@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from physics.modal import varpro
 from physics.modal._fit_kernels import hankel_gram, project, synthesise
 
 
@@ -144,72 +145,28 @@ def refine(
 ):
     """Maximum-likelihood poles in white noise: poles shared by the ``signals`` (y[n] ~ sum_k
     c_k z_k^n, one set of c per signal; with ``real``, real signals y ~ Re(sum_k c_k z_k^n))
-    refined from ``z0`` by Levenberg-Marquardt. ESPRIT alone is biased towards undamped
-    poles when much of the record is noise. Returns (poles, amplitudes per signal).
-
-    Variable projection (Golub & Pereyra 1973): the amplitudes are eliminated by least
-    squares per signal (one QR of its K basis columns), so the Levenberg-Marquardt problem
-    has 2 K unknowns (decay, angular frequency per pole), not 2 K (1 + signals), and its
-    Jacobian is Kaufman's (1975) -P_perp (dE/dtheta) c with d/ds z^n = n z^n / rate for
-    s = -decay + i omega. The minimum is the one of the joint (poles, amplitudes) problem."""
-    from scipy.optimize import least_squares
-
+    refined from ``z0`` by variable projection (:func:`varpro.separable_fit`: amplitudes
+    eliminated per signal, Levenberg-Marquardt on each pole's decay and frequency, with
+    d/ds z^n = n z^n / rate for s = -decay + i omega). ESPRIT alone is biased towards
+    undamped poles when much of the record is noise. Returns (poles, amplitudes per signal)."""
     signals = [np.asarray(y[:max_samples]) for y in signals]
     if z0.size == 0 or not any(y.size for y in signals):
         return z0, [np.zeros(z0.size, dtype=complex) for _ in signals]
-    k = z0.size
-    ns = [np.arange(y.size) / rate for y in signals]
+    ts = [np.arange(y.size)[:, None] / rate for y in signals]
     # a step to a growing pole is held at e^50 over the longest signal (no overflow)
-    min_decay = -50.0 / max(max(t[-1] for t in ns if t.size), 1.0 / rate)
+    min_decay = -50.0 / max(max(t[-1, 0] for t in ts if t.size), 1.0 / rate)
+    rows = (lambda a: a.real) if real else (lambda a: np.vstack([a.real, a.imag]))
 
-    def parts(r):
-        return r if real else np.concatenate([r.real, r.imag])
+    def design(i, d, w):
+        # columns c_k z^n = a_k e + b_k (i e), e = e^{s t}; d/d decay = -t, d/d omega = i t
+        e = np.exp(ts[i] * (-d + 1j * w))
+        pair = np.empty((e.shape[0], 2 * e.shape[1]), dtype=complex)
+        pair[:, 0::2], pair[:, 1::2] = e, 1j * e
+        return varpro.Design(rows(pair), rows(-ts[i] * pair), rows(1j * ts[i] * pair))
 
-    last: dict = {}
-
-    def solve(p):
-        # least_squares evaluates the residual and then the Jacobian at the same point
-        if last.get("p") is not None and np.array_equal(last["p"], p):
-            return last["out"]
-        s = -np.maximum(p[:k], min_decay) + 1j * p[k:]
-        out = []
-        for y, t in zip(signals, ns, strict=True):
-            e = np.exp(np.outer(t, s))
-            basis = np.hstack([e.real, -e.imag]) if real else e
-            q, r = np.linalg.qr(basis)
-            coef = np.linalg.lstsq(r, np.conj(q.T) @ y, rcond=None)[0]
-            c = coef[:k] + 1j * coef[k:] if real else coef
-            out.append((q, c, y - basis @ coef, e * c[None, :] * t[:, None]))
-        last["p"], last["out"] = p.copy(), out
-        return out
-
-    def resid(p):
-        return np.concatenate([parts(o[2]) for o in solve(p)])
-
-    def jac(p):
-        blocks = []
-        for q, _, _, v in solve(p):
-            # model columns' derivatives: d/d decay = -v, d/d omega = i v (real part if real)
-            dv = np.hstack([-v, 1j * v])
-            if real:
-                dv = dv.real
-            dv = dv - q @ (np.conj(q.T) @ dv)
-            blocks.append(-parts(dv))
-        out = np.vstack(blocks)
-        out[:, :k][:, p[:k] < min_decay] = 0.0  # a clamped decay does not move the model
-        return out
-
+    ys = [y.real.astype(float) if real else np.concatenate([y.real, y.imag]) for y in signals]
     logz = np.log(z0)
-    p0 = np.concatenate([-logz.real * rate, logz.imag * rate])
-    try:
-        sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-10, ftol=1e-12)
-        p = sol.x if np.all(np.isfinite(sol.x)) else p0
-    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
-        p = p0
-    try:
-        amps = [o[1] for o in solve(p)]
-    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
-        amps = [np.zeros(k, dtype=complex) for _ in signals]
+    fit = varpro.separable_fit(design, ys, -logz.real * rate, logz.imag * rate, min_decay, max_nfev,
+                               xtol=1e-10, ftol=1e-12)  # fmt: skip
     # the poles the cost and the amplitudes were computed with
-    z = np.exp((-np.maximum(p[:k], min_decay) + 1j * p[k:]) / rate)
-    return z, amps
+    return np.exp((-fit.decays + 1j * fit.omegas) / rate), fit.amplitudes

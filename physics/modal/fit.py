@@ -690,6 +690,8 @@ def fit_recordings(
 
 def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, points, locations, margin,
          attack_ms, progress, time_limit) -> FitResult:  # fmt: skip
+    """:func:`fit_recordings` inside its warning and thread guards: input checks, the
+    segments, the pole search, the modes that stand out, the gains and the attack."""
     if not (rate > 0 and math.isfinite(rate)):
         raise JassyError(f"sample rate: expected > 0 Hz, got {rate}")
     if isinstance(signals, np.ndarray):
@@ -699,64 +701,107 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
     if f_hi <= f_min:
         raise JassyError(f"--fmax: expected more than --fmin ({f_min:g} Hz) and below Nyquist, got {f_hi:g}")
     notes: list[str] = []
-    segments: list[Segment] = []
-    onsets_s: list[list[float]] = []
-    for r, x in enumerate(recs):
-        mono = x.mean(axis=1)
-        if not np.any(mono != 0) and not np.any(x != 0):
-            raise JassyError(f"recording {r}: the signal is silent")
-        clipped = [clipped_samples(x[:, c]) for c in range(x.shape[1])]
-        n_clip = sum(c.size for c in clipped)
-        if n_clip:
-            notes.append(
-                f"warning: recording {r}: {n_clip} of {x.size} samples ({100 * n_clip / x.size:.1f} %) are "
-                "clipped; they are left out of the fit (record with less gain for a better fit)"
-            )
-            print(notes[-1], file=sys.stderr)
-        all_clipped = np.unique(np.concatenate(clipped))
-        if onset is not None:
-            n0 = int(round(onset * rate))
-            if not 0 <= n0 < x.shape[0]:
-                raise JassyError(f"--onset: {onset:g} s is outside the recording ({x.shape[0] / rate:g} s)")
-            ons = [n0]
-        else:
-            ons = detect_onsets(mono, rate)
-            if not ons:
-                raise JassyError(f"recording {r}: no strike found (no sudden rise of the level)")
-        hits = hits_of(ons, x.shape[0], all_clipped, rate, skip)
-        onsets_s.append([h.onset / rate for h in hits])
-        for h in hits:
-            stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
-            if stop - h.first < int(0.02 * rate) and h.first > h.onset + int(round(skip * rate)):
-                raise JassyError(
-                    f"recording {r}: the strike at {h.onset / rate:.3f} s is clipped until "
-                    f"{(h.first - 1) / rate:.3f} s, leaving {(stop - h.first) / rate * 1e3:.1f} ms of "
-                    "unclipped decay (need >= 20 ms); record with less gain"
-                )
-            if stop - h.first < int(0.02 * rate):
-                raise JassyError(
-                    f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
-                    f"({(stop - h.first) / rate * 1e3:.1f} ms after the onset; need >= 20 ms)"
-                )
-            for c in range(x.shape[1]):
-                seg_x = x[h.first : stop, c]
-                exc = clipped[c][(clipped[c] >= h.first) & (clipped[c] < stop)] - h.first
-                n_fft = 1 << int(math.ceil(math.log2(2 * seg_x.size)))
-                floor = noise_floor(seg_x, rate, n_fft)
-                segments.append(Segment(r, c, h, seg_x, exc.astype(np.int64), floor, n_fft))
+    segments, onsets_s = _all_segments(recs, rate, onset, skip, duration, notes)
     if locations is not None and len(locations) != sum(len(o) for o in onsets_s):
         raise JassyError(
             f"--locations: expected {sum(len(o) for o in onsets_s)} names (one per strike found at "
             + "; ".join(", ".join(f"{t:.3f}" for t in o) for o in onsets_s)
             + f" s), got {len(locations)}"
         )
+    work = _Work(progress, _steps(f_min, f_hi), time_limit)
+    poles, amps, totals = _standing_out(_search(segments, rate, f_min, f_hi, margin, work), segments, rate)
+    work.step("amplitudes")
+    modes = _loudest(poles, amps, totals, segments, rate, max_modes)
+    rows, names = _gain_rows(segments, modes.mags, recs, locations, points)
+    residual = [_residual_db(seg, modes.z, c) for seg, c in zip(segments, modes.totals, strict=True)]
+    attack = _stored_attack(segments, recs, modes, rows[0], rate, attack_ms)
+    work.step("done")
+    work.close()
+    levels = 10 * np.log10(modes.energy / modes.energy.max())
+    kept = attack if attack.size else None
+    model = ModalModel(modes.frequencies, modes.decays, rows, names, name, attack=kept,
+                       attack_rate=float(rate) if attack.size else None)  # fmt: skip
+    noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
+    # Re(c z^n) = |c| sin(omega n + arg(c) + pi / 2)
+    phases = np.angle(1j * modes.at_onset)
+    return FitResult(model, float(rate), onsets_s, residual, phases, levels, noise_db, notes)
 
-    # steps: each search pass (a band each, one for the full rate), the band refinement of
-    # each banded stage, each refinement sweep, the amplitudes and the end
+
+def _all_segments(recs, rate, onset, skip, duration, notes: list[str]):
+    """(segments of every hit and channel, onsets in s per recording)."""
+    segments: list[Segment] = []
+    onsets_s: list[list[float]] = []
+    for r, x in enumerate(recs):
+        clipped = [clipped_samples(x[:, c]) for c in range(x.shape[1])]
+        hits = _recording_hits(r, x, clipped, rate, onset, skip, notes)
+        onsets_s.append([h.onset / rate for h in hits])
+        segments += _hit_segments(r, x, clipped, hits, rate, skip, duration)
+    return segments, onsets_s
+
+
+def _recording_hits(r: int, x: np.ndarray, clipped, rate, onset, skip, notes: list[str]) -> list[Hit]:
+    """The hits of recording ``r`` (frames x channels; ``clipped`` = each channel's clipped
+    sample indices): at ``onset`` (s) or at the detected strikes, each starting after its
+    clipped samples (a warning in ``notes``)."""
+    mono = x.mean(axis=1)
+    if not np.any(mono != 0) and not np.any(x != 0):
+        raise JassyError(f"recording {r}: the signal is silent")
+    n_clip = sum(c.size for c in clipped)
+    if n_clip:
+        notes.append(
+            f"warning: recording {r}: {n_clip} of {x.size} samples ({100 * n_clip / x.size:.1f} %) are "
+            "clipped; they are left out of the fit (record with less gain for a better fit)"
+        )
+        print(notes[-1], file=sys.stderr)
+    if onset is not None:
+        n0 = int(round(onset * rate))
+        if not 0 <= n0 < x.shape[0]:
+            raise JassyError(f"--onset: {onset:g} s is outside the recording ({x.shape[0] / rate:g} s)")
+        ons = [n0]
+    else:
+        ons = detect_onsets(mono, rate)
+        if not ons:
+            raise JassyError(f"recording {r}: no strike found (no sudden rise of the level)")
+    return hits_of(ons, x.shape[0], np.unique(np.concatenate(clipped)), rate, skip)
+
+
+def _hit_segments(r: int, x: np.ndarray, clipped, hits: list[Hit], rate, skip, duration) -> list[Segment]:
+    """One :class:`Segment` per hit and channel of recording ``r`` (at most ``duration`` s
+    each), with its clipped samples and noise floor; a hit with under 20 ms left is an error."""
+    out = []
+    for h in hits:
+        stop = h.end if duration is None else min(h.end, h.first + int(round(duration * rate)))
+        if stop - h.first < int(0.02 * rate):
+            if h.first > h.onset + int(round(skip * rate)):
+                raise JassyError(
+                    f"recording {r}: the strike at {h.onset / rate:.3f} s is clipped until "
+                    f"{(h.first - 1) / rate:.3f} s, leaving {(stop - h.first) / rate * 1e3:.1f} ms of "
+                    "unclipped decay (need >= 20 ms); record with less gain"
+                )
+            raise JassyError(
+                f"recording {r}: the strike at {h.onset / rate:.3f} s is too short to fit "
+                f"({(stop - h.first) / rate * 1e3:.1f} ms after the onset; need >= 20 ms)"
+            )
+        for c in range(x.shape[1]):
+            seg_x = x[h.first : stop, c]
+            exc = clipped[c][(clipped[c] >= h.first) & (clipped[c] < stop)] - h.first
+            n_fft = 1 << int(math.ceil(math.log2(2 * seg_x.size)))
+            out.append(Segment(r, c, h, seg_x, exc.astype(np.int64), noise_floor(seg_x, rate, n_fft), n_fft))
+    return out
+
+
+def _steps(f_min: float, f_hi: float) -> int:
+    """Progress steps of a fit: each search pass (a band each, one for the full rate), the
+    band refinement of each banded stage, each refinement sweep, the amplitudes and the end."""
     search = sum(_band_centres(st, f_min, f_hi).size if st.spacing else 1 for st in STAGES)
     banded = sum(1 for st in STAGES if st.spacing)
-    total = search * (1 + EXTRA_PASSES) + banded + SWEEPS * (1 + EXTRA_PASSES) + 2
-    work = _Work(progress, total, time_limit)
+    return search * (1 + EXTRA_PASSES) + banded + SWEEPS * (1 + EXTRA_PASSES) + 2
+
+
+def _search(segments, rate, f_min, f_hi, margin, work) -> list[Pole]:
+    """The poles of every hit and channel (sorted): the stages, the band refinement, the
+    spectral refinement, then up to ``EXTRA_PASSES`` rounds of the stages on what the
+    refined poles leave and the spectral refinement again."""
     poles = _detect([], segments, rate, f_min, f_hi, margin, work)
     if poles:
         poles = _polish(poles, segments, rate, f_min, f_hi, work)
@@ -772,11 +817,15 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
             "fit: no decaying modes found above the noise; check the recording (a strike of a "
             "resonant object), --fmin/--fmax or --onset"
         )
-    poles.sort()
+    return sorted(poles)
+
+
+def _standing_out(poles: list[Pole], segments, rate):
+    """(poles, own amplitudes, total amplitudes per segment) of the poles whose joint
+    amplitudes stand ``MIN_SNR`` above the noise in some segment: a pole fitted to the skirt
+    of a broad mode found later loses its amplitude to that mode in the joint fit."""
     z = _z(poles, rate)
     amps, totals = _segment_amplitudes(segments, z)
-    # a pole fitted to the skirt of a broad mode found later loses its amplitude to that
-    # mode in the joint fit: keep the poles that still stand out of the noise
     snr = np.zeros(z.size)
     for seg, c in zip(segments, totals, strict=True):
         bins = np.clip((np.angle(z) / (2 * np.pi) * seg.n_fft).astype(int), 0, seg.noise.size - 1)
@@ -784,54 +833,56 @@ def _fit(signals, rate, max_modes, f_min, f_max, onset, skip, duration, name, po
         snr = np.maximum(
             snr, [_matched_snr(ck, zk, seg.x.size, s2) / 2 for ck, zk, s2 in zip(c, z, sigma2, strict=True)]
         )
-    if np.any(snr < MIN_SNR):
-        poles = [p for p, ok in zip(poles, snr >= MIN_SNR, strict=True) if ok]
-        if not poles:
-            raise JassyError("fit: no decaying modes found above the noise; check the recording")
-        z = _z(poles, rate)
-        amps, totals = _segment_amplitudes(segments, z)
-    work.step("amplitudes")
+    if np.all(snr >= MIN_SNR):
+        return poles, amps, totals
+    poles = [p for p, ok in zip(poles, snr >= MIN_SNR, strict=True) if ok]
+    if not poles:
+        raise JassyError("fit: no decaying modes found above the noise; check the recording")
+    return (poles, *_segment_amplitudes(segments, _z(poles, rate)))
+
+
+class Modes(NamedTuple):
+    """The fitted modes (ascending frequency) with their amplitudes per segment."""
+
+    frequencies: np.ndarray  # Hz
+    decays: np.ndarray  # 1/s
+    z: np.ndarray  # poles per sample
+    at_onset: np.ndarray  # (segments, modes): complex amplitude of each hit's own ringing at its onset
+    mags: np.ndarray  # |at_onset|
+    energy: np.ndarray  # the loudest hit's energy of each mode
+    totals: list  # per segment: complex amplitudes of everything ringing at its first sample
+
+
+def _loudest(poles: list[Pole], amps, totals, segments, rate, max_modes: int) -> Modes:
+    """The ``max_modes`` modes of most energy (in the hit where each is loudest)."""
     freqs = np.array([p.frequency for p in poles])
     decays = np.array([p.decay for p in poles])
+    z = _z(poles, rate)
     # referred to each hit's onset: c e^{s (t - t_first)} = (c e^{-s (first - onset)}) e^{s (t - t_onset)}
     c0 = np.array([a * z ** -(s.hit.first - s.hit.onset) for a, s in zip(amps, segments, strict=True)])
-    mags = np.abs(c0)
-    energy = (mags**2).max(axis=0) / (4 * np.maximum(decays, 1e-3))
+    energy = (np.abs(c0) ** 2).max(axis=0) / (4 * np.maximum(decays, 1e-3))
     keep = np.sort(np.argsort(energy)[::-1][:max_modes])
-    freqs, decays, z, c0, mags, energy = (
-        freqs[keep],
-        decays[keep],
-        z[keep],
-        c0[:, keep],
-        mags[:, keep],
-        energy[keep],
-    )
-    amps, totals = [a[keep] for a in amps], [a[keep] for a in totals]
+    c0 = c0[:, keep]
+    return Modes(freqs[keep], decays[keep], z[keep], c0, np.abs(c0), energy[keep], [a[keep] for a in totals])
 
-    rows, names = _gain_rows(segments, mags, recs, locations, points)
-    residual = []
-    for seg, c in zip(segments, totals, strict=True):
-        own = np.delete(np.arange(seg.x.size), seg.excluded)
-        err = seg.x - esprit.resynthesis(seg.x.size, z, c)
-        residual.append(
-            10 * math.log10(max(np.sum(err[own] ** 2) / max(np.sum(seg.x[own] ** 2), 1e-300), 1e-30))
-        )
+
+def _residual_db(seg: Segment, z: np.ndarray, c: np.ndarray) -> float:
+    """Energy of the segment minus its resynthesis relative to the segment's (dB, clipped
+    samples left out)."""
+    own = np.delete(np.arange(seg.x.size), seg.excluded)
+    err = seg.x - esprit.resynthesis(seg.x.size, z, c)
+    return 10 * math.log10(max(np.sum(err[own] ** 2) / max(np.sum(seg.x[own] ** 2), 1e-300), 1e-30))
+
+
+def _stored_attack(segments, recs, modes: Modes, row: np.ndarray, rate, attack_ms) -> np.ndarray:
+    """The first segment's attack (:func:`_attack`) on the scale of gain row ``row``."""
     first = segments[0]
     sigma = math.sqrt(float(np.median(first.noise)) / first.x.size)
     onset_x = recs[first.recording][first.hit.onset : first.hit.end, first.channel]
-    attack = _attack(onset_x, z, c0[0], sigma, rate, attack_ms)
-    strong = mags[0] >= 0.1 * mags[0].max()
-    attack *= float(np.median(rows[0][strong] / mags[0][strong]))  # on gain row 0's scale
-    work.step("done")
-    work.close()
-    levels = 10 * np.log10(energy / energy.max())
-    kept = attack if attack.size else None
-    model = ModalModel(
-        freqs, decays, rows, names, name, attack=kept, attack_rate=float(rate) if attack.size else None
-    )
-    noise_db = 10 * math.log10(max(float(np.median(segments[0].noise)) / segments[0].x.size, 1e-300))
-    # Re(c z^n) = |c| sin(omega n + arg(c) + pi / 2)
-    return FitResult(model, float(rate), onsets_s, residual, np.angle(1j * c0), levels, noise_db, notes)
+    attack = _attack(onset_x, modes.z, modes.at_onset[0], sigma, rate, attack_ms)
+    mags = modes.mags[0]
+    strong = mags >= 0.1 * mags.max()
+    return attack * float(np.median(row[strong] / mags[strong]))
 
 
 def _gain_rows(segments, mags, recs, locations, points):

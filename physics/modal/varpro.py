@@ -74,6 +74,87 @@ def _real(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a.real, a.imag])
 
 
+class Design(NamedTuple):
+    """Real least-squares columns of K poles for one signal: ``phi`` (rows x 2K, columns
+    [a_0, b_0, a_1, b_1, ...] for the real amplitudes of c_k = a_k + i b_k) and the
+    derivatives of each column with respect to its own pole's decay (1/s) and angular
+    frequency (rad/s)."""
+
+    phi: np.ndarray
+    by_decay: np.ndarray
+    by_omega: np.ndarray
+
+
+class Separated(NamedTuple):
+    """Result of :func:`separable_fit`."""
+
+    decays: np.ndarray  # 1/s (at least the clamp the cost was computed with)
+    omegas: np.ndarray  # rad/s
+    amplitudes: list  # per signal: complex c_k = a_k + i b_k
+    cost: float  # residual energy summed over the signals
+    cost0: float  # the same at the start
+
+
+def separable_fit(design, ys, decays, omegas, min_decay: float, max_nfev: int, **options) -> Separated:
+    """Decays and angular frequencies of K poles shared by the real signals ``ys``, each with
+    its own linear amplitudes, by variable projection (Golub & Pereyra 1973): the amplitudes
+    are eliminated by least squares per signal (one QR of its 2K columns), Levenberg-Marquardt
+    moves only the 2K pole parameters, with Kaufman's (1975) Jacobian -P_perp (dPhi/dtheta) a.
+    ``design(i, decays, omegas)`` gives the :class:`Design` of signal i. Decays are held at
+    ``min_decay`` or above (their Jacobian columns there are zero); a result whose cost is
+    not below the start's keeps the start. ``options`` go to scipy's ``least_squares``."""
+    from scipy.optimize import least_squares
+
+    k = np.size(decays)
+    last: dict = {}
+
+    def solve(p):
+        # least_squares evaluates the residual and then the Jacobian at the same point
+        if last.get("p") is not None and np.array_equal(last["p"], p):
+            return last["out"]
+        d = np.maximum(p[:k], min_decay)
+        out = []
+        for i, y in enumerate(ys):
+            cols = design(i, d, p[k:])
+            q, r = np.linalg.qr(cols.phi)
+            coef = np.linalg.lstsq(r, q.T @ y, rcond=None)[0]
+            out.append((q, coef, y - cols.phi @ coef, cols))
+        last["p"], last["out"] = p.copy(), out
+        return out
+
+    def resid(p):
+        return np.concatenate([o[2] for o in solve(p)])
+
+    def jac(p):
+        blocks = []
+        for q, coef, _, cols in solve(p):
+            ab = coef.reshape(k, 2)
+            parts = []
+            for deriv in (cols.by_decay, cols.by_omega):
+                # column j of the model's derivative: dPhi_j/dtheta_j (a_j, b_j)
+                v = deriv[:, 0::2] * ab[:, 0] + deriv[:, 1::2] * ab[:, 1]
+                parts.append(-(v - q @ (q.T @ v)))
+            blocks.append(np.hstack(parts))
+        out = np.vstack(blocks)
+        out[:, :k][:, p[:k] < min_decay] = 0.0  # a clamped decay does not move the model
+        return out
+
+    p0 = np.concatenate([np.asarray(decays, float), np.asarray(omegas, float)])
+    r0 = resid(p0)
+    cost0 = float(r0 @ r0)
+    try:
+        sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, **options)
+        p = sol.x if np.all(np.isfinite(sol.x)) else p0
+    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
+        p = p0
+    sols = solve(p)
+    cost = float(sum(o[2] @ o[2] for o in sols))
+    if not cost <= cost0:
+        p, sols, cost = p0, solve(p0), cost0
+    amps = [o[1].reshape(k, 2) @ np.array([1.0, 1j]) for o in sols]
+    return Separated(np.maximum(p[:k], min_decay), p[k:], amps, cost, cost0)
+
+
 class Refined(NamedTuple):
     frequencies: np.ndarray  # Hz
     decays: np.ndarray  # 1/s
@@ -84,68 +165,23 @@ class Refined(NamedTuple):
 
 def refine(spectra: list[Spectrum], rate: float, freqs, decays, max_nfev: int = 30) -> Refined:
     """Frequencies (Hz) and decays (1/s) of damped sinusoids shared by the ``spectra``, by
-    variable projection from the given start; amplitudes per spectrum by least squares."""
-    from scipy.optimize import least_squares
+    variable projection (:func:`separable_fit`) from the given start; amplitudes per
+    spectrum by least squares."""
+    freqs = np.asarray(freqs, float)
 
-    freqs, decays = np.asarray(freqs, float), np.asarray(decays, float)
-    k = freqs.size
-    ys = [_real(s.y) for s in spectra]
+    def design(i, d, w):
+        s = spectra[i]
+        phi, dd, dw = model_columns(np.exp((-d + 1j * w) / rate), s.bins, s.n)
+        return Design(np.vstack([phi.real, phi.imag]), _rows(dd) / rate, _rows(dw) / rate)
 
-    def poles(p):
-        # a step to d <= 0 would make z^N overflow: such poles are held at a tiny decay
-        return np.exp((-np.maximum(p[:k], MIN_DECAY) + 1j * p[k:]) / rate)
+    fit = separable_fit(design, [_real(s.y) for s in spectra], decays, 2 * np.pi * freqs, MIN_DECAY,
+                        max_nfev, x_scale="jac")  # fmt: skip
+    return Refined(fit.omegas / (2 * np.pi), fit.decays, fit.amplitudes, fit.cost, fit.cost0)
 
-    last: dict = {}
 
-    def solve(p):
-        # least_squares evaluates the residual and then the Jacobian at the same point
-        if last.get("p") is not None and np.array_equal(last["p"], p):
-            return last["out"]
-        z = poles(p)
-        out = []
-        for s, y in zip(spectra, ys, strict=True):
-            phi, dd, dw = model_columns(z, s.bins, s.n)
-            a_phi = np.vstack([phi.real, phi.imag])
-            q, r = np.linalg.qr(a_phi)
-            coef = np.linalg.lstsq(r, q.T @ y, rcond=None)[0]
-            res = y - a_phi @ coef
-            out.append((q, coef, res, dd, dw))
-        last["p"], last["out"] = p.copy(), out
-        return out
-
-    def resid(p):
-        return np.concatenate([o[2] for o in solve(p)])
-
-    def jac(p):
-        blocks = []
-        for q, coef, _, dd, dw in solve(p):
-            ab = coef.reshape(k, 2)
-            cols = []
-            for deriv in (dd, dw):
-                # column j: dPhi_j/dtheta_j (a_j, b_j), complex rows -> real
-                v = deriv[:, 0::2] * ab[:, 0] + deriv[:, 1::2] * ab[:, 1]
-                v = np.vstack([v.real, v.imag]) / rate
-                cols.append(-(v - q @ (q.T @ v)))
-            blocks.append(np.hstack(cols))
-        out = np.vstack(blocks)
-        out[:, :k][:, p[:k] < MIN_DECAY] = 0.0  # a clamped decay does not move the model
-        return out
-
-    p0 = np.concatenate([decays, 2 * np.pi * freqs])
-    r0 = resid(p0)
-    cost0 = float(r0 @ r0)
-    try:
-        sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, x_scale="jac")
-        p = sol.x if np.all(np.isfinite(sol.x)) else p0
-    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
-        p = p0
-    sols = solve(p)
-    cost = float(sum(o[2] @ o[2] for o in sols))
-    if not cost <= cost0:
-        p, sols, cost = p0, solve(p0), cost0
-    amps = [o[1].reshape(k, 2) @ np.array([1.0, 1j]) for o in sols]
-    # the decays the cost and the amplitudes were computed with
-    return Refined(p[k:] / (2 * np.pi), np.maximum(p[:k], MIN_DECAY), amps, cost, cost0)
+def _rows(a: np.ndarray) -> np.ndarray:
+    """Complex rows -> real rows (real parts, then imaginary parts)."""
+    return np.vstack([a.real, a.imag])
 
 
 def fast_length(n: int) -> int:

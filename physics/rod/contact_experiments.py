@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -347,19 +348,37 @@ def archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, plot:
     return run_archery(draw, limb_ei, target, plot).summary
 
 
-def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, plot: str | None = None):
-    """A bow: two limbs (0.65 m, EI ``limb_ei`` N m^2, rho_A 0.15 kg/m, natural curvature 0.4 1/m
-    toward the archer) clamped at a 16 cm grip; a string (thin inextensible rod: EI 1e-3 N m^2,
-    rho_A 2e-3 kg/m, 3 % shorter than the tip distance) pinned to the tips; an arrow (rigid, 25 g,
-    0.75 m, a nock disk and a tip disk). Phases: bracing (the string's lower end is pulled onto the
-    lower tip, 2 % of the gap per step) and settling, 0.3 s; draw by a hand pinned to the string's
-    middle, ``draw`` m at up to 1 m/s with the arrow driven along; hold 0.1 s; release (h = 0.1 ms
-    for 40 ms, then 0.5 ms): the string pushes the nock (frictionless contact) until the arrow leaves;
-    flight to a target plane at x = ``target`` m. Gravity acts on the arrow only."""
-    if not (0.05 <= draw <= 0.6 and limb_ei > 0 and target > 1.0):
-        raise JassyError(
-            f"draw, limb_ei, target: expected 0.05..0.6 m, > 0, > 1 m; got {draw}, {limb_ei}, {target}"
+_NOCK_RADIUS = 4e-3  # m, the arrow's nock disk
+_BOW_IGNORES = [(0, 2), (1, 2), (0, 1)]  # limbs-string and limb-limb pairs do not collide
+_PARKED = (0.0, 0.0, 0.0)  # a rigid body's drive velocity (vx, vy, omega) that holds it
+
+
+class _Bow(NamedTuple):
+    """The archery scene's parts: two limbs (rods 0, 1), the string (rod 2, ``nodes`` elements,
+    ``length`` m), the arrow (body 3) and the hand (body 4), the string-to-tip joints and the
+    target plane."""
+
+    upper: MixedRod
+    lower: MixedRod
+    string: MixedRod
+    nodes: int
+    length: float
+    arrow: RigidBody
+    hand: RigidBody
+    tips: list
+    wall: Plane
+
+    def system(self, joints: list) -> RodSystem:
+        """The bow's rods and bodies held by ``joints`` (frictionless contact)."""
+        rods = [self.upper, self.lower, self.string]
+        return RodSystem(
+            rods, [self.arrow, self.hand], [self.wall], joints, mu=0.0, margin=2e-3, ignore=_BOW_IGNORES
         )
+
+
+def _build_bow(limb_ei: float, target: float) -> _Bow:
+    """The bow of ``run_archery`` before bracing: limbs clamped at the grip, the string's upper
+    end pinned to the upper tip and its lower end pulled toward the lower tip."""
     grip, lb, k0 = 0.08, 0.65, 0.4
     upper = MixedRod(
         RodModel(
@@ -404,32 +423,39 @@ def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, p
             damping=1e-4,
         )
     )
-    nock_r = 4e-3
-    arrow = RigidBody(0.025, 0.025 * 0.75**2 / 12, ((-0.375, 0.0, nock_r), (0.375, 0.0, 3e-3)))
+    arrow = RigidBody(0.025, 0.025 * 0.75**2 / 12, ((-0.375, 0.0, _NOCK_RADIUS), (0.375, 0.0, 3e-3)))
     hand = RigidBody(0.1, 1e-3, disks=(), gravity=0.0)
     tips = [
         Joint(Anchor(2, 0, 0.0), Anchor(0, 7, lb / 8)),
         Joint(Anchor(2, ns - 1, ls / ns), Anchor(1, 7, lb / 8), rate=0.02),
     ]
-    mid = Anchor(2, ns // 2, 0.0)
     wall = Plane((target, 0.0), (-1.0, 0.0))
-    rods = [upper, lower, string]
-    skip = [(0, 2), (1, 2), (0, 1)]
-    brace = RodSystem(rods, [arrow, hand], [wall], tips, mu=0.0, margin=2e-3, ignore=skip)
+    return _Bow(upper, lower, string, ns, ls, arrow, hand, tips, wall)
+
+
+def _brace(bow: _Bow, h: float):
+    """Bracing and settling (0.3 s at step ``h``) with the arrow and hand parked aside; then the
+    arrow's nock is set on the string's middle and the hand on it. Returns (state, string
+    tension N)."""
+    brace = bow.system(bow.tips)
     state = brace.initial_state(poses=[[1.0, 5.0, 0.0], [0.0, 5.0, 0.0]])  # arrow and hand parked aside
-    park = {3: (0.0, 0.0, 0.0), 4: (0.0, 0.0, 0.0)}
-    h = 1e-3
+    park = {3: _PARKED, 4: _PARKED}
     for _ in range(300):
         state, info = brace.step(state, h, drives=park)
     tension = float(np.hypot(*info.lam[-8:-6]) / h)  # lower tip joint impulse (rows before the 6 drive rows)
-    p_mid, _, _ = string.point_jacobian(state.rods[2].q, ns // 2, 0.0)
-    nock = p_mid + np.array([string.model.radius + nock_r + 1e-4, 0.0])
+    p_mid, _, _ = bow.string.point_jacobian(state.rods[2].q, bow.nodes // 2, 0.0)
+    nock = p_mid + np.array([bow.string.model.radius + _NOCK_RADIUS + 1e-4, 0.0])
     state.q[:] = [[nock[0] + 0.375, nock[1], 0.0], [*p_mid, 0.0]]
-    draw_sys = RodSystem(
-        rods, [arrow, hand], [wall], [*tips, Joint(mid, Anchor(4))], mu=0.0, margin=2e-3, ignore=skip
-    )
-    infos, draw_x, draw_f, hand_f = [], [], [], []
-    t, x0 = 0.0, p_mid[0]
+    return state, tension
+
+
+def _draw(bow: _Bow, state, draw: float, h: float, infos: list):
+    """Draw by the hand pinned to the string's middle, ``draw`` m at up to 1 m/s, then hold 0.1 s
+    (steps' infos appended to ``infos``). Returns (state, draw lengths m, draw forces N, hand
+    forces [t, fx, fy] per step, the held draw force N)."""
+    draw_sys = bow.system([*bow.tips, Joint(Anchor(2, bow.nodes // 2, 0.0), Anchor(4))])
+    draw_x, draw_f, hand_f = [], [], []
+    t, x0 = 0.0, state.q[1, 0]
     while x0 - state.q[1, 0] < draw:
         t += h
         v = -min(1.0, t / 0.05, 0.05 + 10.0 * (draw - (x0 - state.q[1, 0])))
@@ -439,16 +465,22 @@ def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, p
         infos.append(info)
         hand_f.append([state.time, info.lam[-3] / h, info.lam[-2] / h])
     for _ in range(100):
-        state, info = draw_sys.step(state, h, drives={3: (0.0, 0.0, 0.0), 4: (0.0, 0.0, 0.0)})
+        state, info = draw_sys.step(state, h, drives={3: _PARKED, 4: _PARKED})
         infos.append(info)
         hand_f.append([state.time, info.lam[-3] / h, info.lam[-2] / h])
-    draw_force = float(info.lam[-3] / h)
-    release = RodSystem(rods, [arrow, hand], [wall], tips, mu=0.0, margin=2e-3, ignore=skip)
+    return state, draw_x, draw_f, hand_f, float(info.lam[-3] / h)
+
+
+def _release(bow: _Bow, state, infos: list):
+    """Release (h = 0.1 ms for 40 ms, then 0.5 ms) until 0.25 s or 20 ms after the arrow hits
+    the target (steps' infos appended to ``infos``). Returns (state, path rows [t, x, y, speed],
+    the time the arrow left the string or None, the hit time or None)."""
+    release = bow.system(bow.tips)
     t_rel = state.time
     path, hit, left = [], None, None
     while state.time < t_rel + 0.25 and (hit is None or state.time < hit + 0.02):
         h = 1e-4 if state.time < t_rel + 0.04 else 5e-4
-        state, info = release.step(state, h, drives={4: (0.0, 0.0, 0.0)})
+        state, info = release.step(state, h, drives={4: _PARKED})
         infos.append(info)
         path.append([state.time, *state.q[0, :2], float(np.hypot(*state.v[0, :2]))])
         pairs = {tuple(sorted(map(int, b))) for b, r in zip(info.bodies, info.r, strict=True) if r[0] > 0}
@@ -456,18 +488,39 @@ def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, p
             left = state.time
         if hit is None and (3, 5) in pairs:
             hit = state.time
-    path = np.array(path)
+    return state, np.array(path), left, hit
+
+
+def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, plot: str | None = None):
+    """A bow: two limbs (0.65 m, EI ``limb_ei`` N m^2, rho_A 0.15 kg/m, natural curvature 0.4 1/m
+    toward the archer) clamped at a 16 cm grip; a string (thin inextensible rod: EI 1e-3 N m^2,
+    rho_A 2e-3 kg/m, 3 % shorter than the tip distance) pinned to the tips; an arrow (rigid, 25 g,
+    0.75 m, a nock disk and a tip disk). Phases: bracing (the string's lower end is pulled onto the
+    lower tip, 2 % of the gap per step) and settling, 0.3 s; draw by a hand pinned to the string's
+    middle, ``draw`` m at up to 1 m/s with the arrow driven along; hold 0.1 s; release (h = 0.1 ms
+    for 40 ms, then 0.5 ms): the string pushes the nock (frictionless contact) until the arrow leaves;
+    flight to a target plane at x = ``target`` m. Gravity acts on the arrow only."""
+    if not (0.05 <= draw <= 0.6 and limb_ei > 0 and target > 1.0):
+        raise JassyError(
+            f"draw, limb_ei, target: expected 0.05..0.6 m, > 0, > 1 m; got {draw}, {limb_ei}, {target}"
+        )
+    bow = _build_bow(limb_ei, target)
+    state, tension = _brace(bow, 1e-3)
+    infos = []
+    state, draw_x, draw_f, hand_f, draw_force = _draw(bow, state, draw, 1e-3, infos)
+    t_rel = state.time
+    state, path, left, hit = _release(bow, state, infos)
     impacts, tracks = contact_events(infos)
     speed_left = float(np.interp(left, path[:, 0], path[:, 3])) if left else 0.0
     stored = float(np.trapezoid(draw_f, draw_x))
     summary = {
         "brace_tension_n": tension,
-        "string_length_m": float(ls),
+        "string_length_m": float(bow.length),
         "draw_m": draw,
         "draw_force_n": draw_force,
         "stored_energy_j": stored,
         "arrow_speed_m_s": speed_left,
-        "efficiency": 0.5 * arrow.mass * speed_left**2 / stored if stored > 0 else 0.0,
+        "efficiency": 0.5 * bow.arrow.mass * speed_left**2 / stored if stored > 0 else 0.0,
         "power_stroke_ms": (left - t_rel) * 1e3 if left else None,
         "hit_time_s": hit - t_rel if hit else None,
         "impacts": len(impacts),
@@ -478,5 +531,5 @@ def run_archery(draw: float = 0.4, limb_ei: float = 30.0, target: float = 3.0, p
             plot, np.array(draw_x) * 100, np.array(draw_f), "draw (cm)", "draw force (N)", "bow draw curve"
         )
     return ArcheryResult(
-        summary, upper, state.rods[0], string, impacts, tracks, path, np.array(hand_f), t_rel, hit
+        summary, bow.upper, state.rods[0], bow.string, impacts, tracks, path, np.array(hand_f), t_rel, hit
     )
