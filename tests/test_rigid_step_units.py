@@ -1,10 +1,9 @@
-"""The rigid step's compile units (physics.rigid.step_units: run_steps and the kernels it calls
-apart) are compiled for exactly the argument types the run asks for: otherwise the run would
-compile each of them again after the two cores had (a cold render would only lose time, so
-nothing else shows it). Checked for the wok's models (semi-implicit integrator, impulse
-contacts) and for the other pair (RK4 through the any-integrator motion, a penalty contact
-model). With numba's JIT off the step runs as plain Python (no units, the models picked in
-Python)."""
+"""The rigid step's compile units (physics.rigid.step_units) are compiled for exactly the
+argument types run_steps calls those kernels with: otherwise run_steps would compile each of
+them again after the two cores had (a cold render would only lose time, so nothing else shows
+it). Checked for the wok's models (semi-implicit integrator, impulse contacts) and for the
+other pair of units (RK4 through the any-integrator motion, a penalty contact model). With
+numba's JIT off the step runs as plain Python (no units, the models picked in Python)."""
 
 import math
 import os
@@ -16,13 +15,15 @@ import numpy as np
 import pytest
 
 from physics.rigid import stepper as st
-from physics.rigid.impulses import new_warm_start
+from physics.rigid.impulses import new_warm_start, resolve
+from physics.rigid.narrow import pair_contacts
+from physics.rigid.penalty import penalty
 from physics.rigid.shapes import Plane, Sphere
 from physics.rigid.step_units import step_units
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
-#: The types of run_steps' ``motion`` argument (stepper.step_models).
-TAGS = (st.SemiImplicitMotion, st.AnyMotion)
+#: The types of run_steps' ``contact`` and ``motion`` arguments (stepper.step_models).
+TAGS = (st.ImpulseContacts, st.PenaltyContacts, st.SemiImplicitMotion, st.AnyMotion)
 
 
 def _cached_signatures(kernel) -> list:
@@ -69,22 +70,25 @@ def _unit_calls(world: World) -> list:
 
 @pytest.mark.timeout(600)  # compiles the whole rigid step when the kernel cache is empty
 @pytest.mark.parametrize(
-    ("integrator", "contact", "response"),
-    [("semi-implicit", "impulse", st.impulse_response), ("rk4", "linear", st.penalty_response)],
+    ("integrator", "contact", "solve", "move"),
+    [
+        ("semi-implicit", "impulse", resolve, st._move_semi_implicit),
+        ("rk4", "linear", penalty, st._move),
+    ],
 )
-def test_units_compile_the_types_the_run_asks_for(integrator, contact, response):
+def test_units_compile_the_types_run_steps_asks_for(integrator, contact, solve, move):
     world = _world(integrator, contact)
     calls = _unit_calls(world)
-    assert {call.kernel for call in calls} == {st.narrow_stage, st.impact_stage, response, st.run_steps}
+    assert {call.kernel for call in calls} >= {pair_contacts, st._time_of_impact, solve, move}
     before = {call.kernel: set(_cached_signatures(call.kernel)) for call in calls}
-    simulate(world, 0.01)  # the units compiled (on two cores, on an empty cache) or loaded
+    simulate(world, 0.01)  # run_steps compiled (after the units, on an empty cache) or loaded
     for call in calls:
         wanted = tuple(nb.typeof(a) for a in call.args)
         cached = _cached_signatures(call.kernel)
         name = call.kernel.py_func.__name__
         assert wanted in cached, f"{name}: units compile {wanted}, the cache holds {cached}"
-        # this run added no other specialisation (a unit of other types than the run's
-        # would leave two: the unit's and the run's own)
+        # this run added no other specialisation (a unit of other types than run_steps'
+        # would leave two: the unit's and run_steps' own)
         added = set(cached) - before[call.kernel]
         assert added <= {wanted}, f"{name}: units compile {wanted}, this run added {added}"
         # the cache keeps every specialisation of earlier runs too (other integrators and

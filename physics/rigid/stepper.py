@@ -25,21 +25,17 @@ outer step of h seconds (:func:`outer_step`) is:
    world moves to the earliest such time and goes back to 2. At most ``max_events`` such
    sub-steps per step; later impacts are resolved at the step end.
 
-The large stages are called apart (jassy.unlinked.call_apart, through entry points passed
-in :class:`StepEntries`): the narrow stage and the impact stage (each with
-narrow.pair_contacts linked in) and the contact model's response. A called kernel is
-otherwise linked into its caller's module and optimised again there, at every level above
-it; apart, each compiles once, and run_steps needs none of their code to compile, so a
-first compile can spread them over two cores (physics.rigid.step_units). The
-contact model is picked in Python (:func:`step_models`: the entry point of
-:func:`impulse_response` or :func:`penalty_response`), the free motion's integrator by the
-type of run_steps' ``motion`` argument (an overload resolved when run_steps is typed), so a
-run compiles only its own model and integrator. The other stages are inlined into
-run_steps (numba inline="always").
-
-The whole step allocates nothing and run_steps is compiled without reference counting
-(``_nrt=False``, passed on to every kernel it calls that sets no flag of its own): with it,
-every use of Model or Data counted a reference up and down for each array they
+The contact model and the free motion's integrator are picked by the types of two arguments
+of run_steps (:func:`step_models`, chosen from Options in Python; overloads resolved when
+run_steps is typed), not by branches inside it, so a run compiles only its own model and
+integrator (the wok's first compile no longer builds the penalty models, RK4 and the
+adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
+are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
+linked into its caller's module and optimised again there, so each level of kernel calls
+above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
+compile). The whole step allocates nothing and run_steps is compiled without reference
+counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
+with it, every use of Model or Data counted a reference up and down for each array they
 hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
 Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
 stops the run inside its step (Data.progress says where and how much is needed), and
@@ -55,7 +51,6 @@ frame, and the normal.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numba as nb
@@ -63,7 +58,6 @@ import numpy as np
 from numba.extending import overload
 
 from jassy.jit import drop_stale_cache
-from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import (
     broad,
     codes,
@@ -250,21 +244,14 @@ def _grown(d: Data, opt: Options, steps: int, nrec: int) -> Data:
             f"run: a step needs scratch for {pairs} pairs, {contacts} contacts; it cannot grow"
         )
     d.progress.most[0] = max(d.progress.most[0], contacts)
-    rec = with_record_room(rec, nrec, record_room(opt, d.progress.most[0]))
+    room = record_room(opt, d.progress.most[0])
+    if rec.shape[0] - nrec < room:
+        rec = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
+        rec[:nrec] = d.rec[:nrec]
     d.progress.need[:] = 0
     return d._replace(
         kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], rec=rec, sweep=sweep, near=near, solver=solver
     )
-
-
-def with_record_room(rec: np.ndarray, nrec: int, room: int) -> np.ndarray:
-    """``rec`` if it has ``room`` rows free after its first nrec, else a copy of those rows in
-    a buffer twice as long (or as long as needed)."""
-    if rec.shape[0] - nrec >= room:
-        return rec
-    grown = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
-    grown[:nrec] = rec[:nrec]
-    return grown
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -287,11 +274,10 @@ def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) ->
     resuming it: (d with the grown scratch and records, steps done, record count); fewer steps
     than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
     again). The kinematic samples of the returned d start at the step it stopped in."""
-    motion = step_models(opt)[1]
-    entries = step_entries(m, opt, d)
+    contact, motion = step_models(opt)
     done = 0
     while True:
-        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, entries, motion)
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact, motion)
         done += steps
         if not d.progress.need.any():
             return d, done, nrec
@@ -487,7 +473,7 @@ def _turn(i, tau, quat, kin_w, out_q):
 @nb.njit(cache=True, inline="always")
 def _pair_gap(geo, a, b, pos, rot, margin, probe):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
-    buffers ``probe``)."""
+    buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
     count = pair_contacts(a, b, pos, rot, geo, margin, probe, np.int64(0))  # not a literal 0: one compile
     best = margin
     for c in range(count):
@@ -523,7 +509,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
     return gap
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
     moved by ``motion``'s integrator, step_models)."""
@@ -674,8 +660,8 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
 
 @nb.njit(cache=True, inline="always")
 def _detect(geo, slop, pos, rot, buf, pairs, near):
-    """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin
-    = slop + near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
+    """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
+    near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop."""
@@ -756,13 +742,10 @@ def broad_stage(m, opt, d, dt):
     return count
 
 
-@nb.njit(cache=True, _nrt=False)
-def narrow_stage(m, opt, d, count, dt):
-    """How far each of the broad phase's first ``count`` pairs (d.sweep.pairs) can close in dt
-    (d.near.reach), then the contacts of the pairs that can come within slop (_detect);
-    returns their count. Called apart (StepEntries.narrow): once per (sub-)step, with the
-    narrow phase linked in."""
-    pairs, near = d.sweep.pairs[:count], d.near
+@nb.njit(cache=True, inline="always")
+def narrow_stage(m, opt, d, pairs, near, dt):
+    """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
+    come within slop (_detect); returns their count."""
     reach = near.reach
     for p in range(pairs.shape[0]):
         reach[p] = 0.0
@@ -771,12 +754,25 @@ def narrow_stage(m, opt, d, count, dt):
 
 
 @nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, count, dt, time, step, nrec, response):
+def contact_stage(m, opt, d, count, dt, time, step, nrec, contact):
     """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
-    scratch d.solver (rows >= count), through ``response``, the model's entry point
-    (step_models, StepEntries). Returns the record count, -1 when d.rec is full."""
+    scratch d.solver (rows >= count), the model picked by the type of ``contact``
+    (step_models). Returns the record count, -1 when d.rec is full."""
     d.stats.solves[0] += 1
-    return call_apart(response, (m, opt, d, count, dt, time, step, nrec), nb.int64)
+    return contact_response(contact, m, opt, d, count, dt, time, step, nrec)
+
+
+class ImpulseContacts(NamedTuple):
+    """run_steps' ``contact`` for the impulse model (impulses.resolve); its type picks it."""
+
+    code: int
+
+
+class PenaltyContacts(NamedTuple):
+    """run_steps' ``contact`` for a penalty model (physics.rigid.penalty: linear or
+    Hunt-Crossley by Options.contact); its type picks it."""
+
+    code: int
 
 
 class SemiImplicitMotion(NamedTuple):
@@ -791,16 +787,16 @@ class AnyMotion(NamedTuple):
     code: int
 
 
-def step_models(opt: Options) -> tuple[Callable, SemiImplicitMotion | AnyMotion]:
-    """The contact model kernel (impulse_response or penalty_response, called apart through
-    StepEntries.response) and run_steps' ``motion`` argument for ``opt``: numba compiles
-    run_steps once per type of ``motion``, with only that integrator in it (named tuples of a
-    module-level class keep numba's cache valid across processes, where a kernel passed as
-    an argument would not). An unknown contact model or integrator code is an error."""
+def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiImplicitMotion | AnyMotion]:
+    """run_steps' ``contact`` and ``motion`` arguments for ``opt``: numba compiles run_steps
+    once per pair of their types, with only that contact model and integrator in it (the other
+    overloads are never typed, so never compiled; named tuples of a module-level class keep
+    numba's cache valid across processes, where a kernel passed as an argument would not). An
+    unknown contact model or integrator code is an error."""
     if opt.contact == IMPULSE:
-        response = impulse_response
+        contact = ImpulseContacts(opt.contact)
     elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
-        response = penalty_response
+        contact = PenaltyContacts(opt.contact)
     else:
         raise ValueError(f"stepper.step_models: unknown contact model code {opt.contact!r}")
     if opt.integrator == SEMI_IMPLICIT:
@@ -812,64 +808,39 @@ def step_models(opt: Options) -> tuple[Callable, SemiImplicitMotion | AnyMotion]
             f"stepper.step_models: unknown integrator code {opt.integrator!r}, "
             f"expected one of {sorted(integrate.METHODS.values())} (integrate.METHODS)"
         )
-    return response, motion
+    return contact, motion
 
 
-@nb.njit(cache=True, _nrt=False)
-def impulse_response(m, opt, d, count, dt, time, step, nrec):
-    """The impulse model's response (impulses.resolve) to d.contacts[:count] over dt (s) at
-    ``time`` (s) of step ``step``; returns the record count (-1: d.rec is full)."""
+def _impulse_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """contact_response of the impulse model (impulses.resolve)."""
     bodies = SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
     state = SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
     return resolve(bodies, opt, state, d.solver, count, dt, time, step, nrec)
 
 
-@nb.njit(cache=True, _nrt=False)
-def penalty_response(m, opt, d, count, dt, time, step, nrec):
-    """A penalty model's response (physics.rigid.penalty), as impulse_response."""
+def _penalty_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """contact_response of a penalty model (physics.rigid.penalty)."""
     d.stats.contacts[0] += count
     return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
 
 
-class KernelCall(NamedTuple):
-    """A kernel and example arguments of the types run_steps calls it with."""
-
-    kernel: Callable
-    args: tuple
-
-
-class StepCalls(NamedTuple):
-    """The kernels run_steps calls apart (jassy.unlinked: each compiled alone, not linked into
-    run_steps), with arguments of the types it passes."""
-
-    narrow: KernelCall  # narrow_stage (with narrow.pair_contacts linked in)
-    response: KernelCall  # the contact model (step_models)
-    impact: KernelCall  # impact_stage (with narrow.pair_contacts linked in)
+def contact_response(contact, m, opt, d, count, dt, time, step, nrec):
+    """The response of the model ``contact`` (step_models) to d.contacts[:count]. Compiled,
+    the overload below picks the model by the argument's type when run_steps is typed; this
+    body runs only with numba's JIT off (NUMBA_DISABLE_JIT=1)."""
+    if isinstance(contact, ImpulseContacts):
+        return _impulse_response(contact, m, opt, d, count, dt, time, step, nrec)
+    return _penalty_response(contact, m, opt, d, count, dt, time, step, nrec)
 
 
-class StepEntries(NamedTuple):
-    """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of StepCalls."""
-
-    narrow: Entry
-    response: Entry
-    impact: Entry
-
-
-def step_calls(m: Model, opt: Options, d: Data) -> StepCalls:
-    """The calls run_steps makes apart for a run of ``m``, ``opt``, ``d`` (their types)."""
-    whole, count, dt = np.int64(0), np.int64(0), 0.0
-    response, motion = step_models(opt)
-    return StepCalls(
-        KernelCall(narrow_stage, (m, opt, d, count, dt)),
-        KernelCall(response, (m, opt, d, count, dt, dt, whole, whole)),
-        KernelCall(impact_stage, (m, opt, d, count, dt, motion)),
-    )
-
-
-def step_entries(m: Model, opt: Options, d: Data) -> StepEntries:
-    """The entry points run_steps calls for this run, each kernel compiled (or loaded from
-    numba's cache) here for its call's types."""
-    return StepEntries(*(entry(call.kernel, *call.args) for call in step_calls(m, opt, d)))
+@overload(contact_response, inline="always")
+def _contact_response(contact, m, opt, d, count, dt, time, step, nrec):
+    model = getattr(contact, "instance_class", None)
+    if model is ImpulseContacts:
+        return _impulse_response
+    if model is PenaltyContacts:
+        return _penalty_response
+    return None
 
 
 def _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi):
@@ -910,13 +881,11 @@ def advance_stage(m, opt, d, tau, motion):
         move_body(motion, f, i, tau, new_pos, new_quat, new_phi)
 
 
-@nb.njit(cache=True, _nrt=False)
-def impact_stage(m, opt, d, count, dt, motion):
-    """The earliest time of impact (s, within dt) of the broad phase's first ``count`` pairs
-    (d.sweep.pairs) that were apart at the start of the (sub-)step and penetrate after it
-    (d.new_*) having closed faster than the bounce threshold (module doc, step 6); dt when
-    none. Called apart (StepEntries.impact), with the narrow phase linked in."""
-    pairs, near = d.sweep.pairs[:count], d.near
+@nb.njit(cache=True, inline="always")
+def impact_stage(m, opt, d, pairs, near, dt, motion):
+    """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
+    the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
+    threshold (module doc, step 6); dt when none."""
     slop, bounce = opt.slop, opt.bounce_threshold
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
     # count per array it holds)
@@ -985,7 +954,7 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, nrec, entries, motion):
+def outer_step(m, opt, d, step, nrec, contact, motion):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
     it stopped for more scratch: d.progress.need says how much)."""
@@ -1002,21 +971,19 @@ def outer_step(m, opt, d, step, nrec, entries, motion):
         if count > d.sweep.pairs.shape[0] or count > d.near.reach.shape[0]:
             progress.need[0] = count
             return _stop(progress, t_local, subs, nrec)
-        n_pairs = count
-        count = call_apart(entries.narrow, (m, opt, d, n_pairs, dt), nb.int64)
+        pairs, near = d.sweep.pairs[:count], d.near
+        count = narrow_stage(m, opt, d, pairs, near, dt)
         if count > d.solver.idx.shape[0]:
             progress.need[1] = count
             return _stop(progress, t_local, subs, nrec)
         progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, entries.response)
+        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, contact)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
         advance_stage(m, opt, d, dt, motion)
-        first_hit = dt
-        if subs < max_events:
-            first_hit = call_apart(entries.impact, (m, opt, d, n_pairs, dt, motion), nb.float64)
+        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion) if subs < max_events else dt
         if first_hit < dt:
             advance_stage(m, opt, d, first_hit, motion)
             _commit(d)
@@ -1042,20 +1009,19 @@ def _stop(progress, t_local, subs, nrec):
 
 
 @nb.njit(cache=True, _nrt=False)
-def run_steps(m, opt, d, first, n_steps, nrec, entries, motion):
+def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
     and inside a step that needs more scratch (module doc; :func:`run` resumes it). The
-    contact model is the one of ``entries`` (StepEntries), the integrator the one of
-    ``motion``'s type (step_models)."""
+    types of ``contact`` and ``motion`` pick the contact model and integrator (step_models)."""
     for s in range(n_steps):
         resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
         if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
             return s, nrec
         if not resuming:
             kinematic_stage(m, opt, d, s)
-        nrec, stopped = outer_step(m, opt, d, first + s, nrec, entries, motion)
+        nrec, stopped = outer_step(m, opt, d, first + s, nrec, contact, motion)
         if stopped:
             return s, nrec
         sample_stage(d, first + s)
