@@ -231,7 +231,7 @@ class ModeBudget:
         period, end = self.period, start + n
         count = self._load_kicks(self.listed())
         slow = self._slow if self.renders else []
-        changes = self._queued_changes(start, end) if self.renders else {}
+        changes = self._queued_changes(start, end) if self.renders else None
         state, at, rendered, addresses = self._state, start, start, self._step_handle
         state[INLINE] = not (slow or self._fed or self.cpu_fraction is not None)
         limits = [*sorted(changes), end] if changes else (end,)
@@ -253,16 +253,18 @@ class ModeBudget:
                     self._adapt()
                 self._decide(at, count, at - start, stop - at)
                 at = stop
-            for bank in changes.get(limit, ()):
+            for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
         self.decisions, self.peak_modes = state.item(DECISIONS), state.item(PEAK)
 
-    def _queued_changes(self, start: int, end: int) -> dict[int, list]:
+    def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change
         queued there, for the frames before ``end`` (those before ``start`` at ``start``)."""
-        changes: dict[int, list] = {}
+        changes = None  # (no dictionary for the sub-blocks without a change, most of them)
         for bank in self._compiled_banks:  # (zip over the numpy mask cost ~3 us per call)
             for frame in bank.anytime_changes(end):
+                if changes is None:
+                    changes = {}
                 changes.setdefault(max(frame, start), []).append(bank)
         return changes
 

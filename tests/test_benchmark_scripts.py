@@ -15,7 +15,9 @@ def _run(*args):
 
 
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("script", ["benchmarks/burr_cpu.py", "benchmarks/cold_compile.py"])
+@pytest.mark.parametrize(
+    "script", ["benchmarks/burr_cpu.py", "benchmarks/cold_compile.py", "benchmarks/kept_ring_variants.py"]
+)
 def test_help(script):
     done = _run(script, "--help")
     assert done.returncode == 0 and "usage:" in done.stdout
@@ -29,6 +31,7 @@ def test_help(script):
         (["benchmarks/burr_cpu.py", ".", "/no/such/tree"], "/no/such/tree: expected a jassy checkout"),
         (["benchmarks/cold_compile.py"], "OUT.txt"),
         (["benchmarks/cold_compile.py", "out.txt"], "expected a jassy command"),
+        (["benchmarks/kept_ring_variants.py", "--repeats", "0"], "--repeats: expected a positive count"),
     ],
 )
 def test_bad_arguments_exit_2_with_one_line(args, expected, tmp_path):

@@ -56,7 +56,7 @@ from jassy.record_views import FIELD, float32_table, float_row, float_table, han
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
-from ugens.cells import FLUSH_PERIOD, is_flush_frame, mode_rows, silent, two_pole, until_flush
+from ugens.cells import is_flush_frame, mode_rows, silent, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
@@ -299,8 +299,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
     wide_bank, wide_meta, coef, state, narrow_meta = rows
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
         if last[0] != 0.0 or has_force(f, 0, m):
@@ -320,7 +319,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
             else:
                 resonate_narrow(f, o, m, narrow, active, None, 0, last, by_factor)
         i += m
-        if (start + i) % FLUSH_PERIOD == 0:
+        if is_flush_frame(start + i):
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
             if active > 0 and floor > 0.0:
@@ -748,10 +747,15 @@ class ModalBank(ModelParams, UGen):
         also in its tables, with the per-mode rows that depend on the poles)."""
         self._fresh = self._design()
         if self._tables is not None:
-            self._fresh_rows[:] = self._fresh
-            values, slot = self._tables.values, self._slot
-            values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
+            self._design_to_tables()
             self._refresh_forcing()
+
+    def _design_to_tables(self) -> None:
+        """Copy the current design into the budget's tables: the fresh rows, and the gain
+        times the level gain and the fragment size (an impact elsewhere is ranked by them)."""
+        self._fresh_rows[:] = self._fresh
+        values, slot = self._tables.values, self._slot
+        values[GAIN_LEVEL, slot], values[SIZE, slot] = self.values["gain"] * self._level_gain, self._size
 
     def _refresh_forcing(self) -> None:
         """Per mode (internal order), in the budget's rows: sin^2 theta, 1 / (R^2 sin^2
@@ -996,8 +1000,10 @@ class ModalBank(ModelParams, UGen):
         :meth:`anytime_apply`; a budgeted bank's ramp is read from its meta's RAMP_LEFT)."""
         return self._size_input is None
 
-    def anytime_changes(self, end: int) -> list[int]:
+    def anytime_changes(self, end: int) -> list[int] | tuple:
         """The frames before ``end`` of the parameter changes queued (:meth:`set_param_at`)."""
+        if not self._pending:
+            return ()
         return [change[0] for change in self._pending if change[0] < end]
 
     def anytime_apply(self, frame: int) -> None:
@@ -1024,7 +1030,7 @@ class ModalBank(ModelParams, UGen):
         self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
         self.coef, self.y = self.bank[:4], self.bank[4:]
         self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
-        self._fresh_rows[:] = self._fresh
+        self._design_to_tables()
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
         tables.last[slot] = self.last[0]
@@ -1046,10 +1052,6 @@ class ModalBank(ModelParams, UGen):
         self._psd_bins = tables.bins[cut]
         tables.values[REMEMBERED, slot] = 0.0
         tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
-        tables.values[GAIN_LEVEL, slot], tables.values[SIZE, slot] = (
-            self.values["gain"] * self._level_gain,
-            self._size,
-        )
         self._horizon = horizon
         self._forcing_key = None
         from ugens import modal_kept  # (not at the top: it imports this module)
