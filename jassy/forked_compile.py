@@ -126,9 +126,17 @@ def running_units() -> bool:
 
 
 def cache_holds(kernel) -> bool:
-    """Whether numba's cache holds any compiled version of ``kernel`` (its index file exists;
-    True for a numba without this cache layout, so that nothing is compiled ahead for it)."""
+    """Whether numba's cache holds any compiled version of ``kernel`` (a ``numba.njit``
+    dispatcher, or a plain function compiled by ``numba.cfunc``: its index file exists).
+    False with the JIT off (``NUMBA_DISABLE_JIT``: nothing is compiled or cached); True for a
+    numba without this cache layout, so that nothing is compiled ahead for it."""
+    from numba import config
+    from numba.core import caching
+
+    if config.DISABLE_JIT:
+        return False
     try:
-        return os.path.exists(kernel._cache._cache_file._index_path)
-    except AttributeError:
+        cache = kernel._cache if hasattr(kernel, "py_func") else caching.FunctionCache(kernel)
+        return os.path.exists(cache._cache_file._index_path)
+    except (AttributeError, RuntimeError):  # RuntimeError: no cache locator for its file
         return True

@@ -133,14 +133,14 @@ forked = []
 compiled_after = []  # kernels the render compiled after the units (it should load them all)
 class Compiles(event.Listener):
     def on_start(self, compile_event):
-        compiled_after.append(compile_event.data["dispatcher"].py_func.__qualname__)
+        function = compile_event.data["dispatcher"].py_func
+        compiled_after.append(f"{function.__module__}.{function.__qualname__}")
     def on_end(self, compile_event):
         pass
 original = forked_compile.compile_on_two_cores
 def counted(units):
     forked.append(original(units))
-    if forked[-1]:
-        event.register("numba:compile", Compiles())
+    event.register("numba:compile", Compiles())  # with or without a helper: after the units
     return forked[-1]
 import jassy.engines.offline
 jassy.engines.offline.compile_on_two_cores = counted
@@ -157,7 +157,10 @@ def _render_bell(cache, path="program", helper=True, seconds=1.0):
     after the units) of a fresh process rendering on numba's cache ``cache`` as a program
     or node by node."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    alone = "forked_compile.may_fork_helper = lambda units: False\n"  # the caller compiles it all
+    alone = (  # the units all run here, one after the other, and no helper is forked
+        "def alone(units):\n    for unit in units:\n        unit()\n    return False\n"
+        "forked_compile.compile_on_two_cores = alone\n"
+    )
     code = COLD_RENDER if helper else COLD_RENDER.replace("forked = []\n", "forked = []\n" + alone)
     out = subprocess.run(
         [sys.executable, "-c", code, path, repr(seconds)],
@@ -174,8 +177,9 @@ def _render_bell(cache, path="program", helper=True, seconds=1.0):
 @pytest.mark.skipif(not TWO_CORES, reason="needs two usable cores")
 def test_a_render_with_kernels_from_the_helper_sounds_like_one_compiling_alone(tmp_path):
     """The bell on an empty cache (units shared with a helper), then on a second empty cache
-    compiled here alone (no helper), then loading the first cache: one sound. With the
-    helper, the render after the units compiles nothing (the units cover every kernel)."""
+    compiled here alone (no helper), then loading the first cache: one sound. With or
+    without the helper, the render after the units compiles nothing (the units cover every
+    kernel)."""
     shared, alone = tmp_path / "shared", tmp_path / "alone"
     shared.mkdir()
     alone.mkdir()
@@ -199,5 +203,69 @@ def test_a_cold_render_node_by_node_shares_its_kernels_and_sounds_like_the_progr
     forked, digest, after = _render_bell(nodes, "nodes", seconds=8.0)  # with the gain's fade at 6 s
     assert forked == "True"
     # only numba's own helpers (e.g. np.zeros' implementation) may compile after the units
-    assert all(name == "-" or "<locals>" in name for name in after.split(",")), after
+    assert all(name == "-" or name.startswith("numba.") for name in after.split(",")), after
     assert _render_bell(program, helper=False, seconds=8.0)[1] == digest
+
+
+PER_PATCH = """
+import sys
+from jassy.apps import cli
+from jassy.engines import offline
+from jassy.engines.coldstart import program_cached
+from jassy.patchfile import load_patch
+
+offline.OfflineEngine(load_patch("bell").graph, load_patch("bell").score, 48000).render(0.05)
+
+
+class Built(BaseException):
+    pass
+
+
+class Recorded(offline.OfflineEngine):  # what `jassy render` builds, before it renders
+    def __init__(self, graph, score, rate, *args, program=True, **options):
+        raise Built(program)
+
+
+offline.OfflineEngine = Recorded
+for name in ("wall_tap", "scrape"):
+    try:
+        cli.main(["render", name, "-o", sys.argv[1] + "/" + name + ".wav", "--duration", "0.05"])
+    except Built as built:
+        print(name, built.args[0], program_cached(load_patch(name).graph))
+"""
+
+
+@pytest.mark.timeout(600)
+def test_a_cli_render_takes_the_program_path_only_when_its_graphs_program_is_cached(tmp_path):
+    """After an API render of the bell as a program on an empty cache, `jassy render` renders
+    a patch of the same node kinds (wall_tap) as a program and the scrape (biquads, a mixer
+    and scrapes, never compiled as program functions) node by node."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run(
+        [sys.executable, "-c", PER_PATCH, str(tmp_path)], env=env, capture_output=True, text=True, timeout=550
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split("\n")[-3:] == ["wall_tap True True", "scrape False False", ""]
+
+
+JIT_OFF = """
+from jassy.engines.coldstart import graph_units, kernels_cached, program_cached
+from jassy.forked_compile import cache_holds
+from jassy.patchfile import load_patch
+from jassy.safety import limit
+
+graph = load_patch("bell").graph
+options = {"sample_rate": 48000.0, "block": 64}
+print(cache_holds(limit), kernels_cached(), program_cached(graph), len(graph_units(graph, options)))
+"""
+
+
+def test_with_the_jit_off_nothing_counts_as_cached_and_nothing_compiles_ahead(tmp_path):
+    """NUMBA_DISABLE_JIT on an empty cache: no kernel is cached (a render takes the node path,
+    whose Python code runs as is) and a cold render lists no compile units."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), NUMBA_DISABLE_JIT="1")
+    out = subprocess.run(
+        [sys.executable, "-c", JIT_OFF], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["False", "False", "False", "0"]

@@ -56,7 +56,7 @@ from jassy.record_views import FIELD, float32_table, float_row, float_table, han
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune
-from ugens.cells import FLUSH_PERIOD, is_flush_frame, mode_rows, silent, two_pole, until_flush
+from ugens.cells import is_flush_frame, mode_rows, silent, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
     DECAY,
@@ -299,8 +299,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
     wide_bank, wide_meta, coef, state, narrow_meta = rows
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
         if last[0] != 0.0 or has_force(f, 0, m):
@@ -320,7 +319,7 @@ def mixed_step(force, out, start, n, rows, floor, last):
             else:
                 resonate_narrow(f, o, m, narrow, active, None, 0, last, by_factor)
         i += m
-        if (start + i) % FLUSH_PERIOD == 0:
+        if is_flush_frame(start + i):
             if wide_active > 0 and floor > 0.0:
                 wide_meta[ACTIVE] = flush_silent(wide_bank[4], wide_bank[5], wide_active, floor)
             if active > 0 and floor > 0.0:

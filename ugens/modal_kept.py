@@ -36,9 +36,9 @@ from jassy.anytime_rank import (
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
 from ugens import cells, kernels, modal, modal_budget, modal_meta, modal_retune, real_fft
-from ugens.cells import ModeRows, mode_rows, two_pole
+from ugens.cells import ModeRows, is_flush_frame, mode_rows, two_pole, until_flush
 from ugens.kernels import FASTMATH
-from ugens.modal import FLUSH_PERIOD, Ramp, flush_silent, resonate, resonate_ramp
+from ugens.modal import Ramp, flush_silent, resonate, resonate_ramp
 from ugens.modal_budget import (
     BANK_ROWS,
     COEF_ROWS,
@@ -142,8 +142,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
     meta[ACTIVE] = min((meta[ACTIVE] + KEPT_LANES - 1) // KEPT_LANES * KEPT_LANES, width)
     i = 0
     while i < n:
-        frame = start + i
-        m = min(n - i, (frame // FLUSH_PERIOD + 1) * FLUSH_PERIOD - frame)
+        m = until_flush(start + i, n - i)
         f = force[i : i + m]
         o = out[i : i + m]
         forced = last[0] != 0.0 or has_force(f, 0, m)
@@ -159,7 +158,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard):
         else:
             ring(o, m, rows.c1, rows.c2, rows.y1, rows.y2, active)
         i += m
-        if active > 0 and (start + i) % FLUSH_PERIOD == 0:
+        if active > 0 and is_flush_frame(start + i):
             meta[ACTIVE] = flush_silent(rows.y1, rows.y2, active, floor)
     if heard.size:
         hear(force, n, heard, start)

@@ -118,7 +118,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     engine = OfflineEngine(
         patch.graph, patch.score, rate, args.block, limiter=not args.normalise, haptic_safety=safety,
-        offsets_ms=offsets, program=program_cached(),  # node by node until compiled: the same bits
+        offsets_ms=offsets, program=program_cached(patch.graph),  # node by node until compiled: the same bits
     )  # fmt: skip
     if args.normalise:
         from jassy.apps.loudness import TARGETS, render_normalised

@@ -11,8 +11,8 @@ of one node of each kind, fed by silence, prepared and run for a block and once 
 each kind of parameter change the score makes to it (a modal bank first: its pole design and
 span kernel), the strike kernels and a stand-in render of a silent tap through an engine with
 the same options (the block loop's and the output stage's kernels). :func:`program_cached`
-says whether the program's kernels are compiled already (``jassy render`` renders node by
-node until they are: the same bits, for a fraction of the compiling).
+says whether a graph's program functions are compiled already (``jassy render`` renders a
+patch node by node until they are: the same bits, for a fraction of the compiling).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from functools import partial
 from typing import NamedTuple
 
 import numpy as np
+from numba import config as nb_config
 
 from jassy.forked_compile import cache_holds, running_units
 
@@ -37,8 +38,8 @@ def graph_units(graph, engine_options: dict, score: Sequence = ()) -> list[Calla
     (:func:`kernels_cached`). Ordered so that the two ends meet with about half the work
     each: this process starts with the modal kernels (the largest unit), the helper with
     the engine's own kernels."""
-    if running_units() or graph.budget is not None or kernels_cached():
-        return []
+    if running_units() or graph.budget is not None or nb_config.DISABLE_JIT or kernels_cached():
+        return []  # with the JIT off (NUMBA_DISABLE_JIT) nothing compiles
     from jassy import program
 
     if engine_options.get("program", True) and program.why_not_compiled(graph) is None:
@@ -194,13 +195,22 @@ def _compile_render_loop() -> None:
     specialise(render_planar, control, out, 0, 0, delay.active, delay.history, delay.delays, delay.pos)
 
 
-def program_cached() -> bool:
-    """Whether numba's cache holds the program's offline render loop
-    (jassy.engines.program_offline.render_planar): a render as a program would then load
-    its kernels instead of compiling them."""
+def program_cached(graph) -> bool:
+    """Whether numba's cache holds every function a render of ``graph`` as a program compiles
+    (and a render node by node does not): its node kinds' node functions, event application,
+    the output stage and the offline render loop (jassy.engines.program_offline.render_planar).
+    A render as a program would then load them instead of compiling them. False for a graph
+    that cannot run as a program."""
+    from jassy import program
+    from jassy.engines import callback
     from jassy.engines.program_offline import render_planar
 
-    return cache_holds(render_planar)
+    if program.why_not_compiled(graph) is not None:
+        return False
+    kinds = {program.PROGRAM_UGENS[type(node)] for node in graph.order}
+    functions = [program.NODE_FUNCTIONS[kind] for kind in sorted(kinds)]
+    stages = [callback._next_cut_entry, callback._output_stage, render_planar]
+    return all(cache_holds(function) for function in [*functions, *stages])
 
 
 def kernels_cached() -> bool:
