@@ -142,3 +142,18 @@ def test_example_refuses_a_json_path_in_a_missing_directory_before_running(tmp_p
     assert example.main(["--json", str(tmp_path / "no" / "x.json")]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--json" in err
+
+
+@pytest.mark.timeout(60)
+def test_moving_forceps_tear_more_springs_than_forceps_held_still():
+    """The capsulorhexis is the forceps' doing: the same capsule with the grasp held where it
+    is tears fewer springs than with the lift-and-circle script over the same time. (Held
+    still, the capsule's own weight hanging from the grasp already tears a few around it.)"""
+    from physics.deform.cataract import _anterior_capsule, _forceps
+
+    pts, mem, grasp = _anterior_capsule()
+    torn = {}
+    for name, script in (("still", lambda t: pts[grasp]), ("moving", _forceps(pts[grasp], RHEXIS_STEPS * H))):
+        state = mem.initial_state()
+        torn[name] = sum(len(mem.step(state, H, script)) for _ in range(RHEXIS_STEPS))
+    assert torn["moving"] > torn["still"]
