@@ -422,7 +422,7 @@ def run_blocks(prog, bus, rows, out, offset, start, count, block):
 
 def why_not_compiled(graph: Graph) -> str | None:
     """Why ``graph`` cannot run as a program (None if it can)."""
-    if graph.budget is not None and graph.budgeted:
+    if graph.budget is not None and any(node.supports_budget for node in graph.order):  # (prepared or not)
         return "an anytime mode budget decides between sub-blocks in Python"
     if graph.delays:
         return f"node {graph.delays[0].name!r} is a delay"

@@ -82,7 +82,9 @@ def cataract_demo(
     after the capsulorhexis the phaco tip (a sphere of ``tool_radius`` m, up to ``budget``
     tets per step, hand tremor 20 um from ``seed``) follows the cross-groove raster; the rest
     of the steps let the fragments fall and collide. Returns counts, the Impact and Tear
-    events, and timings (wall-clock ms per call, this machine)."""
+    events, the removed tets' indices into ``lens_mesh(spacing=spacing)``, the fragments' stable
+    ids (as in the Impact events' bodies; -1 = the bag) and timings (wall-clock ms per call,
+    this machine)."""
     if steps < 1 or rhexis_steps < 0:
         raise JassyError(
             f"steps, rhexis_steps: expected steps >= 1 and rhexis_steps >= 0, got {steps}, {rhexis_steps}"
@@ -130,9 +132,11 @@ def cataract_demo(
         "lens_particles": int(mesh.points.shape[0]),
         "lens_tets": int(mesh.tets.shape[0]),
         "tets_removed": int((~st.alive).sum()),
+        "removed_tets": np.flatnonzero(~st.alive).tolist(),
         "removed_by_external_faces": {str(i + 1): int(c) for i, c in enumerate(st.removed_by_kind)},
         "fragments": sim.n_fragments,
         "fragment_sizes": np.bincount(sim.matcher.body[sim.matcher.body >= 0]).tolist(),
+        "fragment_ids": st.fragment_ids.tolist(),
         "split_time_s": None if split_step is None else split_step * h,
         "impacts": len(impacts),
         "impacts_boundary": boundary_hits,

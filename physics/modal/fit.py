@@ -7,8 +7,9 @@ ESPRIT counts modes by the eigenvalues of the signal's Hankel Gram matrix above 
 resolves poles closer than a bin, and estimates decay and frequency together. Running it in
 decimated sub-bands keeps each eigenproblem small (Laroche 1993; Badeau, David & Richard 2006).
 
-Method: pooled subspace estimation (ESPRIT, :mod:`physics.modal.esprit`) at three time-
-frequency resolutions, each on what the previous ones left:
+Method: pooled subspace estimation (ESPRIT, :mod:`physics.modal.esprit`) at five time-
+frequency resolutions (zoom bands of 50 Hz below 2 kHz for d <= 10 /s besides those below),
+each on what the previous ones left:
 
 1. **Strikes.** Onsets are detected (:mod:`physics.modal.strikes`); each hit lasts until the
    next one. Clipped samples are left out of every least-squares fit, and each hit's
@@ -16,9 +17,14 @@ frequency resolutions, each on what the previous ones left:
 2. **Narrow bands** (200 Hz apart, 400 Hz wide, decimated to 1 kHz, the whole hit): slowly
    decaying modes (d <= 40 /s), closely spaced pairs. Every hit and channel adds its Hankel
    rows to one Gram matrix per band, so poles are pooled over all of them.
-3. **Wide bands** (2 kHz apart, the first 0.3 s of the hit minus the modes found so far):
+3. **Medium bands** (200 Hz apart, tapers to 400 Hz, the first 0.5 s): modes of 8-100 /s
+   that a narrow band misses - its filter transient (40 ms, cut away) holds most of a
+   20 /s mode's energy and its whole-hit window adds the noise of seconds after the mode
+   has decayed, so a weak mode 10-20 Hz from a stronger one stayed under the noise edge
+   and the stronger one's decay and gain absorbed it (``jassy bench fit``).
+4. **Wide bands** (2 kHz apart, the first 0.3 s of the hit minus the modes found so far):
    modes of 20-800 /s, which are too broad and too short for a narrow band's filter.
-4. **Full rate** (the first 40 ms, minus everything found so far): modes up to 3000 /s
+5. **Full rate** (the first 40 ms, minus everything found so far): modes up to 3000 /s
    (wood, small objects, high frequencies), with no band filter in the way. Faster
    "modes" (T60 < 2.3 ms) are the contact itself: a noise burst fits as dozens of them,
    so they are left to the attack; each remaining pole must stand out of the larger of
@@ -28,14 +34,14 @@ frequency resolutions, each on what the previous ones left:
    spurious 700-1200 /s modes). A new pole here is the leftover of one found earlier
    only within the window's resolution (25 Hz) or the narrower one's half-width
    (:func:`_duplicate`), so a broad mode is kept beside slow poles 60-150 Hz away.
-5. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
+6. **Joint refinement** of every pole by maximum likelihood on whole segments, pooled over
    all hits and channels (:mod:`physics.modal.varpro`: variable projection on the DFT bins
    around each group of overlapping poles, the other poles subtracted; a pole the
    refinement moved onto another goes back, :func:`_distinct`), then the stages
    again on what the refined poles leave (a weak mode on a strong one's skirt, a cluster's
    missed member), and the joint refinement again with what they found (up to
    ``EXTRA_PASSES`` such rounds).
-6. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
+7. **Amplitudes.** With the poles fixed, complex amplitudes of every hit and channel by
    linear least squares at the full rate (closed-form Gram matrix), minus what the previous
    hits still ring; gain = |amplitude| at the onset.
 
@@ -102,6 +108,7 @@ SWEEPS = 2
 STAGES = (
     Stage("zoom bands", 50.0, 50.0, 6.0, 0.0, 10.0, 2000.0),
     Stage("narrow bands", 200.0, 200.0, 6.0, 0.0, 40.0),
+    Stage("medium bands", 200.0, 400.0, 0.5, 8.0, 100.0),
     Stage("wide bands", 2000.0, 1500.0, 0.3, 20.0, 800.0),
     Stage("full rate", 0.0, 0.0, 0.04, 200.0, 3000.0),
 )
