@@ -246,12 +246,19 @@ def _grown(d: Data, opt: Options, steps: int, nrec: int) -> Data:
     d.progress.most[0] = max(d.progress.most[0], contacts)
     room = record_room(opt, d.progress.most[0])
     if rec.shape[0] - nrec < room:
-        rec = np.empty((max(2 * rec.shape[0], nrec + room), REC_WIDTH))  # the stepper writes whole rows
-        rec[:nrec] = d.rec[:nrec]
+        rec = grown_records(rec, nrec, nrec + room)
     d.progress.need[:] = 0
     return d._replace(
         kin_pos=d.kin_pos[steps:], kin_quat=d.kin_quat[steps:], rec=rec, sweep=sweep, near=near, solver=solver
     )
+
+
+def grown_records(rec: np.ndarray, nrec: int, rows: int) -> np.ndarray:
+    """A record buffer of at least ``rows`` rows and twice rec's, its first nrec rows rec's
+    (the rest left unwritten: the stepper writes whole rows)."""
+    grown = np.empty((max(2 * rec.shape[0], rows), REC_WIDTH))
+    grown[:nrec] = rec[:nrec]
+    return grown
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -787,17 +794,18 @@ class AnyMotion(NamedTuple):
     code: int
 
 
+#: Each contact model code's tag (Options.contact -> run_steps' ``contact`` type).
+CONTACT_TAGS = {IMPULSE: ImpulseContacts, LINEAR: PenaltyContacts, HUNT_CROSSLEY: PenaltyContacts}
+
+
 def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiImplicitMotion | AnyMotion]:
     """run_steps' ``contact`` and ``motion`` arguments for ``opt``: numba compiles run_steps
     once per pair of their types, with only that contact model and integrator in it (the other
     overloads are never typed, so never compiled; named tuples of a module-level class keep
     numba's cache valid across processes, where a kernel passed as an argument would not). An
     unknown contact model or integrator code is an error."""
-    if opt.contact == IMPULSE:
-        contact = ImpulseContacts(opt.contact)
-    elif opt.contact == LINEAR or opt.contact == HUNT_CROSSLEY:
-        contact = PenaltyContacts(opt.contact)
-    else:
+    contact_tag = CONTACT_TAGS.get(opt.contact)
+    if contact_tag is None:
         raise ValueError(f"stepper.step_models: unknown contact model code {opt.contact!r}")
     if opt.integrator == SEMI_IMPLICIT:
         motion = SemiImplicitMotion(opt.integrator)
@@ -808,6 +816,7 @@ def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiIm
             f"stepper.step_models: unknown integrator code {opt.integrator!r}, "
             f"expected one of {sorted(integrate.METHODS.values())} (integrate.METHODS)"
         )
+    contact = contact_tag(opt.contact)
     return contact, motion
 
 
@@ -824,23 +833,21 @@ def _penalty_response(contact, m, opt, d, count, dt, time, step, nrec):
     return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
 
 
+#: Each contact tag's response: the one table contact_response dispatches through, compiled
+#: (by the argument's type, when run_steps is typed) and with numba's JIT off.
+CONTACT_RESPONSES = {ImpulseContacts: _impulse_response, PenaltyContacts: _penalty_response}
+
+
 def contact_response(contact, m, opt, d, count, dt, time, step, nrec):
-    """The response of the model ``contact`` (step_models) to d.contacts[:count]. Compiled,
-    the overload below picks the model by the argument's type when run_steps is typed; this
-    body runs only with numba's JIT off (NUMBA_DISABLE_JIT=1)."""
-    if isinstance(contact, ImpulseContacts):
-        return _impulse_response(contact, m, opt, d, count, dt, time, step, nrec)
-    return _penalty_response(contact, m, opt, d, count, dt, time, step, nrec)
+    """The response of the model ``contact`` (step_models) to d.contacts[:count], looked up in
+    CONTACT_RESPONSES. Compiled, the overload below picks it by the argument's type; this body
+    runs only with numba's JIT off (NUMBA_DISABLE_JIT=1)."""
+    return CONTACT_RESPONSES[type(contact)](contact, m, opt, d, count, dt, time, step, nrec)
 
 
 @overload(contact_response, inline="always")
 def _contact_response(contact, m, opt, d, count, dt, time, step, nrec):
-    model = getattr(contact, "instance_class", None)
-    if model is ImpulseContacts:
-        return _impulse_response
-    if model is PenaltyContacts:
-        return _penalty_response
-    return None
+    return CONTACT_RESPONSES.get(getattr(contact, "instance_class", None))
 
 
 def _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi):
@@ -853,23 +860,20 @@ def _move_any_body(motion, f, i, tau, out_p, out_q, out_phi):
     _move(f, i, tau, out_p, out_q, out_phi)
 
 
+#: Each motion tag's free-motion step: the one table move_body dispatches through.
+MOTIONS = {SemiImplicitMotion: _move_semi_implicit_body, AnyMotion: _move_any_body}
+
+
 def move_body(motion, f, i, tau, out_p, out_q, out_phi):
-    """Body i's free motion by the integrator of ``motion`` (step_models). Compiled, the
-    overload below picks it by the argument's type; this body runs only with numba's JIT off."""
-    if isinstance(motion, SemiImplicitMotion):
-        _move_semi_implicit_body(motion, f, i, tau, out_p, out_q, out_phi)
-    else:
-        _move_any_body(motion, f, i, tau, out_p, out_q, out_phi)
+    """Body i's free motion by the integrator of ``motion`` (step_models), looked up in
+    MOTIONS. Compiled, the overload below picks it by the argument's type; this body runs
+    only with numba's JIT off."""
+    MOTIONS[type(motion)](motion, f, i, tau, out_p, out_q, out_phi)
 
 
 @overload(move_body, inline="always")
 def _move_body(motion, f, i, tau, out_p, out_q, out_phi):
-    integrator = getattr(motion, "instance_class", None)
-    if integrator is SemiImplicitMotion:
-        return _move_semi_implicit_body
-    if integrator is AnyMotion:
-        return _move_any_body
-    return None
+    return MOTIONS.get(getattr(motion, "instance_class", None))
 
 
 @nb.njit(cache=True, inline="always")

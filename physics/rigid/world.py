@@ -532,9 +532,7 @@ def simulate(
         if steps < todo and not keep_records and nrec > 0:
             nrec = 0  # the records are not kept: write over them
         elif steps < todo:  # the record buffer might not hold the next step: grow it
-            grown = np.empty((2 * rec.shape[0], codes.REC_WIDTH))  # the stepper writes whole rows
-            grown[:nrec] = rec[:nrec]
-            rec = grown
+            rec = st.grown_records(rec, nrec, 0)
         done += steps
         if not (np.all(np.isfinite(state.pos)) and np.all(np.isfinite(state.phi))):
             raise JassyError(f"simulate: the state became non-finite near t = {(first + done) * h:.6f} s")
