@@ -84,3 +84,27 @@ def test_steady_tone_keeps_its_pre_sweep_pole():
     out = _spectral_refine(start, [seg], rate, 20.0, 3000.0, _NoProgress(), sweeps=1)
     assert out[0] == start[0]
     assert abs(out[1].decay - 20.0) < abs(start[1].decay - 20.0)
+
+
+def test_degenerate_input_keeps_the_start_without_amplitudes():
+    """A non-finite sample, a pole at z = 0 (infinite decay: a non-finite design) or a
+    non-finite spectrum keep the start with zero amplitudes instead of raising or returning
+    NaN amplitudes; a clean signal still moves its pole (the guard does not fire)."""
+    from physics.modal import esprit
+
+    rate, n = 8000.0, np.arange(400)
+    z_true = np.exp((-20.0 + 2j * np.pi * 440.0) / rate)
+    y = np.real(z_true**n)
+    z_start = np.exp((-25.0 + 2j * np.pi * 441.0) / rate)
+    moved, amps = esprit.refine([y], rate, np.array([z_start]), real=True)
+    assert abs(moved[0] - z_true) < abs(z_start - z_true) / 10 and abs(amps[0][0]) > 0.5
+    for signal, z0 in (
+        (np.where(n == 5, np.nan, y), z_start),
+        (np.where(n == 5, np.inf, y), z_start),
+        (y, 0j),
+    ):
+        z, amps = esprit.refine([signal], rate, np.array([z0]), real=True)
+        assert z[0] == z0 and np.all(amps[0] == 0)
+    bad = varpro.Spectrum(np.arange(50, 60), np.full(10, np.nan + 0j), 400)
+    ref = varpro.refine([bad], rate, [440.0], [20.0])
+    assert ref.frequencies[0] == 440.0 and ref.decays[0] == 20.0 and np.all(ref.amplitudes[0] == 0)

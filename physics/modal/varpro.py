@@ -102,7 +102,9 @@ def separable_fit(design, ys, decays, omegas, min_decay: float, max_nfev: int, *
     moves only the 2K pole parameters, with Kaufman's (1975) Jacobian -P_perp (dPhi/dtheta) a.
     ``design(i, decays, omegas)`` gives the :class:`Design` of signal i. Decays are held at
     ``min_decay`` or above (their Jacobian columns there are zero); a result whose cost is
-    not below the start's keeps the start. ``options`` go to scipy's ``least_squares``."""
+    not below the start's keeps the start; degenerate input (a non-finite signal or design,
+    a design least squares cannot solve) keeps the start with zero amplitudes and NaN
+    costs. ``options`` go to scipy's ``least_squares``."""
     from scipy.optimize import least_squares
 
     k = np.size(decays)
@@ -139,20 +141,31 @@ def separable_fit(design, ys, decays, omegas, min_decay: float, max_nfev: int, *
         out[:, :k][:, p[:k] < min_decay] = 0.0  # a clamped decay does not move the model
         return out
 
+    def settled(p):
+        """(per-signal solutions, cost) at p, or None where the input is degenerate (a
+        non-finite signal or design, a design least squares cannot solve)."""
+        try:
+            sols = solve(p)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+        cost = float(sum(o[2] @ o[2] for o in sols))
+        return (sols, cost) if math.isfinite(cost) else None
+
     p0 = np.concatenate([np.asarray(decays, float), np.asarray(omegas, float)])
-    r0 = resid(p0)
-    cost0 = float(r0 @ r0)
+    start = settled(p0)
+    if start is None:  # the start kept, no amplitudes
+        zero = [np.zeros(k, dtype=complex) for _ in ys]
+        return Separated(np.maximum(p0[:k], min_decay), p0[k:], zero, math.nan, math.nan)
     try:
         sol = least_squares(resid, p0, jac=jac, method="lm", max_nfev=max_nfev, **options)
         p = sol.x if np.all(np.isfinite(sol.x)) else p0
-    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate input
+    except (ValueError, np.linalg.LinAlgError):
         p = p0
-    sols = solve(p)
-    cost = float(sum(o[2] @ o[2] for o in sols))
-    if not cost <= cost0:
-        p, sols, cost = p0, solve(p0), cost0
-    amps = [o[1].reshape(k, 2) @ np.array([1.0, 1j]) for o in sols]
-    return Separated(np.maximum(p[:k], min_decay), p[k:], amps, cost, cost0)
+    end = settled(p)
+    if end is None or not end[1] <= start[1]:
+        p, end = p0, start
+    amps = [o[1].reshape(k, 2) @ np.array([1.0, 1j]) for o in end[0]]
+    return Separated(np.maximum(p[:k], min_decay), p[k:], amps, end[1], start[1])
 
 
 class Refined(NamedTuple):
