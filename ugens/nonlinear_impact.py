@@ -66,7 +66,7 @@ from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import cells, heard
-from ugens.cells import FLUSH_PERIOD, silent, slot, state_step, store
+from ugens.cells import is_flush_frame, silent, slot, state_step, store
 from ugens.heard import STATE_P, STATE_Q, heard_run
 from ugens.kernels import FASTMATH
 from ugens.modal import HEARD_LEVEL, ModelParams
@@ -458,7 +458,7 @@ def hc_run(out, force_out, energy_out, start, n, step, d):
         out[i] = sq + gg * f
         force_out[i] = f
         energy_out[i] = e1
-        if frame % FLUSH_PERIOD == FLUSH_PERIOD - 1 and f == 0.0:
+        if is_flush_frame(frame + 1) and f == 0.0:  # the next frame is a flush frame
             if active and vh <= 0.0 and xh + modes_reach(qs, ps, steps, kmodes) < 0.0:
                 active = False  # moving away, and no free, damped mode can reach it again
             if not active:
