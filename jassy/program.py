@@ -31,7 +31,7 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 from jassy import anytime_rank, jit, params
 from jassy.graph import Graph
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
-from jassy.params import ramp_fill
+from jassy.params import RAMP_NEXT, RAMP_SAMPLES, ramp_fill
 from ugens import (
     cells,
     filters,
@@ -152,7 +152,11 @@ class BiquadSlots(NamedTuple):
     qs: int  #: (size,)
     coef: int  #: (5,)
     state: int  #: (2,)
-    setup: int  #: [mode, 1/fs] (2,)
+    setup: int  #: [mode, 1/fs] (2,): BIQUAD_MODE, BIQUAD_PERIOD
+
+
+#: Fields of a Biquad's setup array (BiquadSlots.setup): the filter mode, 1/fs (s).
+BIQUAD_MODE, BIQUAD_PERIOD = 0, 1
 
 
 class RadiationSlots(NamedTuple):
@@ -231,8 +235,8 @@ def _gain(table, base, start, n):
     out = _f64(out_at, size)
     x = _f64(gain.input, size)
     ramp = _f64(gain.ramp, 4)
-    if ramp[3] == 0:
-        scale(x, out, n, ramp[0])
+    if ramp[RAMP_SAMPLES] == 0:
+        scale(x, out, n, ramp[RAMP_NEXT])
     else:
         gains = _f64(gain.gains, size)
         ramp_fill(ramp, gains, n)
@@ -340,17 +344,18 @@ def _biquad(table, base, start, n):
     coef = _f64(filt.coef, 5)
     state = _f64(filt.state, 2)
     setup = _f64(filt.setup, 2)
-    mode = int(setup[0])
-    if freq[3] == 0 and q[3] == 0:
+    mode = int(setup[BIQUAD_MODE])
+    if freq[RAMP_SAMPLES] == 0 and q[RAMP_SAMPLES] == 0:
         biquad(x, out, n, coef, state)
     else:
         freqs = _f64(filt.freqs, size)
         qs = _f64(filt.qs, size)
         ramp_fill(freq, freqs, n)
         ramp_fill(q, qs, n)
-        biquad_ramp(x, out, n, mode, freqs, qs, setup[1], coef, state)
-        if freq[3] == 0 and q[3] == 0:  # the ramps just ended: coefficients for the targets
-            design_biquad(mode, freq[0], q[0], setup[1], coef)
+        biquad_ramp(x, out, n, mode, freqs, qs, setup[BIQUAD_PERIOD], coef, state)
+        # the ramps just ended: coefficients for the targets
+        if freq[RAMP_SAMPLES] == 0 and q[RAMP_SAMPLES] == 0:
+            design_biquad(mode, freq[RAMP_NEXT], q[RAMP_NEXT], setup[BIQUAD_PERIOD], coef)
 
 
 def _radiation(table, base, start, n):

@@ -50,6 +50,8 @@ from jassy.haptics import HapticSafety, limit_force
 from jassy.jit import address, call_void, drop_stale_cache, void_pointer
 from jassy.params import RAMP_NEXT, ramp_to
 from jassy.program import (
+    BIQUAD_MODE,
+    BIQUAD_PERIOD,
     HEADER,
     KERNEL_MODULES,
     RECORD,
@@ -146,8 +148,6 @@ EVENT_FRAME, EVENT_NODE, EVENT_OPCODE, EVENT_A, EVENT_B, EVENT_C = range(6)
 SET_SLOT, SET_VALUE, SET_SAMPLES = EVENT_A, EVENT_B, EVENT_C  # SET_RAMP, SET_BIQUAD
 STRIKE_T0, STRIKE_LENGTH, STRIKE_AMPLITUDE = EVENT_A, EVENT_B, EVENT_C  # STRIKE
 MODAL_STAGED, MODAL_SAMPLES = EVENT_A, EVENT_B  # MODAL_TARGET
-#: A Biquad's setup array (jassy.program.BiquadSlots.setup): [filter mode, 1/fs].
-BIQUAD_MODE, BIQUAD_PERIOD = 0, 1
 OUTPUT_UNDERFLOW = 4  # PortAudio's paOutputUnderflow status flag
 #: Bits of the OUTPUT slot: the limits the output stage applies.
 LIMIT_AUDIO, LIMIT_HAPTIC = 1, 2

@@ -23,6 +23,8 @@ from jassy import haptics, jit, program, safety
 from jassy.engines import callback
 from jassy.engines.callback import (
     BLOCK,
+    EVENT_NODE,
+    EVENT_OPCODE,
     FRAME,
     HAPTIC_FLAGS,
     LIMIT_AUDIO,
@@ -184,8 +186,9 @@ class OfflineProgram(ProgramRun):
             designs_before = len(self._designs)
             for record in self.records(events[i], sched.sample_times[i], queue):
                 records.append(record)
-                if record[2] == STRIKE:
-                    strikes[int(record[1])] = strikes.get(int(record[1]), 0) + 1
+                if record[EVENT_OPCODE] == STRIKE:
+                    node = int(record[EVENT_NODE])
+                    strikes[node] = strikes.get(node, 0) + 1
             staged += sum(design.nbytes for design in self._designs[designs_before:])
             sched.next_event += 1
         if records:
