@@ -35,7 +35,7 @@ import numpy as np
 from jassy.jit import drop_stale_cache
 from jassy.params import ParamSpec
 from ugens import filters, noise
-from ugens.filters import design_biquad
+from ugens.filters import biquad_coefficients, biquad_step, design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import uniform
 
@@ -100,9 +100,11 @@ def design(values: dict, fs: float) -> np.ndarray:
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _biquad(x, c, s):
-    y = c[0] * x + s[0]
-    s[0] = c[1] * x - c[3] * y + s[1]
-    s[1] = c[2] * x - c[4] * y
+    """One sample of the filter row ``c`` ([b0, b1, b2, a1, a2]) with its state row ``s``
+    (ugens.filters.biquad_step), the state updated in place."""
+    y, s1, s2 = biquad_step(biquad_coefficients(c), x, s[0], s[1])
+    s[0] = s1
+    s[1] = s2
     return y
 
 

@@ -48,7 +48,7 @@ from jassy.registry import register
 from jassy.ugen import UGen
 from ugens import filters, noise
 from ugens.cells import slot
-from ugens.filters import design_biquad
+from ugens.filters import biquad_coefficients, biquad_step, design_biquad
 from ugens.kernels import FASTMATH
 from ugens.noise import seed_spec, uniform
 
@@ -129,14 +129,10 @@ def flow_noise(out, n, rng, speeds, sizes, par, coef, res_coef, st):
             last_f = f
         s, u = uniform(s)
         x = level * v * v * v * math.sqrt(3.0 / coef[0]) * u
-        y = coef[0] * x + s1
-        s1 = coef[1] * x - coef[3] * y + s2
-        s2 = coef[2] * x - coef[4] * y
+        y, s1, s2 = biquad_step(biquad_coefficients(coef), x, s1, s2)
         if resonate:
             x = y * res_gain * math.sqrt(coef[0])
-            y = res_coef[0] * x + r1
-            r1 = res_coef[1] * x - res_coef[3] * y + r2
-            r2 = res_coef[2] * x - res_coef[4] * y
+            y, r1, r2 = biquad_step(biquad_coefficients(res_coef), x, r1, r2)
         out[i] = y
     rng[0] = s
     st[_S1] = s1
