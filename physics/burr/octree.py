@@ -212,8 +212,8 @@ def push_children(stack, sp, cl, bi, bj, bk, dims):
 def lens_block(mom, idx, s, r, R, bcx, bcy, bcz):
     """Partial-volume contribution of a block of side ``s`` voxels (voxel radius ``r``, centre
     (bcx, bcy, bcz) relative to the ball of radius ``R``, moments at mom[idx:idx + 4]) taken as
-    a sphere of equal volume, with its density gradient: (mass, centroid x, y, z relative to
-    the ball) after whether the lens holds any volume."""
+    a sphere of equal volume, with its density gradient: (whether the lens holds any volume,
+    mass, centroid x, y, z relative to the ball); (False, 0, 0, 0, 0) when it holds none."""
     rb = s * r
     d = math.sqrt(bcx * bcx + bcy * bcy + bcz * bcz)
     dv = lens_volume(d, R, rb)

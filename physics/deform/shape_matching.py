@@ -487,10 +487,9 @@ def _slip(vc, w, r, n, vrel, t):
 
 
 @numba.njit(cache=True)
-def _add_rigid_motion(x, v, particles, c, dv, dw):
-    """Add a rigid velocity change (dv at the centre c, angular dw) to the ``particles``."""
-    arm = np.empty(3)
-    turn = np.empty(3)
+def _add_rigid_motion(x, v, particles, c, dv, dw, arm, turn):
+    """Add a rigid velocity change (dv at the centre c, angular dw) to the ``particles``
+    (arm, turn: (3,) scratch, a particle's arm from c and dw x arm)."""
     for i in particles:
         for a in range(3):
             arm[a] = x[i, a] - c[a]
@@ -585,7 +584,7 @@ def _contact_impulses(x, v, model, rows, nc, opt, cimp):
                 _cross(r[k], tmp, rt)
                 for a in range(3):
                     w[a] += iinv[a, 0] * rt[0] + iinv[a, 1] * rt[1] + iinv[a, 2] * rt[2]
-        _add_rigid_motion(x, v, order[starts[b] : starts[b + 1]], c, vc - v0, w - w0)
+        _add_rigid_motion(x, v, order[starts[b] : starts[b + 1]], c, vc - v0, w - w0, tmp, rt)
 
 
 @dataclass(frozen=True)
