@@ -278,11 +278,13 @@ def _one_sample(rows, count, fp, by_factor):
 
 
 @nb.njit(inline="always", cache=True)
-def _tail(force, out, i, n, rows, count, wide, wide_active, last, by_factor, add):
-    """The samples i .. n - 1 after the four-sample passes (fewer than four), one at a time:
+def _tail(force, out, i, rows, count, wide, wide_active, last, by_factor, add):
+    """The samples i .. len(force) - 1 after the four-sample passes (fewer than four; callers
+    pass the force up to the block's end), one at a time:
     the float32 modes [0, count) of ``rows`` (:func:`_one_sample`) and the float64 modes
     [0, wide_active) of ``wide`` (None: none) over force (N), their sum added to out (the
     bank's output units) with ``add``, else written."""
+    n = force.shape[0]
     while i < n:
         fw = force[i - 1] if i > 0 else last[0]
         s = _one_sample(rows, count, np.float32(fw), by_factor)
@@ -381,7 +383,7 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         out[i + 2] += s2 + t2
         out[i + 3] += s3 + t3
         i += 4
-    _tail(force, out, i, n, rows, active, wide, wide_active, last, by_factor, True)
+    _tail(force[:n], out, i, rows, active, wide, wide_active, last, by_factor, True)
     _finish(force, out, 0, n, direct, last)
 
 
@@ -439,7 +441,7 @@ def _held_passes(force, out, n, rows, held, last, width):
         fp = np.float32(force[i - 1] if i > 0 else last[0])
         vector_pass.write_four(width, held, fp, force, out, i, direct)
         i += 4
-    _tail(force, out, i, n, held, held.c0.size, None, 0, last, True, False)
+    _tail(force[:n], out, i, held, held.c0.size, None, 0, last, True, False)
     _release(force, out, i, n, rows, held, direct, last)
 
 
@@ -549,7 +551,7 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
                 t3 += v3
         vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
         i += 4
-    _tail(force, out, i, n, modes, active, wide, wide_active, last, True, False)
+    _tail(force[:n], out, i, modes, active, wide, wide_active, last, True, False)
     _finish(force, out, 0, n, direct, last)
 
 
