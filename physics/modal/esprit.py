@@ -165,8 +165,11 @@ def refine(
         return varpro.Design(rows(pair), rows(-ts[i] * pair), rows(1j * ts[i] * pair))
 
     ys = [y.real.astype(float) if real else np.concatenate([y.real, y.imag]) for y in signals]
-    logz = np.log(z0)
-    fit = varpro.separable_fit(design, ys, -logz.real * rate, logz.imag * rate, min_decay, max_nfev,
-                               xtol=1e-10, ftol=1e-12)  # fmt: skip
-    # the poles the cost and the amplitudes were computed with
-    return np.exp((-fit.decays + 1j * fit.omegas) / rate), fit.amplitudes
+    # a degenerate start (a pole at 0, a non-finite sample) is kept by separable_fit: its
+    # inf/NaN arithmetic on the way is expected, not a warning for the user
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logz = np.log(z0)
+        fit = varpro.separable_fit(design, ys, -logz.real * rate, logz.imag * rate, min_decay, max_nfev,
+                                   xtol=1e-10, ftol=1e-12)  # fmt: skip
+        # the poles the cost and the amplitudes were computed with
+        return np.exp((-fit.decays + 1j * fit.omegas) / rate), fit.amplitudes
