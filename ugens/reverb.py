@@ -32,12 +32,16 @@ import numba as nb
 import numpy as np
 
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import drop_stale_cache, specialise
 from jassy.params import ParamSpec
 from jassy.registry import register
 from jassy.ugen import UGen
+from ugens import filters
 from ugens.cells import slot
+from ugens.filters import BiquadCoefficients, biquad_step
 from ugens.kernels import FASTMATH
+
+drop_stale_cache(__file__, [filters])  # its cache holds copies of their kernels
 
 #: Octave-band centres (Hz) of the ``t60`` values.
 BANDS = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0)
@@ -153,62 +157,41 @@ def absorption_filter(attenuation_db: np.ndarray, fs: float) -> np.ndarray:
     return sections
 
 
+@nb.njit(inline="always", cache=True)
+def _section(sections, k, j):
+    """Section k of line j's absorption cascade as a BiquadCoefficients record."""
+    return BiquadCoefficients(
+        sections[k, B0, j], sections[k, B1, j], sections[k, B2, j], sections[k, A1, j], sections[k, A2, j]
+    )
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _absorb(y, m, sections, filter_state, j):
-    """y[:m] through line j's SECTIONS = 7 biquads (direct form II transposed), sample by
-    sample through the whole cascade so the sections' recurrences overlap."""
-    b00, b10, b20 = sections[0, B0, j], sections[0, B1, j], sections[0, B2, j]
-    a10, a20 = sections[0, A1, j], sections[0, A2, j]
+    """y[:m] through line j's SECTIONS = 7 biquads (direct form II transposed,
+    :func:`ugens.filters.biquad_step`), sample by sample through the whole cascade with every
+    section's coefficients and state in scalars, so the sections' recurrences overlap."""
+    c0, c1, c2, c3 = (
+        _section(sections, 0, j),
+        _section(sections, 1, j),
+        _section(sections, 2, j),
+        _section(sections, 3, j),
+    )
+    c4, c5, c6 = _section(sections, 4, j), _section(sections, 5, j), _section(sections, 6, j)
     s10, s20 = filter_state[0, S1, j], filter_state[0, S2, j]
-    b01, b11, b21 = sections[1, B0, j], sections[1, B1, j], sections[1, B2, j]
-    a11, a21 = sections[1, A1, j], sections[1, A2, j]
     s11, s21 = filter_state[1, S1, j], filter_state[1, S2, j]
-    b02, b12, b22 = sections[2, B0, j], sections[2, B1, j], sections[2, B2, j]
-    a12, a22 = sections[2, A1, j], sections[2, A2, j]
     s12, s22 = filter_state[2, S1, j], filter_state[2, S2, j]
-    b03, b13, b23 = sections[3, B0, j], sections[3, B1, j], sections[3, B2, j]
-    a13, a23 = sections[3, A1, j], sections[3, A2, j]
     s13, s23 = filter_state[3, S1, j], filter_state[3, S2, j]
-    b04, b14, b24 = sections[4, B0, j], sections[4, B1, j], sections[4, B2, j]
-    a14, a24 = sections[4, A1, j], sections[4, A2, j]
     s14, s24 = filter_state[4, S1, j], filter_state[4, S2, j]
-    b05, b15, b25 = sections[5, B0, j], sections[5, B1, j], sections[5, B2, j]
-    a15, a25 = sections[5, A1, j], sections[5, A2, j]
     s15, s25 = filter_state[5, S1, j], filter_state[5, S2, j]
-    b06, b16, b26 = sections[6, B0, j], sections[6, B1, j], sections[6, B2, j]
-    a16, a26 = sections[6, A1, j], sections[6, A2, j]
     s16, s26 = filter_state[6, S1, j], filter_state[6, S2, j]
     for t in range(m):
-        u = y[t]
-        v = b00 * u + s10
-        s10 = b10 * u - a10 * v + s20
-        s20 = b20 * u - a20 * v
-        u = v
-        v = b01 * u + s11
-        s11 = b11 * u - a11 * v + s21
-        s21 = b21 * u - a21 * v
-        u = v
-        v = b02 * u + s12
-        s12 = b12 * u - a12 * v + s22
-        s22 = b22 * u - a22 * v
-        u = v
-        v = b03 * u + s13
-        s13 = b13 * u - a13 * v + s23
-        s23 = b23 * u - a23 * v
-        u = v
-        v = b04 * u + s14
-        s14 = b14 * u - a14 * v + s24
-        s24 = b24 * u - a24 * v
-        u = v
-        v = b05 * u + s15
-        s15 = b15 * u - a15 * v + s25
-        s25 = b25 * u - a25 * v
-        u = v
-        v = b06 * u + s16
-        s16 = b16 * u - a16 * v + s26
-        s26 = b26 * u - a26 * v
-        u = v
-        y[t] = u
+        u, s10, s20 = biquad_step(c0, y[t], s10, s20)
+        u, s11, s21 = biquad_step(c1, u, s11, s21)
+        u, s12, s22 = biquad_step(c2, u, s12, s22)
+        u, s13, s23 = biquad_step(c3, u, s13, s23)
+        u, s14, s24 = biquad_step(c4, u, s14, s24)
+        u, s15, s25 = biquad_step(c5, u, s15, s25)
+        y[t], s16, s26 = biquad_step(c6, u, s16, s26)
     filter_state[0, S1, j], filter_state[0, S2, j] = s10, s20
     filter_state[1, S1, j], filter_state[1, S2, j] = s11, s21
     filter_state[2, S1, j], filter_state[2, S2, j] = s12, s22
