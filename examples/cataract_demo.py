@@ -27,26 +27,19 @@ from physics.deform.cataract import cataract_demo
 DETAIL_KEYS = ("impact_events", "tear_events", "removed_tets")
 
 
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
+def int_at_least(minimum: int):
+    """argparse type: an integer >= ``minimum``."""
 
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
+        return value
 
-def non_negative_int(text: str) -> int:
-    """argparse type: an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return value
+    return parse
 
 
 def summary(result: dict) -> dict:
@@ -77,8 +70,8 @@ def print_summary(s: dict) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = LineParser(prog="cataract_demo", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=positive_int, default=2500, help="1 ms steps (default 2500)")
-    parser.add_argument("--seed", type=non_negative_int, default=0, help="hand tremor seed (default 0)")
+    parser.add_argument("--steps", type=int_at_least(1), default=2500, help="1 ms steps (default 2500)")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="hand tremor seed (default 0)")
     parser.add_argument("--json", metavar="OUT", help="write the summary as JSON to OUT (atomically)")
     args = parser.parse_args(argv)
     if args.json and not (Path(args.json).parent.is_dir() and not Path(args.json).is_dir()):
