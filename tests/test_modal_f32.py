@@ -157,45 +157,12 @@ def test_banks_of_up_to_64_float32_modes_take_a_held_kernel(count):
     assert error_db(y, ref) < -60.0
 
 
-@pytest.mark.parametrize("count", [5, 16, 17, 40, 64])
-def test_the_held_kernels_compute_what_the_general_kernel_does(count):
-    """resonate_narrow's held kernels (rows on the stack, 16, 32 or 64 of them; they write
-    the output) against resonate_delta's general loop (which adds to it) on the same rows:
-    same outputs and state to float32 rounding over calls of odd lengths (the 4-sample
-    passes and the tail, the force sample carried between calls), with the direct term."""
-    rng = np.random.default_rng(5)
-    f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
-    c1, c2, s = design(f, d, FS)
-    c0, b2 = delta_coefficients(c1, c2)
-    zeros = np.zeros(count)
-    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
-    force = rng.standard_normal(3001)
-    runs = []
-    for kernel, out in (
-        (resonate_narrow, np.full(force.size, np.nan)),
-        (resonate_delta, np.zeros(force.size)),
-    ):
-        state = np.zeros((2, coef.shape[1]), np.float32)
-        rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
-        for n in (1, 7, 1000, 993, 1000):
-            kernel(force[start:], out[start:], n, rows, count, None, 0, last, True)
-            start += n
-        runs.append((out, state, last[0]))
-    (out, state, last), (ref, ref_state, ref_last) = runs
-    assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
-    np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
-    state, ref_state = state[:, :count], ref_state[:, :count]  # (the padding modes run apart)
-    np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
-
-
-@pytest.mark.parametrize("count, wide_count", [(20, 2), (100, 0), (100, 3)])
-def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count):
-    """resonate_narrow's decay-factor kernel for banks a held kernel does not take (more than
-    64 float32 modes, or float64 modes: resonate_factor, 32 modes per explicit vector step;
-    it writes the output) against resonate_delta's general loop (which adds to it) on the
-    same rows: same outputs and states to float32 rounding over calls of odd lengths, with
-    the direct term and float64 modes updated in the same passes."""
-    rng = np.random.default_rng(6)
+def _narrow_and_general(count, wide_count, seed):
+    """resonate_narrow and resonate_delta run on the same decay-factor rows of ``count``
+    random float32 modes (and ``wide_count`` float64 modes) over calls of odd lengths (the
+    4-sample passes and the tail, the force sample carried between calls), with the direct
+    term: the force, then (out, state, float64 rows, last force sample) of each."""
+    rng = np.random.default_rng(seed)
     f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
     c1, c2, s = design(f, d, FS)
     c0, b2 = delta_coefficients(c1, c2)
@@ -216,6 +183,31 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
             kernel(force[start:], out[start:], n, rows, count, wide, wide_count, last, True)
             start += n
         runs.append((out, state, wide, last[0]))
+    return force, runs
+
+
+@pytest.mark.parametrize("count", [5, 16, 17, 40, 64])
+def test_the_held_kernels_compute_what_the_general_kernel_does(count):
+    """resonate_narrow's held kernels (rows on the stack, 16, 32 or 64 of them; they write
+    the output) against resonate_delta's general loop (which adds to it) on the same rows:
+    same outputs and state to float32 rounding over calls of odd lengths (the 4-sample
+    passes and the tail, the force sample carried between calls), with the direct term."""
+    force, runs = _narrow_and_general(count, 0, seed=5)
+    (out, state, _, last), (ref, ref_state, _, ref_last) = runs
+    assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
+    np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
+    state, ref_state = state[:, :count], ref_state[:, :count]  # (the padding modes run apart)
+    np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
+
+
+@pytest.mark.parametrize("count, wide_count", [(20, 2), (100, 0), (100, 3)])
+def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count):
+    """resonate_narrow's decay-factor kernel for banks a held kernel does not take (more than
+    64 float32 modes, or float64 modes: resonate_factor, 32 modes per explicit vector step;
+    it writes the output) against resonate_delta's general loop (which adds to it) on the
+    same rows: same outputs and states to float32 rounding over calls of odd lengths, with
+    the direct term and float64 modes updated in the same passes."""
+    force, runs = _narrow_and_general(count, wide_count, seed=6)
     (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
     assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
     np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
