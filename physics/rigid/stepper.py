@@ -33,7 +33,11 @@ adaptive integrator). The stages are inlined into run_steps (numba inline="alway
 are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
 linked into its caller's module and optimised again there, so each level of kernel calls
 above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
-compile). The whole step allocates nothing and run_steps is compiled without reference
+compile). run_steps hands the stages Model and Data by reference (physics.rigid.record_ref:
+a pointer each, stored once per call), so a stage reads only the fields it uses instead of
+copying all of Data's ~400 values at each inlined call (what LLVM then took apart again was
+most of run_steps' own compile), and a kernel it calls with them takes one argument each
+(_commit, sample_stage, _boxes, _time_of_impact, the penalty model). The whole step allocates nothing and run_steps is compiled without reference
 counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
 with it, every use of Model or Data counted a reference up and down for each array they
 hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
@@ -65,6 +69,7 @@ from physics.rigid import (
     integrate,
     meshgrid,
     narrow,
+    record_ref,
     shapes,
     spatial,
 )
@@ -88,11 +93,13 @@ from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, 
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
 from physics.rigid.penalty import penalty
+from physics.rigid.record_ref import ref
 from physics.rigid.shapes import PLANE, SPHERE
 
 #: numba's cache of this module holds copies of these modules' kernels (and constants).
 drop_stale_cache(
-    __file__, [broad, codes, impulses, integrate, meshgrid, narrow, penalty_model, shapes, spatial]
+    __file__,
+    [broad, codes, impulses, integrate, meshgrid, narrow, penalty_model, record_ref, shapes, spatial],
 )
 
 MAX_CONTACTS = 1 << 16
@@ -1018,15 +1025,17 @@ def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
     and inside a step that needs more scratch (module doc; :func:`run` resumes it). The
-    types of ``contact`` and ``motion`` pick the contact model and integrator (step_models)."""
+    types of ``contact`` and ``motion`` pick the contact model and integrator (step_models).
+    The stages take Model and Data by reference (record_ref: one pointer each)."""
+    mr, dr = ref(m), ref(d)
     for s in range(n_steps):
-        resuming = d.progress.t_local[0] > 0.0 or d.progress.subs[0] > 0
-        if not resuming and d.rec.shape[0] - nrec < record_room(opt, d.progress.most[0]):
+        resuming = dr.progress.t_local[0] > 0.0 or dr.progress.subs[0] > 0
+        if not resuming and dr.rec.shape[0] - nrec < record_room(opt, dr.progress.most[0]):
             return s, nrec
         if not resuming:
-            kinematic_stage(m, opt, d, s)
-        nrec, stopped = outer_step(m, opt, d, first + s, nrec, contact, motion)
+            kinematic_stage(mr, opt, dr, s)
+        nrec, stopped = outer_step(mr, opt, dr, first + s, nrec, contact, motion)
         if stopped:
             return s, nrec
-        sample_stage(d, first + s)
+        sample_stage(dr, first + s)
     return n_steps, nrec
