@@ -12,12 +12,12 @@ back of the list while this process works from the front). run_steps then compil
 loading its callees from the cache instead of compiling them.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
-takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~12 s), then the free
+takes the mesh contacts (``narrow._against_mesh`` with its grid search, 7-12 s), then the free
 motion (called from both run_steps and the impact-time search), the run's contact model
 (``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the broad phase's sweep; this
-process the polytope pairs (``narrow._polytopes``, ~10 s, and ``_spheres_polytope``), then
+process the polytope pairs (``narrow._polytopes``, ~7 s, and ``_spheres_polytope``), then
 the rest of the narrow phase (``pair_contacts``, after waiting for the helper's mesh
-contacts: compiled here too they would cost their 12 s twice) and the impact-time search
+contacts: compiled here too they would cost their time twice) and the impact-time search
 (``_time_of_impact``, which reaches the narrow phase again through the gap probe). A unit
 compiled for other types than run_steps asks for would only cost time (run_steps would
 compile its own): tests/test_rigid_step_units.py checks that they agree.
