@@ -192,13 +192,21 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
     )  # fmt: skip
 
 
+#: :func:`spectra_rows` by period, computed once per process (each budget gets a copy)
+_SPECTRA: dict[int, np.ndarray] = {}
+
+
 def spectra_rows(period: int) -> np.ndarray:
     """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window
-    and the transform's tables set, the rest zero."""
-    spectra = np.zeros((SPECTRA_ROWS, period))
-    spectra[WINDOW] = np.hanning(period)
-    spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
-    return spectra
+    and the transform's tables set, the rest zero (a copy of the rows computed for the
+    first budget of that period: the window and the twiddles cost ~0.1-0.3 ms per render
+    to compute)."""
+    spectra = _SPECTRA.get(period)
+    if spectra is None:
+        spectra = _SPECTRA[period] = np.zeros((SPECTRA_ROWS, period))
+        spectra[WINDOW] = np.hanning(period)
+        spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
+    return spectra.copy()
 
 
 @nb.njit(cache=True)
