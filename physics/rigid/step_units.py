@@ -14,7 +14,7 @@ loading its callees from the cache instead of compiling them.
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
 takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~12 s), then the free
 motion (called from both run_steps and the impact-time search), the run's contact model
-(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the small stage kernels; this
+(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the broad phase's sweep; this
 process the polytope pairs (``narrow._polytopes``, ~10 s, and ``_spheres_polytope``), then
 the rest of the narrow phase (``pair_contacts``, after waiting for the helper's mesh
 contacts: compiled here too they would cost their 12 s twice) and the impact-time search
@@ -60,17 +60,17 @@ class KernelCall(NamedTuple):
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d``, each a list of
     kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase and
-    the impact times first (this process); the mesh contacts, free motion, solves and stage
-    kernels from the back (the helper)."""
+    the impact times first (this process); the mesh contacts, free motion, solve and sweep
+    from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
     contact, motion = st.step_models(opt)
-    mr, dr = RefExample(m), RefExample(d)  # run_steps passes Model and Data by reference
+    mr, dr = RefExample(m), RefExample(d)  # the impact-time search takes them by reference
     if isinstance(contact, st.ImpulseContacts):
         bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
         state = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
         solve = KernelCall(resolve, (bodies, opt, state, d.solver, count, dt, when, whole, whole))
     else:
-        solve = KernelCall(penalty, (mr, opt, dr, d.solver, count, dt, when, whole, whole))
+        solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))
     move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
     posed, geo, buf = (d.pos, d.rot), m.geometry, d.contacts
@@ -81,10 +81,7 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
             KernelCall(pair_contacts, (whole, whole, *posed, geo, dt, buf, count), after=_against_mesh),
             KernelCall(st._time_of_impact, (mr, opt, dr, whole, whole, dt, dt, dt, dt, motion)),
         ],
-        [KernelCall(st._boxes, (mr, dr, opt.slop))],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
-        [KernelCall(st.sample_stage, (dr, whole))],
-        [KernelCall(st._commit, (dr,))],
         [solve],
         [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
         [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
