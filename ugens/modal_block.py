@@ -162,8 +162,10 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
         vector, half = ir.VectorType(_DOUBLE, BLOCK), ir.VectorType(_DOUBLE, BLOCK_MODES)
         base = _pointer(context, builder, kinds[0], table, cgutils.intp_t(0), BLOCK)
 
-        def row(r):
-            return builder.load(builder.gep(base, [cgutils.intp_t(r)]), align=8)
+        rows = [builder.load(builder.gep(base, [cgutils.intp_t(r)]), align=8) for r in range(MADE_FROM)]
+
+        def row(r):  # (loaded once, before the passes: held in registers, not reloaded)
+            return rows[r]
 
         def spread(x):  # a scalar in every lane (from memory: a broadcast load)
             one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
