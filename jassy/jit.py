@@ -18,6 +18,8 @@ from numba.core import caching, cgutils, codegen, dispatcher, errors, targetconf
 from numba.core.compiler import Flags
 from numba.extending import intrinsic
 
+from jassy import inline_copies
+
 
 def address(array: np.ndarray) -> int:
     """The address of ``array``'s first element, as ``array.ctypes.data`` gives it (which
@@ -433,3 +435,4 @@ _no_c_wrappers_for_kernels()
 _faster_flag_comparisons()
 _plain_error_text()
 _blas_checked_when_used()
+inline_copies.install_at_first_compile()
