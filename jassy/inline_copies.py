@@ -21,12 +21,9 @@ numba's behaviour kept, if numba's inliner is not shaped as expected (see :func:
 from __future__ import annotations
 
 import copy
-import sys
 from contextlib import contextmanager
 
-from numba.core import event, ir
-
-_INLINER = "numba.core.inline_closurecall"
+from numba.core import ir
 
 
 class ScopeSharingCopies:
@@ -99,28 +96,3 @@ def install() -> bool:
     inline_closurecall.copy = copies
     worker.inline_ir = inline_ir_sharing_scope_copies
     return True
-
-
-class _InstallAtFirstCompile(event.Listener):
-    """Installs the shared scope copies when numba starts its first compile (before any of
-    its passes runs); a no-op afterwards (left registered: numba's listener list is being
-    iterated when it is called)."""
-
-    installed = False
-
-    def on_start(self, ev):
-        if not self.installed:
-            self.installed = True
-            install()
-
-    def on_end(self, ev):
-        pass
-
-
-def install_at_first_compile() -> None:
-    """:func:`install` now if numba's inliner is imported already, else when numba first
-    compiles in this process."""
-    if _INLINER in sys.modules:
-        install()
-    else:
-        event.register("numba:compile", _InstallAtFirstCompile())

@@ -76,11 +76,12 @@ def test_an_inliner_shaped_otherwise_keeps_numbas_copies(monkeypatch):
 _COMPILE = """
 import hashlib, sys
 import jassy
+from numba.core import event
 assert "numba.core.inline_closurecall" not in sys.modules  # a warm process does not import it
-if sys.argv[1] == "numba":  # numba's own copies: one scope copy per block
-    import copy
-    from numba.core import inline_closurecall
-    inline_closurecall.copy = copy
+if sys.argv[1] == "numba":  # numba's own copies and typing: nothing installed
+    for listener in event._registered["numba:compile"]:
+        if hasattr(listener, "installers"):
+            listener.installers = ()
 import numba as nb
 
 @nb.njit(inline="always")
@@ -105,6 +106,10 @@ def kernel(x, n):
     return middle(x, n) * middle(x + 1.0, n)
 
 kernel(1.5, 7)
+from numba.core import inline_closurecall
+from numba.core.types import functions
+installed = hasattr(inline_closurecall.InlineWorker.inline_ir, "shares_scope_copies")
+assert installed == hasattr(functions.BaseFunction.get_call_type, "numbas") == (sys.argv[1] == "jassy")
 (signature,) = kernel.signatures
 ir_text = kernel.inspect_llvm(signature)
 print(len(ir_text), hashlib.sha256(ir_text.encode()).hexdigest())
@@ -113,13 +118,14 @@ print(len(ir_text), hashlib.sha256(ir_text.encode()).hexdigest())
 
 @pytest.mark.timeout(120)
 def test_a_kernel_with_nested_inlined_helpers_compiles_to_the_same_llvm_ir(tmp_path):
-    """The same kernel compiled in two fresh processes, with shared scope copies and with
-    numba's own: the same LLVM IR, character for character (the hash seed fixed: numba
-    spells the fastmath flags in mangled names in set order)."""
+    """The same kernel compiled in two fresh processes, with jassy's changes to numba's
+    compile pipeline (shared scope copies, remembered typing: jassy.remembered_typing) and
+    without: the same LLVM IR, character for character (the hash seed fixed: numba spells
+    the fastmath flags in mangled names in set order)."""
     found = []
-    for copies in ("shared", "numba"):
+    for changes in ("jassy", "numba"):
         run = subprocess.run(
-            [sys.executable, "-c", _COMPILE, copies],
+            [sys.executable, "-c", _COMPILE, changes],
             capture_output=True,
             text=True,
             timeout=110,
