@@ -1,6 +1,7 @@
 """The kernels that render a mode budget's kept modes (ugens.modal_kept)."""
 
 import numpy as np
+import pytest
 
 from ugens.modal import bank_step
 from ugens.modal_budget import line_aligned_zeros
@@ -131,3 +132,29 @@ def test_force_scan_finds_every_kind_of_nonzero_sample():
     cancelling[[70, 71]] = 1.0, -1.0  # a signed sum would miss them
     assert has_force(cancelling, 0, 128) and has_force(cancelling, 64, 128)
     assert checked > 900 and 0 < found < checked
+
+
+@pytest.mark.parametrize("width, audible", [(32, 29), (8, 3)])
+def test_flush_leaving_part_of_a_vector_gives_the_full_kernels_output(width, audible):
+    """Kept modes past ``audible`` decay fast and are flushed at frame 1024: the kernel
+    goes on computing whole vectors (29 of 32: their columns hold exact zeros) or, at most
+    half a vector audible (3 of 8), the audible modes alone, and gives the full bank
+    kernel's output (which computes the audible modes past its last whole vector one by
+    one), its active count the last audible mode + 1."""
+    rng = np.random.default_rng(5)
+    rows, _ = ringing_rows(width, rng)
+    fast = np.exp(-20000.0 / FS)  # -180 dB within 1024 frames
+    rows[0, audible:] *= fast
+    rows[1, audible:] *= fast**2
+    frames = 4096
+    full_rows, kept_rows = rows.copy(), rows.copy()
+    full_meta, kept_meta = np.array([width, 0, width]), np.array([width, 0, width])
+    full, kept = np.zeros(frames), np.zeros(frames)
+    for at in range(0, frames, 1500):
+        size = min(1500, frames - at)
+        f = np.zeros(size)
+        bank_step(f, full[at : at + size], at, size, full_rows, full_meta, 1e-10, np.zeros(1))
+        kept_step(f, kept[at : at + size], at, size, kept_rows, kept_meta, 1e-10, np.zeros(1), np.zeros(0))
+    assert kept_meta[0] == full_meta[0] == audible
+    assert not np.any(kept_rows[4:, audible:])  # the flushed modes' state: exact zeros
+    assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))

@@ -35,14 +35,15 @@ from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
-from ugens import cells, modal_meta, modal_retune, real_fft
+from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
+from ugens.modal_block import BLOCK_TABLE
 from ugens.modal_meta import ACTIVE, ALLOWED, GATHERED, RAMP_LEFT, WIDTH
 from ugens.modal_retune import COEF_GAIN
 from ugens.real_fft import real_spectrum, twiddles
 
 drop_stale_cache(
-    __file__, [anytime_rank, cells, modal_meta, modal_retune, real_fft, record_views]
+    __file__, [anytime_rank, cells, modal_block, modal_meta, modal_retune, real_fft, record_views]
 )  # its cache holds copies of their kernels
 
 #: Rows of a compact bank: c1, c2, g, d, y1, y2 (BANK_ROWS as ModalBank.bank,
@@ -130,6 +131,9 @@ class BudgetTables(NamedTuple):
     values: np.ndarray  # float64 (BANK_VALUES, banks)
     bins: np.ndarray  # int64 (modes,): the periodogram's bin at each mode's frequency
     spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window, scratch and result
+    blocks: (
+        np.ndarray
+    )  # float64 (banks, BLOCK_TABLE): block tables of banks of few kept modes (ugens.modal_block)
 
 
 @nb.njit(cache=True)
@@ -142,6 +146,7 @@ def tables_at(a, i):
         int_table(a, i + 7 * FIELD), float_table(a, i + 8 * FIELD), bool_row(a, i + 9 * FIELD),
         bool_row(a, i + 10 * FIELD), float_table(a, i + 11 * FIELD), float_row(a, i + 12 * FIELD),
         float_table(a, i + 13 * FIELD), int_row(a, i + 14 * FIELD), float_table(a, i + 15 * FIELD),
+        float_table(a, i + 16 * FIELD),
     )  # fmt: skip
 
 
@@ -183,16 +188,25 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
         np.zeros((count, 3), dtype=np.int64), np.zeros((MODE_ROWS, first)), np.ones(first, dtype=bool),
         np.zeros(first, dtype=bool), np.zeros((count, period)), np.zeros(count),
         np.zeros((BANK_VALUES, count)), np.zeros(first, dtype=np.int64), spectra_rows(period),
+        line_aligned_zeros((count, BLOCK_TABLE)),
     )  # fmt: skip
+
+
+#: :func:`spectra_rows` by period, computed once per process (each budget gets a copy)
+_SPECTRA: dict[int, np.ndarray] = {}
 
 
 def spectra_rows(period: int) -> np.ndarray:
     """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window
-    and the transform's tables set, the rest zero."""
-    spectra = np.zeros((SPECTRA_ROWS, period))
-    spectra[WINDOW] = np.hanning(period)
-    spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
-    return spectra
+    and the transform's tables set, the rest zero (a copy of the rows computed for the
+    first budget of that period: the window and the twiddles cost ~0.1-0.3 ms per render
+    to compute)."""
+    spectra = _SPECTRA.get(period)
+    if spectra is None:
+        spectra = _SPECTRA[period] = np.zeros((SPECTRA_ROWS, period))
+        spectra[WINDOW] = np.hanning(period)
+        spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
+    return spectra.copy()
 
 
 @nb.njit(cache=True)

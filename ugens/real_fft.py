@@ -44,25 +44,28 @@ def real_spectrum(x, cos, sin, zr, zi, xr, xi):
         if i < j:
             zr[i], zr[j] = zr[j], zr[i]
             zi[i], zi[j] = zi[j], zi[i]
+    wr, wi = xr, xi  # the stage's twiddles, contiguous (xr, xi are written only at the end)
     size = 2
     while size <= m:
         half = size // 2
         stride = n // size  # e^{-2 pi i k / size} is entry k * stride of the n-point table
         for k in range(half):
-            wr = cos[k * stride]
-            wi = -sin[k * stride]
-            for a in range(k, m, size):
+            wr[k] = cos[k * stride]
+            wi[k] = -sin[k * stride]
+        for s in range(0, m, size):  # each block's butterflies in a row (contiguous a and b)
+            for k in range(half):
+                a = s + k
                 b = a + half
-                tr = zr[b] * wr - zi[b] * wi
-                ti = zr[b] * wi + zi[b] * wr
+                tr = zr[b] * wr[k] - zi[b] * wi[k]
+                ti = zr[b] * wi[k] + zi[b] * wr[k]
                 zr[b] = zr[a] - tr
                 zi[b] = zi[a] - ti
                 zr[a] += tr
                 zi[a] += ti
         size *= 2
     for k in range(m + 1):
-        a = k % m
-        b = (m - k) % m
+        a = k if k < m else 0  # k and m - k modulo m, without a division
+        b = m - k if k > 0 else 0
         er = 0.5 * (zr[a] + zr[b])
         ei = 0.5 * (zi[a] - zi[b])
         orr = 0.5 * (zi[a] + zi[b])

@@ -13,6 +13,9 @@ decides).
   ``repeats`` runs of each, interleaved in the same process; "decisions": the share of
   the decisions taken in Python (importance, ranking, kept sets, impacts and
   periodograms; those the compiled step takes itself count with the step);
+- set-up: the thread CPU time of the budget's set-up at the start of a render
+  (:meth:`jassy.anytime.ModeBudget.attach`: its tables), once per render, over the same
+  full-bank time; not in the CPU ratio, as neither render's preparation of its banks is;
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
   its cost were proportional to the modes it computes;
@@ -24,6 +27,7 @@ decides).
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,8 +62,22 @@ def wok_scene(seconds: float):
     return build, seconds
 
 
-def _timed_render(build, seconds: float, fraction: float | None):
-    """(audio, bank CPU s, decision CPU s, modes, mode-samples computed) of one render."""
+class Timed(NamedTuple):
+    """One render's audio and thread CPU times (s): ``bank`` the ModalBanks' process calls
+    and the budget's steps (its decisions in Python apart, ``decide``), ``setup`` the
+    budget's attach at the render's start (its tables; outside ``bank``, as the banks'
+    own preparation is in both renders); ``modes`` of the graph, ``work`` mode-samples."""
+
+    audio: np.ndarray
+    bank: float
+    decide: float
+    modes: int
+    work: int
+    setup: float
+
+
+def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
+    """One render of ``build``'s graph for ``seconds``, its banks' and budget's clocks."""
     from jassy.anytime import ModeBudget
     from jassy.engines.offline import OfflineEngine
 
@@ -77,9 +95,9 @@ def _timed_render(build, seconds: float, fraction: float | None):
         def run(start, n, offset=0):
             t = time.thread_time_ns()
             process(start, n, offset)
+            spent[0] += time.thread_time_ns() - t  # (the clock's own cost is the bank's, not the step's)
             if not stepping[0]:
                 spent[2] += n * bank.active_modes()  # modes active at the span's end (after flushing)
-            spent[0] += time.thread_time_ns() - t  # (the clock's own cost is the bank's, not the step's)
 
         return run
 
@@ -101,33 +119,43 @@ def _timed_render(build, seconds: float, fraction: float | None):
 
         return run
 
+    def clocked_attach(attach):  # the budget's set-up for a render (its tables), once per render
+        def run(*args, **options):
+            t = time.thread_time_ns()
+            attach(*args, **options)
+            spent[3] += time.thread_time_ns() - t
+
+        return run
+
     for bank in banks:
         bank.process = clocked_bank(bank)
     budget = graph.budget
+    spent.append(0)  # the budget's set-up ns
     if budget is not None:
         budget.step, budget._decide = clocked_step(budget.step), clocked_decide(budget._decide)
+        budget.attach = clocked_attach(budget.attach)
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
     work = spent[2] + (budget.mode_samples if budget is not None else 0)
-    return audio, spent[0] * 1e-9, spent[1] * 1e-9, total, work
+    return Timed(audio, spent[0] * 1e-9, spent[1] * 1e-9, total, work, spent[3] * 1e-9)
 
 
 def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:
     """Rows (fraction, modes, error dB, bank CPU ratio, decision share) for one scene."""
-    full_audio, _, _, total, full_work = _timed_render(build, seconds, None)  # also compiles
+    full_audio, _, _, total, full_work, _ = _timed_render(build, seconds, None)  # also compiles
     full_cpu = []
     best = {f: None for f in fractions}
     for _ in range(repeats):
-        full_cpu.append(_timed_render(build, seconds, None)[1])
+        full_cpu.append(_timed_render(build, seconds, None).bank)
         for f in fractions:
-            audio, bank, decide, _, work = _timed_render(build, seconds, f)
-            if best[f] is None or bank + decide < best[f][1] + best[f][2]:
-                best[f] = (audio, bank, decide, work)
+            run = _timed_render(build, seconds, f)
+            if best[f] is None or run.bank + run.decide < best[f].bank + best[f].decide:
+                best[f] = run
     reference = min(full_cpu)
     energy = float(np.sum(full_audio**2))
     rows = []
     for f in fractions:
-        audio, bank, decide, work = best[f]
+        audio, bank, decide, _, work, setup = best[f]
         error = float(np.sum((audio - full_audio) ** 2)) / energy
         rows.append(
             {
@@ -137,6 +165,7 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
                 "cpu_ratio": round((bank + decide) / reference, 3),
                 "decisions_ratio": round(decide / reference, 3),
                 "work_ratio": round(work / max(full_work, 1), 3),
+                "setup_ratio": round(setup / reference, 3),
             }
         )
     return {"modes": total, "seconds": seconds, "full_bank_cpu_s": round(reference, 4), "rows": rows}
@@ -198,12 +227,15 @@ def print_anytime(result: dict) -> None:
     for name, scene in result.items():
         full_ms = scene["full_bank_cpu_s"] * 1e3
         print(f"\n{name}: {scene['modes']} modes, {scene['seconds']:g} s, full bank {full_ms:.1f} ms CPU")
-        print("  budget   modes   error dB   CPU / full bank   (of which decisions)   mode-samples / full")
+        print(
+            "  budget   modes   error dB   CPU / full bank   (of which decisions)   mode-samples / full"
+            "   set-up / full"
+        )
         for r in scene["rows"]:
             cpu, share, work = r["cpu_ratio"], r["decisions_ratio"], r["work_ratio"]
             print(
                 f"  {r['fraction']:6.0%}  {r['modes']:6d}  {r['error_db']:9.1f}   {cpu:15.2f}"
-                f"   {share:20.2f}   {work:19.2f}"
+                f"   {share:20.2f}   {work:19.2f}   {r['setup_ratio']:13.2f}"
             )
         k = scene.get("kernel")
         if k:

@@ -11,18 +11,22 @@ records), and :func:`compile_step_ahead` hands them to
 back of the list while this process works from the front). run_steps then compiles here,
 loading its callees from the cache instead of compiling them.
 
-The split (CPU of each subtree's first compile on the wok, one cold run): this process takes
-the narrow phase (``pair_contacts``, ~33 s) and then the impact-time search
-(``_time_of_impact``, which reaches the narrow phase again through the gap probe), the helper
-first the free motion (called from both run_steps and the impact-time search), then the
-run's contact model (``impulses.resolve``, ~20 s, or ``penalty.penalty``) and the small stage
-kernels. A unit compiled for other types than run_steps asks for would only cost time
-(run_steps would compile its own): tests/test_rigid_step_units.py checks that they agree.
+The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
+takes the mesh contacts (``narrow._against_mesh`` with its grid search, 7-12 s), then the free
+motion (called from both run_steps and the impact-time search), the run's contact model
+(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the broad phase's sweep; this
+process the polytope pairs (``narrow._polytopes``, ~7 s, and ``_spheres_polytope``), then
+the rest of the narrow phase (``pair_contacts``, after waiting for the helper's mesh
+contacts: compiled here too they would cost their time twice) and the impact-time search
+(``_time_of_impact``, which reaches the narrow phase again through the gap probe). A unit
+compiled for other types than run_steps asks for would only cost time (run_steps would
+compile its own): tests/test_rigid_step_units.py checks that they agree.
 """
 
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
@@ -36,23 +40,31 @@ from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
-from physics.rigid.narrow import pair_contacts
+from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope, pair_contacts
 from physics.rigid.penalty import penalty
+from physics.rigid.record_ref import RefExample
+
+#: At most this long (s) this process waits for a kernel the helper compiles (_await_cache).
+HELPER_WAIT = 60.0
 
 
 class KernelCall(NamedTuple):
-    """A kernel and example arguments of the types run_steps calls it with."""
+    """A kernel and example arguments of the types run_steps calls it with; ``after``: a
+    kernel the helper compiles first, waited for (_await_cache) before this one compiles."""
 
     kernel: Callable
     args: tuple
+    after: Callable | None = None
 
 
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d``, each a list of
-    kernel calls to compile (not run): the narrow phase and impact times first (this
-    process), the free motion, solves and stage kernels from the back (the helper)."""
+    kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase and
+    the impact times first (this process); the mesh contacts, free motion, solve and sweep
+    from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
     contact, motion = st.step_models(opt)
+    mr, dr = RefExample(m), RefExample(d)  # the impact-time search takes them by reference
     if isinstance(contact, st.ImpulseContacts):
         bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
         state = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
@@ -61,17 +73,18 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
         solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))
     move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
+    posed, geo, buf = (d.pos, d.rot), m.geometry, d.contacts
     return [
+        [KernelCall(_polytopes, ((whole,) * 4, (whole, whole), *posed, geo, dt, buf, count))],
+        [KernelCall(_spheres_polytope, (whole, whole, whole, whole, *posed, geo, dt, buf, count))],
         [
-            KernelCall(pair_contacts, (whole, whole, d.pos, d.rot, m.geometry, dt, d.contacts, count)),
-            KernelCall(st._time_of_impact, (m, opt, d, whole, whole, dt, dt, dt, dt, motion)),
+            KernelCall(pair_contacts, (whole, whole, *posed, geo, dt, buf, count), after=_against_mesh),
+            KernelCall(st._time_of_impact, (mr, opt, dr, whole, whole, dt, dt, dt, dt, motion)),
         ],
-        [KernelCall(st._boxes, (m, d, opt.slop))],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
-        [KernelCall(st.sample_stage, (d, whole))],
-        [KernelCall(st._commit, (d,))],
         [solve],
         [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
+        [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
     ]
 
 
@@ -91,5 +104,15 @@ def _compile(unit: list[KernelCall]) -> None:
     """Compile a unit's kernels for their calls' types, ignoring errors (run_steps then
     compiles what it needs itself: only this unit's time is lost)."""
     for call in unit:
+        if call.after is not None:
+            _await_cache(call.after)
         with contextlib.suppress(Exception):
             specialise(call.kernel, *call.args)
+
+
+def _await_cache(kernel, seconds: float = HELPER_WAIT) -> None:
+    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it),
+    at most ``seconds``: should the helper fail, this process compiles it after that."""
+    deadline = time.monotonic() + seconds
+    while not cache_holds(kernel) and time.monotonic() < deadline:
+        time.sleep(0.02)

@@ -1,0 +1,91 @@
+"""The block update of small kept banks (ugens.modal_block) against the two-pole recursion
+run sample by sample (a plain loop here, and ugens.modal_kept.kept_step without blocks)."""
+
+import numpy as np
+
+from ugens.cells import ModeRows
+from ugens.modal_block import BLOCK_TABLE, block_resonate, fill_table
+from ugens.modal_budget import BANK_ROWS, COMPACT_ROWS, line_aligned_zeros
+from ugens.modal_kept import kept_step
+
+RATE = 48000.0
+
+
+def compact_bank(rng, live=4):
+    """A compact bank of 8 columns, ``live`` modes of 50 Hz - 19 kHz decaying 5-60 /s."""
+    bank = line_aligned_zeros((COMPACT_ROWS, 8))
+    radius = np.exp(-rng.uniform(5, 60, live) / RATE)
+    theta = 2 * np.pi * rng.uniform(50, 19000, live) / RATE
+    bank[0, :live], bank[1, :live] = 2 * radius * np.cos(theta), radius**2
+    bank[2, :live] = rng.uniform(0.1, 1.0, live) * 1e-3
+    bank[3, :live] = rng.uniform(0.0, 1.0, live) * 1e-4
+    return bank
+
+
+def two_pole_loop(force, bank, before):
+    """y_k[n] = c1 y_k[n-1] - c2 y_k[n-2] + g_k F[n-1], out[n] = sum_k y_k[n] + sum_k d_k F[n]."""
+    c1, c2, g, d, y1, y2 = (list(map(float, row)) for row in bank[:BANK_ROWS])
+    out, fp = [], before
+    for f in force:
+        total = 0.0
+        for k in range(len(c1)):
+            v = c1[k] * y1[k] - c2[k] * y2[k] + g[k] * fp
+            y1[k], y2[k] = v, y1[k]
+            total += v
+        out.append(total + sum(d) * f)
+        fp = f
+    return np.array(out), np.array([y1, y2])
+
+
+def test_block_update_matches_the_recursion_sample_by_sample():
+    rng = np.random.default_rng(7)
+    for n in (8, 13, 203, 645):  # whole passes, and remainders of 5, 3 and 5 samples
+        bank = compact_bank(rng)
+        bank[4:6, :4] = rng.normal(size=(2, 4)) * 1e-3  # ringing before the force
+        force = rng.normal(size=n)
+        want, state = two_pole_loop(force, bank, 0.25)
+        table = line_aligned_zeros((BLOCK_TABLE,))
+        fill_table(table, *bank[:4])
+        out, last = np.zeros(n), np.array([0.25])
+        block_resonate(force, out, n, ModeRows(*bank[:BANK_ROWS]), table, last)
+        scale = np.max(np.abs(want))
+        assert np.max(np.abs(out - want)) < 1e-12 * scale, n
+        assert np.allclose(bank[4:6], state, rtol=0, atol=1e-12 * np.max(np.abs(state)))
+        assert last[0] == force[-1]
+
+
+def test_kept_step_with_blocks_matches_it_without_through_forces_flushes_and_a_jump():
+    rng = np.random.default_rng(11)
+    frames = 7000
+    force = np.zeros(frames)
+    force[100:900] = rng.normal(size=800)
+    force[2000:2003] = 1.0  # an impact, then free ringing and flushes
+    force[3000:4500] = rng.normal(size=1500)
+    force[5000:6500] = rng.normal(size=1500)
+    plain, blocked = compact_bank(rng, live=3), None
+    blocked = plain.copy()
+    metas = [np.array([0, 1, 8]), np.array([0, 1, 8])]
+    lasts = [np.zeros(1), np.zeros(1)]
+    outs = [np.zeros(frames), np.zeros(frames)]
+    table = line_aligned_zeros((BLOCK_TABLE,))
+    at = 0
+    for size in (37, 1000, 5, 2048, 13, 1897, 60, 1500, 440):
+        if at >= 4800:  # a location jump: the gains change, the poles stay
+            new_gains = rng.uniform(0.1, 1.0, 3) * 1e-3
+            plain[2, :3] = blocked[2, :3] = new_gains
+        size = min(size, frames - at)
+        for bank, meta, last, out, blocks in zip(
+            (plain, blocked), metas, lasts, outs, (None, table), strict=True
+        ):
+            rows, span = bank[:BANK_ROWS], out[at : at + size]
+            if blocks is None:
+                kept_step(force[at : at + size], span, at, size, rows, meta, 1e-10, last, np.zeros(0))
+            else:
+                kept_step(force[at : at + size], span, at, size, rows, meta, 1e-10, last, np.zeros(0), blocks)
+        at += size
+    assert at == frames
+    assert np.max(np.abs(outs[0])) > 0
+    assert np.max(np.abs(outs[1] - outs[0])) < 1e-12 * np.max(np.abs(outs[0]))
+    assert metas[0][0] == metas[1][0]
+    late = slice(5000, frames)  # after the jump: fails if the table kept the old gains
+    assert np.max(np.abs(outs[1][late] - outs[0][late])) < 1e-12 * np.max(np.abs(outs[0][late]))
