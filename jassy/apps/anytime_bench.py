@@ -145,17 +145,19 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
     full_audio, _, _, total, full_work, _ = _timed_render(build, seconds, None)  # also compiles
     full_cpu = []
     best = {f: None for f in fractions}
+    setup = {f: np.inf for f in fractions}  # the least: a process's first budget loads its kernels
     for _ in range(repeats):
         full_cpu.append(_timed_render(build, seconds, None).bank)
         for f in fractions:
             run = _timed_render(build, seconds, f)
+            setup[f] = min(setup[f], run.setup)
             if best[f] is None or run.bank + run.decide < best[f].bank + best[f].decide:
                 best[f] = run
     reference = min(full_cpu)
     energy = float(np.sum(full_audio**2))
     rows = []
     for f in fractions:
-        audio, bank, decide, _, work, setup = best[f]
+        audio, bank, decide, _, work, _ = best[f]
         error = float(np.sum((audio - full_audio) ** 2)) / energy
         rows.append(
             {
@@ -165,7 +167,7 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
                 "cpu_ratio": round((bank + decide) / reference, 3),
                 "decisions_ratio": round(decide / reference, 3),
                 "work_ratio": round(work / max(full_work, 1), 3),
-                "setup_ratio": round(setup / reference, 3),
+                "setup_ratio": round(setup[f] / reference, 3),
             }
         )
     return {"modes": total, "seconds": seconds, "full_bank_cpu_s": round(reference, 4), "rows": rows}
