@@ -26,6 +26,7 @@ compile its own): tests/test_rigid_step_units.py checks that they agree.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Callable
 from functools import partial
@@ -111,8 +112,20 @@ def _compile(unit: list[KernelCall]) -> None:
 
 
 def _await_cache(kernel, seconds: float = HELPER_WAIT) -> None:
-    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it),
-    at most ``seconds``: should the helper fail, this process compiles it after that."""
+    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it)
+    while a child process (the helper) runs, at most ``seconds``; then this process compiles
+    whatever is still missing."""
     deadline = time.monotonic() + seconds
-    while not cache_holds(kernel) and time.monotonic() < deadline:
+    while not cache_holds(kernel) and _child_running() and time.monotonic() < deadline:
         time.sleep(0.02)
+
+
+def _child_running() -> bool:
+    """Whether this process has a child and none has ended (without reaping it: WNOWAIT);
+    True where os.waitid is missing (macOS before Python 3.13: the deadline alone counts)."""
+    if not hasattr(os, "waitid"):
+        return True
+    try:
+        return os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None
+    except ChildProcessError:  # no child at all
+        return False
