@@ -188,9 +188,8 @@ class ModeBudget:
         self._by_python[self._slow] = True
         self._compiled_banks = [bank for i, bank in enumerate(banks) if i not in self._slow]
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
-        self._kick_table = self._empty_kicks(16, 0)
-        self._loaded, self._loaded_rows = None, 0  # the listing in the Kicks table, its rows
-        self._steps_handle()
+        self._loaded = None  # the listing in the Kicks table
+        self._load_kicks(self.listed())  # the score's impacts, before the first sub-block
         #: the compiled step renders every bank and takes every decision itself (INLINE)
         self._inline = not ((self.renders and self._slow) or self._fed or self.cpu_fraction is not None)
         self._state[INLINE] = self._inline
@@ -280,8 +279,9 @@ class ModeBudget:
         """The score's impacts (``listed``: frames, impacts (frame, nodes, impulse, location))
         into the compiled step's table, one row per bank struck (one row with slot -1 for
         an impact on none of the budget's banks), in frame order, with the struck bank's
-        gains at each location named; returns the rows. Loaded once per render, again
-        only when the score changes (a new listing)."""
+        gains at each location named; returns the rows. Loaded when the render starts
+        (:meth:`attach`: ~1 ms for the wok's 1030 impacts, with the scheduler's listing, no
+        longer in the first sub-block), again only when the score changes (a new listing)."""
         if listed is self._loaded:
             return self._loaded_rows
         slots, rows, located, gains, size = self._slots, [], {}, [], 0

@@ -16,17 +16,52 @@ drop_stale_cache(__file__, [record_views])  # the cache holds copies of its view
 
 
 @nb.njit(cache=True)
+def kth_smallest(a, k):
+    """The k-th smallest (from 0) of the values a (reordered in place; no NaN), by Wirth's
+    selection: what np.partition(a, k)[k] gives, without its copy and sort network (2.3
+    against ~1 us for a few hundred scores, twice per decision)."""
+    lo, hi = 0, a.size - 1
+    while lo < hi:
+        pivot, i, j = a[k], lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while pivot < a[j]:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if j < k:
+            lo = i
+        if k < i:
+            hi = j
+    return a[k]
+
+
+@nb.njit(cache=True)
 def top_mask(score, limit, keep):
     """keep[k] = True for the ``limit`` highest positive scores (ties broken by index)."""
     n = score.size
     positive = 0
+    unordered = False  # a NaN score
     for k in range(n):
         keep[k] = score[k] > 0.0
+        unordered |= score[k] != score[k]
         if keep[k]:
             positive += 1
     if positive <= limit:
         return
-    threshold = np.partition(score, n - limit)[n - limit]
+    if unordered:
+        threshold = np.partition(score, n - limit)[n - limit]
+    else:  # the same value: the (positive - limit)-th smallest of the positive scores
+        ranked = np.empty(positive)
+        j = 0
+        for k in range(n):
+            if keep[k]:
+                ranked[j] = score[k]
+                j += 1
+        threshold = kth_smallest(ranked, positive - limit)
     taken = 0
     for k in range(n):
         keep[k] = score[k] > threshold

@@ -14,9 +14,11 @@ import numba as nb
 import numpy as np
 from llvmlite import binding as llvm
 from llvmlite import ir as llvmir
-from numba.core import caching, cgutils, codegen, dispatcher, errors, targetconfig, types
+from numba.core import caching, cgutils, codegen, dispatcher, errors, event, targetconfig, types
 from numba.core.compiler import Flags
 from numba.extending import intrinsic
+
+from jassy import inline_copies, remembered_typing
 
 
 def address(array: np.ndarray) -> int:
@@ -433,3 +435,24 @@ _no_c_wrappers_for_kernels()
 _faster_flag_comparisons()
 _plain_error_text()
 _blas_checked_when_used()
+
+
+class _InstallAtFirstCompile(event.Listener):
+    """Runs ``installers`` when numba starts its first compile in this process, before any of
+    its passes (they import numba's compiler parts and type a call: ~0.4 s that a process
+    which only loads cached kernels does not pay); a no-op afterwards (it stays registered:
+    numba is iterating its listener list when it calls this)."""
+
+    def __init__(self, *installers: Callable[[], bool]):
+        self.installers = installers
+
+    def on_start(self, ev):
+        installers, self.installers = self.installers, ()
+        for install in installers:
+            install()
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", _InstallAtFirstCompile(inline_copies.install, remembered_typing.install))

@@ -241,6 +241,24 @@ def test_ranking_keeps_exactly_the_highest_positive_scores():
             assert score[~keep].max() <= positive[limit - 1]
 
 
+def test_selection_gives_numpys_partition_value():
+    """kth_smallest (the ranking's threshold) against np.partition: sizes 1-300, ties,
+    every k; and top_mask with a NaN score takes np.partition's threshold."""
+    from jassy.anytime_rank import kth_smallest, top_mask
+
+    rng = np.random.default_rng(5)
+    for size in (1, 2, 3, 7, 64, 297):
+        values = np.round(rng.exponential(size=size) ** 3, 1)  # many ties
+        for k in range(0, size, max(1, size // 17)):
+            assert kth_smallest(values.copy(), k) == np.partition(values, k)[k]
+    score = rng.random(50)
+    score[7] = np.nan
+    keep = np.zeros(50, dtype=bool)
+    top_mask(score, 10, keep)
+    threshold = np.partition(score, 40)[40]  # (numpy sorts NaN last: 9 numbers above it, then it)
+    np.testing.assert_array_equal(keep, score >= threshold)
+
+
 def test_a_budgeted_bank_is_split_only_where_the_budget_decides(monkeypatch):
     """Six bells struck 30 times, blocks of 4096 and decisions every 2048 frames, one bell
     rendered through its own ``process`` (over the spans the budget renders): a sub-block

@@ -9,6 +9,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 
 import numba as nb
 import numpy as np
@@ -19,7 +20,7 @@ from physics.rigid.impulses import new_warm_start, resolve
 from physics.rigid.narrow import pair_contacts
 from physics.rigid.penalty import penalty
 from physics.rigid.shapes import Plane, Sphere
-from physics.rigid.step_units import step_units
+from physics.rigid.step_units import _await_cache, step_units
 from physics.rigid.world import Body, Material, Placement, StepParams, World, simulate
 
 #: The types of run_steps' ``contact`` and ``motion`` arguments (stepper.step_models).
@@ -121,3 +122,29 @@ def test_the_step_runs_with_the_jit_off():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert abs(float(out.stdout.split()[-1]) - math.sqrt(2 * 0.005 / 9.81)) < 1e-9
+
+
+@pytest.mark.timeout(60)
+def test_the_wait_for_the_helpers_kernel_ends_with_the_helper():
+    """step_units._await_cache waits for a kernel the helper compiles only while a child runs:
+    with no child it returns at once, with a child that ends (here without compiling the
+    kernel) when the child ends, not at its deadline."""
+
+    @nb.njit(cache=True)
+    def never_compiled(x):  # its cache index never exists
+        return x
+
+    start = time.monotonic()
+    _await_cache(never_compiled, seconds=30.0)
+    assert time.monotonic() - start < 1.0
+    pid = os.fork()
+    if pid == 0:
+        time.sleep(0.5)
+        os._exit(0)
+    try:
+        start = time.monotonic()
+        _await_cache(never_compiled, seconds=30.0)
+        waited = time.monotonic() - start
+    finally:
+        os.waitpid(pid, 0)
+    assert 0.3 < waited < 5.0

@@ -14,9 +14,8 @@ decides).
   the decisions taken in Python (importance, ranking, kept sets, impacts and
   periodograms; those the compiled step takes itself count with the step);
 - set-up: the thread CPU time of the budget's set-up at the start of a render
-  (:meth:`jassy.anytime.ModeBudget.attach`: its tables), once per render, the least of
-  the runs, over the same full-bank time; not in the CPU ratio, as neither render's
-  preparation of its banks is;
+  (:meth:`jassy.anytime.ModeBudget.attach`: its tables), once per render, over the same
+  full-bank time; not in the CPU ratio, as neither render's preparation of its banks is;
 - mode-samples: the modes computed per sample (active at the end of each span a bank
   renders), summed, over the full render's: the CPU ratio the bank kernel would reach if
   its cost were proportional to the modes it computes;
@@ -146,7 +145,7 @@ def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) ->
     full_audio, _, _, total, full_work, _ = _timed_render(build, seconds, None)  # also compiles
     full_cpu = []
     best = {f: None for f in fractions}
-    setup = {f: np.inf for f in fractions}  # the least of the runs (one may compile kernels)
+    setup = {f: np.inf for f in fractions}  # the least: a process's first budget loads its kernels
     for _ in range(repeats):
         full_cpu.append(_timed_render(build, seconds, None).bank)
         for f in fractions:

@@ -10,11 +10,13 @@ stores to take apart again (its SROA pass: most of the rigid step's first compil
 :func:`ref` stores a record once, in its caller's stack frame, and gives a
 :class:`RecordRef`: a pointer to it, typed by the record's numba type. ``r.field`` reads only
 that field through the pointer (a nested record comes back as a value; :func:`ref` it too
-if it is large), and ``deref(r)`` gives the whole record back. A RecordRef passed to another
-kernel is one argument, and that kernel compiles once per record type. It points into the
-frame of the kernel that called :func:`ref`: valid only while that call runs (never kept,
-returned or stored). With numba's JIT off (NUMBA_DISABLE_JIT=1) both functions return the
-record itself, whose fields read the same.
+if it is large), and ``deref(r)`` gives the whole record back. While the reference stays in
+the kernel that made it (used in kernels inlined at numba's level, not passed to another
+kernel), LLVM turns the stored record back into its values: the same code as the record
+itself. Passed to another kernel it is one argument, but its fields are then read from memory
+at each use. It points into the frame of the kernel that called :func:`ref`: valid only while
+that call runs (never kept, returned or stored). With numba's JIT off (NUMBA_DISABLE_JIT=1)
+both functions return their argument, whose fields read the same.
 """
 
 from __future__ import annotations

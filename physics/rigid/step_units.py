@@ -12,12 +12,12 @@ back of the list while this process works from the front). run_steps then compil
 loading its callees from the cache instead of compiling them.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
-takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~12 s), then the free
+takes the mesh contacts (``narrow._against_mesh`` with its grid search, 7-12 s), then the free
 motion (called from both run_steps and the impact-time search), the run's contact model
-(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the small stage kernels; this
-process the polytope pairs (``narrow._polytopes``, ~10 s, and ``_spheres_polytope``), then
+(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the broad phase's sweep; this
+process the polytope pairs (``narrow._polytopes``, ~7 s, and ``_spheres_polytope``), then
 the rest of the narrow phase (``pair_contacts``, after waiting for the helper's mesh
-contacts: compiled here too they would cost their 12 s twice) and the impact-time search
+contacts: compiled here too they would cost their time twice) and the impact-time search
 (``_time_of_impact``, which reaches the narrow phase again through the gap probe). A unit
 compiled for other types than run_steps asks for would only cost time (run_steps would
 compile its own): tests/test_rigid_step_units.py checks that they agree.
@@ -26,6 +26,7 @@ compile its own): tests/test_rigid_step_units.py checks that they agree.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Callable
 from functools import partial
@@ -60,17 +61,17 @@ class KernelCall(NamedTuple):
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d``, each a list of
     kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase and
-    the impact times first (this process); the mesh contacts, free motion, solves and stage
-    kernels from the back (the helper)."""
+    the impact times first (this process); the mesh contacts, free motion, solve and sweep
+    from the back (the helper)."""
     whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
     contact, motion = st.step_models(opt)
-    mr, dr = RefExample(m), RefExample(d)  # run_steps passes Model and Data by reference
+    mr, dr = RefExample(m), RefExample(d)  # the impact-time search takes them by reference
     if isinstance(contact, st.ImpulseContacts):
         bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
         state = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
         solve = KernelCall(resolve, (bodies, opt, state, d.solver, count, dt, when, whole, whole))
     else:
-        solve = KernelCall(penalty, (mr, opt, dr, d.solver, count, dt, when, whole, whole))
+        solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))
     move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
     posed, geo, buf = (d.pos, d.rot), m.geometry, d.contacts
@@ -81,10 +82,7 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
             KernelCall(pair_contacts, (whole, whole, *posed, geo, dt, buf, count), after=_against_mesh),
             KernelCall(st._time_of_impact, (mr, opt, dr, whole, whole, dt, dt, dt, dt, motion)),
         ],
-        [KernelCall(st._boxes, (mr, dr, opt.slop))],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
-        [KernelCall(st.sample_stage, (dr, whole))],
-        [KernelCall(st._commit, (dr,))],
         [solve],
         [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
         [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
@@ -114,8 +112,20 @@ def _compile(unit: list[KernelCall]) -> None:
 
 
 def _await_cache(kernel, seconds: float = HELPER_WAIT) -> None:
-    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it),
-    at most ``seconds``: should the helper fail, this process compiles it after that."""
+    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it)
+    while a child process (the helper) runs, at most ``seconds``; then this process compiles
+    whatever is still missing."""
     deadline = time.monotonic() + seconds
-    while not cache_holds(kernel) and time.monotonic() < deadline:
+    while not cache_holds(kernel) and _child_running() and time.monotonic() < deadline:
         time.sleep(0.02)
+
+
+def _child_running() -> bool:
+    """Whether this process has a child and none has ended (without reaping it: WNOWAIT);
+    True where os.waitid is missing (macOS before Python 3.13: the deadline alone counts)."""
+    if not hasattr(os, "waitid"):
+        return True
+    try:
+        return os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None
+    except ChildProcessError:  # no child at all
+        return False

@@ -36,8 +36,11 @@ above the narrow phase compiled it once more (four such levels: ~12 s of the wok
 compile). run_steps hands the stages Model and Data by reference (physics.rigid.record_ref:
 a pointer each, stored once per call), so a stage reads only the fields it uses instead of
 copying all of Data's ~400 values at each inlined call (what LLVM then took apart again was
-most of run_steps' own compile), and a kernel it calls with them takes one argument each
-(_commit, sample_stage, _boxes, _time_of_impact, the penalty model). The whole step allocates nothing and run_steps is compiled without reference
+most of run_steps' own compile). The references stay in run_steps (the kernels it calls get
+arrays or whole records, as before), so LLVM turns them back into the records' values
+(a reference passed on would be read from memory at each use: +25 % on a bouncing ball's
+steps); only the impact-time search, called at impacts, gets references of its own. The
+whole step allocates nothing and run_steps is compiled without reference
 counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
 with it, every use of Model or Data counted a reference up and down for each array they
 hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
@@ -93,7 +96,7 @@ from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, 
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
 from physics.rigid.penalty import penalty
-from physics.rigid.record_ref import ref
+from physics.rigid.record_ref import deref, ref
 from physics.rigid.shapes import PLANE, SPHERE
 
 #: numba's cache of this module holds copies of these modules' kernels (and constants).
@@ -526,7 +529,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
 @nb.njit(cache=True, _nrt=False)
 def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``motion``'s integrator, step_models)."""
+    moved by ``motion``'s integrator, step_models; m and d by reference)."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -610,7 +613,7 @@ def _pair_reach(pairs, vel, spin, kind, g, dt, out):
         out[p] = max(out[p], reach)
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _boxes(m, d, margin):
     """d.lo, d.hi: bounding boxes grown by margin and d.motion; d.movable: the dynamic bodies."""
     geo = m.geometry
@@ -837,7 +840,7 @@ def _impulse_response(contact, m, opt, d, count, dt, time, step, nrec):
 def _penalty_response(contact, m, opt, d, count, dt, time, step, nrec):
     """contact_response of a penalty model (physics.rigid.penalty)."""
     d.stats.contacts[0] += count
-    return penalty(m, opt, d, d.solver, count, dt, time, step, nrec)
+    return penalty(deref(m), opt, deref(d), d.solver, count, dt, time, step, nrec)
 
 
 #: Each contact tag's response: the one table contact_response dispatches through, compiled
@@ -931,11 +934,13 @@ def impact_stage(m, opt, d, pairs, near, dt, motion):
         g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
+        # references of their own for the search (rare: at impacts), the stage's stay here
+        hit = _time_of_impact(ref(deref(m)), opt, ref(deref(d)), a, b, dt, g0, g1, within, motion)
+        first_hit = min(first_hit, hit)
     return first_hit
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _commit(d):
     """The state after the free motion (d.new_*) becomes the state."""
     _copy_rows(d.new_pos, d.pos)
@@ -951,7 +956,7 @@ def _copy_rows(src, dst, at=0):
             dst[i, at + x] = src[i, x]
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def sample_stage(d, step):
     """After every d.every-th step counted from step d.origin, the poses and twists go to
     d.traj[k] (N, 13) if it has room."""
