@@ -84,10 +84,20 @@ class ModeBudget:
     period: int = 2048
     horizon: float = 0.1
     weighting: str = "flat"
-    peak_modes: int = field(default=0, init=False)
-    decisions: int = field(default=0, init=False)
     #: modes computed times frames, summed over the banks the budget renders
     mode_samples: int = field(default=0, init=False)
+    #: the compiled step's state (jassy.anytime_rank's step fields), made at attach
+    _state: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def decisions(self) -> int:
+        """Decisions taken in the current render."""
+        return 0 if self._state is None else int(self._state[DECISIONS])
+
+    @property
+    def peak_modes(self) -> int:
+        """The most modes kept at once in the current render."""
+        return 0 if self._state is None else int(self._state[PEAK])
 
     def __post_init__(self):
         if self.max_modes is None and self.cpu_fraction is None:
@@ -132,8 +142,6 @@ class ModeBudget:
         self.listed = listed
         total = sum(b.model.n_modes for b in banks)
         self.limit = min(self.max_modes or total, total)
-        self.peak_modes = 0
-        self.decisions = 0
         self.mode_samples = 0
         self._clock = None
         self.active = self.decides(total)
@@ -231,14 +239,13 @@ class ModeBudget:
         if not self.active:
             return
         period, end = self.period, start + n
-        count = self._load_kicks(self.listed())
+        listed = self.listed()
+        count = self._loaded_rows if listed is self._loaded else self._load_kicks(listed)
         changes = self._queued_changes(start, end) if self.renders else None
-        state, at, rendered, addresses = self._state, start, start, self._step_handle
+        at, rendered, addresses = start, start, self._step_handle
         if changes is None and self._inline and self.renders:  # the sub-block in one compiled call
-            self.mode_samples += self._advance(addresses, count, period, start, n, at, rendered, self._rates)[
-                2
-            ]
-            self.decisions, self.peak_modes = state.item(DECISIONS), state.item(PEAK)
+            work = self._advance(addresses, count, period, start, n, at, rendered, self._rates)[2]
+            self.mode_samples += work
             return
         slow = self._slow if self.renders else []
         limits = [*sorted(changes), end] if changes else (end,)
@@ -262,7 +269,6 @@ class ModeBudget:
                 at = stop
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
-        self.decisions, self.peak_modes = state.item(DECISIONS), state.item(PEAK)
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change
