@@ -7,9 +7,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 import pytest
-from numba.extending import overload
-
 from numba.core import errors
+from numba.extending import overload
 
 from physics.rigid import record_ref
 from physics.rigid.record_ref import RecordRef, RefExample, deref, ref

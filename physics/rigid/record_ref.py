@@ -43,7 +43,6 @@ from numba.extending import (
     typeof_impl,
 )
 
-
 #: Why :func:`ref` is refused in a kernel that counts references (module docstring).
 NRT_REFUSED = (
     "record_ref.ref in a kernel compiled with reference counting: the record's arrays may be "
