@@ -18,8 +18,8 @@ SSA), and that block's scope is a copy of the same scope either way. Installed b
 numba's behaviour kept, if numba's inliner is not shaped as expected (see :func:`install`).
 
 Checked against numba 0.68.1's ``numba/core/inline_closurecall.py``
-(``InlineWorker.inline_ir``, which copies the callee's IR with ``copy_ir``-style block by
-block ``copy.deepcopy`` calls) and ``numba/core/ir.py`` (``Block``, ``Scope``).
+(``InlineWorker.inline_ir`` and its inner ``copy_ir``, which copies the callee's IR block by
+block with ``copy.deepcopy``, twice) and ``numba/core/ir.py`` (``Block``, ``Scope``).
 """
 
 from __future__ import annotations
