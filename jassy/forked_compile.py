@@ -36,16 +36,30 @@ import contextlib
 import mmap
 import multiprocessing
 import os
+import pickle
 import threading
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-#: Claim marks of a unit in the shared memory.
-FREE, MINE, HELPERS = 0, 1, 2
+#: Claim marks of a unit in the shared memory (one byte a unit); DONE: the helper has finished
+#: the unit (compiled, or given up on it).
+FREE, MINE, HELPERS, DONE = 0, 1, 2, 3
 #: True while units run (here, or in the helper): a unit that builds an engine neither forks
 #: a helper nor asks for units of its own.
 _running_units = False
+
+
+class _Helper(NamedTuple):
+    """The forked helper of the units running now: its process id and the claim marks."""
+
+    pid: int
+    claims: mmap.mmap
+
+
+#: The helper while units run in this process (None in the helper itself, or with no helper).
+_helper: _Helper | None = None
 
 
 def may_fork_helper(units: Sequence[Callable[[], object]]) -> bool:
@@ -66,7 +80,7 @@ def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
     """Run every unit once, here and in a forked helper from the list's two ends (see the
     module docstring); False (and the units left to the caller's own code) if no helper
     may be forked. An exception of a unit run here propagates after the helper is reaped."""
-    global _running_units
+    global _running_units, _helper
     if not may_fork_helper(units):
         return False
     _set_up_numba()
@@ -75,7 +89,7 @@ def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
     pid = os.fork()
     if pid == 0:
         _help(units, claims)  # never returns
-    _running_units = True
+    _running_units, _helper = True, _Helper(pid, claims)
     try:
         units[0]()
         for i in range(1, len(units)):
@@ -89,7 +103,7 @@ def compile_on_two_cores(units: Sequence[Callable[[], object]]) -> bool:
         with contextlib.suppress(ChildProcessError):  # reaped already by a SIGCHLD handler of the host
             os.waitpid(pid, 0)
         claims.close()
-        _running_units = False
+        _running_units, _helper = False, None
     return True
 
 
@@ -113,11 +127,35 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
             if claims[i] != FREE:
                 break
             claims[i] = HELPERS
-            units[i]()
+            try:
+                units[i]()
+            finally:
+                claims[i] = DONE
     except BaseException:  # noqa: BLE001 - the caller compiles whatever is missing
         pass
     finally:
         os._exit(0)
+
+
+def helper_busy_with(unit: int) -> bool:
+    """While units run in this process: whether the helper may still be working on unit
+    ``unit`` (an index into the list given to :func:`compile_on_two_cores`, negative from its
+    end). False once the helper has finished that unit (compiled or given up: its DONE mark)
+    or has ended, and where there is no helper. The helper's exit is asked of the helper's
+    process alone (``os.waitid`` on its pid, without reaping it), so other children of this
+    process do not count; where os.waitid is missing (macOS before Python 3.13) only the mark
+    counts."""
+    helper = _helper
+    if helper is None or helper.claims.closed:
+        return False
+    if helper.claims[unit] in (MINE, DONE):  # FREE: the helper takes it next, or ends
+        return False
+    if not hasattr(os, "waitid"):
+        return True
+    try:
+        return os.waitid(os.P_PID, helper.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None
+    except ChildProcessError:  # reaped already (by a SIGCHLD handler of the host)
+        return False
 
 
 def running_units() -> bool:
@@ -127,9 +165,12 @@ def running_units() -> bool:
 
 def cache_holds(kernel) -> bool:
     """Whether numba's cache holds any compiled version of ``kernel`` (a ``numba.njit``
-    dispatcher, or a plain function compiled by ``numba.cfunc``: its index file exists).
-    False with the JIT off (``NUMBA_DISABLE_JIT``: nothing is compiled or cached); True for a
-    numba without this cache layout, so that nothing is compiled ahead for it."""
+    dispatcher, or a plain function compiled by ``numba.cfunc``): its index, current for the
+    kernel's source, names a data file that exists (numba 0.68's
+    ``IndexDataCacheFile.save`` writes the index before the data file, so an index alone
+    may name a kernel not yet loadable). False with the JIT off (``NUMBA_DISABLE_JIT``:
+    nothing is compiled or cached); True for a numba without this cache layout, so that
+    nothing is compiled ahead for it."""
     from numba import config
     from numba.core import caching
 
@@ -137,6 +178,10 @@ def cache_holds(kernel) -> bool:
         return False
     try:
         cache = kernel._cache if hasattr(kernel, "py_func") else caching.FunctionCache(kernel)
-        return os.path.exists(cache._cache_file._index_path)
+        files = cache._cache_file
+        names = files._load_index().values()
+        return any(os.path.exists(os.path.join(files._cache_path, name)) for name in names)
     except (AttributeError, RuntimeError):  # RuntimeError: no cache locator for its file
         return True
+    except (OSError, EOFError, pickle.UnpicklingError):  # an unreadable index: numba compiles
+        return False

@@ -19,14 +19,27 @@ SSA), and that block's scope is a copy of the same scope either way. Installed b
 :mod:`jassy.jit` when numba first compiles in a process (importing numba's inliner costs
 ~0.15 s, which a process that only loads cached kernels does not pay); left out, with
 numba's behaviour kept, if numba's inliner is not shaped as expected (see :func:`install`).
+
+Checked against numba 0.68.1's ``numba/core/inline_closurecall.py``
+(``InlineWorker.inline_ir``, which copies the callee's IR with ``copy_ir``-style block by
+block ``copy.deepcopy`` calls) and ``numba/core/ir.py`` (``Block``, ``Scope``).
 """
 
 from __future__ import annotations
 
 import copy
 from contextlib import contextmanager
+from typing import NamedTuple
 
 from numba.core import ir
+
+
+class ScopeCopy(NamedTuple):
+    """A scope and its one copy for the blocks of an IR copy; the source is kept so that its
+    id (the table's key) is not reused while the table lives."""
+
+    source: ir.Scope
+    copy: ir.Scope
 
 
 class ScopeSharingCopies:
@@ -38,7 +51,7 @@ class ScopeSharingCopies:
     lines kept as they are."""
 
     def __init__(self):
-        self.scopes: dict[int, tuple[ir.Scope, ir.Scope]] | None = None
+        self.scopes: dict[int, ScopeCopy] | None = None
 
     def __getattr__(self, name):
         return getattr(copy, name)
@@ -48,9 +61,9 @@ class ScopeSharingCopies:
             return copy.deepcopy(value, memo)
         source = value.scope
         found = self.scopes.get(id(source))
-        if found is None:  # the source is kept in the entry, so its id stays its own
-            found = self.scopes[id(source)] = (source, copy.deepcopy(source))
-        memo = {id(source): found[1]}
+        if found is None:
+            found = self.scopes[id(source)] = ScopeCopy(source, copy.deepcopy(source))
+        memo = {id(source): found.copy}
         for statement in value.body:  # a location's cached source lines: shared, not copied
             lines = getattr(statement.loc, "lines", None)
             if lines is not None:
@@ -71,26 +84,32 @@ class ScopeSharingCopies:
 def shaped_as_expected() -> bool:
     """Whether numba's inliner copies IR as this module expects: the module's ``copy`` is the
     ``copy`` module (used only by ``InlineWorker.inline_ir``'s block copies) and blocks have
-    the ``scope, body, loc`` attributes, with ``scope`` the function's :class:`numba.core.ir.Scope`."""
-    from numba.core import inline_closurecall
+    the ``scope, body, loc`` attributes, with ``scope`` the function's :class:`numba.core.ir.Scope`
+    (False too if the inliner's module is missing or the stand-in block cannot be made)."""
+    try:
+        from numba.core import inline_closurecall
 
-    worker = getattr(inline_closurecall, "InlineWorker", None)
-    if getattr(inline_closurecall, "copy", None) is not copy or worker is None:
+        worker = getattr(inline_closurecall, "InlineWorker", None)
+        if getattr(inline_closurecall, "copy", None) is not copy or worker is None:
+            return False
+        if not callable(getattr(worker, "inline_ir", None)):
+            return False
+        scope = ir.Scope(None, ir.Loc("stand-in", 1))
+        block = ir.Block(scope, ir.Loc("stand-in", 1))
+    except Exception:  # noqa: BLE001 (any other shape: keep numba's behaviour)
         return False
-    if not callable(getattr(worker, "inline_ir", None)):
-        return False
-    scope = ir.Scope(None, ir.Loc("stand-in", 1))
-    block = ir.Block(scope, ir.Loc("stand-in", 1))
     return set(vars(block)) == {"scope", "body", "loc"} and hasattr(scope, "localvars")
 
 
 def install() -> bool:
     """Make ``InlineWorker.inline_ir`` copy blocks with shared scope copies; True if installed
     (now or before), False if numba's inliner is shaped otherwise (numba's own copies stay)."""
-    from numba.core import inline_closurecall
-
+    try:
+        from numba.core import inline_closurecall
+    except ImportError:  # moved in this numba
+        return False
     worker = getattr(inline_closurecall, "InlineWorker", None)
-    if worker is not None and getattr(worker.inline_ir, "shares_scope_copies", False):
+    if getattr(getattr(worker, "inline_ir", None), "shares_scope_copies", False):
         return True
     if not shaped_as_expected():
         return False

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import fcntl
 import os
@@ -449,7 +450,10 @@ class _InstallAtFirstCompile(event.Listener):
     def on_start(self, ev):
         installers, self.installers = self.installers, ()
         for install in installers:
-            install()
+            # A numba whose parts an installer probes are shaped otherwise may make it raise:
+            # numba's behaviour is then kept, and the next installer still runs.
+            with contextlib.suppress(Exception):
+                install()
 
     def on_end(self, ev):
         pass

@@ -613,3 +613,27 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     assert not steady_forces(h, rings, ramp_left, state)
     h.heard_before[1] = False  # a ramping bank that heard nothing does not count
     assert steady_forces(h, rings, ramp_left, state)
+
+
+def test_a_sub_block_in_one_compiled_call_gives_the_stepwise_renders_bits(monkeypatch):
+    """ModeBudget.step renders a sub-block without a queued change in one call of the
+    compiled step when the step takes every decision itself; the general loop around
+    the same call (split at each queued change, ready to decide in Python) gives the
+    same bits, decisions and mode-samples: six bells struck 30 times, their parameters
+    ramping, jumping and the contact moving."""
+    graph, score = changing_scene(ModeBudget(max_modes=225))
+    fast = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+    budget = graph.budget
+    counts = budget.decisions, budget.peak_modes, budget.mode_samples
+    attach = ModeBudget.attach
+
+    def stepwise(self, *args, **options):
+        attach(self, *args, **options)
+        self._inline = False  # (the compiled step still decides: its INLINE flag is set)
+
+    monkeypatch.setattr(ModeBudget, "attach", stepwise)
+    graph, score = changing_scene(ModeBudget(max_modes=225))
+    slow = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+    budget = graph.budget
+    assert counts[0] > 0 and counts == (budget.decisions, budget.peak_modes, budget.mode_samples)
+    assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, slow)

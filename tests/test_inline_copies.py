@@ -89,6 +89,30 @@ def test_an_inliner_shaped_otherwise_keeps_numbas_copies(monkeypatch):
     assert not inline_copies.shaped_as_expected()
 
 
+def test_an_inliner_whose_stand_in_block_cannot_be_made_keeps_numbas_copies(monkeypatch):
+    """numba's ir.Scope taking other arguments makes the probe fail: not installed, no error."""
+
+    def scope_of_another_numba(*args, **kwargs):
+        raise TypeError("Scope() missing 1 required positional argument: 'kind'")
+
+    monkeypatch.setattr(inline_closurecall, "copy", copy)  # as before an install
+    monkeypatch.setattr(ir, "Scope", scope_of_another_numba)
+    assert not inline_copies.shaped_as_expected()
+
+
+def test_an_installer_that_raises_leaves_numba_as_it_is_and_the_next_runs():
+    from jassy.jit import _InstallAtFirstCompile
+
+    ran = []
+
+    def raising():
+        raise TypeError("numba shaped otherwise")
+
+    listener = _InstallAtFirstCompile(raising, lambda: ran.append(True))
+    listener.on_start(None)  # numba's first compile goes on
+    assert ran == [True]
+
+
 _COMPILE = """
 import hashlib, sys
 import jassy

@@ -62,3 +62,15 @@ def test_numba_shaped_otherwise_keeps_its_typing(monkeypatch):
     monkeypatch.setattr(functions, "BaseFunction", None)
     assert not remembered_typing.shaped_as_expected()
     assert not remembered_typing.install()
+
+
+def test_a_numba_without_get_local_target_imports_jassy_and_keeps_its_typing(monkeypatch):
+    """numba.core.target_extension.get_local_target moved: jassy still imports, and typing is
+    left as numba's (the probe fails, install says no)."""
+    import importlib
+
+    from numba.core import target_extension
+
+    monkeypatch.delattr(target_extension, "get_local_target")
+    importlib.reload(remembered_typing)
+    assert not remembered_typing.shaped_as_expected()

@@ -14,15 +14,24 @@ if it is large), and ``deref(r)`` gives the whole record back. While the referen
 the kernel that made it (used in kernels inlined at numba's level, not passed to another
 kernel), LLVM turns the stored record back into its values: the same code as the record
 itself. Passed to another kernel it is one argument, but its fields are then read from memory
-at each use. It points into the frame of the kernel that called :func:`ref`: valid only while
-that call runs (never kept, returned or stored). With numba's JIT off (NUMBA_DISABLE_JIT=1)
+at each use.
+
+A ref owns nothing. It points into the frame of the kernel that called :func:`ref` (never
+keep, return or store it), at a copy of the record's array descriptors, not at the arrays'
+owners: numba's reference counting (NRT) may free a record's arrays after the record's last
+use, which can be the ``ref`` call itself, and reads through the ref would then see freed
+memory. So :func:`ref` is refused (a compile error) in a kernel compiled with reference
+counting: only kernels compiled with ``_nrt=False`` (whose arrays belong to the caller for
+the whole call) may make refs; a kernel given a ref may count references. One ``ref`` call
+site stores into one stack slot however often it runs: a ref made in an earlier iteration of
+a loop reads the record stored by the latest one. With numba's JIT off (NUMBA_DISABLE_JIT=1)
 both functions return their argument, whose fields read the same.
 """
 
 from __future__ import annotations
 
 from numba import typeof
-from numba.core import cgutils, config, ir_utils, types
+from numba.core import cgutils, config, errors, ir_utils, types
 from numba.core.datamodel import models
 from numba.core.imputils import impl_ret_borrowed
 from numba.core.typing.templates import AttributeTemplate
@@ -32,6 +41,12 @@ from numba.extending import (
     lower_getattr_generic,
     register_model,
     typeof_impl,
+)
+
+#: Why :func:`ref` is refused in a kernel that counts references (module docstring).
+NRT_REFUSED = (
+    "record_ref.ref in a kernel compiled with reference counting: the record's arrays may be "
+    "freed while the ref is read; compile the kernel with _nrt=False"
 )
 
 
@@ -98,6 +113,10 @@ def _ref(typingctx, record):
         return None
 
     def codegen(context, builder, signature, args):
+        # Checked here, where the calling kernel is lowered, not at typing: numba types an
+        # intrinsic once per argument types and reuses that for kernels with other flags.
+        if context.enable_nrt:
+            raise errors.TypingError(NRT_REFUSED)
         model = context.data_model_manager[record]
         slot = cgutils.alloca_once(builder, model.get_data_type())
         builder.store(model.as_data(builder, args[0]), slot)
@@ -126,8 +145,12 @@ def _aliases_its_record(lhs, args, alias_map, arg_aliases):
     ir_utils._add_alias(lhs, args[0].name, alias_map, arg_aliases)
 
 
-ir_utils.alias_func_extensions[("_ref", __name__)] = _aliases_its_record
-ir_utils.alias_func_extensions[("_deref", __name__)] = _aliases_its_record
+# numba's find_callname names a call by the function's __name__ when it was imported by name
+# (``ref(x)``: "_ref") and by the attribute read when called through the module
+# (``record_ref.ref(x)``: "ref"): both spellings are registered.
+ir_utils.alias_func_extensions.update(
+    {(name, __name__): _aliases_its_record for name in ("_ref", "ref", "_deref", "deref")}
+)
 
 
 def _itself(value):

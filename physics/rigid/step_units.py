@@ -26,7 +26,6 @@ compile its own): tests/test_rigid_step_units.py checks that they agree.
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from collections.abc import Callable
 from functools import partial
@@ -35,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 from numba.core import config
 
-from jassy.forked_compile import cache_holds, compile_on_two_cores
+from jassy.forked_compile import cache_holds, compile_on_two_cores, helper_busy_with
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
@@ -45,13 +44,16 @@ from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope, p
 from physics.rigid.penalty import penalty
 from physics.rigid.record_ref import RefExample
 
-#: At most this long (s) this process waits for a kernel the helper compiles (_await_cache).
+#: At most this long (s) this process waits for a unit the helper compiles (_await_helper): a
+#: bound for a helper that hangs. The unit waited for (the mesh contacts) takes 7-12 s of CPU
+#: on the wok; 60 s leaves room for a machine shared with other work.
 HELPER_WAIT = 60.0
 
 
 class KernelCall(NamedTuple):
     """A kernel and example arguments of the types run_steps calls it with; ``after``: a
-    kernel the helper compiles first, waited for (_await_cache) before this one compiles."""
+    kernel of a unit the helper compiles first, waited for (_await_helper) before this one
+    compiles."""
 
     kernel: Callable
     args: tuple
@@ -98,34 +100,24 @@ def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
-    return compile_on_two_cores([partial(_compile, unit) for unit in step_units(m, opt, d)])
+    units = step_units(m, opt, d)
+    return compile_on_two_cores([partial(_compile, unit, units) for unit in units])
 
 
-def _compile(unit: list[KernelCall]) -> None:
+def _compile(unit: list[KernelCall], units: list[list[KernelCall]]) -> None:
     """Compile a unit's kernels for their calls' types, ignoring errors (run_steps then
     compiles what it needs itself: only this unit's time is lost)."""
     for call in unit:
         if call.after is not None:
-            _await_cache(call.after)
+            _await_helper(next(i for i, u in enumerate(units) if u[0].kernel is call.after))
         with contextlib.suppress(Exception):
             specialise(call.kernel, *call.args)
 
 
-def _await_cache(kernel, seconds: float = HELPER_WAIT) -> None:
-    """Wait until numba's cache holds ``kernel`` (compiled by the helper, which starts with it)
-    while a child process (the helper) runs, at most ``seconds``; then this process compiles
-    whatever is still missing."""
+def _await_helper(unit: int, seconds: float = HELPER_WAIT) -> None:
+    """Wait while the helper works on unit ``unit`` of the list (it starts with it), at most
+    ``seconds``: until it has finished it (compiled, or given up) or has ended; at once with
+    no helper. This process then compiles whatever is still missing."""
     deadline = time.monotonic() + seconds
-    while not cache_holds(kernel) and _child_running() and time.monotonic() < deadline:
+    while helper_busy_with(unit) and time.monotonic() < deadline:
         time.sleep(0.02)
-
-
-def _child_running() -> bool:
-    """Whether this process has a child and none has ended (without reaping it: WNOWAIT);
-    True where os.waitid is missing (macOS before Python 3.13: the deadline alone counts)."""
-    if not hasattr(os, "waitid"):
-        return True
-    try:
-        return os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None
-    except ChildProcessError:  # no child at all
-        return False
