@@ -8,7 +8,10 @@ callee that holds its own inlined helpers has hundreds of blocks and thousands o
 variables, and in a first ``jassy render wok`` these copies were the largest single cost
 of numba's own Python work. Here each block is still deep-copied on its own, but the
 blocks of one IR copy share one copy of the scope (made the same way, by
-``copy.deepcopy``), as the blocks of the IR they are copied from share theirs.
+``copy.deepcopy``), as the blocks of the IR they are copied from share theirs. A statement's
+source location may hold its file's source lines (a list numba caches from ``linecache``
+and only reads, to format messages); the copied locations share that list instead of
+copying it, item by item, per block.
 
 The copies hold the same statements, variables and names: numba reads a copied IR's scope
 through its first block only (to rename the callee's variables into the caller, and for
@@ -44,7 +47,8 @@ class ScopeSharingCopies:
 
     Outside :meth:`sharing` (and for anything but a whole block) it is ``copy`` itself. While
     sharing, ``deepcopy(block)`` deep-copies the block with its scope replaced by one copy of
-    that scope per source scope, made at its first block."""
+    that scope per source scope, made at its first block, and its statements' cached source
+    lines kept as they are."""
 
     def __init__(self):
         self.scopes: dict[int, ScopeCopy] | None = None
@@ -59,7 +63,12 @@ class ScopeSharingCopies:
         found = self.scopes.get(id(source))
         if found is None:
             found = self.scopes[id(source)] = ScopeCopy(source, copy.deepcopy(source))
-        return copy.deepcopy(value, {id(source): found.copy})
+        memo = {id(source): found.copy}
+        for statement in value.body:  # a location's cached source lines: shared, not copied
+            lines = getattr(statement.loc, "lines", None)
+            if lines is not None:
+                memo[id(lines)] = lines
+        return copy.deepcopy(value, memo)
 
     @contextmanager
     def sharing(self):

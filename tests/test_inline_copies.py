@@ -46,6 +46,22 @@ def test_the_blocks_of_one_copy_share_one_scope_equal_to_numbas_copies():
         assert all(var.scope is scope for stmt in block.body for var in stmt.list_vars())
 
 
+def test_copied_locations_share_their_cached_source_lines():
+    source = run_frontend(_branchy)
+    block = source.blocks[0]
+    for statement in block.body:
+        statement.loc.get_lines()  # numba caches them when it formats a message
+    copies = inline_copies.ScopeSharingCopies()
+    with copies.sharing():
+        copied = copies.deepcopy(block)
+    numbas = copy.deepcopy(block)
+    assert copied == numbas
+    for new, mine, old in zip(copied.body, numbas.body, block.body, strict=True):
+        assert new.loc is not old.loc and new.loc == old.loc  # a copy, at the same place
+        assert new.loc.lines is old.loc.lines and len(old.loc.lines) > 10  # one list, not copied
+        assert mine.loc.lines == old.loc.lines and mine.loc.lines is not old.loc.lines
+
+
 def test_outside_a_sharing_context_it_is_numbas_deepcopy():
     source = run_frontend(_branchy)
     copies = inline_copies.ScopeSharingCopies()
