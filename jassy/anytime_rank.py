@@ -17,9 +17,10 @@ drop_stale_cache(__file__, [record_views])  # the cache holds copies of its view
 
 @nb.njit(cache=True)
 def kth_smallest(a, k):
-    """The k-th smallest (from 0) of the values a (reordered in place; no NaN), by Wirth's
-    selection: what np.partition(a, k)[k] gives, without its copy and sort network (2.3
-    against ~1 us for a few hundred scores, twice per decision)."""
+    """The k-th smallest (from 0; 0 <= k < a.size) of the values a (reordered in place; no
+    NaN), by Wirth's selection: what np.partition(a, k)[k] gives, without its copy and sort
+    network (a ``top_mask`` of 297 scores: 1.7 us with it against 2.6 us with
+    np.partition)."""
     lo, hi = 0, a.size - 1
     while lo < hi:
         pivot, i, j = a[k], lo, hi
@@ -41,8 +42,12 @@ def kth_smallest(a, k):
 
 @nb.njit(cache=True)
 def top_mask(score, limit, keep):
-    """keep[k] = True for the ``limit`` highest positive scores (ties broken by index)."""
+    """keep[k] = True for the ``limit`` highest positive scores (ties broken by index);
+    none for ``limit`` <= 0."""
     n = score.size
+    if limit <= 0:
+        keep[:] = False
+        return
     positive = 0
     unordered = False  # a NaN score
     for k in range(n):

@@ -241,16 +241,24 @@ def test_ranking_keeps_exactly_the_highest_positive_scores():
             assert score[~keep].max() <= positive[limit - 1]
 
 
+@pytest.mark.timeout(120)
 def test_selection_gives_numpys_partition_value():
     """kth_smallest (the ranking's threshold) against np.partition: sizes 1-300, ties,
-    every k; and top_mask with a NaN score takes np.partition's threshold."""
+    k from the first to the last; top_mask with a NaN score takes np.partition's
+    threshold, and with a limit of 0 keeps nothing (it used to select one past the end)."""
     from jassy.anytime_rank import kth_smallest, top_mask
 
     rng = np.random.default_rng(5)
     for size in (1, 2, 3, 7, 64, 297):
         values = np.round(rng.exponential(size=size) ** 3, 1)  # many ties
-        for k in range(0, size, max(1, size // 17)):
+        for k in [*range(0, size, max(1, size // 17)), size - 1]:
             assert kth_smallest(values.copy(), k) == np.partition(values, k)[k]
+    for unordered in (False, True):
+        score = rng.random(40)
+        score[3] = np.nan if unordered else score[3]
+        keep = np.ones(40, dtype=bool)
+        top_mask(score, 0, keep)
+        assert not keep.any()
     score = rng.random(50)
     score[7] = np.nan
     keep = np.zeros(50, dtype=bool)

@@ -62,7 +62,7 @@ def test_kept_step_with_blocks_matches_it_without_through_forces_flushes_and_a_j
     force[2000:2003] = 1.0  # an impact, then free ringing and flushes
     force[3000:4500] = rng.normal(size=1500)
     force[5000:6500] = rng.normal(size=1500)
-    plain, blocked = compact_bank(rng, live=3), None
+    plain = compact_bank(rng, live=3)
     blocked = plain.copy()
     metas = [np.array([0, 1, 8]), np.array([0, 1, 8])]
     lasts = [np.zeros(1), np.zeros(1)]

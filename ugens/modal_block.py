@@ -47,7 +47,7 @@ BLOCK_MODES, BLOCK = 4, 8
 #: the next state's rows for [y1 | y1] and [y2 | y2] and for each input, then the
 #: coefficients the table was made from (c1 | c2, then g | d).
 BASIS, TOEPLITZ, NEXT_Y1, NEXT_Y2, NEXT_INPUT, MADE_FROM = 0, 8, 16, 17, 18, 26
-BLOCK_ROWS = 28
+BLOCK_ROWS = MADE_FROM + 2
 #: Floats of a block table (rows of BLOCK lanes, flat).
 BLOCK_TABLE = BLOCK_ROWS * BLOCK
 
@@ -106,11 +106,6 @@ def _lanes(builder, a, b, picks):
     return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_INDEX, len(picks)), picks))
 
 
-def _spread(builder, v, lane):
-    """A BLOCK-lane vector of v's lane ``lane``."""
-    return _lanes(builder, v, v, [lane] * BLOCK)
-
-
 def _pointer(context, builder, array_type, value, at, lanes):
     """The address of element ``at`` of a C-contiguous float64 array as <lanes x double>*."""
     data = context.make_array(array_type)(context, builder, value).data
@@ -147,7 +142,10 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
     with the bank's block ``table`` (:func:`fill_table`) into out[:8 passes]: the inputs
     are fp (the force before sample 0) and force[:8 passes - 1], plus the direct term
     ``direct`` force[j]. Each state value and input is read by a broadcast load (lane
-    shuffles of 512-bit vectors cost more). Returns the force sample before the next pass."""
+    shuffles of 512-bit vectors cost more). Returns the force sample before the next pass.
+    A non-finite input (NaN, inf) makes the whole pass non-finite, its samples before that
+    input too (the Toeplitz matrix's zeros times it), where the recursion is non-finite
+    only from that sample on; the output stage keeps either from any file or device."""
     if not (
         all(_contiguous(a) for a in (table, y1, y2, force, out))
         and isinstance(passes, types.Integer)
@@ -162,10 +160,8 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
         vector, half = ir.VectorType(_DOUBLE, BLOCK), ir.VectorType(_DOUBLE, BLOCK_MODES)
         base = _pointer(context, builder, kinds[0], table, cgutils.intp_t(0), BLOCK)
 
+        # the rows, loaded once before the passes: held in registers, not reloaded
         rows = [builder.load(builder.gep(base, [cgutils.intp_t(r)]), align=8) for r in range(MADE_FROM)]
-
-        def row(r):  # (loaded once, before the passes: held in registers, not reloaded)
-            return rows[r]
 
         def spread(x):  # a scalar in every lane (from memory: a broadcast load)
             one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
@@ -182,7 +178,7 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
             states = [
                 builder.load(builder.gep(scalars[k // 4], [cgutils.intp_t(k % 4)])) for k in range(BLOCK)
             ]
-            terms = [(row(BASIS + k), spread(states[k])) for k in range(BLOCK)]
+            terms = [(rows[BASIS + k], spread(states[k])) for k in range(BLOCK)]
             ones = _lanes(
                 builder, builder.load(low, align=8), ir.Constant(half, ir.Undefined), [0, 1, 2, 3] * 2
             )
@@ -198,10 +194,10 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
             samples = builder.load(
                 builder.bitcast(builder.gep(force_at, [first]), vector.as_pointer()), align=8
             )
-            terms += [(row(TOEPLITZ + m), spreads[m]) for m in range(BLOCK)]
+            terms += [(rows[TOEPLITZ + m], spreads[m]) for m in range(BLOCK)]
             terms.append((direct_lanes, samples))
-            driven = _accumulated(builder, [(row(NEXT_INPUT + m), spreads[m]) for m in range(BLOCK)], 2)
-            following = _fma(builder, row(NEXT_Y2), twos, _fma(builder, row(NEXT_Y1), ones, driven))
+            driven = _accumulated(builder, [(rows[NEXT_INPUT + m], spreads[m]) for m in range(BLOCK)], 2)
+            following = _fma(builder, rows[NEXT_Y2], twos, _fma(builder, rows[NEXT_Y1], ones, driven))
             builder.store(builder.extract_element(samples, _INDEX(BLOCK - 1)), before_slot)
             builder.store(_accumulated(builder, terms, 4), builder.gep(out_at, [loop.index]), align=8)
             builder.store(_lanes(builder, following, following, [0, 1, 2, 3]), low, align=8)

@@ -44,20 +44,20 @@ def real_spectrum(x, cos, sin, zr, zi, xr, xi):
         if i < j:
             zr[i], zr[j] = zr[j], zr[i]
             zi[i], zi[j] = zi[j], zi[i]
-    wr, wi = xr, xi  # the stage's twiddles, contiguous (xr, xi are written only at the end)
+    stage_cos, stage_sin = xr, xi  # the stage's twiddles, contiguous (xr, xi are written only at the end)
     size = 2
     while size <= m:
         half = size // 2
         stride = n // size  # e^{-2 pi i k / size} is entry k * stride of the n-point table
         for k in range(half):
-            wr[k] = cos[k * stride]
-            wi[k] = -sin[k * stride]
+            stage_cos[k] = cos[k * stride]
+            stage_sin[k] = -sin[k * stride]
         for s in range(0, m, size):  # each block's butterflies in a row (contiguous a and b)
             for k in range(half):
                 a = s + k
                 b = a + half
-                tr = zr[b] * wr[k] - zi[b] * wi[k]
-                ti = zr[b] * wi[k] + zi[b] * wr[k]
+                tr = zr[b] * stage_cos[k] - zi[b] * stage_sin[k]
+                ti = zr[b] * stage_sin[k] + zi[b] * stage_cos[k]
                 zr[b] = zr[a] - tr
                 zi[b] = zi[a] - ti
                 zr[a] += tr
