@@ -89,3 +89,56 @@ def test_kept_step_with_blocks_matches_it_without_through_forces_flushes_and_a_j
     assert metas[0][0] == metas[1][0]
     late = slice(5000, frames)  # after the jump: fails if the table kept the old gains
     assert np.max(np.abs(outs[1][late] - outs[0][late])) < 1e-12 * np.max(np.abs(outs[0][late]))
+
+
+def test_a_bank_dropping_to_four_kept_modes_renders_by_blocks_as_without():
+    """A budgeted bank keeping more than four modes, then (a louder bank struck, its modes
+    faded out first) four or fewer: once its fades are over the compiled render takes the
+    block path (ugens.modal_kept.render_bank), which renders columns 0-3 of the compact
+    bank only. Its columns 4-7 are then silent (exact zeros), and from that state
+    kept_step with blocks equals it without, over a force, within 1e-12 of the peak."""
+    from jassy import Event, Graph, ModalModel, render
+    from jassy.anytime import ModeBudget
+    from ugens import ImpactForce, Mixer, ModalBank
+    from ugens.modal_budget import COMPACT_AT, FIRST, MODES
+    from ugens.modal_meta import ALLOWED, GATHERED, RAMP_LEFT, WIDTH
+
+    quiet = ModalModel(np.linspace(300.0, 2700.0, 10), np.full(10, 2.0), np.ones((1, 10)))
+    loud = ModalModel(np.linspace(3100.0, 4700.0, 5), np.full(5, 1.0), np.full((1, 5), 30.0))
+    bank = ModalBank(quiet, name="quiet")(ImpactForce(name="hq"))
+    mix = Mixer(bank, ModalBank(loud, name="loud")(ImpactForce(name="hl")))
+    score = [Event(0.0, "hq", "impact", {"impulse": 1.0}), Event(0.3, "hl", "impact", {"impulse": 1.0})]
+    budget = ModeBudget(max_modes=8, period=512)
+    seen = {"more": False, "fading": False, "blocks": None}
+    step = budget.step
+
+    def watched(start, n):  # after each sub-block: the quiet bank's kept set and compact bank
+        step(start, n)
+        t, b = budget._tables, budget._slots[id(bank)]
+        first, modes = t.layout[FIRST, b], t.layout[MODES, b]
+        allowed, meta = t.meta[b, ALLOWED], t.compact_meta[b]
+        seen["more"] |= allowed > 4
+        seen["fading"] |= seen["more"] and bool(t.faded[first : first + modes].any())
+        by_blocks = allowed <= 4 and t.meta[b, RAMP_LEFT] == 0 and meta[WIDTH] == 8 and meta[GATHERED]
+        if seen["fading"] and by_blocks and seen["blocks"] is None:
+            at = t.layout[COMPACT_AT, b]
+            compact = t.compact[at : at + COMPACT_ROWS * 8].reshape((COMPACT_ROWS, 8))
+            seen["blocks"] = (compact.copy(), meta.copy(), t.last[b], int(allowed), t.blocks[b].copy())
+
+    budget.step = watched
+    render(Graph(mix, budget=budget), score, 0.6, int(RATE), 64, limiter=False)
+    assert seen["more"] and seen["fading"] and seen["blocks"] is not None
+    compact, meta, before, allowed, made = seen["blocks"]
+    assert 0 < allowed <= 4 and np.any(compact[4, :allowed] != 0)  # kept modes ringing
+    assert not np.any(compact[:, 4:])  # what the block path leaves out is silent
+    assert np.array_equal(made.reshape(-1, 8)[-2, :4], compact[0, :4])  # the render's table: c1
+    rng = np.random.default_rng(3)
+    force = rng.normal(size=1024) * 1e-2
+    outs = []
+    for blocks in (None, line_aligned_zeros((BLOCK_TABLE,))):
+        rows, state, last, out = compact[:BANK_ROWS].copy(), meta.copy(), np.array([before]), np.zeros(1024)
+        extra = () if blocks is None else (blocks,)
+        kept_step(force, out, 0, 1024, rows, state, 1e-10, last, np.zeros(0), *extra)
+        outs.append(out)
+    assert np.max(np.abs(outs[0])) > 0
+    assert np.max(np.abs(outs[1] - outs[0])) < 1e-12 * np.max(np.abs(outs[0]))
