@@ -167,8 +167,9 @@ class ModeBudget:
         from ugens import modal_budget as mb  # (not at the top: the ugens import jassy)
 
         self._tables = tables = mb.budget_tables([b.model.n_modes for b in banks], self.period)
+        self._tables_handle = handle(tables)  # (the banks' and the step's: made once)
         for slot, bank in enumerate(banks):
-            bank.anytime_attach(tables, slot, self.horizon, self.weighting)
+            bank.anytime_attach(tables, slot, self.horizon, self.weighting, self._tables_handle)
         #: the scores (now, next period, sounding) and the masks to keep, fade, and keep next
         masks = (np.zeros(total, dtype=bool) for _ in range(3))
         h = self._hearing
@@ -218,10 +219,10 @@ class ModeBudget:
         the Decision (ugens.modal_kept.DECISION_AT)."""
         from ugens.modal_kept import DECISION_AT
 
-        self._step_handle = handle(
-            self._tables, self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,),
-            self._decision,
-        )  # fmt: skip
+        rest = handle(
+            self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,), self._decision
+        )
+        self._step_handle = np.concatenate((self._tables_handle, rest))  # handle(tables, hearing, ...)
         assert self._step_handle.size == DECISION_AT + len(self._decision) * FIELD, "step handle layout"
 
     def step(self, start: int, n: int) -> None:

@@ -1012,11 +1012,14 @@ class ModalBank(ModelParams, UGen):
         while self._pending and self._pending[0][0] <= frame:
             self._apply_queued()
 
-    def anytime_attach(self, tables: BudgetTables, slot: int, horizon: float, weighting: str) -> None:
+    def anytime_attach(
+        self, tables: BudgetTables, slot: int, horizon: float, weighting: str, tables_handle=None
+    ) -> None:
         """Start a budgeted render: the bank's rows move into column ``slot`` of the
         budget's ``tables`` (ugens.modal_budget; decisions every period, the ring's
         length); a continuous force is judged by the amplitude it builds in ``horizon``
-        seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime)."""
+        seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime).
+        ``tables_handle``: the tables' handle (jassy.record_views) if the budget made it."""
         self._settle()
         k, first, bank_at, coef_at, _ = (int(x) for x in tables.layout[:, slot])
         self._tables, self._slot = tables, slot
@@ -1056,7 +1059,7 @@ class ModalBank(ModelParams, UGen):
         self._forcing_key = None
         from ugens import modal_kept  # (not at the top: it imports this module)
 
-        self._tables_handle = handle(tables)
+        self._tables_handle = handle(tables) if tables_handle is None else tables_handle
         self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
         self._jump_kept = specialise(modal_budget.jump_at, self._tables_handle, slot)
         self._kept_span = specialise(
