@@ -7,7 +7,8 @@ in different processes, and numba's cache (``cache=True``) carries them from one
 other. :func:`compile_on_two_cores` takes a list of compile units (callables that compile,
 or load, some kernels), forks one helper process and works through the list from both ends:
 this process from the front, the helper from the back, each claiming a unit (in memory the
-two share) before it runs it, until they meet. Then it waits for the helper and returns;
+two share) before it runs it and passing over units the other has claimed, until none is
+left. Then it waits for the helper and returns;
 what the caller does next loads the helper's kernels from the cache instead of compiling
 them.
 
@@ -116,7 +117,7 @@ def _set_up_numba() -> None:
 
 
 def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
-    """The helper process: units from the back while they are free, silently; then exit."""
+    """The helper process: the free units from the back, silently; then exit."""
     global _running_units
     _running_units = True
     try:
@@ -124,8 +125,8 @@ def _help(units: Sequence[Callable[[], object]], claims: mmap.mmap) -> None:
         os.dup2(quiet, 1)
         os.dup2(quiet, 2)
         for i in reversed(range(len(units))):
-            if claims[i] != FREE:
-                break
+            if claims[i] != FREE:  # taken by this process: the helper goes on past it
+                continue
             claims[i] = HELPERS
             try:
                 units[i]()
@@ -156,6 +157,19 @@ def helper_busy_with(unit: int) -> bool:
         return os.waitid(os.P_PID, helper.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None
     except ChildProcessError:  # reaped already (by a SIGCHLD handler of the host)
         return False
+
+
+def claim(unit: int) -> bool:
+    """While units run: claim unit ``unit`` (an index into the list) for this process if
+    nobody has taken it yet; True if it is now this process's to run (always, where there
+    is no helper: in the helper itself, or with no helper forked)."""
+    helper = _helper
+    if helper is None or helper.claims.closed:
+        return True
+    if helper.claims[unit] != FREE:
+        return False
+    helper.claims[unit] = MINE
+    return True
 
 
 def running_units() -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -36,11 +37,8 @@ def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, 
     Returns (audio (channels, frames) as written, the engine's warnings)."""
     from jassy.engines.offline import OfflineEngine
     from jassy.files import AtomicAudioWriter
-    from jassy.graph import Graph
-    from ugens.radiation import Radiation
 
-    radiated = [Radiation(node, radius=radius, name=f"radiated{i}") for i, node in enumerate(graph.audio)]
-    graph = Graph(radiated, graph.haptic, graph.budget)
+    graph = _radiated(graph, radius)
     rendering = OfflineEngine(graph, score, sample_rate, block, limiter=False).render(duration)
     audio = rendering.audio
     if not np.all(np.isfinite(audio)):
@@ -53,6 +51,49 @@ def render_normalised(graph, score, duration: float, out_wav, sample_rate: int, 
     for found in _CAPTURES:
         found.append((audio, list(score)))
     return audio, list(rendering.warnings)
+
+
+def _radiated(graph, radius: float):
+    """``graph`` with each audio output through the radiation stage of a body of ``radius`` m."""
+    from jassy.graph import Graph
+    from ugens.radiation import Radiation
+
+    radiated = [Radiation(node, radius=radius, name=f"radiated{i}") for i, node in enumerate(graph.audio)]
+    return Graph(radiated, graph.haptic, graph.budget)
+
+
+def render_units(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> list:
+    """Compile units of a rigid scene's sound render, for the step's helper before the
+    physics has run (physics.rigid.world.simulate): one unit, :func:`compile_render`. Empty
+    on a filled kernel cache or for a scene with no voices."""
+    from jassy.engines.coldstart import kernels_cached
+
+    if not voices or kernels_cached():
+        return []
+    return [partial(compile_render, world, voices, sample_rate, block, radius)]
+
+
+def compile_render(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> None:
+    """Compile the kernels of a rigid scene's sound render (jassy.engines.coldstart's
+    compile_graph) for the graph scene_graph builds from one impact, with a location change,
+    and one sustained contact of the first sounding body on another, rendered as
+    render_normalised renders: the node kinds and parameter changes, so the kernels for the
+    types, of the real render."""
+    from jassy.engines.coldstart import compile_graph
+    from jassy.events import ContactTrack, Impact
+    from jassy.modal_model import Location
+    from patches.rigid_sound import scene_graph
+
+    body = min(voices)
+    other = 1 - body if len(world.bodies) > 1 and body < 2 else 0
+    pair = (min(body, other), max(body, other))
+    times = np.linspace(0.0, 0.01, 11)
+    ones = np.ones_like(times)
+    track = ContactTrack(pair, times, ones, ones, ones)
+    moved = Location((0, 1), (0.5, 0.5))  # a location change: the banks' jump to a new location
+    hit = Impact(0.0, pair, 1e-3, 0.5, locations=(moved, moved))
+    graph, score = scene_graph(world.bodies, [hit], [track], voices)
+    compile_graph(_radiated(graph, radius), dict(sample_rate=sample_rate, block=block, limiter=False), score)
 
 
 def write_csv(path, columns, header: str) -> None:

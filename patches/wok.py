@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from jassy.engines.offline import OFFLINE_BLOCK
 from jassy.errors import JassyError
 from jassy.modal_model import ModalModel
 from patches.rigid_sound import IMPACT_HEADER, Voice, contact_locator, impact_rows, scene_graph
-from patches.scene_io import render_normalised, write_csv
+from patches.scene_io import render_normalised, render_units, write_csv
 
 WOK_RIM = 0.18  # m
 WOK_CURVATURE = 0.35  # m
@@ -144,12 +145,14 @@ def build_world(n_food: int = 14, seed: int = 0, h: float = 1e-3):
     return world, voices
 
 
-def simulate_wok(duration: float = 6.0, n_food: int = 14, seed: int = 0):
-    """(world, voices, RunResult) of the wok scene."""
+def simulate_wok(duration: float = 6.0, n_food: int = 14, seed: int = 0, compile_units=None):
+    """(world, voices, RunResult) of the wok scene; ``compile_units(world, voices)``: compile
+    units for the step's helper on a cold kernel cache (physics.rigid.world.simulate)."""
     from physics.rigid.world import simulate
 
     world, voices = build_world(n_food, seed)
-    return world, voices, simulate(world, duration, sample_every=10)
+    units = compile_units(world, voices) if compile_units is not None else ()
+    return world, voices, simulate(world, duration, sample_every=10, compile_units=units)
 
 
 def render_wok(
@@ -173,7 +176,8 @@ def render_wok(
     if not (isinstance(duration, (int, float)) and 0 < duration <= 60):
         raise JassyError(f"duration: expected seconds in (0, 60], got {duration!r}")
     t0 = time.perf_counter()
-    world, voices, result = simulate_wok(duration, n_food, seed)
+    sound_units = partial(render_units, sample_rate=sample_rate, block=block)
+    world, voices, result = simulate_wok(duration, n_food, seed, compile_units=sound_units)
     t_phys = time.perf_counter() - t0
     hits = impacts(result, locate=contact_locator(world, voices))
     tracks = contact_tracks(result)

@@ -108,3 +108,26 @@ def test_the_cache_holds_a_kernel_once_its_data_file_is_written(monkeypatch):
     assert _cached_twice(2.0) == 4.0
     assert seen == [(True, False)]
     assert cache_holds(_cached_twice)
+
+
+@pytest.mark.timeout(60)
+def test_the_helper_passes_over_a_unit_this_process_claimed(forking_alone, tmp_path):
+    """This process claims unit 2 (forked_compile.claim) while the helper works on unit 3:
+    the helper passes over unit 2 and runs unit 1, which this process then leaves to it."""
+    if not forking_alone:
+        return
+    ran: list[int] = []
+
+    def first():
+        assert forked_compile.claim(2)
+        ran.append(0)
+        time.sleep(1.5)  # the helper reaches unit 1 meanwhile
+
+    def mark(unit: int):
+        return lambda: (tmp_path / f"unit{unit}-{os.getpid()}").touch()
+
+    here = os.getpid()
+    assert compile_on_two_cores([first, mark(1), lambda: ran.append(2), lambda: time.sleep(0.3)])
+    assert ran == [0]  # unit 2 was claimed, not run, here
+    marks = sorted(p.name for p in tmp_path.iterdir())
+    assert len(marks) == 1 and marks[0].startswith("unit1-") and marks[0] != f"unit1-{here}"

@@ -38,7 +38,23 @@ def graph_units(graph, engine_options: dict, score: Sequence = ()) -> list[Calla
     (:func:`kernels_cached`). Ordered so that the two ends meet with about half the work
     each: this process starts with the modal kernels (the largest unit), the helper with
     the engine's own kernels."""
-    if running_units() or graph.budget is not None or nb_config.DISABLE_JIT or kernels_cached():
+    if running_units():
+        return []
+    return _units(graph, engine_options, score)
+
+
+def compile_graph(graph, engine_options: dict, score: Sequence = ()) -> None:
+    """Run every unit of :func:`graph_units` here, one after the other (nothing on a filled
+    cache): for a compile unit that builds its graph itself, e.g. in a forked helper, since
+    building some graphs starts threads (pyfftw's cache) that would keep a helper from
+    being forked."""
+    for unit in _units(graph, engine_options, score):
+        unit()
+
+
+def _units(graph, engine_options: dict, score: Sequence) -> list[Callable[[], object]]:
+    """The units of :func:`graph_units`, whether or not units run now."""
+    if graph.budget is not None or nb_config.DISABLE_JIT or kernels_cached():
         return []  # with the JIT off (NUMBA_DISABLE_JIT) nothing compiles
     from jassy import program
 

@@ -8,8 +8,10 @@ subtrees can compile side by side: :func:`step_units` lists them as compile unit
 exact argument types run_steps passes (taken from the run's own Model, Options and Data
 records), and :func:`compile_step_ahead` hands them to
 :func:`jassy.forked_compile.compile_on_two_cores` (a forked helper takes units from the
-back of the list while this process works from the front). run_steps then compiles here,
-loading its callees from the cache instead of compiling them.
+back of the list while this process works from the front). run_steps then compiles here as
+this process's last unit, loading its callees from the cache instead of compiling them,
+while the helper goes on with the caller's own units (a scene's sound kernels), which
+otherwise this process would compile after the run.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
 takes the mesh contacts (``narrow._against_mesh`` with its grid search, 7-12 s), then the free
@@ -27,14 +29,14 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import partial
 from typing import NamedTuple
 
 import numpy as np
 from numba.core import config
 
-from jassy.forked_compile import cache_holds, compile_on_two_cores, helper_busy_with
+from jassy.forked_compile import cache_holds, claim, compile_on_two_cores, helper_busy_with
 from jassy.jit import specialise
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
@@ -48,6 +50,8 @@ from physics.rigid.record_ref import RefExample
 #: bound for a helper that hangs. The unit waited for (the mesh contacts) takes 7-12 s of CPU
 #: on the wok; 60 s leaves room for a machine shared with other work.
 HELPER_WAIT = 60.0
+#: The first this many units of step_units are this process's (the rest the helper's).
+MAIN_UNITS = 3
 
 
 class KernelCall(NamedTuple):
@@ -91,27 +95,60 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     ]
 
 
-def compile_step_ahead(m: Model, opt: Options, d: st.Data) -> bool:
+def compile_step_ahead(
+    m: Model, opt: Options, d: st.Data, extra: Sequence[Callable[[], object]] = ()
+) -> bool:
     """Compile run_steps' large callees for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it; True if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the kernels
-    are plain Python functions, nothing to compile)."""
+    it, then run_steps itself here while the helper goes on with ``extra`` (compile units of
+    the caller's, e.g. a scene's sound kernels, which the caller would otherwise compile after
+    the run); True if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
+    kernels are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
-    units = step_units(m, opt, d)
-    return compile_on_two_cores([partial(_compile, unit, units) for unit in units])
+    rigid = step_units(m, opt, d)
+    front, back = rigid[:MAIN_UNITS], rigid[MAIN_UNITS:]
+    first_back = len(front) + 1 + len(extra)
+    at = {id(u[0].kernel): i for i, u in enumerate(front)}
+    at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
+    contact, motion = st.step_models(opt)
+    run_args = (m, opt, d, 0, 0, 0, contact, motion)  # the types stepper.run passes
+    whole_step = partial(_compile_run_steps, list(enumerate(back, start=first_back)), at, run_args)
+    units = [
+        *(partial(_compile, unit, at) for unit in front),
+        whole_step,
+        *extra,
+        *(partial(_compile, unit, at) for unit in back),
+    ]
+    return compile_on_two_cores(units)
 
 
-def _compile(unit: list[KernelCall], units: list[list[KernelCall]]) -> None:
+def _compile(unit: list[KernelCall], at: dict[int, int]) -> None:
     """Compile a unit's kernels for their calls' types, ignoring errors (run_steps then
-    compiles what it needs itself: only this unit's time is lost)."""
+    compiles what it needs itself: only this unit's time is lost); ``at``: the position of
+    each kernel's unit in the list (by the id of the unit's first kernel)."""
     for call in unit:
         if call.after is not None:
-            _await_helper(next(i for i, u in enumerate(units) if u[0].kernel is call.after))
+            _await_helper(at[id(call.after)])
         with contextlib.suppress(Exception):
             specialise(call.kernel, *call.args)
+
+
+def _compile_run_steps(
+    helpers: list[tuple[int, list[KernelCall]]], at: dict[int, int], run_args: tuple
+) -> None:
+    """Compile run_steps for ``run_args`` once its callees are in the cache: the units the
+    helper has not taken yet here, then wait for those it has (the helper then goes on with
+    the units after this one)."""
+    for position, unit in helpers:
+        if claim(position):
+            _compile(unit, at)
+    for position, _ in helpers:
+        _await_helper(position)
+    with contextlib.suppress(Exception):
+        specialise(st.run_steps, *run_args)
 
 
 def _await_helper(unit: int, seconds: float = HELPER_WAIT) -> None:

@@ -11,7 +11,7 @@ events, ContactTracks and haptic frames.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -476,13 +476,16 @@ def simulate(
     sample_every: int = 1,
     chunk: int = 2000,
     keep_records: bool = True,
+    compile_units: Sequence[Callable[[], object]] = (),
 ) -> RunResult:
     """Run ``world`` for ``duration`` seconds (a whole number of steps of world.params.h),
     sampling the poses after every ``sample_every`` steps (0: only the final state).
     ``keep_records=False`` keeps no contact records (RunResult.records is empty; the counts in
     stats stay): the stepper writes them into one buffer reused from its start, instead of a
     run-long buffer whose every page is new memory (a settled pile of 1000 bodies writes
-    ~0.6 MB of records per step)."""
+    ~0.6 MB of records per step). ``compile_units``: the caller's compile units (e.g. a
+    scene's sound kernels) for the helper that compiles the step on a cold kernel cache
+    (:func:`physics.rigid.step_units.compile_step_ahead`); ignored on a filled cache."""
     opt = world.params.options()
     h = opt.h
     if not (duration > 0 and np.isfinite(duration)):
@@ -526,7 +529,7 @@ def simulate(
         if last is not None:
             data = st.carry_scratch(data, last)  # the scratch grown so far, not grown again
         else:
-            compile_step_ahead(model, opt, data)  # on an empty kernel cache: on two cores
+            compile_step_ahead(model, opt, data, compile_units)  # on an empty kernel cache: on two cores
         last, steps, nrec = st.run(model, opt, data, first + done, todo, nrec)
         rec = last.rec  # grown when a step resumed with too little room
         if steps < todo and not keep_records and nrec > 0:
