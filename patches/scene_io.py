@@ -85,7 +85,7 @@ def compile_render(world, voices, sample_rate: int, block: int, radius: float = 
     from patches.rigid_sound import scene_graph
 
     body = min(voices)
-    other = 1 - body if len(world.bodies) > 1 and body < 2 else 0
+    other = 1 if body == 0 and len(world.bodies) > 1 else 0  # any other body (or itself, alone)
     pair = (min(body, other), max(body, other))
     times = np.linspace(0.0, 0.01, 11)
     ones = np.ones_like(times)
