@@ -128,8 +128,9 @@ class ModeBudget:
 
     def attach(self, banks: list, sample_rate: float, listed, renders: bool = False, audio=None) -> None:
         """Start a render: ``banks`` expose the anytime_* methods of ugens.modal.ModalBank;
-        ``listed()`` gives (frames, impacts) of the score's impacts (frame, nodes, impulse,
-        location) in frame order, the same objects until the score changes. ``renders``:
+        ``listed()`` gives the score's impacts (jassy.scheduler.ListedImpacts: columns of
+        frame, ugen struck, impulse, location) in frame order, the same object until the
+        score changes. ``renders``:
         :meth:`step` also renders the banks (their inputs are rendered before it), splitting
         their sub-block only at the frames where it decides; otherwise the scheduler cuts
         sub-blocks at every period and a bank's force counts as heard in every period (it
@@ -282,35 +283,37 @@ class ModeBudget:
                 changes.setdefault(max(frame, start), []).append(bank)
         return changes
 
-    def _load_kicks(self, listed: tuple) -> int:
-        """The score's impacts (``listed``: frames, impacts (frame, nodes, impulse, location))
-        into the compiled step's table, one row per bank struck (one row with slot -1 for
-        an impact on none of the budget's banks), in frame order, with the struck bank's
-        gains at each location named; returns the rows. Loaded when the render starts
-        (:meth:`attach`: ~1 ms for the wok's 1030 impacts, with the scheduler's listing, no
-        longer in the first sub-block), again only when the score changes (a new listing)."""
+    def _load_kicks(self, listed) -> int:
+        """The score's impacts (``listed``: jassy.scheduler.ListedImpacts, columns of one
+        row per bank struck in frame order) into the compiled step's table (slot -1 for a
+        bank not the budget's), with the struck bank's gains at each location named;
+        returns the rows. Loaded when the render starts (:meth:`attach`), again only when
+        the score changes (a new listing). Column by column: ~0.2 ms for the wok scene's
+        1030 impacts."""
         if listed is self._loaded:
             return self._loaded_rows
-        slots, rows, located, gains, size = self._slots, [], {}, [], 0
-        for frame, nodes, impulse, location in listed[1]:
-            for node in nodes or (None,):
-                slot = slots.get(id(node), -1)
-                at = -1
-                if slot >= 0 and location is not None:
-                    at = located.get((slot, location))
-                    if at is None:
-                        row = self.banks[slot].anytime_gains(location)
-                        at = located[(slot, location)] = size
-                        gains.append(row)
-                        size += row.size
-                rows.append((frame, slot, impulse > 0.0, impulse, at))
-        count = len(rows)
-        table = self._kick_table = self._empty_kicks(max(count, 1), size)
+        slot_of, count = self._slots, len(listed.frames)
+        table = self._kick_table = self._empty_kicks(max(count, 1), 0)
+        slots = [slot_of.get(id(node), -1) for node in listed.nodes]
+        at, located, gains, size = [-1] * count, {}, [], 0
+        named = [i for i, where in enumerate(listed.locations) if where is not None and slots[i] >= 0]
+        for i in named:  # the struck bank's gains at each location named
+            key = (slots[i], listed.locations[i])
+            offset = located.get(key)
+            if offset is None:
+                row = self.banks[key[0]].anytime_gains(key[1])
+                offset = located[key] = size
+                gains.append(row)
+                size += row.size
+            at[i] = offset
         if count:
-            for field, column in zip(table[:5], zip(*rows, strict=True), strict=True):
-                field[:count] = column
+            table.frames[:count] = listed.frames
+            table.slots[:count] = slots
+            table.impulses[:count] = listed.impulses
+            np.greater(table.impulses, 0.0, out=table.positive)
+            table.located[:count] = at
         if gains:
-            np.concatenate(gains, out=table.gains)
+            table = self._kick_table = table._replace(gains=np.concatenate(gains))
         self._steps_handle()
         self._loaded, self._loaded_rows = listed, count
         return count

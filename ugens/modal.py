@@ -708,7 +708,7 @@ class ModalBank(ModelParams, UGen):
         split = self._split
         self._forget_split()
         if self._compact_meta[GATHERED]:
-            self._settle_compact(self._tables_handle, self._slot)
+            self._anytime_entry("settle")(self._tables_handle, self._slot)
         if split is None:
             return
         self.y[:, split.wide] = split.rows.wide_bank[4:]
@@ -786,7 +786,7 @@ class ModalBank(ModelParams, UGen):
             return
         if self._tables is not None and self._jumps_gains_only(jump):
             self._refresh_design_cache()
-            self._jump_kept(self._tables_handle, self._slot)
+            self._anytime_entry("jump")(self._tables_handle, self._slot)
             self.meta[RAMP_LEFT] = 0
             self._ramping = False
             return
@@ -951,6 +951,8 @@ class ModalBank(ModelParams, UGen):
             self._ramping = meta[RAMP_LEFT] > 0
         else:
             self._settle()
+            if self._bank_handle is None:  # (a budget's attach moved the rows: made again on use)
+                self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
             call = self._bank_call
             if call is None:
                 call = self._bank_call = self._call(bank_span, self._bank_handle)
@@ -968,7 +970,7 @@ class ModalBank(ModelParams, UGen):
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
         bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
         excitation), its coefficients ramping while the bank's meta says so."""
-        self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
+        self._anytime_entry("span")(self._tables_handle, self._slot, inp, out, start, n)
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -1038,7 +1040,7 @@ class ModalBank(ModelParams, UGen):
         self.meta = tables.meta[slot]
         tables.last[slot] = self.last[0]
         self.last = tables.last[slot : slot + 1]
-        self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
+        self._bank_handle = None  # (a budgeted render does not use it: made again on use)
         tables.values[FLOOR, slot] = self._floor
         self._compact_meta = tables.compact_meta[slot]
         self._compact_meta[:] = 0
@@ -1057,15 +1059,28 @@ class ModalBank(ModelParams, UGen):
         tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
         self._horizon = horizon
         self._forcing_key = None
-        from ugens import modal_kept  # (not at the top: it imports this module)
-
         self._tables_handle = handle(tables) if tables_handle is None else tables_handle
-        self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
-        self._jump_kept = specialise(modal_budget.jump_at, self._tables_handle, slot)
-        self._kept_span = specialise(
-            modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
-        )
+        self._anytime_entries = {}
         self._refresh_forcing()
+
+    def _anytime_entry(self, name: str):
+        """A budgeted bank's compiled entry point ``name``: "settle" (its compact bank's
+        state back into its rows), "jump" (its coefficients to the fresh design in place)
+        or "span" (its kept modes over a span, for a bank rendering through its own
+        ``process``), found on first use: most banks of a budget use none of them, and
+        finding one costs ~10 us (the budget's set-up, charged to it)."""
+        entry = self._anytime_entries.get(name)
+        if entry is None:
+            from ugens import modal_kept  # (not at the top: it imports this module)
+
+            at, slot = self._tables_handle, self._slot
+            kernel, example = {
+                "settle": (modal_kept.settle_at, (at, slot)),
+                "jump": (modal_budget.jump_at, (at, slot)),
+                "span": (modal_kept.kept_span, (at, slot, self.out, self.out, 0, 0)),
+            }[name]
+            entry = self._anytime_entries[name] = specialise(kernel, *example)
+        return entry
 
     def active_modes(self) -> int:
         """The modes the bank computes now (its kernels' active count)."""
