@@ -185,10 +185,8 @@ class ModeBudget:
             (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
         )
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
-        window_power = self.sample_rate * float(np.sum(tables.spectra[mb.WINDOW] ** 2))
-        self._rates = mb.Rates(
-            float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, window_power, 0
-        )
+        scale = mb.window_power(self.period, self.sample_rate)
+        self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, scale, 0)
         from ugens import modal_kept as mk
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them

@@ -59,15 +59,11 @@ from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_ret
 from ugens.cells import is_flush_frame, mode_rows, silent, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
-    DECAY,
     FLAT_SPECTRUM_MODES,
     FLOOR,
     FLOOR2,
     GAIN_LEVEL,
-    GROWTH,
-    INV,
     REMEMBERED,
-    SIN2,
     SIZE,
     TRANSFORMED,
     WEIGHT,
@@ -764,22 +760,24 @@ class ModalBank(ModelParams, UGen):
         amplitude^2 a stationary force of power spectral density S gives it is unit2 S
         times this), and the DFT bin of its frequency in a budget period."""
         v = self.values
-        key = (v["freq_scale"], v["decay_scale"], self._size)
+        key = (float(v["freq_scale"]), float(v["decay_scale"]), float(self._size))
         if key == self._forcing_key:  # a location or gain change: nothing to redo
             return
-        self._forcing_key, retune = key, 1.0 / np.sqrt(self._size)
+        self._forcing_key = key
         _, _, sin2, inv = self._poles
-        rows, period = self._mode_rows_view, self._heard.size
-        rows[SIN2], rows[INV] = sin2, inv
-        rows[DECAY] = self._fresh[COEF_C2] ** period
-        freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
-        decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
-        self._psd_bins[:] = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2)
-        self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
-        two_d_tau = 2.0 * decays * self._horizon
-        rows[GROWTH] = np.where(
-            two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
+        modes = modal_budget.Forcing(
+            sin2, inv, self._fresh[COEF_C2], self.model.frequencies, self.model.decays, self.order
         )
+        modal_budget.forcing_rows(
+            self._mode_rows_view,
+            self._psd_bins,
+            modes,
+            self._heard.size,
+            key,
+            self.sample_rate,
+            self._horizon,
+        )
+        self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if self._held:  # more keys of the same change follow (:meth:`_set_together`)

@@ -103,12 +103,17 @@ PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 #: The share of the previous smoothed periodogram kept at each decision.
 PSD_MEMORY = 0.75
 
-#: Rows of :attr:`BudgetTables.spectra` (one budget period wide): the Hann window, the
-#: period's force centred and windowed, the transform's cos and sin table
-#: (ugens.real_fft.twiddles), its scratch (real, imaginary) and the spectrum (real,
+#: Rows of :attr:`BudgetTables.spectra` (one budget period wide, the same for every
+#: budget of that period and only read): the Hann window and the transform's cos and sin
+#: table (ugens.real_fft.twiddles).
+WINDOW, COS, SIN = range(3)
+SPECTRA_ROWS = 3
+
+#: Rows of a periodogram's scratch (:func:`periodogram` allocates it): the period's force
+#: centred and windowed, the transform's scratch (real, imaginary) and the spectrum (real,
 #: imaginary).
-WINDOW, WINDOWED, COS, SIN, PACKED_RE, PACKED_IM, SPECTRUM_RE, SPECTRUM_IM = range(8)
-SPECTRA_ROWS = 8
+WINDOWED, PACKED_RE, PACKED_IM, SPECTRUM_RE, SPECTRUM_IM = range(5)
+SCRATCH_ROWS = 5
 
 
 class BudgetTables(NamedTuple):
@@ -130,7 +135,7 @@ class BudgetTables(NamedTuple):
     last: np.ndarray  # float64 (banks,): ModalBank.last, the force sample before the next frame
     values: np.ndarray  # float64 (BANK_VALUES, banks)
     bins: np.ndarray  # int64 (modes,): the periodogram's bin at each mode's frequency
-    spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window, scratch and result
+    spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window and twiddles (shared)
     blocks: (
         np.ndarray
     )  # float64 (banks, BLOCK_TABLE): block tables of banks of few kept modes (ugens.modal_block)
@@ -192,21 +197,32 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
     )  # fmt: skip
 
 
-#: :func:`spectra_rows` by period, computed once per process (each budget gets a copy)
+#: :func:`spectra_rows` by period, computed once per process and shared by every budget,
+#: and the window's energy (the sum of its squares) by period
 _SPECTRA: dict[int, np.ndarray] = {}
+_WINDOW_ENERGY: dict[int, float] = {}
 
 
 def spectra_rows(period: int) -> np.ndarray:
-    """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window
-    and the transform's tables set, the rest zero (a copy of the rows computed for the
-    first budget of that period: the window and the twiddles cost ~0.1-0.3 ms per render
-    to compute)."""
+    """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window and
+    the transform's tables, computed for the first budget of that period (they cost
+    ~0.1-0.3 ms) and shared by all (compiled code only reads them; a periodogram's
+    scratch is its own)."""
     spectra = _SPECTRA.get(period)
     if spectra is None:
         spectra = _SPECTRA[period] = np.zeros((SPECTRA_ROWS, period))
         spectra[WINDOW] = np.hanning(period)
         spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
-    return spectra.copy()
+        _WINDOW_ENERGY[period] = float(np.sum(spectra[WINDOW] ** 2))
+    return spectra
+
+
+def window_power(period: int, sample_rate: float) -> float:
+    """The periodogram's scale for a budget ``period``: the sample rate (Hz) times the
+    energy of :func:`spectra_rows`' window (a PSD in N^2/Hz; :attr:`Rates.window_power`)."""
+    if period not in _WINDOW_ENERGY:
+        spectra_rows(period)
+    return sample_rate * _WINDOW_ENERGY[period]
 
 
 @nb.njit(cache=True)
@@ -341,6 +357,41 @@ def centred_windowed(force, window, out, oldest):
         out[i] = (force[i] - mean) * window[i + n - oldest]
 
 
+class Forcing(NamedTuple):
+    """A bank's modes for :func:`forcing_rows`: sin^2 theta and 1 / (R^2 sin^2 theta) of
+    its poles and c2 = R^2 of its design (internal order), its model's frequencies (Hz)
+    and decay rates (1/s), and ``order``, the model's mode at each internal position."""
+
+    sin2: np.ndarray
+    inv: np.ndarray
+    c2: np.ndarray
+    frequencies: np.ndarray
+    decays: np.ndarray
+    order: np.ndarray
+
+
+@nb.njit(cache=True)
+def forcing_rows(rows, bins, modes, period, scales, sample_rate, horizon):
+    """A bank's per-mode rows of a budget of ``period`` frames in one pass (``rows``: its
+    columns of :attr:`BudgetTables.rows`, ``bins`` of :attr:`BudgetTables.bins`), from
+    ``modes`` (:class:`Forcing`): SIN2, INV, the energy decay over a period c2^period =
+    R^(2 period), the build-up under a steady force over the horizon tau (s),
+    (1 - e^{-2 d tau}) / (2 d) (tau as d -> 0), and the periodogram's bin of each
+    frequency (at most period / 2); frequencies and decays scaled by ``scales``
+    (freq_scale, decay_scale, fragment size s: both also by 1 / sqrt(s))."""
+    retune = 1.0 / np.sqrt(scales[2])
+    freq_scale, decay_scale = scales[0] * retune, scales[1] * retune
+    half = period // 2
+    for i in range(bins.size):
+        j = modes.order[i]
+        rows[SIN2, i], rows[INV, i] = modes.sin2[i], modes.inv[i]
+        rows[DECAY, i] = modes.c2[i] ** float(period)
+        bins[i] = int(min(np.rint(modes.frequencies[j] * freq_scale * period / sample_rate), half))
+        decay = modes.decays[j] * decay_scale
+        two_d_tau = 2.0 * decay * horizon
+        rows[GROWTH, i] = -np.expm1(-two_d_tau) / max(2.0 * decay, 1e-300) if two_d_tau > 1e-9 else horizon
+
+
 @nb.njit(cache=True)
 def psd_at_bins(re, im, bins, taps, scale, memory, remembered, psd):
     """Per mode, the periodogram |re + i im|^2 / ``scale`` (N^2/Hz) smoothed over the bins
@@ -424,11 +475,11 @@ def periodogram(t, b, window_power, frame):
     modes' bins (:attr:`BudgetTables.bins`), smoothed over PSD_SMOOTHING and blended with
     the last one by PSD_MEMORY, into its SPECTRUM row (ugens.real_fft: no Python between
     the force and the row)."""
-    s = t.spectra
+    s, x = t.spectra, np.empty((SCRATCH_ROWS, t.spectra.shape[1]))
     half = s.shape[1] // 2
-    centred_windowed(t.rings[b], s[WINDOW], s[WINDOWED], frame % s.shape[1])
-    re, im = s[SPECTRUM_RE, : half + 1], s[SPECTRUM_IM, : half + 1]
-    real_spectrum(s[WINDOWED], s[COS], s[SIN], s[PACKED_RE, :half], s[PACKED_IM, :half], re, im)
+    centred_windowed(t.rings[b], s[WINDOW], x[WINDOWED], frame % s.shape[1])
+    re, im = x[SPECTRUM_RE, : half + 1], x[SPECTRUM_IM, : half + 1]
+    real_spectrum(x[WINDOWED], s[COS], s[SIN], x[PACKED_RE, :half], x[PACKED_IM, :half], re, im)
     o, k = t.layout[FIRST, b], t.layout[MODES, b]
     remembered = t.values[REMEMBERED, b] > 0.0
     psd_at_bins(
