@@ -191,10 +191,14 @@ class ModeBudget:
 
         self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
         self._by_python = np.zeros(len(banks), dtype=bool)
+        self._zeros = np.zeros(len(banks), dtype=np.int64)  # output samples known zero (render_kept)
         #: the banks the compiled render cannot render (a size input), marked in by_python
         self._slow = [i for i, bank in enumerate(banks) if not bank.anytime_compiled()]
         self._by_python[self._slow] = True
-        self._compiled_banks = [bank for i, bank in enumerate(banks) if i not in self._slow]
+        self._watched = {}  # id -> the compiled banks with a parameter change queued
+        for i, bank in enumerate(banks):
+            if i not in self._slow:
+                bank.anytime_watch(self._watched)
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
         self._loaded = None  # the listing in the Kicks table
         self._load_kicks(self.listed())  # the score's impacts, before the first sub-block
@@ -219,7 +223,11 @@ class ModeBudget:
         from ugens.modal_kept import DECISION_AT
 
         rest = handle(
-            self._hearing, (self._outputs, self._by_python), self._kick_table, (self._state,), self._decision
+            self._hearing,
+            (self._outputs, self._by_python, self._zeros),
+            self._kick_table,
+            (self._state,),
+            self._decision,
         )
         self._step_handle = np.concatenate((self._tables_handle, rest))  # handle(tables, hearing, ...)
         assert self._step_handle.size == DECISION_AT + len(self._decision) * FIELD, "step handle layout"
@@ -272,14 +280,25 @@ class ModeBudget:
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change
-        queued there, for the frames before ``end`` (those before ``start`` at ``start``)."""
+        queued there, for the frames before ``end`` (those before ``start`` at ``start``),
+        in the banks' order; None for none. Only the banks that queued a change are asked
+        (ModalBank.anytime_watch); those with none left are let go."""
+        watch = self._watched
+        if not watch:
+            return None
         changes = None  # (no dictionary for the sub-blocks without a change, most of them)
-        for bank in self._compiled_banks:  # (zip over the numpy mask cost ~3 us per call)
-            for frame in bank.anytime_changes(end):
+        for bank in sorted(watch.values(), key=self._slot_of):
+            frames = bank.anytime_changes(end)
+            if not frames and not bank.anytime_changes(math.inf):
+                del watch[id(bank)]
+            for frame in frames:
                 if changes is None:
                     changes = {}
                 changes.setdefault(max(frame, start), []).append(bank)
         return changes
+
+    def _slot_of(self, bank) -> int:
+        return self._slots[id(bank)]
 
     def _load_kicks(self, listed) -> int:
         """The score's impacts (``listed``: jassy.scheduler.ListedImpacts, columns of one

@@ -632,6 +632,7 @@ class ModalBank(ModelParams, UGen):
         self._steady = None  # (_steady, _steady_rows): process's fast path (_span)
         self._steady_rows: np.ndarray | None = None
         self.budgeted = False
+        self._change_watch: dict | None = None  # told of queued changes (anytime_watch)
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
         self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
@@ -834,6 +835,8 @@ class ModalBank(ModelParams, UGen):
         """Queue a parameter change for ``frame``: :meth:`process` applies it there (a location
         jump at each impact of a rigid scene need not split the graph's sub-block)."""
         self._pending.append((frame, key, value, jump, ramp))
+        if self._change_watch is not None:
+            self._change_watch[id(self)] = self
 
     def process(self, start: int, n: int, offset: int = 0) -> None:
         """Frames [start, start + n) from the inputs' samples [offset, offset + n) of this
@@ -1005,6 +1008,15 @@ class ModalBank(ModelParams, UGen):
         if not self._pending:
             return ()
         return [change[0] for change in self._pending if change[0] < end]
+
+    def anytime_watch(self, watch: dict) -> None:
+        """From now on enter this bank in ``watch`` (by id) whenever a parameter change is
+        queued (:meth:`set_param_at`; now too if one is): the budget that renders the bank
+        asks only the banks entered there for their changes (asking each of the wok
+        scene's 15 banks at every sub-block cost ~6 us)."""
+        self._change_watch = watch
+        if self._pending:
+            watch[id(self)] = self
 
     def anytime_apply(self, frame: int) -> None:
         """Apply the parameter changes queued for frames up to ``frame``: the budget has
