@@ -105,6 +105,7 @@ def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does()
         graph.budget = ModeBudget(max_modes=30)
         OfflineEngine(graph, score, FS, 4096, limiter=False, program=False)
         budget = graph.budget
-        records = (budget._tables, budget.hearing, (budget._addresses[1], budget._flags[BY_PYTHON]))
+        outputs = (budget._addresses[1], budget._flags[BY_PYTHON], budget._zeros)
+        records = (budget._tables, budget.hearing, outputs)
         rest = (budget._kick_table, (budget._state,), budget.decision)
         assert np.array_equal(budget._step_handle, handle(*records, *rest))
