@@ -189,6 +189,7 @@ class ModeBudget:
         self._state[RENDERS] = self.renders
         for bank in banks:
             bank.budgeted = self.active
+        self._one_call = False
         if self.active:
             self._attach_tables(banks, total)
         self._processes = [bank.process for bank in banks]
@@ -277,6 +278,8 @@ class ModeBudget:
         #: the compiled step renders every bank and takes every decision itself (INLINE)
         self._inline = not ((self.renders and self._slow) or self._fed or self.cpu_fraction is not None)
         self._state[INLINE] = self._inline
+        #: every sub-block without a queued change or a new score is one compiled call
+        self._one_call = self._inline and self.renders
         self._advance = fixed_entry(mk.advance_at, self._step_handle, 0, 0, 0, 0, 0, 0, self._rates)
         self._impacts = fixed_entry(mk.impacts_at, self._step_handle, 0, 0, 0)
         self._decide_all = fixed_entry(mk.decide_at, self._step_handle, self._rates)
@@ -312,6 +315,12 @@ class ModeBudget:
         to Python to decide only when a bank renders through its own ``process`` (a size
         input: rendered over the same spans), a bank is fed by another (credited in
         Python, jassy.anytime_chain) or a CPU budget adapts."""
+        if self._one_call and not self._watched and self.listed() is self._loaded:
+            rows, handle = self._loaded_rows, self._step_handle  # (the common case, in fewest steps)
+            self.mode_samples += self._advance(
+                handle, rows, self.period, start, n, start, start, self._rates
+            )[2]
+            return
         if not self.active:
             return
         period, end = self.period, start + n
