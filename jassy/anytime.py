@@ -53,7 +53,7 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
-from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
+from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, packed_zeros
 from jassy.record_views import FIELD, address
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
@@ -89,6 +89,25 @@ UNSEEN, ONSET, UNRENDERED, BY_PYTHON, HEARD = (
 )
 #: Fields of ugens.modal_budget.Decision (slots at the step handle's end)
 DECISION_FIELDS = 7
+
+
+def record_fields(count: int, total: int) -> tuple:
+    """(shape, dtype) of the step's records (:meth:`ModeBudget._records`) for ``count``
+    banks of ``total`` modes: flags, masks, addresses, zeros, state, power, scores."""
+    rows = len(FLAG_ROWS)
+    return (
+        ((rows, count), BOOL), ((3, total), BOOL), ((2, count), INT), ((count,), INT),
+        ((STEP_STATE,), INT), ((count,), FLOAT), ((3, total), FLOAT),
+    )  # fmt: skip
+
+
+def kick_fields(rows: int, gains: int) -> tuple:
+    """(shape, dtype) of a Kicks table (jassy.anytime_rank) of ``rows`` impacts and
+    ``gains`` gains."""
+    column = (rows,)
+    fields = ((column, INT), (column, INT), (column, BOOL), (column, FLOAT), (column, INT))
+    return (*fields, ((max(gains, 1),), FLOAT))
+
 
 #: Compiled entry points of the budget's kernels, by kernel (:func:`fixed_entry`).
 _ENTRIES: dict = {}
@@ -184,19 +203,21 @@ class ModeBudget:
         self._clock = None
         self.active = self.decides(total)
         self.renders = renders and self.active
-        self._records(banks, total, renders)
-        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
-        self._state[RENDERS] = self.renders
         for bank in banks:
             bank.budgeted = self.active
         self._one_call = False
         if self.active:
-            self._attach_tables(banks, total)
+            self._attach_tables(banks, total, renders)
+        else:
+            self._records(banks, total, renders, packed_zeros(record_fields(len(banks), total)))
+        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
+        self._state[RENDERS] = self.renders
         self._processes = [bank.process for bank in banks]
 
-    def _records(self, banks: list, total: int, renders: bool) -> None:
-        """The compiled step's records besides the tables and the impacts, carved from one
-        buffer (jassy.packed_arrays), and their slots of the step handle: the Hearing's
+    def _records(self, banks: list, total: int, renders: bool, packed: Packed) -> None:
+        """The compiled step's records besides the tables and the impacts (``packed``: the
+        arrays of :func:`record_fields`, jassy.packed_arrays), and their slots of the step
+        handle: the Hearing's
         flags and the by-Python and Decision's heard masks (rows of ``_flags``, FLAG_ROWS;
         ``renders``: the banks are rendered before the budget's step decides), the banks'
         input and output addresses, their output samples known zero (render_kept), the
@@ -205,11 +226,7 @@ class ModeBudget:
         Hearing and the Decision only when asked (:attr:`hearing`, :attr:`decision`): the
         step reads them by address."""
         count, rows = len(banks), len(FLAG_ROWS)
-        fields = (
-            ((rows, count), BOOL), ((3, total), BOOL), ((2, count), INT), ((count,), INT),
-            ((STEP_STATE,), INT), ((count,), FLOAT), ((3, total), FLOAT),
-        )  # fmt: skip
-        arrays, slots = packed_zeros(fields)
+        arrays, slots = packed
         self._flags, self._masks, self._addresses, self._zeros, self._state, self._power, self._scores = (
             arrays
         )
@@ -242,14 +259,26 @@ class ModeBudget:
             self._flags[ONSET], self._flags[HEARD], self._addresses[0], self._scores, *self._masks
         )
 
-    def _attach_tables(self, banks: list, total: int) -> None:
-        """Move every bank's rows into shared tables and prepare the compiled decision."""
+    def _attach_tables(self, banks: list, total: int, renders: bool) -> None:
+        """Move every bank's rows into shared tables and prepare the compiled decision: the
+        tables, the step's records and the score's impacts carved from one buffer."""
         from ugens import modal_budget as mb  # (not at the top: the ugens import jassy)
         from ugens import modal_kept as mk
 
-        # the tables and their handle (the banks' and the step's: made once)
-        tables, self._tables_handle = mb.allocate_tables([b.model.n_modes for b in banks], self.period)
-        self._tables = tables
+        counts, records = [b.model.n_modes for b in banks], record_fields(len(banks), total)
+
+        def carve(kicks: tuple) -> Packed:  # the impacts' fields, with the tables and records
+            allocated = mb.allocate_tables(counts, self.period, (*records, *kicks))
+            self._tables, self._tables_handle = allocated.tables, allocated.handle  # (made once)
+            n = len(records)
+            self._records(banks, total, renders, Packed(allocated.arrays[:n], allocated.slots[:n]))
+            return Packed(allocated.arrays[n:], allocated.slots[n:])
+
+        self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
+        self._loaded = None  # the listing in the Kicks table
+        self._handle_size = mk.DECISION_AT + DECISION_FIELDS * FIELD  # (the step handle's: checked)
+        self._load_kicks(self.listed(), carve)  # the score's impacts, before the first sub-block
+        tables = self._tables
         for slot, bank in enumerate(banks):
             bank.anytime_attach(tables, slot, self.horizon, self.weighting, self._tables_handle)
         #: banks fed by banks, credited with their feeders' impacts (this period, the next)
@@ -263,7 +292,6 @@ class ModeBudget:
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         scale = mb.window_power(self.period, self.sample_rate)
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, scale, 0)
-        self._handle_size = mk.DECISION_AT + DECISION_FIELDS * FIELD  # (the step handle's: checked)
         #: the banks the compiled render cannot render (a size input), marked in by_python
         self._slow = [i for i, bank in enumerate(banks) if not bank.anytime_compiled()]
         self._watched = {}  # id -> the compiled banks with a parameter change queued
@@ -272,9 +300,6 @@ class ModeBudget:
                 self._flags[BY_PYTHON, i] = True
             else:
                 bank.anytime_watch(self._watched)
-        self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
-        self._loaded = None  # the listing in the Kicks table
-        self._load_kicks(self.listed())  # the score's impacts, before the first sub-block
         #: the compiled step renders every bank and takes every decision itself (INLINE)
         self._inline = not ((self.renders and self._slow) or self._fed or self.cpu_fraction is not None)
         self._state[INLINE] = self._inline
@@ -285,12 +310,10 @@ class ModeBudget:
         self._decide_all = fixed_entry(mk.decide_at, self._step_handle, self._rates)
 
     @staticmethod
-    def _empty_kicks(rows: int, gains: int) -> tuple[Kicks, np.ndarray]:
-        """A Kicks table of ``rows`` impacts and ``gains`` gains (none located) and its
-        handle (jassy.record_views)."""
-        column = (rows,)
-        fields = ((column, INT), (column, INT), (column, BOOL), (column, FLOAT), (column, INT))
-        arrays, slots = packed_zeros((*fields, ((max(gains, 1),), FLOAT)))
+    def _empty_kicks(packed: Packed) -> tuple[Kicks, np.ndarray]:
+        """The Kicks table of ``packed`` (the arrays of :func:`kick_fields`), none located,
+        and its handle (jassy.record_views)."""
+        arrays, slots = packed
         arrays[4][:] = -1  # none located
         return Kicks(*arrays), np.array(slots, dtype=np.int64).ravel()
 
@@ -377,13 +400,13 @@ class ModeBudget:
     def _slot_of(self, bank) -> int:
         return self._slots[id(bank)]
 
-    def _load_kicks(self, listed) -> int:
+    def _load_kicks(self, listed, carve=packed_zeros) -> int:
         """The score's impacts (``listed``: jassy.scheduler.ListedImpacts, columns of one
         row per bank struck in frame order) into the compiled step's table (slot -1 for a
         bank not the budget's), with the struck bank's gains at each location named;
         returns the rows. Loaded when the render starts (:meth:`attach`), again only when
         the score changes (a new listing). Column by column: ~0.2 ms for the wok scene's
-        1030 impacts."""
+        1030 impacts. ``carve``: makes the table's arrays of their fields (jassy.packed_arrays)."""
         if listed is self._loaded:
             return self._loaded_rows
         slot_of, count = self._slots, len(listed.frames)
@@ -399,7 +422,7 @@ class ModeBudget:
                 gains.append(row)
                 size += row.size
             at[i] = offset
-        table, kicks = self._empty_kicks(max(count, 1), size)
+        table, kicks = self._empty_kicks(carve(kick_fields(max(count, 1), size)))
         self._kick_table = table
         if count:
             table.frames[:count] = listed.frames

@@ -183,17 +183,21 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
 
 
 class Allocated(NamedTuple):
-    """:class:`BudgetTables` and their handle (jassy.record_views)."""
+    """:class:`BudgetTables` and their handle (jassy.record_views), and the arrays of the
+    ``more`` fields of :func:`allocate_tables` and their handle slots."""
 
     tables: BudgetTables
     handle: np.ndarray
+    arrays: list[np.ndarray]
+    slots: list[tuple[int, int, int]]
 
 
-def allocate_tables(mode_counts: list[int], period: int) -> Allocated:
+def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
     """Empty :class:`BudgetTables` for banks of ``mode_counts`` modes and a budget
     ``period`` (frames, a power of two), and their handle: the fields are views of one
     zeroed buffer (jassy.packed_arrays; each starts on a 64-byte cache line), the window
-    and twiddles shared (:func:`spectra_rows`)."""
+    and twiddles shared (:func:`spectra_rows`); ``more`` fields ((shape, dtype) pairs) in
+    the same buffer."""
     count = len(mode_counts)
     first = bank_at = coef_at = compact_at = 0
     places = []
@@ -210,13 +214,14 @@ def allocate_tables(mode_counts: list[int], period: int) -> Allocated:
         ((first,), b), ((count, period), f), ((count,), f), ((BANK_VALUES, count), f), ((first,), i),
         ((count, BLOCK_TABLE), f),
     )  # fmt: skip
-    arrays, slots = packed_zeros(fields)
+    arrays, slots = packed_zeros((*fields, *more))
     arrays[0][:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
     arrays[9][:] = True  # every mode kept
     spectra = spectra_rows(period)
     tables = BudgetTables(*arrays[:15], spectra, arrays[15])
-    slots.insert(15, (address(spectra), *spectra.shape))
-    return Allocated(tables, np.array(slots, dtype=np.int64).ravel())
+    table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
+    handle = np.array(table_slots, dtype=np.int64).ravel()
+    return Allocated(tables, handle, arrays[16:], slots[16:])
 
 
 #: :func:`spectra_rows` by period, computed once per process and shared by every budget,
