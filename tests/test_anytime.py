@@ -159,7 +159,7 @@ def test_cpu_budget_adapts_the_mode_count():
     def watched_step(start, n):
         step(start, n)
         if budget.limit == 16:
-            fading = int(budget._decision.fade.sum())
+            fading = int(budget.decision.fade.sum())
             adapted.append((sum(bank.active_modes() for bank in banks), fading))
 
     budget.step = watched_step
@@ -645,3 +645,46 @@ def test_a_sub_block_in_one_compiled_call_gives_the_stepwise_renders_bits(monkey
     budget = graph.budget
     assert counts[0] > 0 and counts == (budget.decisions, budget.peak_modes, budget.mode_samples)
     assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, slow)
+
+
+def short_rings(budget, seconds=2.0):
+    """Four bells of 150 modes ringing 30 times shorter than :func:`scene`'s (each falls
+    silent within ~0.3 s), each struck three times at random."""
+    rng = np.random.default_rng(7)
+    banks, hits = [], []
+    for b in range(4):
+        hit = ImpactForce(name=f"h{b}", duration=0.0005)
+        bell = bell_model(150, prime=150 + 60 * b, seed=b)
+        banks.append(ModalBank(bell, name=f"b{b}", decay_scale=30.0)(hit))
+        hits.append(hit)
+    score = [
+        Event(float(t), f"h{b}", "impact", {"impulse": 0.3})
+        for b in range(4)
+        for t in np.sort(rng.uniform(0, seconds - 0.3, 3))
+    ]
+    return Graph(Mixer(*banks), haptic=hits, budget=budget), sorted(score, key=lambda event: event.time)
+
+
+def test_a_silent_bank_writes_zeros_only_where_its_output_may_hold_other_samples(monkeypatch):
+    """The compiled render writes a silent bank's zeros only past the samples its output
+    buffer is known to hold zeros in (ModeBudget's count per bank, ugens.modal_kept.render_kept):
+    four bells struck three times each, falling silent between strikes, at a quarter of
+    their modes, give the same bits, decisions and mode-samples as the render that
+    forgets the count before every step (every silent span written), and whole silent
+    sub-blocks are skipped."""
+    graph, score = short_rings(ModeBudget(max_modes=150))
+    skipping = render(graph, score, 2.0, FS, 4096, limiter=False).audio
+    counts = graph.budget.decisions, graph.budget.mode_samples
+    step, known = ModeBudget.step, []
+
+    def forgetting(self, start, n):
+        known.append(int(self._zeros.max()))
+        self._zeros[:] = 0
+        step(self, start, n)
+
+    monkeypatch.setattr(ModeBudget, "step", forgetting)
+    graph, score = short_rings(ModeBudget(max_modes=150))
+    writing = render(graph, score, 2.0, FS, 4096, limiter=False).audio
+    assert counts[0] > 0 and counts == (graph.budget.decisions, graph.budget.mode_samples)
+    assert np.max(np.abs(skipping)) > 1e-3 and np.array_equal(skipping, writing)
+    assert max(known) == 4096  # some bank was silent through a whole sub-block (the next is skipped)

@@ -80,7 +80,8 @@ def _unit_calls(world: World) -> list:
 def test_units_compile_the_types_run_steps_asks_for(integrator, contact, solve, move):
     world = _world(integrator, contact)
     calls = _unit_calls(world)
-    assert {call.kernel for call in calls} >= {pair_contacts, st._time_of_impact, solve, move}
+    stages = {st.narrow_stage, st.contact_stage, st.impact_stage}
+    assert {call.kernel for call in calls} >= {pair_contacts, *stages, solve, move}
     before = {call.kernel: set(_cached_signatures(call.kernel)) for call in calls}
     known = len(st.run_steps.signatures)
     simulate(world, 0.01)  # run_steps compiled (after the units, on an empty cache) or loaded

@@ -45,7 +45,7 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank, record_views
-from jassy.anytime import a_weighting_power
+from jassy.anytime import a_weighting_power, fixed_entry
 from jassy.anytime_rank import has_force
 from jassy.errors import ModelError, PatchError
 from jassy.jit import drop_stale_cache, specialise
@@ -59,15 +59,11 @@ from ugens import cells, kernels, modal_budget, modal_f32, modal_meta, modal_ret
 from ugens.cells import is_flush_frame, mode_rows, silent, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal_budget import (
-    DECAY,
     FLAT_SPECTRUM_MODES,
     FLOOR,
     FLOOR2,
     GAIN_LEVEL,
-    GROWTH,
-    INV,
     REMEMBERED,
-    SIN2,
     SIZE,
     TRANSFORMED,
     WEIGHT,
@@ -636,6 +632,7 @@ class ModalBank(ModelParams, UGen):
         self._steady = None  # (_steady, _steady_rows): process's fast path (_span)
         self._steady_rows: np.ndarray | None = None
         self.budgeted = False
+        self._change_watch: dict | None = None  # told of queued changes (anytime_watch)
         self._tables: BudgetTables | None = None  # a budget's tables, which hold the rows (anytime_attach)
         self._heard = None  # the force over the last budget period (a ring of the tables)
         self._compact_meta = np.zeros(len(CompactMeta._fields), dtype=np.int64)  # a CompactMeta
@@ -708,7 +705,7 @@ class ModalBank(ModelParams, UGen):
         split = self._split
         self._forget_split()
         if self._compact_meta[GATHERED]:
-            self._settle_compact(self._tables_handle, self._slot)
+            self._anytime_entry("settle")(self._tables_handle, self._slot)
         if split is None:
             return
         self.y[:, split.wide] = split.rows.wide_bank[4:]
@@ -764,29 +761,24 @@ class ModalBank(ModelParams, UGen):
         amplitude^2 a stationary force of power spectral density S gives it is unit2 S
         times this), and the DFT bin of its frequency in a budget period."""
         v = self.values
-        key = (v["freq_scale"], v["decay_scale"], self._size)
+        key = (float(v["freq_scale"]), float(v["decay_scale"]), float(self._size))
         if key == self._forcing_key:  # a location or gain change: nothing to redo
             return
-        self._forcing_key, retune = key, 1.0 / np.sqrt(self._size)
+        self._forcing_key = key
         _, _, sin2, inv = self._poles
-        rows, period = self._mode_rows_view, self._heard.size
-        rows[SIN2], rows[INV] = sin2, inv
-        rows[DECAY] = self._fresh[COEF_C2] ** period
-        freqs = self.model.frequencies[self.order] * (v["freq_scale"] * retune)
-        decays = self.model.decays[self.order] * (v["decay_scale"] * retune)
-        self._psd_bins[:] = np.minimum(np.rint(freqs * period / self.sample_rate), period // 2)
+        model, rate, horizon = self.model, float(self.sample_rate), float(self._horizon)
+        modal_budget.forcing_rows(
+            self._mode_rows_view, self._psd_bins, sin2, inv, self._fresh[COEF_C2], model.frequencies,
+            model.decays, self.order, self._heard.size, key, rate, horizon,
+        )  # fmt: skip
         self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
-        two_d_tau = 2.0 * decays * self._horizon
-        rows[GROWTH] = np.where(
-            two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * decays, 1e-300), self._horizon
-        )
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
         if self._held:  # more keys of the same change follow (:meth:`_set_together`)
             return
         if self._tables is not None and self._jumps_gains_only(jump):
             self._refresh_design_cache()
-            self._jump_kept(self._tables_handle, self._slot)
+            self._anytime_entry("jump")(self._tables_handle, self._slot)
             self.meta[RAMP_LEFT] = 0
             self._ramping = False
             return
@@ -836,6 +828,8 @@ class ModalBank(ModelParams, UGen):
         """Queue a parameter change for ``frame``: :meth:`process` applies it there (a location
         jump at each impact of a rigid scene need not split the graph's sub-block)."""
         self._pending.append((frame, key, value, jump, ramp))
+        if self._change_watch is not None:
+            self._change_watch[id(self)] = self
 
     def process(self, start: int, n: int, offset: int = 0) -> None:
         """Frames [start, start + n) from the inputs' samples [offset, offset + n) of this
@@ -951,6 +945,8 @@ class ModalBank(ModelParams, UGen):
             self._ramping = meta[RAMP_LEFT] > 0
         else:
             self._settle()
+            if self._bank_handle is None:  # (a budget's attach moved the rows: made again on use)
+                self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
             call = self._bank_call
             if call is None:
                 call = self._bank_call = self._call(bank_span, self._bank_handle)
@@ -968,7 +964,7 @@ class ModalBank(ModelParams, UGen):
         """As :meth:`_span` for a budgeted bank: only the kept modes, in the budget's compact
         bank (ugens.modal_kept); the force goes to the budget period's ring (continuous
         excitation), its coefficients ramping while the bank's meta says so."""
-        self._kept_span(self._tables_handle, self._slot, inp, out, start, n)
+        self._anytime_entry("span")(self._tables_handle, self._slot, inp, out, start, n)
 
     def _span_mixed(self, inp: np.ndarray, out: np.ndarray, start: int, n: int) -> None:
         """As :meth:`_span` with the modes split by precision: float64 modes write out,
@@ -1006,6 +1002,15 @@ class ModalBank(ModelParams, UGen):
             return ()
         return [change[0] for change in self._pending if change[0] < end]
 
+    def anytime_watch(self, watch: dict) -> None:
+        """From now on enter this bank in ``watch`` (by id) whenever a parameter change is
+        queued (:meth:`set_param_at`; now too if one is): the budget that renders the bank
+        asks only the banks entered there for their changes (asking each of the wok
+        scene's 15 banks at every sub-block cost ~6 us)."""
+        self._change_watch = watch
+        if self._pending:
+            watch[id(self)] = self
+
     def anytime_apply(self, frame: int) -> None:
         """Apply the parameter changes queued for frames up to ``frame``: the budget has
         rendered the bank up to there (as :meth:`process` does between its spans)."""
@@ -1019,53 +1024,64 @@ class ModalBank(ModelParams, UGen):
         budget's ``tables`` (ugens.modal_budget; decisions every period, the ring's
         length); a continuous force is judged by the amplitude it builds in ``horizon``
         seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime).
-        ``tables_handle``: the tables' handle (jassy.record_views) if the budget made it."""
+        ``tables_handle``: the tables' handle (jassy.record_views) if the budget made it.
+        The tables are fresh (ugens.modal_budget.allocate_tables: zeros, every mode kept)."""
         self._settle()
-        k, first, bank_at, coef_at, _ = (int(x) for x in tables.layout[:, slot])
+        k, first, bank_at, coef_at, _ = tables.layout[:, slot].tolist()
         self._tables, self._slot = tables, slot
-        views = {}
-        stores = {"bank": (tables.bank, bank_at, 6), "target": (tables.target, coef_at, 4)}
-        stores["delta"] = (tables.delta, coef_at, 4)
-        for name, (store, at, rows) in stores.items():
-            view = store[at : at + rows * k].reshape(rows, k)
-            view[:] = getattr(self, name)
-            views[name] = view
-        self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
-        self.coef, self.y = self.bank[:4], self.bank[4:]
+        bank = tables.bank[bank_at : bank_at + 6 * k].reshape(6, k)
+        bank[:] = self.bank
+        target = tables.target[coef_at : coef_at + 4 * k].reshape(4, k)
+        target[:] = self.target
+        delta = tables.delta[coef_at : coef_at + 4 * k].reshape(4, k)
+        delta[:] = self.delta
+        self.bank, self.target, self.delta = bank, target, delta
+        self.coef, self.y = bank[:4], bank[4:]
         self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
         self._design_to_tables()
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
+        self.meta[ALLOWED] = k
         tables.last[slot] = self.last[0]
         self.last = tables.last[slot : slot + 1]
-        self._bank_handle = handle(BankArrays(self.bank, self.meta, self.last))
-        tables.values[FLOOR, slot] = self._floor
+        self._bank_handle = None  # (a budgeted render does not use it: made again on use)
+        values = tables.values
+        values[FLOOR, slot], values[FLOOR2, slot] = self._floor, self._floor * self._floor
+        values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
         self._compact_meta = tables.compact_meta[slot]
-        self._compact_meta[:] = 0
         cut = slice(first, first + k)
         self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
-        self._kept_mask[:], self._faded[:] = True, False
-        self.meta[ALLOWED] = k
         self._mode_rows_view = tables.rows[:, cut]
-        freqs = self.model.frequencies[self.order]
-        self._mode_rows_view[WEIGHT] = a_weighting_power(freqs) if weighting == "A" else 1.0
-        tables.values[FLOOR2, slot] = self._floor * self._floor
+        if weighting == "A":
+            self._mode_rows_view[WEIGHT] = a_weighting_power(self.model.frequencies[self.order])
+        else:
+            self._mode_rows_view[WEIGHT] = 1.0
         self._heard = tables.rings[slot]
-        self._heard[:] = 0.0
         self._psd_bins = tables.bins[cut]
-        tables.values[REMEMBERED, slot] = 0.0
-        tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
         self._horizon = horizon
         self._forcing_key = None
-        from ugens import modal_kept  # (not at the top: it imports this module)
-
         self._tables_handle = handle(tables) if tables_handle is None else tables_handle
-        self._settle_compact = specialise(modal_kept.settle_at, self._tables_handle, slot)
-        self._jump_kept = specialise(modal_budget.jump_at, self._tables_handle, slot)
-        self._kept_span = specialise(
-            modal_kept.kept_span, self._tables_handle, slot, self.out, self.out, 0, 0
-        )
+        self._anytime_entries = {}
         self._refresh_forcing()
+
+    def _anytime_entry(self, name: str):
+        """A budgeted bank's compiled entry point ``name``: "settle" (its compact bank's
+        state back into its rows), "jump" (its coefficients to the fresh design in place)
+        or "span" (its kept modes over a span, for a bank rendering through its own
+        ``process``), found on first use: most banks of a budget use none of them (their
+        argument types are fixed: jassy.anytime.fixed_entry)."""
+        entry = self._anytime_entries.get(name)
+        if entry is None:
+            from ugens import modal_kept  # (not at the top: it imports this module)
+
+            at, slot = self._tables_handle, self._slot
+            kernel, example = {
+                "settle": (modal_kept.settle_at, (at, slot)),
+                "jump": (modal_budget.jump_at, (at, slot)),
+                "span": (modal_kept.kept_span, (at, slot, self.out, self.out, 0, 0)),
+            }[name]
+            entry = self._anytime_entries[name] = fixed_entry(kernel, *example)
+        return entry
 
     def active_modes(self) -> int:
         """The modes the bank computes now (its kernels' active count)."""

@@ -34,6 +34,7 @@ import numpy as np
 from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
+from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
 from jassy.record_views import FIELD, address, bool_row, float_row, float_table, int_row, int_table
 from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
@@ -103,12 +104,17 @@ PSD_SMOOTHING = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 #: The share of the previous smoothed periodogram kept at each decision.
 PSD_MEMORY = 0.75
 
-#: Rows of :attr:`BudgetTables.spectra` (one budget period wide): the Hann window, the
-#: period's force centred and windowed, the transform's cos and sin table
-#: (ugens.real_fft.twiddles), its scratch (real, imaginary) and the spectrum (real,
+#: Rows of :attr:`BudgetTables.spectra` (one budget period wide, the same for every
+#: budget of that period and only read): the Hann window and the transform's cos and sin
+#: table (ugens.real_fft.twiddles).
+WINDOW, COS, SIN = range(3)
+SPECTRA_ROWS = 3
+
+#: Rows of a periodogram's scratch (:func:`periodogram` allocates it): the period's force
+#: centred and windowed, the transform's scratch (real, imaginary) and the spectrum (real,
 #: imaginary).
-WINDOW, WINDOWED, COS, SIN, PACKED_RE, PACKED_IM, SPECTRUM_RE, SPECTRUM_IM = range(8)
-SPECTRA_ROWS = 8
+WINDOWED, PACKED_RE, PACKED_IM, SPECTRUM_RE, SPECTRUM_IM = range(5)
+SCRATCH_ROWS = 5
 
 
 class BudgetTables(NamedTuple):
@@ -130,7 +136,7 @@ class BudgetTables(NamedTuple):
     last: np.ndarray  # float64 (banks,): ModalBank.last, the force sample before the next frame
     values: np.ndarray  # float64 (BANK_VALUES, banks)
     bins: np.ndarray  # int64 (modes,): the periodogram's bin at each mode's frequency
-    spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window, scratch and result
+    spectra: np.ndarray  # float64 (SPECTRA_ROWS, period): a periodogram's window and twiddles (shared)
     blocks: (
         np.ndarray
     )  # float64 (banks, BLOCK_TABLE): block tables of banks of few kept modes (ugens.modal_block)
@@ -173,40 +179,77 @@ def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
 def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
     """Empty tables for banks of ``mode_counts`` modes and a budget ``period`` (frames, a
     power of two)."""
+    return allocate_tables(mode_counts, period).tables
+
+
+class Allocated(NamedTuple):
+    """:class:`BudgetTables` and their handle (jassy.record_views), and the arrays of the
+    ``more`` fields of :func:`allocate_tables` and their handle slots."""
+
+    tables: BudgetTables
+    handle: np.ndarray
+    arrays: list[np.ndarray]
+    slots: list[tuple[int, int, int]]
+
+
+def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
+    """Empty :class:`BudgetTables` for banks of ``mode_counts`` modes and a budget
+    ``period`` (frames, a power of two), and their handle: the fields are views of one
+    zeroed buffer (jassy.packed_arrays; each starts on a 64-byte cache line), the window
+    and twiddles shared (:func:`spectra_rows`); ``more`` fields ((shape, dtype) pairs) in
+    the same buffer."""
     count = len(mode_counts)
-    layout = np.zeros((5, count), dtype=np.int64)
     first = bank_at = coef_at = compact_at = 0
-    for b, k in enumerate(mode_counts):
-        layout[:, b] = (k, first, bank_at, coef_at, compact_at)
+    places = []
+    for k in mode_counts:
+        places.append((k, first, bank_at, coef_at, compact_at))
         first += k
         bank_at += aligned(BANK_ROWS * k)
         coef_at += aligned(COEF_ROWS * k)
         compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
-    return BudgetTables(
-        layout, line_aligned_zeros((bank_at,)), np.zeros(coef_at), np.zeros(coef_at), np.zeros(coef_at),
-        line_aligned_zeros((compact_at,)), np.zeros((count, 3), dtype=np.int64),
-        np.zeros((count, 3), dtype=np.int64), np.zeros((MODE_ROWS, first)), np.ones(first, dtype=bool),
-        np.zeros(first, dtype=bool), np.zeros((count, period)), np.zeros(count),
-        np.zeros((BANK_VALUES, count)), np.zeros(first, dtype=np.int64), spectra_rows(period),
-        line_aligned_zeros((count, BLOCK_TABLE)),
+    f, i, b = FLOAT, INT, BOOL
+    fields = (
+        ((5, count), i), ((bank_at,), f), ((coef_at,), f), ((coef_at,), f), ((coef_at,), f),
+        ((compact_at,), f), ((count, 3), i), ((count, 3), i), ((MODE_ROWS, first), f), ((first,), b),
+        ((first,), b), ((count, period), f), ((count,), f), ((BANK_VALUES, count), f), ((first,), i),
+        ((count, BLOCK_TABLE), f),
     )  # fmt: skip
+    arrays, slots = packed_zeros((*fields, *more))
+    arrays[0][:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
+    arrays[9][:] = True  # every mode kept
+    spectra = spectra_rows(period)
+    tables = BudgetTables(*arrays[:15], spectra, arrays[15])
+    table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
+    handle = np.array(table_slots, dtype=np.int64).ravel()
+    return Allocated(tables, handle, arrays[16:], slots[16:])
 
 
-#: :func:`spectra_rows` by period, computed once per process (each budget gets a copy)
+#: :func:`spectra_rows` by period, computed once per process and shared by every budget,
+#: and the window's energy (the sum of its squares) by period
 _SPECTRA: dict[int, np.ndarray] = {}
+_WINDOW_ENERGY: dict[int, float] = {}
 
 
 def spectra_rows(period: int) -> np.ndarray:
-    """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window
-    and the transform's tables set, the rest zero (a copy of the rows computed for the
-    first budget of that period: the window and the twiddles cost ~0.1-0.3 ms per render
-    to compute)."""
+    """:attr:`BudgetTables.spectra` for a ``period`` (a power of two): the Hann window and
+    the transform's tables, computed for the first budget of that period (they cost
+    ~0.1-0.3 ms) and shared by all (compiled code only reads them; a periodogram's
+    scratch is its own)."""
     spectra = _SPECTRA.get(period)
     if spectra is None:
         spectra = _SPECTRA[period] = np.zeros((SPECTRA_ROWS, period))
         spectra[WINDOW] = np.hanning(period)
         spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
-    return spectra.copy()
+        _WINDOW_ENERGY[period] = float(np.sum(spectra[WINDOW] ** 2))
+    return spectra
+
+
+def window_power(period: int, sample_rate: float) -> float:
+    """The periodogram's scale for a budget ``period``: the sample rate (Hz) times the
+    energy of :func:`spectra_rows`' window (a PSD in N^2/Hz; :attr:`Rates.window_power`)."""
+    if period not in _WINDOW_ENERGY:
+        spectra_rows(period)
+    return sample_rate * _WINDOW_ENERGY[period]
 
 
 @nb.njit(cache=True)
@@ -342,6 +385,30 @@ def centred_windowed(force, window, out, oldest):
 
 
 @nb.njit(cache=True)
+def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, period, scales, sample_rate, horizon):
+    """A bank's per-mode rows of a budget of ``period`` frames in one pass (``rows``: its
+    columns of :attr:`BudgetTables.rows`, ``bins`` of :attr:`BudgetTables.bins`), from its
+    poles' sin^2 theta and 1 / (R^2 sin^2 theta), its design's c2 = R^2 (internal order)
+    and its model's frequencies (Hz) and decay rates (1/s), ``order`` the model's mode at
+    each internal position: SIN2, INV, the energy decay over a period c2^period =
+    R^(2 period), the build-up under a steady force over the horizon tau (s),
+    (1 - e^{-2 d tau}) / (2 d) (tau as d -> 0), and the periodogram's bin of each
+    frequency (at most period / 2); frequencies and decays scaled by ``scales``
+    (freq_scale, decay_scale, fragment size s: both also by 1 / sqrt(s))."""
+    retune = 1.0 / np.sqrt(scales[2])
+    freq_scale, decay_scale = scales[0] * retune, scales[1] * retune
+    half = period // 2
+    for i in range(bins.size):
+        j = order[i]
+        rows[SIN2, i], rows[INV, i] = sin2[i], inv[i]
+        rows[DECAY, i] = c2[i] ** float(period)
+        bins[i] = int(min(np.rint(frequencies[j] * freq_scale * period / sample_rate), half))
+        decay = decays[j] * decay_scale
+        two_d_tau = 2.0 * decay * horizon
+        rows[GROWTH, i] = -np.expm1(-two_d_tau) / max(2.0 * decay, 1e-300) if two_d_tau > 1e-9 else horizon
+
+
+@nb.njit(cache=True)
 def psd_at_bins(re, im, bins, taps, scale, memory, remembered, psd):
     """Per mode, the periodogram |re + i im|^2 / ``scale`` (N^2/Hz) smoothed over the bins
     ``bins[m] - len(taps) // 2 ...`` with weights ``taps`` (bins past either end count as
@@ -424,11 +491,11 @@ def periodogram(t, b, window_power, frame):
     modes' bins (:attr:`BudgetTables.bins`), smoothed over PSD_SMOOTHING and blended with
     the last one by PSD_MEMORY, into its SPECTRUM row (ugens.real_fft: no Python between
     the force and the row)."""
-    s = t.spectra
+    s, x = t.spectra, np.empty((SCRATCH_ROWS, t.spectra.shape[1]))
     half = s.shape[1] // 2
-    centred_windowed(t.rings[b], s[WINDOW], s[WINDOWED], frame % s.shape[1])
-    re, im = s[SPECTRUM_RE, : half + 1], s[SPECTRUM_IM, : half + 1]
-    real_spectrum(s[WINDOWED], s[COS], s[SIN], s[PACKED_RE, :half], s[PACKED_IM, :half], re, im)
+    centred_windowed(t.rings[b], s[WINDOW], x[WINDOWED], frame % s.shape[1])
+    re, im = x[SPECTRUM_RE, : half + 1], x[SPECTRUM_IM, : half + 1]
+    real_spectrum(x[WINDOWED], s[COS], s[SIN], x[PACKED_RE, :half], x[PACKED_IM, :half], re, im)
     o, k = t.layout[FIRST, b], t.layout[MODES, b]
     remembered = t.values[REMEMBERED, b] > 0.0
     psd_at_bins(

@@ -307,28 +307,36 @@ def render_bank(t, b, force, out, start, n, ring_of_force):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def render_kept(t, h, outputs, by_python, start, n, offset):
+def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
     its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
-    (ugens.modal_budget). A bank with nothing to compute (not
-    :func:`heard_lately`, no mode sounding, no force sample before, no ramp) writes
-    zeros. Returns the modes computed times frames (each bank's active count after its
-    span)."""
+    (ugens.modal_budget). A bank with nothing to compute (not :func:`heard_lately`, no
+    mode sounding, no force sample before, no ramp) writes zeros, and not even those
+    where its output already holds them: ``zeros[b]`` counts the samples from the start
+    of its output buffer known to be zero (most of the wok scene's fourteen 4-mode banks
+    are silent most of the time: writing 4096 zeros costs about as much as the kernel's
+    bookkeeping). Returns the modes computed times frames (each bank's active count
+    after its span)."""
     work = 0
     for b in range(by_python.size):
         if by_python[b]:
             continue
-        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         busy = heard_lately(h, b)
         ramping = t.meta[b, RAMP_LEFT] > 0
         if not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0 and not ramping:
-            for i in range(n):
-                out[i] = 0.0
+            if offset + n > zeros[b]:  # (else the span holds zeros already)
+                out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
+                for i in range(n):
+                    out[i] = 0.0
+                if offset <= zeros[b]:
+                    zeros[b] = offset + n
             continue
+        out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         ring_of_force = t.rings[b] if busy else t.rings[b, :0]
         work += render_bank(t, b, force, out, start, n, ring_of_force) * n
+        zeros[b] = min(zeros[b], offset)
     return work
 
 
@@ -356,11 +364,13 @@ def expect_impacts(h, kicks, count, at, period, state):
 HEARING_FIELDS = len(Hearing._fields)
 
 #: Slots of a budget's step handle (jassy.record_views) where its records start: the
-#: tables (ugens.modal_budget.BudgetTables), the Hearing, the banks' output addresses and
-#: the by-Python mask, the Kicks (jassy.anytime_rank), the step state, the Decision.
+#: tables (ugens.modal_budget.BudgetTables), the Hearing, the banks' outputs (addresses,
+#: the by-Python mask and the zeros they hold, :func:`render_kept`), the Kicks
+#: (jassy.anytime_rank), the step state, the Decision.
 HEARING_AT = TABLE_FIELDS * FIELD
 OUTPUTS_AT = HEARING_AT + HEARING_FIELDS * FIELD
-KICKS_AT = OUTPUTS_AT + 2 * FIELD  # the outputs' addresses and the by-Python mask
+OUTPUT_FIELDS = 3
+KICKS_AT = OUTPUTS_AT + OUTPUT_FIELDS * FIELD
 STATE_AT = KICKS_AT + len(Kicks._fields) * FIELD
 DECISION_AT = STATE_AT + FIELD
 
@@ -408,6 +418,7 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
     modes computed times frames, whether Python decides there)."""
     t, h, kicks = tables_at(a, 0), hearing_at(a, HEARING_AT), kicks_at(a, KICKS_AT)
     outputs, by_python = int_row(a, OUTPUTS_AT), bool_row(a, OUTPUTS_AT + FIELD)
+    zeros = int_row(a, OUTPUTS_AT + 2 * FIELD)
     state = int_row(a, STATE_AT)
     renders = state[RENDERS] > 0
     end, work = start + n, 0
@@ -418,7 +429,9 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
         heard, woken = scan_forces(h, at - start, stop - start, rotate)
         if woken or (rotate and (state[FADING] > 0 or state[EVERY_PERIOD] > 0 or coming or heard)):
             if at > rendered and renders:
-                work += render_kept(t, h, outputs, by_python, rendered, at - rendered, rendered - start)
+                work += render_kept(
+                    t, h, outputs, by_python, zeros, rendered, at - rendered, rendered - start
+                )
                 h.unrendered[:] = False
             rendered = max(rendered, at)
             only_heard = not (woken or coming or state[FADING] > 0 or state[EVERY_PERIOD] > 0)
@@ -435,7 +448,7 @@ def advance_at(a, count, period, start, n, at, rendered, rates):
             decide_at(a, spans)
         at = stop
     if end > rendered and renders:
-        work += render_kept(t, h, outputs, by_python, rendered, end - rendered, rendered - start)
+        work += render_kept(t, h, outputs, by_python, zeros, rendered, end - rendered, rendered - start)
         h.unrendered[:] = False
     return end, max(rendered, end), work, False
 

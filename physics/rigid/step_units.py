@@ -1,28 +1,29 @@
 """The rigid step's first compile shared by two cores.
 
 On an empty numba cache the first :func:`physics.rigid.world.simulate` compiles
-``stepper.run_steps`` with every kernel it calls (about 150 s of CPU for the wok, one
-process, one function at a time). The kernels it calls without inlining compile on their own
-and numba's cache (``cache=True``) carries them from one process to another, so the large
-subtrees can compile side by side: :func:`step_units` lists them as compile units for the
-exact argument types run_steps passes (taken from the run's own Model, Options and Data
-records), and :func:`compile_step_ahead` hands them to
+``stepper.run_steps`` and the stages it calls apart (stepper.StepEntries) with every kernel
+they call (about 45 s of CPU for the wok, one process, one function at a time). Kernels
+compiled on their own are carried from one process to another by numba's cache
+(``cache=True``), so the large subtrees can compile side by side: :func:`step_units` lists
+them as compile units for the exact argument types the step passes (taken from the run's
+own Model, Options and Data records), and :func:`compile_step_ahead` hands them to
 :func:`jassy.forked_compile.compile_on_two_cores` (a forked helper takes units from the
-back of the list while this process works from the front). run_steps then compiles here as
-this process's last unit, loading its callees from the cache instead of compiling them,
-while the helper goes on with the caller's own units (a scene's sound kernels), which
-otherwise this process would compile after the run.
+back of the list while this process works from the front), with run_steps (which links
+none of the stages) and the caller's own units (a scene's sound kernels, which otherwise
+this process would compile after the run) in the middle, for whichever process gets there
+first.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
-takes the mesh contacts (``narrow._against_mesh`` with its grid search, 7-12 s), then the free
-motion (called from both run_steps and the impact-time search), the run's contact model
-(``impulses.resolve``, ~14 s, or ``penalty.penalty``) and the broad phase's sweep; this
-process the polytope pairs (``narrow._polytopes``, ~7 s, and ``_spheres_polytope``), then
-the rest of the narrow phase (``pair_contacts``, after waiting for the helper's mesh
-contacts: compiled here too they would cost their time twice) and the impact-time search
-(``_time_of_impact``, which reaches the narrow phase again through the gap probe). A unit
-compiled for other types than run_steps asks for would only cost time (run_steps would
-compile its own): tests/test_rigid_step_units.py checks that they agree.
+takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~4.5 s), then the
+free motion with the advance stage, the sweep with the broad stage, and the contact model
+(``impulses.resolve``, ~10 s, or ``penalty.penalty``) with the contact stage; this process
+the polytope pairs (``narrow._polytopes``, ~5 s, and ``_spheres_polytope``), then the rest
+of the narrow phase (``pair_contacts``, after waiting for the helper's mesh contacts:
+compiled here too they would cost their time twice) with the narrow stage, and the impact
+stage (the impact-time search, which reaches the narrow phase again through the gap probe,
+after the free motion). A unit compiled for other types than the step asks for would only
+cost time (the step would compile its own): tests/test_rigid_step_units.py checks that they
+agree.
 """
 
 from __future__ import annotations
@@ -36,22 +37,20 @@ from typing import NamedTuple
 import numpy as np
 from numba.core import config
 
-from jassy.forked_compile import cache_holds, claim, compile_on_two_cores, helper_busy_with
+from jassy.forked_compile import cache_holds, compile_on_two_cores, helper_busy_with
 from jassy.jit import specialise
+from jassy.unlinked import Entry
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope, pair_contacts
 from physics.rigid.penalty import penalty
-from physics.rigid.record_ref import RefExample
 
 #: At most this long (s) this process waits for a unit the helper compiles (_await_helper): a
 #: bound for a helper that hangs. The unit waited for (the mesh contacts) takes 7-12 s of CPU
 #: on the wok; 60 s leaves room for a machine shared with other work.
 HELPER_WAIT = 60.0
-#: The first this many units of step_units are this process's (the rest the helper's).
-MAIN_UNITS = 3
 
 
 class KernelCall(NamedTuple):
@@ -65,57 +64,64 @@ class KernelCall(NamedTuple):
 
 
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
-    """Compile units of run_steps' callees for a run of ``m``, ``opt``, ``d``, each a list of
-    kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase and
-    the impact times first (this process); the mesh contacts, free motion, solve and sweep
-    from the back (the helper)."""
-    whole, count, dt, when = np.int64(0), np.int64(0), 0.0, 0.0
+    """Compile units of the step's kernels for a run of ``m``, ``opt``, ``d``, each a list of
+    kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase with
+    the narrow stage, and the impact stage first (this process); the mesh contacts, the free
+    motion with the advance stage, the sweep with the broad stage, and the contact model with
+    the contact stage from the back (the helper: the last BACK_UNITS)."""
+    whole, count, dt = np.int64(0), np.int64(0), 0.0
+    calls = st.step_calls(m, opt, d)
     contact, motion = st.step_models(opt)
-    mr, dr = RefExample(m), RefExample(d)  # the impact-time search takes them by reference
     if isinstance(contact, st.ImpulseContacts):
         bodies = st.SolveBodies(m.kind, m.inv_mass, m.inv_inertia, m.restitution, m.friction, m.rolling)
         state = st.SolveData(d.contacts, d.warm, d.pos, d.rot, d.phi, d.kin_v, d.kin_w, d.rec, d.stats)
-        solve = KernelCall(resolve, (bodies, opt, state, d.solver, count, dt, when, whole, whole))
+        solve = KernelCall(resolve, (bodies, opt, state, d.solver, count, dt, dt, whole, whole))
     else:
-        solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, when, whole, whole))
+        solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, dt, whole, whole))
     move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
-    posed, geo, buf = (d.pos, d.rot), m.geometry, d.contacts
+    posed, geo, buf, moved = (d.pos, d.rot), m.geometry, d.contacts, (d.new_pos, d.new_quat, d.new_phi)
     return [
         [KernelCall(_polytopes, ((whole,) * 4, (whole, whole), *posed, geo, dt, buf, count))],
         [KernelCall(_spheres_polytope, (whole, whole, whole, whole, *posed, geo, dt, buf, count))],
         [
             KernelCall(pair_contacts, (whole, whole, *posed, geo, dt, buf, count), after=_against_mesh),
-            KernelCall(st._time_of_impact, (mr, opt, dr, whole, whole, dt, dt, dt, dt, motion)),
+            KernelCall(*calls["narrow"]),
         ],
-        [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep))],
-        [solve],
-        [KernelCall(move, (free, whole, dt, d.new_pos, d.new_quat, d.new_phi))],
+        [KernelCall(*calls["impact"], after=move)],
+        [solve, KernelCall(*calls["response"])],
+        [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep)), KernelCall(*calls["broad"])],
+        [KernelCall(move, (free, whole, dt, *moved)), KernelCall(*calls["advance"])],
         [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
     ]
+
+
+#: The last this many units of step_units are the helper's (it starts with the last).
+BACK_UNITS = 4
 
 
 def compile_step_ahead(
     m: Model, opt: Options, d: st.Data, extra: Sequence[Callable[[], object]] = ()
 ) -> bool:
-    """Compile run_steps' large callees for this run on two cores (:func:`step_units`) when
+    """Compile the step's kernels for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it, then run_steps itself here while the helper goes on with ``extra`` (compile units of
-    the caller's, e.g. a scene's sound kernels, which the caller would otherwise compile after
-    the run); True if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
+    it: run_steps and ``extra`` (compile units of the caller's, e.g. a scene's sound kernels,
+    which the caller would otherwise compile after the run) in the middle of the list; True
+    if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
     kernels are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
     rigid = step_units(m, opt, d)
-    front, back = rigid[:MAIN_UNITS], rigid[MAIN_UNITS:]
+    front, back = rigid[:-BACK_UNITS], rigid[-BACK_UNITS:]
     first_back = len(front) + 1 + len(extra)
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
-    run_args = (m, opt, d, 0, 0, 0, contact, motion)  # the types stepper.run passes
-    whole_step = partial(_compile_run_steps, list(enumerate(back, start=first_back)), at, run_args)
+    entries = st.StepEntries(*(Entry(0, 0),) * len(st.StepEntries._fields))
+    run_args = (m, opt, d, 0, 0, 0, contact, motion, entries)  # the types stepper.run passes
+    whole_step = partial(_compile, [KernelCall(st.run_steps, run_args)], at)
     units = [
         *(partial(_compile, unit, at) for unit in front),
         whole_step,
@@ -134,21 +140,6 @@ def _compile(unit: list[KernelCall], at: dict[int, int]) -> None:
             _await_helper(at[id(call.after)])
         with contextlib.suppress(Exception):
             specialise(call.kernel, *call.args)
-
-
-def _compile_run_steps(
-    helpers: list[tuple[int, list[KernelCall]]], at: dict[int, int], run_args: tuple
-) -> None:
-    """Compile run_steps for ``run_args`` once its callees are in the cache: the units the
-    helper has not taken yet here, then wait for those it has (the helper then goes on with
-    the units after this one)."""
-    for position, unit in helpers:
-        if claim(position):
-            _compile(unit, at)
-    for position, _ in helpers:
-        _await_helper(position)
-    with contextlib.suppress(Exception):
-        specialise(st.run_steps, *run_args)
 
 
 def _await_helper(unit: int, seconds: float = HELPER_WAIT) -> None:

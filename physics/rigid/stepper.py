@@ -27,27 +27,31 @@ outer step of h seconds (:func:`outer_step`) is:
 
 The contact model and the free motion's integrator are picked by the types of two arguments
 of run_steps (:func:`step_models`, chosen from Options in Python; overloads resolved when
-run_steps is typed), not by branches inside it, so a run compiles only its own model and
+the stages are typed), not by branches inside them, so a run compiles only its own model and
 integrator (the wok's first compile no longer builds the penalty models, RK4 and the
-adaptive integrator). The stages are inlined into run_steps (numba inline="always"), and so
-are the narrow stage's pair loop and the impact-time search's gap probe: a called kernel is
-linked into its caller's module and optimised again there, so each level of kernel calls
-above the narrow phase compiled it once more (four such levels: ~12 s of the wok's first
-compile). run_steps hands the stages Model and Data by reference (physics.rigid.record_ref:
-a pointer each, stored once per call), so a stage reads only the fields it uses instead of
-copying all of Data's ~400 values at each inlined call (what LLVM then took apart again was
-most of run_steps' own compile). The references stay in run_steps (the kernels it calls get
-arrays or whole records, as before), so LLVM turns them back into the records' values
-(a reference passed on would be read from memory at each use: +25 % on a bouncing ball's
-steps); only the impact-time search, called at impacts, gets references of its own. The
-whole step allocates nothing and run_steps is compiled without reference
-counting (``_nrt=False``, passed on to every kernel it calls that sets no flag of its own):
-with it, every use of Model or Data counted a reference up and down for each array they
-hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved poses) lives in
-Data; a sweep that finds more pairs, or a narrow phase more contacts, than the scratch holds
-stops the run inside its step (Data.progress says where and how much is needed), and
-:func:`run` grows the scratch and resumes the step there. Only the RK4 and adaptive
-integrators allocate (integrate.advance_body_into keeps reference counting for itself).
+adaptive integrator).
+
+The large stages (broad, narrow, contact, advance, impact) are called apart
+(jassy.unlinked.call_apart), through entry points run_steps gets as its argument
+``entries`` (:func:`step_entries`), not linked into it: numba links every kernel a kernel
+calls into the caller's module and LLVM optimises and generates code for that whole tree
+again at each level, so run_steps used to compile the whole step a second time (~10 s of
+the wok's first compile, on one core, after everything below it). Each stage now compiles
+once, and the stages and run_steps can compile side by side (physics.rigid.step_units). The
+stages get Model and Data by reference (physics.rigid.record_ref: one pointer each, made
+once per run_steps call) and read the fields they use into locals once per call, so a call
+passes a few pointers and scalars, once per (sub-)step; the same speed as the linked step
+(benchmarks/rigid_vs_commit.py). Inside a stage the smaller helpers are inlined (numba
+inline="always"), and so are the narrow stage's pair loop, the impact-time search and its
+gap probe. The whole step allocates nothing and run_steps and the stages are compiled
+without reference counting (``_nrt=False``, passed on to every kernel they call that sets
+no flag of its own): with it, every use of Model or Data counted a reference up and down for
+each array they hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved
+poses) lives in Data; a sweep that finds more pairs, or a narrow phase more contacts, than
+the scratch holds stops the run inside its step (Data.progress says where and how much is
+needed), and :func:`run` grows the scratch and resumes the step there. Only the RK4 and
+adaptive integrators allocate (integrate.advance_body_into keeps reference counting for
+itself).
 
 Each resolved contact appends a record row (columns ``codes.RECORD_FIELDS``): time, step,
 bodies, world point, impulse on a (N s, world), approach speed, slip and rolling speed after
@@ -64,7 +68,8 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
-from jassy.jit import drop_stale_cache
+from jassy.jit import _type_key, drop_stale_cache
+from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import (
     broad,
     codes,
@@ -96,7 +101,7 @@ from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, 
 from physics.rigid.model import Model, Options
 from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
 from physics.rigid.penalty import penalty
-from physics.rigid.record_ref import deref, ref
+from physics.rigid.record_ref import RefExample, deref, ref
 from physics.rigid.shapes import PLANE, SPHERE
 
 #: numba's cache of this module holds copies of these modules' kernels (and constants).
@@ -292,9 +297,10 @@ def run(m: Model, opt: Options, d: Data, first: int, n_steps: int, nrec: int) ->
     than n_steps when d.rec may not hold the next step's records (the caller grows it and calls
     again). The kinematic samples of the returned d start at the step it stopped in."""
     contact, motion = step_models(opt)
+    entries = step_entries(m, opt, d)
     done = 0
     while True:
-        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact, motion)
+        steps, nrec = run_steps(m, opt, d, first + done, n_steps - done, nrec, contact, motion, entries)
         done += steps
         if not d.progress.need.any():
             return d, done, nrec
@@ -526,7 +532,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
     return gap
 
 
-@nb.njit(cache=True, _nrt=False)
+@nb.njit(cache=True, inline="always")
 def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
     moved by ``motion``'s integrator, step_models; m and d by reference)."""
@@ -744,12 +750,13 @@ def _turn_rate(kin_quat, s, j, h, i, kin_w):
         kin_w[i, 0], kin_w[i, 1], kin_w[i, 2] = scale * v0 / h, scale * v1 / h, scale * v2 / h
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def broad_stage(m, opt, d, dt):
     """Rotations, speed bounds and the pairs of bodies that can come within slop in dt seconds
     of free motion (sweep and prune of bounding boxes grown by how far each can move) into
     d.sweep.pairs; d.spin keeps only what can change a gap (_gap_spin). Returns how many
-    pairs there are (more than d.sweep.pairs holds: grow it and sweep again)."""
+    pairs there are (more than d.sweep.pairs holds: grow it and sweep again). Called apart
+    (StepEntries.broad); m and d by reference."""
     _rotations(d.quat, d.rot)
     _speeds(m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin)
     _motion(d.vel, d.spin, m.kind, d.gravity_norm, dt, d.motion)
@@ -759,22 +766,27 @@ def broad_stage(m, opt, d, dt):
     return count
 
 
-@nb.njit(cache=True, inline="always")
-def narrow_stage(m, opt, d, pairs, near, dt):
-    """How far each pair can close in dt (near.reach), then the contacts of the pairs that can
-    come within slop (_detect); returns their count."""
+@nb.njit(cache=True, _nrt=False)
+def narrow_stage(m, opt, d, n_pairs, dt):
+    """How far each of the broad phase's first ``n_pairs`` pairs (d.sweep.pairs) can close in
+    dt (d.near.reach), then the contacts of the pairs that can come within slop (_detect);
+    returns their count. Called apart (StepEntries.narrow: once per (sub-)step, with the
+    narrow phase linked in); m and d by reference, their fields read once here."""
+    pairs, near, geo = d.sweep.pairs[:n_pairs], d.near, m.geometry
     reach = near.reach
     for p in range(pairs.shape[0]):
         reach[p] = 0.0
     _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
-    return _detect(m.geometry, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
+    return _detect(geo, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
 
 
-@nb.njit(cache=True, inline="always")
-def contact_stage(m, opt, d, count, dt, time, step, nrec, contact):
+@nb.njit(cache=True, _nrt=False)
+def contact_stage(contact, m, opt, d, count, dt, time, step, nrec):
     """The contact model's response to the contacts d.contacts[:count] over dt (s), in the
     scratch d.solver (rows >= count), the model picked by the type of ``contact``
-    (step_models). Returns the record count, -1 when d.rec is full."""
+    (step_models). Returns the record count, -1 when d.rec is full. Called apart
+    (StepEntries.response: once per (sub-)step, with the model linked in); m and d by
+    reference."""
     d.stats.solves[0] += 1
     return contact_response(contact, m, opt, d, count, dt, time, step, nrec)
 
@@ -828,6 +840,51 @@ def step_models(opt: Options) -> tuple[ImpulseContacts | PenaltyContacts, SemiIm
         )
     contact = contact_tag(opt.contact)
     return contact, motion
+
+
+class StepEntries(NamedTuple):
+    """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of the stages
+    it calls apart (step_calls), each compiled alone (not linked into run_steps)."""
+
+    broad: Entry  # broad_stage
+    narrow: Entry  # narrow_stage
+    response: Entry  # contact_stage
+    advance: Entry  # advance_stage
+    impact: Entry  # impact_stage
+
+
+def step_calls(m: Model, opt: Options, d: Data) -> dict:
+    """The stages run_steps calls apart for a run of ``m``, ``opt``, ``d``: StepEntries'
+    field -> (kernel, example arguments of the types run_steps passes)."""
+    whole, dt = np.int64(0), 0.0
+    contact, motion = step_models(opt)
+    mr, dr = RefExample(m), RefExample(d)
+    return {
+        "broad": (broad_stage, (mr, opt, dr, dt)),
+        "narrow": (narrow_stage, (mr, opt, dr, whole, dt)),
+        "response": (contact_stage, (contact, mr, opt, dr, whole, dt, dt, whole, whole)),
+        "advance": (advance_stage, (mr, opt, dr, dt, motion)),
+        "impact": (impact_stage, (mr, opt, dr, whole, dt, motion)),
+    }
+
+
+#: step_entries' answers by a cheap key of the run's types (numba's typing of Model and Data
+#: for the five stages takes ~30 ms, run is called once per chunk of steps).
+_ENTRIES: dict[tuple, StepEntries] = {}
+
+
+def step_entries(m: Model, opt: Options, d: Data) -> StepEntries:
+    """The entry points run_steps calls for this run, each stage compiled (or loaded from
+    numba's cache) for its call's types the first time a run has these types."""
+    contact, motion = step_models(opt)
+    key = (type(contact), type(motion), _type_key((m, opt, d)))
+    found = _ENTRIES.get(key)
+    if found is None:
+        calls = step_calls(m, opt, d)
+        found = StepEntries(*(entry(calls[name][0], *calls[name][1]) for name in StepEntries._fields))
+        if key[2] is not None:  # None: a type the key cannot tell (not remembered)
+            _ENTRIES[key] = found
+    return found
 
 
 def _impulse_response(contact, m, opt, d, count, dt, time, step, nrec):
@@ -886,20 +943,25 @@ def _move_body(motion, f, i, tau, out_p, out_q, out_phi):
     return MOTIONS.get(getattr(motion, "instance_class", None))
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, _nrt=False)
 def advance_stage(m, opt, d, tau, motion):
     """Every body's pose and twist after tau seconds of free motion (by ``motion``'s
-    integrator) into d.new_*."""
+    integrator) into d.new_*; returns the number of bodies. Called apart
+    (StepEntries.advance); m and d by reference."""
     f, new_pos, new_quat, new_phi = _free_motion(m, opt, d), d.new_pos, d.new_quat, d.new_phi
     for i in range(m.kind.shape[0]):
         move_body(motion, f, i, tau, new_pos, new_quat, new_phi)
+    return m.kind.shape[0]
 
 
-@nb.njit(cache=True, inline="always")
-def impact_stage(m, opt, d, pairs, near, dt, motion):
-    """The earliest time of impact (s, within dt) of the pairs that were apart at the start of
-    the (sub-)step and penetrate after it (d.new_*) having closed faster than the bounce
-    threshold (module doc, step 6); dt when none."""
+@nb.njit(cache=True, _nrt=False)
+def impact_stage(m, opt, d, n_pairs, dt, motion):
+    """The earliest time of impact (s, within dt) of the broad phase's first ``n_pairs`` pairs
+    (d.sweep.pairs) that were apart at the start of the (sub-)step and penetrate after it
+    (d.new_*) having closed faster than the bounce threshold (module doc, step 6); dt when
+    none. Called apart (StepEntries.impact: once per (sub-)step, with the narrow phase and
+    the impact-time search linked in); m and d by reference, their fields read once here."""
+    pairs, near = d.sweep.pairs[:n_pairs], d.near
     slop, bounce = opt.slop, opt.bounce_threshold
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
     # count per array it holds)
@@ -934,9 +996,7 @@ def impact_stage(m, opt, d, pairs, near, dt, motion):
         g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        # references of their own for the search (rare: at impacts), the stage's stay here
-        hit = _time_of_impact(ref(deref(m)), opt, ref(deref(d)), a, b, dt, g0, g1, within, motion)
-        first_hit = min(first_hit, hit)
+        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
     return first_hit
 
 
@@ -970,7 +1030,7 @@ def sample_stage(d, step):
 
 
 @nb.njit(cache=True, inline="always")
-def outer_step(m, opt, d, step, nrec, contact, motion):
+def outer_step(m, opt, d, step, nrec, contact, motion, entries):
     """One outer step of opt.h seconds at step number ``step`` (module doc): the stages, with
     impact sub-steps, from where d.progress says it stopped. Returns (record count, whether
     it stopped for more scratch: d.progress.need says how much)."""
@@ -983,25 +1043,28 @@ def outer_step(m, opt, d, step, nrec, contact, motion):
         dt = h - t_local
         if dt <= 1e-15:
             break
-        count = broad_stage(m, opt, d, dt)
+        count = call_apart(entries.broad, (m, opt, d, dt), nb.int64)
         if count > d.sweep.pairs.shape[0] or count > d.near.reach.shape[0]:
             progress.need[0] = count
             return _stop(progress, t_local, subs, nrec)
-        pairs, near = d.sweep.pairs[:count], d.near
-        count = narrow_stage(m, opt, d, pairs, near, dt)
+        n_pairs = count
+        count = call_apart(entries.narrow, (m, opt, d, n_pairs, dt), nb.int64)
         if count > d.solver.idx.shape[0]:
             progress.need[1] = count
             return _stop(progress, t_local, subs, nrec)
         progress.most[0] = max(progress.most[0], count)
         solved = nrec
-        nrec = contact_stage(m, opt, d, count, dt, step * h + t_local, step, nrec, contact)
+        at = step * h + t_local
+        nrec = call_apart(entries.response, (contact, m, opt, d, count, dt, at, step, nrec), nb.int64)
         if nrec < 0:
             raise RuntimeError("run_steps: contact record buffer overflow")
         _mark_resting(d.rec, solved, nrec, m.kind, opt.contact == IMPULSE, d.resting)
-        advance_stage(m, opt, d, dt, motion)
-        first_hit = impact_stage(m, opt, d, pairs, near, dt, motion) if subs < max_events else dt
+        call_apart(entries.advance, (m, opt, d, dt, motion), nb.int64)
+        first_hit = dt
+        if subs < max_events:
+            first_hit = call_apart(entries.impact, (m, opt, d, n_pairs, dt, motion), nb.float64)
         if first_hit < dt:
-            advance_stage(m, opt, d, first_hit, motion)
+            call_apart(entries.advance, (m, opt, d, first_hit, motion), nb.int64)
             _commit(d)
             t_local += first_hit
             subs += 1
@@ -1025,7 +1088,7 @@ def _stop(progress, t_local, subs, nrec):
 
 
 @nb.njit(cache=True, _nrt=False)
-def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
+def run_steps(m, opt, d, first, n_steps, nrec, contact, motion, entries):
     """Advance n_steps outer steps from step ``first`` (time first * h); the kinematic bodies
     follow d.kin_pos/kin_quat[s] at step first + s. Returns (steps done, record count); stops
     before a step when d.rec may not hold its records (the caller grows it and calls again),
@@ -1039,7 +1102,7 @@ def run_steps(m, opt, d, first, n_steps, nrec, contact, motion):
             return s, nrec
         if not resuming:
             kinematic_stage(mr, opt, dr, s)
-        nrec, stopped = outer_step(mr, opt, dr, first + s, nrec, contact, motion)
+        nrec, stopped = outer_step(mr, opt, dr, first + s, nrec, contact, motion, entries)
         if stopped:
             return s, nrec
         sample_stage(dr, first + s)

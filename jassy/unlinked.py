@@ -1,0 +1,114 @@
+"""Calls of numba kernels compiled apart: not linked into their callers, so compiled once.
+
+numba links the code of every kernel a kernel calls into the caller's module (as
+``linkonce_odr`` copies) and LLVM optimises and generates code for the whole linked tree
+again at each level. A large callee called from three levels is optimised four times, and
+the top of a deep tree (the rigid step) re-optimises everything below it: on a fresh install
+that is most of the first compile. :func:`call_apart` calls a kernel through the address of
+its compiled code instead. Its caller's module holds only an indirect call; the callee is
+compiled (or loaded from numba's cache) alone, and two processes can compile callee and
+caller side by side.
+
+The address is an argument, known only at run time (an address differs from process to
+process, and numba's cache keeps a caller across processes): :func:`entry` gives it in
+Python as an :class:`Entry`, with a checksum of the callee's compiled argument types. The
+call compares that checksum with the one of the types it passes and raises a RuntimeError
+if they differ (an entry point made for other types would read its arguments wrongly), so
+a caller cannot run a callee compiled for anything else.
+
+The callee runs as its own compiled code, not as a copy optimised inside the caller: no
+floating-point operation changes for kernels compiled without fastmath (LLVM keeps IEEE
+semantics across inlining). The call passes numba's native arguments, as a call of a linked
+kernel that LLVM does not inline does: a record (NamedTuple) of arrays is flattened into
+all its arrays' fields (hundreds of scalars for a large one), so a callee called often
+should take large records by reference (physics.rigid.record_ref) and read the fields it
+uses once. A kernel called apart must not also be linked into another kernel of the
+process: MCJIT resolves a symbol to any linked copy of it.
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import NamedTuple
+
+import numba as nb
+from llvmlite import ir as llvmir
+from numba.core import cgutils, config, types
+from numba.core.typing import signature
+from numba.extending import intrinsic, overload
+
+
+class Entry(NamedTuple):
+    """A compiled kernel's entry point: the address of its native function and a checksum of
+    the argument and result types it was compiled for (:func:`types_checksum`). With numba's
+    JIT off, ``address`` is the kernel's Python function."""
+
+    address: int
+    types: int
+
+
+def types_checksum(argument_types, result_type) -> int:
+    """A checksum (CRC-32) of numba argument and result types, the same in every process."""
+    return zlib.crc32(repr((tuple(argument_types), result_type)).encode())
+
+
+def entry(kernel, *example_args) -> Entry:
+    """The :class:`Entry` of numba ``kernel`` compiled (or loaded from numba's cache) for
+    the types of ``example_args``; :func:`call_apart` passes it arguments of those types."""
+    if config.DISABLE_JIT:
+        return Entry(kernel, 0)
+    key = tuple(nb.typeof(a) for a in example_args)
+    kernel.compile(key)
+    compiled = kernel.overloads[key]
+    address = compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name)
+    return Entry(int(address), types_checksum(compiled.signature.args, compiled.signature.return_type))
+
+
+@intrinsic
+def _call_apart(typingctx, where, args, result):
+    """Compiled :func:`call_apart`: an indirect call of numba's native calling convention,
+    the callee's status (an exception) passed on; a RuntimeError if ``where``'s checksum is
+    not that of ``args``' types and ``result``."""
+    if not isinstance(args, types.BaseTuple) or not isinstance(result, types.NumberClass):
+        return None
+    argument_types = tuple(types.unliteral(t) for t in args)
+    result_type = result.instance_type
+    checksum = types_checksum(argument_types, result_type)
+
+    def codegen(context, builder, sig, llargs):
+        where_value, tuple_value, _ = llargs
+        address = builder.extract_value(where_value, 0)
+        found = builder.extract_value(where_value, 1)
+        wrong = builder.icmp_signed("!=", found, llvmir.Constant(found.type, checksum))
+        with builder.if_then(wrong, likely=False):
+            message = f"call_apart: the entry point was compiled for other types than {argument_types}"
+            context.call_conv.return_user_exc(builder, RuntimeError, (message,))
+        values = [
+            context.cast(builder, builder.extract_value(tuple_value, i), have, want)
+            for i, (have, want) in enumerate(zip(args, argument_types, strict=True))
+        ]
+        function_type = context.call_conv.get_function_type(result_type, argument_types)
+        pointer = builder.inttoptr(address, function_type.as_pointer())
+        status, value = context.call_conv.call_function(builder, pointer, result_type, argument_types, values)
+        with cgutils.if_unlikely(builder, status.is_error):
+            context.call_conv.return_status_propagate(builder, status)
+        return value
+
+    return signature(result_type, where, args, result), codegen
+
+
+def call_apart(where: Entry, args: tuple, result):
+    """``kernel(*args)`` for the kernel whose :func:`entry` ``where`` is, called through its
+    address (not linked into the caller: module doc); ``result`` is its numba result type
+    (``numba.int64``, ``numba.float64``, ...). Typing the caller compiles nothing of the
+    callee. Raises a RuntimeError when ``where`` was compiled for other types than
+    ``args``' and ``result``. With numba's JIT off, calls the Python function."""
+    return where.address(*args)
+
+
+@overload(call_apart, inline="always")
+def _call_apart_compiled(where, args, result):
+    def impl(where, args, result):
+        return _call_apart(where, args, result)
+
+    return impl

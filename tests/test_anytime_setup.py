@@ -1,0 +1,111 @@
+"""A mode budget's set-up (ModeBudget.attach): the per-mode rows it computes in one
+compiled pass against numpy's formulas, and the periodogram's shared window and twiddles."""
+
+import numpy as np
+
+from jassy.anytime import ModeBudget
+from jassy.engines.offline import OfflineEngine
+from jassy.patchfile import load_patch
+from ugens import modal_budget as mb
+
+PERIOD, FS, HORIZON = 2048, 48000.0, 0.1
+
+
+def numpy_forcing(sin2, inv, c2, frequencies, decays, order, scales, period, rate, horizon):
+    """The rows of ugens.modal_budget.forcing_rows with numpy, as the budget used to
+    compute them: (sin2, inv, decay, growth, bins)."""
+    retune = 1.0 / np.sqrt(scales[2])
+    f = frequencies[order] * (scales[0] * retune)
+    d = decays[order] * (scales[1] * retune)
+    bins = np.minimum(np.rint(f * period / rate), period // 2)
+    two_d_tau = 2.0 * d * horizon
+    growth = np.where(two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * d, 1e-300), horizon)
+    return sin2, inv, c2**period, growth, bins
+
+
+def test_forcing_rows_match_numpy_on_random_modes():
+    """Random poles and modes in a shuffled order, retuned (freq_scale, decay_scale and a
+    fragment size), some undamped (growth = the horizon) and some past the top bin: the
+    compiled pass writes the bank's columns only, equal to numpy's within 1 ulp, bins
+    exactly."""
+    rng = np.random.default_rng(5)
+    k, other = 37, 5
+    sin2, inv, c2 = rng.uniform(0.01, 1, k), rng.uniform(1, 100, k), rng.uniform(0.99, 1, k)
+    frequencies, decays = rng.uniform(20, 30000, k), rng.uniform(0, 40, k)
+    decays[:4], frequencies[4:6] = 0.0, 40000.0
+    order = rng.permutation(k)
+    scales = (1.3, 0.7, 2.5)
+    rows = np.full((mb.MODE_ROWS, other + k), -1.0)
+    bins = np.full(other + k, -1, dtype=np.int64)
+    mb.forcing_rows(
+        rows[:, other:], bins[other:], sin2, inv, c2, frequencies, decays, order, PERIOD, scales, FS, HORIZON
+    )
+    expected = numpy_forcing(sin2, inv, c2, frequencies, decays, order, scales, PERIOD, FS, HORIZON)
+    for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):
+        assert np.allclose(rows[row, other:], want, rtol=4e-16, atol=0)
+    assert np.array_equal(bins[other:], expected[4])
+    assert np.any(expected[4] == PERIOD // 2) and np.any(expected[3] == HORIZON)
+    assert np.all(rows[:, :other] == -1.0) and np.all(bins[:other] == -1)
+    untouched = [r for r in range(mb.MODE_ROWS) if r not in (mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH)]
+    assert np.all(rows[untouched] == -1.0)
+
+
+def test_a_budgeted_banks_rows_after_attach_match_numpy():
+    """The bell's bank attached to a budget (tables filled by ModeBudget.attach): its
+    per-mode rows equal numpy's formulas from its model and design."""
+    patch = load_patch("bell")
+    bank = patch.graph.nodes["bell"]
+    patch.graph.budget = ModeBudget(max_modes=30)
+    OfflineEngine(patch.graph, patch.score, FS, 4096, limiter=False, program=False)
+    tables = patch.graph.budget._tables
+    _, _, sin2, inv = bank._poles
+    scales = (1.0, 1.0, 1.0)
+    model = bank.model
+    expected = numpy_forcing(
+        sin2, inv, bank._fresh[1], model.frequencies, model.decays, bank.order, scales, PERIOD, FS, HORIZON
+    )
+    for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):
+        assert np.allclose(tables.rows[row], want, rtol=4e-16, atol=0)
+    assert np.array_equal(tables.bins, expected[4])
+
+
+def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():
+    """Two budgets of the same period read one array of the Hann window and the
+    transform's twiddles (cos, sin of 2 pi j / period); after a scrape render (which
+    takes periodograms, their scratch their own) it still holds exactly those."""
+    patch = load_patch("scrape")
+    patch.graph.budget = ModeBudget(max_modes=200)
+    engine = OfflineEngine(patch.graph, patch.score, FS, 4096, limiter=False, program=False)
+    engine.render(1.0)
+    spectra = patch.graph.budget._tables.spectra
+    assert spectra is mb.budget_tables([3], PERIOD).spectra
+    j = np.arange(PERIOD // 2 + 1)
+    assert np.array_equal(spectra[mb.WINDOW], np.hanning(PERIOD))
+    assert np.allclose(spectra[mb.COS, : j.size], np.cos(2 * np.pi * j / PERIOD), atol=1e-15)
+    assert np.allclose(spectra[mb.SIN, : j.size], np.sin(2 * np.pi * j / PERIOD), atol=1e-15)
+    assert mb.window_power(PERIOD, FS) == FS * np.sum(np.hanning(PERIOD) ** 2)
+
+
+def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does():
+    """ModeBudget.attach carves the tables, the Hearing, the Decision, the step state and
+    the impacts out of a few buffers and writes their handle from offsets: it equals the
+    handle jassy.record_views.handle makes by asking numpy for each array's address, on
+    the bell (one bank) and three bells of different sizes struck in turn."""
+    from jassy import Event, Graph
+    from jassy.anytime import BY_PYTHON
+    from jassy.record_views import handle
+    from patches.models import bell_model
+    from ugens import ImpactForce, Mixer, ModalBank
+
+    hits = [ImpactForce(name=f"h{b}", duration=0.0005) for b in range(3)]
+    banks = [ModalBank(bell_model(40 + 30 * b, seed=b), name=f"b{b}")(hit) for b, hit in enumerate(hits)]
+    struck = [Event(0.1 * i, f"h{i % 3}", "impact", {"impulse": 0.3}) for i in range(7)]
+    bell = load_patch("bell")
+    for graph, score in ((bell.graph, bell.score), (Graph(Mixer(*banks), haptic=hits), struck)):
+        graph.budget = ModeBudget(max_modes=30)
+        OfflineEngine(graph, score, FS, 4096, limiter=False, program=False)
+        budget = graph.budget
+        outputs = (budget._addresses[1], budget._flags[BY_PYTHON], budget._zeros)
+        records = (budget._tables, budget.hearing, outputs)
+        rest = (budget._kick_table, (budget._state,), budget.decision)
+        assert np.array_equal(budget._step_handle, handle(*records, *rest))
