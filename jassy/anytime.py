@@ -53,7 +53,7 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
-from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, packed_zeros
+from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, handle_of, packed_zeros
 from jassy.record_views import FIELD, address
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
@@ -240,9 +240,9 @@ class ModeBudget:
         inputs, outputs = (addresses[0], count, 1), (addresses[0] + 8 * count, count, 1)
         mask = [(masks[0] + r * total, total, 1) for r in range(3)]
         hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], power)
-        self._before_kicks = np.array((*hearing, outputs, flag[BY_PYTHON], zeros), dtype=np.int64).ravel()
+        self._before_kicks = handle_of((*hearing, outputs, flag[BY_PYTHON], zeros))
         decision = (flag[ONSET], flag[HEARD], inputs, scores, *mask)
-        self._after_kicks = np.array((state, *decision), dtype=np.int64).ravel()
+        self._after_kicks = handle_of((state, *decision))
 
     @property
     def hearing(self) -> Hearing:
@@ -315,7 +315,7 @@ class ModeBudget:
         and its handle (jassy.record_views)."""
         arrays, slots = packed
         arrays[4][:] = -1  # none located
-        return Kicks(*arrays), np.array(slots, dtype=np.int64).ravel()
+        return Kicks(*arrays), handle_of(slots)
 
     def _steps_handle(self, kicks: np.ndarray) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
