@@ -206,6 +206,7 @@ class ModeBudget:
         for bank in banks:
             bank.budgeted = self.active
         self._one_call = False
+        self._same_score = True  # (the listing loaded at attach; Scheduler.insert says when not)
         if self.active:
             self._attach_tables(banks, total, renders)
         else:
@@ -338,7 +339,7 @@ class ModeBudget:
         to Python to decide only when a bank renders through its own ``process`` (a size
         input: rendered over the same spans), a bank is fed by another (credited in
         Python, jassy.anytime_chain) or a CPU budget adapts."""
-        if self._one_call and not self._watched and self.listed() is self._loaded:
+        if self._one_call and self._same_score and not self._watched:
             rows, handle = self._loaded_rows, self._step_handle  # (the common case, in fewest steps)
             self.mode_samples += self._advance(
                 handle, rows, self.period, start, n, start, start, self._rates
@@ -349,6 +350,7 @@ class ModeBudget:
         period, end = self.period, start + n
         listed = self.listed()
         count = self._loaded_rows if listed is self._loaded else self._load_kicks(listed)
+        self._same_score = True
         changes = self._queued_changes(start, end) if self.renders else None
         at, rendered, addresses = start, start, self._step_handle
         if changes is None and self._inline and self.renders:  # the sub-block in one compiled call
@@ -377,6 +379,11 @@ class ModeBudget:
                 at = stop
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
+
+    def score_changed(self) -> None:
+        """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
+        step lists its impacts again."""
+        self._same_score = False
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change
