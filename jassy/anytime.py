@@ -53,7 +53,7 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
-from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, packed_zeros
+from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, handle_of, packed_zeros
 from jassy.record_views import FIELD, address
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
@@ -206,6 +206,7 @@ class ModeBudget:
         for bank in banks:
             bank.budgeted = self.active
         self._one_call = False
+        self._same_score = True  # (the listing loaded at attach; Scheduler.insert says when not)
         if self.active:
             self._attach_tables(banks, total, renders)
         else:
@@ -240,9 +241,9 @@ class ModeBudget:
         inputs, outputs = (addresses[0], count, 1), (addresses[0] + 8 * count, count, 1)
         mask = [(masks[0] + r * total, total, 1) for r in range(3)]
         hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], power)
-        self._before_kicks = np.array((*hearing, outputs, flag[BY_PYTHON], zeros), dtype=np.int64).ravel()
+        self._before_kicks = handle_of((*hearing, outputs, flag[BY_PYTHON], zeros))
         decision = (flag[ONSET], flag[HEARD], inputs, scores, *mask)
-        self._after_kicks = np.array((state, *decision), dtype=np.int64).ravel()
+        self._after_kicks = handle_of((state, *decision))
 
     @property
     def hearing(self) -> Hearing:
@@ -315,7 +316,7 @@ class ModeBudget:
         and its handle (jassy.record_views)."""
         arrays, slots = packed
         arrays[4][:] = -1  # none located
-        return Kicks(*arrays), np.array(slots, dtype=np.int64).ravel()
+        return Kicks(*arrays), handle_of(slots)
 
     def _steps_handle(self, kicks: np.ndarray) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
@@ -338,7 +339,7 @@ class ModeBudget:
         to Python to decide only when a bank renders through its own ``process`` (a size
         input: rendered over the same spans), a bank is fed by another (credited in
         Python, jassy.anytime_chain) or a CPU budget adapts."""
-        if self._one_call and not self._watched and self.listed() is self._loaded:
+        if self._one_call and self._same_score and not self._watched:
             rows, handle = self._loaded_rows, self._step_handle  # (the common case, in fewest steps)
             self.mode_samples += self._advance(
                 handle, rows, self.period, start, n, start, start, self._rates
@@ -349,6 +350,7 @@ class ModeBudget:
         period, end = self.period, start + n
         listed = self.listed()
         count = self._loaded_rows if listed is self._loaded else self._load_kicks(listed)
+        self._same_score = True
         changes = self._queued_changes(start, end) if self.renders else None
         at, rendered, addresses = start, start, self._step_handle
         if changes is None and self._inline and self.renders:  # the sub-block in one compiled call
@@ -377,6 +379,11 @@ class ModeBudget:
                 at = stop
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
+
+    def score_changed(self) -> None:
+        """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
+        step lists its impacts again."""
+        self._same_score = False
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change

@@ -9,6 +9,7 @@ carved from one buffer have the buffer's address plus their offsets.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import NamedTuple
 
@@ -48,3 +49,9 @@ def packed_zeros(fields) -> Packed:
         arrays.append(np.ndarray(shape, dtype, raw, skip + at))
         slots.append((base + at, shape[0], shape[1] if len(shape) > 1 else 1))
     return Packed(arrays, slots)
+
+
+def handle_of(slots) -> np.ndarray:
+    """The handle (jassy.record_views) of ``slots``: each field's three int64 slots, in
+    order (numpy reads a flat iterator ~3x faster than nested tuples)."""
+    return np.fromiter(itertools.chain.from_iterable(slots), dtype=np.int64, count=3 * len(slots))

@@ -109,3 +109,33 @@ def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does()
         records = (budget._tables, budget.hearing, outputs)
         rest = (budget._kick_table, (budget._state,), budget.decision)
         assert np.array_equal(budget._step_handle, handle(*records, *rest))
+
+
+def test_an_impact_inserted_during_a_budgeted_render_is_ranked_as_one_scored():
+    """The budget's one-call sub-blocks take the impacts loaded at attach until the
+    scheduler says the score changed (Scheduler.insert): a bell struck once more at 1.3 s
+    by an event inserted after 0.5 s of rendering sounds as the same bell with that
+    impact in its score from the start (the budget foresees it either way), and unlike
+    the bell without it."""
+    from jassy import Event
+    from jassy.scheduler import validate_event
+
+    extra = Event(1.3, "clapper", "impact", {"impulse": 0.7, "location": "waist"})
+
+    def render(score, insert_at=None):
+        patch = load_patch("bell")
+        patch.graph.budget = ModeBudget(max_modes=30)
+        engine = OfflineEngine(patch.graph, score(patch), FS, 4096, limiter=False, program=False)
+        if insert_at is None:
+            return engine.render(2.0).audio
+        first = engine.render(insert_at).audio
+        engine.scheduler.insert(validate_event(patch.graph, extra, "test"))
+        return np.concatenate((first, engine.render(2.0 - insert_at).audio), axis=1)
+
+    scored = render(
+        lambda p: sorted([*p.score, validate_event(p.graph, extra, "test")], key=lambda e: e.time)
+    )
+    inserted = render(lambda p: p.score, insert_at=4096 * 6 / FS)
+    plain = render(lambda p: p.score)
+    assert np.array_equal(inserted, scored)
+    assert not np.allclose(plain, scored)

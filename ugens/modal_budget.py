@@ -34,7 +34,7 @@ import numpy as np
 from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
-from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
+from jassy.packed_arrays import BOOL, FLOAT, INT, handle_of, packed_zeros
 from jassy.record_views import FIELD, address, bool_row, float_row, float_table, int_row, int_table
 from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
@@ -220,7 +220,7 @@ def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
     spectra = spectra_rows(period)
     tables = BudgetTables(*arrays[:15], spectra, arrays[15])
     table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
-    handle = np.array(table_slots, dtype=np.int64).ravel()
+    handle = handle_of(table_slots)
     return Allocated(tables, handle, arrays[16:], slots[16:])
 
 
