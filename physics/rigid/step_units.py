@@ -102,20 +102,17 @@ def compile_step_ahead(
 ) -> bool:
     """Compile the step's kernels for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it: run_steps, ``extra`` (compile units of the caller's, e.g. a scene's sound kernels,
-    which the caller would otherwise compile after the run) and the contact events' kernels
-    (physics.rigid.events.compile_kernels) in the middle of the list; True if the units
-    ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
-    kernels are plain Python functions, nothing to compile)."""
+    it: run_steps and ``extra`` (compile units of the caller's, e.g. a scene's sound and
+    contact-event kernels, which the caller would otherwise compile after the run) in the
+    middle of the list; True if the units ran. False with numba's JIT off
+    (NUMBA_DISABLE_JIT=1: the kernels are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
-    from physics.rigid.events import compile_kernels  # imports world, which imports this module
-
     rigid = step_units(m, opt, d)
     front, back = rigid[:-BACK_UNITS], rigid[-BACK_UNITS:]
-    first_back = len(front) + 1 + len(extra) + 1
+    first_back = len(front) + 1 + len(extra)
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
@@ -126,7 +123,6 @@ def compile_step_ahead(
         *(partial(_compile, unit, at) for unit in front),
         whole_step,
         *extra,
-        compile_kernels,  # the contact events' kernels, which the caller runs after the run
         *(partial(_compile, unit, at) for unit in back),
     ]
     return compile_on_two_cores(units)
