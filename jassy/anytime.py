@@ -53,7 +53,8 @@ from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, we
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
 from jassy.jit import specialise
-from jassy.record_views import FIELD, handle
+from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, handle_of, packed_zeros
+from jassy.record_views import FIELD, address
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
 #: margin do not swap at every decision (each swap regathers a bank and cuts a mode).
@@ -67,6 +68,61 @@ def a_weighting_power(f: np.ndarray) -> np.ndarray:
         (f2 + 20.6**2) * np.sqrt((f2 + 107.7**2) * (f2 + 737.9**2)) * (f2 + 12194.0**2)
     )
     return (ra / 0.7943282347242815) ** 2  # R_A(1 kHz) = 10^(-2/20)
+
+
+#: Rows of ModeBudget's flags (one column per bank): the Hearing's (jassy.anytime_rank) from
+#: ``unseen`` to ``unrendered``, then the banks the step leaves to Python and the Decision's
+#: ``heard`` (ugens.modal_budget).
+FLAG_ROWS = (
+    "unseen",
+    "expected",
+    "heard_now",
+    "heard_before",
+    "forced",
+    "onset",
+    "unrendered",
+    "by_python",
+    "heard",
+)
+UNSEEN, ONSET, UNRENDERED, BY_PYTHON, HEARD = (
+    FLAG_ROWS.index(n) for n in ("unseen", "onset", "unrendered", "by_python", "heard")
+)
+#: Fields of ugens.modal_budget.Decision (slots at the step handle's end)
+DECISION_FIELDS = 7
+
+
+def record_fields(count: int, total: int) -> tuple:
+    """(shape, dtype) of the step's records (:meth:`ModeBudget._records`) for ``count``
+    banks of ``total`` modes: flags, masks, addresses, zeros, state, power, scores."""
+    rows = len(FLAG_ROWS)
+    return (
+        ((rows, count), BOOL), ((3, total), BOOL), ((2, count), INT), ((count,), INT),
+        ((STEP_STATE,), INT), ((count,), FLOAT), ((3, total), FLOAT),
+    )  # fmt: skip
+
+
+def kick_fields(rows: int, gains: int) -> tuple:
+    """(shape, dtype) of a Kicks table (jassy.anytime_rank) of ``rows`` impacts and
+    ``gains`` gains."""
+    column = (rows,)
+    fields = ((column, INT), (column, INT), (column, BOOL), (column, FLOAT), (column, INT))
+    return (*fields, ((max(gains, 1),), FLOAT))
+
+
+#: Compiled entry points of the budget's kernels, by kernel (:func:`fixed_entry`).
+_ENTRIES: dict = {}
+
+
+def fixed_entry(kernel, *example_args):
+    """jassy.jit.specialise for a kernel whose callers always pass arguments of the types
+    of ``example_args`` (the budget's: handles, C-contiguous float64 arrays, Python ints,
+    records of Python scalars): found once per process and kept by kernel, as numba's
+    dispatcher keeps its compiled code (re-deriving the types at every render's set-up
+    cost ~5 us per entry point)."""
+    entry = _ENTRIES.get(kernel)
+    if entry is None:
+        entry = _ENTRIES[kernel] = specialise(kernel, *example_args)
+    return entry
 
 
 @dataclass
@@ -147,90 +203,129 @@ class ModeBudget:
         self._clock = None
         self.active = self.decides(total)
         self.renders = renders and self.active
-        count = len(banks)
-        inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
-        flags = (np.zeros(count, dtype=bool) for _ in range(6))
-        self._hearing = Hearing(
-            np.array([x.ctypes.data for x in inputs], dtype=np.intp), min(x.size for x in inputs),
-            np.array([not renders for _ in banks], dtype=bool), *flags, np.zeros(count),
-        )  # fmt: skip
-        self._state = np.zeros(STEP_STATE, dtype=np.int64)  # FADING .. UNDECIDED (jassy.anytime_rank)
-        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
-        self._state[RENDERS] = self.renders
         for bank in banks:
             bank.budgeted = self.active
+        self._one_call = False
+        self._same_score = True  # (the listing loaded at attach; Scheduler.insert says when not)
         if self.active:
-            self._attach_tables(banks, total)
+            self._attach_tables(banks, total, renders)
+        else:
+            self._records(banks, total, renders, packed_zeros(record_fields(len(banks), total)))
+        self._state[EVERY_PERIOD] = self.cpu_fraction is not None
+        self._state[RENDERS] = self.renders
         self._processes = [bank.process for bank in banks]
 
-    def _attach_tables(self, banks: list, total: int) -> None:
-        """Move every bank's rows into shared tables and prepare the compiled decision."""
-        from ugens import modal_budget as mb  # (not at the top: the ugens import jassy)
+    def _records(self, banks: list, total: int, renders: bool, packed: Packed) -> None:
+        """The compiled step's records besides the tables and the impacts (``packed``: the
+        arrays of :func:`record_fields`, jassy.packed_arrays), and their slots of the step
+        handle: the Hearing's
+        flags and the by-Python and Decision's heard masks (rows of ``_flags``, FLAG_ROWS;
+        ``renders``: the banks are rendered before the budget's step decides), the banks'
+        input and output addresses, their output samples known zero (render_kept), the
+        step state (FADING .. UNDECIDED, jassy.anytime_rank), the forces' power at the
+        last decision, the Decision's masks and scores. Python makes the views of the
+        Hearing and the Decision only when asked (:attr:`hearing`, :attr:`decision`): the
+        step reads them by address."""
+        count, rows = len(banks), len(FLAG_ROWS)
+        arrays, slots = packed
+        self._flags, self._masks, self._addresses, self._zeros, self._state, self._power, self._scores = (
+            arrays
+        )
+        heard_inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
+        self._addresses[0] = [address(x) for x in heard_inputs]
+        self._addresses[1] = [address(bank.out) for bank in banks]  # alive with them
+        self._flags[UNSEEN] = not renders
+        self._size = min(x.size for x in heard_inputs)
+        flags, masks, addresses, zeros, state, power, scores = slots
+        flag = [(flags[0] + r * count, count, 1) for r in range(rows)]
+        inputs, outputs = (addresses[0], count, 1), (addresses[0] + 8 * count, count, 1)
+        mask = [(masks[0] + r * total, total, 1) for r in range(3)]
+        hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], power)
+        self._before_kicks = handle_of((*hearing, outputs, flag[BY_PYTHON], zeros))
+        decision = (flag[ONSET], flag[HEARD], inputs, scores, *mask)
+        self._after_kicks = handle_of((state, *decision))
 
-        self._tables = tables = mb.budget_tables([b.model.n_modes for b in banks], self.period)
-        self._tables_handle = handle(tables)  # (the banks' and the step's: made once)
+    @property
+    def hearing(self) -> Hearing:
+        """The Hearing the compiled step reads (jassy.anytime_rank), as views."""
+        f = self._flags
+        return Hearing(self._addresses[0], self._size, *f[: UNRENDERED + 1], self._power)
+
+    @property
+    def decision(self):
+        """The Decision the compiled step reads (ugens.modal_budget), as views."""
+        from ugens.modal_budget import Decision  # (not at the top: the ugens import jassy)
+
+        return Decision(
+            self._flags[ONSET], self._flags[HEARD], self._addresses[0], self._scores, *self._masks
+        )
+
+    def _attach_tables(self, banks: list, total: int, renders: bool) -> None:
+        """Move every bank's rows into shared tables and prepare the compiled decision: the
+        tables, the step's records and the score's impacts carved from one buffer."""
+        from ugens import modal_budget as mb  # (not at the top: the ugens import jassy)
+        from ugens import modal_kept as mk
+
+        counts, records = [b.model.n_modes for b in banks], record_fields(len(banks), total)
+
+        def carve(kicks: tuple) -> Packed:  # the impacts' fields, with the tables and records
+            allocated = mb.allocate_tables(counts, self.period, (*records, *kicks))
+            self._tables, self._tables_handle = allocated.tables, allocated.handle  # (made once)
+            n = len(records)
+            self._records(banks, total, renders, Packed(allocated.arrays[:n], allocated.slots[:n]))
+            return Packed(allocated.arrays[n:], allocated.slots[n:])
+
+        self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
+        self._loaded = None  # the listing in the Kicks table
+        self._handle_size = mk.DECISION_AT + DECISION_FIELDS * FIELD  # (the step handle's: checked)
+        self._load_kicks(self.listed(), carve)  # the score's impacts, before the first sub-block
+        tables = self._tables
         for slot, bank in enumerate(banks):
             bank.anytime_attach(tables, slot, self.horizon, self.weighting, self._tables_handle)
-        #: the scores (now, next period, sounding) and the masks to keep, fade, and keep next
-        masks = (np.zeros(total, dtype=bool) for _ in range(3))
-        h = self._hearing
-        self._decision = mb.Decision(h.onset, np.zeros(len(banks), dtype=bool), h.inputs,
-                                  np.zeros((3, total)), *masks)  # fmt: skip
         #: banks fed by banks, credited with their feeders' impacts (this period, the next)
         self._fed = feeding_banks(banks)
         if self._fed:
             weigh_feeders(tables, self._fed, heard_banks(banks, self._audio or banks), self.sample_rate)
-        self._chain_fields = (
-            (mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW, mb.ELSEWHERE_NOW),
-            (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
-        )
+            self._chain_fields = (
+                (mb.KICK_NOW, mb.HAS_ELSEWHERE_NOW, mb.ELSEWHERE_NOW),
+                (mb.KICK_NEXT, mb.HAS_ELSEWHERE_NEXT, mb.ELSEWHERE_NEXT),
+            )
         shrink = math.exp(-math.log(1000.0) / self.period)  # a fading mode: -60 dB over one period
         scale = mb.window_power(self.period, self.sample_rate)
         self._rates = mb.Rates(float(self.sample_rate), int(self.limit), KEPT_BONUS, shrink, 0, 0, scale, 0)
-        from ugens import modal_kept as mk
-
-        self._outputs = np.array([bank.out.ctypes.data for bank in banks], dtype=np.intp)  # alive with them
-        self._by_python = np.zeros(len(banks), dtype=bool)
-        self._zeros = np.zeros(len(banks), dtype=np.int64)  # output samples known zero (render_kept)
         #: the banks the compiled render cannot render (a size input), marked in by_python
         self._slow = [i for i, bank in enumerate(banks) if not bank.anytime_compiled()]
-        self._by_python[self._slow] = True
         self._watched = {}  # id -> the compiled banks with a parameter change queued
         for i, bank in enumerate(banks):
-            if i not in self._slow:
+            if i in self._slow:
+                self._flags[BY_PYTHON, i] = True
+            else:
                 bank.anytime_watch(self._watched)
-        self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
-        self._loaded = None  # the listing in the Kicks table
-        self._load_kicks(self.listed())  # the score's impacts, before the first sub-block
         #: the compiled step renders every bank and takes every decision itself (INLINE)
         self._inline = not ((self.renders and self._slow) or self._fed or self.cpu_fraction is not None)
         self._state[INLINE] = self._inline
-        self._advance = specialise(mk.advance_at, self._step_handle, 0, 0, 0, 0, 0, 0, self._rates)
-        self._impacts = specialise(mk.impacts_at, self._step_handle, 0, 0, 0)
-        self._decide_all = specialise(mk.decide_at, self._step_handle, self._rates)
+        #: every sub-block without a queued change or a new score is one compiled call
+        self._one_call = self._inline and self.renders
+        self._advance = fixed_entry(mk.advance_at, self._step_handle, 0, 0, 0, 0, 0, 0, self._rates)
+        self._impacts = fixed_entry(mk.impacts_at, self._step_handle, 0, 0, 0)
+        self._decide_all = fixed_entry(mk.decide_at, self._step_handle, self._rates)
 
     @staticmethod
-    def _empty_kicks(rows: int, gains: int) -> Kicks:
-        return Kicks(
-            np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=bool),
-            np.zeros(rows), np.full(rows, -1, dtype=np.int64), np.zeros(max(gains, 1)),
-        )  # fmt: skip
+    def _empty_kicks(packed: Packed) -> tuple[Kicks, np.ndarray]:
+        """The Kicks table of ``packed`` (the arrays of :func:`kick_fields`), none located,
+        and its handle (jassy.record_views)."""
+        arrays, slots = packed
+        arrays[4][:] = -1  # none located
+        return Kicks(*arrays), handle_of(slots)
 
-    def _steps_handle(self) -> None:
+    def _steps_handle(self, kicks: np.ndarray) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
-        Hearing, the banks' outputs, the by-Python mask, the impacts, the step state and
-        the Decision (ugens.modal_kept.DECISION_AT)."""
-        from ugens.modal_kept import DECISION_AT
-
-        rest = handle(
-            self._hearing,
-            (self._outputs, self._by_python, self._zeros),
-            self._kick_table,
-            (self._state,),
-            self._decision,
-        )
-        self._step_handle = np.concatenate((self._tables_handle, rest))  # handle(tables, hearing, ...)
-        assert self._step_handle.size == DECISION_AT + len(self._decision) * FIELD, "step handle layout"
+        Hearing, the banks' outputs, the by-Python mask, the output samples known zero, the
+        impacts (``kicks``: the Kicks table's handle), the step state and the Decision
+        (ugens.modal_kept.DECISION_AT)."""
+        parts = (self._tables_handle, self._before_kicks, kicks, self._after_kicks)
+        self._step_handle = np.concatenate(parts)  # handle(tables, hearing, ..., decision)
+        assert self._step_handle.size == self._handle_size, "step handle layout"
 
     def step(self, start: int, n: int) -> None:
         """Graph step for frames [start, start + n), after every node the banks hear:
@@ -244,11 +339,18 @@ class ModeBudget:
         to Python to decide only when a bank renders through its own ``process`` (a size
         input: rendered over the same spans), a bank is fed by another (credited in
         Python, jassy.anytime_chain) or a CPU budget adapts."""
+        if self._one_call and self._same_score and not self._watched:
+            rows, handle = self._loaded_rows, self._step_handle  # (the common case, in fewest steps)
+            self.mode_samples += self._advance(
+                handle, rows, self.period, start, n, start, start, self._rates
+            )[2]
+            return
         if not self.active:
             return
         period, end = self.period, start + n
         listed = self.listed()
         count = self._loaded_rows if listed is self._loaded else self._load_kicks(listed)
+        self._same_score = True
         changes = self._queued_changes(start, end) if self.renders else None
         at, rendered, addresses = start, start, self._step_handle
         if changes is None and self._inline and self.renders:  # the sub-block in one compiled call
@@ -278,6 +380,11 @@ class ModeBudget:
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
 
+    def score_changed(self) -> None:
+        """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
+        step lists its impacts again."""
+        self._same_score = False
+
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change
         queued there, for the frames before ``end`` (those before ``start`` at ``start``),
@@ -300,17 +407,16 @@ class ModeBudget:
     def _slot_of(self, bank) -> int:
         return self._slots[id(bank)]
 
-    def _load_kicks(self, listed) -> int:
+    def _load_kicks(self, listed, carve=packed_zeros) -> int:
         """The score's impacts (``listed``: jassy.scheduler.ListedImpacts, columns of one
         row per bank struck in frame order) into the compiled step's table (slot -1 for a
         bank not the budget's), with the struck bank's gains at each location named;
         returns the rows. Loaded when the render starts (:meth:`attach`), again only when
         the score changes (a new listing). Column by column: ~0.2 ms for the wok scene's
-        1030 impacts."""
+        1030 impacts. ``carve``: makes the table's arrays of their fields (jassy.packed_arrays)."""
         if listed is self._loaded:
             return self._loaded_rows
         slot_of, count = self._slots, len(listed.frames)
-        table = self._kick_table = self._empty_kicks(max(count, 1), 0)
         slots = [slot_of.get(id(node), -1) for node in listed.nodes]
         at, located, gains, size = [-1] * count, {}, [], 0
         named = [i for i, where in enumerate(listed.locations) if where is not None and slots[i] >= 0]
@@ -323,6 +429,8 @@ class ModeBudget:
                 gains.append(row)
                 size += row.size
             at[i] = offset
+        table, kicks = self._empty_kicks(carve(kick_fields(max(count, 1), size)))
+        self._kick_table = table
         if count:
             table.frames[:count] = listed.frames
             table.slots[:count] = slots
@@ -330,8 +438,8 @@ class ModeBudget:
             np.greater(table.impulses, 0.0, out=table.positive)
             table.located[:count] = at
         if gains:
-            table = self._kick_table = table._replace(gains=np.concatenate(gains))
-        self._steps_handle()
+            np.concatenate(gains, out=table.gains)
+        self._steps_handle(kicks)
         self._loaded, self._loaded_rows = listed, count
         return count
 

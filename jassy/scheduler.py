@@ -272,6 +272,8 @@ class Scheduler:
         self.apply_frames.insert(i, frame)
         self.inline.insert(i, self._is_inline(event))
         self._impacts = None  # listed again when next asked
+        if self.graph.budget is not None:
+            self.graph.budget.score_changed()
 
     def _is_inline(self, event: Event) -> bool:
         """Whether the event's node (and every node its impact location moves) applies it at

@@ -64,13 +64,37 @@ def _radiated(graph, radius: float):
 
 def render_units(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> list:
     """Compile units of a rigid scene's sound render, for the step's helper before the
-    physics has run (physics.rigid.world.simulate): one unit, :func:`compile_render`. Empty
-    on a filled kernel cache or for a scene with no voices."""
+    physics has run (physics.rigid.world.simulate): :func:`compile_events` and
+    :func:`compile_render` (the helper takes units from the back: the sound kernels first).
+    Empty on a filled kernel cache or for a scene with no voices."""
     from jassy.engines.coldstart import kernels_cached
 
     if not voices or kernels_cached():
         return []
-    return [partial(compile_render, world, voices, sample_rate, block, radius)]
+    return [
+        partial(compile_events, world),
+        partial(compile_render, world, voices, sample_rate, block, radius),
+    ]
+
+
+def compile_events(world) -> None:
+    """Compile the kernels that turn a run's contact records into impacts, contact tracks and
+    the contact wrench on a body (physics.rigid.events), by running them on a stand-in run of
+    ``world``: two records (an impact and a sustained contact of body 0 on body 1, or on
+    itself alone) in an array of the real run's type, so the kernels for the real run's types."""
+    from physics.rigid.codes import REC_B, REC_IMPACT, REC_WIDTH
+    from physics.rigid.events import contact_tracks, contact_wrench, impacts
+    from physics.rigid.world import RunResult
+
+    records = np.zeros((2, REC_WIDTH))
+    records[:, REC_B] = min(1, len(world.bodies) - 1)
+    records[0, REC_IMPACT] = 1.0
+    state = world.initial_state()
+    state.time = world.params.h
+    run = RunResult(world, 0.0, records, np.zeros(0), *(np.zeros((0, 0, k)) for k in (3, 4, 6)), state, {})
+    impacts(run)
+    contact_tracks(run)
+    contact_wrench(run, 0, lambda times: np.zeros((len(times), 3)))
 
 
 def compile_render(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> None:

@@ -159,7 +159,7 @@ def test_cpu_budget_adapts_the_mode_count():
     def watched_step(start, n):
         step(start, n)
         if budget.limit == 16:
-            fading = int(budget._decision.fade.sum())
+            fading = int(budget.decision.fade.sum())
             adapted.append((sum(bank.active_modes() for bank in banks), fading))
 
     budget.step = watched_step

@@ -37,8 +37,9 @@ def test_forcing_rows_match_numpy_on_random_modes():
     scales = (1.3, 0.7, 2.5)
     rows = np.full((mb.MODE_ROWS, other + k), -1.0)
     bins = np.full(other + k, -1, dtype=np.int64)
-    modes = mb.Forcing(sin2, inv, c2, frequencies, decays, order)
-    mb.forcing_rows(rows[:, other:], bins[other:], modes, PERIOD, scales, FS, HORIZON)
+    mb.forcing_rows(
+        rows[:, other:], bins[other:], sin2, inv, c2, frequencies, decays, order, PERIOD, scales, FS, HORIZON
+    )
     expected = numpy_forcing(sin2, inv, c2, frequencies, decays, order, scales, PERIOD, FS, HORIZON)
     for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):
         assert np.allclose(rows[row, other:], want, rtol=4e-16, atol=0)
@@ -83,3 +84,58 @@ def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():
     assert np.allclose(spectra[mb.COS, : j.size], np.cos(2 * np.pi * j / PERIOD), atol=1e-15)
     assert np.allclose(spectra[mb.SIN, : j.size], np.sin(2 * np.pi * j / PERIOD), atol=1e-15)
     assert mb.window_power(PERIOD, FS) == FS * np.sum(np.hanning(PERIOD) ** 2)
+
+
+def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does():
+    """ModeBudget.attach carves the tables, the Hearing, the Decision, the step state and
+    the impacts out of a few buffers and writes their handle from offsets: it equals the
+    handle jassy.record_views.handle makes by asking numpy for each array's address, on
+    the bell (one bank) and three bells of different sizes struck in turn."""
+    from jassy import Event, Graph
+    from jassy.anytime import BY_PYTHON
+    from jassy.record_views import handle
+    from patches.models import bell_model
+    from ugens import ImpactForce, Mixer, ModalBank
+
+    hits = [ImpactForce(name=f"h{b}", duration=0.0005) for b in range(3)]
+    banks = [ModalBank(bell_model(40 + 30 * b, seed=b), name=f"b{b}")(hit) for b, hit in enumerate(hits)]
+    struck = [Event(0.1 * i, f"h{i % 3}", "impact", {"impulse": 0.3}) for i in range(7)]
+    bell = load_patch("bell")
+    for graph, score in ((bell.graph, bell.score), (Graph(Mixer(*banks), haptic=hits), struck)):
+        graph.budget = ModeBudget(max_modes=30)
+        OfflineEngine(graph, score, FS, 4096, limiter=False, program=False)
+        budget = graph.budget
+        outputs = (budget._addresses[1], budget._flags[BY_PYTHON], budget._zeros)
+        records = (budget._tables, budget.hearing, outputs)
+        rest = (budget._kick_table, (budget._state,), budget.decision)
+        assert np.array_equal(budget._step_handle, handle(*records, *rest))
+
+
+def test_an_impact_inserted_during_a_budgeted_render_is_ranked_as_one_scored():
+    """The budget's one-call sub-blocks take the impacts loaded at attach until the
+    scheduler says the score changed (Scheduler.insert): a bell struck once more at 1.3 s
+    by an event inserted after 0.5 s of rendering sounds as the same bell with that
+    impact in its score from the start (the budget foresees it either way), and unlike
+    the bell without it."""
+    from jassy import Event
+    from jassy.scheduler import validate_event
+
+    extra = Event(1.3, "clapper", "impact", {"impulse": 0.7, "location": "waist"})
+
+    def render(score, insert_at=None):
+        patch = load_patch("bell")
+        patch.graph.budget = ModeBudget(max_modes=30)
+        engine = OfflineEngine(patch.graph, score(patch), FS, 4096, limiter=False, program=False)
+        if insert_at is None:
+            return engine.render(2.0).audio
+        first = engine.render(insert_at).audio
+        engine.scheduler.insert(validate_event(patch.graph, extra, "test"))
+        return np.concatenate((first, engine.render(2.0 - insert_at).audio), axis=1)
+
+    scored = render(
+        lambda p: sorted([*p.score, validate_event(p.graph, extra, "test")], key=lambda e: e.time)
+    )
+    inserted = render(lambda p: p.score, insert_at=4096 * 6 / FS)
+    plain = render(lambda p: p.score)
+    assert np.array_equal(inserted, scored)
+    assert not np.allclose(plain, scored)

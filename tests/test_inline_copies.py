@@ -1,5 +1,6 @@
-"""jassy.inline_copies: numba's inliner copies a callee's scope once per IR copy, and the
-compiled code is the same as with numba's own copies (one scope copy per block)."""
+"""jassy.inline_copies: numba's inliner hands over fresh translations, skips the untouched
+copy numba's passes discard, copies a callee's scope once per IR copy, and the compiled code
+is the same as with numba's own copies (two copies, one scope copy per block)."""
 
 import copy
 import subprocess
@@ -68,6 +69,155 @@ def test_outside_a_sharing_context_it_is_numbas_deepcopy():
     copied = [copies.deepcopy(block) for block in source.blocks.values()]
     assert len({id(block.scope) for block in copied}) == len(copied)
     assert copies.copy is copy.copy  # the rest of the copy module passes through
+
+
+def test_handed_over_blocks_are_the_working_copy_and_the_untouched_copy_is_made_unless_discarded():
+    source = run_frontend(_branchy)
+    copies = inline_copies.ScopeSharingCopies()
+    for discarded in (True, False):
+        with copies.sharing(handed_over=source.blocks.values(), discarded=discarded):
+            working = {label: copies.deepcopy(block) for label, block in source.blocks.items()}
+            untouched = {label: copies.deepcopy(block) for label, block in working.items()}
+        assert all(working[label] is block for label, block in source.blocks.items())
+        if discarded:
+            assert all(untouched[label] is block for label, block in working.items())
+        else:  # an independent copy, equal statement for statement
+            assert untouched == working and not any(untouched[k] is working[k] for k in working)
+            assert {id(block.scope) for block in untouched.values()} == {id(untouched[0].scope)}
+            assert untouched[0].scope is not source.blocks[0].scope
+
+
+def test_a_copied_working_copy_is_copied_once_more_only_if_not_discarded():
+    source = run_frontend(_branchy)
+    copies = inline_copies.ScopeSharingCopies()
+    for discarded in (True, False):
+        with copies.sharing(discarded=discarded):
+            working = {label: copies.deepcopy(block) for label, block in source.blocks.items()}
+            untouched = {label: copies.deepcopy(block) for label, block in working.items()}
+        assert working == untouched and not any(working[k] is source.blocks[k] for k in working)
+        assert all((untouched[k] is working[k]) == discarded for k in working)
+
+
+def _kernel_helper(x):
+    total = 0.0
+    for i in range(3):
+        if x > i:
+            total += x
+    return total
+
+
+def _kernel_caller(x):
+    return _kernel_helper(x) + 1.0
+
+
+def _inline_the_helper():
+    """Inline ``_kernel_helper`` into ``_kernel_caller``'s IR through numba's InlineWorker,
+    called from here (not from numba's passes), counting the blocks deep-copied."""
+    from numba.core.compiler import Flags
+    from numba.core.registry import cpu_target
+
+    caller_ir = run_frontend(_kernel_caller)
+    (block, i) = next(
+        (block, i)
+        for block in caller_ir.blocks.values()
+        for i, stmt in enumerate(block.body)
+        if isinstance(stmt, ir.Assign)
+        and isinstance(stmt.value, ir.Expr)
+        and stmt.value.op == "call"
+        and getattr(caller_ir.get_definition(stmt.value.func), "name", None) == "_kernel_helper"
+    )
+    worker = inline_closurecall.InlineWorker(
+        cpu_target.typing_context, cpu_target.target_context, {}, object(), Flags(),
+        validator=inline_closurecall.callee_ir_validator,
+    )  # fmt: skip
+    return worker.inline_function(caller_ir, block, i, _kernel_helper)
+
+
+def test_another_caller_gets_an_untouched_copy_apart_from_the_inlined_blocks(monkeypatch):
+    import numba as nb
+
+    import jassy  # noqa: F401 (installs it when numba first compiles)
+
+    nb.njit(lambda x: x + 1)(1)
+    copied = []
+    copy_block = inline_copies.ScopeSharingCopies._copied
+    monkeypatch.setattr(
+        inline_copies.ScopeSharingCopies,
+        "_copied",
+        staticmethod(lambda b, run: copied.append(b) or copy_block(b, run)),
+    )
+    untouched, _, _, inlined = _inline_the_helper()
+    assert len(copied) == len(untouched.blocks) > 3  # the untouched copy only: the working one handed over
+    inlined_ids = {id(block) for _, block in inlined}
+    assert not any(id(block) in inlined_ids for block in untouched.blocks.values())
+    assert all(
+        block.scope is untouched.blocks[min(untouched.blocks)].scope for block in untouched.blocks.values()
+    )
+
+
+def test_numbas_inlining_pass_copies_no_block_of_a_fresh_translation(monkeypatch):
+    import numba as nb
+
+    import jassy  # noqa: F401
+
+    nb.njit(lambda x: x + 1)(1)
+    copied = []
+    copy_block = inline_copies.ScopeSharingCopies._copied
+    monkeypatch.setattr(
+        inline_copies.ScopeSharingCopies,
+        "_copied",
+        staticmethod(lambda b, run: copied.append(b) or copy_block(b, run)),
+    )
+    helper = nb.njit(inline="always")(_kernel_helper)
+    kernel = nb.njit(lambda x: helper(x) + 1.0)
+    assert kernel(2.5) == _kernel_caller(2.5) == 8.5
+    assert copied == []  # numba's pass discards the untouched copy; the translation is handed over
+
+
+def test_numbas_passes_are_recognised_as_discarding_the_untouched_copy():
+    from numba.core.typed_passes import InlineOverloads
+    from numba.core.untyped_passes import InlineInlinables
+
+    assert inline_copies.discards_first_result(InlineInlinables._do_work, "inline_function")
+    assert inline_copies.discards_first_result(InlineOverloads._run_inliner, "inline_ir")
+    assert inline_copies.numbas_callers() is not None
+
+    def reads_it(worker):
+        original, _, _, blocks = worker.inline_ir(1, 2)
+        return original
+
+    def reads_underscore(worker):
+        _, _, _, blocks = worker.inline_ir(1, 2)
+        return _
+
+    def keeps_the_tuple(worker):
+        return worker.inline_ir(1, 2)
+
+    for caller in (reads_it, reads_underscore, keeps_the_tuple):
+        assert not inline_copies.discards_first_result(caller, "inline_ir")
+
+
+def test_passes_shaped_otherwise_always_get_the_untouched_copy(monkeypatch):
+    from numba.core.untyped_passes import InlineInlinables
+
+    def do_work_reading_it(self, state, work_list, block, i, expr, inline_worker):
+        original, _, _, new_blocks = inline_worker.inline_function(state.func_ir, block, i, expr)
+        return original
+
+    monkeypatch.setattr(InlineInlinables, "_do_work", do_work_reading_it)
+    assert inline_copies.numbas_callers() is None
+
+
+def test_an_inline_function_shaped_otherwise_keeps_numbas_copies(monkeypatch):
+    def inline_function_of_another_numba(self, caller_ir, block, i, function, arg_typs=None):
+        callee_ir = self.run_frontend_and_cache(function)
+        return self.inline_ir(
+            caller_ir, block, i, callee_ir, function.__code__.co_freevars, arg_typs=arg_typs
+        )
+
+    monkeypatch.setattr(inline_closurecall, "copy", copy)  # as before an install
+    monkeypatch.setattr(inline_closurecall.InlineWorker, "inline_function", inline_function_of_another_numba)
+    assert not inline_copies.shaped_as_expected()
 
 
 def test_installed_by_jassy_at_the_first_compile():

@@ -182,7 +182,9 @@ class _Framed(UGen):
         self.history = np.zeros(size + self.max_block)
         self.held = np.zeros(len(self.values_of))
         self.window = np.hanning(size + 1)[:size]
-        import pyfftw  # imported on use: pyfftw's interfaces slow every start of jassy
+        from jassy.fftw import import_pyfftw  # imported on use: pyfftw's interfaces slow every start
+
+        pyfftw = import_pyfftw()
 
         self.frame = pyfftw.empty_aligned(size, dtype="float64")
         self.fft = pyfftw.builders.rfft(self.frame, threads=1)
@@ -326,8 +328,9 @@ class Pitch(_Framed):
                 f"nodes.{self.name}: min_freq {v['min_freq']:g} Hz needs a frame of more than "
                 f"2 fs / min_freq samples and below max_freq; got size {self.size}"
             )
-        import pyfftw
+        from jassy.fftw import import_pyfftw
 
+        pyfftw = import_pyfftw()
         self.padded = pyfftw.empty_aligned(2 * self.size, dtype="float64")
         self.forward = pyfftw.builders.rfft(self.padded, threads=1)
 

@@ -45,7 +45,7 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank, record_views
-from jassy.anytime import a_weighting_power
+from jassy.anytime import a_weighting_power, fixed_entry
 from jassy.anytime_rank import has_force
 from jassy.errors import ModelError, PatchError
 from jassy.jit import drop_stale_cache, specialise
@@ -766,18 +766,11 @@ class ModalBank(ModelParams, UGen):
             return
         self._forcing_key = key
         _, _, sin2, inv = self._poles
-        modes = modal_budget.Forcing(
-            sin2, inv, self._fresh[COEF_C2], self.model.frequencies, self.model.decays, self.order
-        )
+        model, rate, horizon = self.model, float(self.sample_rate), float(self._horizon)
         modal_budget.forcing_rows(
-            self._mode_rows_view,
-            self._psd_bins,
-            modes,
-            self._heard.size,
-            key,
-            self.sample_rate,
-            self._horizon,
-        )
+            self._mode_rows_view, self._psd_bins, sin2, inv, self._fresh[COEF_C2], model.frequencies,
+            model.decays, self.order, self._heard.size, key, rate, horizon,
+        )  # fmt: skip
         self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
 
     def _param_changed(self, key: str, value: Any, jump: bool) -> None:
@@ -1031,42 +1024,40 @@ class ModalBank(ModelParams, UGen):
         budget's ``tables`` (ugens.modal_budget; decisions every period, the ring's
         length); a continuous force is judged by the amplitude it builds in ``horizon``
         seconds; modes are weighted by ``weighting`` ("flat" or "A", see jassy.anytime).
-        ``tables_handle``: the tables' handle (jassy.record_views) if the budget made it."""
+        ``tables_handle``: the tables' handle (jassy.record_views) if the budget made it.
+        The tables are fresh (ugens.modal_budget.allocate_tables: zeros, every mode kept)."""
         self._settle()
-        k, first, bank_at, coef_at, _ = (int(x) for x in tables.layout[:, slot])
+        k, first, bank_at, coef_at, _ = tables.layout[:, slot].tolist()
         self._tables, self._slot = tables, slot
-        views = {}
-        stores = {"bank": (tables.bank, bank_at, 6), "target": (tables.target, coef_at, 4)}
-        stores["delta"] = (tables.delta, coef_at, 4)
-        for name, (store, at, rows) in stores.items():
-            view = store[at : at + rows * k].reshape(rows, k)
-            view[:] = getattr(self, name)
-            views[name] = view
-        self.bank, self.target, self.delta = views["bank"], views["target"], views["delta"]
-        self.coef, self.y = self.bank[:4], self.bank[4:]
+        bank = tables.bank[bank_at : bank_at + 6 * k].reshape(6, k)
+        bank[:] = self.bank
+        target = tables.target[coef_at : coef_at + 4 * k].reshape(4, k)
+        target[:] = self.target
+        delta = tables.delta[coef_at : coef_at + 4 * k].reshape(4, k)
+        delta[:] = self.delta
+        self.bank, self.target, self.delta = bank, target, delta
+        self.coef, self.y = bank[:4], bank[4:]
         self._fresh_rows = tables.fresh[coef_at : coef_at + 4 * k].reshape(4, k)
         self._design_to_tables()
         tables.meta[slot] = self.meta
         self.meta = tables.meta[slot]
+        self.meta[ALLOWED] = k
         tables.last[slot] = self.last[0]
         self.last = tables.last[slot : slot + 1]
         self._bank_handle = None  # (a budgeted render does not use it: made again on use)
-        tables.values[FLOOR, slot] = self._floor
+        values = tables.values
+        values[FLOOR, slot], values[FLOOR2, slot] = self._floor, self._floor * self._floor
+        values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
         self._compact_meta = tables.compact_meta[slot]
-        self._compact_meta[:] = 0
         cut = slice(first, first + k)
         self._kept_mask, self._faded = tables.kept[cut], tables.faded[cut]
-        self._kept_mask[:], self._faded[:] = True, False
-        self.meta[ALLOWED] = k
         self._mode_rows_view = tables.rows[:, cut]
-        freqs = self.model.frequencies[self.order]
-        self._mode_rows_view[WEIGHT] = a_weighting_power(freqs) if weighting == "A" else 1.0
-        tables.values[FLOOR2, slot] = self._floor * self._floor
+        if weighting == "A":
+            self._mode_rows_view[WEIGHT] = a_weighting_power(self.model.frequencies[self.order])
+        else:
+            self._mode_rows_view[WEIGHT] = 1.0
         self._heard = tables.rings[slot]
-        self._heard[:] = 0.0
         self._psd_bins = tables.bins[cut]
-        tables.values[REMEMBERED, slot] = 0.0
-        tables.values[TRANSFORMED, slot] = k > FLAT_SPECTRUM_MODES
         self._horizon = horizon
         self._forcing_key = None
         self._tables_handle = handle(tables) if tables_handle is None else tables_handle
@@ -1077,8 +1068,8 @@ class ModalBank(ModelParams, UGen):
         """A budgeted bank's compiled entry point ``name``: "settle" (its compact bank's
         state back into its rows), "jump" (its coefficients to the fresh design in place)
         or "span" (its kept modes over a span, for a bank rendering through its own
-        ``process``), found on first use: most banks of a budget use none of them, and
-        finding one costs ~10 us (the budget's set-up, charged to it)."""
+        ``process``), found on first use: most banks of a budget use none of them (their
+        argument types are fixed: jassy.anytime.fixed_entry)."""
         entry = self._anytime_entries.get(name)
         if entry is None:
             from ugens import modal_kept  # (not at the top: it imports this module)
@@ -1089,7 +1080,7 @@ class ModalBank(ModelParams, UGen):
                 "jump": (modal_budget.jump_at, (at, slot)),
                 "span": (modal_kept.kept_span, (at, slot, self.out, self.out, 0, 0)),
             }[name]
-            entry = self._anytime_entries[name] = specialise(kernel, *example)
+            entry = self._anytime_entries[name] = fixed_entry(kernel, *example)
         return entry
 
     def active_modes(self) -> int:

@@ -34,6 +34,7 @@ import numpy as np
 from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
+from jassy.packed_arrays import BOOL, FLOAT, INT, handle_of, packed_zeros
 from jassy.record_views import FIELD, address, bool_row, float_row, float_table, int_row, int_table
 from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
@@ -178,23 +179,49 @@ def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
 def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
     """Empty tables for banks of ``mode_counts`` modes and a budget ``period`` (frames, a
     power of two)."""
+    return allocate_tables(mode_counts, period).tables
+
+
+class Allocated(NamedTuple):
+    """:class:`BudgetTables` and their handle (jassy.record_views), and the arrays of the
+    ``more`` fields of :func:`allocate_tables` and their handle slots."""
+
+    tables: BudgetTables
+    handle: np.ndarray
+    arrays: list[np.ndarray]
+    slots: list[tuple[int, int, int]]
+
+
+def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
+    """Empty :class:`BudgetTables` for banks of ``mode_counts`` modes and a budget
+    ``period`` (frames, a power of two), and their handle: the fields are views of one
+    zeroed buffer (jassy.packed_arrays; each starts on a 64-byte cache line), the window
+    and twiddles shared (:func:`spectra_rows`); ``more`` fields ((shape, dtype) pairs) in
+    the same buffer."""
     count = len(mode_counts)
-    layout = np.zeros((5, count), dtype=np.int64)
     first = bank_at = coef_at = compact_at = 0
-    for b, k in enumerate(mode_counts):
-        layout[:, b] = (k, first, bank_at, coef_at, compact_at)
+    places = []
+    for k in mode_counts:
+        places.append((k, first, bank_at, coef_at, compact_at))
         first += k
         bank_at += aligned(BANK_ROWS * k)
         coef_at += aligned(COEF_ROWS * k)
         compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
-    return BudgetTables(
-        layout, line_aligned_zeros((bank_at,)), np.zeros(coef_at), np.zeros(coef_at), np.zeros(coef_at),
-        line_aligned_zeros((compact_at,)), np.zeros((count, 3), dtype=np.int64),
-        np.zeros((count, 3), dtype=np.int64), np.zeros((MODE_ROWS, first)), np.ones(first, dtype=bool),
-        np.zeros(first, dtype=bool), np.zeros((count, period)), np.zeros(count),
-        np.zeros((BANK_VALUES, count)), np.zeros(first, dtype=np.int64), spectra_rows(period),
-        line_aligned_zeros((count, BLOCK_TABLE)),
+    f, i, b = FLOAT, INT, BOOL
+    fields = (
+        ((5, count), i), ((bank_at,), f), ((coef_at,), f), ((coef_at,), f), ((coef_at,), f),
+        ((compact_at,), f), ((count, 3), i), ((count, 3), i), ((MODE_ROWS, first), f), ((first,), b),
+        ((first,), b), ((count, period), f), ((count,), f), ((BANK_VALUES, count), f), ((first,), i),
+        ((count, BLOCK_TABLE), f),
     )  # fmt: skip
+    arrays, slots = packed_zeros((*fields, *more))
+    arrays[0][:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
+    arrays[9][:] = True  # every mode kept
+    spectra = spectra_rows(period)
+    tables = BudgetTables(*arrays[:15], spectra, arrays[15])
+    table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
+    handle = handle_of(table_slots)
+    return Allocated(tables, handle, arrays[16:], slots[16:])
 
 
 #: :func:`spectra_rows` by period, computed once per process and shared by every budget,
@@ -357,24 +384,13 @@ def centred_windowed(force, window, out, oldest):
         out[i] = (force[i] - mean) * window[i + n - oldest]
 
 
-class Forcing(NamedTuple):
-    """A bank's modes for :func:`forcing_rows`: sin^2 theta and 1 / (R^2 sin^2 theta) of
-    its poles and c2 = R^2 of its design (internal order), its model's frequencies (Hz)
-    and decay rates (1/s), and ``order``, the model's mode at each internal position."""
-
-    sin2: np.ndarray
-    inv: np.ndarray
-    c2: np.ndarray
-    frequencies: np.ndarray
-    decays: np.ndarray
-    order: np.ndarray
-
-
 @nb.njit(cache=True)
-def forcing_rows(rows, bins, modes, period, scales, sample_rate, horizon):
+def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, period, scales, sample_rate, horizon):
     """A bank's per-mode rows of a budget of ``period`` frames in one pass (``rows``: its
-    columns of :attr:`BudgetTables.rows`, ``bins`` of :attr:`BudgetTables.bins`), from
-    ``modes`` (:class:`Forcing`): SIN2, INV, the energy decay over a period c2^period =
+    columns of :attr:`BudgetTables.rows`, ``bins`` of :attr:`BudgetTables.bins`), from its
+    poles' sin^2 theta and 1 / (R^2 sin^2 theta), its design's c2 = R^2 (internal order)
+    and its model's frequencies (Hz) and decay rates (1/s), ``order`` the model's mode at
+    each internal position: SIN2, INV, the energy decay over a period c2^period =
     R^(2 period), the build-up under a steady force over the horizon tau (s),
     (1 - e^{-2 d tau}) / (2 d) (tau as d -> 0), and the periodogram's bin of each
     frequency (at most period / 2); frequencies and decays scaled by ``scales``
@@ -383,11 +399,11 @@ def forcing_rows(rows, bins, modes, period, scales, sample_rate, horizon):
     freq_scale, decay_scale = scales[0] * retune, scales[1] * retune
     half = period // 2
     for i in range(bins.size):
-        j = modes.order[i]
-        rows[SIN2, i], rows[INV, i] = modes.sin2[i], modes.inv[i]
-        rows[DECAY, i] = modes.c2[i] ** float(period)
-        bins[i] = int(min(np.rint(modes.frequencies[j] * freq_scale * period / sample_rate), half))
-        decay = modes.decays[j] * decay_scale
+        j = order[i]
+        rows[SIN2, i], rows[INV, i] = sin2[i], inv[i]
+        rows[DECAY, i] = c2[i] ** float(period)
+        bins[i] = int(min(np.rint(frequencies[j] * freq_scale * period / sample_rate), half))
+        decay = decays[j] * decay_scale
         two_d_tau = 2.0 * decay * horizon
         rows[GROWTH, i] = -np.expm1(-two_d_tau) / max(2.0 * decay, 1e-300) if two_d_tau > 1e-9 else horizon
 

@@ -83,11 +83,11 @@ def fractal_profile(
     spectrum.real, spectrum.imag = noise[:m], noise[m:]
     if n % 2 == 0:
         spectrum[-1] = spectrum[-1].real * math.sqrt(2.0)  # the Nyquist bin is real (same variance)
-    import pyfftw
-    import pyfftw.interfaces.numpy_fft as fftw  # imported on use (slow to import)
+    from jassy.fftw import import_pyfftw  # imported on use (slow to import)
 
+    pyfftw = import_pyfftw()
     pyfftw.interfaces.cache.enable()
-    profile = fftw.irfft(spectrum, n=n)
+    profile = pyfftw.interfaces.numpy_fft.irfft(spectrum, n=n)
     scale = math.sqrt(float(profile @ profile) / n)
     return profile * (rms / scale) if scale > 0 else profile
 
