@@ -18,10 +18,10 @@ takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~4.5 s),
 free motion with the advance stage, the sweep with the broad stage, and the contact model
 (``impulses.resolve``, ~10 s, or ``penalty.penalty``) with the contact stage; this process
 the polytope pairs (``narrow._polytopes``, ~5 s, and ``_spheres_polytope``), then the rest
-of the narrow phase (``pair_contacts``, after waiting for the helper's mesh contacts:
-compiled here too they would cost their time twice) with the narrow stage, and the impact
-stage (the impact-time search, which reaches the narrow phase again through the gap probe,
-after the free motion). A unit compiled for other types than the step asks for would only
+of the narrow phase (``narrow.pair_contacts_by_ref``, after waiting for the helper's mesh
+contacts: compiled here too they would cost their time twice), the narrow stage and the
+impact stage (with the impact-time search; both call the narrow phase apart, the impact
+stage links the free motion). A unit compiled for other types than the step asks for would only
 cost time (the step would compile its own): tests/test_rigid_step_units.py checks that they
 agree.
 """
@@ -44,7 +44,7 @@ from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
-from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope, pair_contacts
+from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope
 from physics.rigid.penalty import penalty
 
 #: At most this long (s) this process waits for a unit the helper compiles (_await_helper): a
@@ -65,8 +65,8 @@ class KernelCall(NamedTuple):
 
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     """Compile units of the step's kernels for a run of ``m``, ``opt``, ``d``, each a list of
-    kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase with
-    the narrow stage, and the impact stage first (this process); the mesh contacts, the free
+    kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase, the
+    narrow and impact stages first (this process); the mesh contacts, the free
     motion with the advance stage, the sweep with the broad stage, and the contact model with
     the contact stage from the back (the helper: the last BACK_UNITS)."""
     whole, count, dt = np.int64(0), np.int64(0), 0.0
@@ -84,11 +84,8 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     return [
         [KernelCall(_polytopes, ((whole,) * 4, (whole, whole), *posed, geo, dt, buf, count))],
         [KernelCall(_spheres_polytope, (whole, whole, whole, whole, *posed, geo, dt, buf, count))],
-        [
-            KernelCall(pair_contacts, (whole, whole, *posed, geo, dt, buf, count), after=_against_mesh),
-            KernelCall(*calls["narrow"]),
-        ],
-        [KernelCall(*calls["impact"], after=move)],
+        [KernelCall(*calls["pair"], after=_against_mesh)],
+        [KernelCall(*calls["narrow"]), KernelCall(*calls["impact"], after=move)],
         [solve, KernelCall(*calls["response"])],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep)), KernelCall(*calls["broad"])],
         [KernelCall(move, (free, whole, dt, *moved)), KernelCall(*calls["advance"])],
@@ -105,17 +102,20 @@ def compile_step_ahead(
 ) -> bool:
     """Compile the step's kernels for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it: run_steps and ``extra`` (compile units of the caller's, e.g. a scene's sound kernels,
-    which the caller would otherwise compile after the run) in the middle of the list; True
-    if the units ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
+    it: run_steps, ``extra`` (compile units of the caller's, e.g. a scene's sound kernels,
+    which the caller would otherwise compile after the run) and the contact events' kernels
+    (physics.rigid.events.compile_kernels) in the middle of the list; True if the units
+    ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
     kernels are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
+    from physics.rigid.events import compile_kernels  # imports world, which imports this module
+
     rigid = step_units(m, opt, d)
     front, back = rigid[:-BACK_UNITS], rigid[-BACK_UNITS:]
-    first_back = len(front) + 1 + len(extra)
+    first_back = len(front) + 1 + len(extra) + 1
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
@@ -126,6 +126,7 @@ def compile_step_ahead(
         *(partial(_compile, unit, at) for unit in front),
         whole_step,
         *extra,
+        compile_kernels,  # the contact events' kernels, which the caller runs after the run
         *(partial(_compile, unit, at) for unit in back),
     ]
     return compile_on_two_cores(units)
