@@ -19,24 +19,25 @@ import numba as nb
 import numpy as np
 
 
-@nb.njit(cache=False)
-def _pairs(pos, rot, geo, margin, buf, repeats, first, last, pair_contacts):
+@nb.njit(cache=False, _nrt=False)
+def _pairs(pos, rot, geo, margin, buf, repeats, first, last, pair_contacts, extra):
     """Contacts of bodies first..last-1 against every later body at every pose, ``repeats``
-    times; returns the number of contacts."""
+    times (``extra``: pair_contacts' arguments after the count); returns the number of
+    contacts."""
     total = 0
     for _ in range(repeats):
         for s in range(pos.shape[0]):
             n = pos.shape[1]
             for a in range(first, min(n, last)):
                 for b in range(a + 1, n):
-                    total += pair_contacts(a, b, pos[s], rot[s], geo, margin, buf, 0)
+                    total += pair_contacts(a, b, pos[s], rot[s], geo, margin, buf, 0, *extra)
     return total
 
 
 def main() -> None:
     from patches.wok import build_world, simulate_wok
     from physics.rigid import narrow
-    from physics.rigid.narrow import new_mesh_memory, pair_contacts
+    from physics.rigid.narrow import new_mesh_memory
     from physics.rigid.spatial import rotation_matrices
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -57,12 +58,17 @@ def main() -> None:
 
         geo = world.arrays()[0]
         buf = stepper._new_buffers(4096, new_mesh_memory(geo[21][-1]))
-    _pairs(pos[:1], rot[:1], geo, 0.002, buf, 1, 0, 1000, pair_contacts)  # compile
+    if hasattr(narrow, "narrow_entries"):  # its methods called apart
+        pair_contacts = narrow.pair_contacts_of
+        extra = (narrow.narrow_entries(pos[0], rot[0], geo, buf),)
+    else:  # a tree from before
+        pair_contacts, extra = narrow.pair_contacts, ()
+    _pairs(pos[:1], rot[:1], geo, 0.002, buf, 1, 0, 1000, pair_contacts, extra)  # compile
     for name, first, last in (("wok mesh vs food", 0, 1), ("food vs food", 1, 1000)):
         best = np.inf
         for _ in range(5):
             t0 = time.process_time()
-            count = _pairs(pos, rot, geo, 0.002, buf, 3, first, last, pair_contacts)
+            count = _pairs(pos, rot, geo, 0.002, buf, 3, first, last, pair_contacts, extra)
             best = min(best, time.process_time() - t0)
         print(f"{name:18s} {count:7d} contacts  {best * 1e3:6.1f} ms CPU")
 

@@ -643,13 +643,14 @@ def test_spin_bound_covers_a_tumbling_body_over_a_step():
 
 def _pair_gaps(world, state, margin=0.1):
     """Contacts (points, normals, gaps, pairs) of bodies 0 and 1 of ``world`` at ``state``."""
-    from physics.rigid.narrow import pair_contacts
+    from physics.rigid.narrow import narrow_entries, pair_contacts_of
     from physics.rigid.spatial import rotation_matrices
 
     geo = world.model().geometry
     buf = new_contacts(64, new_mesh_memory(geo.point_start[-1]))
     rot = rotation_matrices(state.quat)
-    count = pair_contacts(0, 1, state.pos, rot, geo, margin, buf, 0)
+    entries = narrow_entries(state.pos, rot, geo, buf)
+    count = pair_contacts_of(0, 1, state.pos, rot, geo, margin, buf, 0, entries)
     return buf.points[:count], buf.normals[:count], buf.gaps[:count], buf.pairs[:count]
 
 

@@ -40,6 +40,7 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import drop_stale_cache
+from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import meshgrid, record_ref, shapes
 from physics.rigid.meshgrid import (
     GridView,
@@ -49,7 +50,7 @@ from physics.rigid.meshgrid import (
     triangle_point,
     triangle_weights,
 )
-from physics.rigid.record_ref import deref
+from physics.rigid.record_ref import RefExample, deref, ref
 from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
 
 # its cache holds copies of their kernels and constants
@@ -269,9 +270,11 @@ def _polytope_distance(x, y, z, b, sb, pos, rot, model):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _spheres_polytope(a, b, sb, piece, pos, rot, model, margin, buf, count):
+def _spheres_polytope(a, b, sb, piece, pos, rot, gr, margin, br, count):
     """Contacts of sphere or capsule a with polytope b's geometry slot sb (its piece number
-    ``piece``: features are offset by PIECE times it)."""
+    ``piece``: features are offset by PIECE times it). Called apart (NarrowEntries), the
+    Geometry and the Contacts by reference (``gr``, ``br``)."""
+    model, buf = deref(gr), deref(br)
     pstart, planes, offsets, points = model.plane_start, model.planes, model.point_start, model.points
     for k in range(offsets[a], offsets[a + 1]):
         x, y, z, r = body_point(k, a, pos, rot, points)
@@ -509,13 +512,15 @@ def _edge_contact(slots, axis, rows, pieces, pos, rot, model, buf, count):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _polytopes(slots, pieces, pos, rot, model, margin, buf, count):
+def _polytopes(slots, pieces, pos, rot, gr, margin, br, count):
     """Contacts of two polytopes (geometry slots sa, sb; piece numbers ``pieces``) by
     separating axes: the face normals of each (_reference_face) and the cross products of
     their edge directions (_edge_separation). No contact when an axis separates them by more
     than margin; one edge-edge contact when an edge axis separates (or overlaps) them by
     EDGE_PREFERENCE more than every face axis; else the face manifolds of each on the other.
-    slots: (a, sa, b, sb)."""
+    slots: (a, sa, b, sb). Called apart (NarrowEntries), the Geometry and the Contacts by
+    reference (``gr``, ``br``)."""
+    model, buf = deref(gr), deref(br)
     a, sa, b, sb = slots
     face_ab, sep_ab = _reference_face(a, sa, b, sb, pos, rot, model)
     if sep_ab > margin:
@@ -553,7 +558,10 @@ def _against_plane(a, b, pos, rot, model, margin, buf, count):
 
 
 @nb.njit(cache=True, _nrt=False)
-def _against_mesh(a, b, pos, rot, model, margin, buf, count):
+def _against_mesh(a, b, pos, rot, gr, margin, br, count):
+    """Contacts of body a's points (sphere centres or vertices) with mesh b (module doc).
+    Called apart (NarrowEntries), the Geometry and the Contacts by reference (``gr``, ``br``)."""
+    model, buf = deref(gr), deref(br)
     tris, nrms, offsets, points = model.tris, model.tri_normals, model.point_start, model.points
     m = model.mesh_of[b]
     t0 = model.tri_start[m]
@@ -725,25 +733,26 @@ def _pair_methods() -> np.ndarray:
 PAIR_METHOD = _pair_methods()
 
 
-@nb.njit(cache=True, _nrt=False)
-def pair_contacts(a, b, pos, rot, model, margin, buf, count):
-    """Append the contacts of bodies a and b (any order) within ``margin`` (m); returns count.
-    The method comes from PAIR_METHOD. Compiled without reference counting (_nrt=False: it
-    allocates nothing), which would otherwise touch every array of model and buf at each call."""
-    return _pair_contacts(a, b, pos, rot, model, margin, buf, count)
+class NarrowEntries(NamedTuple):
+    """The narrow phase's kernels called apart (jassy.unlinked.call_apart), each compiled
+    alone, not linked into another: their entry points (narrow_entries). Its callers pass
+    the Geometry and the Contacts by reference (physics.rigid.record_ref)."""
+
+    contacts: Entry  # pair_contacts
+    polytopes: Entry  # _polytopes
+    spheres_polytope: Entry  # _spheres_polytope
+    against_mesh: Entry  # _against_mesh
+    with_compound: Entry  # _with_compound
 
 
 @nb.njit(cache=True, _nrt=False)
-def pair_contacts_by_ref(a, b, pos, rot, model, margin, buf, count):
-    """:func:`pair_contacts` with ``model`` (Geometry) and ``buf`` (Contacts) by reference
-    (physics.rigid.record_ref): a call passes two pointers instead of every array of both.
-    The rigid step calls it apart, per pair (stepper.StepEntries.pair)."""
-    return _pair_contacts(a, b, pos, rot, deref(model), margin, deref(buf), count)
-
-
-@nb.njit(cache=True, inline="always")
-def _pair_contacts(a, b, pos, rot, model, margin, buf, count):
-    """pair_contacts' body, inlined into both of its forms."""
+def pair_contacts(a, b, pos, rot, gr, margin, br, count, entries):
+    """Append the contacts of bodies a and b (any order) within ``margin`` (m) to the Contacts
+    ``br`` refers to; returns count. ``gr``: a reference to the Geometry; ``entries``: the
+    NarrowEntries through which the larger methods are called apart (compiled alone, so no
+    kernel optimises them again). The method comes from PAIR_METHOD. Compiled without
+    reference counting (_nrt=False: it allocates nothing)."""
+    model, buf = deref(gr), deref(br)
     btype = model.shape_type
     if btype[a] > btype[b]:
         a, b = b, a
@@ -753,36 +762,75 @@ def _pair_contacts(a, b, pos, rot, model, margin, buf, count):
     if method == POINTS_PLANE:
         return _against_plane(a, b, pos, rot, model, margin, buf, count)
     if method == POINTS_MESH:
-        return _against_mesh(a, b, pos, rot, model, margin, buf, count)
+        return call_apart(entries.against_mesh, (a, b, pos, rot, gr, margin, br, count), nb.int64)
     if method == SEGMENTS:
         return _segment_segment(a, b, pos, rot, model, margin, buf, count)
     if method == SPHERES_POLYTOPE:
-        return _spheres_polytope(a, b, b, np.int64(0), pos, rot, model, margin, buf, count)
+        where = (a, b, b, np.int64(0), pos, rot, gr, margin, br, count)
+        return call_apart(entries.spheres_polytope, where, nb.int64)
     if method == POLYTOPES:
         if _plane_separates(a, b, b, pos, rot, model, margin) or _plane_separates(
             b, a, a, pos, rot, model, margin
         ):
             return count
-        return _polytopes((a, a, b, b), (np.int64(0), np.int64(0)), pos, rot, model, margin, buf, count)
+        whole = (np.int64(a), np.int64(a), np.int64(b), np.int64(b))
+        where = (whole, (np.int64(0), np.int64(0)), pos, rot, gr, margin, br, count)
+        return call_apart(entries.polytopes, where, nb.int64)
     if method == PIECES:
-        return _with_compound(a, b, pos, rot, model, margin, buf, count)
+        where = (a, b, pos, rot, gr, margin, br, count, entries)
+        return call_apart(entries.with_compound, where, nb.int64)
     return count  # NO_CONTACT
 
 
 @nb.njit(cache=True, _nrt=False)
-def _with_compound(a, b, pos, rot, model, margin, buf, count):
+def pair_contacts_of(a, b, pos, rot, model, margin, buf, count, entries):
+    """:func:`pair_contacts` for a caller holding the Geometry ``model`` and the Contacts
+    ``buf`` themselves rather than references (tests, benchmarks); ``entries``:
+    narrow_entries for these types."""
+    where = (a, b, pos, rot, ref(model), margin, ref(buf), count, entries)
+    return call_apart(entries.contacts, where, nb.int64)
+
+
+@nb.njit(cache=True, _nrt=False)
+def _with_compound(a, b, pos, rot, gr, margin, br, count, entries):
     """Contacts of body a (a sphere, capsule, polytope or compound) with compound b: with each
     convex piece of b (geometry slots Model.piece_slots[piece_start[b]:piece_start[b + 1]]),
-    piece by piece for a compound a too."""
+    piece by piece for a compound a too; the pieces' methods called apart (``entries``)."""
+    model = deref(gr)
     ta, first, slots = model.shape_type[a], model.piece_start, model.piece_slots
     for j in range(first[b], first[b + 1]):
         sb, pb = slots[j], j - first[b]
         if _plane_separates(a, b, sb, pos, rot, model, margin):
             continue  # a's bounding sphere is beyond this piece of b
         if ta <= CAPSULE:
-            count = _spheres_polytope(a, b, sb, pb, pos, rot, model, margin, buf, count)
+            where = (a, b, sb, pb, pos, rot, gr, margin, br, count)
+            count = call_apart(entries.spheres_polytope, where, nb.int64)
             continue
         for i in range(first[a], first[a + 1]):
             sa, pa = slots[i], i - first[a]
-            count = _polytopes((a, sa, b, sb), (pa, pb), pos, rot, model, margin, buf, count)
+            where = ((a, sa, b, sb), (pa, pb), pos, rot, gr, margin, br, count)
+            count = call_apart(entries.polytopes, where, nb.int64)
     return count
+
+
+def narrow_calls(pos, rot, geo, buf) -> dict:
+    """The narrow phase's kernels called apart, for poses ``pos``, ``rot`` (arrays of the
+    types the caller passes), Geometry ``geo`` and Contacts ``buf``: NarrowEntries' field ->
+    (kernel, example arguments of the types they are called with)."""
+    whole, dt = np.int64(0), 0.0
+    gr, br, entries = RefExample(geo), RefExample(buf), NarrowEntries(*(Entry(0, 0),) * 5)
+    posed = (pos, rot, gr, dt, br, whole)
+    return {
+        "contacts": (pair_contacts, (whole, whole, *posed, entries)),
+        "polytopes": (_polytopes, ((whole,) * 4, (whole, whole), *posed)),
+        "spheres_polytope": (_spheres_polytope, (whole, whole, whole, whole, *posed)),
+        "against_mesh": (_against_mesh, (whole, whole, *posed)),
+        "with_compound": (_with_compound, (whole, whole, *posed, entries)),
+    }
+
+
+def narrow_entries(pos, rot, geo, buf) -> NarrowEntries:
+    """The NarrowEntries for calls with arguments of the types of ``pos``, ``rot``, ``geo``,
+    ``buf`` (narrow_calls), each kernel compiled (or loaded from numba's cache) on first use."""
+    calls = narrow_calls(pos, rot, geo, buf)
+    return NarrowEntries(*(entry(kernel, *args) for kernel, args in calls.values()))

@@ -18,10 +18,10 @@ takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~4.5 s),
 free motion with the advance stage and the contact model (``impulses.resolve``, ~10 s, or
 ``penalty.penalty``) with the contact stage; this process the polytope pairs
 (``narrow._polytopes``, ~5 s, and ``_spheres_polytope``), then the rest of the narrow phase
-(``narrow.pair_contacts_by_ref``, after waiting for the helper's mesh contacts: compiled
-here too they would cost their time twice), the narrow stage and the impact stage (with the
-impact-time search; both call the narrow phase apart, the impact stage links the free
-motion), the sweep with the broad stage. A unit compiled for other types than the step
+(``narrow.pair_contacts`` and ``_with_compound``, which call the larger methods apart:
+narrow.NarrowEntries), the narrow stage and the impact stage (with the impact-time search;
+both call the narrow phase apart, the impact stage links the free motion), the sweep with
+the broad stage. A unit compiled for other types than the step
 asks for would only cost time (the step would compile its own):
 tests/test_rigid_step_units.py checks that they agree.
 """
@@ -44,7 +44,6 @@ from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.impulses import resolve
 from physics.rigid.model import Model, Options
-from physics.rigid.narrow import _against_mesh, _polytopes, _spheres_polytope
 from physics.rigid.penalty import penalty
 
 #: At most this long (s) this process waits for a unit the helper compiles (_await_helper): a
@@ -80,16 +79,17 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
         solve = KernelCall(penalty, (m, opt, d, d.solver, count, dt, dt, whole, whole))
     move = st._move_semi_implicit if isinstance(motion, st.SemiImplicitMotion) else st._move
     free = st._free_motion.py_func(m, opt, d)
-    posed, geo, buf, moved = (d.pos, d.rot), m.geometry, d.contacts, (d.new_pos, d.new_quat, d.new_phi)
+    moved = (d.new_pos, d.new_quat, d.new_phi)
+    pair = calls["pair"]
     return [
-        [KernelCall(_polytopes, ((whole,) * 4, (whole, whole), *posed, geo, dt, buf, count))],
-        [KernelCall(_spheres_polytope, (whole, whole, whole, whole, *posed, geo, dt, buf, count))],
-        [KernelCall(*calls["pair"], after=_against_mesh)],
+        [KernelCall(*pair["polytopes"])],
+        [KernelCall(*pair["spheres_polytope"])],
+        [KernelCall(*pair["contacts"]), KernelCall(*pair["with_compound"])],
         [KernelCall(*calls["narrow"]), KernelCall(*calls["impact"], after=move)],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep)), KernelCall(*calls["broad"])],
         [solve, KernelCall(*calls["response"])],
         [KernelCall(move, (free, whole, dt, *moved)), KernelCall(*calls["advance"])],
-        [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
+        [KernelCall(*pair["against_mesh"])],
     ]
 
 
@@ -116,7 +116,8 @@ def compile_step_ahead(
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
-    entries = st.StepEntries(*(Entry(0, 0),) * len(st.StepEntries._fields))
+    pair = st.NarrowEntries(*(Entry(0, 0),) * len(st.NarrowEntries._fields))
+    entries = st.StepEntries(pair, *(Entry(0, 0),) * (len(st.StepEntries._fields) - 1))
     run_args = (m, opt, d, 0, 0, 0, contact, motion, entries)  # the types stepper.run passes
     whole_step = partial(_compile, [KernelCall(st.run_steps, run_args)], at)
     units = [

@@ -41,9 +41,10 @@ once, and the stages and run_steps can compile side by side (physics.rigid.step_
 stages get Model and Data by reference (physics.rigid.record_ref: one pointer each, made
 once per run_steps call) and read the fields they use into locals once per call, so a call
 passes a few pointers and scalars, once per (sub-)step. The narrow phase itself
-(narrow.pair_contacts_by_ref, StepEntries.pair) is called apart per pair by the narrow and
+(narrow.pair_contacts, StepEntries.pair) is called apart per pair by the narrow and
 impact stages, with the Geometry and the contact buffers by reference (pointers into m and
-d, record_ref.field_ref), so its tree compiles once, not once more in each stage. Inside a
+d, record_ref.field_ref), and its larger methods apart from it (narrow.NarrowEntries), so
+each compiles once, not once more in each caller. Inside a
 stage the smaller helpers are inlined (numba inline="always"), and so are the narrow
 stage's pair loop, the impact-time search and its gap probe.
 
@@ -103,7 +104,14 @@ from physics.rigid.codes import (
 from physics.rigid.impulses import SolverScratch, WarmStart, new_solver, resolve
 from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, semi_implicit_into
 from physics.rigid.model import Model, Options
-from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts_by_ref
+from physics.rigid.narrow import (
+    Contacts,
+    NarrowEntries,
+    narrow_calls,
+    narrow_entries,
+    new_contacts,
+    new_mesh_memory,
+)
 from physics.rigid.penalty import penalty
 from physics.rigid.record_ref import RefExample, deref, field_ref, ref
 from physics.rigid.shapes import PLANE, SPHERE
@@ -501,8 +509,8 @@ def _turn(i, tau, quat, kin_w, out_q):
 def _pair_gap(pair, gr, a, b, pos, rot, margin, probe, pr):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
     buffers ``probe``, ``pr`` a reference to it; ``pair`` the narrow phase's entry point and
-    ``gr`` a reference to the Geometry, StepEntries.pair)."""
-    count = call_apart(pair, (a, b, pos, rot, gr, margin, pr, np.int64(0)), nb.int64)
+    ``gr`` a reference to the Geometry; ``pair`` the narrow phase's entry points, StepEntries.pair)."""
+    count = call_apart(pair.contacts, (a, b, pos, rot, gr, margin, pr, np.int64(0), pair), nb.int64)
     best = margin
     for c in range(count):
         best = min(best, probe.gaps[c])
@@ -695,7 +703,7 @@ def _detect(geo, slop, pos, rot, buf, pairs, near, pair, gr, br):
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
     solve skips contacts beyond slop. Each pair's contacts come from the narrow phase's entry
-    point ``pair`` (StepEntries.pair), given references ``gr`` to geo and ``br`` to buf."""
+    points ``pair`` (StepEntries.pair), given references ``gr`` to geo and ``br`` to buf."""
     reach, gap, touching = near.reach, near.gap, near.touching
     count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
@@ -706,7 +714,7 @@ def _detect(geo, slop, pos, rot, buf, pairs, near, pair, gr, br):
         if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
-        count = call_apart(pair, (a, b, pos, rot, gr, margin, br, count), nb.int64)
+        count = call_apart(pair.contacts, (a, b, pos, rot, gr, margin, br, count, pair), nb.int64)
         for c in range(before, count):
             gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
@@ -779,7 +787,7 @@ def narrow_stage(m, opt, d, n_pairs, dt, pair):
     """How far each of the broad phase's first ``n_pairs`` pairs (d.sweep.pairs) can close in
     dt (d.near.reach), then the contacts of the pairs that can come within slop (_detect);
     returns their count. Called apart (StepEntries.narrow: once per (sub-)step), the narrow
-    phase through its entry point ``pair`` per pair; m and d by reference, their fields read
+    phase through its entry points ``pair`` per pair; m and d by reference, their fields read
     once here."""
     pairs, near, geo, buf = d.sweep.pairs[:n_pairs], d.near, m.geometry, d.contacts
     reach = near.reach
@@ -856,7 +864,7 @@ class StepEntries(NamedTuple):
     """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of the stages
     it calls apart (step_calls), each compiled alone (not linked into run_steps)."""
 
-    pair: Entry  # narrow.pair_contacts_by_ref (called per pair by the narrow and impact stages)
+    pair: NarrowEntries  # the narrow phase (called per pair by the narrow and impact stages)
     broad: Entry  # broad_stage
     narrow: Entry  # narrow_stage
     response: Entry  # contact_stage
@@ -866,13 +874,13 @@ class StepEntries(NamedTuple):
 
 def step_calls(m: Model, opt: Options, d: Data) -> dict:
     """The stages run_steps calls apart for a run of ``m``, ``opt``, ``d``: StepEntries'
-    field -> (kernel, example arguments of the types run_steps passes)."""
+    field -> (kernel, example arguments of the types run_steps passes); for ``pair`` the
+    narrow phase's kernels, narrow.narrow_calls."""
     whole, dt = np.int64(0), 0.0
     contact, motion = step_models(opt)
-    mr, dr, pair = RefExample(m), RefExample(d), Entry(0, 0)
-    geo, buf = RefExample(m.geometry), RefExample(d.contacts)
+    mr, dr, pair = RefExample(m), RefExample(d), NarrowEntries(*(Entry(0, 0),) * len(NarrowEntries._fields))
     return {
-        "pair": (pair_contacts_by_ref, (whole, whole, d.pos, d.rot, geo, dt, buf, whole)),
+        "pair": narrow_calls(d.pos, d.rot, m.geometry, d.contacts),
         "broad": (broad_stage, (mr, opt, dr, dt)),
         "narrow": (narrow_stage, (mr, opt, dr, whole, dt, pair)),
         "response": (contact_stage, (contact, mr, opt, dr, whole, dt, dt, whole, whole)),
@@ -894,7 +902,9 @@ def step_entries(m: Model, opt: Options, d: Data) -> StepEntries:
     found = _ENTRIES.get(key)
     if found is None:
         calls = step_calls(m, opt, d)
-        found = StepEntries(*(entry(calls[name][0], *calls[name][1]) for name in StepEntries._fields))
+        pair = narrow_entries(d.pos, d.rot, m.geometry, d.contacts)
+        stages = (entry(calls[name][0], *calls[name][1]) for name in StepEntries._fields[1:])
+        found = StepEntries(pair, *stages)
         if key[2] is not None:  # None: a type the key cannot tell (not remembered)
             _ENTRIES[key] = found
     return found
@@ -973,7 +983,7 @@ def impact_stage(m, opt, d, n_pairs, dt, motion, pair):
     (d.sweep.pairs) that were apart at the start of the (sub-)step and penetrate after it
     (d.new_*) having closed faster than the bounce threshold (module doc, step 6); dt when
     none. Called apart (StepEntries.impact: once per (sub-)step, with the impact-time search
-    inlined), the narrow phase through its entry point ``pair``; m and d by reference, their
+    inlined), the narrow phase through its entry points ``pair``; m and d by reference, their
     fields read once here."""
     pairs, near = d.sweep.pairs[:n_pairs], d.near
     slop, bounce = opt.slop, opt.bounce_threshold
