@@ -35,7 +35,7 @@ import numba as nb
 from llvmlite import ir as llvmir
 from numba.core import cgutils, config, types
 from numba.core.typing import signature
-from numba.extending import intrinsic, overload
+from numba.extending import intrinsic
 
 
 class Entry(NamedTuple):
@@ -97,18 +97,18 @@ def _call_apart(typingctx, where, args, result):
     return signature(result_type, where, args, result), codegen
 
 
-def call_apart(where: Entry, args: tuple, result):
-    """``kernel(*args)`` for the kernel whose :func:`entry` ``where`` is, called through its
-    address (not linked into the caller: module doc); ``result`` is its numba result type
-    (``numba.int64``, ``numba.float64``, ...). Typing the caller compiles nothing of the
-    callee. Raises a RuntimeError when ``where`` was compiled for other types than
-    ``args``' and ``result``. With numba's JIT off, calls the Python function."""
+def _call_in_python(where: Entry, args: tuple, result):
+    """call_apart with numba's JIT off: the kernel's Python function, called."""
     return where.address(*args)
 
 
-@overload(call_apart, inline="always")
-def _call_apart_compiled(where, args, result):
-    def impl(where, args, result):
-        return _call_apart(where, args, result)
-
-    return impl
+#: call_apart(where, args, result): ``kernel(*args)`` for the kernel whose :func:`entry`
+#: ``where`` is, called through its address (not linked into the caller: module doc);
+#: ``result`` is its numba result type (``numba.int64``, ``numba.float64``, ...). Typing the
+#: caller compiles nothing of the callee. Raises a RuntimeError when ``where`` was compiled
+#: for other types than ``args``' and ``result``. The intrinsic itself, not an overload
+#: inlined at numba's level: numba runs its dead-code elimination over a kernel each time it
+#: inlines an overload there, and that elimination drops writes into arrays taken out of a
+#: record by tuple unpacking (``a, b = rec.a, rec.b``) that nothing reads afterwards. With
+#: numba's JIT off, calls the Python function.
+call_apart = _call_in_python if config.DISABLE_JIT else _call_apart

@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from jassy import unlinked
 from jassy.jit import drop_stale_cache
 from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import meshgrid, record_ref, shapes
@@ -54,7 +55,7 @@ from physics.rigid.record_ref import RefExample, deref, ref
 from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
 
 # its cache holds copies of their kernels and constants
-drop_stale_cache(__file__, [meshgrid, record_ref, shapes])
+drop_stale_cache(__file__, [meshgrid, record_ref, shapes, unlinked])
 
 NO_BARY = (0.0, 0.0, 0.0)  # barycentric weights of a contact not on a mesh triangle
 PIECE = 100000  # features of a compound's k-th convex piece are offset by PIECE * k
@@ -752,7 +753,9 @@ def pair_contacts(a, b, pos, rot, gr, margin, br, count, entries):
     NarrowEntries through which the larger methods are called apart (compiled alone, so no
     kernel optimises them again). The method comes from PAIR_METHOD. Compiled without
     reference counting (_nrt=False: it allocates nothing)."""
-    model, buf = deref(gr), deref(br)
+    model = deref(gr)
+    # the buffers written here through br itself: numba's dead-code elimination (run where
+    # call_apart is inlined) drops writes into arrays of a record copied out by deref
     btype = model.shape_type
     if btype[a] > btype[b]:
         a, b = b, a
@@ -760,11 +763,11 @@ def pair_contacts(a, b, pos, rot, gr, margin, br, count, entries):
     if btype[a] >= PLANE:
         a, b = b, a  # a compound's surface points against a plane or mesh
     if method == POINTS_PLANE:
-        return _against_plane(a, b, pos, rot, model, margin, buf, count)
+        return _against_plane(a, b, pos, rot, model, margin, br, count)
     if method == POINTS_MESH:
         return call_apart(entries.against_mesh, (a, b, pos, rot, gr, margin, br, count), nb.int64)
     if method == SEGMENTS:
-        return _segment_segment(a, b, pos, rot, model, margin, buf, count)
+        return _segment_segment(a, b, pos, rot, model, margin, br, count)
     if method == SPHERES_POLYTOPE:
         where = (a, b, b, np.int64(0), pos, rot, gr, margin, br, count)
         return call_apart(entries.spheres_polytope, where, nb.int64)
