@@ -381,7 +381,7 @@ class ModeBudget:
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
                 if not bank.anytime_changes(math.inf):  # (the next sub-block: one call again)
-                    del self._watched[id(bank)]
+                    self._watched.pop(id(bank), None)
 
     def score_changed(self) -> None:
         """The score changed during the render (jassy.scheduler.Scheduler.insert): the next

@@ -653,6 +653,9 @@ class StickyWatch(dict):
     def __delitem__(self, key):
         pass
 
+    def pop(self, key, default=None):
+        return self.get(key, default)
+
 
 def test_a_bank_leaves_the_watch_with_its_last_queued_change(monkeypatch):
     """Once a bank's last queued change is applied, ModeBudget.step lets it go, so the
