@@ -7,8 +7,10 @@ empty folder to see a fresh install's first render:
     NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/cold_compile.py OUT.txt render wok -o /tmp/wok.wav -q
 
 OUT.txt: a summary line, then one line per function (exclusive s, inclusive s, compiles,
-qualified name), the most expensive first; then the same table for each forked helper (its
-compile events, written by the helper as it goes to OUT.txt.helper-PID and gathered here)."""
+qualified name), the most expensive first, and the timeline of the outermost compiles (wall
+seconds from this process's start at their start and end, name); then the same for each
+forked helper (its compile events, written by the helper as it goes to OUT.txt.helper-PID
+and gathered here), on the same clock: where one process waits for the other shows there."""
 
 from __future__ import annotations
 
@@ -22,6 +24,9 @@ from collections import defaultdict
 
 from numba.core import event
 
+#: The clock of the timelines (time.monotonic is one clock for the process and its forks).
+START = time.monotonic()
+
 
 class CompileTimes(event.Listener):
     """CPU time per compiled function, exclusive of the compiles nested in it."""
@@ -33,6 +38,7 @@ class CompileTimes(event.Listener):
         self.inclusive: dict[str, float] = defaultdict(float)
         self.exclusive: dict[str, float] = defaultdict(float)
         self.count: dict[str, int] = defaultdict(int)
+        self.outermost: list[str] = []  # the timeline: start, end (wall s from START), name
         os.register_at_fork(after_in_child=self._forked)
 
     def _forked(self):
@@ -42,27 +48,32 @@ class CompileTimes(event.Listener):
         self.stack.clear()
         for table in (self.inclusive, self.exclusive, self.count):
             table.clear()
+        self.outermost.clear()
 
     def table(self) -> list[str]:
-        """One line per function: exclusive s, inclusive s, compiles, name; costliest first."""
+        """One line per function: exclusive s, inclusive s, compiles, name; costliest first;
+        then the timeline of the outermost compiles."""
         return [
             f"{self.exclusive[name]:8.2f} {self.inclusive[name]:8.2f} {self.count[name]:3d} {name}\n"
             for name in sorted(self.exclusive, key=lambda k: -self.exclusive[k])
-        ]
+        ] + ["  timeline (wall s from start: start, end, outermost compile):\n", *self.outermost]
 
     def on_start(self, ev):
         function = ev.data["dispatcher"].py_func
-        self.stack.append([f"{function.__module__}.{function.__qualname__}", time.process_time(), 0.0])
+        name = f"{function.__module__}.{function.__qualname__}"
+        self.stack.append([name, time.process_time(), 0.0, time.monotonic() - START])
 
     def on_end(self, ev):
-        name, start, nested = self.stack.pop()
+        name, start, nested, wall_start = self.stack.pop()
         spent = time.process_time() - start
         self.inclusive[name] += spent
         self.exclusive[name] += spent - nested
         self.count[name] += 1
         if self.stack:
             self.stack[-1][2] += spent
-        elif self.helper_file:
+            return
+        self.outermost.append(f"  {wall_start:8.2f} {time.monotonic() - START:8.2f} {name}\n")
+        if self.helper_file:
             with open(self.helper_file, "w") as f:
                 f.writelines(self.table())
 

@@ -688,3 +688,43 @@ def test_a_silent_bank_writes_zeros_only_where_its_output_may_hold_other_samples
     assert counts[0] > 0 and counts == (graph.budget.decisions, graph.budget.mode_samples)
     assert np.max(np.abs(skipping)) > 1e-3 and np.array_equal(skipping, writing)
     assert max(known) == 4096  # some bank was silent through a whole sub-block (the next is skipped)
+
+
+def test_a_location_jump_in_the_short_path_changes_what_the_general_path_changes(monkeypatch):
+    """A budgeted bank applies a queued jump of its location alone without re-checking the
+    value and dispatching through ``set_param`` (ModalBank._jump_location): six bells at a
+    quarter of their modes with 40 location jumps, some of them sharing a frame with a
+    gain jump (the general path, keys together) or ramping (not in place), give the same
+    bits, decisions, locations and designs as every change through the general path."""
+    rng = np.random.default_rng(5)
+    times, banks, spots = rng.uniform(0, 1.0, 40), rng.integers(0, 6, 40), rng.integers(0, 4, 40)
+    changes = []
+    for i, (t, b, loc) in enumerate(zip(times, banks, spots, strict=True)):
+        if i % 10 == 3:  # a location that ramps: not a jump in place
+            changes.append(Event(float(t), f"b{b}", "set", {"location": int(loc)}, ramp=0.01))
+        elif i % 10 == 7:  # a location and a gain at one frame: applied together
+            changes.append(Event(float(t), f"b{b}", "set", {"location": int(loc), "gain": 0.8}, jump=True))
+        else:
+            changes.append(Event(float(t), f"b{b}", "set", {"location": int(loc)}, jump=True))
+    short = ModalBank._jump_location
+    taken = []
+
+    def counted(self, pending):
+        taken.append(short(self, pending))
+        return taken[-1]
+
+    def run():
+        graph, score = scene(ModeBudget(max_modes=225), seconds=1.0)
+        score = sorted(score + changes, key=lambda event: event.time)
+        audio = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+        banks = [node for node in graph.order if node.supports_budget]
+        return audio, graph.budget.decisions, [(b.values["location"], b._fresh.copy()) for b in banks]
+
+    monkeypatch.setattr(ModalBank, "_jump_location", counted)
+    fast, decisions, states = run()
+    assert 20 <= sum(taken) < len(taken)  # most jumps took the short path, not all
+    monkeypatch.setattr(ModalBank, "_jump_location", lambda self, pending: False)
+    general, general_decisions, general_states = run()
+    assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, general) and decisions == general_decisions
+    for (location, design), (other, other_design) in zip(states, general_states, strict=True):
+        assert location == other and np.array_equal(design, other_design)

@@ -152,3 +152,27 @@ def test_an_example_ref_types_as_a_ref_of_the_records_type():
     signature = (RecordRef(nb.typeof(record)), nb.float64)
     _scaled_rows_called.compile(signature)
     assert signature in _scaled_rows_called.signatures
+
+
+@nb.njit(_nrt=False)
+def _inner_total(inner_ref):
+    total = 0.0
+    for i in range(inner_ref.table.shape[0]):
+        for j in range(inner_ref.table.shape[2]):
+            total += inner_ref.table[i, 1, j]
+    inner_ref.flags[1] = True
+    return total
+
+
+@nb.njit(_nrt=False)
+def _through_field_ref(record):
+    return _inner_total(record_ref.field_ref(ref(record), "inner"))
+
+
+def test_a_field_ref_reads_and_writes_the_nested_records_arrays():
+    """field_ref(ref, "inner"): a reference to the nested record (passed to another kernel),
+    reading its arrays' values and writing into them."""
+    record = _record(3)
+    expected = float(record.inner.table[:, 1, :].sum())
+    assert _through_field_ref(record) == pytest.approx(expected, rel=1e-15)
+    assert record.inner.flags[1]

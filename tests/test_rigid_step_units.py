@@ -17,7 +17,7 @@ import pytest
 
 from physics.rigid import stepper as st
 from physics.rigid.impulses import new_warm_start, resolve
-from physics.rigid.narrow import pair_contacts
+from physics.rigid.narrow import pair_contacts_by_ref
 from physics.rigid.penalty import penalty
 from physics.rigid.shapes import Plane, Sphere
 from physics.rigid.step_units import _await_helper, step_units
@@ -81,7 +81,7 @@ def test_units_compile_the_types_run_steps_asks_for(integrator, contact, solve, 
     world = _world(integrator, contact)
     calls = _unit_calls(world)
     stages = {st.narrow_stage, st.contact_stage, st.impact_stage}
-    assert {call.kernel for call in calls} >= {pair_contacts, *stages, solve, move}
+    assert {call.kernel for call in calls} >= {pair_contacts_by_ref, *stages, solve, move}
     before = {call.kernel: set(_cached_signatures(call.kernel)) for call in calls}
     known = len(st.run_steps.signatures)
     simulate(world, 0.01)  # run_steps compiled (after the units, on an empty cache) or loaded

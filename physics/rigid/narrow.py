@@ -40,7 +40,7 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import drop_stale_cache
-from physics.rigid import meshgrid, shapes
+from physics.rigid import meshgrid, record_ref, shapes
 from physics.rigid.meshgrid import (
     GridView,
     grid_closest,
@@ -49,9 +49,11 @@ from physics.rigid.meshgrid import (
     triangle_point,
     triangle_weights,
 )
+from physics.rigid.record_ref import deref
 from physics.rigid.shapes import CAPSULE, COMPOUND, MESH, PLANE, SPHERE
 
-drop_stale_cache(__file__, [meshgrid, shapes])  # its cache holds copies of their kernels and constants
+# its cache holds copies of their kernels and constants
+drop_stale_cache(__file__, [meshgrid, record_ref, shapes])
 
 NO_BARY = (0.0, 0.0, 0.0)  # barycentric weights of a contact not on a mesh triangle
 PIECE = 100000  # features of a compound's k-th convex piece are offset by PIECE * k
@@ -728,6 +730,20 @@ def pair_contacts(a, b, pos, rot, model, margin, buf, count):
     """Append the contacts of bodies a and b (any order) within ``margin`` (m); returns count.
     The method comes from PAIR_METHOD. Compiled without reference counting (_nrt=False: it
     allocates nothing), which would otherwise touch every array of model and buf at each call."""
+    return _pair_contacts(a, b, pos, rot, model, margin, buf, count)
+
+
+@nb.njit(cache=True, _nrt=False)
+def pair_contacts_by_ref(a, b, pos, rot, model, margin, buf, count):
+    """:func:`pair_contacts` with ``model`` (Geometry) and ``buf`` (Contacts) by reference
+    (physics.rigid.record_ref): a call passes two pointers instead of every array of both.
+    The rigid step calls it apart, per pair (stepper.StepEntries.pair)."""
+    return _pair_contacts(a, b, pos, rot, deref(model), margin, deref(buf), count)
+
+
+@nb.njit(cache=True, inline="always")
+def _pair_contacts(a, b, pos, rot, model, margin, buf, count):
+    """pair_contacts' body, inlined into both of its forms."""
     btype = model.shape_type
     if btype[a] > btype[b]:
         a, b = b, a

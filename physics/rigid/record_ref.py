@@ -138,6 +138,24 @@ def _deref(typingctx, record_ref):
     return record_ref.record_type(record_ref), codegen
 
 
+@intrinsic(prefer_literal=True)
+def _field_ref(typingctx, record_ref, name):
+    if not isinstance(record_ref, RecordRef) or not isinstance(name, types.StringLiteral):
+        return None
+    record = record_ref.record_type
+    if name.literal_value not in record.fields:
+        return None
+    index = record.fields.index(name.literal_value)
+    field_type = record.types[index]
+    if not isinstance(field_type, types.BaseNamedTuple):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return cgutils.gep_inbounds(builder, args[0], 0, index)
+
+    return RecordRef(field_type)(record_ref, name), codegen
+
+
 def _aliases_its_record(lhs, args, alias_map, arg_aliases):
     """numba's alias analysis: a ref (or a deref) aliases its argument. Without this, numba's
     dead code elimination (run where an overload is inlined) takes a ref for new memory and
@@ -149,7 +167,10 @@ def _aliases_its_record(lhs, args, alias_map, arg_aliases):
 # (``ref(x)``: "_ref") and by the attribute read when called through the module
 # (``record_ref.ref(x)``: "ref"): both spellings are registered.
 ir_utils.alias_func_extensions.update(
-    {(name, __name__): _aliases_its_record for name in ("_ref", "ref", "_deref", "deref")}
+    {
+        (name, __name__): _aliases_its_record
+        for name in ("_ref", "ref", "_deref", "deref", "_field_ref", "field_ref")
+    }
 )
 
 
@@ -157,7 +178,16 @@ def _itself(value):
     return value
 
 
-#: ref(record): a reference to ``record`` (module doc); deref(ref): the record it refers to.
+def _field_itself(record, name):
+    return getattr(record, name)
+
+
+#: ref(record): a reference to ``record`` (module doc); deref(ref): the record it refers to;
+#: field_ref(ref, "name"): a reference to the record's field ``name`` (a record itself,
+#: ``name`` a string constant), pointing into the referred record: nothing is copied.
 #: Intrinsics, so that the record is stored in the frame of the kernel that calls ref. With
-#: numba's JIT off (an intrinsic cannot run as Python) both return their argument.
-ref, deref = (_itself, _itself) if config.DISABLE_JIT else (_ref, _deref)
+#: numba's JIT off (an intrinsic cannot run as Python) ref and deref return their argument,
+#: field_ref the field.
+ref, deref, field_ref = (
+    (_itself, _itself, _field_itself) if config.DISABLE_JIT else (_ref, _deref, _field_ref)
+)

@@ -8,7 +8,7 @@ outer step of h seconds (:func:`outer_step`) is:
 1. kinematic_stage: kinematic bodies to their path's pose, with its velocity;
 2. broad_stage: bounding boxes grown by how far each body can move, sweep and prune;
 3. narrow_stage: contacts of the pairs within slop plus how far each pair can close in the
-   step (narrow.pair_contacts);
+   step (narrow.pair_contacts_by_ref);
 4. contact_stage: contacts touching (gap <= slop) resolved by the contact model, impulse
    (impulses.resolve: projected Gauss-Seidel with Newton restitution, Coulomb friction,
    rolling resistance, penetration recovery and a warm start) or a penalty force
@@ -40,11 +40,15 @@ the wok's first compile, on one core, after everything below it). Each stage now
 once, and the stages and run_steps can compile side by side (physics.rigid.step_units). The
 stages get Model and Data by reference (physics.rigid.record_ref: one pointer each, made
 once per run_steps call) and read the fields they use into locals once per call, so a call
-passes a few pointers and scalars, once per (sub-)step; the same speed as the linked step
-(benchmarks/rigid_vs_commit.py). Inside a stage the smaller helpers are inlined (numba
-inline="always"), and so are the narrow stage's pair loop, the impact-time search and its
-gap probe. The whole step allocates nothing and run_steps and the stages are compiled
-without reference counting (``_nrt=False``, passed on to every kernel they call that sets
+passes a few pointers and scalars, once per (sub-)step. The narrow phase itself
+(narrow.pair_contacts_by_ref, StepEntries.pair) is called apart per pair by the narrow and
+impact stages, with the Geometry and the contact buffers by reference (pointers into m and
+d, record_ref.field_ref), so its tree compiles once, not once more in each stage. Inside a
+stage the smaller helpers are inlined (numba inline="always"), and so are the narrow
+stage's pair loop, the impact-time search and its gap probe.
+
+The whole step allocates nothing and run_steps and the stages are compiled without
+reference counting (``_nrt=False``, passed on to every kernel they call that sets
 no flag of its own): with it, every use of Model or Data counted a reference up and down for
 each array they hold. Its scratch (contact solve, sweep, pair bounds, the gap probe's saved
 poses) lives in Data; a sweep that finds more pairs, or a narrow phase more contacts, than
@@ -99,9 +103,9 @@ from physics.rigid.codes import (
 from physics.rigid.impulses import SolverScratch, WarmStart, new_solver, resolve
 from physics.rigid.integrate import SEMI_IMPLICIT, FreeBody, advance_body_into, semi_implicit_into
 from physics.rigid.model import Model, Options
-from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts
+from physics.rigid.narrow import Contacts, new_contacts, new_mesh_memory, pair_contacts_by_ref
 from physics.rigid.penalty import penalty
-from physics.rigid.record_ref import RefExample, deref, ref
+from physics.rigid.record_ref import RefExample, deref, field_ref, ref
 from physics.rigid.shapes import PLANE, SPHERE
 
 #: numba's cache of this module holds copies of these modules' kernels (and constants).
@@ -494,10 +498,11 @@ def _turn(i, tau, quat, kin_w, out_q):
 
 
 @nb.njit(cache=True, inline="always")
-def _pair_gap(geo, a, b, pos, rot, margin, probe):
+def _pair_gap(pair, gr, a, b, pos, rot, margin, probe, pr):
     """Smallest gap (m) of pair (a, b) at the poses pos, rot, at most margin (contacts in the
-    buffers ``probe``; no reference counting, like narrow.pair_contacts)."""
-    count = pair_contacts(a, b, pos, rot, geo, margin, probe, np.int64(0))  # not a literal 0: one compile
+    buffers ``probe``, ``pr`` a reference to it; ``pair`` the narrow phase's entry point and
+    ``gr`` a reference to the Geometry, StepEntries.pair)."""
+    count = call_apart(pair, (a, b, pos, rot, gr, margin, pr, np.int64(0)), nb.int64)
     best = margin
     for c in range(count):
         best = min(best, probe.gaps[c])
@@ -505,9 +510,10 @@ def _pair_gap(geo, a, b, pos, rot, margin, probe):
 
 
 @nb.njit(cache=True, inline="always")
-def _gap_at(m, opt, d, a, b, tau, margin, motion):
+def _gap_at(m, opt, d, a, b, tau, margin, motion, pair, gr, pr):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
-    moved_* scratch; d.pos and d.rot are kept in d.keep and restored)."""
+    moved_* scratch; d.pos and d.rot are kept in d.keep and restored; ``pair``, ``gr``, ``pr``:
+    _pair_gap's)."""
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
     for side in range(2):
         i = a if side == 0 else b
@@ -522,7 +528,7 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
         for x in range(3):
             pos[i, x] = mp[i, x]
         _rotation(mq, i, rot)
-    gap = _pair_gap(m.geometry, a, b, pos, rot, margin, d.probe)
+    gap = _pair_gap(pair, gr, a, b, pos, rot, margin, d.probe, pr)
     for side in range(2):
         i = a if side == 0 else b
         for x in range(3):
@@ -533,9 +539,10 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion):
 
 
 @nb.njit(cache=True, inline="always")
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
+def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion, pair, gr, pr):
     """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``motion``'s integrator, step_models; m and d by reference)."""
+    moved by ``motion``'s integrator, step_models; m and d by reference; ``pair``, ``gr``,
+    ``pr``: _pair_gap's)."""
     lo, hi = 0.0, dt
     flo, fhi = g0, g1
     side = 0
@@ -543,7 +550,7 @@ def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin, motion)
+        f = _gap_at(m, opt, d, a, b, t, margin, motion, pair, gr, pr)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -682,12 +689,13 @@ def _cannot_touch(a, b, pos, rot, geo, margin):
 
 
 @nb.njit(cache=True, inline="always")
-def _detect(geo, slop, pos, rot, buf, pairs, near):
+def _detect(geo, slop, pos, rot, buf, pairs, near, pair, gr, br):
     """Contacts (into ``buf``, narrow.Contacts; returns their count) of all pairs within margin = slop +
     near.reach[p] (m, how far the pair can close in the step). near.gap[p]: a lower bound of
     pair p's gap (its smallest contact gap, polytope face planes standing in for the distance;
     ``margin`` when none is that close); near.touching[p]: it has a contact within slop. The
-    solve skips contacts beyond slop."""
+    solve skips contacts beyond slop. Each pair's contacts come from the narrow phase's entry
+    point ``pair`` (StepEntries.pair), given references ``gr`` to geo and ``br`` to buf."""
     reach, gap, touching = near.reach, near.gap, near.touching
     count = np.int64(0)  # a literal 0 would compile the narrow phase a second time
     for p in range(pairs.shape[0]):
@@ -698,7 +706,7 @@ def _detect(geo, slop, pos, rot, buf, pairs, near):
         if _cannot_touch(a, b, pos, rot, geo, margin):
             continue
         before = count
-        count = pair_contacts(a, b, pos, rot, geo, margin, buf, count)
+        count = call_apart(pair, (a, b, pos, rot, gr, margin, br, count), nb.int64)
         for c in range(before, count):
             gap[p] = min(gap[p], buf.gaps[c])
         touching[p] = count > before and gap[p] <= slop
@@ -767,17 +775,19 @@ def broad_stage(m, opt, d, dt):
 
 
 @nb.njit(cache=True, _nrt=False)
-def narrow_stage(m, opt, d, n_pairs, dt):
+def narrow_stage(m, opt, d, n_pairs, dt, pair):
     """How far each of the broad phase's first ``n_pairs`` pairs (d.sweep.pairs) can close in
     dt (d.near.reach), then the contacts of the pairs that can come within slop (_detect);
-    returns their count. Called apart (StepEntries.narrow: once per (sub-)step, with the
-    narrow phase linked in); m and d by reference, their fields read once here."""
-    pairs, near, geo = d.sweep.pairs[:n_pairs], d.near, m.geometry
+    returns their count. Called apart (StepEntries.narrow: once per (sub-)step), the narrow
+    phase through its entry point ``pair`` per pair; m and d by reference, their fields read
+    once here."""
+    pairs, near, geo, buf = d.sweep.pairs[:n_pairs], d.near, m.geometry, d.contacts
     reach = near.reach
     for p in range(pairs.shape[0]):
         reach[p] = 0.0
     _pair_reach(pairs, d.vel, d.spin, m.kind, d.gravity_norm, dt, reach)
-    return _detect(geo, opt.slop, d.pos, d.rot, d.contacts, pairs, near)
+    gr, br = field_ref(m, "geometry"), field_ref(d, "contacts")  # pointers into m and d
+    return _detect(geo, opt.slop, d.pos, d.rot, buf, pairs, near, pair, gr, br)
 
 
 @nb.njit(cache=True, _nrt=False)
@@ -846,6 +856,7 @@ class StepEntries(NamedTuple):
     """run_steps' argument ``entries``: the entry points (jassy.unlinked.Entry) of the stages
     it calls apart (step_calls), each compiled alone (not linked into run_steps)."""
 
+    pair: Entry  # narrow.pair_contacts_by_ref (called per pair by the narrow and impact stages)
     broad: Entry  # broad_stage
     narrow: Entry  # narrow_stage
     response: Entry  # contact_stage
@@ -858,13 +869,15 @@ def step_calls(m: Model, opt: Options, d: Data) -> dict:
     field -> (kernel, example arguments of the types run_steps passes)."""
     whole, dt = np.int64(0), 0.0
     contact, motion = step_models(opt)
-    mr, dr = RefExample(m), RefExample(d)
+    mr, dr, pair = RefExample(m), RefExample(d), Entry(0, 0)
+    geo, buf = RefExample(m.geometry), RefExample(d.contacts)
     return {
+        "pair": (pair_contacts_by_ref, (whole, whole, d.pos, d.rot, geo, dt, buf, whole)),
         "broad": (broad_stage, (mr, opt, dr, dt)),
-        "narrow": (narrow_stage, (mr, opt, dr, whole, dt)),
+        "narrow": (narrow_stage, (mr, opt, dr, whole, dt, pair)),
         "response": (contact_stage, (contact, mr, opt, dr, whole, dt, dt, whole, whole)),
         "advance": (advance_stage, (mr, opt, dr, dt, motion)),
-        "impact": (impact_stage, (mr, opt, dr, whole, dt, motion)),
+        "impact": (impact_stage, (mr, opt, dr, whole, dt, motion, pair)),
     }
 
 
@@ -955,12 +968,13 @@ def advance_stage(m, opt, d, tau, motion):
 
 
 @nb.njit(cache=True, _nrt=False)
-def impact_stage(m, opt, d, n_pairs, dt, motion):
+def impact_stage(m, opt, d, n_pairs, dt, motion, pair):
     """The earliest time of impact (s, within dt) of the broad phase's first ``n_pairs`` pairs
     (d.sweep.pairs) that were apart at the start of the (sub-)step and penetrate after it
     (d.new_*) having closed faster than the bounce threshold (module doc, step 6); dt when
-    none. Called apart (StepEntries.impact: once per (sub-)step, with the narrow phase and
-    the impact-time search linked in); m and d by reference, their fields read once here."""
+    none. Called apart (StepEntries.impact: once per (sub-)step, with the impact-time search
+    inlined), the narrow phase through its entry point ``pair``; m and d by reference, their
+    fields read once here."""
     pairs, near = d.sweep.pairs[:n_pairs], d.near
     slop, bounce = opt.slop, opt.bounce_threshold
     # records read once, not per pair (taking one out of m or d in the loop costs a reference
@@ -975,6 +989,7 @@ def impact_stage(m, opt, d, n_pairs, dt, motion):
         d.stats.impact_checks,
     )
     reach, gap0, touching = near.reach, near.gap, near.touching
+    gr, pr = field_ref(m, "geometry"), field_ref(d, "probe")  # for the narrow phase's entry point
     _rotations(d.new_quat, d.new_rot)
     _speeds(
         m.kind, m.geometry.bound, m.inertia, d.phi, d.rot, d.kin_v, d.kin_w, d.vel, d.spin
@@ -989,14 +1004,15 @@ def impact_stage(m, opt, d, n_pairs, dt, motion):
         if _cannot_touch(a, b, new_pos, new_rot, geo, slop):
             continue
         checks[0] += 1
-        g1 = _pair_gap(geo, a, b, new_pos, new_rot, slop, probe)
+        g1 = _pair_gap(pair, gr, a, b, new_pos, new_rot, slop, probe, pr)
         if g1 >= -slop:
             continue
         within = reach[p] + 4.0 * slop
-        g0 = _pair_gap(geo, a, b, pos, rot, within, probe)
+        g0 = _pair_gap(pair, gr, a, b, pos, rot, within, probe, pr)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        first_hit = min(first_hit, _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion))
+        hit = _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion, pair, gr, pr)
+        first_hit = min(first_hit, hit)
     return first_hit
 
 
@@ -1048,7 +1064,7 @@ def outer_step(m, opt, d, step, nrec, contact, motion, entries):
             progress.need[0] = count
             return _stop(progress, t_local, subs, nrec)
         n_pairs = count
-        count = call_apart(entries.narrow, (m, opt, d, n_pairs, dt), nb.int64)
+        count = call_apart(entries.narrow, (m, opt, d, n_pairs, dt, entries.pair), nb.int64)
         if count > d.solver.idx.shape[0]:
             progress.need[1] = count
             return _stop(progress, t_local, subs, nrec)
@@ -1062,7 +1078,8 @@ def outer_step(m, opt, d, step, nrec, contact, motion, entries):
         call_apart(entries.advance, (m, opt, d, dt, motion), nb.int64)
         first_hit = dt
         if subs < max_events:
-            first_hit = call_apart(entries.impact, (m, opt, d, n_pairs, dt, motion), nb.float64)
+            impact_args = (m, opt, d, n_pairs, dt, motion, entries.pair)
+            first_hit = call_apart(entries.impact, impact_args, nb.float64)
         if first_hit < dt:
             call_apart(entries.advance, (m, opt, d, first_hit, motion), nb.int64)
             _commit(d)
