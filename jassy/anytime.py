@@ -241,9 +241,9 @@ class ModeBudget:
         inputs, outputs = (addresses[0], count, 1), (addresses[0] + 8 * count, count, 1)
         mask = [(masks[0] + r * total, total, 1) for r in range(3)]
         hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], power)
-        self._before_kicks = handle_of((*hearing, outputs, flag[BY_PYTHON], zeros))
+        self._before_kicks = (*hearing, outputs, flag[BY_PYTHON], zeros)
         decision = (flag[ONSET], flag[HEARD], inputs, scores, *mask)
-        self._after_kicks = handle_of((state, *decision))
+        self._after_kicks = (state, *decision)
 
     @property
     def hearing(self) -> Hearing:
@@ -270,7 +270,7 @@ class ModeBudget:
 
         def carve(kicks: tuple) -> Packed:  # the impacts' fields, with the tables and records
             allocated = mb.allocate_tables(counts, self.period, (*records, *kicks))
-            self._tables, self._tables_handle = allocated.tables, allocated.handle  # (made once)
+            self._tables, self._table_slots = allocated.tables, allocated.table_slots
             n = len(records)
             self._records(banks, total, renders, Packed(allocated.arrays[:n], allocated.slots[:n]))
             return Packed(allocated.arrays[n:], allocated.slots[n:])
@@ -279,11 +279,12 @@ class ModeBudget:
         self._loaded = None  # the listing in the Kicks table
         self._handle_size = mk.DECISION_AT + DECISION_FIELDS * FIELD  # (the step handle's: checked)
         self._load_kicks(self.listed(), carve)  # the score's impacts, before the first sub-block
-        tables = self._tables
+        tables, fields = self._tables, len(self._table_slots)
+        self._tables_handle = self._step_handle[: fields * FIELD]  # (the banks' and the step's)
         for slot, bank in enumerate(banks):
             bank.anytime_attach(tables, slot, self.horizon, self.weighting, self._tables_handle)
         #: banks fed by banks, credited with their feeders' impacts (this period, the next)
-        self._fed = feeding_banks(banks)
+        self._fed = [] if self.renders else feeding_banks(banks)  # (a bank fed by one: not renders)
         if self._fed:
             weigh_feeders(tables, self._fed, heard_banks(banks, self._audio or banks), self.sample_rate)
             self._chain_fields = (
@@ -311,20 +312,20 @@ class ModeBudget:
         self._decide_all = fixed_entry(mk.decide_at, self._step_handle, self._rates)
 
     @staticmethod
-    def _empty_kicks(packed: Packed) -> tuple[Kicks, np.ndarray]:
+    def _empty_kicks(packed: Packed) -> tuple[Kicks, list]:
         """The Kicks table of ``packed`` (the arrays of :func:`kick_fields`), none located,
-        and its handle (jassy.record_views)."""
+        and its handle slots (jassy.record_views)."""
         arrays, slots = packed
         arrays[4][:] = -1  # none located
-        return Kicks(*arrays), handle_of(slots)
+        return Kicks(*arrays), slots
 
-    def _steps_handle(self, kicks: np.ndarray) -> None:
+    def _steps_handle(self, kicks: list) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the
         Hearing, the banks' outputs, the by-Python mask, the output samples known zero, the
-        impacts (``kicks``: the Kicks table's handle), the step state and the Decision
+        impacts (``kicks``: the Kicks table's slots), the step state and the Decision
         (ugens.modal_kept.DECISION_AT)."""
-        parts = (self._tables_handle, self._before_kicks, kicks, self._after_kicks)
-        self._step_handle = np.concatenate(parts)  # handle(tables, hearing, ..., decision)
+        parts = (*self._table_slots, *self._before_kicks, *kicks, *self._after_kicks)
+        self._step_handle = handle_of(parts)  # handle(tables, hearing, ..., decision), one array
         assert self._step_handle.size == self._handle_size, "step handle layout"
 
     def step(self, start: int, n: int) -> None:

@@ -183,13 +183,18 @@ def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
 
 
 class Allocated(NamedTuple):
-    """:class:`BudgetTables` and their handle (jassy.record_views), and the arrays of the
-    ``more`` fields of :func:`allocate_tables` and their handle slots."""
+    """:class:`BudgetTables` and their handle slots (jassy.record_views: three per field),
+    and the arrays of the ``more`` fields of :func:`allocate_tables` and their slots."""
 
     tables: BudgetTables
-    handle: np.ndarray
+    table_slots: tuple
     arrays: list[np.ndarray]
     slots: list[tuple[int, int, int]]
+
+    @property
+    def handle(self) -> np.ndarray:
+        """The tables' handle."""
+        return handle_of(self.table_slots)
 
 
 def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
@@ -220,8 +225,7 @@ def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
     spectra = spectra_rows(period)
     tables = BudgetTables(*arrays[:15], spectra, arrays[15])
     table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
-    handle = handle_of(table_slots)
-    return Allocated(tables, handle, arrays[16:], slots[16:])
+    return Allocated(tables, table_slots, arrays[16:], slots[16:])
 
 
 #: :func:`spectra_rows` by period, computed once per process and shared by every budget,

@@ -35,7 +35,6 @@ from physics.rigid.codes import (
     REC_SPEED,
     REC_STEP,
     REC_TIME,
-    REC_WIDTH,
 )
 from physics.rigid.world import RunResult
 
@@ -263,17 +262,3 @@ def haptic_frames(result: RunResult, body: int, point=None) -> list[HapticFrame]
         raise ValueError("haptic_frames: non-finite contact force")
     torques = torque if point is not None else [None] * len(times)
     return [HapticFrame(float(t), f, tq) for t, f, tq in zip(times, force, torques, strict=True)]
-
-
-def compile_kernels() -> None:
-    """Compile (or load from numba's cache) the kernels :func:`impacts`, :func:`contact_tracks`
-    and :func:`contact_wrench` call, for the types they pass (run on empty records): a compile
-    unit of a cold start (physics.rigid.step_units), so that they are ready when the run
-    ends instead of compiling after it."""
-    rec, rows = np.zeros((0, REC_WIDTH)), np.zeros(0, np.int64)
-    _impact_groups(rec, rows)
-    columns = _sustained_columns(rec, 1)
-    _step_groups(rows, *columns)
-    on, sign = _rows_on(rec, 0)
-    forces = np.zeros((0, 3))
-    _wrench_sums(rec, on, sign, 0, 1.0, forces, rows, forces, forces.copy())

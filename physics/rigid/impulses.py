@@ -134,10 +134,10 @@ class SolverScratch(NamedTuple):
     touched: np.ndarray  # (bodies,) the bodies the sweep updated
 
 
-@nb.njit(cache=True)
 def new_solver(rows, n_bodies, warm_rows):
     """The contact solve's scratch (SolverScratch) for up to ``rows`` contacts, allocated once
-    per run and grown with the contacts."""
+    per run and grown with the contacts (in numpy: a kernel would be one more compile on a
+    fresh install's first run, before its compile units start)."""
     return SolverScratch(
         np.empty(rows, np.int64),
         np.empty((rows, 3)),

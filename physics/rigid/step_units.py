@@ -15,15 +15,15 @@ first.
 
 The split (CPU of each subtree's first compile on the wok, one cold run): the helper first
 takes the mesh contacts (``narrow._against_mesh`` with its grid search, ~4.5 s), then the
-free motion with the advance stage, the sweep with the broad stage, and the contact model
-(``impulses.resolve``, ~10 s, or ``penalty.penalty``) with the contact stage; this process
-the polytope pairs (``narrow._polytopes``, ~5 s, and ``_spheres_polytope``), then the rest
-of the narrow phase (``narrow.pair_contacts_by_ref``, after waiting for the helper's mesh
-contacts: compiled here too they would cost their time twice), the narrow stage and the
-impact stage (with the impact-time search; both call the narrow phase apart, the impact
-stage links the free motion). A unit compiled for other types than the step asks for would only
-cost time (the step would compile its own): tests/test_rigid_step_units.py checks that they
-agree.
+free motion with the advance stage and the contact model (``impulses.resolve``, ~10 s, or
+``penalty.penalty``) with the contact stage; this process the polytope pairs
+(``narrow._polytopes``, ~5 s, and ``_spheres_polytope``), then the rest of the narrow phase
+(``narrow.pair_contacts_by_ref``, after waiting for the helper's mesh contacts: compiled
+here too they would cost their time twice), the narrow stage and the impact stage (with the
+impact-time search; both call the narrow phase apart, the impact stage links the free
+motion), the sweep with the broad stage. A unit compiled for other types than the step
+asks for would only cost time (the step would compile its own):
+tests/test_rigid_step_units.py checks that they agree.
 """
 
 from __future__ import annotations
@@ -66,9 +66,9 @@ class KernelCall(NamedTuple):
 def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
     """Compile units of the step's kernels for a run of ``m``, ``opt``, ``d``, each a list of
     kernel calls to compile (not run): the polytope pairs, the rest of the narrow phase, the
-    narrow and impact stages first (this process); the mesh contacts, the free
-    motion with the advance stage, the sweep with the broad stage, and the contact model with
-    the contact stage from the back (the helper: the last BACK_UNITS)."""
+    narrow and impact stages, the sweep with the broad stage first (this process); the mesh
+    contacts, the free motion with the advance stage and the contact model with the contact
+    stage from the back (the helper: the last BACK_UNITS)."""
     whole, count, dt = np.int64(0), np.int64(0), 0.0
     calls = st.step_calls(m, opt, d)
     contact, motion = st.step_models(opt)
@@ -86,15 +86,15 @@ def step_units(m: Model, opt: Options, d: st.Data) -> list[list[KernelCall]]:
         [KernelCall(_spheres_polytope, (whole, whole, whole, whole, *posed, geo, dt, buf, count))],
         [KernelCall(*calls["pair"], after=_against_mesh)],
         [KernelCall(*calls["narrow"]), KernelCall(*calls["impact"], after=move)],
-        [solve, KernelCall(*calls["response"])],
         [KernelCall(sweep_pairs, (d.lo, d.hi, d.movable, d.sweep)), KernelCall(*calls["broad"])],
+        [solve, KernelCall(*calls["response"])],
         [KernelCall(move, (free, whole, dt, *moved)), KernelCall(*calls["advance"])],
         [KernelCall(_against_mesh, (whole, whole, *posed, geo, dt, buf, count))],
     ]
 
 
 #: The last this many units of step_units are the helper's (it starts with the last).
-BACK_UNITS = 4
+BACK_UNITS = 3
 
 
 def compile_step_ahead(
@@ -102,20 +102,17 @@ def compile_step_ahead(
 ) -> bool:
     """Compile the step's kernels for this run on two cores (:func:`step_units`) when
     numba's cache holds no run_steps yet (a fresh install) and this process has not compiled
-    it: run_steps, ``extra`` (compile units of the caller's, e.g. a scene's sound kernels,
-    which the caller would otherwise compile after the run) and the contact events' kernels
-    (physics.rigid.events.compile_kernels) in the middle of the list; True if the units
-    ran. False with numba's JIT off (NUMBA_DISABLE_JIT=1: the
-    kernels are plain Python functions, nothing to compile)."""
+    it: run_steps and ``extra`` (compile units of the caller's, e.g. a scene's sound and
+    contact-event kernels, which the caller would otherwise compile after the run) in the
+    middle of the list; True if the units ran. False with numba's JIT off
+    (NUMBA_DISABLE_JIT=1: the kernels are plain Python functions, nothing to compile)."""
     if config.DISABLE_JIT or not hasattr(st.run_steps, "signatures"):
         return False
     if st.run_steps.signatures or cache_holds(st.run_steps):
         return False
-    from physics.rigid.events import compile_kernels  # imports world, which imports this module
-
     rigid = step_units(m, opt, d)
     front, back = rigid[:-BACK_UNITS], rigid[-BACK_UNITS:]
-    first_back = len(front) + 1 + len(extra) + 1
+    first_back = len(front) + 1 + len(extra)
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
@@ -126,7 +123,6 @@ def compile_step_ahead(
         *(partial(_compile, unit, at) for unit in front),
         whole_step,
         *extra,
-        compile_kernels,  # the contact events' kernels, which the caller runs after the run
         *(partial(_compile, unit, at) for unit in back),
     ]
     return compile_on_two_cores(units)
