@@ -72,6 +72,7 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
+from jassy import unlinked
 from jassy.jit import _type_key, drop_stale_cache
 from jassy.unlinked import Entry, call_apart, entry
 from physics.rigid import (
@@ -108,10 +109,23 @@ from physics.rigid.penalty import penalty
 from physics.rigid.record_ref import RefExample, deref, field_ref, ref
 from physics.rigid.shapes import PLANE, SPHERE
 
-#: numba's cache of this module holds copies of these modules' kernels (and constants).
+#: numba's cache of this module holds copies of these modules' kernels and constants
+#: (``unlinked``: the entry points' types checksums).
 drop_stale_cache(
     __file__,
-    [broad, codes, impulses, integrate, meshgrid, narrow, penalty_model, record_ref, shapes, spatial],
+    [
+        broad,
+        codes,
+        impulses,
+        integrate,
+        meshgrid,
+        narrow,
+        penalty_model,
+        record_ref,
+        shapes,
+        spatial,
+        unlinked,
+    ],
 )
 
 MAX_CONTACTS = 1 << 16
