@@ -380,6 +380,8 @@ class ModeBudget:
                 at = stop
             for bank in changes.get(limit, ()) if changes else ():
                 bank.anytime_apply(limit)
+                if not bank.anytime_changes(math.inf):  # (the next sub-block: one call again)
+                    self._watched.pop(id(bank), None)
 
     def score_changed(self) -> None:
         """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
@@ -390,18 +392,22 @@ class ModeBudget:
         """Frame -> the banks rendered by the compiled step that have a parameter change
         queued there, for the frames before ``end`` (those before ``start`` at ``start``),
         in the banks' order; None for none. Only the banks that queued a change are asked
-        (ModalBank.anytime_watch); those with none left are let go."""
+        (ModalBank.anytime_watch); those with none left are let go (:meth:`step` also lets
+        go those it applied the last change of)."""
         watch = self._watched
         if not watch:
             return None
+        banks = list(watch.values()) if len(watch) == 1 else sorted(watch.values(), key=self._slot_of)
         changes = None  # (no dictionary for the sub-blocks without a change, most of them)
-        for bank in sorted(watch.values(), key=self._slot_of):
+        for bank in banks:
             frames = bank.anytime_changes(end)
-            if not frames and not bank.anytime_changes(math.inf):
-                del watch[id(bank)]
+            if not frames:
+                if not bank.anytime_changes(math.inf):
+                    del watch[id(bank)]
+                continue
+            if changes is None:
+                changes = {}
             for frame in frames:
-                if changes is None:
-                    changes = {}
                 changes.setdefault(max(frame, start), []).append(bank)
         return changes
 

@@ -13,8 +13,9 @@ The address is an argument, known only at run time (an address differs from proc
 process, and numba's cache keeps a caller across processes): :func:`entry` gives it in
 Python as an :class:`Entry`, with a checksum of the callee's compiled argument types. The
 call compares that checksum with the one of the types it passes and raises a RuntimeError
-if they differ (an entry point made for other types would read its arguments wrongly), so
-a caller cannot run a callee compiled for anything else.
+if they differ (an entry point made for other types would read its arguments wrongly). The
+checksum covers what numba's type names leave out: a NamedTuple's class (module and name)
+and field names, and the record a reference points to.
 
 The callee runs as its own compiled code, not as a copy optimised inside the caller: no
 floating-point operation changes for kernels compiled without fastmath (LLVM keeps IEEE
@@ -22,8 +23,16 @@ semantics across inlining). The call passes numba's native arguments, as a call 
 kernel that LLVM does not inline does: a record (NamedTuple) of arrays is flattened into
 all its arrays' fields (hundreds of scalars for a large one), so a callee called often
 should take large records by reference (physics.rigid.record_ref) and read the fields it
-uses once. A kernel called apart must not also be linked into another kernel of the
-process: MCJIT resolves a symbol to any linked copy of it.
+uses once. A kernel called apart may also be linked into other kernels: numba finalises a
+callee's library and adds it to the JIT before any caller links it (``_get_module_for_linking``
+calls ``_ensure_finalized``), the linked copies are ``linkonce_odr`` clones that do not
+replace its symbol, and numba never removes a module, so an address stays valid for the
+process.
+
+Checked against numba 0.68.1: ``numba/core/callconv.py`` (``CPUCallConv.get_function_type``,
+``call_function``, ``return_status_propagate``, ``return_user_exc``: the native calling
+convention the indirect call follows) and ``numba/core/codegen.py``
+(``CPUCodeLibrary.get_pointer_to_function``, ``_get_module_for_linking``, ``add_linking_library``).
 """
 
 from __future__ import annotations
@@ -47,9 +56,27 @@ class Entry(NamedTuple):
     types: int
 
 
+def described(numba_type):
+    """``numba_type``'s repr, with what the repr leaves out made explicit, recursively: a
+    NamedTuple's class (module, qualified name) and field names, a tuple's members, and the
+    record type of a reference to a record (a type with ``record_type``)."""
+    if isinstance(numba_type, types.BaseNamedTuple):
+        cls = numba_type.instance_class
+        members = tuple(described(t) for t in numba_type.types)
+        return (cls.__module__, cls.__qualname__, tuple(numba_type.fields), members)
+    if isinstance(numba_type, types.BaseTuple):
+        return ("tuple", tuple(described(t) for t in numba_type.types))
+    record_type = getattr(numba_type, "record_type", None)
+    if isinstance(record_type, types.Type):
+        return (repr(numba_type), described(record_type))
+    return repr(numba_type)
+
+
 def types_checksum(argument_types, result_type) -> int:
-    """A checksum (CRC-32) of numba argument and result types, the same in every process."""
-    return zlib.crc32(repr((tuple(argument_types), result_type)).encode())
+    """A checksum (CRC-32) of numba argument and result types (:func:`described`), the same
+    in every process."""
+    text = repr((tuple(described(t) for t in argument_types), described(result_type)))
+    return zlib.crc32(text.encode())
 
 
 def entry(kernel, *example_args) -> Entry:
@@ -61,6 +88,8 @@ def entry(kernel, *example_args) -> Entry:
     kernel.compile(key)
     compiled = kernel.overloads[key]
     address = compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name)
+    if not address:
+        raise RuntimeError(f"entry: numba gave no address for {kernel.__name__}{key}")
     return Entry(int(address), types_checksum(compiled.signature.args, compiled.signature.return_type))
 
 
@@ -69,7 +98,8 @@ def _call_apart(typingctx, where, args, result):
     """Compiled :func:`call_apart`: an indirect call of numba's native calling convention,
     the callee's status (an exception) passed on; a RuntimeError if ``where``'s checksum is
     not that of ``args``' types and ``result``."""
-    if not isinstance(args, types.BaseTuple) or not isinstance(result, types.NumberClass):
+    is_entry = isinstance(where, types.BaseNamedTuple) and where.instance_class is Entry
+    if not is_entry or not isinstance(args, types.BaseTuple) or not isinstance(result, types.NumberClass):
         return None
     argument_types = tuple(types.unliteral(t) for t in args)
     result_type = result.instance_type

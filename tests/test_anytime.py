@@ -647,6 +647,56 @@ def test_a_sub_block_in_one_compiled_call_gives_the_stepwise_renders_bits(monkey
     assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, slow)
 
 
+class StickyWatch(dict):
+    """A watch of banks with a queued change that never lets a bank go."""
+
+    def __delitem__(self, key):
+        pass
+
+    def pop(self, key, default=None):
+        return self.get(key, default)
+
+
+def test_a_bank_leaves_the_watch_with_its_last_queued_change(monkeypatch):
+    """Once a bank's last queued change is applied, ModeBudget.step lets it go, so the
+    sub-block after the change is one compiled call again instead of a search of the
+    watched banks' changes that finds none: six bells struck 30 times, their parameters
+    ramping, jumping and the contact moving, give the same bits, decisions and
+    mode-samples as a render whose banks stay watched for good (every sub-block after the
+    first change through the general path), and no search meets a watch whose banks have
+    nothing queued."""
+    searched, idle = [0], [0]
+    queued = ModeBudget._queued_changes
+
+    def counted(self, start, end):
+        searched[0] += 1
+        idle[0] += all(not bank.anytime_changes(np.inf) for bank in self._watched.values())
+        return queued(self, start, end)
+
+    monkeypatch.setattr(ModeBudget, "_queued_changes", counted)
+    graph, score = changing_scene(ModeBudget(max_modes=225))
+    letting_go = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+    budget = graph.budget
+    counts, searches = (budget.decisions, budget.peak_modes, budget.mode_samples), searched[0]
+    assert idle[0] == 0 and searches > 0
+    attach = ModeBudget.attach
+
+    def sticky(self, *args, **options):
+        attach(self, *args, **options)
+        self._watched = StickyWatch(self._watched)
+        for bank in self.banks:
+            bank.anytime_watch(self._watched)
+
+    monkeypatch.setattr(ModeBudget, "attach", sticky)
+    searched[0] = idle[0] = 0
+    graph, score = changing_scene(ModeBudget(max_modes=225))
+    holding = render(graph, score, 1.0, FS, 4096, limiter=False).audio
+    budget = graph.budget
+    assert counts[0] > 0 and counts == (budget.decisions, budget.peak_modes, budget.mode_samples)
+    assert np.max(np.abs(letting_go)) > 1e-3 and np.array_equal(letting_go, holding)
+    assert idle[0] > 0 and searched[0] > searches
+
+
 def short_rings(budget, seconds=2.0):
     """Four bells of 150 modes ringing 30 times shorter than :func:`scene`'s (each falls
     silent within ~0.3 s), each struck three times at random."""

@@ -38,7 +38,16 @@ def test_forcing_rows_match_numpy_on_random_modes():
     rows = np.full((mb.MODE_ROWS, other + k), -1.0)
     bins = np.full(other + k, -1, dtype=np.int64)
     mb.forcing_rows(
-        rows[:, other:], bins[other:], sin2, inv, c2, frequencies, decays, order, PERIOD, scales, FS, HORIZON
+        rows[:, other:],
+        bins[other:],
+        sin2,
+        inv,
+        c2,
+        frequencies,
+        decays,
+        order,
+        scales,
+        (PERIOD, FS, HORIZON),
     )
     expected = numpy_forcing(sin2, inv, c2, frequencies, decays, order, scales, PERIOD, FS, HORIZON)
     for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):

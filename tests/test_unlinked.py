@@ -52,6 +52,8 @@ def test_the_callee_is_not_linked_into_the_caller():
     caller_ir = summed.inspect_llvm(signature)
     assert f"@{callee_name}(" not in caller_ir and f'@"{callee_name}"(' not in caller_ir
     assert "inttoptr" in caller_ir
+    callee_library = weighted_sum.overloads[weighted_sum.signatures[0]].library
+    assert callee_library not in summed.overloads[signature].library._linking_libraries
 
 
 def test_an_entry_of_other_types_is_refused():
@@ -72,3 +74,34 @@ def test_the_callees_exception_is_passed_on():
 
     with pytest.raises(ValueError, match="k must be >= 0"):
         negative(ROWS, where)
+
+
+#: Rows's name and member types with its fields in the other order: the same numba type name.
+SwappedRows = NamedTuple("Rows", [("b", np.ndarray), ("a", np.ndarray)])  # noqa: UP014 (named Rows)
+
+
+def test_a_record_of_other_field_names_is_refused():
+    """Two NamedTuples whose numba type names agree (same class name, same member types) but
+    whose fields differ: the call refuses the other one's entry."""
+    swapped = SwappedRows(ROWS.b, ROWS.a)
+    assert str(nb.typeof(swapped)) == str(nb.typeof(ROWS))
+    where = entry(weighted_sum, ROWS, np.int64(0), 1.5)
+
+    @nb.njit(_nrt=False)
+    def swapped_call(rows, where):
+        return call_apart(where, (rows, 0, 1.5), nb.float64)
+
+    with pytest.raises(RuntimeError, match="other types"):
+        swapped_call(swapped, where)
+    assert swapped_call(ROWS, where) == pytest.approx(float(np.sum(ROWS.a * 1.5 + ROWS.b)), rel=1e-15)
+
+
+def test_only_an_entry_is_called():
+    """A tuple that is not an Entry does not type as the callee's address."""
+
+    @nb.njit(_nrt=False)
+    def with_tuple(rows):
+        return call_apart((1.5, 3), (rows, 0, 1.5), nb.float64)
+
+    with pytest.raises(nb.core.errors.TypingError):
+        with_tuple(ROWS)

@@ -769,7 +769,7 @@ class ModalBank(ModelParams, UGen):
         model, rate, horizon = self.model, float(self.sample_rate), float(self._horizon)
         modal_budget.forcing_rows(
             self._mode_rows_view, self._psd_bins, sin2, inv, self._fresh[COEF_C2], model.frequencies,
-            model.decays, self.order, self._heard.size, key, rate, horizon,
+            model.decays, self.order, key, (self._heard.size, rate, horizon),
         )  # fmt: skip
         self._tables.values[REMEMBERED, self._slot] = 0.0  # (the SPECTRUM row: a PSD of other modes)
 

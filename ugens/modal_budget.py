@@ -389,9 +389,10 @@ def centred_windowed(force, window, out, oldest):
 
 
 @nb.njit(cache=True)
-def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, period, scales, sample_rate, horizon):
-    """A bank's per-mode rows of a budget of ``period`` frames in one pass (``rows``: its
-    columns of :attr:`BudgetTables.rows`, ``bins`` of :attr:`BudgetTables.bins`), from its
+def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, scales, timing):
+    """A bank's per-mode rows of a budget in one pass (``timing`` = (period in frames,
+    sample_rate in Hz, horizon in s); ``rows``: its columns of :attr:`BudgetTables.rows`,
+    ``bins`` of :attr:`BudgetTables.bins`), from its
     poles' sin^2 theta and 1 / (R^2 sin^2 theta), its design's c2 = R^2 (internal order)
     and its model's frequencies (Hz) and decay rates (1/s), ``order`` the model's mode at
     each internal position: SIN2, INV, the energy decay over a period c2^period =
@@ -399,6 +400,7 @@ def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, period, 
     (1 - e^{-2 d tau}) / (2 d) (tau as d -> 0), and the periodogram's bin of each
     frequency (at most period / 2); frequencies and decays scaled by ``scales``
     (freq_scale, decay_scale, fragment size s: both also by 1 / sqrt(s))."""
+    period, sample_rate, horizon = timing
     retune = 1.0 / np.sqrt(scales[2])
     freq_scale, decay_scale = scales[0] * retune, scales[1] * retune
     half = period // 2

@@ -117,7 +117,8 @@ from physics.rigid.penalty import penalty
 from physics.rigid.record_ref import RefExample, deref, field_ref, ref
 from physics.rigid.shapes import PLANE, SPHERE
 
-#: numba's cache of this module holds copies of these modules' kernels (and constants).
+#: numba's cache of this module holds copies of these modules' kernels and constants
+#: (``unlinked``: the entry points' types checksums).
 drop_stale_cache(
     __file__,
     [
@@ -531,10 +532,11 @@ def _pair_gap(pair, gr, a, b, pos, rot, margin, probe, pr):
 
 
 @nb.njit(cache=True, inline="always")
-def _gap_at(m, opt, d, a, b, tau, margin, motion, pair, gr, pr):
+def _gap_at(m, opt, d, a, b, tau, margin, motion, narrow):
     """Smallest gap of pair (a, b) after tau seconds of free motion of both (moved in d's
-    moved_* scratch; d.pos and d.rot are kept in d.keep and restored; ``pair``, ``gr``, ``pr``:
-    _pair_gap's)."""
+    moved_* scratch; d.pos and d.rot are kept in d.keep and restored; ``narrow``: the tuple
+    (pair, gr, pr) of _pair_gap's arguments)."""
+    pair, gr, pr = narrow
     pos, rot, mp, mq, mf, keep = d.pos, d.rot, d.moved_pos, d.moved_quat, d.moved_phi, d.keep
     for side in range(2):
         i = a if side == 0 else b
@@ -560,18 +562,18 @@ def _gap_at(m, opt, d, a, b, tau, margin, motion, pair, gr, pr):
 
 
 @nb.njit(cache=True, inline="always")
-def _time_of_impact(m, opt, d, a, b, dt, g0, g1, margin, motion, pair, gr, pr):
-    """Root of the pair's gap on [0, dt] (g0 > 0 > g1), Illinois regula falsi (the bodies
-    moved by ``motion``'s integrator, step_models; m and d by reference; ``pair``, ``gr``,
-    ``pr``: _pair_gap's)."""
+def _time_of_impact(m, opt, d, a, b, dt, gaps, margin, motion, narrow):
+    """Root of the pair's gap on [0, dt] (``gaps`` = (g0, g1) at 0 and dt, g0 > 0 > g1),
+    Illinois regula falsi (the bodies moved by ``motion``'s integrator, step_models; m and d by
+    reference; ``narrow``: _gap_at's)."""
     lo, hi = 0.0, dt
-    flo, fhi = g0, g1
+    flo, fhi = gaps
     side = 0
     for _ in range(100):
         t = (lo * fhi - hi * flo) / (fhi - flo)
         if hi - lo < 1e-12:
             break
-        f = _gap_at(m, opt, d, a, b, t, margin, motion, pair, gr, pr)
+        f = _gap_at(m, opt, d, a, b, t, margin, motion, narrow)
         if f > 0.0:
             lo, flo = t, f
             if side == -1:
@@ -1034,7 +1036,7 @@ def impact_stage(m, opt, d, n_pairs, dt, motion, pair):
         g0 = _pair_gap(pair, gr, a, b, pos, rot, within, probe, pr)
         if g0 <= slop or g0 - g1 < bounce * dt:
             continue  # touching already, or closing too slowly to bounce
-        hit = _time_of_impact(m, opt, d, a, b, dt, g0, g1, within, motion, pair, gr, pr)
+        hit = _time_of_impact(m, opt, d, a, b, dt, (g0, g1), within, motion, (pair, gr, pr))
         first_hit = min(first_hit, hit)
     return first_hit
 
