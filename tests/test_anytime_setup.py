@@ -1,7 +1,12 @@
 """A mode budget's set-up (ModeBudget.attach): the per-mode rows it computes in one
 compiled pass against numpy's formulas, and the periodogram's shared window and twiddles."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
+import pytest
 
 from jassy.anytime import ModeBudget
 from jassy.engines.offline import OfflineEngine
@@ -148,3 +153,25 @@ def test_an_impact_inserted_during_a_budgeted_render_is_ranked_as_one_scored():
     plain = render(lambda p: p.score)
     assert np.array_equal(inserted, scored)
     assert not np.allclose(plain, scored)
+
+
+SETTLE = """
+from jassy.apps.anytime_bench import settle_cold_start
+from jassy.engines import coldstart
+before = coldstart.kernels_cached()
+settle_cold_start()
+coldstart._cache_found = False  # (asked again, not remembered)
+print(before, coldstart.kernels_cached())
+"""
+
+
+@pytest.mark.timeout(300)
+def test_the_anytime_bench_starts_its_engines_as_a_warm_install_does(tmp_path):
+    """On an empty numba cache the engine's cold-start check
+    (jassy.engines.coldstart.kernels_cached) finds nothing compiled, so every unbudgeted
+    engine the bench starts would run the cold-start compile units and fork their helper;
+    after the bench's settle_cold_start the check finds the cache filled."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", SETTLE], env=env, capture_output=True, text=True, timeout=280)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["False", "True"]
