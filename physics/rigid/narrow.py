@@ -753,9 +753,7 @@ def pair_contacts(a, b, pos, rot, gr, margin, br, count, entries):
     NarrowEntries through which the larger methods are called apart (compiled alone, so no
     kernel optimises them again). The method comes from PAIR_METHOD. Compiled without
     reference counting (_nrt=False: it allocates nothing)."""
-    model = deref(gr)
-    # the buffers written here through br itself: numba's dead-code elimination (run where
-    # call_apart is inlined) drops writes into arrays of a record copied out by deref
+    model, buf = deref(gr), deref(br)
     btype = model.shape_type
     if btype[a] > btype[b]:
         a, b = b, a
@@ -763,11 +761,11 @@ def pair_contacts(a, b, pos, rot, gr, margin, br, count, entries):
     if btype[a] >= PLANE:
         a, b = b, a  # a compound's surface points against a plane or mesh
     if method == POINTS_PLANE:
-        return _against_plane(a, b, pos, rot, model, margin, br, count)
+        return _against_plane(a, b, pos, rot, model, margin, buf, count)
     if method == POINTS_MESH:
         return call_apart(entries.against_mesh, (a, b, pos, rot, gr, margin, br, count), nb.int64)
     if method == SEGMENTS:
-        return _segment_segment(a, b, pos, rot, model, margin, br, count)
+        return _segment_segment(a, b, pos, rot, model, margin, buf, count)
     if method == SPHERES_POLYTOPE:
         where = (a, b, b, np.int64(0), pos, rot, gr, margin, br, count)
         return call_apart(entries.spheres_polytope, where, nb.int64)
