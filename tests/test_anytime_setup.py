@@ -98,6 +98,8 @@ def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():
     assert np.allclose(spectra[mb.COS, : j.size], np.cos(2 * np.pi * j / PERIOD), atol=1e-15)
     assert np.allclose(spectra[mb.SIN, : j.size], np.sin(2 * np.pi * j / PERIOD), atol=1e-15)
     assert mb.window_power(PERIOD, FS) == FS * np.sum(np.hanning(PERIOD) ** 2)
+    with pytest.raises(ValueError, match="read-only"):  # shared by every budget: never written
+        spectra[mb.WINDOW, 0] = 1.0
 
 
 def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does():
