@@ -98,6 +98,8 @@ def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():
     assert np.allclose(spectra[mb.COS, : j.size], np.cos(2 * np.pi * j / PERIOD), atol=1e-15)
     assert np.allclose(spectra[mb.SIN, : j.size], np.sin(2 * np.pi * j / PERIOD), atol=1e-15)
     assert mb.window_power(PERIOD, FS) == FS * np.sum(np.hanning(PERIOD) ** 2)
+    with pytest.raises(ValueError, match="read-only"):  # shared by every budget: never written
+        spectra[mb.WINDOW, 0] = 1.0
 
 
 def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does():
@@ -155,23 +157,32 @@ def test_an_impact_inserted_during_a_budgeted_render_is_ranked_as_one_scored():
     assert not np.allclose(plain, scored)
 
 
-SETTLE = """
-from jassy.apps.anytime_bench import settle_cold_start
+NODE_PATH_WITHOUT_LIMITER = """
 from jassy.engines import coldstart
+from jassy.engines.offline import OfflineEngine
+from jassy.patchfile import load_patch
+
 before = coldstart.kernels_cached()
-settle_cold_start()
+patch = load_patch("bell")
+OfflineEngine(patch.graph, patch.score, 48000.0, 256, limiter=False, program=False).render(0.1)
 coldstart._cache_found = False  # (asked again, not remembered)
 print(before, coldstart.kernels_cached())
 """
 
 
 @pytest.mark.timeout(300)
-def test_the_anytime_bench_starts_its_engines_as_a_warm_install_does(tmp_path):
+def test_a_render_without_the_limiter_fills_what_the_cold_start_check_looks_for(tmp_path):
     """On an empty numba cache the engine's cold-start check
-    (jassy.engines.coldstart.kernels_cached) finds nothing compiled, so every unbudgeted
-    engine the bench starts would run the cold-start compile units and fork their helper;
-    after the bench's settle_cold_start the check finds the cache filled."""
+    (jassy.engines.coldstart.kernels_cached) finds nothing compiled; after one node-by-node
+    render without the limiter (as the anytime bench's) it finds the cache filled, so later
+    engine starts run no cold-start compile units and fork no helper."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
-    out = subprocess.run([sys.executable, "-c", SETTLE], env=env, capture_output=True, text=True, timeout=280)
+    out = subprocess.run(
+        [sys.executable, "-c", NODE_PATH_WITHOUT_LIMITER],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=280,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["False", "True"]

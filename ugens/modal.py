@@ -1028,7 +1028,7 @@ class ModalBank(ModelParams, UGen):
         re-check and the dispatch of :meth:`_set_together` and :meth:`set_param`, about
         half of such a change's ~17 us, are left out. Returns whether it applied it."""
         frame, key, value, jump, ramp = pending[0]
-        if key != "location" or type(value) is not Location:
+        if self._tables is None or key != "location" or type(value) is not Location:
             return False
         if len(pending) > 1 and pending[1][0] == frame and pending[1][3:] == (jump, ramp):
             return False  # (keys changed together: _apply_queued)

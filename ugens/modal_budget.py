@@ -34,7 +34,7 @@ import numpy as np
 from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
 from jassy.jit import drop_stale_cache, void_pointer
-from jassy.packed_arrays import BOOL, FLOAT, INT, handle_of, packed_zeros
+from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
 from jassy.record_views import FIELD, address, bool_row, float_row, float_table, int_row, int_table
 from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
@@ -191,15 +191,10 @@ class Allocated(NamedTuple):
     arrays: list[np.ndarray]
     slots: list[tuple[int, int, int]]
 
-    @property
-    def handle(self) -> np.ndarray:
-        """The tables' handle."""
-        return handle_of(self.table_slots)
-
 
 def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
     """Empty :class:`BudgetTables` for banks of ``mode_counts`` modes and a budget
-    ``period`` (frames, a power of two), and their handle: the fields are views of one
+    ``period`` (frames, a power of two), and their handle slots: the fields are views of one
     zeroed buffer (jassy.packed_arrays; each starts on a 64-byte cache line), the window
     and twiddles shared (:func:`spectra_rows`); ``more`` fields ((shape, dtype) pairs) in
     the same buffer."""
@@ -245,6 +240,7 @@ def spectra_rows(period: int) -> np.ndarray:
         spectra[WINDOW] = np.hanning(period)
         spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
         _WINDOW_ENERGY[period] = float(np.sum(spectra[WINDOW] ** 2))
+        spectra.flags.writeable = False  # (shared: a write would change every budget's)
     return spectra
 
 

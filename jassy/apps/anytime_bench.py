@@ -144,24 +144,10 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
     return Timed(audio, spent[0] * 1e-9, spent[1] * 1e-9, total, work, spent[3] * 1e-9)
 
 
-def settle_cold_start() -> None:
-    """Compile, once per process, the kernel by which an engine knows that numba's cache is
-    filled (the output stage's limiter, jassy.engines.coldstart.kernels_cached). The
-    bench's engines run without the limiter, so on a cache that never held it every
-    unbudgeted engine start ran the cold-start compile units and forked their helper
-    (jassy.forked_compile): outside the clocks, but the next render's clocks paid for it
-    (the bell's budgeted set-up ~0.4 against ~0.25 ms, its steps ~5 % slower). A warm
-    install, where a limiter was compiled once, never runs them."""
-    from jassy.safety import limit
-
-    limit(np.zeros((1, 8)), 8, np.ones(1), 1.0, 0.5)
-
-
 def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:
     """Rows (fraction, modes, error dB, CPU ratios with and without set-up, decision share,
     mode-samples, set-up) for one scene; each budget's best run is the one of least CPU
     with its set-up charged."""
-    settle_cold_start()
     first = _timed_render(build, seconds, None)  # also compiles
     _timed_render(build, seconds, fractions[0])  # the budget's entry points found (excluded, as the full's)
     full_cpu = []

@@ -230,13 +230,15 @@ def program_cached(graph) -> bool:
 
 
 def kernels_cached() -> bool:
-    """Whether numba's cache already holds the output stage's limiter, which every render
-    calls (False on a fresh install, or after the cache was removed). Once found, the
-    answer is kept for the process (no file check per render)."""
+    """Whether numba's cache already holds the output stage's limiter, which every program
+    render compiles (inside the compiled output stage, limiter on or off), or the output
+    scan every node-by-node render calls (False on a fresh install, or after the cache was
+    removed). Once found, the answer is kept for the process (no file check per render)."""
     global _cache_found
     if _cache_found:
         return True
-    from jassy.safety import limit
+    from jassy.safety import limit, scan_chunk
 
-    _cache_found = cache_holds(limit)  # a numba without this cache layout: say nothing
+    # a numba without this cache layout: say nothing
+    _cache_found = cache_holds(limit) or cache_holds(scan_chunk)
     return _cache_found
