@@ -46,6 +46,7 @@ import math
 import operator
 import time
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -87,18 +88,36 @@ FLAG_ROWS = (
 UNSEEN, ONSET, UNRENDERED, BY_PYTHON, HEARD = (
     FLAG_ROWS.index(n) for n in ("unseen", "onset", "unrendered", "by_python", "heard")
 )
-#: Fields of ugens.modal_budget.Decision (slots at the step handle's end)
-DECISION_FIELDS = 7
 
 
-def record_fields(count: int, total: int) -> tuple:
-    """(shape, dtype) of the step's records (:meth:`ModeBudget._records`) for ``count``
-    banks of ``total`` modes: flags, masks, addresses, zeros, state, power, scores."""
-    rows = len(FLAG_ROWS)
-    return (
-        ((rows, count), BOOL), ((3, total), BOOL), ((2, count), INT), ((count,), INT),
-        ((STEP_STATE,), INT), ((count,), FLOAT), ((3, total), FLOAT),
-    )  # fmt: skip
+class StepRecords(NamedTuple):
+    """The compiled step's records besides the tables and the impacts
+    (:meth:`ModeBudget._records`): the flags (FLAG_ROWS, banks), the Decision's masks
+    (3, modes), the banks' input and output addresses (2, banks), their output samples
+    known zero, the step state (jassy.anytime_rank's step fields), the forces' power at
+    the last decision and the Decision's scores (3, modes); each field an array, its
+    (shape, dtype) (:func:`record_fields`) or its handle slots (jassy.packed_arrays)."""
+
+    flags: Any
+    masks: Any
+    addresses: Any
+    zeros: Any
+    state: Any
+    power: Any
+    scores: Any
+
+
+def record_fields(count: int, total: int) -> StepRecords:
+    """(shape, dtype) of the step's records for ``count`` banks of ``total`` modes."""
+    return StepRecords(
+        flags=((len(FLAG_ROWS), count), BOOL),
+        masks=((3, total), BOOL),
+        addresses=((2, count), INT),
+        zeros=((count,), INT),
+        state=((STEP_STATE,), INT),
+        power=((count,), FLOAT),
+        scores=((3, total), FLOAT),
+    )
 
 
 def kick_fields(rows: int, gains: int) -> tuple:
@@ -209,8 +228,8 @@ class ModeBudget:
         self._same_score = True  # (the listing loaded at attach; Scheduler.insert says when not)
         if self.active:
             self._attach_tables(banks, total, renders)
-        else:
-            self._records(banks, total, renders, packed_zeros(record_fields(len(banks), total)))
+        else:  # (no step: only its state, which counts no decisions)
+            self._state = np.zeros(STEP_STATE, dtype=np.int64)
         self._state[EVERY_PERIOD] = self.cpu_fraction is not None
         self._state[RENDERS] = self.renders
         self._processes = [bank.process for bank in banks]
@@ -227,23 +246,22 @@ class ModeBudget:
         Hearing and the Decision only when asked (:attr:`hearing`, :attr:`decision`): the
         step reads them by address."""
         count, rows = len(banks), len(FLAG_ROWS)
-        arrays, slots = packed
-        self._flags, self._masks, self._addresses, self._zeros, self._state, self._power, self._scores = (
-            arrays
-        )
+        records, slots = StepRecords(*packed.arrays), StepRecords(*packed.slots)
+        self._flags, self._masks, self._addresses = records.flags, records.masks, records.addresses
+        self._zeros, self._state, self._power, self._scores = records[3:]
         heard_inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
         self._addresses[0] = [address(x) for x in heard_inputs]
         self._addresses[1] = [address(bank.out) for bank in banks]  # alive with them
         self._flags[UNSEEN] = not renders
         self._size = min(x.size for x in heard_inputs)
-        flags, masks, addresses, zeros, state, power, scores = slots
-        flag = [(flags[0] + r * count, count, 1) for r in range(rows)]
-        inputs, outputs = (addresses[0], count, 1), (addresses[0] + 8 * count, count, 1)
-        mask = [(masks[0] + r * total, total, 1) for r in range(3)]
-        hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], power)
-        self._before_kicks = (*hearing, outputs, flag[BY_PYTHON], zeros)
-        decision = (flag[ONSET], flag[HEARD], inputs, scores, *mask)
-        self._after_kicks = (state, *decision)
+        flag = [(slots.flags[0] + r * count, count, 1) for r in range(rows)]
+        at = slots.addresses[0]
+        inputs, outputs = (at, count, 1), (at + self._addresses.itemsize * count, count, 1)
+        mask = [(slots.masks[0] + r * total, total, 1) for r in range(3)]
+        hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], slots.power)
+        self._before_kicks = (*hearing, outputs, flag[BY_PYTHON], slots.zeros)
+        decision = (flag[ONSET], flag[HEARD], inputs, slots.scores, *mask)
+        self._after_kicks = (slots.state, *decision)
 
     @property
     def hearing(self) -> Hearing:
@@ -277,7 +295,7 @@ class ModeBudget:
 
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
         self._loaded = None  # the listing in the Kicks table
-        self._handle_size = mk.DECISION_AT + DECISION_FIELDS * FIELD  # (the step handle's: checked)
+        self._handle_size = mk.DECISION_AT + len(mb.Decision._fields) * FIELD  # (the step handle's: checked)
         self._load_kicks(self.listed(), carve)  # the score's impacts, before the first sub-block
         tables, fields = self._tables, len(self._table_slots)
         self._tables_handle = self._step_handle[: fields * FIELD]  # (the banks' and the step's)
@@ -315,9 +333,9 @@ class ModeBudget:
     def _empty_kicks(packed: Packed) -> tuple[Kicks, list]:
         """The Kicks table of ``packed`` (the arrays of :func:`kick_fields`), none located,
         and its handle slots (jassy.record_views)."""
-        arrays, slots = packed
-        arrays[4][:] = -1  # none located
-        return Kicks(*arrays), slots
+        kicks = Kicks(*packed.arrays)
+        kicks.located[:] = -1  # none located
+        return kicks, packed.slots
 
     def _steps_handle(self, kicks: list) -> None:
         """The handle (jassy.record_views) of what the compiled step reads: the tables, the

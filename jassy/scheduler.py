@@ -251,7 +251,7 @@ class Scheduler:
         self.inline = [self._is_inline(ev) for ev in self.events]
         self.next_event = 0
         self.frame = 0
-        self._impacts = None  # (frames, impacts) of the score, listed when first asked
+        self._impacts = None  # the score's ListedImpacts, listed when first asked
         budget = graph.budget
         self.period = budget.period if budget is not None and graph.budgeted else None
         if self.period is not None:

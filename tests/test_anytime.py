@@ -697,6 +697,61 @@ def test_a_bank_leaves_the_watch_with_its_last_queued_change(monkeypatch):
     assert idle[0] > 0 and searched[0] > searches
 
 
+def bells_and_a_sine(budget):
+    """Three bells of 80 modes struck in turn, each jumping to a new location between
+    strikes, and a silent Sine whose frequency is set at the frame of each jump: a set
+    the compiled step does not apply ends the engine's sub-block at the jump's frame."""
+    from ugens.oscillators import Sine
+
+    hits = [ImpactForce(name=f"h{b}", duration=0.0005) for b in range(3)]
+    banks = [
+        ModalBank(bell_model(80, prime=100 + 40 * b, seed=b), name=f"b{b}")(h) for b, h in enumerate(hits)
+    ]
+    score = [Event(0.05 + 0.2 * i, f"h{i % 3}", "impact", {"impulse": 0.3}) for i in range(8)]
+    for i in range(8):
+        t = 0.1 + 0.2 * i
+        score.append(Event(t, f"b{i % 3}", "set", {"location": (i * 7) % 4}, jump=True))
+        score.append(Event(t, "osc", "set", {"freq": 300.0 + 10 * i}, jump=True))
+        score.append(Event(t + 1e-3, f"h{i % 3}", "impact", {"impulse": 0.2}))
+    graph = Graph([Mixer(*banks, name="mix"), Sine(name="osc", amp=0.0)], haptic=hits, budget=budget)
+    return graph, sorted(score, key=lambda event: event.time)
+
+
+def test_a_watched_bank_whose_change_is_at_the_sub_blocks_end_stays_watched(monkeypatch):
+    """A bank's location jump shares its frame with a set of another node, so the engine's
+    sub-block ends at the jump and the bank's change is queued at (not before) its end:
+    ModeBudget._queued_changes keeps the bank watched for the next sub-block, which
+    applies the jump at its first frame. The render equals, bit for bit, one that asks
+    every bank for its changes at every sub-block (a watch that never lets go)."""
+    kept = [0]
+    queued = ModeBudget._queued_changes
+
+    def counted(self, start, end):
+        kept[0] += sum(
+            not bank.anytime_changes(end) and bool(bank.anytime_changes(np.inf))
+            for bank in self._watched.values()
+        )
+        return queued(self, start, end)
+
+    monkeypatch.setattr(ModeBudget, "_queued_changes", counted)
+    graph, score = bells_and_a_sine(ModeBudget(max_modes=60))
+    watched = render(graph, score, 2.0, FS, 4096, limiter=False).audio
+    assert kept[0] >= 8  # (every jump met the branch that keeps its bank)
+    attach = ModeBudget.attach
+
+    def asking_every_bank(self, *args, **options):
+        attach(self, *args, **options)
+        self._watched = StickyWatch(self._watched)
+        for bank in self.banks:
+            bank.anytime_watch(self._watched)
+            self._watched[id(bank)] = bank
+
+    monkeypatch.setattr(ModeBudget, "attach", asking_every_bank)
+    graph, score = bells_and_a_sine(ModeBudget(max_modes=60))
+    everyone = render(graph, score, 2.0, FS, 4096, limiter=False).audio
+    assert np.max(np.abs(watched)) > 1e-3 and np.array_equal(watched, everyone)
+
+
 def short_rings(budget, seconds=2.0):
     """Four bells of 150 modes ringing 30 times shorter than :func:`scene`'s (each falls
     silent within ~0.3 s), each struck three times at random."""

@@ -208,19 +208,24 @@ def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
         coef_at += aligned(COEF_ROWS * k)
         compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
     f, i, b = FLOAT, INT, BOOL
-    fields = (
-        ((5, count), i), ((bank_at,), f), ((coef_at,), f), ((coef_at,), f), ((coef_at,), f),
-        ((compact_at,), f), ((count, 3), i), ((count, 3), i), ((MODE_ROWS, first), f), ((first,), b),
-        ((first,), b), ((count, period), f), ((count,), f), ((BANK_VALUES, count), f), ((first,), i),
-        ((count, BLOCK_TABLE), f),
-    )  # fmt: skip
-    arrays, slots = packed_zeros((*fields, *more))
-    arrays[0][:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
-    arrays[9][:] = True  # every mode kept
+    fields = {  # (shape, dtype) of the fields in the buffer (spectra: shared)
+        "layout": ((5, count), i), "bank": ((bank_at,), f), "target": ((coef_at,), f),
+        "delta": ((coef_at,), f), "fresh": ((coef_at,), f), "compact": ((compact_at,), f),
+        "meta": ((count, 3), i), "compact_meta": ((count, 3), i), "rows": ((MODE_ROWS, first), f),
+        "kept": ((first,), b), "faded": ((first,), b), "rings": ((count, period), f),
+        "last": ((count,), f), "values": ((BANK_VALUES, count), f), "bins": ((first,), i),
+        "blocks": ((count, BLOCK_TABLE), f),
+    }  # fmt: skip
+    arrays, slots = packed_zeros((*fields.values(), *more))
+    n = len(fields)
+    own = dict(zip(fields, zip(arrays[:n], slots[:n], strict=True), strict=True))
     spectra = spectra_rows(period)
-    tables = BudgetTables(*arrays[:15], spectra, arrays[15])
-    table_slots = (*slots[:15], (address(spectra), *spectra.shape), slots[15])
-    return Allocated(tables, table_slots, arrays[16:], slots[16:])
+    own["spectra"] = (spectra, (address(spectra), *spectra.shape))
+    tables = BudgetTables(**{name: own[name][0] for name in BudgetTables._fields})
+    table_slots = tuple(own[name][1] for name in BudgetTables._fields)
+    tables.layout[:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
+    tables.kept[:] = True  # every mode kept
+    return Allocated(tables, table_slots, arrays[n:], slots[n:])
 
 
 #: :func:`spectra_rows` by period, computed once per process and shared by every budget,

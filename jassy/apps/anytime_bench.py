@@ -80,6 +80,53 @@ class Timed(NamedTuple):
     setup: float
 
 
+class Intervals(NamedTuple):
+    """The clock pairs one render read: around a bank's ``process`` called by the engine
+    (``banks``) or by the budget's step (``nested``), around a step, a decision taken in
+    Python (inside a step) and the budget's set-up."""
+
+    banks: int
+    nested: int
+    steps: int
+    decisions: int
+    attaches: int
+
+
+def clock_costs(calls: int = 4000) -> tuple[float, float]:
+    """What the clocks add to the times measured (ns, calibrated now, median of batches):
+    ``outer`` to an interval timed (the reads' own cost between the two samples, about
+    one read), ``nested`` to an interval around it for each interval timed inside it
+    (two reads and the wrapper). Taken off each side's times per interval, so the full
+    render, which reads a pair per bank call (705 for the wok), and the budgeted one, a
+    pair per step, are charged alike."""
+    clock, spent = time.thread_time_ns, [0]
+
+    def nothing(*args):
+        pass
+
+    def timed(*args):  # as the bench's wrappers time a call
+        t = clock()
+        nothing(*args)
+        spent[0] += clock() - t
+
+    outer, nested = [], []
+    for _ in range(5):
+        spent[0], batch = 0, calls // 5
+        for _ in range(batch):  # an interval around nothing
+            t = clock()
+            spent[0] += clock() - t
+        outer.append(spent[0] / batch)
+        t = clock()
+        for _ in range(batch):
+            timed(0, 0, 0)
+        wrapped = clock() - t
+        t = clock()
+        for _ in range(batch):
+            nothing(0, 0, 0)
+        nested.append((wrapped - (clock() - t)) / batch)
+    return float(np.median(outer)), float(np.median(nested))
+
+
 def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
     """One render of ``build``'s graph for ``seconds``, its banks' and budget's clocks."""
     from jassy.anytime import ModeBudget
@@ -91,6 +138,7 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
     if fraction is not None:
         graph.budget = ModeBudget(max_modes=max(1, int(round(fraction * total))))
     spent = [0, 0, 0]  # bank ns (the rest of the budget's steps included), decision ns, mode-samples
+    intervals = Intervals(0, 0, 0, 0, 0)._asdict()  # the clock pairs read, by kind
     stepping = [False]  # inside the budget's step (which counts the modes of the banks it renders)
 
     def clocked_bank(bank):
@@ -101,7 +149,10 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
             process(start, n, offset)
             spent[0] += time.thread_time_ns() - t  # (the clock's own cost is the bank's, not the step's)
             if not stepping[0]:
+                intervals["banks"] += 1
                 spent[2] += n * bank.active_modes()  # modes active at the span's end (after flushing)
+            else:
+                intervals["nested"] += 1
 
         return run
 
@@ -110,6 +161,7 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
             t = time.thread_time_ns()
             decide(*args)
             spent[1] += time.thread_time_ns() - t
+            intervals["decisions"] += 1
 
         return run
 
@@ -120,6 +172,7 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
             step(start, n)
             stepping[0] = False
             spent[0] = inside + time.thread_time_ns() - t - (spent[1] - deciding)
+            intervals["steps"] += 1
 
         return run
 
@@ -128,6 +181,7 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
             t = time.thread_time_ns()
             attach(*args, **options)
             spent[3] += time.thread_time_ns() - t
+            intervals["attaches"] += 1
 
         return run
 
@@ -141,7 +195,10 @@ def _timed_render(build, seconds: float, fraction: float | None) -> Timed:
     engine = OfflineEngine(graph, score, SAMPLE_RATE, BLOCK, limiter=False, program=False)
     audio = engine.render(seconds).audio
     work = spent[2] + (budget.mode_samples if budget is not None else 0)
-    return Timed(audio, spent[0] * 1e-9, spent[1] * 1e-9, total, work, spent[3] * 1e-9)
+    n, (outer, nested) = Intervals(**intervals), clock_costs()  # the clocks' own cost, taken off
+    bank = spent[0] - outer * (n.banks + n.steps) - nested * (n.nested + n.decisions) + outer * n.decisions
+    decide, setup = spent[1] - outer * n.decisions, spent[3] - outer * n.attaches
+    return Timed(audio, bank * 1e-9, decide * 1e-9, total, work, setup * 1e-9)
 
 
 def bench_scene(build, seconds: float, fractions=FRACTIONS, repeats: int = 3) -> dict:
