@@ -157,6 +157,38 @@ def test_an_impact_inserted_during_a_budgeted_render_is_ranked_as_one_scored():
     assert not np.allclose(plain, scored)
 
 
+def test_a_set_inserted_without_a_location_keeps_the_listed_impacts():
+    """Scheduler.insert lists the score's impacts again only for an impact-like event or
+    a set naming a location: a gain set inserted live on the bell's output keeps the
+    listing (the same object, the budget not told the score changed) and sounds as the
+    same set scored from the start; a location set inserted after it relists."""
+    from jassy import Event
+    from jassy.scheduler import validate_event
+
+    gain = Event(1.0, "out", "set", {"gain": 0.5})
+    moved = Event(1.5, "bell", "set", {"location": "lip"})
+
+    def engine(score):
+        patch = load_patch("bell")
+        patch.graph.budget = ModeBudget(max_modes=30)
+        return patch, OfflineEngine(patch.graph, score(patch), FS, 4096, limiter=False, program=False)
+
+    patch, live = engine(lambda p: p.score)
+    told = []
+    patch.graph.budget.score_changed = lambda: told.append(True)
+    first = live.render(4096 * 6 / FS).audio
+    listed = live.scheduler.listed_impacts()
+    live.scheduler.insert(validate_event(patch.graph, gain, "test"))
+    audio = np.concatenate((first, live.render(1.0).audio), axis=1)
+    assert live.scheduler.listed_impacts() is listed and not told
+    patch, scored = engine(
+        lambda p: sorted([*p.score, validate_event(p.graph, gain, "test")], key=lambda e: e.time)
+    )
+    assert np.array_equal(audio, scored.render(audio.shape[1] / FS).audio)
+    live.scheduler.insert(validate_event(live.graph, moved, "test"))
+    assert live.scheduler.listed_impacts() is not listed and told
+
+
 NODE_PATH_WITHOUT_LIMITER = """
 from jassy.engines import coldstart
 from jassy.engines.offline import OfflineEngine
