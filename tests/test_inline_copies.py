@@ -133,19 +133,26 @@ def _inline_the_helper():
     return worker.inline_function(caller_ir, block, i, _kernel_helper)
 
 
-def test_another_caller_gets_an_untouched_copy_apart_from_the_inlined_blocks(monkeypatch):
+@pytest.fixture
+def copied(monkeypatch):
+    """The blocks the installed inliner copies from now on (jassy installs it when numba
+    first compiles: one compile here)."""
     import numba as nb
 
-    import jassy  # noqa: F401 (installs it when numba first compiles)
+    import jassy  # noqa: F401
 
     nb.njit(lambda x: x + 1)(1)
-    copied = []
+    blocks = []
     copy_block = inline_copies.ScopeSharingCopies._copied
     monkeypatch.setattr(
         inline_copies.ScopeSharingCopies,
         "_copied",
-        staticmethod(lambda b, run: copied.append(b) or copy_block(b, run)),
+        staticmethod(lambda b, run: blocks.append(b) or copy_block(b, run)),
     )
+    return blocks
+
+
+def test_another_caller_gets_an_untouched_copy_apart_from_the_inlined_blocks(copied):
     untouched, _, _, inlined = _inline_the_helper()
     assert len(copied) == len(untouched.blocks) > 3  # the untouched copy only: the working one handed over
     inlined_ids = {id(block) for _, block in inlined}
@@ -155,19 +162,9 @@ def test_another_caller_gets_an_untouched_copy_apart_from_the_inlined_blocks(mon
     )
 
 
-def test_numbas_inlining_pass_copies_no_block_of_a_fresh_translation(monkeypatch):
+def test_numbas_inlining_pass_copies_no_block_of_a_fresh_translation(copied):
     import numba as nb
 
-    import jassy  # noqa: F401
-
-    nb.njit(lambda x: x + 1)(1)
-    copied = []
-    copy_block = inline_copies.ScopeSharingCopies._copied
-    monkeypatch.setattr(
-        inline_copies.ScopeSharingCopies,
-        "_copied",
-        staticmethod(lambda b, run: copied.append(b) or copy_block(b, run)),
-    )
     helper = nb.njit(inline="always")(_kernel_helper)
     kernel = nb.njit(lambda x: helper(x) + 1.0)
     assert kernel(2.5) == _kernel_caller(2.5) == 8.5
