@@ -3,6 +3,7 @@ copy numba's passes discard, copies a callee's scope once per IR copy, and the c
 is the same as with numba's own copies (two copies, one scope copy per block)."""
 
 import copy
+import inspect
 import subprocess
 import sys
 
@@ -271,18 +272,8 @@ if sys.argv[1] == "numba":  # numba's own copies and typing: nothing installed
             listener.installers = ()
 import numba as nb
 
-@nb.njit(inline="always")
-def helper(x, n):
-    total = 0.0
-    for i in range(n):
-        if x > i:
-            total += x * i
-        elif x < -i:
-            total -= x
-        else:
-            for j in range(i):
-                total += j * 0.5
-    return total
+BRANCHY_SOURCE
+helper = nb.njit(inline="always")(_branchy)
 
 @nb.njit(inline="always")
 def middle(x, n):
@@ -312,7 +303,7 @@ def test_a_kernel_with_nested_inlined_helpers_compiles_to_the_same_llvm_ir(tmp_p
     found = []
     for changes in ("jassy", "numba"):
         run = subprocess.run(
-            [sys.executable, "-c", _COMPILE, changes],
+            [sys.executable, "-c", _COMPILE.replace("BRANCHY_SOURCE", inspect.getsource(_branchy)), changes],
             capture_output=True,
             text=True,
             timeout=110,
