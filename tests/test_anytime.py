@@ -657,6 +657,23 @@ class StickyWatch(dict):
         return self.get(key, default)
 
 
+def watch_for_good(monkeypatch, every_bank: bool = False) -> None:
+    """ModeBudget.attach patched so that the budget's watch never lets a bank go
+    (:class:`StickyWatch`); with ``every_bank`` every bank is watched from the start, so
+    each is asked for its changes at every sub-block."""
+    attach = ModeBudget.attach
+
+    def sticky(self, *args, **options):
+        attach(self, *args, **options)
+        self._watched = StickyWatch(self._watched)
+        for bank in self.banks:
+            bank.anytime_watch(self._watched)
+            if every_bank:
+                self._watched[id(bank)] = bank
+
+    monkeypatch.setattr(ModeBudget, "attach", sticky)
+
+
 def test_a_bank_leaves_the_watch_with_its_last_queued_change(monkeypatch):
     """Once a bank's last queued change is applied, ModeBudget.step lets it go, so the
     sub-block after the change is one compiled call again instead of a search of the
@@ -679,15 +696,7 @@ def test_a_bank_leaves_the_watch_with_its_last_queued_change(monkeypatch):
     budget = graph.budget
     counts, searches = (budget.decisions, budget.peak_modes, budget.mode_samples), searched[0]
     assert idle[0] == 0 and searches > 0
-    attach = ModeBudget.attach
-
-    def sticky(self, *args, **options):
-        attach(self, *args, **options)
-        self._watched = StickyWatch(self._watched)
-        for bank in self.banks:
-            bank.anytime_watch(self._watched)
-
-    monkeypatch.setattr(ModeBudget, "attach", sticky)
+    watch_for_good(monkeypatch)
     searched[0] = idle[0] = 0
     graph, score = changing_scene(ModeBudget(max_modes=225))
     holding = render(graph, score, 1.0, FS, 4096, limiter=False).audio
@@ -737,16 +746,7 @@ def test_a_watched_bank_whose_change_is_at_the_sub_blocks_end_stays_watched(monk
     graph, score = bells_and_a_sine(ModeBudget(max_modes=60))
     watched = render(graph, score, 2.0, FS, 4096, limiter=False).audio
     assert kept[0] >= 8  # (every jump met the branch that keeps its bank)
-    attach = ModeBudget.attach
-
-    def asking_every_bank(self, *args, **options):
-        attach(self, *args, **options)
-        self._watched = StickyWatch(self._watched)
-        for bank in self.banks:
-            bank.anytime_watch(self._watched)
-            self._watched[id(bank)] = bank
-
-    monkeypatch.setattr(ModeBudget, "attach", asking_every_bank)
+    watch_for_good(monkeypatch, every_bank=True)
     graph, score = bells_and_a_sine(ModeBudget(max_modes=60))
     everyone = render(graph, score, 2.0, FS, 4096, limiter=False).audio
     assert np.max(np.abs(watched)) > 1e-3 and np.array_equal(watched, everyone)
