@@ -777,10 +777,7 @@ class ModalBank(ModelParams, UGen):
         if self._held:  # more keys of the same change follow (:meth:`_set_together`)
             return
         if self._tables is not None and self._jumps_gains_only(jump):
-            self._refresh_design_cache()
-            self._anytime_entry("jump")(self._tables_handle, self._slot)
-            self.meta[RAMP_LEFT] = 0
-            self._ramping = False
+            self._jump_in_place()
             return
         self._settle()
         before = self._poles
@@ -1023,7 +1020,7 @@ class ModalBank(ModelParams, UGen):
         """Apply the first queued change if it is a location alone (a parsed Location, no
         other key at its frame) to which the bank jumps with its current poles: a rigid
         scene's before each impact. Then only the design, the budget's tables and the
-        kept modes' jump in place change (:meth:`_param_changed`'s first branch), and the
+        kept modes' jump in place change (:meth:`_jump_in_place`), and the
         value was checked when its event was (jassy.scheduler.prepare_score): the
         re-check and the dispatch of :meth:`_set_together` and :meth:`set_param`, about
         half of such a change's ~17 us, are left out. Returns whether it applied it."""
@@ -1041,11 +1038,17 @@ class ModalBank(ModelParams, UGen):
             return False
         pending.popleft()
         self.values["location"] = value
+        self._jump_in_place()
+        return True
+
+    def _jump_in_place(self) -> None:
+        """A budgeted bank's jump to the fresh design with its current poles
+        (:meth:`_jumps_gains_only`): the design, the budget's tables and the kept modes in
+        place (ugens.modal_budget.jump_to_fresh); no ramp left."""
         self._refresh_design_cache()
         self._anytime_entry("jump")(self._tables_handle, self._slot)
         self.meta[RAMP_LEFT] = 0
         self._ramping = False
-        return True
 
     def anytime_attach(
         self, tables: BudgetTables, slot: int, horizon: float, weighting: str, tables_handle=None
