@@ -53,9 +53,9 @@ import numpy as np
 from jassy.anytime_chain import credit_fed_banks, feeding_banks, heard_banks, weigh_feeders
 from jassy.anytime_rank import DECISIONS, EVERY_PERIOD, INLINE, PEAK, RENDERS, STEP_STATE, Hearing, Kicks
 from jassy.errors import PatchError
-from jassy.jit import specialise
+from jassy.jit import address, specialise
 from jassy.packed_arrays import BOOL, FLOAT, INT, Packed, handle_of, packed_zeros
-from jassy.record_views import FIELD, address
+from jassy.record_views import FIELD
 
 #: The importance of a mode already computed is multiplied by this, so modes near the
 #: margin do not swap at every decision (each swap regathers a bank and cuts a mode).
@@ -372,10 +372,6 @@ class ModeBudget:
         self._same_score = True
         changes = self._queued_changes(start, end) if self.renders else None
         at, rendered, addresses = start, start, self._step_handle
-        if changes is None and self._inline and self.renders:  # the sub-block in one compiled call
-            work = self._advance(addresses, count, period, start, n, at, rendered, self._rates)[2]
-            self.mode_samples += work
-            return
         slow = self._slow if self.renders else []
         limits = [*sorted(changes), end] if changes else (end,)
         for limit in limits:  # render up to each frame a bank's parameters change

@@ -1,7 +1,7 @@
 """Zeroed arrays carved out of one buffer, with their slots of a handle
 (jassy.record_views) known as they are made.
 
-Asking numpy for an array's address costs about a microsecond (record_views.address),
+Asking numpy for an array's address costs about a microsecond (jassy.jit.address),
 and allocating a record's dozen arrays one by one, then listing them in a handle, tens
 of microseconds of Python: a mode budget pays that at the start of every render. Arrays
 carved from one buffer have the buffer's address plus their offsets.
@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jassy.record_views import address
+from jassy.jit import address
 
 #: Bytes between the starts of two arrays of a buffer (a cache line).
 LINE = 64

@@ -12,26 +12,16 @@ used (their owners keep them); a handle is rebuilt when one of them is replaced.
 
 from __future__ import annotations
 
-import ctypes
-
 import numba as nb
 import numpy as np
 
 from jassy import jit
-from jassy.jit import drop_stale_cache, void_pointer
+from jassy.jit import address, drop_stale_cache, void_pointer
 
 drop_stale_cache(__file__, [jit])  # its views hold copies of jit.void_pointer's code
 
 #: int64 slots per field of a handle: address (or an integer's value), then two extents.
 FIELD = 3
-
-
-def address(array: np.ndarray) -> int:
-    """The address of a C-contiguous array's first element: ``array.ctypes.data`` (~1 us),
-    through a ctypes view of its buffer where it is writable and not empty (~0.3 us)."""
-    if array.flags.writeable and array.size:
-        return ctypes.addressof(ctypes.c_char.from_buffer(array))
-    return array.ctypes.data
 
 
 def handle(*records) -> np.ndarray:

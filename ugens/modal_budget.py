@@ -33,9 +33,9 @@ import numpy as np
 
 from jassy import anytime_rank, record_views
 from jassy.anytime_rank import rank_modes
-from jassy.jit import drop_stale_cache, void_pointer
+from jassy.jit import address, drop_stale_cache, void_pointer
 from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
-from jassy.record_views import FIELD, address, bool_row, float_row, float_table, int_row, int_table
+from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
 from ugens import cells, modal_block, modal_meta, modal_retune, real_fft
 from ugens.cells import mode_rows
 from ugens.modal_block import BLOCK_TABLE
@@ -170,10 +170,7 @@ def line_aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
 
     The mode loop's vector loads then never straddle cache lines: a bank 16 bytes off the
     boundary ran the 1000-mode bell about 13 % slower (``jassy bench modal``)."""
-    size = int(np.prod(shape))
-    raw = np.zeros(size + 8)
-    skip = (-address(raw) % 64) // 8
-    return raw[skip : skip + size].reshape(shape)
+    return packed_zeros([(shape, FLOAT)]).arrays[0]
 
 
 def budget_tables(mode_counts: list[int], period: int) -> BudgetTables:
