@@ -93,6 +93,19 @@ def entry(kernel, *example_args) -> Entry:
     return Entry(int(address), types_checksum(compiled.signature.args, compiled.signature.return_type))
 
 
+def unset(entries_class, **given):
+    """A record (NamedTuple) ``entries_class`` of entry points with every field not in
+    ``given`` an unset :class:`Entry` (address 0): an example argument of the record's
+    types, for compiling a caller ahead."""
+    return entries_class(**{name: given.get(name, Entry(0, 0)) for name in entries_class._fields})
+
+
+def entries_of(entries_class, calls: dict):
+    """The record ``entries_class`` of the :func:`entry` of each of its fields' (kernel,
+    example arguments) in ``calls``."""
+    return entries_class(*(entry(calls[name][0], *calls[name][1]) for name in entries_class._fields))
+
+
 @intrinsic
 def _call_apart(typingctx, where, args, result):
     """Compiled :func:`call_apart`: an indirect call of numba's native calling convention,

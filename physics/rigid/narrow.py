@@ -41,7 +41,7 @@ import numpy as np
 
 from jassy import unlinked
 from jassy.jit import drop_stale_cache
-from jassy.unlinked import Entry, call_apart, entry
+from jassy.unlinked import Entry, call_apart, entries_of, unset
 from physics.rigid import meshgrid, record_ref, shapes
 from physics.rigid.meshgrid import (
     GridView,
@@ -819,7 +819,7 @@ def narrow_calls(pos, rot, geo, buf) -> dict:
     types the caller passes), Geometry ``geo`` and Contacts ``buf``: NarrowEntries' field ->
     (kernel, example arguments of the types they are called with)."""
     whole, dt = np.int64(0), 0.0
-    gr, br, entries = RefExample(geo), RefExample(buf), NarrowEntries(*(Entry(0, 0),) * 5)
+    gr, br, entries = RefExample(geo), RefExample(buf), unset(NarrowEntries)
     posed = (pos, rot, gr, dt, br, whole)
     return {
         "contacts": (pair_contacts, (whole, whole, *posed, entries)),
@@ -833,5 +833,4 @@ def narrow_calls(pos, rot, geo, buf) -> dict:
 def narrow_entries(pos, rot, geo, buf) -> NarrowEntries:
     """The NarrowEntries for calls with arguments of the types of ``pos``, ``rot``, ``geo``,
     ``buf`` (narrow_calls), each kernel compiled (or loaded from numba's cache) on first use."""
-    calls = narrow_calls(pos, rot, geo, buf)
-    return NarrowEntries(*(entry(kernel, *args) for kernel, args in calls.values()))
+    return entries_of(NarrowEntries, narrow_calls(pos, rot, geo, buf))

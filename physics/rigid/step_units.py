@@ -39,7 +39,7 @@ from numba.core import config
 
 from jassy.forked_compile import cache_holds, compile_on_two_cores, helper_busy_with
 from jassy.jit import specialise
-from jassy.unlinked import Entry
+from jassy.unlinked import unset
 from physics.rigid import stepper as st
 from physics.rigid.broad import sweep_pairs
 from physics.rigid.impulses import resolve
@@ -116,8 +116,7 @@ def compile_step_ahead(
     at = {id(u[0].kernel): i for i, u in enumerate(front)}
     at.update({id(u[0].kernel): first_back + i for i, u in enumerate(back)})
     contact, motion = st.step_models(opt)
-    pair = st.NarrowEntries(*(Entry(0, 0),) * len(st.NarrowEntries._fields))
-    entries = st.StepEntries(pair, *(Entry(0, 0),) * (len(st.StepEntries._fields) - 1))
+    entries = unset(st.StepEntries, pair=unset(st.NarrowEntries))
     run_args = (m, opt, d, 0, 0, 0, contact, motion, entries)  # the types stepper.run passes
     whole_step = partial(_compile, [KernelCall(st.run_steps, run_args)], at)
     units = [

@@ -75,7 +75,7 @@ from numba.extending import overload
 
 from jassy import unlinked
 from jassy.jit import _type_key, drop_stale_cache
-from jassy.unlinked import Entry, call_apart, entry
+from jassy.unlinked import Entry, call_apart, entries_of, entry, unset
 from physics.rigid import (
     broad,
     codes,
@@ -109,7 +109,6 @@ from physics.rigid.narrow import (
     Contacts,
     NarrowEntries,
     narrow_calls,
-    narrow_entries,
     new_contacts,
     new_mesh_memory,
 )
@@ -893,7 +892,7 @@ def step_calls(m: Model, opt: Options, d: Data) -> dict:
     narrow phase's kernels, narrow.narrow_calls."""
     whole, dt = np.int64(0), 0.0
     contact, motion = step_models(opt)
-    mr, dr, pair = RefExample(m), RefExample(d), NarrowEntries(*(Entry(0, 0),) * len(NarrowEntries._fields))
+    mr, dr, pair = RefExample(m), RefExample(d), unset(NarrowEntries)
     return {
         "pair": narrow_calls(d.pos, d.rot, m.geometry, d.contacts),
         "broad": (broad_stage, (mr, opt, dr, dt)),
@@ -917,7 +916,7 @@ def step_entries(m: Model, opt: Options, d: Data) -> StepEntries:
     found = _ENTRIES.get(key)
     if found is None:
         calls = step_calls(m, opt, d)
-        pair = narrow_entries(d.pos, d.rot, m.geometry, d.contacts)
+        pair = entries_of(NarrowEntries, calls["pair"])
         stages = (entry(calls[name][0], *calls[name][1]) for name in StepEntries._fields[1:])
         found = StepEntries(pair, *stages)
         if key[2] is not None:  # None: a type the key cannot tell (not remembered)
