@@ -221,10 +221,15 @@ def test_udp_haptic_frames_follow_the_played_force_on_the_device_clock(jack, mod
     assert np.all(np.diff(first[ok]) == 1) and np.all(first[ok] <= np.arange(4800)[ok])
     np.testing.assert_allclose(played[:4800][ok], ref[first[ok]], rtol=1e-5, atol=1e-6)
     assert np.any(played[:4800][ok] > 0)  # the tap is in it
-    # they leave as their samples reach the device: 1 ms apart on the local clock too (the
-    # sender's own send times: this process's receiving thread is late on a loaded machine)
+    # they leave as their samples reach the device: evenly, at the device's pace on the local
+    # clock (the sender's own send times: this process's receiving thread is late on a loaded
+    # machine), which is 1 ms a frame; JACK's dummy driver on a loaded machine runs its
+    # cycles a little late, so the pace is measured over the run (sent in bursts, the median
+    # gap would be far below it)
     assert sent.size == len(body)  # the final frame is not logged
-    assert np.median(np.diff(sent[20:])) == pytest.approx(1e-3, abs=1e-4)
+    pace = (sent[-1] - sent[20]) / (sent.size - 21)
+    assert np.median(np.diff(sent[20:])) == pytest.approx(pace, rel=0.05)
+    assert pace == pytest.approx(1e-3, rel=0.15)
 
 
 def test_udp_frames_flag_clamping_and_the_watchdog_fade(jack):
