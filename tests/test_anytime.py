@@ -596,7 +596,7 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
 
     rng = np.random.default_rng(1)
     rings = rng.normal(size=(2, 2048))
-    flags = [np.zeros(2, dtype=bool) for _ in range(7)]
+    flags = [np.zeros(2, dtype=bool) for _ in range(8)]
     h = Hearing(np.zeros(2, dtype=np.intp), 2048, *flags, np.zeros(2))
     state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
     h.heard_before[:] = True
@@ -833,3 +833,35 @@ def test_a_location_jump_in_the_short_path_changes_what_the_general_path_changes
     assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, general) and decisions == general_decisions
     for (location, design), (other, other_design) in zip(states, general_states, strict=True):
         assert location == other and np.array_equal(design, other_design)
+
+
+def struck_bell(budget, through_gain: bool):
+    """A bell of 150 modes struck four times by an ImpactForce, directly or through a Gain
+    (whose output the budget cannot tell from a continuous force)."""
+    from ugens.mix import Gain
+
+    hit = ImpactForce(name="hit", duration=0.001)
+    force = Gain(hit, name="via", gain=1.0) if through_gain else hit
+    score = [Event(t, "hit", "impact", {"impulse": 0.3}) for t in (0.05, 0.4, 0.75, 1.1)]
+    return Graph(ModalBank(bell_model(150), name="bell")(force), budget=budget), score
+
+
+def test_a_bank_struck_only_by_the_scores_impacts_never_hears_them_as_a_force():
+    """An ImpactForce's output is the score's impacts, which the budget ranks from the
+    score: the bank it drives is ``struck_only`` (no periodogram of its pulses, no
+    decision for having heard them), the same pulses through a Gain are judged as a
+    heard force; both render within -15 dB of the full synthesis."""
+    from ugens import modal_budget as mb
+
+    decisions, errors = {}, {}
+    for through_gain in (False, True):
+        graph, score = struck_bell(None, through_gain)
+        full = render(graph, score, 1.5, FS, 4096, limiter=False).audio[0]
+        budget = ModeBudget(max_modes=40)
+        graph, score = struck_bell(budget, through_gain)
+        y = render(graph, score, 1.5, FS, 4096, limiter=False).audio[0]
+        assert list(budget.hearing.struck_only) == [not through_gain]
+        assert budget._tables.values[mb.REMEMBERED, 0] == float(through_gain)  # a periodogram taken
+        decisions[through_gain], errors[through_gain] = budget.decisions, error_db(y, full)
+    assert decisions[False] < decisions[True], decisions
+    assert max(errors.values()) <= -15.0, errors

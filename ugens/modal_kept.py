@@ -311,8 +311,9 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
     its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
-    (ugens.modal_budget). A bank with nothing to compute (not :func:`heard_lately`, no
-    mode sounding, no force sample before, no ramp) writes zeros, and not even those
+    (ugens.modal_budget); its force into its ring unless ``struck_only`` (never judged).
+    A bank with nothing to compute (not :func:`heard_lately`, no mode sounding, no force
+    sample before, no ramp) writes zeros, and not even those
     where its output already holds them: ``zeros[b]`` counts the samples from the start
     of its output buffer known to be zero (most of the wok scene's fourteen 4-mode banks
     are silent most of the time: writing 4096 zeros costs about as much as the kernel's
@@ -334,7 +335,7 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
             continue
         out = nb.carray(void_pointer(outputs[b] + 8 * offset), (n,), np.float64)
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
-        ring_of_force = t.rings[b] if busy else t.rings[b, :0]
+        ring_of_force = t.rings[b] if busy and not h.struck_only[b] else t.rings[b, :0]
         work += render_bank(t, b, force, out, start, n, ring_of_force) * n
         zeros[b] = min(zeros[b], offset)
     return work
