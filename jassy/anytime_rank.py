@@ -234,23 +234,20 @@ def hearing_at(a, i):
     )  # fmt: skip
 
 
-#: The force's power is judged on every this-many-th sample of a period (its mean
-#: square is estimated as well for a 2x test, at a quarter of the reads).
-POWER_STRIDE = 4
-
-
 @nb.njit(fastmath=True, cache=True)
-def force_power(force):
-    """Mean square about its mean (N^2; a steady load makes no sound) of every
-    POWER_STRIDE-th sample of ``force``."""
-    n = (force.size + POWER_STRIDE - 1) // POWER_STRIDE
+def centred_power(force):
+    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2. (fastmath
+    lets the sums run in SIMD lanes: a strict left-to-right sum cost about 5 us per
+    2048-sample period, most of a decision over the wok's fourteen small banks; every
+    fourth sample, which does not vectorise, 0.25 us against 0.11 us for all of them.)"""
+    n = force.size
     mean = 0.0
     for i in range(n):
-        mean += force[i * POWER_STRIDE]
+        mean += force[i]
     mean /= n
     total = 0.0
     for i in range(n):
-        f = force[i * POWER_STRIDE] - mean
+        f = force[i] - mean
         total += f * f
     return total / n
 
@@ -260,7 +257,7 @@ def note_decided(h, rings, heard, state):
     """A decision was taken: remember the power of each bank's force over the last period
     (``rings``, one row per bank; zero for a bank that heard none, ``heard``)."""
     for b in range(heard.size):
-        h.decided_power[b] = force_power(rings[b]) if heard[b] else 0.0
+        h.decided_power[b] = centred_power(rings[b]) if heard[b] else 0.0
     state[UNDECIDED] = 0
 
 
@@ -280,7 +277,7 @@ def steady_forces(h, rings, ramp_left, state):
         if h.heard_before[b]:
             if ramp_left[b] > 0:
                 return False
-            if force_power(rings[b]) > STEADY_POWER * h.decided_power[b]:
+            if centred_power(rings[b]) > STEADY_POWER * h.decided_power[b]:
                 return False
     state[UNDECIDED] += 1
     return True

@@ -584,7 +584,6 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     force's power is at most STEADY_POWER times its power at the last decision (a weaker
     one too), no heard bank ramps, and fewer than STEADY_PERIODS periods in a row."""
     from jassy.anytime_rank import (
-        POWER_STRIDE,
         STEADY_PERIODS,
         STEADY_POWER,
         STEP_STATE,
@@ -601,8 +600,7 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
     h.heard_before[:] = True
     note_decided(h, rings, np.array([True, False]), state)
-    sampled = rings[0, ::POWER_STRIDE]
-    power = np.mean((sampled - sampled.mean()) ** 2)
+    power = np.mean((rings[0] - rings[0].mean()) ** 2)
     assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
     assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
     note_decided(h, rings, np.array([True, True]), state)

@@ -32,7 +32,7 @@ import numba as nb
 import numpy as np
 
 from jassy import anytime_rank, record_views
-from jassy.anytime_rank import rank_modes
+from jassy.anytime_rank import centred_power, rank_modes
 from jassy.jit import address, drop_stale_cache, void_pointer
 from jassy.packed_arrays import BOOL, FLOAT, INT, packed_zeros
 from jassy.record_views import FIELD, bool_row, float_row, float_table, int_row, int_table
@@ -427,23 +427,6 @@ def psd_at_bins(re, im, bins, taps, scale, memory, remembered, psd):
                 total += (re[b] * re[b] + im[b] * im[b]) * taps[t]
         value = total / scale
         psd[m] = memory * psd[m] + (1.0 - memory) * value if remembered else value
-
-
-@nb.njit(fastmath=True, cache=True)
-def centred_power(force):
-    """Mean square of ``force`` about its mean (a steady load makes no sound), N^2. (fastmath
-    lets the sums run in SIMD lanes: a strict left-to-right sum cost about 5 us per
-    2048-sample period, most of a decision over the wok's fourteen small banks.)"""
-    n = force.size
-    mean = 0.0
-    for i in range(n):
-        mean += force[i]
-    mean /= n
-    total = 0.0
-    for i in range(n):
-        f = force[i] - mean
-        total += f * f
-    return total / n
 
 
 class Decision(NamedTuple):
