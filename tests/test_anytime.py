@@ -506,13 +506,13 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
 
 
-def test_a_remembered_psd_stands_for_one_period():
+def test_a_remembered_psd_stands_for_psd_reuse_periods():
     """ugens.modal_budget.decide on tables whose second bank hears a new force at each
     decision, one budget period apart (six decisions), then two apart (three): its
     periodogram (the PSD numpy gives for that ring, blended with the one remembered) is
-    taken at every other decision while they come every period and at each when they
-    come further apart (PSD_REUSE_PERIODS); the decisions between rank by the remembered
-    PSD unchanged."""
+    taken at the first decision and then at the first more than PSD_REUSE_PERIODS (3)
+    periods after the last one taken; the decisions between rank by the remembered PSD
+    unchanged."""
     from ugens import modal_budget as mb
 
     period, counts, window_power = 256, [11, 23], 3.5
@@ -525,7 +525,7 @@ def test_a_remembered_psd_stands_for_one_period():
     masks = (np.zeros(sum(counts), dtype=bool) for _ in range(3))
     d = mb.Decision(np.zeros(2, dtype=bool), np.array([False, True]), np.zeros(2, dtype=np.intp),
                     np.zeros((3, sum(counts))), *masks)  # fmt: skip
-    assert mb.PSD_REUSE_PERIODS == 1
+    assert mb.PSD_REUSE_PERIODS == 3
     remembered, transforms = None, []
     for k, frame in enumerate([*range(0, 6 * period, period), *range(7 * period, 13 * period, 2 * period)]):
         t.rings[1] = rng.normal(size=period) * (k + 1)
@@ -542,7 +542,7 @@ def test_a_remembered_psd_stands_for_one_period():
             )
         assert np.allclose(t.rows[mb.SPECTRUM, 11:], remembered, rtol=1e-10), k
         assert t.values[mb.SPECTRAL, 1] == 1.0
-    assert transforms == [True, False] * 3 + [True] * 3
+    assert transforms == [True, False, False, False, True, False, False, True, False]
 
 
 def rubbed_bell(budget):
