@@ -5,7 +5,8 @@ A compact bank holds only the modes the budget computes, in whole vectors of KEP
 (its padding holds exact zeros). Most of a struck object's sound is free ringing: a
 stretch (between two flush frames) with no force sample and no force before it runs
 :func:`ring_kept`, the recursion without its input term, eight samples per pass; a
-stretch with a force runs ugens.modal's full recursion (:func:`ugens.modal.resonate`).
+stretch with a force runs ugens.modal's full recursion (:func:`resonate_kept`, as
+:func:`ugens.modal.resonate`).
 The free recursion is the same sum of the same products with a zero input, so it changes
 no more than rounding: c1 y1 - c2 y2 + g * 0.
 """
@@ -45,6 +46,7 @@ from ugens.modal import Ramp, flush_silent, resonate, resonate_ramp
 from ugens.modal_block import (
     _DOUBLE,
     _FLAGS,
+    _INDEX,
     BLOCK_MODES,
     _contiguous,
     _fma,
@@ -221,6 +223,91 @@ def ring_passes(typingctx, out, c1, c2, y1, y2, passes, vectors):
     return types.void(out, c1, c2, y1, y2, passes, vectors), codegen
 
 
+@intrinsic
+def resonate_passes(typingctx, force, out, c1, c2, g, y1, y2, passes, vectors, before):
+    """ugens.modal.resonate without its direct term, of modes [0, KEPT_LANES * vectors) for
+    ``passes`` passes of eight samples over force[:8 passes] into out[:8 passes], in
+    explicit LLVM vectors of eight modes: y[j] = c1 y[j-1] - c2 y[j-2] + g x[j] with
+    x[j] = force[j-1] (``before`` for j = 0, each broadcast to the lanes), each sample's
+    sums reduced together at the pass's end (:func:`_transposed_sum`). Returns the force
+    sample before the next pass. Per sample at 32 / 64 / 208 modes: 2.5 / 4.0 / 10.7 ns
+    against resonate's 3.5 / 4.6 / 11.2; rounding only."""
+    arrays = (force, out, c1, c2, g, y1, y2)
+    scalars = (passes, vectors)
+    if not (
+        all(_contiguous(a) for a in arrays)
+        and all(isinstance(x, types.Integer) for x in scalars)
+        and before == types.float64
+    ):
+        return None
+
+    def codegen(context, builder, signature, args):
+        vector, zero = ir.VectorType(_DOUBLE, KEPT_LANES), cgutils.intp_t(0)
+        force_at = context.make_array(signature.args[0])(context, builder, args[0]).data
+        pointers = [
+            _pointer(context, builder, kind, a, zero, KEPT_LANES)
+            for kind, a in zip(signature.args[1:7], args[1:7], strict=True)
+        ]
+        out_at, rows = pointers[0], pointers[1:]
+        sums = [cgutils.alloca_once(builder, vector) for _ in range(KEPT_LANES)]
+        before_slot = cgutils.alloca_once_value(builder, args[9])
+
+        def spread(x):  # a scalar in every lane
+            one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
+            return _lanes(builder, one, one, [0] * KEPT_LANES)
+
+        with cgutils.for_range(builder, builder.sext(args[7], cgutils.intp_t)) as each_pass:
+            first = builder.mul(each_pass.index, cgutils.intp_t(KEPT_LANES))
+            samples = [
+                builder.load(builder.gep(force_at, [builder.add(first, cgutils.intp_t(j))]))
+                for j in range(KEPT_LANES)
+            ]
+            inputs = [spread(x) for x in [builder.load(before_slot), *samples[:-1]]]
+            for s in sums:
+                builder.store(ir.Constant(vector, [0.0] * KEPT_LANES), s)
+            with cgutils.for_range(builder, builder.sext(args[8], cgutils.intp_t)) as each_vector:
+                at = [builder.gep(row, [each_vector.index]) for row in rows]
+                p, q, gain, old, older = (builder.load(x, align=8) for x in at)
+                minus_q = builder.fneg(q, flags=_FLAGS)
+                for s, x in zip(sums, inputs, strict=True):
+                    driven = _fma(builder, minus_q, older, builder.fmul(gain, x, flags=_FLAGS))
+                    v = _fma(builder, p, old, driven)
+                    builder.store(builder.fadd(builder.load(s), v, flags=_FLAGS), s)
+                    older, old = old, v
+                builder.store(older, at[4], align=8)
+                builder.store(old, at[3], align=8)
+            total = _transposed_sum(builder, [builder.load(s) for s in sums])
+            builder.store(total, builder.gep(out_at, [each_pass.index]), align=8)
+            builder.store(samples[-1], before_slot)
+        return builder.load(before_slot)
+
+    return types.float64(force, out, c1, c2, g, y1, y2, passes, vectors, before), codegen
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_kept(force, out, n, rows, active, last):
+    """ugens.modal.resonate of modes [0, active) of ``rows`` over force[:n] into out[:n]
+    (last[0]: the force sample before force[0], left at force[n - 1]): by
+    :func:`resonate_passes` plus the direct term if ``active`` is whole vectors of
+    KEPT_LANES (the samples past the last whole pass by resonate)."""
+    if active % KEPT_LANES:
+        resonate(force, out, n, rows, active, last)
+        return
+    passes = n // KEPT_LANES
+    done = passes * KEPT_LANES
+    if passes:
+        c1, c2, g, d, y1, y2 = rows
+        last[0] = resonate_passes(force, out, c1, c2, g, y1, y2, passes, active // KEPT_LANES, last[0])
+        if has_force(force, 0, done):
+            direct = 0.0
+            for k in range(active):
+                direct += d[k]
+            for i in range(done):
+                out[i] += direct * force[i]
+    if done < n:
+        resonate(force[done:], out[done:], n - done, rows, active, last)
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def ring_kept(out, n, c1, c2, y1, y2, active):
     """:func:`ring` of modes [0, active) for n samples: by :func:`ring_passes` if
@@ -272,7 +359,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, blocks=No
     meta[ACTIVE] keeps the last audible mode + 1), meta [active, gathered, width], last[0]
     the force sample before force[0]. As ugens.modal.bank_step (flushes at multiples of
     FLUSH_PERIOD on the clock, so the output does not depend on the block size), with
-    force-free stretches by :func:`ring_kept`. The force also goes to the budget period's ring
+    force-free stretches by :func:`ring_kept`, forced ones by :func:`resonate_kept`. The
+    force also goes to the budget period's ring
     ``heard`` (empty: the force is zero and the ring holds zeros). ``blocks``: a bank of at
     most four kept modes renders its forced stretches by ugens.modal_block with this
     block table (made again first if the coefficients changed)."""
@@ -296,7 +384,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, blocks=No
         elif forced and blocks is not None:
             block_resonate(f, o, m, rows, blocks, last)
         elif forced:
-            resonate(f, o, m, rows, active, last)
+            resonate_kept(f, o, m, rows, active, last)
         else:
             ring_kept(o, m, rows.c1, rows.c2, rows.y1, rows.y2, active)
         i += m
