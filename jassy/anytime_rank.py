@@ -253,11 +253,12 @@ def centred_power(force):
 
 
 @nb.njit(cache=True)
-def note_decided(h, rings, heard, state):
+def note_decided(h, powers, heard, state):
     """A decision was taken: remember the power of each bank's force over the last period
-    (``rings``, one row per bank; zero for a bank that heard none, ``heard``)."""
+    (``powers``, N^2, as the decision measured it: ugens.modal_budget's RING_POWER; zero
+    for a bank that heard none, ``heard``)."""
     for b in range(heard.size):
-        h.decided_power[b] = centred_power(rings[b]) if heard[b] else 0.0
+        h.decided_power[b] = powers[b] if heard[b] else 0.0
     state[UNDECIDED] = 0
 
 

@@ -589,6 +589,7 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
         STEP_STATE,
         UNDECIDED,
         Hearing,
+        centred_power,
         note_decided,
         steady_forces,
     )
@@ -599,11 +600,12 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     h = Hearing(np.zeros(2, dtype=np.intp), 2048, *flags, np.zeros(2))
     state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
     h.heard_before[:] = True
-    note_decided(h, rings, np.array([True, False]), state)
+    powers = np.array([centred_power(ring) for ring in rings])  # (the decision's RING_POWER)
+    note_decided(h, powers, np.array([True, False]), state)
     power = np.mean((rings[0] - rings[0].mean()) ** 2)
     assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
     assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
-    note_decided(h, rings, np.array([True, True]), state)
+    note_decided(h, powers, np.array([True, True]), state)
     for scale, steady in (
         (0.1, True),
         (0.99 * np.sqrt(STEADY_POWER), True),

@@ -80,12 +80,14 @@ MODES, FIRST, BANK_AT, COEF_AT, COMPACT_AT = range(5)
 #: and its fragment size (an impact's amplitude per mode elsewhere is its location's
 #: gain times impulse times the first, over the root of the second); 1.0 once SPECTRUM
 #: holds a smoothed PSD to blend the next with; 1.0 if the bank judges a force by its
-#: periodogram (more modes than FLAT_SPECTRUM_MODES); the frame of its last periodogram.
+#: periodogram (more modes than FLAT_SPECTRUM_MODES); the frame of its last periodogram;
+#: the power of the force it heard over the last period at the last decision (N^2, its
+#: ring's centred mean square: the flat PSD's and jassy.anytime_rank.note_decided's).
 (
     KICK_NOW, KICK_NEXT, HAS_ELSEWHERE_NOW, HAS_ELSEWHERE_NEXT, SPECTRAL, FLOOR, FLOOR2, GAIN_LEVEL, SIZE,
-    REMEMBERED, TRANSFORMED, PSD_FRAME,
-) = range(12)  # fmt: skip
-BANK_VALUES = 12
+    REMEMBERED, TRANSFORMED, PSD_FRAME, RING_POWER,
+) = range(13)  # fmt: skip
+BANK_VALUES = 13
 
 #: A bank that keeps hearing a force ranks by its remembered (smoothed) PSD at a decision
 #: at most this many budget periods after its last periodogram, so that decisions every
@@ -657,7 +659,8 @@ def decide(t, d, rates):
     quiet bank's
     scores (nothing rings, no impact comes, no force heard) are zero; a woken bank judges
     the force in its input samples [begin, end), another bank that heard a force lately
-    judges the last period's (its ring), both spread flat over frequency unless SPECTRAL.
+    judges the last period's (its ring; its power kept in RING_POWER), both spread flat
+    over frequency unless SPECTRAL.
     Returns (whether some mode fades, modes computed)."""
     count = t.layout.shape[1]
     scores = d.scores
@@ -685,8 +688,10 @@ def decide(t, d, rates):
             size = rates.end - rates.begin
             x = nb.carray(void_pointer(d.inputs[b] + 8 * rates.begin), (size,), np.float64)
             flat_psd = centred_power(x) / rates.sample_rate
-        elif d.heard[b] and t.values[SPECTRAL, b] == 0.0:
-            flat_psd = centred_power(t.rings[b]) / rates.sample_rate
+        elif d.heard[b]:
+            t.values[RING_POWER, b] = centred_power(t.rings[b])
+            if t.values[SPECTRAL, b] == 0.0:
+                flat_psd = t.values[RING_POWER, b] / rates.sample_rate
         bank_importance(t, d, b, flat_psd, rates.sample_rate, rates.bonus)
     fading = rank_modes(scores, rates.limit, d.keep, d.fade, d.later)
     total = 0

@@ -62,6 +62,7 @@ from ugens.modal_budget import (
     KEPT_LANES,
     RAMP_DELTA,
     RAMP_TARGET,
+    RING_POWER,
     TABLE_FIELDS,
     Rates,
     compact_bank,
@@ -592,7 +593,7 @@ def decide_at(a, rates):
     for b in range(d.heard.size):
         d.heard[b] = h.heard_now[b] or h.heard_before[b]
     fading, total = decide(t, d, rates)
-    note_decided(h, t.rings, d.heard, state)
+    note_decided(h, t.values[RING_POWER], d.heard, state)
     state[FADING] = fading
     state[DECISIONS] += 1
     state[PEAK] = max(state[PEAK], total)
