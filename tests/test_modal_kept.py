@@ -160,7 +160,7 @@ def test_flush_leaving_part_of_a_vector_gives_the_full_kernels_output(width, aud
     assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))
 
 
-@pytest.mark.parametrize("modes", [8, 24, 32, 64])
+@pytest.mark.parametrize("modes", [8, 24, 32, 64, 80])
 def test_ring_passes_in_explicit_vectors_give_rings_samples_and_state(modes):
     """ugens.modal_kept.ring_kept (whole vectors of modes: eight-sample passes in explicit
     LLVM vectors, by the squared pole's recursion, the sums reduced together) gives ring's
