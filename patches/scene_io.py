@@ -62,18 +62,29 @@ def _radiated(graph, radius: float):
     return Graph(radiated, graph.haptic, graph.budget)
 
 
+#: The sound render's compile units are shared out one by one up to this many (the rest in
+#: the last): the wok's graph has eight (its modal banks, the radiation, the mixer, the
+#: strikes, the scrape, the roll, the strike records, the block loop).
+SOUND_PARTS = 8
+
+
 def render_units(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> list:
     """Compile units of a rigid scene's sound render, for the step's helper before the
-    physics has run (physics.rigid.world.simulate): :func:`compile_events` and
-    :func:`compile_render` (the helper takes units from the back: the sound kernels first).
-    Empty on a filled kernel cache or for a scene with no voices."""
+    physics has run (physics.rigid.world.simulate): :func:`compile_events`, then
+    :func:`compile_render` one unit of the graph at a time, the modal banks' (the largest)
+    last, so that the helper, which takes units from the back, starts the sound with it
+    while this process, from the front, takes the others as it gets there. Empty on a
+    filled kernel cache or for a scene with no voices."""
     from jassy.engines.coldstart import kernels_cached
 
     if not voices or kernels_cached():
         return []
+    render = partial(compile_render, world, voices, sample_rate, block, radius)
+    others = [slice(i, i + 1) for i in range(1, SOUND_PARTS - 1)] + [slice(SOUND_PARTS - 1, None)]
     return [
         partial(compile_events, world),
-        partial(compile_render, world, voices, sample_rate, block, radius),
+        *(partial(render, part=part) for part in others),
+        partial(render, part=slice(0, 1)),
     ]
 
 
@@ -97,12 +108,14 @@ def compile_events(world) -> None:
     contact_wrench(run, 0, lambda times: np.zeros((len(times), 3)))
 
 
-def compile_render(world, voices, sample_rate: int, block: int, radius: float = 0.18) -> None:
-    """Compile the kernels of a rigid scene's sound render (jassy.engines.coldstart's
-    compile_graph) for the graph scene_graph builds from one impact, with a location change,
-    and one sustained contact of the first sounding body on another, rendered as
-    render_normalised renders: the node kinds and parameter changes, so the kernels for the
-    types, of the real render."""
+def compile_render(
+    world, voices, sample_rate: int, block: int, radius: float = 0.18, part: slice = slice(None)
+) -> None:
+    """Compile the kernels of a rigid scene's sound render (the units of jassy.engines.coldstart's
+    compile_graph in ``part``) for the graph scene_graph builds from one impact, with a
+    location change, and one sustained contact of the first sounding body on another,
+    rendered as render_normalised renders: the node kinds and parameter changes, so the
+    kernels for the types, of the real render."""
     from jassy.engines.coldstart import compile_graph
     from jassy.events import ContactTrack, Impact
     from jassy.modal_model import Location
@@ -117,7 +130,8 @@ def compile_render(world, voices, sample_rate: int, block: int, radius: float = 
     moved = Location((0, 1), (0.5, 0.5))  # a location change: the banks' jump to a new location
     hit = Impact(0.0, pair, 1e-3, 0.5, locations=(moved, moved))
     graph, score = scene_graph(world.bodies, [hit], [track], voices)
-    compile_graph(_radiated(graph, radius), dict(sample_rate=sample_rate, block=block, limiter=False), score)
+    options = dict(sample_rate=sample_rate, block=block, limiter=False)
+    compile_graph(_radiated(graph, radius), options, score, part)
 
 
 def write_csv(path, columns, header: str) -> None:

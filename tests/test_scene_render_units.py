@@ -39,7 +39,7 @@ def test_the_stand_in_graph_has_the_real_renders_kinds_and_changes(monkeypatch):
     seen = {}
     monkeypatch.setattr(
         "jassy.engines.coldstart.compile_graph",
-        lambda graph, options, score: seen.update(graph=graph, options=options, score=score),
+        lambda graph, options, score, part: seen.update(graph=graph, options=options, score=score),
     )
     compile_render(world, voices, 48000, 64)
     stand_in = _shapes(seen["graph"], seen["score"])
@@ -92,3 +92,30 @@ def test_compile_events_calls_each_event_kernel_with_the_real_runs_types(monkeyp
     for name in EVENT_KERNELS:
         assert real[name], f"{name}: not called by the wok's events"
         assert real[name] == stand_in[name], f"{name}: the run {real[name]}, compile_events {stand_in[name]}"
+
+
+def test_the_sound_units_run_each_unit_of_the_graph_once_the_modal_banks_last(monkeypatch):
+    """render_units shares the stand-in graph's compile units out one at a time: together
+    they run every unit of the graph exactly once, and the last (the helper's first) is the
+    modal banks'."""
+    from jassy.engines import coldstart
+    from patches.scene_io import render_units
+    from patches.wok import build_world
+
+    ran: list[str] = []
+    monkeypatch.setattr(coldstart, "kernels_cached", lambda: False)
+    monkeypatch.setattr(coldstart, "_process_alone", lambda node, *args: ran.append(type(node).__name__))
+    monkeypatch.setattr(coldstart, "_compile_strike_records", lambda **options: ran.append("strike records"))
+    monkeypatch.setattr(coldstart, "_render_stand_in", lambda *args: ran.append("stand-in render"))
+    world, voices = build_world()
+    units = render_units(world, voices, 48000, 4096)
+    for unit in units[1:]:
+        unit()
+    every = ran[:]
+    ran.clear()
+    render_units(world, voices, 48000, 4096)[-1]()
+    assert ran == ["ModalBank"]
+    ran.clear()
+    compile_render(world, voices, 48000, 4096)  # the graph's units, all, in one call
+    assert sorted(every) == sorted(ran), "each unit of the graph once"
+    assert {"ModalBank", "Scrape", "strike records", "stand-in render"} <= set(ran)

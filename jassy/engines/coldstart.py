@@ -43,12 +43,12 @@ def graph_units(graph, engine_options: dict, score: Sequence = ()) -> list[Calla
     return _units(graph, engine_options, score)
 
 
-def compile_graph(graph, engine_options: dict, score: Sequence = ()) -> None:
-    """Run every unit of :func:`graph_units` here, one after the other (nothing on a filled
-    cache): for a compile unit that builds its graph itself, e.g. in a forked helper, since
-    building some graphs starts threads (pyfftw's cache) that would keep a helper from
-    being forked."""
-    for unit in _units(graph, engine_options, score):
+def compile_graph(graph, engine_options: dict, score: Sequence = (), part: slice = slice(None)) -> None:
+    """Run the units of :func:`graph_units` in ``part`` (all by default) here, one after the
+    other (nothing on a filled cache): for a compile unit that builds its graph itself, e.g.
+    in a forked helper, since building some graphs starts threads (pyfftw's cache) that would
+    keep a helper from being forked. Parts let two such units share a graph's units."""
+    for unit in _units(graph, engine_options, score)[part]:
         unit()
 
 
