@@ -160,8 +160,10 @@ def tables_at(a, i):
     )  # fmt: skip
 
 
-#: Fields of a :class:`BudgetTables` (slots of FIELD in a handle).
+#: Fields of a :class:`BudgetTables` (slots of FIELD in a handle), and the place of the
+#: one not in a budget's buffer (:func:`allocate_tables`).
 TABLE_FIELDS = len(BudgetTables._fields)
+SPECTRA_FIELD = BudgetTables._fields.index("spectra")
 
 
 def aligned(size: int) -> int:
@@ -209,29 +211,27 @@ def allocate_tables(mode_counts: list[int], period: int, more=()) -> Allocated:
         coef_at += aligned(COEF_ROWS * k)
         compact_at += COMPACT_ROWS * aligned(k + KEPT_LANES)
     f, i, b = FLOAT, INT, BOOL
-    fields = {  # (shape, dtype) of the fields in the buffer (spectra: shared)
-        "layout": ((5, count), i), "bank": ((bank_at,), f), "target": ((coef_at,), f),
-        "delta": ((coef_at,), f), "fresh": ((coef_at,), f), "compact": ((compact_at,), f),
-        "meta": ((count, 3), i), "compact_meta": ((count, 3), i), "rows": ((MODE_ROWS, first), f),
-        "kept": ((first,), b), "faded": ((first,), b), "rings": ((count, period), f),
-        "last": ((count,), f), "values": ((BANK_VALUES, count), f), "bins": ((first,), i),
-        "blocks": ((count, BLOCK_TABLE), f),
-    }  # fmt: skip
-    arrays, slots = packed_zeros((*fields.values(), *more))
-    n = len(fields)
-    own = dict(zip(fields, zip(arrays[:n], slots[:n], strict=True), strict=True))
-    spectra = spectra_rows(period)
-    own["spectra"] = (spectra, (address(spectra), *spectra.shape))
-    tables = BudgetTables(**{name: own[name][0] for name in BudgetTables._fields})
-    table_slots = tuple(own[name][1] for name in BudgetTables._fields)
-    tables.layout[:] = np.array(places, dtype=np.int64).reshape(count, 5).T  # the layout
+    owned = (  # (shape, dtype) of the fields in the buffer, in BudgetTables' order (spectra: shared)
+        ((5, count), i), ((bank_at,), f), ((coef_at,), f), ((coef_at,), f), ((coef_at,), f),
+        ((compact_at,), f), ((count, 3), i), ((count, 3), i), ((MODE_ROWS, first), f), ((first,), b),
+        ((first,), b), ((count, period), f), ((count,), f), ((BANK_VALUES, count), f), ((first,), i),
+        ((count, BLOCK_TABLE), f),
+    )  # fmt: skip
+    arrays, slots = packed_zeros((*owned, *more))
+    n, at = len(owned), SPECTRA_FIELD
+    tables = BudgetTables(*arrays[:at], spectra_rows(period), *arrays[at:n])
+    table_slots = (*slots[:at], _SPECTRA_SLOTS[period], *slots[at:n])
+    tables.layout.T[:] = places  # the layout
     tables.kept[:] = True  # every mode kept
     return Allocated(tables, table_slots, arrays[n:], slots[n:])
 
 
 #: :func:`spectra_rows` by period, computed once per process and shared by every budget,
-#: and the window's energy (the sum of its squares) by period
+#: their handle slots (jassy.record_views; the address of a read-only array is found by a
+#: slow path, ~25 us at a render's start) and the window's energy (the sum of its squares)
+#: by period
 _SPECTRA: dict[int, np.ndarray] = {}
+_SPECTRA_SLOTS: dict[int, tuple[int, int, int]] = {}
 _WINDOW_ENERGY: dict[int, float] = {}
 
 
@@ -246,6 +246,7 @@ def spectra_rows(period: int) -> np.ndarray:
         spectra[WINDOW] = np.hanning(period)
         spectra[[COS, SIN], : period // 2 + 1] = twiddles(period)
         _WINDOW_ENERGY[period] = float(np.sum(spectra[WINDOW] ** 2))
+        _SPECTRA_SLOTS[period] = (address(spectra), *spectra.shape)
         spectra.flags.writeable = False  # (shared: a write would change every budget's)
     return spectra
 
