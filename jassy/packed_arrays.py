@@ -37,17 +37,19 @@ def packed_zeros(fields) -> Packed:
     """Zeroed C-contiguous arrays of ``fields`` ((shape, dtype) pairs: one or two
     dimensions, a dtype object such as :data:`FLOAT`) in one buffer, each starting on a
     64-byte cache line (the float64 mode loops' vector loads then never straddle lines)."""
-    offsets, total = [], 0
-    for shape, dtype in fields:
-        offsets.append(total)
-        total += -(-max(math.prod(shape) * dtype.itemsize, 1) // LINE) * LINE
-    raw = np.zeros(total + LINE, dtype=np.uint8)
-    skip = -address(raw) % LINE
-    base = address(raw) + skip
-    arrays, slots = [], []
-    for (shape, dtype), at in zip(fields, offsets, strict=True):
-        arrays.append(np.ndarray(shape, dtype, raw, skip + at))
-        slots.append((base + at, shape[0], shape[1] if len(shape) > 1 else 1))
+    sizes = [-(-max(math.prod(shape) * dtype.itemsize, 1) // LINE) * LINE for shape, dtype in fields]
+    offsets = list(itertools.accumulate(sizes, initial=0))
+    raw = np.zeros(offsets.pop() + LINE, dtype=np.uint8)
+    at = address(raw)
+    skip = -at % LINE
+    base = at + skip
+    arrays = [
+        np.ndarray(shape, dtype, raw, skip + to) for (shape, dtype), to in zip(fields, offsets, strict=True)
+    ]
+    slots = [
+        (base + to, shape[0], shape[1] if len(shape) > 1 else 1)
+        for (shape, _), to in zip(fields, offsets, strict=True)
+    ]
     return Packed(arrays, slots)
 
 

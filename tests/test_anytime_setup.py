@@ -102,6 +102,24 @@ def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():
         spectra[mb.WINDOW, 0] = 1.0
 
 
+def test_packed_zeros_carves_zeroed_line_aligned_arrays_at_their_slots():
+    """Each array of jassy.packed_arrays.packed_zeros is zeroed, C-contiguous, of its
+    shape and dtype, starts on a 64-byte line after the one before it (none overlap) and
+    its slot holds its address and extents; an empty field still takes a line."""
+    from jassy.jit import address
+    from jassy.packed_arrays import BOOL, FLOAT, INT, LINE, packed_zeros
+
+    fields = [((3, 5), FLOAT), ((0,), INT), ((7,), BOOL), ((2, 9), INT), ((1,), FLOAT)]
+    arrays, slots = packed_zeros(fields)
+    starts = [address(a) if a.size else slot[0] for a, slot in zip(arrays, slots, strict=True)]
+    assert all(s % LINE == 0 for s in starts)
+    sizes = [max(a.nbytes, 1) for a in arrays]
+    assert all(b - a >= -(-n // LINE) * LINE for a, b, n in zip(starts, starts[1:], sizes, strict=False))
+    for (shape, dtype), a, slot, start in zip(fields, arrays, slots, starts, strict=True):
+        assert a.shape == shape and a.dtype == dtype and a.flags.c_contiguous and not a.any()
+        assert slot == (start, shape[0], shape[1] if len(shape) > 1 else 1)
+
+
 def test_the_step_handle_carved_from_buffers_lists_every_record_as_handle_does():
     """ModeBudget.attach carves the tables, the Hearing, the Decision, the step state and
     the impacts out of a few buffers and writes their handle from offsets: it equals the
