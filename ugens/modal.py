@@ -38,6 +38,7 @@ silent bank costs nothing ("silent modes skipped", also the subnormal guard).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, NamedTuple
 
@@ -117,6 +118,10 @@ from ugens.modal_retune import (
 drop_stale_cache(
     __file__, [anytime_rank, cells, kernels, modal_budget, modal_f32, modal_meta, modal_retune, record_views]
 )
+
+#: A design (c1, c2, g, d) is its poles (c1, c2, R sin theta, d / g) with the last two
+#: rows scaled in place (ModalBank._design): the two layouts share their rows.
+assert (POLE_C1, POLE_C2, POLE_SIN, POLE_RATIO) == (COEF_C1, COEF_C2, COEF_GAIN, COEF_DIRECT)
 
 #: The band points of the ``"band"`` direct ratio as :func:`pole_rows` takes them.
 TOP_BAND_ROWS = TopBand(TOP_BAND, TOP_BAND_COS, TOP_BAND_SIN)
@@ -677,13 +682,12 @@ class ModalBank(ModelParams, UGen):
         if out is None:
             if self._gain_rows[None] is not poles or len(self._gain_rows) > 256:
                 self._gain_rows = {None: poles}  # new poles, or many locations: start afresh
-            scale = v["gain"] * self._level_gain / (self.sample_rate * np.sqrt(self._size))
-            gains = poles[POLE_SIN] * scale * self.anytime_gains(v["location"])
-            out = np.empty_like(poles)
-            out[COEF_C1] = poles[POLE_C1]
-            out[COEF_C2] = poles[POLE_C2]
-            out[COEF_GAIN] = gains
-            out[COEF_DIRECT] = gains * poles[POLE_RATIO]
+            scale = v["gain"] * self._level_gain / (self.sample_rate * math.sqrt(self._size))
+            out = poles.copy()  # c1, c2 as they are, R sin theta scaled to g, then d
+            gains = out[COEF_GAIN]  # R sin theta times scale times the location's gains
+            np.multiply(gains, scale, out=gains)
+            np.multiply(gains, self.anytime_gains(v["location"]), out=gains)
+            np.multiply(gains, poles[POLE_RATIO], out=out[COEF_DIRECT])
             self._gain_rows[key] = out  # read only: every user copies it or reads it
         return out
 
