@@ -73,19 +73,19 @@ from ugens.modal_budget import (
 from ugens.modal_f32 import (
     MIN_GAIN,
     TOLERANCE,
-    decay_factor_error,
     delta_coefficients,
     delta_rows,
     float32_error,
     flush_silent_delta,
     narrow_rows,
+    order_by_form,
     resonate_narrow,
     unscaled_state,
 )
 from ugens.modal_meta import (
     ACTIVE,
     ALLOWED,
-    BY_FACTOR,
+    DELTA_END,
     GATHERED,
     NARROW_ACTIVE,
     NARROW_ALL,
@@ -309,11 +309,11 @@ def mixed_step(force, out, start, n, rows, floor, last):
             last[0] = 0.0
         else:
             narrow = delta_rows(coef, state)
-            by_factor = narrow_meta[BY_FACTOR] == 1
+            delta_end = narrow_meta[DELTA_END]
             if wide_meta[ALLOWED] > 0:
-                resonate_narrow(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, delta_end)
             else:
-                resonate_narrow(f, o, m, narrow, active, None, 0, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, None, 0, last, delta_end)
         i += m
         if is_flush_frame(start + i):
             if wide_active > 0 and floor > 0.0:
@@ -422,22 +422,24 @@ class MixedSplit(NamedTuple):
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
     """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
-    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and
-    |g| >= MIN_GAIN; in the faster decay-factor form if every float32 mode holds the
-    tolerance in it (:func:`ugens.modal_f32.decay_factor_error`)."""
+    modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >=
+    MIN_GAIN; those that miss it in the faster decay-factor form
+    (:func:`ugens.modal_f32.decay_factor_error`) first, in chunks of the delta form
+    (:func:`ugens.modal_f32.order_by_form`), the rest in the decay-factor form."""
     c1, c2, g, d, y1, y2 = bank
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
-    by_factor = bool(np.all(decay_factor_error(c1[narrow], c2[narrow], sample_rate) <= tolerance))
+    order, delta_end = order_by_form(c1[narrow], c2[narrow], sample_rate, tolerance)
+    narrow = narrow[order]
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], by_factor)
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], delta_end)
     nw, nn = wide.size, narrow.size
     rows = MixedRows(
         np.ascontiguousarray(bank[:, wide]),
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array(NarrowMeta(nn, nn, int(by_factor)), dtype=np.int64),
+        np.array(NarrowMeta(nn, nn, delta_end), dtype=np.int64),
     )
     return MixedSplit(wide, narrow, rows)
 

@@ -1,4 +1,4 @@
-"""One four-sample pass of float32 decay-factor modes written as explicit LLVM vectors.
+"""One four-sample pass of float32 modes written as explicit LLVM vectors.
 
 ugens.modal_f32's held kernels keep a bank's rows (16, 32 or 64 modes) on the stack, where
 LLVM holds them in vector registers across the passes. From the per-mode loop, LLVM's
@@ -9,13 +9,14 @@ stored the four sums one by one and added the direct term in a pass of its own.
 the lanes at each step: about half the shuffles and adds), adds the direct term to the
 four at once and converts and stores them as one vector: against the C two-pole loop,
 0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
-Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_factor), run
+Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_chunks), run
 :func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
 :func:`write_sums` at the end of each pass.
 
-The arithmetic per mode is ugens.modal_f32's decay-factor update (``_four_samples``):
-with p = y[n-2] / g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2,
-u = p + v, v' = b v + (f - c0 p) as two fused multiply-adds, in the same order.
+The arithmetic per mode is ugens.modal_f32's update (``_four_samples``): with p = y[n-2] /
+g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2, u = p + v, in the
+decay-factor form v' = b v + (f - c0 p) as two fused multiply-adds, in the delta form
+(add_chunk only) v' = (f - c0 u) + (v - b v), in the same order.
 """
 
 from __future__ import annotations
@@ -94,24 +95,30 @@ def _sum_four(builder, a0, a1, a2, a3):
     return z
 
 
-def _pass(builder, lanes, c0v, bv, p, v, forces):
+def _pass(builder, lanes, c0v, bv, p, v, forces, by_factor=True):
     """The four-sample update of vectors of modes with rows c0, b and state p = y[n-2] / g,
     v = Delta[n-1] / g, whose preceding forces are ``forces`` (four float32 scalars):
-    (the new p, the new v, the four outputs y / g)."""
+    (the new p, the new v, the four outputs y / g). Decay-factor form (``by_factor``, b =
+    R^2 - c0): v' = b v + (f - c0 y[n-2]); delta form (b = b2): v' = (f - c0 y[n-1]) + (v -
+    b2 v), two FMA and an add."""
     minus_c0 = builder.fneg(c0v)
+    minus_b = builder.fneg(bv)
 
-    def next_delta(v, p, f):  # b v + (f - c0 p)
-        return _fma(builder, bv, v, _fma(builder, minus_c0, p, _broadcast(builder, f, lanes)))
+    def next_delta(v, older, newer, f):
+        force = _fma(builder, minus_c0, older if by_factor else newer, _broadcast(builder, f, lanes))
+        if by_factor:
+            return _fma(builder, bv, v, force)
+        return builder.fadd(force, _fma(builder, minus_b, v, v), flags=_UPDATE_FLAGS)
 
     fp, f0, f1, f2 = forces
     u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, p, fp)
+    v = next_delta(v, p, u, fp)
     u0 = builder.fadd(u, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u, f0)
+    v = next_delta(v, u, u0, f0)
     u1 = builder.fadd(u0, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u0, f1)
+    v = next_delta(v, u0, u1, f1)
     u2 = builder.fadd(u1, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u1, f2)
+    v = next_delta(v, u1, u2, f2)
     u3 = builder.fadd(u2, v, flags=_UPDATE_FLAGS)
     return u2, v, (u0, u1, u2, u3)
 
@@ -202,31 +209,34 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
 
 
 @intrinsic
-def add_chunk(typingctx, width, rows, k, forces, sums):
+def add_chunk(typingctx, width, rows, k, forces, sums, by_factor):
     """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
     of it) of ``rows`` (c0, b, g, y, dy as in :func:`write_four`) by four samples whose
     preceding forces are ``forces`` (four float32, N), storing y and dy, and add g_k y_k / g_k
     of sample j to the lanes of sums[j] (four float32 rows of ``width`` lanes: per-lane
-    partial sums over the chunks of a pass, :func:`write_sums`). The mode rows may lie
-    anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a caller's own rows
-    may not be: loads aligned to 64 bytes faulted on them); the sums must be on 64-byte
-    lines (ugens.stack_rows)."""
+    partial sums over the chunks of a pass, :func:`write_sums`); in the decay-factor form
+    if ``by_factor`` (a literal bool: b = R^2 - c0), else in the delta form (b = b2). The
+    mode rows may lie anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a
+    caller's own rows may not be: loads aligned to 64 bytes faulted on them); the sums
+    must be on 64-byte lines (ugens.stack_rows)."""
     if not (
         _is_literal_width(width)
         and _contiguous_arrays(rows, 5, types.float32)
         and isinstance(k, types.Integer)
         and _scalars(forces, 4, types.float32)
         and _contiguous_arrays(sums, 4, types.float32)
+        and isinstance(by_factor, types.BooleanLiteral)
     ):
         return None
-    lanes = width.literal_value
+    lanes, form = width.literal_value, by_factor.literal_value
 
     def codegen(context, builder, signature, args):
-        _, rows, at, forces, sums = args
+        _, rows, at, forces, sums, _ = args
         vector = ir.VectorType(_FLOAT, lanes)
         pointers = _row_pointers(context, builder, signature.args[1], rows, at, vector)
         c0v, bv, gv, p, v = (builder.load(row, align=4) for row in pointers)
-        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, cgutils.unpack_tuple(builder, forces, 4))
+        forces = cgutils.unpack_tuple(builder, forces, 4)
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, forces, form)
         builder.store(y_next, pointers[3], align=4)
         builder.store(v, pointers[4], align=4)
         for row, uj in zip(
@@ -237,7 +247,7 @@ def add_chunk(typingctx, width, rows, k, forces, sums):
             builder.store(_fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
         return context.get_dummy_value()
 
-    return types.none(width, rows, k, forces, sums), codegen
+    return types.none(width, rows, k, forces, sums, by_factor), codegen
 
 
 @intrinsic
