@@ -522,6 +522,7 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
     time, interleaved, two runs)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
+    split = min(delta_end, active)  # the delta form's chunks, then the decay-factor form's
     direct = _direct_gain(d, active, 0.0)
     if wide is not None:
         direct = _direct_gain(wide.d, wide_active, direct)
@@ -542,11 +543,10 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
             s1[lane] = 0.0
             s2[lane] = 0.0
             s3[lane] = 0.0
-        for k in range(0, active, LANES):
-            if k < delta_end:
-                vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
-            else:
-                vector_pass.add_chunk(LANES, modes, k, forces, sums, True)
+        for k in range(0, split, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
+        for k in range(split, active, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, True)
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
