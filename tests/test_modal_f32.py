@@ -13,6 +13,7 @@ from ugens.modal_f32 import (
     HELD_MODES,
     LANES,
     TOLERANCE,
+    WIDE_LANES,
     DeltaRows,
     decay_factor_error,
     delta_coefficients,
@@ -163,7 +164,8 @@ def test_banks_of_up_to_64_float32_modes_take_a_held_kernel(count):
 def _narrow_and_general(count, wide_count, seed, delta_end=0):
     """resonate_narrow and resonate_delta run on the same rows of ``count`` random float32
     modes (the first ``delta_end`` in the delta form, the rest in the decay-factor form; and
-    ``wide_count`` float64 modes) over calls of odd lengths (the 4-sample passes and the
+    ``wide_count`` float64 modes, on rows padded with silent modes to whole WIDE_LANES as
+    split_by_precision pads them) over calls of odd lengths (the 4-sample passes and the
     tail, the force sample carried between calls), with the direct term: the force, then
     (out, state, float64 rows, last force sample) of each."""
     rng = np.random.default_rng(seed)
@@ -172,7 +174,9 @@ def _narrow_and_general(count, wide_count, seed, delta_end=0):
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros(count)
     coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, delta_end)
-    w1, w2, ws = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    padded = np.zeros((3, -(-wide_count // WIDE_LANES) * WIDE_LANES))
+    padded[:, :wide_count] = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    w1, w2, ws = padded
     force = rng.standard_normal(3001)
     runs = []
     for kernel, out in (
@@ -180,7 +184,7 @@ def _narrow_and_general(count, wide_count, seed, delta_end=0):
         (resonate_delta, np.zeros(force.size)),
     ):
         state = np.zeros((2, coef.shape[1]), np.float32)
-        z = np.zeros(wide_count)
+        z = np.zeros(w1.size)
         wide = ModeRows(w1, w2, ws, 0.1 * ws, z.copy(), z.copy()) if wide_count else None
         rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
         for n in (1, 7, 1000, 993, 1000):
@@ -206,7 +210,16 @@ def test_the_held_kernels_compute_what_the_general_kernel_does(count):
 
 @pytest.mark.parametrize(
     "count, wide_count, delta_end",
-    [(20, 2, 0), (100, 0, 0), (100, 3, 0), (100, 0, 32), (100, 3, 64), (100, 0, 128)],
+    [
+        (20, 2, 0),
+        (100, 0, 0),
+        (100, 3, 0),
+        (100, 8, 0),
+        (100, 9, 0),
+        (100, 0, 32),
+        (100, 3, 64),
+        (100, 0, 128),
+    ],
 )
 def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count, delta_end):
     """resonate_narrow's kernel for banks a held kernel does not take (more than 64 float32
@@ -214,7 +227,8 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
     vector step in the form of their chunk; it writes the output) against resonate_delta's
     general loop (which adds to it) on the same rows: same outputs and states to float32
     rounding over calls of odd lengths, with the direct term and float64 modes updated in
-    the same passes, in the decay-factor form, the delta form and both."""
+    the same passes to float64 rounding (up to WIDE_LANES as one vector: 2, 3, 8 of them;
+    9 in the scalar pass), in the decay-factor form, the delta form and both."""
     force, runs = _narrow_and_general(count, wide_count, seed=6, delta_end=delta_end)
     (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
     assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
@@ -223,7 +237,7 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
     if wide_count:
         assert np.max(np.abs(ref_wide.y1)) > 0
-        np.testing.assert_array_equal(wide.y1, ref_wide.y1)
+        np.testing.assert_allclose(wide.y1, ref_wide.y1, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref_wide.y1)))
 
 
 @pytest.mark.parametrize("wrong", ["force", "out"])
@@ -324,9 +338,10 @@ def test_the_float32_bench_compares_like_for_like():
 
 def test_only_the_chunk_of_modes_that_need_it_runs_in_the_delta_form():
     """100 modes, 3 of them low and light (20, 40 and 60 Hz at d = 0.5 /s, where the
-    decay-factor form misses the tolerance, :func:`decay_factor_error`): the split puts those 3 first, the first chunk of LANES float32
-    modes in the delta form (row 1 b2) and the rest in the decay-factor form (R^2 - c0);
-    the mixed bank follows the float64 bank within -60 dB."""
+    decay-factor form misses the tolerance, :func:`decay_factor_error`): the split puts
+    those 3 first, the first chunk of LANES float32 modes in the delta form (row 1 b2) and
+    the rest in the decay-factor form (R^2 - c0); the mixed bank follows the float64 bank
+    within -60 dB."""
     f, d = np.geomspace(100.0, 8000.0, 100), np.full(100, 20.0)
     light = [10, 50, 90]
     f[light], d[light] = [20.0, 40.0, 60.0], 0.5

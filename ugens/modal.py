@@ -73,6 +73,7 @@ from ugens.modal_budget import (
 from ugens.modal_f32 import (
     MIN_GAIN,
     TOLERANCE,
+    WIDE_LANES,
     delta_coefficients,
     delta_rows,
     float32_error,
@@ -275,7 +276,8 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
-    y1, y2) and meta (a BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
+    y1, y2; padded with silent modes to whole ugens.modal_f32.WIDE_LANES) and meta (a
+    BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
     (y[n-2], Delta[n-1]) / g (ugens.modal_f32.narrow_rows) and their NarrowMeta
     (ugens.modal_meta)."""
 
@@ -425,7 +427,8 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >=
     MIN_GAIN; those that miss it in the faster decay-factor form
     (:func:`ugens.modal_f32.decay_factor_error`) first, in chunks of the delta form
-    (:func:`ugens.modal_f32.order_by_form`), the rest in the decay-factor form."""
+    (:func:`ugens.modal_f32.order_by_form`), the rest in the decay-factor form; the float64
+    rows padded to whole WIDE_LANES (for resonate_narrow's vectors)."""
     c1, c2, g, d, y1, y2 = bank
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
@@ -434,8 +437,10 @@ def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = 
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
     coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], delta_end)
     nw, nn = wide.size, narrow.size
+    wide_bank = line_aligned_zeros((6, -(-nw // WIDE_LANES) * WIDE_LANES))  # silent padding modes
+    wide_bank[:, :nw] = bank[:, wide]
     rows = MixedRows(
-        np.ascontiguousarray(bank[:, wide]),
+        wide_bank,
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
@@ -710,7 +715,7 @@ class ModalBank(ModelParams, UGen):
             self._anytime_entry("settle")(self._tables_handle, self._slot)
         if split is None:
             return
-        self.y[:, split.wide] = split.rows.wide_bank[4:]
+        self.y[:, split.wide] = split.rows.wide_bank[4:, : split.wide.size]
         self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 

@@ -147,6 +147,10 @@ def _next_delta(v, p, u, c0, b, f, by_factor):
 #: modes, 30 of them took half the time of the other 224).
 LANES = 32
 
+#: Rows of float64 modes that resonate_narrow's explicit vectors take hold a multiple of
+#: this many modes (one AVX-512 vector of float64: ugens.vector_pass.add_wide_chunk).
+WIDE_LANES = vector_pass.WIDE_VECTOR
+
 #: Banks of at most this many float32 modes and no float64 modes run with their rows held
 #: on the kernel's stack (:func:`resonate_held`): 4 vectors of 16 float32 lanes per row with
 #: AVX-512, five rows and the four output sums fit the 32 vector registers.
@@ -516,10 +520,14 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
     pass's float32 modes in explicit vectors (ugens.vector_pass.add_chunk, 32 modes at a
     time, their per-lane sums kept in four stack rows; write_sums reduces the four together
     and stores the four samples as one vector): LLVM's code reduced and stored the four
-    samples one by one. The float64 modes' pass is written out here as in resonate_delta:
-    shared by both as an inlined helper, 256 float32 modes with two float64 modes took
-    1.29-1.30x the time of the same bank without them, against 1.06-1.07x written out (CPU
-    time, interleaved, two runs)."""
+    samples one by one. Up to WIDE_LANES float64 modes (rows of whole WIDE_LANES) run as
+    one float64 vector whose outputs join the float32 sums' lanes
+    (ugens.vector_pass.add_wide_chunk; ModalBank b1024/C at 1000 modes, 8 of them: 0.96-0.99
+    -> 1.00-1.08; at 256, 2 of them: 0.87-0.88 -> 0.88-0.89); more run in the scalar pass
+    written out here as in resonate_delta (two vectors of them at 5000 modes made that bank
+    10 % slower, though the kernel alone was not). As an inlined helper shared with
+    resonate_delta, the scalar pass made 256 float32 modes with two float64 modes take
+    1.29-1.30x the time of the same bank without them, against 1.06-1.07x written out."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
     split = min(delta_end, active)  # the delta form's chunks, then the decay-factor form's
@@ -543,35 +551,39 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
             s1[lane] = 0.0
             s2[lane] = 0.0
             s3[lane] = 0.0
-        for k in range(0, split, LANES):
-            vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
-        for k in range(split, active, LANES):
-            vector_pass.add_chunk(LANES, modes, k, forces, sums, True)
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
         t3 = 0.0
         if wide is not None:
-            fw = force[i - 1] if i > 0 else last[0]
-            w0 = force[i]
-            w1 = force[i + 1]
-            w2 = force[i + 2]
-            for k in range(wide_active):
-                q1 = wide.c1[k]
-                q2 = wide.c2[k]
-                gk = wide.g[k]
-                u1 = wide.y1[k]
-                u2 = wide.y2[k]
-                v0 = two_pole(q1, q2, u1, u2, gk * fw)
-                v1 = two_pole(q1, q2, v0, u1, gk * w0)
-                v2 = two_pole(q1, q2, v1, v0, gk * w1)
-                v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                wide.y2[k] = v2
-                wide.y1[k] = v3
-                t0 += v0
-                t1 += v1
-                t2 += v2
-                t3 += v3
+            if 0 < wide_active <= WIDE_LANES:
+                wide_forces = (force[i - 1] if i > 0 else last[0], force[i], force[i + 1], force[i + 2])
+                vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
+            else:
+                fw = force[i - 1] if i > 0 else last[0]
+                w0 = force[i]
+                w1 = force[i + 1]
+                w2 = force[i + 2]
+                for k in range(wide_active):
+                    q1 = wide.c1[k]
+                    q2 = wide.c2[k]
+                    gk = wide.g[k]
+                    u1 = wide.y1[k]
+                    u2 = wide.y2[k]
+                    v0 = two_pole(q1, q2, u1, u2, gk * fw)
+                    v1 = two_pole(q1, q2, v0, u1, gk * w0)
+                    v2 = two_pole(q1, q2, v1, v0, gk * w1)
+                    v3 = two_pole(q1, q2, v2, v1, gk * w2)
+                    wide.y2[k] = v2
+                    wide.y1[k] = v3
+                    t0 += v0
+                    t1 += v1
+                    t2 += v2
+                    t3 += v3
+        for k in range(0, split, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
+        for k in range(split, active, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, True)
         vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
         i += 4
     _tail(force[:n], out, i, modes, active, wide, wide_active, last, delta_end, False)
@@ -582,16 +594,16 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
 def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, delta_end):
     """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
     all in the decay-factor form (``delta_end`` 0), 1 .. HELD_MODES float32 modes and no
-    float64 modes,
-    :func:`resonate_held` (on rows at least :func:`held_width` long, as :func:`narrow_rows`
-    pads them); else, on rows of whole LANES, :func:`resonate_chunks`; otherwise (or
+    float64 modes, :func:`resonate_held` (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them); else, on float32 rows of whole LANES and float64 rows of whole WIDE_LANES
+    (as ugens.modal.split_by_precision pads them), :func:`resonate_chunks`; otherwise (or
     without EXPLICIT_VECTORS) out cleared and resonate_delta."""
     if EXPLICIT_VECTORS:
         held = delta_end == 0 and wide is None and 0 < active <= HELD_MODES
         if held and held_width(active) <= rows.c0.size:
             resonate_held(force, out, n, rows, active, last)
             return
-        if rows.c0.size % LANES == 0:
+        if rows.c0.size % LANES == 0 and (wide is None or wide.c1.size % WIDE_LANES == 0):
             resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_end)
             return
     for i in range(n):

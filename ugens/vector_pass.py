@@ -11,7 +11,8 @@ four at once and converts and stores them as one vector: against the C two-pole 
 0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
 Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_chunks), run
 :func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
-:func:`write_sums` at the end of each pass.
+:func:`write_sums` at the end of each pass; a few float64 modes beside them run as one
+float64 vector (:func:`add_wide_chunk`) whose outputs join the first lanes of those sums.
 
 The arithmetic per mode is ugens.modal_f32's update (``_four_samples``): with p = y[n-2] /
 g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2, u = p + v, in the
@@ -40,10 +41,11 @@ _INDEX = ir.IntType(32)
 
 
 def _fma(builder, a, b, c):
-    """a b + c, rounded once, lane by lane (llvm.fma)."""
+    """a b + c, rounded once, lane by lane (llvm.fma; float32 or float64 vectors)."""
     fnty = ir.FunctionType(a.type, [a.type] * 3)
+    element = "f64" if isinstance(a.type.element, ir.DoubleType) else "f32"
     return builder.call(
-        cgutils.get_or_insert_function(builder.module, fnty, f"llvm.fma.v{a.type.count}f32"), [a, b, c]
+        cgutils.get_or_insert_function(builder.module, fnty, f"llvm.fma.v{a.type.count}{element}"), [a, b, c]
     )
 
 
@@ -53,8 +55,8 @@ def _lanes(builder, a, b, picks):
 
 
 def _broadcast(builder, x, width):
-    """A vector of ``width`` float32 lanes, each the float32 scalar x (insert, shuffle)."""
-    vector = ir.VectorType(_FLOAT, width)
+    """A vector of ``width`` lanes, each the scalar x (float32 or float64; insert, shuffle)."""
+    vector = ir.VectorType(x.type, width)
     one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
     return _lanes(builder, one, ir.Constant(vector, ir.Undefined), [0] * width)
 
@@ -281,3 +283,49 @@ def write_sums(typingctx, width, sums, out, i, wide):
         return context.get_dummy_value()
 
     return types.none(width, sums, out, i, wide), codegen
+
+
+#: float64 lanes of one AVX-512 vector: the float64 modes' chunk (:func:`add_wide_chunk`).
+WIDE_VECTOR = 8
+
+
+@intrinsic
+def add_wide_chunk(typingctx, width, wide, k, forces, sums):
+    """Advance the float64 modes [k, k + WIDE_VECTOR) of ``wide`` (``width`` the literal
+    WIDE_VECTOR; the rows c1, c2, g, d, y1 = y[n-1], y2 = y[n-2] of ugens.cells.ModeRows,
+    float64, at least k + WIDE_VECTOR long) by four samples of the two-pole recursion y[n]
+    = c1 y[n-1] - c2 y[n-2] + g F[n-1] (ugens.cells.two_pole, as c1 y[n-1] + (g F - c2
+    y[n-2])) whose preceding forces are ``forces`` (four float64, N), storing y1 and y2, and
+    add sample j's outputs, rounded to float32, to the first WIDE_VECTOR lanes of sums[j]
+    (:func:`add_chunk`'s four float32 rows, on 64-byte lines): no reduction of their own.
+    As scalars, two float64 modes took 10-12 % of the time of 254 float32 modes (an FMA
+    unit's slot per mode and operation)."""
+    if not (
+        isinstance(width, types.IntegerLiteral)
+        and width.literal_value == WIDE_VECTOR
+        and _contiguous_arrays(wide, 6, types.float64)
+        and isinstance(k, types.Integer)
+        and _scalars(forces, 4, types.float64)
+        and _contiguous_arrays(sums, 4, types.float32)
+    ):
+        return None
+
+    def codegen(context, builder, signature, args):
+        _, wide, at, forces, sums = args
+        vector = ir.VectorType(ir.DoubleType(), WIDE_VECTOR)
+        pointers = _row_pointers(context, builder, signature.args[1], wide, at, vector)
+        c1v, c2v, gv = (builder.load(row, align=8) for row in pointers[:3])
+        y1, y2 = (builder.load(row, align=8) for row in pointers[4:])
+        minus_c2 = builder.fneg(c2v)
+        narrow = ir.VectorType(_FLOAT, WIDE_VECTOR)
+        rows = _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), narrow)
+        for f, row in zip(cgutils.unpack_tuple(builder, forces, 4), rows, strict=True):
+            drive = builder.fmul(gv, _broadcast(builder, f, WIDE_VECTOR), flags=_UPDATE_FLAGS)
+            y1, y2 = _fma(builder, c1v, y1, _fma(builder, minus_c2, y2, drive)), y1
+            total = builder.fadd(builder.load(row, align=32), builder.fptrunc(y1, narrow), flags=_SUM_FLAGS)
+            builder.store(total, row, align=32)
+        builder.store(y1, pointers[4], align=8)
+        builder.store(y2, pointers[5], align=8)
+        return context.get_dummy_value()
+
+    return types.none(width, wide, k, forces, sums), codegen
