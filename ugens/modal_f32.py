@@ -330,6 +330,35 @@ def _finish(force, out, start, n, direct, last):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
+def _wide_pass(wide, count, force, i, last):
+    """The float64 modes [0, count) of ``wide`` (ugens.cells.ModeRows) advanced over
+    force[i:i + 4] (N; last[0] is the sample before force[0]) as in resonate_delta's
+    passes: their four output sums (the bank's output units)."""
+    fw = force[i - 1] if i > 0 else last[0]
+    w0 = force[i]
+    w1 = force[i + 1]
+    w2 = force[i + 2]
+    t0 = t1 = t2 = t3 = 0.0
+    for k in range(count):
+        q1 = wide.c1[k]
+        q2 = wide.c2[k]
+        gk = wide.g[k]
+        u1 = wide.y1[k]
+        u2 = wide.y2[k]
+        v0 = two_pole(q1, q2, u1, u2, gk * fw)
+        v1 = two_pole(q1, q2, v0, u1, gk * w0)
+        v2 = two_pole(q1, q2, v1, v0, gk * w1)
+        v3 = two_pole(q1, q2, v2, v1, gk * w2)
+        wide.y2[k] = v2
+        wide.y1[k] = v3
+        t0 += v0
+        t1 += v1
+        t2 += v2
+        t3 += v3
+    return t0, t1, t2, t3
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
 def resonate_delta(force, out, n, rows, active, wide, wide_active, last, delta_end):
     """Add the float32 modes [0, active) of ``rows`` and the float64 modes [0, wide_active)
     of ``wide`` over force[:n] to out[:n]; the float32 modes [0, delta_end) in the delta
@@ -377,31 +406,9 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, delta_e
                 s1 += gk * u1
                 s2 += gk * u2
                 s3 += gk * u3
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        t3 = 0.0
+        t0 = t1 = t2 = t3 = 0.0
         if wide is not None:
-            fw = force[i - 1] if i > 0 else last[0]
-            w0 = force[i]
-            w1 = force[i + 1]
-            w2 = force[i + 2]
-            for k in range(wide_active):
-                q1 = wide.c1[k]
-                q2 = wide.c2[k]
-                gk = wide.g[k]
-                u1 = wide.y1[k]
-                u2 = wide.y2[k]
-                v0 = two_pole(q1, q2, u1, u2, gk * fw)
-                v1 = two_pole(q1, q2, v0, u1, gk * w0)
-                v2 = two_pole(q1, q2, v1, v0, gk * w1)
-                v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                wide.y2[k] = v2
-                wide.y1[k] = v3
-                t0 += v0
-                t1 += v1
-                t2 += v2
-                t3 += v3
+            t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         out[i] += s0 + t0
         out[i + 1] += s1 + t1
         out[i + 2] += s2 + t2
@@ -524,10 +531,9 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
     one float64 vector whose outputs join the float32 sums' lanes
     (ugens.vector_pass.add_wide_chunk; ModalBank b1024/C at 1000 modes, 8 of them: 0.96-0.99
     -> 1.00-1.08; at 256, 2 of them: 0.87-0.88 -> 0.88-0.89); more run in the scalar pass
-    written out here as in resonate_delta (two vectors of them at 5000 modes made that bank
-    10 % slower, though the kernel alone was not). As an inlined helper shared with
-    resonate_delta, the scalar pass made 256 float32 modes with two float64 modes take
-    1.29-1.30x the time of the same bank without them, against 1.06-1.07x written out."""
+    :func:`_wide_pass` (two vectors of them at 5000 modes made that bank 10 % slower, though
+    the kernel alone was not), a function of its own: written out here, its loop's mere
+    presence made the bank of 256 modes (2 of them float64, in the vector) 2-4 % slower."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
     split = min(delta_end, active)  # the delta form's chunks, then the decay-factor form's
@@ -560,26 +566,7 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
                 wide_forces = (force[i - 1] if i > 0 else last[0], force[i], force[i + 1], force[i + 2])
                 vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
             else:
-                fw = force[i - 1] if i > 0 else last[0]
-                w0 = force[i]
-                w1 = force[i + 1]
-                w2 = force[i + 2]
-                for k in range(wide_active):
-                    q1 = wide.c1[k]
-                    q2 = wide.c2[k]
-                    gk = wide.g[k]
-                    u1 = wide.y1[k]
-                    u2 = wide.y2[k]
-                    v0 = two_pole(q1, q2, u1, u2, gk * fw)
-                    v1 = two_pole(q1, q2, v0, u1, gk * w0)
-                    v2 = two_pole(q1, q2, v1, v0, gk * w1)
-                    v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                    wide.y2[k] = v2
-                    wide.y1[k] = v3
-                    t0 += v0
-                    t1 += v1
-                    t2 += v2
-                    t3 += v3
+                t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         for k in range(0, split, LANES):
             vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
         for k in range(split, active, LANES):
