@@ -5,10 +5,10 @@ LLVM holds them in vector registers across the passes. From the per-mode loop, L
 vectoriser summed each of the pass's four output samples over the lanes on its own (four
 horizontal reductions, each a chain of extracts, shuffles and adds), then converted and
 stored the four sums one by one and added the direct term in a pass of its own.
-:func:`write_four` reduces the four sums together (pairs of vectors interleaved, halving
-the lanes at each step: about half the shuffles and adds), adds the direct term to the
-four at once and converts and stores them as one vector: against the C two-pole loop,
-0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
+:func:`write_four` reduces the four sums together (:func:`_sum_four`: within each 128-bit
+block first, then the blocks), adds the direct term to the four at once and converts and
+stores them as one vector: against the C two-pole loop, 0.98x -> 1.09x at 16 modes, 0.96x
+-> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each, on an earlier machine).
 Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_chunks), run
 :func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
 :func:`write_sums` at the end of each pass; a few float64 modes beside them run as one
@@ -72,28 +72,27 @@ def _fold(builder, v, width):
 
 
 def _sum_four(builder, a0, a1, a2, a3):
-    """<4 x float> (sum(a0), sum(a1), sum(a2), sum(a3)) of four VECTOR-lane vectors: each
-    step adds two shuffles of a pair, so the lanes holding each sum halve together."""
+    """<4 x float> (sum(a0), sum(a1), sum(a2), sum(a3)) of four VECTOR-lane vectors: first
+    within each 128-bit block (shuffles that stay in their block, two-source shufps: the
+    four vectors' block sums side by side in two steps), then the blocks added (halves of
+    the vector). Halving the lanes of pairs across the whole vector at each step (cross-block
+    shuffles, 11 of them) cost the bank of 256 modes about 5 % more."""
 
-    def pair(x, y, width):  # [x's halves summed, y's halves summed]
+    def within(x, y):  # per block of four lanes: [x0 + x1, x2 + x3, y0 + y1, y2 + y3]
+        even = [i for b in range(0, VECTOR, 4) for i in (b, b + 2, VECTOR + b, VECTOR + b + 2)]
+        odd = [i + 1 for i in even]
+        return builder.fadd(_lanes(builder, x, y, even), _lanes(builder, x, y, odd), flags=_SUM_FLAGS)
+
+    z = within(within(a0, a1), within(a2, a3))  # per block: its sums of a0, a1, a2, a3
+    width = VECTOR
+    while width > 4:
         half = width // 2
-        low = list(range(half)) + list(range(width, width + half))
-        high = list(range(half, width)) + list(range(width + half, 2 * width))
-        return builder.fadd(_lanes(builder, x, y, low), _lanes(builder, x, y, high), flags=_SUM_FLAGS)
-
-    x, y = pair(a0, a1, VECTOR), pair(a2, a3, VECTOR)  # groups of VECTOR / 2 lanes: a0 a1 | a2 a3
-    group = VECTOR // 2
-    quarter = group // 2
-    low = [g * group + j for g in range(4) for j in range(quarter)]
-    high = [i + quarter for i in low]
-    z = builder.fadd(_lanes(builder, x, y, low), _lanes(builder, x, y, high), flags=_SUM_FLAGS)  # VECTOR / 4
-    group = quarter
-    while group > 1:
-        half = group // 2
-        low = [g * group + j for g in range(4) for j in range(half)]
-        high = [i + half for i in low]
-        z = builder.fadd(_lanes(builder, z, z, low), _lanes(builder, z, z, high), flags=_SUM_FLAGS)
-        group = half
+        z = builder.fadd(
+            _lanes(builder, z, z, list(range(half))),
+            _lanes(builder, z, z, list(range(half, width))),
+            flags=_SUM_FLAGS,
+        )
+        width = half
     return z
 
 
