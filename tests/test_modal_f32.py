@@ -216,6 +216,7 @@ def test_the_held_kernels_compute_what_the_general_kernel_does(count):
         (100, 3, 0),
         (100, 8, 0),
         (100, 9, 0),
+        (100, 17, 0),
         (100, 0, 32),
         (100, 3, 64),
         (100, 0, 128),
@@ -227,8 +228,8 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
     vector step in the form of their chunk; it writes the output) against resonate_delta's
     general loop (which adds to it) on the same rows: same outputs and states to float32
     rounding over calls of odd lengths, with the direct term and float64 modes updated in
-    the same passes to float64 rounding (up to WIDE_LANES as one vector: 2, 3, 8 of them;
-    9 in the scalar pass), in the decay-factor form, the delta form and both."""
+    the same passes to float64 rounding (up to 2 WIDE_LANES as vectors: 2, 3, 8, 9 of
+    them; 17 in the scalar pass), in the decay-factor form, the delta form and both."""
     force, runs = _narrow_and_general(count, wide_count, seed=6, delta_end=delta_end)
     (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
     assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]

@@ -527,13 +527,13 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
     pass's float32 modes in explicit vectors (ugens.vector_pass.add_chunk, 32 modes at a
     time, their per-lane sums kept in four stack rows; write_sums reduces the four together
     and stores the four samples as one vector): LLVM's code reduced and stored the four
-    samples one by one. Up to WIDE_LANES float64 modes (rows of whole WIDE_LANES) run as
-    one float64 vector whose outputs join the float32 sums' lanes
+    samples one by one. Up to 2 WIDE_LANES float64 modes (rows of whole WIDE_LANES) run as
+    one or two float64 vectors whose outputs join the float32 sums' lanes
     (ugens.vector_pass.add_wide_chunk; ModalBank b1024/C at 1000 modes, 8 of them: 0.96-0.99
-    -> 1.00-1.08; at 256, 2 of them: 0.87-0.88 -> 0.88-0.89); more run in the scalar pass
-    :func:`_wide_pass` (two vectors of them at 5000 modes made that bank 10 % slower, though
-    the kernel alone was not), a function of its own: written out here, its loop's mere
-    presence made the bank of 256 modes (2 of them float64, in the vector) 2-4 % slower."""
+    -> 1.00-1.08; at 5000, 12 of them: 0.95 -> 1.00), called once or twice: as a loop over
+    the vectors, two of them made the bank at 5000 modes 10 % slower (though not the kernel
+    alone). More run in the scalar pass :func:`_wide_pass`, a function of its own: written
+    out here, its loop's mere presence made the bank of 256 modes 2-4 % slower."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
     split = min(delta_end, active)  # the delta form's chunks, then the decay-factor form's
@@ -562,9 +562,11 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
         t2 = 0.0
         t3 = 0.0
         if wide is not None:
-            if 0 < wide_active <= WIDE_LANES:
+            if 0 < wide_active <= 2 * WIDE_LANES:
                 wide_forces = (force[i - 1] if i > 0 else last[0], force[i], force[i + 1], force[i + 2])
                 vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
+                if wide_active > WIDE_LANES:
+                    vector_pass.add_wide_chunk(WIDE_LANES, wide, WIDE_LANES, wide_forces, sums)
             else:
                 t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         for k in range(0, split, LANES):
