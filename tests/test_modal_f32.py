@@ -19,6 +19,7 @@ from ugens.modal_f32 import (
     delta_coefficients,
     factor_coefficient,
     float32_error,
+    flush_silent_delta,
     narrow_rows,
     order_by_form,
     resonate_delta,
@@ -358,3 +359,22 @@ def test_only_the_chunk_of_modes_that_need_it_runs_in_the_delta_form():
     np.testing.assert_array_equal(row[LANES:], factor_coefficient(c0, b2)[LANES:])
     ref = render_noise(model, "float64")
     assert error_db(render_noise(model, "mixed"), ref) < -60.0
+
+
+def test_the_flush_zeroes_silent_float32_modes_and_counts_to_the_last_audible_one():
+    """flush_silent_delta (written without branches): the modes whose g y and g dy are both
+    below the floor get zero state, the others keep theirs, and the active count becomes
+    the last audible mode + 1 (the silent tail is not counted)."""
+    rng = np.random.default_rng(8)
+    y, dy = (rng.standard_normal(40) * 10 ** rng.uniform(-9, 0, 40) for _ in range(2))
+    y, dy = y.astype(np.float32), dy.astype(np.float32)
+    y[30:], dy[30:] = 1e-12, -1e-12
+    g = rng.uniform(0.5, 2.0, 40).astype(np.float32)
+    floor = 1e-6
+    silent = (np.abs(g * y) < floor) & (np.abs(g * dy) < floor)
+    assert 0 < silent[:30].sum() < 30
+    expect_y, expect_dy = np.where(silent, 0.0, y), np.where(silent, 0.0, dy)
+    active = flush_silent_delta(y, dy, g, 40, floor)
+    assert active == np.flatnonzero(~silent).max() + 1 <= 30
+    np.testing.assert_array_equal(y, expect_y)
+    np.testing.assert_array_equal(dy, expect_dy)
