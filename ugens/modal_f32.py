@@ -567,7 +567,7 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
                 vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
                 if wide_active > WIDE_LANES:
                     vector_pass.add_wide_chunk(WIDE_LANES, wide, WIDE_LANES, wide_forces, sums)
-            else:
+            elif wide_active > 0:
                 t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         for k in range(0, split, LANES):
             vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
