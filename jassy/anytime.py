@@ -26,7 +26,9 @@ this or the next period, a force heard in the last period, or a mode fading out.
 them the kept set only loses modes (ringing modes decay, silent ones are skipped), which
 the banks do by themselves. A budget that covers every mode never decides: the render is
 the full synthesis. Whether a bank hears a force is read from its input before the banks
-run (one compiled pass over every bank's input), and when no bank hears another bank the
+run (one compiled pass over every bank's input; a bank driven by an ImpactForce hears
+none: its force is the score's impacts, ranked from the score, so no periodogram of its
+pulses and no decision for them after their period). When no bank hears another bank the
 budget renders the banks itself: a sub-block is split only at the frames where it
 decides, so a budgeted bank is called no more often than a full one between decisions.
 
@@ -72,7 +74,7 @@ def a_weighting_power(f: np.ndarray) -> np.ndarray:
 
 
 #: Rows of ModeBudget's flags (one column per bank): the Hearing's (jassy.anytime_rank) from
-#: ``unseen`` to ``unrendered``, then the banks the step leaves to Python and the Decision's
+#: ``unseen`` to ``struck_only``, then the banks the step leaves to Python and the Decision's
 #: ``heard`` (ugens.modal_budget).
 FLAG_ROWS = (
     "unseen",
@@ -82,11 +84,12 @@ FLAG_ROWS = (
     "forced",
     "onset",
     "unrendered",
+    "struck_only",
     "by_python",
     "heard",
 )
-UNSEEN, ONSET, UNRENDERED, BY_PYTHON, HEARD = (
-    FLAG_ROWS.index(n) for n in ("unseen", "onset", "unrendered", "by_python", "heard")
+UNSEEN, ONSET, STRUCK_ONLY, BY_PYTHON, HEARD = (
+    FLAG_ROWS.index(n) for n in ("unseen", "onset", "struck_only", "by_python", "heard")
 )
 
 
@@ -253,12 +256,13 @@ class ModeBudget:
         self._addresses[0] = [address(x) for x in heard_inputs]
         self._addresses[1] = [address(bank.out) for bank in banks]  # alive with them
         self._flags[UNSEEN] = not renders
+        self._flags[STRUCK_ONLY] = [bank.sources["input"].score_impacts_only for bank in banks]
         self._size = min(x.size for x in heard_inputs)
         flag = [(slots.flags[0] + r * count, count, 1) for r in range(rows)]
         at = slots.addresses[0]
         inputs, outputs = (at, count, 1), (at + self._addresses.itemsize * count, count, 1)
         mask = [(slots.masks[0] + r * total, total, 1) for r in range(3)]
-        hearing = (inputs, (self._size, 0, 0), *flag[: UNRENDERED + 1], slots.power)
+        hearing = (inputs, (self._size, 0, 0), *flag[: STRUCK_ONLY + 1], slots.power)
         self._before_kicks = (*hearing, outputs, flag[BY_PYTHON], slots.zeros)
         decision = (flag[ONSET], flag[HEARD], inputs, slots.scores, *mask)
         self._after_kicks = (slots.state, *decision)
@@ -267,7 +271,7 @@ class ModeBudget:
     def hearing(self) -> Hearing:
         """The Hearing the compiled step reads (jassy.anytime_rank), as views."""
         f = self._flags
-        return Hearing(self._addresses[0], self._size, *f[: UNRENDERED + 1], self._power)
+        return Hearing(self._addresses[0], self._size, *f[: STRUCK_ONLY + 1], self._power)
 
     @property
     def decision(self):

@@ -55,6 +55,9 @@ class UGen:
     #: True for ugens that share a mode budget (anytime synthesis): they implement
     #: :meth:`anytime_attach` and honour ``self.budgeted``.
     supports_budget: ClassVar[bool] = False
+    #: True for force sources whose output is the score's impacts alone (ImpactForce): a
+    #: mode budget ranks what they strike from the score, not from the force it hears.
+    score_impacts_only: ClassVar[bool] = False
     #: True for :class:`Tap`, which carries another ugen's extra output and is named after it.
     is_tap: ClassVar[bool] = False
     #: Names of additional outputs (e.g. the contact force of a closed-loop interaction),

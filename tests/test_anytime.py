@@ -506,13 +506,13 @@ def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
     assert np.all(t.rows[mb.SPECTRUM, :11] == 0.0)  # the first bank's row is untouched
 
 
-def test_a_remembered_psd_stands_for_one_period():
+def test_a_remembered_psd_stands_for_psd_reuse_periods():
     """ugens.modal_budget.decide on tables whose second bank hears a new force at each
     decision, one budget period apart (six decisions), then two apart (three): its
     periodogram (the PSD numpy gives for that ring, blended with the one remembered) is
-    taken at every other decision while they come every period and at each when they
-    come further apart (PSD_REUSE_PERIODS); the decisions between rank by the remembered
-    PSD unchanged."""
+    taken at the first decision and then at the first more than PSD_REUSE_PERIODS (3)
+    periods after the last one taken; the decisions between rank by the remembered PSD
+    unchanged."""
     from ugens import modal_budget as mb
 
     period, counts, window_power = 256, [11, 23], 3.5
@@ -525,7 +525,7 @@ def test_a_remembered_psd_stands_for_one_period():
     masks = (np.zeros(sum(counts), dtype=bool) for _ in range(3))
     d = mb.Decision(np.zeros(2, dtype=bool), np.array([False, True]), np.zeros(2, dtype=np.intp),
                     np.zeros((3, sum(counts))), *masks)  # fmt: skip
-    assert mb.PSD_REUSE_PERIODS == 1
+    assert mb.PSD_REUSE_PERIODS == 3
     remembered, transforms = None, []
     for k, frame in enumerate([*range(0, 6 * period, period), *range(7 * period, 13 * period, 2 * period)]):
         t.rings[1] = rng.normal(size=period) * (k + 1)
@@ -542,7 +542,7 @@ def test_a_remembered_psd_stands_for_one_period():
             )
         assert np.allclose(t.rows[mb.SPECTRUM, 11:], remembered, rtol=1e-10), k
         assert t.values[mb.SPECTRAL, 1] == 1.0
-    assert transforms == [True, False] * 3 + [True] * 3
+    assert transforms == [True, False, False, False, True, False, False, True, False]
 
 
 def rubbed_bell(budget):
@@ -584,28 +584,28 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     force's power is at most STEADY_POWER times its power at the last decision (a weaker
     one too), no heard bank ramps, and fewer than STEADY_PERIODS periods in a row."""
     from jassy.anytime_rank import (
-        POWER_STRIDE,
         STEADY_PERIODS,
         STEADY_POWER,
         STEP_STATE,
         UNDECIDED,
         Hearing,
+        centred_power,
         note_decided,
         steady_forces,
     )
 
     rng = np.random.default_rng(1)
     rings = rng.normal(size=(2, 2048))
-    flags = [np.zeros(2, dtype=bool) for _ in range(7)]
+    flags = [np.zeros(2, dtype=bool) for _ in range(8)]
     h = Hearing(np.zeros(2, dtype=np.intp), 2048, *flags, np.zeros(2))
     state, ramp_left = np.zeros(STEP_STATE, dtype=np.int64), np.zeros(2, dtype=np.int64)
     h.heard_before[:] = True
-    note_decided(h, rings, np.array([True, False]), state)
-    sampled = rings[0, ::POWER_STRIDE]
-    power = np.mean((sampled - sampled.mean()) ** 2)
+    powers = np.array([centred_power(ring) for ring in rings])  # (the decision's RING_POWER)
+    note_decided(h, powers, np.array([True, False]), state)
+    power = np.mean((rings[0] - rings[0].mean()) ** 2)
     assert h.decided_power[0] == pytest.approx(power, rel=1e-12) and h.decided_power[1] == 0.0
     assert not steady_forces(h, rings, ramp_left, state)  # bank 1: heard now, not at the decision
-    note_decided(h, rings, np.array([True, True]), state)
+    note_decided(h, powers, np.array([True, True]), state)
     for scale, steady in (
         (0.1, True),
         (0.99 * np.sqrt(STEADY_POWER), True),
@@ -833,3 +833,35 @@ def test_a_location_jump_in_the_short_path_changes_what_the_general_path_changes
     assert np.max(np.abs(fast)) > 1e-3 and np.array_equal(fast, general) and decisions == general_decisions
     for (location, design), (other, other_design) in zip(states, general_states, strict=True):
         assert location == other and np.array_equal(design, other_design)
+
+
+def struck_bell(budget, through_gain: bool):
+    """A bell of 150 modes struck four times by an ImpactForce, directly or through a Gain
+    (whose output the budget cannot tell from a continuous force)."""
+    from ugens.mix import Gain
+
+    hit = ImpactForce(name="hit", duration=0.001)
+    force = Gain(hit, name="via", gain=1.0) if through_gain else hit
+    score = [Event(t, "hit", "impact", {"impulse": 0.3}) for t in (0.05, 0.4, 0.75, 1.1)]
+    return Graph(ModalBank(bell_model(150), name="bell")(force), budget=budget), score
+
+
+def test_a_bank_struck_only_by_the_scores_impacts_never_hears_them_as_a_force():
+    """An ImpactForce's output is the score's impacts, which the budget ranks from the
+    score: the bank it drives is ``struck_only`` (no periodogram of its pulses, no
+    decision for having heard them), the same pulses through a Gain are judged as a
+    heard force; both render within -15 dB of the full synthesis."""
+    from ugens import modal_budget as mb
+
+    decisions, errors = {}, {}
+    for through_gain in (False, True):
+        graph, score = struck_bell(None, through_gain)
+        full = render(graph, score, 1.5, FS, 4096, limiter=False).audio[0]
+        budget = ModeBudget(max_modes=40)
+        graph, score = struck_bell(budget, through_gain)
+        y = render(graph, score, 1.5, FS, 4096, limiter=False).audio[0]
+        assert list(budget.hearing.struck_only) == [not through_gain]
+        assert budget._tables.values[mb.REMEMBERED, 0] == float(through_gain)  # a periodogram taken
+        decisions[through_gain], errors[through_gain] = budget.decisions, error_db(y, full)
+    assert decisions[False] < decisions[True], decisions
+    assert max(errors.values()) <= -15.0, errors

@@ -158,3 +158,56 @@ def test_flush_leaving_part_of_a_vector_gives_the_full_kernels_output(width, aud
     assert kept_meta[0] == full_meta[0] == audible
     assert not np.any(kept_rows[4:, audible:])  # the flushed modes' state: exact zeros
     assert np.max(np.abs(kept - full)) < 1e-12 * np.max(np.abs(full))
+
+
+@pytest.mark.parametrize("modes", [8, 24, 32, 64, 80])
+def test_ring_passes_in_explicit_vectors_give_rings_samples_and_state(modes):
+    """ugens.modal_kept.ring_kept (whole vectors of modes: eight-sample passes in explicit
+    LLVM vectors, by the squared pole's recursion, the sums reduced together) gives ring's
+    samples and state to rounding, over a stretch that is not whole passes; a count of
+    modes that is not whole vectors runs ring itself (the same bits)."""
+    from ugens.modal_kept import ring, ring_kept
+
+    rng = np.random.default_rng(modes)
+    rows, _ = ringing_rows(modes, rng)
+    for active in (modes, modes - 3):
+        ours, theirs = rows.copy(), rows.copy()
+        out, reference = np.full(1001, np.nan), np.full(1001, np.nan)
+        ring_kept(out, 1001, ours[0], ours[1], ours[4], ours[5], active)
+        ring(reference, 1001, theirs[0], theirs[1], theirs[4], theirs[5], active)
+        if active % 8:
+            assert np.array_equal(out, reference) and np.array_equal(ours, theirs)
+        else:
+            assert np.max(np.abs(out - reference)) < 1e-12 * np.max(np.abs(reference))
+            assert np.max(np.abs(ours - theirs)) < 1e-12 * np.max(np.abs(theirs))
+
+
+@pytest.mark.parametrize("modes", [8, 32, 48])
+def test_forced_passes_in_explicit_vectors_give_resonates_samples_and_state(modes):
+    """ugens.modal_kept.resonate_kept (whole vectors of modes: eight-sample passes in
+    explicit LLVM vectors, the direct term added after) gives ugens.modal.resonate's
+    samples, state and last force sample to rounding, over a force with silent stretches
+    and a length that is not whole passes; a count of modes that is not whole vectors
+    runs resonate itself (the same bits)."""
+    from ugens.cells import ModeRows
+    from ugens.modal import resonate
+    from ugens.modal_kept import resonate_kept
+
+    rng = np.random.default_rng(modes)
+    rows, _ = ringing_rows(modes, rng)
+    rows[2] = rng.uniform(1e-4, 1e-3, modes)  # g
+    rows[3] = rng.uniform(1e-7, 1e-6, modes)  # d
+    force = rng.normal(size=1003)
+    force[200:500] = 0.0
+    for active in (modes, modes - 3):
+        ours, theirs = rows.copy(), rows.copy()
+        out, reference = np.full(1003, np.nan), np.full(1003, np.nan)
+        last, last_reference = np.array([0.4]), np.array([0.4])
+        resonate_kept(force, out, 1003, ModeRows(*ours), active, last)
+        resonate(force, reference, 1003, ModeRows(*theirs), active, last_reference)
+        assert last[0] == last_reference[0] == force[-1]
+        if active % 8:
+            assert np.array_equal(out, reference) and np.array_equal(ours, theirs)
+        else:
+            assert np.max(np.abs(out - reference)) < 1e-12 * np.max(np.abs(reference))
+            assert np.max(np.abs(ours - theirs)) < 1e-12 * np.max(np.abs(theirs))

@@ -155,6 +155,8 @@ class ImpactForce(PulseSource):
     #: Pulses are placed at their own sample time, and the parameters matter only when an
     #: impact starts (in event order): events need not split a sub-block.
     inline_events = True
+    #: Its pulses are the score's impacts (listed, jassy.scheduler.ListedImpacts).
+    score_impacts_only = True
 
     def set_param_at(self, frame: int, key: str, value: Any, jump: bool, ramp: float | None) -> None:
         """Change ``duration`` for the impacts from ``frame`` on: now, since every impact before

@@ -1036,11 +1036,14 @@ class ModalBank(ModelParams, UGen):
             return False
         if len(pending) > 1 and pending[1][0] == frame and pending[1][3:] == (jump, ramp):
             return False  # (keys changed together: _apply_queued)
-        self._event_ramp = ramp
-        try:
+        if jump:
             gains_only = self._jumps_gains_only(jump)
-        finally:
-            self._event_ramp = None
+        else:  # (whether it ramps depends on the event's own ramp)
+            self._event_ramp = ramp
+            try:
+                gains_only = self._jumps_gains_only(jump)
+            finally:
+                self._event_ramp = None
         if not gains_only:
             return False
         pending.popleft()
@@ -1051,8 +1054,10 @@ class ModalBank(ModelParams, UGen):
     def _jump_in_place(self) -> None:
         """A budgeted bank's jump to the fresh design with its current poles
         (:meth:`_jumps_gains_only`): the design, the budget's tables and the kept modes in
-        place (ugens.modal_budget.jump_to_fresh); no ramp left."""
-        self._refresh_design_cache()
+        place (ugens.modal_budget.jump_to_fresh); no ramp left. (The poles are the same, so
+        the per-mode rows of :meth:`_refresh_forcing` are too.)"""
+        self._fresh = self._design()
+        self._design_to_tables()
         self._anytime_entry("jump")(self._tables_handle, self._slot)
         self.meta[RAMP_LEFT] = 0
         self._ramping = False
