@@ -378,3 +378,28 @@ def test_the_flush_zeroes_silent_float32_modes_and_counts_to_the_last_audible_on
     assert active == np.flatnonzero(~silent).max() + 1 <= 30
     np.testing.assert_array_equal(y, expect_y)
     np.testing.assert_array_equal(dy, expect_dy)
+
+
+@pytest.mark.parametrize("delta_end", [5, 40])
+def test_a_delta_end_within_a_chunk_takes_the_general_loop(delta_end):
+    """resonate_chunks runs whole 32-mode chunks of one form: a delta_end inside a chunk
+    takes resonate_delta (before, chunks overlapped, skipped modes and wrote past rows of
+    exactly the bank's length)."""
+    from ugens.modal import design
+    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta, resonate_narrow
+
+    count, frames = 64, 64
+    c1, c2, gain = design(np.geomspace(100.0, 8000.0, count), np.full(count, 20.0), 48000.0)
+    c0, b2 = delta_coefficients(c1, c2)
+    force = np.random.default_rng(0).standard_normal(frames)
+    coefficients, state = narrow_rows(c0, b2, gain, 0 * gain, 0 * gain, 0 * gain, delta_end)
+    guarded = [np.full(count + 16, 777.0, np.float32) for _ in range(6)]  # rows, then 16 guards
+    for buffer, row in zip(guarded, [*coefficients[:, :count], *state[:, :count]], strict=True):
+        buffer[:count] = row
+    out, reference = np.zeros(frames), np.zeros(frames)
+    rows = DeltaRows(*(buffer[:count] for buffer in guarded))
+    resonate_narrow(force, out, frames, rows, count, None, 0, np.zeros(1), delta_end)
+    general = DeltaRows(*coefficients[:, :count].copy(), *state[:, :count].copy())
+    resonate_delta(force, reference, frames, general, count, None, 0, np.zeros(1), delta_end)
+    assert all(np.all(buffer[count:] == 777.0) for buffer in guarded)
+    assert np.array_equal(out, reference)

@@ -584,15 +584,17 @@ def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, delta_
     """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
     all in the decay-factor form (``delta_end`` 0), 1 .. HELD_MODES float32 modes and no
     float64 modes, :func:`resonate_held` (on rows at least :func:`held_width` long, as :func:`narrow_rows`
-    pads them); else, on float32 rows of whole LANES and float64 rows of whole WIDE_LANES
-    (as ugens.modal.split_by_precision pads them), :func:`resonate_chunks`; otherwise (or
-    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
+    pads them); else, on float32 rows of whole LANES, ``delta_end`` a whole number of LANES
+    and float64 rows of whole WIDE_LANES (as ugens.modal.split_by_precision makes them),
+    :func:`resonate_chunks`; otherwise (or without EXPLICIT_VECTORS) out cleared and
+    resonate_delta. The float64 rows, where given, are C-contiguous (as the bank's are)."""
     if EXPLICIT_VECTORS:
         held = delta_end == 0 and wide is None and 0 < active <= HELD_MODES
         if held and held_width(active) <= rows.c0.size:
             resonate_held(force, out, n, rows, active, last)
             return
-        if rows.c0.size % LANES == 0 and (wide is None or wide.c1.size % WIDE_LANES == 0):
+        whole = rows.c0.size % LANES == 0 and delta_end % LANES == 0  # chunks of one form each
+        if whole and (wide is None or wide.c1.size % WIDE_LANES == 0):
             resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_end)
             return
     for i in range(n):

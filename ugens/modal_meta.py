@@ -38,7 +38,10 @@ class NarrowMeta(NamedTuple):
 
     active: int  #: float32 modes computed, [0, active): the last audible one + 1
     all: int  #: float32 modes in the rows (all become active when force arrives)
-    delta_end: int  #: modes [0, delta_end) in the delta form (coefficient row 1 holds b2), the rest R^2 - c0
+    #: modes [0, delta_end) in the delta form (coefficient row 1 holds b2), the rest R^2 - c0;
+    #: the explicit-vector kernel (ugens.modal_f32.resonate_chunks) runs only whole chunks of
+    #: 32 modes in one form, so other values take the general loop
+    delta_end: int
 
 
 ACTIVE, RAMP_LEFT, ALLOWED = (slot(BankMeta, key) for key in BankMeta._fields)
