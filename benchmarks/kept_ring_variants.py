@@ -139,7 +139,7 @@ def bench(m: int, repeats: int, rng) -> dict:
     c1, c2, y1, y2 = _modes(rng, m)
     c0, b2 = modal_f32.delta_coefficients(c1, c2)
     g = np.ones(m)
-    coef, state = modal_f32.narrow_rows(c0, b2, g, np.zeros(m), y1, y2, decay_factor=True)
+    coef, state = modal_f32.narrow_rows(c0, b2, g, np.zeros(m), y1, y2, delta_end=0)
     held, zero, last = modal_f32.delta_rows(coef, state), np.zeros(FRAMES), np.zeros(1)
     state0 = state.copy()
     rows64 = [np.empty(m), np.empty(m)]
@@ -147,7 +147,7 @@ def bench(m: int, repeats: int, rng) -> dict:
     c1f, c2f = c1.astype(np.float32), c2.astype(np.float32)
     runs = {
         "ring": lambda out: modal_kept.ring(out, FRAMES, c1, c2, *rows64, m),
-        "held32": lambda out: modal_f32.resonate_narrow(zero, out, FRAMES, held, m, None, 0, last, True),
+        "held32": lambda out: modal_f32.resonate_narrow(zero, out, FRAMES, held, m, None, 0, last, 0),
         "pole32": lambda out: pole32(out, FRAMES, c1f, c2f, *rows32, m),
         "sums64": lambda out: sums64(out, FRAMES, c1, c2, *rows64, m),
     }

@@ -166,6 +166,8 @@ class ModeBudget:
     mode_samples: int = field(default=0, init=False)
     #: the compiled step's state (jassy.anytime_rank's step fields), made at attach
     _state: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+    #: the banks' flags (FLAG_ROWS x banks), made at attach
+    _flags: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def decisions(self) -> int:
@@ -403,8 +405,12 @@ class ModeBudget:
 
     def score_changed(self) -> None:
         """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
-        step lists its impacts again."""
+        step lists its impacts again, and from now on no bank is ``struck_only``: an impact
+        inserted into a period already started was not expected at its start, so the bank it
+        strikes must be woken by the force it hears (as every bank is)."""
         self._same_score = False
+        if self._flags is not None:
+            self._flags[STRUCK_ONLY] = False
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:
         """Frame -> the banks rendered by the compiled step that have a parameter change

@@ -865,3 +865,30 @@ def test_a_bank_struck_only_by_the_scores_impacts_never_hears_them_as_a_force():
         decisions[through_gain], errors[through_gain] = budget.decisions, error_db(y, full)
     assert decisions[False] < decisions[True], decisions
     assert max(errors.values()) <= -15.0, errors
+
+
+def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_bank():
+    """Scheduler.insert (the live engine's path) strikes a bank that nothing else strikes in
+    the middle of a budget period: no period's start listed it, so the bank must be woken
+    by what it hears; its budgeted output then carries the full synthesis's energy."""
+    block, insert_at = 512, 4608  # period 2048: inserted mid-period
+
+    def run(budget):
+        ha, hb = ImpactForce(name="ha", duration=0.0005), ImpactForce(name="hb", duration=0.0005)
+        a = ModalBank(bell_model(150, prime=150, seed=0), name="a")(ha)
+        b = ModalBank(bell_model(150, prime=210, seed=1), name="b")(hb)
+        score = [Event(t, "ha", "impact", {"impulse": 0.3}) for t in np.arange(0.0, 1.0, 0.05)]
+        engine = OfflineEngine(
+            Graph(Mixer(a, b), budget=budget), score, FS, block, limiter=False, program=False
+        )
+        buffer, bank_b = np.zeros((1, block)), []
+        for frame in range(0, FS, block):
+            if frame == insert_at:
+                engine.scheduler.insert(Event(frame / FS, "hb", "impact", {"impulse": 0.5}))
+            engine.produce(buffer, block)
+            bank_b.append(b.out[:block].copy())
+        return np.concatenate(bank_b)
+
+    full, budgeted = run(None), run(ModeBudget(max_modes=60))
+    assert np.sum(full[insert_at:] ** 2) > 1.0
+    assert error_db(budgeted[insert_at:], full[insert_at:]) <= -10.0

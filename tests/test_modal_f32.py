@@ -11,17 +11,21 @@ from ugens.cells import ModeRows
 from ugens.modal import ModalBank, design, split_by_precision
 from ugens.modal_f32 import (
     HELD_MODES,
+    LANES,
     TOLERANCE,
+    WIDE_LANES,
     DeltaRows,
     decay_factor_error,
     delta_coefficients,
     factor_coefficient,
     float32_error,
+    flush_silent_delta,
     narrow_rows,
+    order_by_form,
     resonate_delta,
     resonate_narrow,
 )
-from ugens.modal_meta import BY_FACTOR, NARROW_ALL
+from ugens.modal_meta import DELTA_END, NARROW_ALL
 
 FREQS = np.geomspace(20.0, 20000.0, 7)
 DECAYS = np.geomspace(0.5, 500.0, 7)
@@ -66,11 +70,12 @@ def float32_only_response(f, d, seconds, decay_factor=False):
     c1, c2, s = design(np.array([f]), np.array([d]), FS)
     c0, b2 = delta_coefficients(c1, c2)
     zero = np.zeros(1)
-    coef, state = narrow_rows(c0, b2, s, zero, zero, zero, decay_factor)
+    delta_end = 0 if decay_factor else LANES
+    coef, state = narrow_rows(c0, b2, s, zero, zero, zero, delta_end)
     x = np.zeros(int(seconds * FS))
     x[0] = 1.0
     out = np.full(x.size, np.nan)  # (written, not added to)
-    resonate_narrow(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), decay_factor)
+    resonate_narrow(x, out, x.size, DeltaRows(*coef, *state), 1, None, 0, np.zeros(1), delta_end)
     return out
 
 
@@ -119,7 +124,7 @@ def takes_a_held_kernel(split):
     the stack (resonate_held): no float64 modes, the decay-factor form, at most HELD_MODES
     float32 modes."""
     meta = split.rows.narrow_meta
-    return split.wide.size == 0 and meta[BY_FACTOR] == 1 and 0 < meta[NARROW_ALL] <= HELD_MODES
+    return split.wide.size == 0 and meta[DELTA_END] == 0 and 0 < meta[NARROW_ALL] <= HELD_MODES
 
 
 @pytest.mark.parametrize("block", [1, 64, 1000])
@@ -157,18 +162,22 @@ def test_banks_of_up_to_64_float32_modes_take_a_held_kernel(count):
     assert error_db(y, ref) < -60.0
 
 
-def _narrow_and_general(count, wide_count, seed):
-    """resonate_narrow and resonate_delta run on the same decay-factor rows of ``count``
-    random float32 modes (and ``wide_count`` float64 modes) over calls of odd lengths (the
-    4-sample passes and the tail, the force sample carried between calls), with the direct
-    term: the force, then (out, state, float64 rows, last force sample) of each."""
+def _narrow_and_general(count, wide_count, seed, delta_end=0):
+    """resonate_narrow and resonate_delta run on the same rows of ``count`` random float32
+    modes (the first ``delta_end`` in the delta form, the rest in the decay-factor form; and
+    ``wide_count`` float64 modes, on rows padded with silent modes to whole WIDE_LANES as
+    split_by_precision pads them) over calls of odd lengths (the 4-sample passes and the
+    tail, the force sample carried between calls), with the direct term: the force, then
+    (out, state, float64 rows, last force sample) of each."""
     rng = np.random.default_rng(seed)
     f, d = np.geomspace(100.0, 15000.0, count), rng.uniform(5.0, 200.0, count)
     c1, c2, s = design(f, d, FS)
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros(count)
-    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, decay_factor=True)
-    w1, w2, ws = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    coef, _ = narrow_rows(c0, b2, s, 0.1 * s, zeros, zeros, delta_end)
+    padded = np.zeros((3, -(-wide_count // WIDE_LANES) * WIDE_LANES))
+    padded[:, :wide_count] = design(np.geomspace(6000.0, 9000.0, wide_count), np.full(wide_count, 0.5), FS)
+    w1, w2, ws = padded
     force = rng.standard_normal(3001)
     runs = []
     for kernel, out in (
@@ -176,11 +185,11 @@ def _narrow_and_general(count, wide_count, seed):
         (resonate_delta, np.zeros(force.size)),
     ):
         state = np.zeros((2, coef.shape[1]), np.float32)
-        z = np.zeros(wide_count)
+        z = np.zeros(w1.size)
         wide = ModeRows(w1, w2, ws, 0.1 * ws, z.copy(), z.copy()) if wide_count else None
         rows, last, start = DeltaRows(*coef, *state), np.zeros(1), 0
         for n in (1, 7, 1000, 993, 1000):
-            kernel(force[start:], out[start:], n, rows, count, wide, wide_count, last, True)
+            kernel(force[start:], out[start:], n, rows, count, wide, wide_count, last, delta_end)
             start += n
         runs.append((out, state, wide, last[0]))
     return force, runs
@@ -200,14 +209,29 @@ def test_the_held_kernels_compute_what_the_general_kernel_does(count):
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
 
 
-@pytest.mark.parametrize("count, wide_count", [(20, 2), (100, 0), (100, 3)])
-def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count):
-    """resonate_narrow's decay-factor kernel for banks a held kernel does not take (more than
-    64 float32 modes, or float64 modes: resonate_factor, 32 modes per explicit vector step;
-    it writes the output) against resonate_delta's general loop (which adds to it) on the
-    same rows: same outputs and states to float32 rounding over calls of odd lengths, with
-    the direct term and float64 modes updated in the same passes."""
-    force, runs = _narrow_and_general(count, wide_count, seed=6)
+@pytest.mark.parametrize(
+    "count, wide_count, delta_end",
+    [
+        (20, 2, 0),
+        (100, 0, 0),
+        (100, 3, 0),
+        (100, 8, 0),
+        (100, 9, 0),
+        (100, 17, 0),
+        (100, 0, 32),
+        (100, 3, 64),
+        (100, 0, 128),
+    ],
+)
+def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wide_count, delta_end):
+    """resonate_narrow's kernel for banks a held kernel does not take (more than 64 float32
+    modes, float64 modes or modes in the delta form: resonate_chunks, 32 modes per explicit
+    vector step in the form of their chunk; it writes the output) against resonate_delta's
+    general loop (which adds to it) on the same rows: same outputs and states to float32
+    rounding over calls of odd lengths, with the direct term and float64 modes updated in
+    the same passes to float64 rounding (up to 2 WIDE_LANES as vectors: 2, 3, 8, 9 of
+    them; 17 in the scalar pass), in the decay-factor form, the delta form and both."""
+    force, runs = _narrow_and_general(count, wide_count, seed=6, delta_end=delta_end)
     (out, state, wide, last), (ref, ref_state, ref_wide, ref_last) = runs
     assert np.max(np.abs(ref)) > 0 and last == ref_last == force[-1]
     np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
@@ -215,7 +239,7 @@ def test_the_vector_pass_kernel_computes_what_the_general_kernel_does(count, wid
     np.testing.assert_allclose(state, ref_state, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref_state)))
     if wide_count:
         assert np.max(np.abs(ref_wide.y1)) > 0
-        np.testing.assert_array_equal(wide.y1, ref_wide.y1)
+        np.testing.assert_allclose(wide.y1, ref_wide.y1, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref_wide.y1)))
 
 
 @pytest.mark.parametrize("wrong", ["force", "out"])
@@ -229,12 +253,12 @@ def test_the_explicit_vector_kernels_refuse_float32_force_or_output(wrong):
     c1, c2, s = design(np.geomspace(100.0, 15000.0, count), np.full(count, 20.0), FS)
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros(count)
-    coef, state = narrow_rows(c0, b2, s, zeros, zeros, zeros, decay_factor=True)
+    coef, state = narrow_rows(c0, b2, s, zeros, zeros, zeros, delta_end=0)
     arrays = {"force": np.ones(64), "out": np.zeros(64)}
     arrays[wrong] = arrays[wrong].astype(np.float32)
     with pytest.raises(TypingError, match="write_four|add_chunk|write_sums"):
         resonate_narrow(
-            arrays["force"], arrays["out"], 64, DeltaRows(*coef, *state), count, None, 0, np.zeros(1), True
+            arrays["force"], arrays["out"], 64, DeltaRows(*coef, *state), count, None, 0, np.zeros(1), 0
         )
 
 
@@ -255,7 +279,7 @@ def test_rows_shorter_than_a_held_kernel_take_the_general_loop():
         (resonate_delta, np.zeros(force.size)),
     ):
         rows = DeltaRows(*coef, *np.zeros((2, count), np.float32))
-        kernel(force, out, force.size, rows, count, None, 0, np.zeros(1), True)
+        kernel(force, out, force.size, rows, count, None, 0, np.zeros(1), 0)
         outs.append(out)
     assert np.max(np.abs(outs[1])) > 0
     np.testing.assert_array_equal(outs[0], outs[1])
@@ -312,3 +336,70 @@ def test_the_float32_bench_compares_like_for_like():
     if "c_error_db" in row:
         assert row["c_error_db"] > row["kernel_error_db"]
         assert all(r > 0 for r in row["kernel_vs_c"] + row["bank_vs_c"])
+
+
+def test_only_the_chunk_of_modes_that_need_it_runs_in_the_delta_form():
+    """100 modes, 3 of them low and light (20, 40 and 60 Hz at d = 0.5 /s, where the
+    decay-factor form misses the tolerance, :func:`decay_factor_error`): the split puts
+    those 3 first, the first chunk of LANES float32 modes in the delta form (row 1 b2) and
+    the rest in the decay-factor form (R^2 - c0); the mixed bank follows the float64 bank
+    within -60 dB."""
+    f, d = np.geomspace(100.0, 8000.0, 100), np.full(100, 20.0)
+    light = [10, 50, 90]
+    f[light], d[light] = [20.0, 40.0, 60.0], 0.5
+    model = ModalModel(f, d, np.random.default_rng(3).uniform(0.5, 1.0, (1, 100)))
+    c1, c2, s = design(model.frequencies, model.decays, FS)
+    order, delta_end = order_by_form(c1, c2, FS)
+    assert sorted(order[:3]) == light and sorted(order) == list(range(100)) and delta_end == LANES
+    split = split_by_precision(np.stack([c1, c2, s, 0 * s, 0 * s, 0 * s]), FS)
+    assert split.rows.narrow_meta[DELTA_END] == LANES and split.rows.narrow_meta[NARROW_ALL] == 100
+    c0, b2 = delta_coefficients(c1[split.narrow], c2[split.narrow])
+    row = split.rows.narrow_coef[1, :100]
+    np.testing.assert_array_equal(row[:LANES], b2[:LANES].astype(np.float32))
+    np.testing.assert_array_equal(row[LANES:], factor_coefficient(c0, b2)[LANES:])
+    ref = render_noise(model, "float64")
+    assert error_db(render_noise(model, "mixed"), ref) < -60.0
+
+
+def test_the_flush_zeroes_silent_float32_modes_and_counts_to_the_last_audible_one():
+    """flush_silent_delta (written without branches): the modes whose g y and g dy are both
+    below the floor get zero state, the others keep theirs, and the active count becomes
+    the last audible mode + 1 (the silent tail is not counted)."""
+    rng = np.random.default_rng(8)
+    y, dy = (rng.standard_normal(40) * 10 ** rng.uniform(-9, 0, 40) for _ in range(2))
+    y, dy = y.astype(np.float32), dy.astype(np.float32)
+    y[30:], dy[30:] = 1e-12, -1e-12
+    g = rng.uniform(0.5, 2.0, 40).astype(np.float32)
+    floor = 1e-6
+    silent = (np.abs(g * y) < floor) & (np.abs(g * dy) < floor)
+    assert 0 < silent[:30].sum() < 30
+    expect_y, expect_dy = np.where(silent, 0.0, y), np.where(silent, 0.0, dy)
+    active = flush_silent_delta(y, dy, g, 40, floor)
+    assert active == np.flatnonzero(~silent).max() + 1 <= 30
+    np.testing.assert_array_equal(y, expect_y)
+    np.testing.assert_array_equal(dy, expect_dy)
+
+
+@pytest.mark.parametrize("delta_end", [5, 40])
+def test_a_delta_end_within_a_chunk_takes_the_general_loop(delta_end):
+    """resonate_chunks runs whole 32-mode chunks of one form: a delta_end inside a chunk
+    takes resonate_delta (before, chunks overlapped, skipped modes and wrote past rows of
+    exactly the bank's length)."""
+    from ugens.modal import design
+    from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_delta, resonate_narrow
+
+    count, frames = 64, 64
+    c1, c2, gain = design(np.geomspace(100.0, 8000.0, count), np.full(count, 20.0), 48000.0)
+    c0, b2 = delta_coefficients(c1, c2)
+    force = np.random.default_rng(0).standard_normal(frames)
+    coefficients, state = narrow_rows(c0, b2, gain, 0 * gain, 0 * gain, 0 * gain, delta_end)
+    guarded = [np.full(count + 16, 777.0, np.float32) for _ in range(6)]  # rows, then 16 guards
+    for buffer, row in zip(guarded, [*coefficients[:, :count], *state[:, :count]], strict=True):
+        buffer[:count] = row
+    out, reference = np.zeros(frames), np.zeros(frames)
+    rows = DeltaRows(*(buffer[:count] for buffer in guarded))
+    resonate_narrow(force, out, frames, rows, count, None, 0, np.zeros(1), delta_end)
+    general = DeltaRows(*coefficients[:, :count].copy(), *state[:, :count].copy())
+    resonate_delta(force, reference, frames, general, count, None, 0, np.zeros(1), delta_end)
+    assert all(np.all(buffer[count:] == 777.0) for buffer in guarded)
+    assert np.array_equal(out, reference)

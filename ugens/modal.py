@@ -74,19 +74,20 @@ from ugens.modal_budget import (
 from ugens.modal_f32 import (
     MIN_GAIN,
     TOLERANCE,
-    decay_factor_error,
+    WIDE_LANES,
     delta_coefficients,
     delta_rows,
     float32_error,
     flush_silent_delta,
     narrow_rows,
+    order_by_form,
     resonate_narrow,
     unscaled_state,
 )
 from ugens.modal_meta import (
     ACTIVE,
     ALLOWED,
-    BY_FACTOR,
+    DELTA_END,
     GATHERED,
     NARROW_ACTIVE,
     NARROW_ALL,
@@ -280,7 +281,8 @@ def bank_step(force, out, start, n, bank, meta, floor, last):
 
 class MixedRows(NamedTuple):
     """The arrays :func:`mixed_step` runs on: the float64 modes' bank rows (c1, c2, g, d,
-    y1, y2) and meta (a BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
+    y1, y2; padded with silent modes to whole ugens.modal_f32.WIDE_LANES) and meta (a
+    BankMeta), the float32 modes' delta-form rows (c0, b2, g, d) and state
     (y[n-2], Delta[n-1]) / g (ugens.modal_f32.narrow_rows) and their NarrowMeta
     (ugens.modal_meta)."""
 
@@ -314,11 +316,11 @@ def mixed_step(force, out, start, n, rows, floor, last):
             last[0] = 0.0
         else:
             narrow = delta_rows(coef, state)
-            by_factor = narrow_meta[BY_FACTOR] == 1
+            delta_end = narrow_meta[DELTA_END]
             if wide_meta[ALLOWED] > 0:
-                resonate_narrow(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, mode_rows(wide_bank), wide_active, last, delta_end)
             else:
-                resonate_narrow(f, o, m, narrow, active, None, 0, last, by_factor)
+                resonate_narrow(f, o, m, narrow, active, None, 0, last, delta_end)
         i += m
         if is_flush_frame(start + i):
             if wide_active > 0 and floor > 0.0:
@@ -427,22 +429,27 @@ class MixedSplit(NamedTuple):
 
 def split_by_precision(bank: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE) -> MixedSplit:
     """Split a float64 bank (rows c1, c2, g, d, y1, y2) into float64 modes and float32
-    delta-form modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and
-    |g| >= MIN_GAIN; in the faster decay-factor form if every float32 mode holds the
-    tolerance in it (:func:`ugens.modal_f32.decay_factor_error`)."""
+    modes: float32 where :func:`ugens.modal_f32.float32_error` <= tolerance and |g| >=
+    MIN_GAIN; those that miss it in the faster decay-factor form
+    (:func:`ugens.modal_f32.decay_factor_error`) first, in chunks of the delta form
+    (:func:`ugens.modal_f32.order_by_form`), the rest in the decay-factor form; the float64
+    rows padded to whole WIDE_LANES (for resonate_narrow's vectors)."""
     c1, c2, g, d, y1, y2 = bank
     fits = (float32_error(c1, c2, sample_rate) <= tolerance) & (np.abs(g) >= MIN_GAIN)
     wide, narrow = np.flatnonzero(~fits), np.flatnonzero(fits)
-    by_factor = bool(np.all(decay_factor_error(c1[narrow], c2[narrow], sample_rate) <= tolerance))
+    order, delta_end = order_by_form(c1[narrow], c2[narrow], sample_rate, tolerance)
+    narrow = narrow[order]
     c0, b2 = delta_coefficients(c1[narrow], c2[narrow])
-    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], by_factor)
+    coef, state = narrow_rows(c0, b2, g[narrow], d[narrow], y1[narrow], y2[narrow], delta_end)
     nw, nn = wide.size, narrow.size
+    wide_bank = line_aligned_zeros((6, -(-nw // WIDE_LANES) * WIDE_LANES))  # silent padding modes
+    wide_bank[:, :nw] = bank[:, wide]
     rows = MixedRows(
-        np.ascontiguousarray(bank[:, wide]),
+        wide_bank,
         np.array(BankMeta(nw, 0, nw), dtype=np.int64),
         coef,
         state,
-        np.array(NarrowMeta(nn, nn, int(by_factor)), dtype=np.int64),
+        np.array(NarrowMeta(nn, nn, delta_end), dtype=np.int64),
     )
     return MixedSplit(wide, narrow, rows)
 
@@ -712,7 +719,7 @@ class ModalBank(ModelParams, UGen):
             self._anytime_entry("settle")(self._tables_handle, self._slot)
         if split is None:
             return
-        self.y[:, split.wide] = split.rows.wide_bank[4:]
+        self.y[:, split.wide] = split.rows.wide_bank[4:, : split.wide.size]
         self.y[:, split.narrow] = unscaled_state(split.rows.narrow_state, self.bank[2, split.narrow])
         self.meta[ACTIVE] = self.meta[ALLOWED]
 

@@ -147,6 +147,10 @@ def _next_delta(v, p, u, c0, b, f, by_factor):
 #: modes, 30 of them took half the time of the other 224).
 LANES = 32
 
+#: Rows of float64 modes that resonate_narrow's explicit vectors take hold a multiple of
+#: this many modes (one AVX-512 vector of float64: ugens.vector_pass.add_wide_chunk).
+WIDE_LANES = vector_pass.WIDE_VECTOR
+
 #: Banks of at most this many float32 modes and no float64 modes run with their rows held
 #: on the kernel's stack (:func:`resonate_held`): 4 vectors of 16 float32 lanes per row with
 #: AVX-512, five rows and the four output sums fit the 32 vector registers.
@@ -175,22 +179,37 @@ def float32_rows(rows: int, width: int) -> np.ndarray:
     return raw[skip : skip + rows * stride].reshape(rows, stride)
 
 
-def narrow_rows(c0, b2, g, d, y1, y2, decay_factor: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(coef, state): the float32 rows (c0, b2 or, with ``decay_factor``, R^2 - c0
-    (:func:`factor_coefficient`), g, d) and (y[n-2] / g, Delta[n-1] / g) of modes with
-    float64 coefficients c0, b2 (:func:`delta_coefficients`), gains g, direct gains d and
-    state y[n-1] = y1, y[n-2] = y2, padded to a multiple of LANES modes (the rows may be
-    longer: :func:`float32_rows`). A padding mode has c0 = 1 and b2 = 1 (R^2 = 0, R^2 - c0
-    = -1), so its y[n] = F[n-1] stays bounded, and g = d = 0, so it adds exact zeros."""
+def narrow_rows(c0, b2, g, d, y1, y2, delta_end: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(coef, state): the float32 rows (c0, b2 for the modes [0, ``delta_end``) in the delta
+    form, R^2 - c0 (:func:`factor_coefficient`) for the rest, in the decay-factor form;
+    g, d) and (y[n-2] / g, Delta[n-1] / g) of modes with float64 coefficients c0, b2
+    (:func:`delta_coefficients`), gains g, direct gains d and state y[n-1] = y1, y[n-2] =
+    y2, padded to a multiple of LANES modes (the rows may be longer: :func:`float32_rows`).
+    ``delta_end`` None: every mode in the delta form. A padding mode has c0 = 1 and b2 = 1
+    (R^2 = 0, R^2 - c0 = -1), so its y[n] = F[n-1] stays bounded, and g = d = 0, so it
+    adds exact zeros."""
     n = g.size
     width = -(-n // LANES) * LANES
+    delta_end = width if delta_end is None else delta_end
     rows = float32_rows(6, width)
     coef, state = rows[:4], rows[4:]
-    coef[:, :n] = np.stack([c0, factor_coefficient(c0, b2) if decay_factor else b2, g, d])
+    in_delta = np.arange(n) < delta_end
+    coef[:, :n] = np.stack([c0, np.where(in_delta, b2, factor_coefficient(c0, b2)), g, d])
     coef[0, n:] = 1.0
-    coef[1, n:] = -1.0 if decay_factor else 1.0
+    coef[1, n:] = np.where(np.arange(n, coef.shape[1]) < delta_end, 1.0, -1.0)
     state[:, :n] = np.stack([y2 / g, (y1 - y2) / g])
     return coef, state
+
+
+def order_by_form(c1: np.ndarray, c2: np.ndarray, sample_rate: float, tolerance: float = TOLERANCE):
+    """(order, delta_end) for float32 modes with two-pole coefficients c1, c2 (sample_rate
+    in Hz): the modes whose decay-factor form misses ``tolerance``
+    (:func:`decay_factor_error`) first, then the others, each group in its own order, and
+    how many leading modes run in the delta form: those, rounded up to whole LANES (the
+    kernels take one form per chunk of LANES modes), 0 if none."""
+    misses = decay_factor_error(c1, c2, sample_rate) > tolerance
+    order = np.concatenate([np.flatnonzero(misses), np.flatnonzero(~misses)])
+    return order, -(-int(misses.sum()) // LANES) * LANES
 
 
 def unscaled_state(state: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -263,14 +282,15 @@ def _direct_gain(d, count, direct):
 
 
 @nb.njit(inline="always", cache=True)
-def _one_sample(rows, count, fp, by_factor):
-    """One sample of the float32 modes [0, count) of ``rows`` (DeltaRows or HeldRows) whose
-    preceding force is fp (float32, N): their state advanced, their output sum (float32)."""
+def _one_sample(rows, count, fp, delta_end):
+    """One sample of the float32 modes [0, count) of ``rows`` (DeltaRows or HeldRows; modes
+    [0, delta_end) in the delta form, the rest in the decay-factor form) whose preceding
+    force is fp (float32, N): their state advanced, their output sum (float32)."""
     s = np.float32(0.0)
     for k in range(count):
         p = rows.y[k]
         u = p + rows.dy[k]
-        v = _next_delta(rows.dy[k], p, u, rows.c0[k], rows.b2[k], fp, by_factor)
+        v = _next_delta(rows.dy[k], p, u, rows.c0[k], rows.b2[k], fp, k >= delta_end)
         rows.y[k] = u
         rows.dy[k] = v
         s += rows.g[k] * (u + v)
@@ -278,16 +298,16 @@ def _one_sample(rows, count, fp, by_factor):
 
 
 @nb.njit(inline="always", cache=True)
-def _tail(force, out, i, rows, count, wide, wide_active, last, by_factor, add):
+def _tail(force, out, i, rows, count, wide, wide_active, last, delta_end, add):
     """The samples i .. len(force) - 1 after the four-sample passes (fewer than four; callers
     pass the force up to the block's end), one at a time:
-    the float32 modes [0, count) of ``rows`` (:func:`_one_sample`) and the float64 modes
+    the float32 modes [0, count) of ``rows`` (:func:`_one_sample`, ``delta_end``) and the float64 modes
     [0, wide_active) of ``wide`` (None: none) over force (N), their sum added to out (the
     bank's output units) with ``add``, else written."""
     n = force.shape[0]
     while i < n:
         fw = force[i - 1] if i > 0 else last[0]
-        s = _one_sample(rows, count, np.float32(fw), by_factor)
+        s = _one_sample(rows, count, np.float32(fw), delta_end)
         if wide is not None:
             s = s + _wide_one(wide, wide_active, fw)
         if add:
@@ -310,10 +330,39 @@ def _finish(force, out, start, n, direct, last):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor):
-    """Add the float32 delta-form modes [0, active) of ``rows`` and the float64 modes [0,
-    wide_active) of ``wide`` over force[:n] to out[:n]; the float32 modes in the
-    decay-factor form with ``by_factor`` (b2 holds R^2 - c0, :func:`narrow_rows`).
+def _wide_pass(wide, count, force, i, last):
+    """The float64 modes [0, count) of ``wide`` (ugens.cells.ModeRows) advanced over
+    force[i:i + 4] (N; last[0] is the sample before force[0]) as in resonate_delta's
+    passes: their four output sums (the bank's output units)."""
+    fw = force[i - 1] if i > 0 else last[0]
+    w0 = force[i]
+    w1 = force[i + 1]
+    w2 = force[i + 2]
+    t0 = t1 = t2 = t3 = 0.0
+    for k in range(count):
+        q1 = wide.c1[k]
+        q2 = wide.c2[k]
+        gk = wide.g[k]
+        u1 = wide.y1[k]
+        u2 = wide.y2[k]
+        v0 = two_pole(q1, q2, u1, u2, gk * fw)
+        v1 = two_pole(q1, q2, v0, u1, gk * w0)
+        v2 = two_pole(q1, q2, v1, v0, gk * w1)
+        v3 = two_pole(q1, q2, v2, v1, gk * w2)
+        wide.y2[k] = v2
+        wide.y1[k] = v3
+        t0 += v0
+        t1 += v1
+        t2 += v2
+        t3 += v3
+    return t0, t1, t2, t3
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def resonate_delta(force, out, n, rows, active, wide, wide_active, last, delta_end):
+    """Add the float32 modes [0, active) of ``rows`` and the float64 modes [0, wide_active)
+    of ``wide`` over force[:n] to out[:n]; the float32 modes [0, delta_end) in the delta
+    form, the rest in the decay-factor form (b2 holds R^2 - c0 there, :func:`narrow_rows`).
 
     ``rows``: a DeltaRows of float32 arrays (the state scaled by the input gain: the force
     enters with an add instead of a multiply and g weighs the output sum with an FMA).
@@ -330,6 +379,7 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
     zero without force, and with force every mode is active)."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
+    split = min(delta_end, active)
     direct = _direct_gain(d, active, 0.0)
     if wide is not None:
         direct = _direct_gain(wide.d, wide_active, direct)
@@ -346,51 +396,32 @@ def resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_fact
         s1 = np.float32(0.0)
         s2 = np.float32(0.0)
         s3 = np.float32(0.0)
-        for k in range(active):
-            gk = g[k]
-            y[k], dy[k], u0, u1, u2, u3 = _four_samples(c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, by_factor)
-            s0 += gk * u0
-            s1 += gk * u1
-            s2 += gk * u2
-            s3 += gk * u3
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        t3 = 0.0
+        for by_factor in (False, True):  # the modes [0, delta_end), then the rest
+            for k in range(split if by_factor else 0, active if by_factor else split):
+                gk = g[k]
+                y[k], dy[k], u0, u1, u2, u3 = _four_samples(
+                    c0[k], b2[k], y[k], dy[k], fp, f0, f1, f2, by_factor
+                )
+                s0 += gk * u0
+                s1 += gk * u1
+                s2 += gk * u2
+                s3 += gk * u3
+        t0 = t1 = t2 = t3 = 0.0
         if wide is not None:
-            fw = force[i - 1] if i > 0 else last[0]
-            w0 = force[i]
-            w1 = force[i + 1]
-            w2 = force[i + 2]
-            for k in range(wide_active):
-                q1 = wide.c1[k]
-                q2 = wide.c2[k]
-                gk = wide.g[k]
-                u1 = wide.y1[k]
-                u2 = wide.y2[k]
-                v0 = two_pole(q1, q2, u1, u2, gk * fw)
-                v1 = two_pole(q1, q2, v0, u1, gk * w0)
-                v2 = two_pole(q1, q2, v1, v0, gk * w1)
-                v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                wide.y2[k] = v2
-                wide.y1[k] = v3
-                t0 += v0
-                t1 += v1
-                t2 += v2
-                t3 += v3
+            t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         out[i] += s0 + t0
         out[i + 1] += s1 + t1
         out[i + 2] += s2 + t2
         out[i + 3] += s3 + t3
         i += 4
-    _tail(force[:n], out, i, rows, active, wide, wide_active, last, by_factor, True)
+    _tail(force[:n], out, i, rows, active, wide, wide_active, last, delta_end, True)
     _finish(force, out, 0, n, direct, last)
 
 
 class HeldRows(NamedTuple):
     """A :class:`DeltaRows` without the direct gains, as ugens.vector_pass takes the modes:
     in :func:`_held_passes` copies on the kernel's stack (ugens.stack_rows) of one
-    constant width, in :func:`resonate_factor` the bank's own rows."""
+    constant width, in :func:`resonate_chunks` the bank's own rows."""
 
     c0: np.ndarray
     b2: np.ndarray
@@ -441,7 +472,7 @@ def _held_passes(force, out, n, rows, held, last, width):
         fp = np.float32(force[i - 1] if i > 0 else last[0])
         vector_pass.write_four(width, held, fp, force, out, i, direct)
         i += 4
-    _tail(force[:n], out, i, held, held.c0.size, None, 0, last, True, False)
+    _tail(force[:n], out, i, held, held.c0.size, None, 0, last, 0, False)
     _release(force, out, i, n, rows, held, direct, last)
 
 
@@ -491,17 +522,21 @@ def resonate_held(force, out, n, rows, active, last):
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
-def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
-    """Write (not add) what :func:`resonate_delta` computes in the decay-factor form
-    (``by_factor``) to out[:n], each pass's float32 modes in explicit vectors
-    (ugens.vector_pass.add_chunk, 32 modes at a time, their per-lane sums kept in four
-    stack rows; write_sums reduces the four together and stores the four samples as one
-    vector): LLVM's code reduced and stored the four samples one by one. The float64
-    modes' pass is written out here as in resonate_delta: shared by both as an inlined
-    helper, 256 float32 modes with two float64 modes took 1.29-1.30x the time of the same
-    bank without them, against 1.06-1.07x written out (CPU time, interleaved, two runs)."""
+def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_end):
+    """Write (not add) what :func:`resonate_delta` computes (same arguments) to out[:n], each
+    pass's float32 modes in explicit vectors (ugens.vector_pass.add_chunk, 32 modes at a
+    time, their per-lane sums kept in four stack rows; write_sums reduces the four together
+    and stores the four samples as one vector): LLVM's code reduced and stored the four
+    samples one by one. Up to 2 WIDE_LANES float64 modes (rows of whole WIDE_LANES) run as
+    one or two float64 vectors whose outputs join the float32 sums' lanes
+    (ugens.vector_pass.add_wide_chunk; ModalBank b1024/C at 1000 modes, 8 of them: 0.96-0.99
+    -> 1.00-1.08; at 5000, 12 of them: 0.95 -> 1.00), called once or twice: as a loop over
+    the vectors, two of them made the bank at 5000 modes 10 % slower (though not the kernel
+    alone). More run in the scalar pass :func:`_wide_pass`, a function of its own: written
+    out here, its loop's mere presence made the bank of 256 modes 2-4 % slower."""
     c0, b2, g, d, y, dy = rows
     active = min(-(-active // LANES) * LANES, c0.size)
+    split = min(delta_end, active)  # the delta form's chunks, then the decay-factor form's
     direct = _direct_gain(d, active, 0.0)
     if wide is not None:
         direct = _direct_gain(wide.d, wide_active, direct)
@@ -522,56 +557,49 @@ def resonate_factor(force, out, n, rows, active, wide, wide_active, last):
             s1[lane] = 0.0
             s2[lane] = 0.0
             s3[lane] = 0.0
-        for k in range(0, active, LANES):
-            vector_pass.add_chunk(LANES, modes, k, forces, sums)
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
         t3 = 0.0
         if wide is not None:
-            fw = force[i - 1] if i > 0 else last[0]
-            w0 = force[i]
-            w1 = force[i + 1]
-            w2 = force[i + 2]
-            for k in range(wide_active):
-                q1 = wide.c1[k]
-                q2 = wide.c2[k]
-                gk = wide.g[k]
-                u1 = wide.y1[k]
-                u2 = wide.y2[k]
-                v0 = two_pole(q1, q2, u1, u2, gk * fw)
-                v1 = two_pole(q1, q2, v0, u1, gk * w0)
-                v2 = two_pole(q1, q2, v1, v0, gk * w1)
-                v3 = two_pole(q1, q2, v2, v1, gk * w2)
-                wide.y2[k] = v2
-                wide.y1[k] = v3
-                t0 += v0
-                t1 += v1
-                t2 += v2
-                t3 += v3
+            if 0 < wide_active <= 2 * WIDE_LANES:
+                wide_forces = (force[i - 1] if i > 0 else last[0], force[i], force[i + 1], force[i + 2])
+                vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
+                if wide_active > WIDE_LANES:
+                    vector_pass.add_wide_chunk(WIDE_LANES, wide, WIDE_LANES, wide_forces, sums)
+            elif wide_active > 0:
+                t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
+        for k in range(0, split, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, False)
+        for k in range(split, active, LANES):
+            vector_pass.add_chunk(LANES, modes, k, forces, sums, True)
         vector_pass.write_sums(LANES, sums, out, i, (t0, t1, t2, t3))
         i += 4
-    _tail(force[:n], out, i, modes, active, wide, wide_active, last, True, False)
+    _tail(force[:n], out, i, modes, active, wide, wide_active, last, delta_end, False)
     _finish(force, out, 0, n, direct, last)
 
 
 @nb.njit(cache=True)
-def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, by_factor):
-    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n].
-    In the decay-factor form: :func:`resonate_held` for 1 .. HELD_MODES float32 modes and
-    no float64 modes (on rows at least :func:`held_width` long, as :func:`narrow_rows`
-    pads them), else :func:`resonate_factor` (on rows of whole LANES); otherwise (or
-    without EXPLICIT_VECTORS) out cleared and resonate_delta."""
-    if EXPLICIT_VECTORS and by_factor:
-        if wide is None and 0 < active <= HELD_MODES and held_width(active) <= rows.c0.size:
+def resonate_narrow(force, out, n, rows, active, wide, wide_active, last, delta_end):
+    """Write the modes of :func:`resonate_delta` (same arguments) over force[:n] to out[:n]:
+    all in the decay-factor form (``delta_end`` 0), 1 .. HELD_MODES float32 modes and no
+    float64 modes, :func:`resonate_held` (on rows at least :func:`held_width` long, as :func:`narrow_rows`
+    pads them); else, on float32 rows of whole LANES, ``delta_end`` a whole number of LANES
+    and float64 rows of whole WIDE_LANES (as ugens.modal.split_by_precision makes them),
+    :func:`resonate_chunks`; otherwise (or without EXPLICIT_VECTORS) out cleared and
+    resonate_delta. The float64 rows, where given, are C-contiguous (as the bank's are)."""
+    if EXPLICIT_VECTORS:
+        held = delta_end == 0 and wide is None and 0 < active <= HELD_MODES
+        if held and held_width(active) <= rows.c0.size:
             resonate_held(force, out, n, rows, active, last)
             return
-        if rows.c0.size % LANES == 0:
-            resonate_factor(force, out, n, rows, active, wide, wide_active, last)
+        whole = rows.c0.size % LANES == 0 and delta_end % LANES == 0  # chunks of one form each
+        if whole and (wide is None or wide.c1.size % WIDE_LANES == 0):
+            resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_end)
             return
     for i in range(n):
         out[i] = 0.0
-    resonate_delta(force, out, n, rows, active, wide, wide_active, last, by_factor)
+    resonate_delta(force, out, n, rows, active, wide, wide_active, last, delta_end)
 
 
 @nb.njit(cache=True)
@@ -579,10 +607,9 @@ def flush_silent_delta(y, dy, g, active, floor):
     """Zero float32 modes whose y[n-2] and Delta[n-1] (the scaled state times g) are below ``floor``;
     return the new active count (last audible mode + 1)."""
     last = 0
-    for k in range(active):
-        if abs(g[k] * y[k]) < floor and abs(g[k] * dy[k]) < floor:
-            y[k] = 0.0
-            dy[k] = 0.0
-        else:
-            last = k + 1
+    for k in range(active):  # without branches: 86 -> 43 ns at 254 modes
+        silent = (abs(g[k] * y[k]) < floor) & (abs(g[k] * dy[k]) < floor)
+        y[k] = 0.0 if silent else y[k]
+        dy[k] = 0.0 if silent else dy[k]
+        last = max(last, 0 if silent else k + 1)
     return last

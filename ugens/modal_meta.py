@@ -5,7 +5,7 @@ budget's compact bank of the kept modes has its own (:class:`CompactMeta`), whic
 :func:`ugens.modal.bank_step` reads as a bank's (the active count and its cap sit in the
 same slots). The float32 modes of a mixed-precision bank have their own too
 (:class:`NarrowMeta`), read only by :func:`ugens.modal.mixed_step`, not by bank_step: its
-``by_factor`` flag sits in the slot of BankMeta's ``allowed`` and is no cap.
+``delta_end`` sits in the slot of BankMeta's ``allowed`` and is no cap.
 Kernels index the arrays by the slot constants below (cells.slot), which compile to the
 same loads as the numbers they replace.
 """
@@ -38,10 +38,13 @@ class NarrowMeta(NamedTuple):
 
     active: int  #: float32 modes computed, [0, active): the last audible one + 1
     all: int  #: float32 modes in the rows (all become active when force arrives)
-    by_factor: int  #: 1: the decay-factor form (coefficient row 1 holds R^2 - c0); 0: the delta form
+    #: modes [0, delta_end) in the delta form (coefficient row 1 holds b2), the rest R^2 - c0;
+    #: the explicit-vector kernel (ugens.modal_f32.resonate_chunks) runs only whole chunks of
+    #: 32 modes in one form, so other values take the general loop
+    delta_end: int
 
 
 ACTIVE, RAMP_LEFT, ALLOWED = (slot(BankMeta, key) for key in BankMeta._fields)
 GATHERED, WIDTH = (slot(CompactMeta, key) for key in ("gathered", "width"))
-NARROW_ACTIVE, NARROW_ALL, BY_FACTOR = (slot(NarrowMeta, key) for key in NarrowMeta._fields)
+NARROW_ACTIVE, NARROW_ALL, DELTA_END = (slot(NarrowMeta, key) for key in NarrowMeta._fields)
 assert (slot(CompactMeta, "active"), WIDTH) == (ACTIVE, ALLOWED)  # bank_step reads either

@@ -1,21 +1,23 @@
-"""One four-sample pass of float32 decay-factor modes written as explicit LLVM vectors.
+"""One four-sample pass of float32 modes written as explicit LLVM vectors.
 
 ugens.modal_f32's held kernels keep a bank's rows (16, 32 or 64 modes) on the stack, where
 LLVM holds them in vector registers across the passes. From the per-mode loop, LLVM's
 vectoriser summed each of the pass's four output samples over the lanes on its own (four
 horizontal reductions, each a chain of extracts, shuffles and adds), then converted and
 stored the four sums one by one and added the direct term in a pass of its own.
-:func:`write_four` reduces the four sums together (pairs of vectors interleaved, halving
-the lanes at each step: about half the shuffles and adds), adds the direct term to the
-four at once and converts and stores them as one vector: against the C two-pole loop,
-0.98x -> 1.09x at 16 modes, 0.96x -> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each).
-Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_factor), run
+:func:`write_four` reduces the four sums together (:func:`_sum_four`: within each 128-bit
+block first, then the blocks), adds the direct term to the four at once and converts and
+stores them as one vector: against the C two-pole loop, 0.98x -> 1.09x at 16 modes, 0.96x
+-> 1.02x at 32, 0.94x -> 1.03x at 64 (one run each, on an earlier machine).
+Larger banks, whose rows stay in memory (ugens.modal_f32.resonate_chunks), run
 :func:`add_chunk` per 32 modes, the per-lane sums kept in four stack rows, and
-:func:`write_sums` at the end of each pass.
+:func:`write_sums` at the end of each pass; a few float64 modes beside them run as one
+float64 vector (:func:`add_wide_chunk`) whose outputs join the first lanes of those sums.
 
-The arithmetic per mode is ugens.modal_f32's decay-factor update (``_four_samples``):
-with p = y[n-2] / g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2,
-u = p + v, v' = b v + (f - c0 p) as two fused multiply-adds, in the same order.
+The arithmetic per mode is ugens.modal_f32's update (``_four_samples``): with p = y[n-2] /
+g, v = Delta[n-1] / g and the preceding forces fp, f0, f1, f2, u = p + v, in the
+decay-factor form v' = b v + (f - c0 p) as two fused multiply-adds, in the delta form
+(add_chunk only) v' = (f - c0 u) + (v - b v), in the same order.
 """
 
 from __future__ import annotations
@@ -39,10 +41,11 @@ _INDEX = ir.IntType(32)
 
 
 def _fma(builder, a, b, c):
-    """a b + c, rounded once, lane by lane (llvm.fma)."""
+    """a b + c, rounded once, lane by lane (llvm.fma; float32 or float64 vectors)."""
     fnty = ir.FunctionType(a.type, [a.type] * 3)
+    element = "f64" if isinstance(a.type.element, ir.DoubleType) else "f32"
     return builder.call(
-        cgutils.get_or_insert_function(builder.module, fnty, f"llvm.fma.v{a.type.count}f32"), [a, b, c]
+        cgutils.get_or_insert_function(builder.module, fnty, f"llvm.fma.v{a.type.count}{element}"), [a, b, c]
     )
 
 
@@ -52,8 +55,8 @@ def _lanes(builder, a, b, picks):
 
 
 def _broadcast(builder, x, width):
-    """A vector of ``width`` float32 lanes, each the float32 scalar x (insert, shuffle)."""
-    vector = ir.VectorType(_FLOAT, width)
+    """A vector of ``width`` lanes, each the scalar x (float32 or float64; insert, shuffle)."""
+    vector = ir.VectorType(x.type, width)
     one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
     return _lanes(builder, one, ir.Constant(vector, ir.Undefined), [0] * width)
 
@@ -69,49 +72,54 @@ def _fold(builder, v, width):
 
 
 def _sum_four(builder, a0, a1, a2, a3):
-    """<4 x float> (sum(a0), sum(a1), sum(a2), sum(a3)) of four VECTOR-lane vectors: each
-    step adds two shuffles of a pair, so the lanes holding each sum halve together."""
+    """<4 x float> (sum(a0), sum(a1), sum(a2), sum(a3)) of four VECTOR-lane vectors: first
+    within each 128-bit block (shuffles that stay in their block, two-source shufps: the
+    four vectors' block sums side by side in two steps), then the blocks added (halves of
+    the vector). Halving the lanes of pairs across the whole vector at each step (cross-block
+    shuffles, 11 of them) cost the bank of 256 modes about 5 % more."""
 
-    def pair(x, y, width):  # [x's halves summed, y's halves summed]
+    def within(x, y):  # per block of four lanes: [x0 + x1, x2 + x3, y0 + y1, y2 + y3]
+        even = [i for b in range(0, VECTOR, 4) for i in (b, b + 2, VECTOR + b, VECTOR + b + 2)]
+        odd = [i + 1 for i in even]
+        return builder.fadd(_lanes(builder, x, y, even), _lanes(builder, x, y, odd), flags=_SUM_FLAGS)
+
+    z = within(within(a0, a1), within(a2, a3))  # per block: its sums of a0, a1, a2, a3
+    width = VECTOR
+    while width > 4:
         half = width // 2
-        low = list(range(half)) + list(range(width, width + half))
-        high = list(range(half, width)) + list(range(width + half, 2 * width))
-        return builder.fadd(_lanes(builder, x, y, low), _lanes(builder, x, y, high), flags=_SUM_FLAGS)
-
-    x, y = pair(a0, a1, VECTOR), pair(a2, a3, VECTOR)  # groups of VECTOR / 2 lanes: a0 a1 | a2 a3
-    group = VECTOR // 2
-    quarter = group // 2
-    low = [g * group + j for g in range(4) for j in range(quarter)]
-    high = [i + quarter for i in low]
-    z = builder.fadd(_lanes(builder, x, y, low), _lanes(builder, x, y, high), flags=_SUM_FLAGS)  # VECTOR / 4
-    group = quarter
-    while group > 1:
-        half = group // 2
-        low = [g * group + j for g in range(4) for j in range(half)]
-        high = [i + half for i in low]
-        z = builder.fadd(_lanes(builder, z, z, low), _lanes(builder, z, z, high), flags=_SUM_FLAGS)
-        group = half
+        z = builder.fadd(
+            _lanes(builder, z, z, list(range(half))),
+            _lanes(builder, z, z, list(range(half, width))),
+            flags=_SUM_FLAGS,
+        )
+        width = half
     return z
 
 
-def _pass(builder, lanes, c0v, bv, p, v, forces):
+def _pass(builder, lanes, c0v, bv, p, v, forces, by_factor=True):
     """The four-sample update of vectors of modes with rows c0, b and state p = y[n-2] / g,
     v = Delta[n-1] / g, whose preceding forces are ``forces`` (four float32 scalars):
-    (the new p, the new v, the four outputs y / g)."""
+    (the new p, the new v, the four outputs y / g). Decay-factor form (``by_factor``, b =
+    R^2 - c0): v' = b v + (f - c0 y[n-2]); delta form (b = b2): v' = (f - c0 y[n-1]) + (v -
+    b2 v), two FMA and an add."""
     minus_c0 = builder.fneg(c0v)
+    minus_b = builder.fneg(bv)
 
-    def next_delta(v, p, f):  # b v + (f - c0 p)
-        return _fma(builder, bv, v, _fma(builder, minus_c0, p, _broadcast(builder, f, lanes)))
+    def next_delta(v, older, newer, f):
+        force = _fma(builder, minus_c0, older if by_factor else newer, _broadcast(builder, f, lanes))
+        if by_factor:
+            return _fma(builder, bv, v, force)
+        return builder.fadd(force, _fma(builder, minus_b, v, v), flags=_UPDATE_FLAGS)
 
     fp, f0, f1, f2 = forces
     u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, p, fp)
+    v = next_delta(v, p, u, fp)
     u0 = builder.fadd(u, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u, f0)
+    v = next_delta(v, u, u0, f0)
     u1 = builder.fadd(u0, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u0, f1)
+    v = next_delta(v, u0, u1, f1)
     u2 = builder.fadd(u1, v, flags=_UPDATE_FLAGS)
-    v = next_delta(v, u1, f2)
+    v = next_delta(v, u1, u2, f2)
     u3 = builder.fadd(u2, v, flags=_UPDATE_FLAGS)
     return u2, v, (u0, u1, u2, u3)
 
@@ -202,31 +210,34 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
 
 
 @intrinsic
-def add_chunk(typingctx, width, rows, k, forces, sums):
+def add_chunk(typingctx, width, rows, k, forces, sums, by_factor):
     """Advance the modes [k, k + width) (``width`` a literal multiple of VECTOR, k a multiple
     of it) of ``rows`` (c0, b, g, y, dy as in :func:`write_four`) by four samples whose
     preceding forces are ``forces`` (four float32, N), storing y and dy, and add g_k y_k / g_k
     of sample j to the lanes of sums[j] (four float32 rows of ``width`` lanes: per-lane
-    partial sums over the chunks of a pass, :func:`write_sums`). The mode rows may lie
-    anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a caller's own rows
-    may not be: loads aligned to 64 bytes faulted on them); the sums must be on 64-byte
-    lines (ugens.stack_rows)."""
+    partial sums over the chunks of a pass, :func:`write_sums`); in the decay-factor form
+    if ``by_factor`` (a literal bool: b = R^2 - c0), else in the delta form (b = b2). The
+    mode rows may lie anywhere (ugens.modal_f32.narrow_rows puts them on 64-byte lines, a
+    caller's own rows may not be: loads aligned to 64 bytes faulted on them); the sums
+    must be on 64-byte lines (ugens.stack_rows)."""
     if not (
         _is_literal_width(width)
         and _contiguous_arrays(rows, 5, types.float32)
         and isinstance(k, types.Integer)
         and _scalars(forces, 4, types.float32)
         and _contiguous_arrays(sums, 4, types.float32)
+        and isinstance(by_factor, types.BooleanLiteral)
     ):
         return None
-    lanes = width.literal_value
+    lanes, form = width.literal_value, by_factor.literal_value
 
     def codegen(context, builder, signature, args):
-        _, rows, at, forces, sums = args
+        _, rows, at, forces, sums, _ = args
         vector = ir.VectorType(_FLOAT, lanes)
         pointers = _row_pointers(context, builder, signature.args[1], rows, at, vector)
         c0v, bv, gv, p, v = (builder.load(row, align=4) for row in pointers)
-        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, cgutils.unpack_tuple(builder, forces, 4))
+        forces = cgutils.unpack_tuple(builder, forces, 4)
+        y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, forces, form)
         builder.store(y_next, pointers[3], align=4)
         builder.store(v, pointers[4], align=4)
         for row, uj in zip(
@@ -237,7 +248,7 @@ def add_chunk(typingctx, width, rows, k, forces, sums):
             builder.store(_fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
         return context.get_dummy_value()
 
-    return types.none(width, rows, k, forces, sums), codegen
+    return types.none(width, rows, k, forces, sums, by_factor), codegen
 
 
 @intrinsic
@@ -271,3 +282,49 @@ def write_sums(typingctx, width, sums, out, i, wide):
         return context.get_dummy_value()
 
     return types.none(width, sums, out, i, wide), codegen
+
+
+#: float64 lanes of one AVX-512 vector: the float64 modes' chunk (:func:`add_wide_chunk`).
+WIDE_VECTOR = 8
+
+
+@intrinsic
+def add_wide_chunk(typingctx, width, wide, k, forces, sums):
+    """Advance the float64 modes [k, k + WIDE_VECTOR) of ``wide`` (``width`` the literal
+    WIDE_VECTOR; the rows c1, c2, g, d, y1 = y[n-1], y2 = y[n-2] of ugens.cells.ModeRows,
+    float64, at least k + WIDE_VECTOR long) by four samples of the two-pole recursion y[n]
+    = c1 y[n-1] - c2 y[n-2] + g F[n-1] (ugens.cells.two_pole, as c1 y[n-1] + (g F - c2
+    y[n-2])) whose preceding forces are ``forces`` (four float64, N), storing y1 and y2, and
+    add sample j's outputs, rounded to float32, to the first WIDE_VECTOR lanes of sums[j]
+    (:func:`add_chunk`'s four float32 rows, on 64-byte lines): no reduction of their own.
+    As scalars, two float64 modes took 10-12 % of the time of 254 float32 modes (an FMA
+    unit's slot per mode and operation)."""
+    if not (
+        isinstance(width, types.IntegerLiteral)
+        and width.literal_value == WIDE_VECTOR
+        and _contiguous_arrays(wide, 6, types.float64)
+        and isinstance(k, types.Integer)
+        and _scalars(forces, 4, types.float64)
+        and _contiguous_arrays(sums, 4, types.float32)
+    ):
+        return None
+
+    def codegen(context, builder, signature, args):
+        _, wide, at, forces, sums = args
+        vector = ir.VectorType(ir.DoubleType(), WIDE_VECTOR)
+        pointers = _row_pointers(context, builder, signature.args[1], wide, at, vector)
+        c1v, c2v, gv = (builder.load(row, align=8) for row in pointers[:3])
+        y1, y2 = (builder.load(row, align=8) for row in pointers[4:])
+        minus_c2 = builder.fneg(c2v)
+        narrow = ir.VectorType(_FLOAT, WIDE_VECTOR)
+        rows = _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), narrow)
+        for f, row in zip(cgutils.unpack_tuple(builder, forces, 4), rows, strict=True):
+            drive = builder.fmul(gv, _broadcast(builder, f, WIDE_VECTOR), flags=_UPDATE_FLAGS)
+            y1, y2 = _fma(builder, c1v, y1, _fma(builder, minus_c2, y2, drive)), y1
+            total = builder.fadd(builder.load(row, align=32), builder.fptrunc(y1, narrow), flags=_SUM_FLAGS)
+            builder.store(total, row, align=32)
+        builder.store(y1, pointers[4], align=8)
+        builder.store(y2, pointers[5], align=8)
+        return context.get_dummy_value()
+
+    return types.none(width, wide, k, forces, sums), codegen

@@ -54,27 +54,36 @@ def _float64_reference(force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.
 
 
 def _kernel_runner(
-    force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray, by_factor: bool
+    force: np.ndarray, c1: np.ndarray, c2: np.ndarray, g: np.ndarray, order: np.ndarray, delta_end: int
 ) -> Callable[[], None]:
     """ugens.modal_f32.resonate_narrow (the kernel ModalBank runs) over ``force`` in one
-    call, fresh state, no direct term (the C loop has none), every mode in float32 in the
-    form ModalBank chose, on rows laid out as ModalBank's (:func:`narrow_rows`); it writes
-    ``out`` as the C loop does."""
+    call, fresh state, no direct term (the C loop has none), every mode in float32: the
+    modes in ``order`` (ModalBank's float32 modes in its order, then its float64 ones), the
+    first ``delta_end`` in the delta form as ModalBank runs them, on rows laid out as
+    ModalBank's (:func:`narrow_rows`); it writes ``out`` as the C loop does."""
     from ugens.modal_f32 import DeltaRows, delta_coefficients, narrow_rows, resonate_narrow
 
+    c1, c2, g = c1[order], c2[order], g[order]
     c0, b2 = delta_coefficients(c1, c2)
     zeros = np.zeros_like(g)
-    coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros, by_factor)
+    coef, state = narrow_rows(c0, b2, g, zeros, zeros, zeros, delta_end)
     out, last = np.zeros(force.size), np.zeros(1)
     rows = DeltaRows(coef[0], coef[1], coef[2], coef[3], state[0], state[1])
 
     def run():
         state[:] = 0.0
         last[0] = 0.0
-        resonate_narrow(force, out, force.size, rows, g.size, None, 0, last, by_factor)
+        resonate_narrow(force, out, force.size, rows, g.size, None, 0, last, delta_end)
 
     run.output = out
     return run
+
+
+def _form(delta_end: int, modes: int) -> str:
+    """The float32 modes' form: "decay factor", "delta", or how many run in the delta form."""
+    if delta_end == 0:
+        return "decay factor"
+    return "delta" if delta_end >= modes else f"{delta_end} delta"
 
 
 def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -> list[dict]:
@@ -86,7 +95,7 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
     from jassy.apps.bench import SAMPLE_RATE, _bank_runner, _best_times, random_model
     from jassy.apps.bench_c import c_runner, compile_modal_f32
     from ugens.modal import design, split_by_precision
-    from ugens.modal_meta import BY_FACTOR
+    from ugens.modal_meta import DELTA_END, NARROW_ALL
 
     c_loop, note = compile_modal_f32()
     rows = []
@@ -97,15 +106,15 @@ def float32_bench(mode_counts=MODE_COUNTS, rounds: int = 5, repeats: int = 40) -
         c1, c2, s = design(model.frequencies, model.decays, SAMPLE_RATE)
         g = s * model.gains[0] / SAMPLE_RATE
         split = split_by_precision(np.stack([c1, c2, g, 0 * g, 0 * g, 0 * g]), SAMPLE_RATE)
-        by_factor = bool(split.rows.narrow_meta[BY_FACTOR])
-        kernel = _kernel_runner(force, c1, c2, g, by_factor)
+        delta_end = int(split.rows.narrow_meta[DELTA_END])
+        kernel = _kernel_runner(force, c1, c2, g, np.concatenate([split.narrow, split.wide]), delta_end)
         bank = _bank_runner(model, force, 1024, "mixed")
         big_bank = _bank_runner(model, force, min(BIG_BLOCK, frames), "mixed")
         row = {
             "modes": k,
             "frames": frames,
             "float32_share": split.narrow.size / k,
-            "form": "decay factor" if by_factor else "delta",
+            "form": _form(*split.rows.narrow_meta[[DELTA_END, NARROW_ALL]]),
             "c_note": note,
         }
         ref = _float64_reference(force, c1, c2, g)
