@@ -403,13 +403,14 @@ class ModeBudget:
                 if not bank.anytime_changes(math.inf):  # (the next sub-block: one call again)
                     self._watched.pop(id(bank), None)
 
-    def score_changed(self) -> None:
-        """The score changed during the render (jassy.scheduler.Scheduler.insert): the next
-        step lists its impacts again, and from now on no bank is ``struck_only``: an impact
-        inserted into a period already started was not expected at its start, so the bank it
-        strikes must be woken by the force it hears (as every bank is)."""
+    def score_changed(self, frame: int, now: int) -> None:
+        """The score changed during the render (jassy.scheduler.Scheduler.insert) by an event
+        applied at ``frame``, the render at frame ``now``: the next step lists its impacts
+        again. An event in the period already started (its impacts were expected at its
+        start) ends ``struck_only`` for the render: the bank it strikes must be woken by
+        the force it hears, as every bank is; one in a later period is foreseen there."""
         self._same_score = False
-        if self._flags is not None:
+        if self._flags is not None and frame < (now // self.period + 1) * self.period:
             self._flags[STRUCK_ONLY] = False
 
     def _queued_changes(self, start: int, end: int) -> dict[int, list] | None:

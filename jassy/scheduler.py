@@ -275,7 +275,7 @@ class Scheduler:
         if event.action != "set" or "location" in event.args:  # (what :meth:`_list_impacts` reads)
             self._impacts = None  # listed again when next asked (~0.7 ms for the wok scene)
             if self.graph.budget is not None:
-                self.graph.budget.score_changed()
+                self.graph.budget.score_changed(frame, self.frame)
 
     def _is_inline(self, event: Event) -> bool:
         """Whether the event's node (and every node its impact location moves) applies it at

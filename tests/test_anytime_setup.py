@@ -193,7 +193,7 @@ def test_a_set_inserted_without_a_location_keeps_the_listed_impacts():
 
     patch, live = engine(lambda p: p.score)
     told = []
-    patch.graph.budget.score_changed = lambda: told.append(True)
+    patch.graph.budget.score_changed = lambda frame, now: told.append(True)
     first = live.render(4096 * 6 / FS).audio
     listed = live.scheduler.listed_impacts()
     live.scheduler.insert(validate_event(patch.graph, gain, "test"))
