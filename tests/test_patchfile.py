@@ -161,9 +161,13 @@ def test_shipped_models_are_the_builders_output():
     for filename, builder in shipped_models().items():
         shipped = ModalModel.load(Path(patches.__file__).parent / filename)
         built = builder()
-        np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-15)
-        np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-15)
-        np.testing.assert_allclose(shipped.gains, built.gains, rtol=1e-15)
+        # the vessels' FEM eigen solves round differently on other LAPACK builds (seen:
+        # frequencies 2.5e-11 relative, gains 1.3e-5 of the largest, in degenerate pairs)
+        np.testing.assert_allclose(shipped.frequencies, built.frequencies, rtol=1e-9)
+        np.testing.assert_allclose(shipped.decays, built.decays, rtol=1e-9)
+        np.testing.assert_allclose(
+            shipped.gains, built.gains, rtol=0, atol=1e-4 * np.max(np.abs(built.gains))
+        )
         assert shipped.points == built.points
 
 

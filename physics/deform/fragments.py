@@ -431,7 +431,9 @@ class FragmentSim:
 
 def _group(time, a, b, pa, pb, speed, impulse, threshold) -> list[Impact]:
     """One Impact per body pair (a, b) among contacts faster than ``threshold``: summed
-    impulse, the largest speed and the particles of that fastest contact as locations."""
+    impulse, the largest speed and the particles of that fastest contact as locations. A
+    pair whose impulses sum to zero (a boundary contact whose sequential-impulse solve left
+    the work to the body's other contacts) transferred nothing and makes no Impact."""
     fast = speed > threshold
     if not fast.any():
         return []
@@ -443,6 +445,8 @@ def _group(time, a, b, pa, pb, speed, impulse, threshold) -> list[Impact]:
     first = order[np.r_[0, np.flatnonzero(np.diff(inv[order])) + 1]]
     out = []
     for g, k in enumerate(first):
+        if tot[g] == 0.0:
+            continue
         vals = (time, tot[g], speed[k])
         if not all(math.isfinite(float(val)) for val in vals):
             raise JassyError("impact: non-finite time, impulse or speed")
