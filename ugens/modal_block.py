@@ -33,11 +33,12 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from jassy.jit import drop_stale_cache
-from ugens import cells, kernels
+from ugens import cells, kernels, vector_ir
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
+from ugens.vector_ir import DOUBLE, INDEX, broadcast, contiguous, fma, row_pointer, shuffle
 
-drop_stale_cache(__file__, [cells, kernels])  # its cache holds copies of their kernels
+drop_stale_cache(__file__, [cells, kernels, vector_ir])  # its cache holds their kernels and code
 
 #: The most kept modes a bank may have to be rendered by blocks, and the samples per block.
 BLOCK_MODES, BLOCK = 4, 8
@@ -51,8 +52,6 @@ BLOCK_ROWS = MADE_FROM + 2
 #: Floats of a block table (rows of BLOCK lanes, flat).
 BLOCK_TABLE = BLOCK_ROWS * BLOCK
 
-_DOUBLE = ir.DoubleType()
-_INDEX = ir.IntType(32)
 #: The passes' adds and multiplies: contracted to fused multiply-adds where written so.
 _FLAGS = ("contract", "nsz", "arcp")
 
@@ -94,33 +93,6 @@ def current_table(table, c1, c2, g, d):
             return
 
 
-def _fma(builder, a, b, c):
-    """a b + c, rounded once, lane by lane (llvm.fma)."""
-    fnty = ir.FunctionType(a.type, [a.type] * 3)
-    name = f"llvm.fma.v{a.type.count}f64"
-    return builder.call(cgutils.get_or_insert_function(builder.module, fnty, name), [a, b, c])
-
-
-def _lanes(builder, a, b, picks):
-    """The lanes ``picks`` of a and b concatenated (shufflevector)."""
-    return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_INDEX, len(picks)), picks))
-
-
-def _pointer(context, builder, array_type, value, at, lanes):
-    """The address of element ``at`` of a C-contiguous float64 array as <lanes x double>*."""
-    data = context.make_array(array_type)(context, builder, value).data
-    return builder.bitcast(builder.gep(data, [at]), ir.VectorType(_DOUBLE, lanes).as_pointer())
-
-
-def _contiguous(array) -> bool:
-    return (
-        isinstance(array, types.Array)
-        and array.ndim == 1
-        and array.layout == "C"
-        and array.dtype == types.float64
-    )
-
-
 def _accumulated(builder, terms, chains):
     """The sum of the products a b of ``terms`` (pairs of vectors) in ``chains``
     interleaved chains of multiply-adds, added at the end: no chain longer than
@@ -128,7 +100,7 @@ def _accumulated(builder, terms, chains):
     sums = [None] * chains
     for t, (a, b) in enumerate(terms):
         c = t % chains
-        sums[c] = builder.fmul(a, b, flags=_FLAGS) if sums[c] is None else _fma(builder, a, b, sums[c])
+        sums[c] = builder.fmul(a, b, flags=_FLAGS) if sums[c] is None else fma(builder, a, b, sums[c])
     sums = [x for x in sums if x is not None]
     while len(sums) > 1:
         pairs = [builder.fadd(a, b, flags=_FLAGS) for a, b in zip(sums[::2], sums[1::2], strict=False)]
@@ -147,7 +119,7 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
     input too (the Toeplitz matrix's zeros times it), where the recursion is non-finite
     only from that sample on; the output stage keeps either from any file or device."""
     if not (
-        all(_contiguous(a) for a in (table, y1, y2, force, out))
+        all(contiguous(a) for a in (table, y1, y2, force, out))
         and isinstance(passes, types.Integer)
         and fp == types.float64
         and direct == types.float64
@@ -157,32 +129,32 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
     def codegen(context, builder, signature, args):
         table, y1, y2, force, out, passes, fp, direct = args
         kinds = signature.args
-        vector, half = ir.VectorType(_DOUBLE, BLOCK), ir.VectorType(_DOUBLE, BLOCK_MODES)
-        base = _pointer(context, builder, kinds[0], table, cgutils.intp_t(0), BLOCK)
+        vector, half = ir.VectorType(DOUBLE, BLOCK), ir.VectorType(DOUBLE, BLOCK_MODES)
+        base = row_pointer(context, builder, kinds[0], table, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK))
 
         # the rows, loaded once before the passes: held in registers, not reloaded
         rows = [builder.load(builder.gep(base, [cgutils.intp_t(r)]), align=8) for r in range(MADE_FROM)]
 
-        def spread(x):  # a scalar in every lane (from memory: a broadcast load)
-            one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
-            return _lanes(builder, one, one, [0] * BLOCK)
-
-        low = _pointer(context, builder, kinds[1], y1, cgutils.intp_t(0), BLOCK_MODES)
-        high = _pointer(context, builder, kinds[2], y2, cgutils.intp_t(0), BLOCK_MODES)
-        scalars = [builder.bitcast(p, _DOUBLE.as_pointer()) for p in (low, high)]
+        low = row_pointer(
+            context, builder, kinds[1], y1, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK_MODES)
+        )
+        high = row_pointer(
+            context, builder, kinds[2], y2, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK_MODES)
+        )
+        scalars = [builder.bitcast(p, DOUBLE.as_pointer()) for p in (low, high)]
         force_at = context.make_array(kinds[3])(context, builder, force).data
-        out_at = _pointer(context, builder, kinds[4], out, cgutils.intp_t(0), BLOCK)
+        out_at = row_pointer(context, builder, kinds[4], out, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK))
         before_slot = cgutils.alloca_once_value(builder, fp)
-        direct_lanes = spread(direct)
+        direct_lanes = broadcast(builder, direct, BLOCK)
         with cgutils.for_range(builder, builder.sext(passes, cgutils.intp_t)) as loop:
             states = [
                 builder.load(builder.gep(scalars[k // 4], [cgutils.intp_t(k % 4)])) for k in range(BLOCK)
             ]
-            terms = [(rows[BASIS + k], spread(states[k])) for k in range(BLOCK)]
-            ones = _lanes(
+            terms = [(rows[BASIS + k], broadcast(builder, states[k], BLOCK)) for k in range(BLOCK)]
+            ones = shuffle(
                 builder, builder.load(low, align=8), ir.Constant(half, ir.Undefined), [0, 1, 2, 3] * 2
             )
-            twos = _lanes(
+            twos = shuffle(
                 builder, builder.load(high, align=8), ir.Constant(half, ir.Undefined), [0, 1, 2, 3] * 2
             )
             first = builder.mul(loop.index, cgutils.intp_t(BLOCK))
@@ -190,18 +162,18 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
                 builder.load(builder.gep(force_at, [builder.add(first, cgutils.intp_t(m - 1))]))
                 for m in range(1, BLOCK)
             ]
-            spreads = [spread(x) for x in inputs]
+            spreads = [broadcast(builder, x, BLOCK) for x in inputs]
             samples = builder.load(
                 builder.bitcast(builder.gep(force_at, [first]), vector.as_pointer()), align=8
             )
             terms += [(rows[TOEPLITZ + m], spreads[m]) for m in range(BLOCK)]
             terms.append((direct_lanes, samples))
             driven = _accumulated(builder, [(rows[NEXT_INPUT + m], spreads[m]) for m in range(BLOCK)], 2)
-            following = _fma(builder, rows[NEXT_Y2], twos, _fma(builder, rows[NEXT_Y1], ones, driven))
-            builder.store(builder.extract_element(samples, _INDEX(BLOCK - 1)), before_slot)
+            following = fma(builder, rows[NEXT_Y2], twos, fma(builder, rows[NEXT_Y1], ones, driven))
+            builder.store(builder.extract_element(samples, INDEX(BLOCK - 1)), before_slot)
             builder.store(_accumulated(builder, terms, 4), builder.gep(out_at, [loop.index]), align=8)
-            builder.store(_lanes(builder, following, following, [0, 1, 2, 3]), low, align=8)
-            builder.store(_lanes(builder, following, following, [4, 5, 6, 7]), high, align=8)
+            builder.store(shuffle(builder, following, following, [0, 1, 2, 3]), low, align=8)
+            builder.store(shuffle(builder, following, following, [4, 5, 6, 7]), high, align=8)
         return builder.load(before_slot)
 
     return types.float64(table, y1, y2, force, out, passes, fp, direct), codegen

@@ -33,11 +33,11 @@ import numba as nb
 import numpy as np
 
 from jassy.jit import drop_stale_cache
-from ugens import cells, kernels, stack_rows, vector_pass
+from ugens import cells, kernels, stack_rows, vector_ir, vector_pass
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
 
-drop_stale_cache(__file__, [cells, kernels, stack_rows, vector_pass])  # its cache holds their code
+drop_stale_cache(__file__, [cells, kernels, stack_rows, vector_ir, vector_pass])  # its cache holds their code
 
 #: A float32 mode's worst error, relative to its own peak, that is accepted: -70 dB,
 #: 10 dB inside the -60 dB bound, so that errors of many modes summed stay within it.

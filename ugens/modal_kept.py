@@ -39,22 +39,21 @@ from jassy.anytime_rank import (
 )
 from jassy.jit import drop_stale_cache, void_pointer
 from jassy.record_views import FIELD, bool_row, int_row
-from ugens import cells, kernels, modal, modal_block, modal_budget, modal_meta, modal_retune, real_fft
+from ugens import (
+    cells,
+    kernels,
+    modal,
+    modal_block,
+    modal_budget,
+    modal_meta,
+    modal_retune,
+    real_fft,
+    vector_ir,
+)
 from ugens.cells import ModeRows, is_flush_frame, mode_rows, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal import Ramp, flush_silent, resonate, resonate_ramp
-from ugens.modal_block import (
-    _DOUBLE,
-    _FLAGS,
-    _INDEX,
-    BLOCK_MODES,
-    _contiguous,
-    _fma,
-    _lanes,
-    _pointer,
-    block_resonate,
-    current_table,
-)
+from ugens.modal_block import _FLAGS, BLOCK_MODES, block_resonate, current_table
 from ugens.modal_budget import (
     BANK_ROWS,
     COEF_ROWS,
@@ -74,6 +73,7 @@ from ugens.modal_budget import (
 )
 from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 from ugens.modal_retune import COEF_C1, COEF_C2, COEF_DIRECT, COEF_GAIN
+from ugens.vector_ir import DOUBLE, broadcast, contiguous, fma, row_pointer, shuffle
 
 drop_stale_cache(
     __file__,
@@ -88,6 +88,7 @@ drop_stale_cache(
         modal_retune,
         real_fft,
         record_views,
+        vector_ir,
     ],
 )  # the cache holds copies of their kernels (real_fft through modal_budget.decide) and FASTMATH
 
@@ -153,7 +154,7 @@ def _transposed_sum(builder, sums):
         first = [i if (i // width) % 2 == 0 else i - width + KEPT_LANES for i in range(KEPT_LANES)]
         second = [i + width if (i // width) % 2 == 0 else i + KEPT_LANES for i in range(KEPT_LANES)]
         level = [
-            builder.fadd(_lanes(builder, a, b, first), _lanes(builder, a, b, second), flags=_FLAGS)
+            builder.fadd(shuffle(builder, a, b, first), shuffle(builder, a, b, second), flags=_FLAGS)
             for a, b in zip(level[::2], level[1::2], strict=True)
         ]
         width *= 2
@@ -175,7 +176,7 @@ def _ring_coefficients(builder, c1, c2):
         builder.fadd(c1_squared, minus_c2, flags=_FLAGS),
         minus_c2,
         builder.fmul(minus_c2, c1, flags=_FLAGS),
-        _fma(builder, minus_c2, ir.Constant(c1.type, [2.0] * KEPT_LANES), c1_squared),
+        fma(builder, minus_c2, ir.Constant(c1.type, [2.0] * KEPT_LANES), c1_squared),
         builder.fneg(builder.fmul(c2, c2, flags=_FLAGS), flags=_FLAGS),
     ]
 
@@ -189,14 +190,14 @@ def _free_response(builder, coefficients, y1, y2):
     units busy (the same samples in exact arithmetic)."""
     c1, first, minus_c2, mixed, twice, minus_squared = coefficients
     samples = [
-        _fma(builder, c1, y1, builder.fmul(minus_c2, y2, flags=_FLAGS)),
-        _fma(builder, first, y1, builder.fmul(mixed, y2, flags=_FLAGS)),
+        fma(builder, c1, y1, builder.fmul(minus_c2, y2, flags=_FLAGS)),
+        fma(builder, first, y1, builder.fmul(mixed, y2, flags=_FLAGS)),
     ]
     before = [y2, y1]  # y[-2], y[-1]
     for j in range(2, KEPT_LANES):
         four_back = samples[j - 4] if j >= 4 else before[j - 2]
         samples.append(
-            _fma(builder, twice, samples[j - 2], builder.fmul(minus_squared, four_back, flags=_FLAGS))
+            fma(builder, twice, samples[j - 2], builder.fmul(minus_squared, four_back, flags=_FLAGS))
         )
     return samples
 
@@ -215,16 +216,16 @@ def ring_passes(typingctx, out, c1, c2, y1, y2, passes, vectors, adding):
     c2^2 round worse than c1 and c2 (ring's own: 1e-10 to 1e-13)."""
     arrays = (out, c1, c2, y1, y2)
     if not (
-        all(_contiguous(a) for a in arrays)
+        all(contiguous(a) for a in arrays)
         and all(isinstance(x, types.Integer) for x in (passes, vectors))
         and adding == types.boolean
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        vector, zero = ir.VectorType(_DOUBLE, KEPT_LANES), cgutils.intp_t(0)
+        vector, zero = ir.VectorType(DOUBLE, KEPT_LANES), cgutils.intp_t(0)
         pointers = [
-            _pointer(context, builder, kind, a, zero, KEPT_LANES)
+            row_pointer(context, builder, kind, a, zero, vector)
             for kind, a in zip(signature.args[:5], args[:5], strict=True)
         ]
         out_at, (c1_at, c2_at, y1_at, y2_at) = pointers[0], pointers[1:]
@@ -272,26 +273,22 @@ def resonate_passes(typingctx, force, out, c1, c2, g, y1, y2, passes, vectors, b
     arrays = (force, out, c1, c2, g, y1, y2)
     scalars = (passes, vectors)
     if not (
-        all(_contiguous(a) for a in arrays)
+        all(contiguous(a) for a in arrays)
         and all(isinstance(x, types.Integer) for x in scalars)
         and before == types.float64
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        vector, zero = ir.VectorType(_DOUBLE, KEPT_LANES), cgutils.intp_t(0)
+        vector, zero = ir.VectorType(DOUBLE, KEPT_LANES), cgutils.intp_t(0)
         force_at = context.make_array(signature.args[0])(context, builder, args[0]).data
         pointers = [
-            _pointer(context, builder, kind, a, zero, KEPT_LANES)
+            row_pointer(context, builder, kind, a, zero, vector)
             for kind, a in zip(signature.args[1:7], args[1:7], strict=True)
         ]
         out_at, rows = pointers[0], pointers[1:]
         sums = [cgutils.alloca_once(builder, vector) for _ in range(KEPT_LANES)]
         before_slot = cgutils.alloca_once_value(builder, args[9])
-
-        def spread(x):  # a scalar in every lane
-            one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
-            return _lanes(builder, one, one, [0] * KEPT_LANES)
 
         with cgutils.for_range(builder, builder.sext(args[7], cgutils.intp_t)) as each_pass:
             first = builder.mul(each_pass.index, cgutils.intp_t(KEPT_LANES))
@@ -299,7 +296,7 @@ def resonate_passes(typingctx, force, out, c1, c2, g, y1, y2, passes, vectors, b
                 builder.load(builder.gep(force_at, [builder.add(first, cgutils.intp_t(j))]))
                 for j in range(KEPT_LANES)
             ]
-            inputs = [spread(x) for x in [builder.load(before_slot), *samples[:-1]]]
+            inputs = [broadcast(builder, x, KEPT_LANES) for x in [builder.load(before_slot), *samples[:-1]]]
             for s in sums:
                 builder.store(ir.Constant(vector, [0.0] * KEPT_LANES), s)
             with cgutils.for_range(builder, builder.sext(args[8], cgutils.intp_t)) as each_vector:
@@ -307,8 +304,8 @@ def resonate_passes(typingctx, force, out, c1, c2, g, y1, y2, passes, vectors, b
                 p, q, gain, old, older = (builder.load(x, align=8) for x in at)
                 minus_q = builder.fneg(q, flags=_FLAGS)
                 for s, x in zip(sums, inputs, strict=True):
-                    driven = _fma(builder, minus_q, older, builder.fmul(gain, x, flags=_FLAGS))
-                    v = _fma(builder, p, old, driven)
+                    driven = fma(builder, minus_q, older, builder.fmul(gain, x, flags=_FLAGS))
+                    v = fma(builder, p, old, driven)
                     builder.store(builder.fadd(builder.load(s), v, flags=_FLAGS), s)
                     older, old = old, v
                 builder.store(older, at[4], align=8)

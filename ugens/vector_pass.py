@@ -26,6 +26,8 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from ugens.vector_ir import FLOAT, INDEX, broadcast, contiguous, fma, row_pointer, shuffle
+
 #: float32 lanes of one AVX-512 vector: the reduction first folds wider rows to this.
 VECTOR = 16
 
@@ -36,37 +38,13 @@ _UPDATE_FLAGS = ("contract", "nsz", "arcp")
 #: state, so the order only moves their float32 rounding).
 _SUM_FLAGS = ("fast",)
 
-_FLOAT = ir.FloatType()
-_INDEX = ir.IntType(32)
-
-
-def _fma(builder, a, b, c):
-    """a b + c, rounded once, lane by lane (llvm.fma; float32 or float64 vectors)."""
-    fnty = ir.FunctionType(a.type, [a.type] * 3)
-    element = "f64" if isinstance(a.type.element, ir.DoubleType) else "f32"
-    return builder.call(
-        cgutils.get_or_insert_function(builder.module, fnty, f"llvm.fma.v{a.type.count}{element}"), [a, b, c]
-    )
-
-
-def _lanes(builder, a, b, picks):
-    """The lanes ``picks`` of a and b concatenated (shufflevector)."""
-    return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_INDEX, len(picks)), picks))
-
-
-def _broadcast(builder, x, width):
-    """A vector of ``width`` lanes, each the scalar x (float32 or float64; insert, shuffle)."""
-    vector = ir.VectorType(x.type, width)
-    one = builder.insert_element(ir.Constant(vector, ir.Undefined), x, _INDEX(0))
-    return _lanes(builder, one, ir.Constant(vector, ir.Undefined), [0] * width)
-
 
 def _fold(builder, v, width):
     """v's lanes summed down to VECTOR lanes (halves added)."""
     while width > VECTOR:
         half = width // 2
         low, high = list(range(half)), list(range(half, width))
-        v = builder.fadd(_lanes(builder, v, v, low), _lanes(builder, v, v, high), flags=_SUM_FLAGS)
+        v = builder.fadd(shuffle(builder, v, v, low), shuffle(builder, v, v, high), flags=_SUM_FLAGS)
         width = half
     return v
 
@@ -81,15 +59,15 @@ def _sum_four(builder, a0, a1, a2, a3):
     def within(x, y):  # per block of four lanes: [x0 + x1, x2 + x3, y0 + y1, y2 + y3]
         even = [i for b in range(0, VECTOR, 4) for i in (b, b + 2, VECTOR + b, VECTOR + b + 2)]
         odd = [i + 1 for i in even]
-        return builder.fadd(_lanes(builder, x, y, even), _lanes(builder, x, y, odd), flags=_SUM_FLAGS)
+        return builder.fadd(shuffle(builder, x, y, even), shuffle(builder, x, y, odd), flags=_SUM_FLAGS)
 
     z = within(within(a0, a1), within(a2, a3))  # per block: its sums of a0, a1, a2, a3
     width = VECTOR
     while width > 4:
         half = width // 2
         z = builder.fadd(
-            _lanes(builder, z, z, list(range(half))),
-            _lanes(builder, z, z, list(range(half, width))),
+            shuffle(builder, z, z, list(range(half))),
+            shuffle(builder, z, z, list(range(half, width))),
             flags=_SUM_FLAGS,
         )
         width = half
@@ -106,10 +84,10 @@ def _pass(builder, lanes, c0v, bv, p, v, forces, by_factor=True):
     minus_b = builder.fneg(bv)
 
     def next_delta(v, older, newer, f):
-        force = _fma(builder, minus_c0, older if by_factor else newer, _broadcast(builder, f, lanes))
+        force = fma(builder, minus_c0, older if by_factor else newer, broadcast(builder, f, lanes))
         if by_factor:
-            return _fma(builder, bv, v, force)
-        return builder.fadd(force, _fma(builder, minus_b, v, v), flags=_UPDATE_FLAGS)
+            return fma(builder, bv, v, force)
+        return builder.fadd(force, fma(builder, minus_b, v, v), flags=_UPDATE_FLAGS)
 
     fp, f0, f1, f2 = forces
     u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
@@ -129,18 +107,12 @@ def _is_literal_width(width) -> bool:
     return isinstance(width, types.IntegerLiteral) and width.literal_value % VECTOR == 0
 
 
-def _contiguous(array, dtype) -> bool:
-    """Whether ``array`` is a 1-D C-contiguous array of ``dtype``: the intrinsics read and
-    write its data as vectors of that type (float32 rows and sums, float64 force and out)."""
-    return isinstance(array, types.Array) and array.ndim == 1 and array.layout == "C" and array.dtype == dtype
-
-
 def _contiguous_arrays(record, count: int, dtype) -> bool:
     """Whether ``record`` is a tuple type of ``count`` arrays passing :func:`_contiguous`."""
     return (
         isinstance(record, types.BaseTuple)
         and len(record) == count
-        and all(_contiguous(t, dtype) for t in record.types)
+        and all(contiguous(t, dtype) for t in record.types)
     )
 
 
@@ -151,17 +123,11 @@ def _scalars(record, count: int, dtype) -> bool:
     )
 
 
-def _row_pointer(context, builder, array_type, value, at, vector):
-    """The address of element ``at`` of a C-contiguous array as a pointer to ``vector``."""
-    data = context.make_array(array_type)(context, builder, value).data
-    return builder.bitcast(builder.gep(data, [at]), vector.as_pointer())
-
-
 def _row_pointers(context, builder, record_type, record, at, vector):
     """:func:`_row_pointer` of each array of a record (a tuple of arrays)."""
     values = cgutils.unpack_tuple(builder, record, len(record_type))
     return [
-        _row_pointer(context, builder, t, v, at, vector)
+        row_pointer(context, builder, t, v, at, vector)
         for t, v in zip(record_type.types, values, strict=True)
     ]
 
@@ -179,8 +145,8 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
         _is_literal_width(width)
         and _contiguous_arrays(rows, 5, types.float32)
         and fp == types.float32
-        and _contiguous(force, types.float64)
-        and _contiguous(out, types.float64)
+        and contiguous(force, types.float64)
+        and contiguous(out, types.float64)
         and isinstance(i, types.Integer)
         and direct == types.float64
     ):
@@ -189,20 +155,20 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
 
     def codegen(context, builder, signature, args):
         _, rows, fp, force, out, at, direct = args
-        vector = ir.VectorType(_FLOAT, lanes)
+        vector = ir.VectorType(FLOAT, lanes)
         four_doubles = ir.VectorType(ir.DoubleType(), 4)
         pointers = _row_pointers(context, builder, signature.args[1], rows, cgutils.intp_t(0), vector)
         c0v, bv, gv, p, v = (builder.load(row, align=64) for row in pointers)
-        samples = _row_pointer(context, builder, signature.args[3], force, at, four_doubles)
-        forces = builder.fptrunc(builder.load(samples, align=8), ir.VectorType(_FLOAT, 4))
-        f0, f1, f2 = (builder.extract_element(forces, _INDEX(j)) for j in range(3))
+        samples = row_pointer(context, builder, signature.args[3], force, at, four_doubles)
+        forces = builder.fptrunc(builder.load(samples, align=8), ir.VectorType(FLOAT, 4))
+        f0, f1, f2 = (builder.extract_element(forces, INDEX(j)) for j in range(3))
         y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, (fp, f0, f1, f2))
         builder.store(y_next, pointers[3], align=64)
         builder.store(v, pointers[4], align=64)
         terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in outputs]
         total = _sum_four(builder, *(_fold(builder, t, lanes) for t in terms))
-        total = _fma(builder, _broadcast(builder, builder.fptrunc(direct, _FLOAT), 4), forces, total)
-        target = _row_pointer(context, builder, signature.args[4], out, at, four_doubles)
+        total = fma(builder, broadcast(builder, builder.fptrunc(direct, FLOAT), 4), forces, total)
+        target = row_pointer(context, builder, signature.args[4], out, at, four_doubles)
         builder.store(builder.fpext(total, four_doubles), target, align=8)
         return context.get_dummy_value()
 
@@ -233,7 +199,7 @@ def add_chunk(typingctx, width, rows, k, forces, sums, by_factor):
 
     def codegen(context, builder, signature, args):
         _, rows, at, forces, sums, _ = args
-        vector = ir.VectorType(_FLOAT, lanes)
+        vector = ir.VectorType(FLOAT, lanes)
         pointers = _row_pointers(context, builder, signature.args[1], rows, at, vector)
         c0v, bv, gv, p, v = (builder.load(row, align=4) for row in pointers)
         forces = cgutils.unpack_tuple(builder, forces, 4)
@@ -245,7 +211,7 @@ def add_chunk(typingctx, width, rows, k, forces, sums, by_factor):
             outputs,
             strict=True,
         ):
-            builder.store(_fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
+            builder.store(fma(builder, gv, uj, builder.load(row, align=64)), row, align=64)
         return context.get_dummy_value()
 
     return types.none(width, rows, k, forces, sums, by_factor), codegen
@@ -260,7 +226,7 @@ def write_sums(typingctx, width, sums, out, i, wide):
     if not (
         _is_literal_width(width)
         and _contiguous_arrays(sums, 4, types.float32)
-        and _contiguous(out, types.float64)
+        and contiguous(out, types.float64)
         and isinstance(i, types.Integer)
         and _scalars(wide, 4, types.float64)
     ):
@@ -269,15 +235,15 @@ def write_sums(typingctx, width, sums, out, i, wide):
 
     def codegen(context, builder, signature, args):
         _, sums, out, at, wide = args
-        vector = ir.VectorType(_FLOAT, lanes)
+        vector = ir.VectorType(FLOAT, lanes)
         four_doubles = ir.VectorType(ir.DoubleType(), 4)
         pointers = _row_pointers(context, builder, signature.args[1], sums, cgutils.intp_t(0), vector)
         rows = [_fold(builder, builder.load(row, align=64), lanes) for row in pointers]
         total = builder.fpext(_sum_four(builder, *rows), four_doubles)
         wide_vector = ir.Constant(four_doubles, ir.Undefined)
         for j, tj in enumerate(cgutils.unpack_tuple(builder, wide, 4)):
-            wide_vector = builder.insert_element(wide_vector, tj, _INDEX(j))
-        target = _row_pointer(context, builder, signature.args[2], out, at, four_doubles)
+            wide_vector = builder.insert_element(wide_vector, tj, INDEX(j))
+        target = row_pointer(context, builder, signature.args[2], out, at, four_doubles)
         builder.store(builder.fadd(total, wide_vector), target, align=8)
         return context.get_dummy_value()
 
@@ -316,11 +282,11 @@ def add_wide_chunk(typingctx, width, wide, k, forces, sums):
         c1v, c2v, gv = (builder.load(row, align=8) for row in pointers[:3])
         y1, y2 = (builder.load(row, align=8) for row in pointers[4:])
         minus_c2 = builder.fneg(c2v)
-        narrow = ir.VectorType(_FLOAT, WIDE_VECTOR)
+        narrow = ir.VectorType(FLOAT, WIDE_VECTOR)
         rows = _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), narrow)
         for f, row in zip(cgutils.unpack_tuple(builder, forces, 4), rows, strict=True):
-            drive = builder.fmul(gv, _broadcast(builder, f, WIDE_VECTOR), flags=_UPDATE_FLAGS)
-            y1, y2 = _fma(builder, c1v, y1, _fma(builder, minus_c2, y2, drive)), y1
+            drive = builder.fmul(gv, broadcast(builder, f, WIDE_VECTOR), flags=_UPDATE_FLAGS)
+            y1, y2 = fma(builder, c1v, y1, fma(builder, minus_c2, y2, drive)), y1
             total = builder.fadd(builder.load(row, align=32), builder.fptrunc(y1, narrow), flags=_SUM_FLAGS)
             builder.store(total, row, align=32)
         builder.store(y1, pointers[4], align=8)
