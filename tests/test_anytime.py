@@ -198,6 +198,25 @@ def test_a_quarter_of_the_modes_is_within_15_db_and_all_of_them_exact(name, seco
     assert budget.decisions == 0 and error_db(everything, full) < -200.0
 
 
+def test_modes_rank_by_their_energy_over_the_period_not_their_amplitude_now():
+    """Two banks struck at once, one mode each: a 220 Hz mode ringing for seconds and a
+    2.2 kHz one gone in a few ms (600 1/s), whose amplitude right after the impact the
+    ranking once put first. With one mode allowed the budget keeps the one that carries
+    the energy (over a period, 1800x the other's), so the render is the slow mode's."""
+
+    def graph(budget):
+        slow = ModalBank(ModalModel([220.0], [3.0], [[1.0]]), name="slow")(ImpactForce(name="hit_slow"))
+        fast = ModalBank(ModalModel([2200.0], [600.0], [[1.0]]), name="fast")(ImpactForce(name="hit_fast"))
+        return Graph(Mixer(slow, fast), budget=budget)
+
+    score = [Event(0.1, f"hit_{name}", "impact", {"impulse": 0.1}) for name in ("slow", "fast")]
+    full = render(graph(None), score, 0.5, FS, 64, limiter=False).audio[0]
+    slow_alone = render(graph(None), score[:1], 0.5, FS, 64, limiter=False).audio[0]
+    kept = render(graph(ModeBudget(max_modes=1)), score, 0.5, FS, 64, limiter=False).audio[0]
+    assert error_db(kept, slow_alone) < -200.0
+    assert error_db(kept, full) < -30.0  # (keeping the fast mode: about 0 dB)
+
+
 def test_a_contact_nobody_scheduled_sounds_from_its_first_sample():
     """A scrape starts on a silent plate mid-period, with no impact in the score: the
     budget decides in that very sub-block, so the budgeted output starts with the full one

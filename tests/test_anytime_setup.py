@@ -18,14 +18,16 @@ PERIOD, FS, HORIZON = 2048, 48000.0, 0.1
 
 def numpy_forcing(sin2, inv, c2, frequencies, decays, order, scales, period, rate, horizon):
     """The rows of ugens.modal_budget.forcing_rows with numpy, as the budget used to
-    compute them: (sin2, inv, decay, growth, bins)."""
+    compute them: (sin2, inv, decay, growth, bins, fill); fill, the share of a period a
+    free decay fills, as the sum of its energy's geometric series term by term."""
     retune = 1.0 / np.sqrt(scales[2])
     f = frequencies[order] * (scales[0] * retune)
     d = decays[order] * (scales[1] * retune)
     bins = np.minimum(np.rint(f * period / rate), period // 2)
     two_d_tau = 2.0 * d * horizon
     growth = np.where(two_d_tau > 1e-9, -np.expm1(-two_d_tau) / np.maximum(2.0 * d, 1e-300), horizon)
-    return sin2, inv, c2**period, growth, bins
+    fill = np.sum(c2[:, None] ** np.arange(period), axis=1) / period
+    return sin2, inv, c2**period, growth, bins, fill
 
 
 def test_forcing_rows_match_numpy_on_random_modes():
@@ -58,9 +60,11 @@ def test_forcing_rows_match_numpy_on_random_modes():
     for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):
         assert np.allclose(rows[row, other:], want, rtol=4e-16, atol=0)
     assert np.array_equal(bins[other:], expected[4])
+    assert np.allclose(rows[mb.FILL, other:], expected[5], rtol=1e-10, atol=0)
     assert np.any(expected[4] == PERIOD // 2) and np.any(expected[3] == HORIZON)
     assert np.all(rows[:, :other] == -1.0) and np.all(bins[:other] == -1)
-    untouched = [r for r in range(mb.MODE_ROWS) if r not in (mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH)]
+    written = (mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH, mb.FILL)
+    untouched = [r for r in range(mb.MODE_ROWS) if r not in written]
     assert np.all(rows[untouched] == -1.0)
 
 
@@ -81,6 +85,7 @@ def test_a_budgeted_banks_rows_after_attach_match_numpy():
     for row, want in zip((mb.SIN2, mb.INV, mb.DECAY, mb.GROWTH), expected[:4], strict=True):
         assert np.allclose(tables.rows[row], want, rtol=4e-16, atol=0)
     assert np.array_equal(tables.bins, expected[4])
+    assert np.allclose(tables.rows[mb.FILL], expected[5], rtol=1e-10, atol=0)
 
 
 def test_budgets_share_the_window_and_twiddles_and_no_render_writes_them():

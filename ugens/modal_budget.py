@@ -14,10 +14,14 @@ decision is one compiled call over all banks (:func:`decide`) instead of several
 
 Importance of mode k for the coming budget period (see jassy.anytime):
 
-    I_k = w_k (max(A_k^2, u_k S(f_k) G_k) + u_k sum_j J_j^2 + E_k)
+    I_k = w_k (max(F_k A_k^2, u_k S(f_k) G_k) + F_k (u_k sum_j J_j^2 + E_k))
 
 A_k^2 = (y1^2 - c1 y1 y2 + c2 y2^2) / sin^2 theta: the squared amplitude of the
-decaying sine through the last two state samples; u_k = (g fs)^2 / (R^2 sin^2 theta) the
+decaying sine through the last two state samples; F_k = (1 - R^(2 P)) / (P (1 - R^2)) the
+share of the period's P samples a free decay from amplitude A fills at A^2 (its energy
+over the period is F P A^2: a mode gone in a few ms weighs by the little it sounds, not
+by its amplitude now; 1 for a mode that does not decay, as a steady force's build-up
+counts); u_k = (g fs)^2 / (R^2 sin^2 theta) the
 squared amplitude per unit impulse (N s) at the bank's current location; S the force's
 power spectral density at the mode's frequency (N^2/Hz); G_k = (1 - e^{-2 d tau}) / (2 d)
 the build-up of a steady force over the horizon tau (s); J_j the impulses scheduled at the
@@ -63,9 +67,10 @@ KEPT_LANES = 8
 #: over one period, R^(2 period); the importance weight; the force's PSD at the mode's
 #: frequency (N^2/Hz, banks that hear a force through a transform); squared amplitudes of
 #: the impacts scheduled elsewhere on the bank, this period and the next; the squared
-#: amplitude now (scratch).
-SIN2, INV, GROWTH, DECAY, WEIGHT, SPECTRUM, ELSEWHERE_NOW, ELSEWHERE_NEXT, AMP2 = range(9)
-MODE_ROWS = 9
+#: amplitude now (scratch); the share of the period a free decay fills,
+#: (1 - R^(2 period)) / (period (1 - R^2)).
+SIN2, INV, GROWTH, DECAY, WEIGHT, SPECTRUM, ELSEWHERE_NOW, ELSEWHERE_NEXT, AMP2, FILL = range(10)
+MODE_ROWS = 10
 
 #: Per-bank integer fields of :attr:`BudgetTables.layout`: mode count; its first column
 #: in the per-mode rows; offsets of its (6, modes) bank rows, of its (4, modes) target,
@@ -399,7 +404,8 @@ def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, scales, 
     poles' sin^2 theta and 1 / (R^2 sin^2 theta), its design's c2 = R^2 (internal order)
     and its model's frequencies (Hz) and decay rates (1/s), ``order`` the model's mode at
     each internal position: SIN2, INV, the energy decay over a period c2^period =
-    R^(2 period), the build-up under a steady force over the horizon tau (s),
+    R^(2 period), the share of the period a free decay fills (FILL: 1 - R^(2 period) over
+    period (1 - R^2)), the build-up under a steady force over the horizon tau (s),
     (1 - e^{-2 d tau}) / (2 d) (tau as d -> 0), and the periodogram's bin of each
     frequency (at most period / 2); frequencies and decays scaled by ``scales``
     (freq_scale, decay_scale, fragment size s: both also by 1 / sqrt(s))."""
@@ -411,6 +417,7 @@ def forcing_rows(rows, bins, sin2, inv, c2, frequencies, decays, order, scales, 
         j = order[i]
         rows[SIN2, i], rows[INV, i] = sin2[i], inv[i]
         rows[DECAY, i] = c2[i] ** float(period)
+        rows[FILL, i] = (1.0 - rows[DECAY, i]) / (period * (1.0 - c2[i])) if c2[i] < 1.0 else 1.0
         bins[i] = int(min(np.rint(frequencies[j] * freq_scale * period / sample_rate), half))
         decay = decays[j] * decay_scale
         two_d_tau = 2.0 * decay * horizon
@@ -584,12 +591,15 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
         unit2 = g * g * rows[INV, m]
         s = rows[SPECTRUM, m] if spectral else flat_psd
         forced = unit2 * s * rows[GROWTH, m]
-        now = max(a, forced) + unit2 * kick_now
-        later = max(a * rows[DECAY, m], forced) + unit2 * kick_next
+        fill = rows[FILL, m]
+        struck_now = unit2 * kick_now
+        struck_next = unit2 * kick_next
         if has_now:
-            now += rows[ELSEWHERE_NOW, m]
+            struck_now += rows[ELSEWHERE_NOW, m]
         if has_next:
-            later += rows[ELSEWHERE_NEXT, m]
+            struck_next += rows[ELSEWHERE_NEXT, m]
+        now = max(a * fill, forced) + struck_now * fill
+        later = max(a * rows[DECAY, m] * fill, forced) + struck_next * fill
         if kept[m] and not faded[m]:
             now *= bonus
         w = rows[WEIGHT, m]
