@@ -213,8 +213,8 @@ class ModeBudget:
         score changes. ``renders``:
         :meth:`step` also renders the banks (their inputs are rendered before it), splitting
         their sub-block only at the frames where it decides; otherwise the scheduler cuts
-        sub-blocks at every period and a bank's force counts as heard in every period (it
-        may be rendered after the step).
+        sub-blocks at every period and the force of a bank fed by a bank (its input is
+        rendered after the step) counts as heard in every period.
         ``audio``: the graph's audio outputs (a bank heard only through another bank is
         ranked by what reaches them; None: every bank is heard)."""
         self._audio = audio
@@ -257,7 +257,8 @@ class ModeBudget:
         heard_inputs = [bank.sources["input"].out for bank in banks]  # the addresses stay valid
         self._addresses[0] = [address(x) for x in heard_inputs]
         self._addresses[1] = [address(bank.out) for bank in banks]  # alive with them
-        self._flags[UNSEEN] = not renders
+        self._flags[UNSEEN] = False  # (the step runs after every input but a bank's: jassy.graph)
+        self._flags[UNSEEN, [fed.slot for fed in self._fed]] = True
         self._flags[STRUCK_ONLY] = [bank.sources["input"].score_impacts_only for bank in banks]
         self._size = min(x.size for x in heard_inputs)
         flag = [(slots.flags[0] + r * count, count, 1) for r in range(rows)]
@@ -300,6 +301,8 @@ class ModeBudget:
             return Packed(allocated.arrays[n:], allocated.slots[n:])
 
         self._slots = {id(bank): slot for slot, bank in enumerate(banks)}
+        #: banks fed by banks, credited with their feeders' impacts (this period, the next)
+        self._fed = [] if self.renders else feeding_banks(banks)  # (a bank fed by one: not renders)
         self._loaded = None  # the listing in the Kicks table
         self._handle_size = mk.DECISION_AT + len(mb.Decision._fields) * FIELD  # (the step handle's: checked)
         self._load_kicks(self.listed(), carve)  # the score's impacts, before the first sub-block
@@ -307,8 +310,6 @@ class ModeBudget:
         self._tables_handle = self._step_handle[: fields * FIELD]  # (the banks' and the step's)
         for slot, bank in enumerate(banks):
             bank.anytime_attach(tables, slot, self.horizon, self.weighting, self._tables_handle)
-        #: banks fed by banks, credited with their feeders' impacts (this period, the next)
-        self._fed = [] if self.renders else feeding_banks(banks)  # (a bank fed by one: not renders)
         if self._fed:
             weigh_feeders(tables, self._fed, heard_banks(banks, self._audio or banks), self.sample_rate)
             self._chain_fields = (

@@ -886,10 +886,13 @@ def test_a_bank_struck_only_by_the_scores_impacts_never_hears_them_as_a_force():
     assert max(errors.values()) <= -15.0, errors
 
 
-def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_bank():
+@pytest.mark.parametrize("fed_bank", [False, True])
+def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_bank(fed_bank):
     """Scheduler.insert (the live engine's path) strikes a bank that nothing else strikes in
     the middle of a budget period: no period's start listed it, so the bank must be woken
-    by what it hears; its budgeted output then carries the full synthesis's energy."""
+    by what it hears; its budgeted output then carries the full synthesis's energy. Also
+    where a third bank hears the first (``fed_bank``: the banks then render themselves
+    after the budget's step, and only the fed bank's force is unseen when it decides)."""
     block, insert_at = 512, 4608  # period 2048: inserted mid-period
 
     def run(budget):
@@ -897,9 +900,10 @@ def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_b
         a = ModalBank(bell_model(150, prime=150, seed=0), name="a")(ha)
         b = ModalBank(bell_model(150, prime=210, seed=1), name="b")(hb)
         score = [Event(t, "ha", "impact", {"impulse": 0.3}) for t in np.arange(0.0, 1.0, 0.05)]
-        engine = OfflineEngine(
-            Graph(Mixer(a, b), budget=budget), score, FS, block, limiter=False, program=False
-        )
+        heard = [a, b, ModalBank(bell_model(20, prime=20, seed=2), name="c")(a)] if fed_bank else [a, b]
+        graph = Graph(Mixer(*heard), budget=budget)
+        engine = OfflineEngine(graph, score, FS, block, limiter=False, program=False)
+        assert graph.budget_renders is (budget is not None and not fed_bank)
         buffer, bank_b = np.zeros((1, block)), []
         for frame in range(0, FS, block):
             if frame == insert_at:
