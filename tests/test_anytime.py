@@ -260,18 +260,48 @@ def test_ranking_keeps_exactly_the_highest_positive_scores():
             assert score[~keep].max() <= positive[limit - 1]
 
 
+def test_rank_modes_fades_the_kept_modes_not_on_top_later():
+    """rank_modes against numpy masks: later_top the ``limit`` highest positive scores[1]
+    (lexsort: ties by index), fade those of scores[0]'s top not among them and sounding
+    (scores[2] > 0), keep the rest of scores[0]'s top."""
+    from jassy.anytime_rank import rank_modes
+
+    rng = np.random.default_rng(6)
+    for size, limit in ((297, 74), (40, 7), (12, 30)):
+        scores = np.where(rng.random((3, size)) < 0.3, 0.0, rng.exponential(size=(3, size)) ** 4)
+        scores[:2, :6] = scores[:2, 6:7]  # ties
+        masks = [np.zeros(size, dtype=bool) for _ in range(3)]
+        any_fade = rank_modes(scores, limit, *masks)
+        keep, fade, later = masks
+        top = []
+        for row in scores[:2]:
+            order = np.lexsort((np.arange(size), -row))  # highest first, ties by index
+            mask = np.zeros(size, dtype=bool)
+            mask[order[:limit]] = True
+            top.append(mask & (row > 0))
+        np.testing.assert_array_equal(later, top[1])
+        np.testing.assert_array_equal(fade, top[0] & ~top[1] & (scores[2] > 0))
+        np.testing.assert_array_equal(keep, top[0] & ~fade)
+        assert any_fade == fade.any()
+
+
 @pytest.mark.timeout(120)
 def test_selection_gives_numpys_partition_value():
-    """kth_smallest (the ranking's threshold) against np.partition: sizes 1-300, ties,
+    """kth_smallest (the ranking's threshold, a radix selection) against np.partition:
+    sizes 1-300, ties, zeros, values spread over 80 decades and values a last bit apart,
     k from the first to the last; top_mask with a NaN score takes np.partition's
     threshold, and with a limit of 0 keeps nothing (it used to select one past the end)."""
-    from jassy.anytime_rank import kth_smallest, top_mask
+    from jassy.anytime_rank import DIGIT_BITS, kth_smallest, top_mask
 
     rng = np.random.default_rng(5)
+    bins = np.zeros(1 << DIGIT_BITS, np.int64)
     for size in (1, 2, 3, 7, 64, 297):
-        values = np.round(rng.exponential(size=size) ** 3, 1)  # many ties
+        values = np.round(rng.exponential(size=size) ** 3, 1)  # many ties, zeros
+        spread = np.exp(rng.normal(0.0, 30.0, size))  # 1e-40 .. 1e40, subnormal-free
+        spread[1 : size // 3] = np.nextafter(spread[0], np.inf)  # values a last bit apart
         for k in [*range(0, size, max(1, size // 17)), size - 1]:
-            assert kth_smallest(values.copy(), k) == np.partition(values, k)[k]
+            assert kth_smallest(values.copy(), k, bins) == np.partition(values, k)[k]
+            assert kth_smallest(spread.copy(), k, bins) == np.partition(spread, k)[k]
     for unordered in (False, True):
         score = rng.random(40)
         score[3] = np.nan if unordered else score[3]
