@@ -66,11 +66,10 @@ KEPT_LANES = 8
 #: theta; 1 / (R^2 sin^2 theta); the build-up G under a steady force (s); the energy decay
 #: over one period, R^(2 period); the importance weight; the force's PSD at the mode's
 #: frequency (N^2/Hz, banks that hear a force through a transform); squared amplitudes of
-#: the impacts scheduled elsewhere on the bank, this period and the next; the squared
-#: amplitude now (scratch); the share of the period a free decay fills,
-#: (1 - R^(2 period)) / (period (1 - R^2)).
-SIN2, INV, GROWTH, DECAY, WEIGHT, SPECTRUM, ELSEWHERE_NOW, ELSEWHERE_NEXT, AMP2, FILL = range(10)
-MODE_ROWS = 10
+#: the impacts scheduled elsewhere on the bank, this period and the next; the share of the
+#: period a free decay fills, (1 - R^(2 period)) / (period (1 - R^2)).
+SIN2, INV, GROWTH, DECAY, WEIGHT, SPECTRUM, ELSEWHERE_NOW, ELSEWHERE_NEXT, FILL = range(9)
+MODE_ROWS = 9
 
 #: Per-bank integer fields of :attr:`BudgetTables.layout`: mode count; its first column
 #: in the per-mode rows; offsets of its (6, modes) bank rows, of its (4, modes) target,
@@ -554,27 +553,17 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
     """Importance of bank b's modes for this period (scores[0]) and the next (scores[1],
     the amplitude decayed by a period), and whether each sounds now (scores[2]: 1.0 or
     0.0), into ``d.scores``; kept modes not fading get ``bonus`` (no churn at the margin).
-    ``flat_psd``: the force's PSD spread flat over frequency unless SPECTRAL."""
+    ``flat_psd``: the force's PSD spread flat over frequency unless SPECTRAL. One pass
+    over the modes, the kept set's choices as selects (a branch on it mispredicts as it
+    varies from decision to decision)."""
     k, o = t.layout[MODES, b], t.layout[FIRST, b]
     rows, scores, kept, faded = t.rows, d.scores, t.kept, t.faded
-    amp2 = rows[AMP2]
     floor2 = t.values[FLOOR2, b]
-    for m in range(o, o + k):
-        amp2[m] = 0.0
-        scores[2, m] = 0.0
-    if t.compact_meta[b, GATHERED]:  # the state is in the compact bank, kept modes in order
-        c = mode_rows(compact_bank(t, b))
-        j = 0
-        for m in range(o, o + k):
-            if kept[m]:
-                amp2[m] = squared_amplitude(c.c1[j], c.c2[j], c.y1[j], c.y2[j]) / rows[SIN2, m]
-                j += 1
-    else:  # in the bank's rows (modes not kept hold zero state)
-        r = mode_rows(bank_rows(t, b))
-        for i in range(k):
-            m = o + i
-            if kept[m]:
-                amp2[m] = squared_amplitude(r.c1[i], r.c2[i], r.y1[i], r.y2[i]) / rows[SIN2, m]
+    gathered = t.compact_meta[b, GATHERED] > 0  # the state in the compact bank, kept modes in order
+    if gathered and t.compact_meta[b, WIDTH] == 0:  # none kept (the bank's rows then: none read)
+        gathered = False
+    state = mode_rows(compact_bank(t, b) if gathered else bank_rows(t, b))  # (modes not kept: zero)
+    last, j = state.c1.size - 1, 0
     spectral = t.values[SPECTRAL, b] > 0.0
     has_now, has_next = t.values[HAS_ELSEWHERE_NOW, b] > 0.0, t.values[HAS_ELSEWHERE_NEXT, b] > 0.0
     kick_now, kick_next = t.values[KICK_NOW, b], t.values[KICK_NEXT, b]
@@ -582,26 +571,21 @@ def bank_importance(t, d, b, flat_psd, sample_rate, bonus):
     target, delta = coef_rows(t.target, t, b)[COEF_GAIN], coef_rows(t.delta, t, b)[COEF_GAIN]
     for i in range(k):
         m = o + i
-        a = amp2[m]
-        if a < 0.0:
-            a = 0.0
-        elif a > floor2:
-            scores[2, m] = 1.0
+        at = min(j, last) if gathered else i
+        a = squared_amplitude(state.c1[at], state.c2[at], state.y1[at], state.y2[at]) / rows[SIN2, m]
+        a = max(a, 0.0) if kept[m] else 0.0
+        j += kept[m]
+        scores[2, m] = 1.0 if a > floor2 else 0.0
         g = (target[i] - left * delta[i]) * sample_rate
         unit2 = g * g * rows[INV, m]
         s = rows[SPECTRUM, m] if spectral else flat_psd
         forced = unit2 * s * rows[GROWTH, m]
         fill = rows[FILL, m]
-        struck_now = unit2 * kick_now
-        struck_next = unit2 * kick_next
-        if has_now:
-            struck_now += rows[ELSEWHERE_NOW, m]
-        if has_next:
-            struck_next += rows[ELSEWHERE_NEXT, m]
+        struck_now = unit2 * kick_now + (rows[ELSEWHERE_NOW, m] if has_now else 0.0)
+        struck_next = unit2 * kick_next + (rows[ELSEWHERE_NEXT, m] if has_next else 0.0)
         now = max(a * fill, forced) + struck_now * fill
         later = max(a * rows[DECAY, m] * fill, forced) + struck_next * fill
-        if kept[m] and not faded[m]:
-            now *= bonus
+        now *= bonus if kept[m] and not faded[m] else 1.0
         w = rows[WEIGHT, m]
         scores[0, m] = w * now
         scores[1, m] = w * later
