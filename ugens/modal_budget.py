@@ -378,6 +378,14 @@ def jump_at(a, b):
     jump_to_fresh(tables_at(a, 0), b)
 
 
+@nb.njit(fastmath=True, cache=True, inline="always")
+def centred_times(force, mean, window, out):
+    """out = (force - mean) * window, element by element (the same length; slices that start
+    at their first element: the loop vectorises, where offset indices kept it scalar)."""
+    for i in range(force.size):
+        out[i] = (force[i] - mean) * window[i]
+
+
 @nb.njit(fastmath=True, cache=True)
 def centred_windowed(force, window, out, oldest):
     """out = (force - its mean) * window, the window starting at sample ``oldest`` of the
@@ -389,10 +397,8 @@ def centred_windowed(force, window, out, oldest):
     for i in range(n):
         mean += force[i]
     mean /= n
-    for i in range(oldest, n):
-        out[i] = (force[i] - mean) * window[i - oldest]
-    for i in range(oldest):
-        out[i] = (force[i] - mean) * window[i + n - oldest]
+    centred_times(force[oldest:], mean, window[: n - oldest], out[oldest:])
+    centred_times(force[:oldest], mean, window[n - oldest :], out[:oldest])
 
 
 @nb.njit(cache=True)
