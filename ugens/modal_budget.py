@@ -621,17 +621,16 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
     target, delta, fresh = coef_rows(t.target, t, b), coef_rows(t.delta, t, b), coef_rows(t.fresh, t, b)
     settle_compact(t, b)
     count = 0
-    for i in range(k):
+    for i in range(k):  # (branches only on what is rare: one on the kept set mispredicts)
         m = o + i
         if faded[m]:
             for r in range(COEF_ROWS):
                 target[r, i] = fresh[r, i]
                 delta[r, i] = 0.0
-        if keep[m]:
-            if not kept[m] or faded[m]:
-                for r in range(COEF_ROWS):
-                    bank[r, i] = target[r, i] - ramp_left * delta[r, i]
-        elif fade[m]:  # R -> R shrink: c1 = 2 R cos theta, c2 = R^2; no input
+        if keep[m] and (not kept[m] or faded[m]):
+            for r in range(COEF_ROWS):
+                bank[r, i] = target[r, i] - ramp_left * delta[r, i]
+        if fade[m] and not keep[m]:  # R -> R shrink: c1 = 2 R cos theta, c2 = R^2; no input
             rows.c1[i] *= shrink
             rows.c2[i] *= shrink * shrink
             rows.g[i] = 0.0
@@ -639,13 +638,12 @@ def apply_kept(t, b, keep, fade, ramp_left, shrink):
             for r in range(COEF_ROWS):
                 target[r, i] = bank[r, i]
                 delta[r, i] = 0.0
-        else:
-            rows.y1[i] = 0.0
-            rows.y2[i] = 0.0
+        computed = keep[m] or fade[m]
+        rows.y1[i] = rows.y1[i] if computed else 0.0  # (silenced: zero state)
+        rows.y2[i] = rows.y2[i] if computed else 0.0
         faded[m] = fade[m]
-        kept[m] = keep[m] or fade[m]
-        if kept[m]:
-            count += 1
+        kept[m] = computed
+        count += computed
     t.compact_meta[b, GATHERED] = 0
     return count
 
