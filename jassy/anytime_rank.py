@@ -22,23 +22,35 @@ DIGIT_BITS, TOP_SHIFT = 8, 55
 
 @nb.njit(cache=True)
 def kth_smallest(a, k, bins):
-    """The k-th smallest (from 0; 0 <= k < a.size) of the non-negative values a (reordered
-    in place; no NaN), by radix selection on their bits, DIGIT_BITS at a time from the
-    top: per pass a histogram (``bins``: int64 scratch of 2^DIGIT_BITS), the bin holding
-    the k-th, the values in it kept. What np.partition(a, k)[k] gives, with few branches
-    that depend on the values: on the wok's 297 scores, varying from call to call as the
-    decisions' do, a ``rank_modes`` took 5.6 us with Wirth's selection (mispredicted
-    branches; 1.8 us on the same scores again and again)."""
+    """(the k-th smallest (from 0; 0 <= k < a.size) of the non-negative values a, how many
+    are larger), a reordered in place (no NaN), by radix selection on their bits,
+    DIGIT_BITS at a time from the top: per pass a histogram (``bins``: int64 scratch of
+    2^DIGIT_BITS), the bin holding the k-th (sought from the nearer end of the bins
+    used), the values in it kept. The value np.partition(a, k)[k] gives, with few
+    branches that depend on the values: on the wok's 297 scores, varying from call to
+    call as the decisions' do, a ``rank_modes`` took 5.6 us with Wirth's selection
+    (mispredicted branches; 1.8 us on the same scores again and again)."""
     bits = a.view(np.int64)
-    count, shift, mask = a.size, TOP_SHIFT, (1 << DIGIT_BITS) - 1
+    count, shift, mask, larger = a.size, TOP_SHIFT, (1 << DIGIT_BITS) - 1, 0
     while count > 1:
         bins[:] = 0
+        low, high = mask, 0
         for i in range(count):
-            bins[(bits[i] >> shift) & mask] += 1
-        digit, below = 0, 0
-        while below + bins[digit] <= k:
-            below += bins[digit]
-            digit += 1
+            digit = (bits[i] >> shift) & mask
+            bins[digit] += 1
+            low, high = min(low, digit), max(high, digit)
+        if 2 * k < count:
+            digit, below = low, 0
+            while below + bins[digit] <= k:
+                below += bins[digit]
+                digit += 1
+        else:
+            digit, above = high, 0
+            while count - above - bins[digit] > k:
+                above += bins[digit]
+                digit -= 1
+            below = count - above - bins[digit]
+        larger += count - below - bins[digit]
         kept = 0
         for i in range(count):  # the bin's values to the front, without a branch
             value = bits[i]
@@ -48,7 +60,7 @@ def kth_smallest(a, k, bins):
         if shift == 0:  # every bit sorted: the values left are equal
             break
         shift = max(shift - DIGIT_BITS, 0)
-    return a[k]
+    return a[k], larger  # (the values left equal it)
 
 
 @nb.njit(cache=True)
@@ -69,10 +81,10 @@ def threshold_of(score, limit, ranked, bins):
         positive += s > 0.0
     if positive <= limit:
         return 0.0, 0
-    if unordered:
-        threshold = np.partition(score, n - limit)[n - limit]
-    else:  # the same value: the (positive - limit)-th smallest of the positive scores
-        threshold = kth_smallest(ranked[:positive], positive - limit, bins)
+    if not unordered:  # the (positive - limit)-th smallest of the positive scores
+        threshold, above = kth_smallest(ranked[:positive], positive - limit, bins)
+        return threshold, limit - above
+    threshold = np.partition(score, n - limit)[n - limit]  # (the same value without a NaN)
     above = 0
     for k in range(n):
         above += score[k] > threshold
