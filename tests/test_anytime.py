@@ -915,3 +915,36 @@ def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_b
     full, budgeted = run(None), run(ModeBudget(max_modes=60))
     assert np.sum(full[insert_at:] ** 2) > 1.0
     assert error_db(budgeted[insert_at:], full[insert_at:]) <= -10.0
+
+
+def test_a_bank_with_no_mode_kept_outputs_zeros_and_hears_its_whole_force():
+    """A bank driven by a quiet white noise beside a loud struck bank, at a budget of 8 of
+    their 160 modes: whenever it keeps no mode (and does not ramp) its output over the
+    sub-block is zero and its ring of the period's force holds the period of its input
+    that ends the sub-block (frame t at t % period), as the compiled render leaves them
+    (ugens.modal_kept.none_kept, without a pass per flush period)."""
+    from ugens.modal_meta import ALLOWED, RAMP_LEFT
+    from ugens.noise import WhiteNoise
+
+    period = 512
+    quiet = ModalBank(
+        ModalModel(np.linspace(300.0, 2700.0, 10), np.full(10, 2.0), np.ones((1, 10))), name="q"
+    )
+    loud = ModalBank(bell_model(150), name="loud")(ImpactForce(name="hl"))
+    mix = Mixer(quiet(WhiteNoise(amp=1e-4, name="noise")), loud)
+    score = [Event(t, "hl", "impact", {"impulse": 1.0}) for t in (0.0, 0.2, 0.4)]
+    budget = ModeBudget(max_modes=8, period=period)
+    step, checked = budget.step, []
+
+    def watched(start, n):
+        step(start, n)
+        t, b = budget._tables, budget._slots[id(quiet)]
+        if t.meta[b, ALLOWED] == 0 and t.meta[b, RAMP_LEFT] == 0 and n >= period:
+            heard = quiet.sources["input"].out[n - period : n]
+            assert not np.any(quiet.out[:n])
+            assert np.array_equal(t.rings[b][np.arange(start + n - period, start + n) % period], heard)
+            checked.append(start)
+
+    budget.step = watched
+    render(Graph(mix, budget=budget), score, 0.6, FS, 4096, limiter=False)
+    assert len(checked) >= 2
