@@ -404,8 +404,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, blocks=No
     force-free stretches by :func:`ring_kept`, forced ones by :func:`resonate_kept`. The
     force also goes to the budget period's ring
     ``heard`` (empty: the force is zero and the ring holds zeros). ``blocks``: a bank of at
-    most four kept modes renders its forced stretches by ugens.modal_block with this
-    block table (made again first if the coefficients changed)."""
+    most four kept modes renders its stretches, forced or ringing, by ugens.modal_block
+    with this block table (made again first if the coefficients changed)."""
     width, rows = meta[WIDTH], mode_rows(compact)
     if blocks is not None:
         current_table(blocks, rows.c1, rows.c2, rows.g, rows.d)
@@ -423,7 +423,7 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, blocks=No
             for j in range(m):
                 o[j] = 0.0
             last[0] = 0.0
-        elif forced and blocks is not None:
+        elif blocks is not None:  # (ringing too: 0.66-0.68 against ring's 1.3-1.5 ns per sample)
             block_resonate(f, o, m, rows, blocks, last)
         elif forced:
             resonate_kept(f, o, m, rows, active, last)
