@@ -646,9 +646,8 @@ DECISION_AT = STATE_AT + FIELD
 @nb.njit(cache=True)
 def impacts_at(a, count, at, period):
     """ugens.modal_budget.load_impacts on the tables and Kicks of step handle ``a`` for a
-    decision at frame ``at`` (impacts count only at a period's start)."""
-    kicks = kicks_at(a, KICKS_AT)
-    return load_impacts(tables_at(a, 0), kicks, count, at, period if at % period == 0 else 0)
+    decision at frame ``at``."""
+    return load_impacts(tables_at(a, 0), kicks_at(a, KICKS_AT), count, at, period)
 
 
 @nb.njit(cache=True)
