@@ -9,8 +9,10 @@ decay rate d_j (1/s), give its output's spectrum (the Laplace transform of decay
 sinusoids, A w_j / ((d_j + i w)^2 + w_j^2)); a fed mode k, of squared amplitude U_k^2 per
 unit impulse (N s), rings after that input with about U_k^2 |X(w_k)|^2, summed over the
 struck modes incoherently (their phases are not tracked). Exact for an undamped fed mode.
-The same transfer weighs a feeding bank's modes by the energy they give the fed bank's
-(what of them is heard, when only the fed bank reaches an output).
+Over a budget period each pair's energy lasts as long as the slower of the two modes rings
+(:func:`lasting`), as the ranking weighs a mode's own ringing by its decay. The same
+transfer weighs a feeding bank's modes by the energy they give the fed bank's (what of
+them is heard, when only the fed bank reaches an output).
 """
 
 from __future__ import annotations
@@ -67,6 +69,22 @@ def _transfer(w: np.ndarray, model) -> np.ndarray:
     return np.abs(wj[None, :] / (s * s + wj[None, :] ** 2)) ** 2
 
 
+def bank_row(tables, row: int, b: int) -> np.ndarray:
+    """Bank b's columns of the per-mode row ``row`` of ``tables.rows`` (a view)."""
+    from ugens.modal_budget import FIRST, MODES
+
+    first = tables.layout[FIRST, b]
+    return tables.rows[row, first : first + tables.layout[MODES, b]]
+
+
+def lasting(transfer: np.ndarray, fed_fill: np.ndarray, feeder_fill: np.ndarray) -> np.ndarray:
+    """``transfer`` (fed modes, feeder modes) times, per pair, the share of a budget period
+    the longer-lived of the two fills (ugens.modal_budget's FILL): a fed mode driven by a
+    ringing feeder mode rings as long as the slower of them, so the energy a pair carries
+    over the period scales with that one's fill, not the fed mode's nor the feeder's."""
+    return transfer * np.maximum(fed_fill[:, None], feeder_fill[None, :])
+
+
 def unit_power(tables, b: int, sample_rate: float) -> np.ndarray:
     """Bank b's squared mode amplitudes per unit impulse (N s) at its gains' ramp targets."""
     from ugens.modal_budget import COEF_AT, FIRST, INV, MODES
@@ -82,10 +100,10 @@ def credit_fed_banks(tables, fed: list[FedBank], fields: tuple[int, int, int], s
     ``fields``: the tables' value field of squared impulses at the bank's location, the
     value field flagging the row and the row (this period's or the next). Fed banks come
     after their feeders (graph order), so a chain of banks passes the credit on."""
-    from ugens.modal_budget import FIRST, MODES
+    from ugens.modal_budget import FILL
 
     kick, has_row, row = fields
-    values, rows = tables.values, tables.rows
+    values = tables.values
 
     def struck(b: int) -> np.ndarray | None:
         """Bank b's squared mode amplitudes after the impacts, None if it is not struck."""
@@ -93,24 +111,23 @@ def credit_fed_banks(tables, fed: list[FedBank], fields: tuple[int, int, int], s
             return None
         power = unit_power(tables, b, sample_rate) * values[kick, b]
         if values[has_row, b] > 0.0:
-            first = tables.layout[FIRST, b]
-            power += rows[row, first : first + tables.layout[MODES, b]]
+            power += bank_row(tables, row, b)
         return power
 
     for slot, feeders, transfers in fed:
-        heard = None
+        heard, fill = None, bank_row(tables, FILL, slot)
         for a, transfer in zip(feeders, transfers, strict=True):
             power = struck(a)
             if power is not None:
-                heard = transfer @ power if heard is None else heard + transfer @ power
+                energy = lasting(transfer, fill, bank_row(tables, FILL, a)) @ power
+                heard = energy if heard is None else heard + energy
         if heard is None:
             continue
-        first = tables.layout[FIRST, slot]
-        target = rows[row, first : first + tables.layout[MODES, slot]]
+        target = bank_row(tables, row, slot)
         if values[has_row, slot] <= 0.0:
             target[:] = 0.0
             values[has_row, slot] = 1.0
-        target += unit_power(tables, slot, sample_rate) * heard
+        target += unit_power(tables, slot, sample_rate) * heard / fill  # (the ranking multiplies by fill)
 
 
 def heard_banks(banks: list, audio: list) -> np.ndarray:
@@ -126,19 +143,17 @@ def weigh_feeders(tables, fed: list[FedBank], heard: np.ndarray, sample_rate: fl
     weight if the bank is heard directly (``heard``), plus, per fed bank, the energy its
     modes ring with per unit energy of the feeder's mode (U_k^2 |X(w_k)|^2 / P_j, weighted
     by the fed modes' own weights). A bank that only feeds another is then ranked by what is heard of it."""
-    from ugens.modal_budget import FIRST, MODES, WEIGHT
-
-    rows = tables.rows
-
-    def weights(b: int) -> np.ndarray:
-        first = tables.layout[FIRST, b]
-        return rows[WEIGHT, first : first + tables.layout[MODES, b]]
+    from ugens.modal_budget import FILL, WEIGHT
 
     feeds: dict[int, list[tuple[int, np.ndarray]]] = {}
     for slot, feeders, transfers in fed:
         for a, transfer in zip(feeders, transfers, strict=True):
             feeds.setdefault(a, []).append((slot, transfer))
     for a in sorted(feeds, reverse=True):  # fed banks come later: their weights are final
-        w = weights(a)
-        reach = sum((unit_power(tables, c, sample_rate) * weights(c)) @ transfer for c, transfer in feeds[a])
-        w[:] = w * heard[a] + reach
+        w, fill = bank_row(tables, WEIGHT, a), bank_row(tables, FILL, a)
+        reach = sum(
+            (unit_power(tables, c, sample_rate) * bank_row(tables, WEIGHT, c))
+            @ lasting(transfer, bank_row(tables, FILL, c), fill)
+            for c, transfer in feeds[a]
+        )
+        w[:] = w * heard[a] + reach / fill  # (the ranking multiplies the feeder's score by its fill)

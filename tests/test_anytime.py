@@ -96,13 +96,13 @@ def test_a_displaced_mode_fades_out_before_the_new_one_enters():
     fade_start = (strike // 512 - 1) * 512  # the decision one period before the strike's own
     # before the fade: the low mode rings untouched; during it: a smooth exponential decay
     ring = y[:fade_start]
-    np.testing.assert_allclose(  # (the kept bank's kernels round otherwise: ugens.modal_block)
-        ring,
+    np.testing.assert_allclose(  # (the kept bank's kernels round otherwise: ugens.modal_block,
+        ring,  # whose free ringing drifts ~1e-10 of the peak in 0.5 s at 220 Hz, ring's ~1e-12)
         render(Graph(ModalBank(low)(ImpactForce(name="ha"))), score[:1], 1.0, FS, 64, limiter=False).audio[0][
             :fade_start
         ],
         rtol=0,
-        atol=1e-12 * np.max(np.abs(ring)),
+        atol=1e-9 * np.max(np.abs(ring)),
     )
     assert np.max(np.abs(np.diff(y[fade_start - 200 : strike]))) <= np.max(np.abs(np.diff(ring))) * 1.001
     before = np.abs(y[fade_start - 220 : fade_start]).max()  # one 220 Hz cycle before the fade
@@ -200,9 +200,10 @@ def test_a_quarter_of_the_modes_is_within_15_db_and_all_of_them_exact(name, seco
 
 def test_modes_rank_by_their_energy_over_the_period_not_their_amplitude_now():
     """Two banks struck at once, one mode each: a 220 Hz mode ringing for seconds and a
-    2.2 kHz one gone in a few ms (600 1/s), whose amplitude right after the impact the
-    ranking once put first. With one mode allowed the budget keeps the one that carries
-    the energy (over a period, 1800x the other's), so the render is the slow mode's."""
+    2.2 kHz one gone in a few ms (600 1/s), which the ranking once put first by its
+    squared amplitude per unit impulse. Over a period an ideal impulse leaves the slow one
+    ~45x the fast one's energy (the default pulse excites 2.2 kHz less still): with one
+    mode allowed the budget keeps the slow one, so the render is the slow mode's."""
 
     def graph(budget):
         slow = ModalBank(ModalModel([220.0], [3.0], [[1.0]]), name="slow")(ImpactForce(name="hit_slow"))
@@ -215,6 +216,71 @@ def test_modes_rank_by_their_energy_over_the_period_not_their_amplitude_now():
     kept = render(graph(ModeBudget(max_modes=1)), score, 0.5, FS, 64, limiter=False).audio[0]
     assert error_db(kept, slow_alone) < -200.0
     assert error_db(kept, full) < -30.0  # (keeping the fast mode: about 0 dB)
+
+
+@pytest.mark.parametrize("fed_bank", [False, True])
+def test_an_impact_after_a_mid_period_onset_still_counts_at_that_decision(fed_bank):
+    """A scrape starts mid-period on a silent plate (an onset: the budget decides there)
+    and a silent bell is struck later in that period: the decision counts the rest of the
+    period's impacts, so the bell keeps modes for its impact and sounds as in the full
+    synthesis (it scored zero, stayed silent and never scored again). Also where the banks
+    render themselves after the budget's step (``fed_bank``: a bank hears a bank)."""
+    period = 2048
+
+    def graph(budget):
+        stylus = Scrape(name="stylus", roughness=4e-6, stiffness=1e5, seed=3, force=0.0, speed=0.0)
+        plate = ModalBank(steel_plate_model(), name="plate", location="t2", gain=30.0)(stylus)
+        bell = ModalBank(bell_model(150, prime=300, seed=4), name="bell")(ImpactForce(name="hit"))
+        heard = [plate, bell]
+        if fed_bank:
+            feeder = ModalBank(bell_model(20, prime=500, seed=1), name="feeder")(ImpactForce(name="tap"))
+            heard += [feeder, ModalBank(bell_model(10, prime=700, seed=2), name="fed")(feeder)]
+        return Graph(Mixer(*heard), budget=budget), bell
+
+    onset, strike = 10 * period + 300, 10 * period + 1500
+    score = [
+        Event(onset / FS, "stylus", "set", {"force": 1.0, "speed": 0.5}, jump=True),
+        Event(strike / FS, "hit", "impact", {"impulse": 0.5}),
+    ]
+    bells = []
+    for budget in (None, ModeBudget(max_modes=250, period=period)):
+        g, bell = graph(budget)
+        engine = OfflineEngine(g, score, FS, 512, limiter=False, program=False)
+        assert g.budget_renders is (budget is not None and not fed_bank)
+        out = []
+        for _ in range(0, 12 * period, 512):
+            engine.render(512 / FS)
+            out.append(bell.out[:512].copy())
+        bells.append(np.concatenate(out)[strike:])
+    full, budgeted = bells
+    assert np.sum(full**2) > 1.0
+    assert error_db(budgeted, full) < -20.0
+
+
+def test_a_feeder_heard_through_a_slow_bank_ranks_by_how_long_that_bank_rings():
+    """A fast-decaying exciter (40 modes, ~100 1/s) heard only through a slow bell it
+    feeds, beside a bell struck on its own: the exciter's modes carry what the fed bell
+    rings with over the period, which lasts as long as the bell's modes (the slower of
+    each pair), not the exciter's few ms. Ranked by the exciter's own decay they lost
+    their place and the fed bell went silent (-3.2 dB at 100 of 200 modes; -8.2 dB now)."""
+    rng = np.random.default_rng(0)
+    frequencies, decays = np.sort(rng.uniform(150, 4000, 40)), 100.0 * rng.uniform(0.7, 1.4, 40)
+    gains = rng.uniform(0.3, 1, (1, 40))
+    times, impulses = rng.uniform(0, 1.5, 24), rng.uniform(0.05, 0.5, 24)
+
+    def graph(budget):
+        exciter = ModalBank(ModalModel(frequencies, decays, gains), name="exciter")(ImpactForce(name="ha"))
+        fed = ModalBank(bell_model(60, prime=250, seed=1), name="fed", gain=300.0)(exciter)
+        other = ModalBank(bell_model(100, prime=450, seed=2), name="other")(ImpactForce(name="hc"))
+        return Graph(Mixer(fed, other), budget=budget)
+
+    score = [
+        Event(float(t), name, "impact", {"impulse": float(j)})
+        for t, name, j in zip(times, ["ha", "hc"] * 12, impulses, strict=True)
+    ]
+    full = render(graph(None), score, 1.5, FS, 256, limiter=False).audio[0]
+    half = render(graph(ModeBudget(max_modes=100)), score, 1.5, FS, 256, limiter=False).audio[0]
+    assert error_db(half, full) < -6.0
 
 
 def test_a_contact_nobody_scheduled_sounds_from_its_first_sample():
@@ -486,9 +552,10 @@ def test_the_compiled_periodogram_at_the_modes_bins_matches_numpy():
 
 def test_impacts_load_as_numpy_sums():
     """ugens.modal_budget.load_impacts against sums in numpy: per bank, the squared
-    impulses at its current location this period and the next, and the squared
-    amplitudes per mode of impacts elsewhere; impacts before the period, two periods on,
-    with impulse <= 0 or on none of the banks (slot -1) count nowhere."""
+    impulses at its current location from the decision to its period's end and in the
+    next period, and the squared amplitudes per mode of impacts elsewhere; impacts before
+    the decision, two periods on, with impulse <= 0 or on none of the banks (slot -1)
+    count nowhere. At a period's start and between two (a force woke a bank)."""
     from jassy.anytime_rank import Kicks
     from ugens import modal_budget as mb
 
@@ -498,34 +565,36 @@ def test_impacts_load_as_numpy_sums():
     t.values[mb.SIZE] = (4.0, 9.0)
     gains = np.random.default_rng(2).normal(size=14)  # bank 1 at two locations: rows at 0 and 7
     rows = [  # frame, slot, impulse, where its gains start (-1: current location)
-        (at - 1, 0, 9.0, -1), (at, 0, 0.5, -1), (at + 3, 0, 0.25, -1), (at + period, 0, 0.75, -1),
-        (at + 4, 0, -0.5, -1), (at + 5, 1, 0.0, 0), (at + 6, -1, 2.0, -1), (at + 7, 1, 0.3, 0),
-        (at + 8, 1, 0.2, 7), (at + period + 1, 1, 0.4, 7), (at + period + 2, 1, 0.6, -1),
-        (at + 2 * period, 0, 5.0, -1), (at + 2 * period, 1, 5.0, 0),
+        (at - 1, 0, 9.0, -1), (at, 0, 0.5, -1), (at + 3, 0, 0.25, -1), (at + 4, 0, -0.5, -1),
+        (at + 5, 1, 0.0, 0), (at + 6, -1, 2.0, -1), (at + 7, 1, 0.3, 0), (at + 8, 1, 0.2, 7),
+        (at + 10, 0, 0.125, -1), (at + 12, 1, 0.7, 0), (at + period, 0, 0.75, -1),
+        (at + period + 1, 1, 0.4, 7), (at + period + 2, 1, 0.6, -1), (at + 2 * period, 0, 5.0, -1),
+        (at + 2 * period, 1, 5.0, 0),
     ]  # fmt: skip
     frames, slots, impulses, located = (np.array(column) for column in zip(*rows, strict=True))
     kicks = Kicks(frames, slots, impulses > 0, impulses.astype(float), located, gains)
-    t.values[mb.KICK_NOW] = 7.0  # stale values of an earlier decision are cleared
-    t.rows[mb.ELSEWHERE_NOW] = 7.0
-    assert mb.load_impacts(t, kicks, len(rows), at, period)
-    window = [(frames >= at + p * period) & (frames < at + (p + 1) * period) & (impulses > 0) for p in (0, 1)]
-    for b, k in enumerate(counts):
-        o = sum(counts[:b])
-        for later in (0, 1):
-            here = window[later] & (slots == b) & (located < 0)
-            assert t.values[mb.KICK_NOW + later, b] == pytest.approx(np.sum(impulses[here] ** 2), abs=0)
-            elsewhere = np.flatnonzero(window[later] & (slots == b) & (located >= 0))
-            assert t.values[mb.HAS_ELSEWHERE_NOW + later, b] == float(elsewhere.size > 0)
-            if elsewhere.size:
-                amplitude = (
-                    gains[located[elsewhere, None] + np.arange(k)]
-                    * impulses[elsewhere, None]
-                    * t.values[mb.GAIN_LEVEL, b]
-                )
-                expected = np.sum(amplitude**2, axis=0) / t.values[mb.SIZE, b]
-                assert np.allclose(t.rows[mb.ELSEWHERE_NOW + later, o : o + k], expected, rtol=1e-14)
-    assert not mb.load_impacts(t, kicks, len(rows), at, 0)  # between period starts: none
-    assert np.all(t.values[mb.KICK_NOW : mb.HAS_ELSEWHERE_NEXT + 1] == 0.0)
+    for decision in (at, at + period // 2):
+        t.values[mb.KICK_NOW] = 7.0  # stale values of an earlier decision are cleared
+        t.rows[mb.ELSEWHERE_NOW] = 7.0
+        assert mb.load_impacts(t, kicks, len(rows), decision, period)
+        bounds = (decision, at + period, at + 2 * period)
+        window = [(frames >= bounds[p]) & (frames < bounds[p + 1]) & (impulses > 0) for p in (0, 1)]
+        for b, k in enumerate(counts):
+            o = sum(counts[:b])
+            for later in (0, 1):
+                here = window[later] & (slots == b) & (located < 0)
+                assert t.values[mb.KICK_NOW + later, b] == pytest.approx(np.sum(impulses[here] ** 2), abs=0)
+                elsewhere = np.flatnonzero(window[later] & (slots == b) & (located >= 0))
+                assert t.values[mb.HAS_ELSEWHERE_NOW + later, b] == float(elsewhere.size > 0)
+                if elsewhere.size:
+                    amplitude = (
+                        gains[located[elsewhere, None] + np.arange(k)]
+                        * impulses[elsewhere, None]
+                        * t.values[mb.GAIN_LEVEL, b]
+                    )
+                    expected = np.sum(amplitude**2, axis=0) / t.values[mb.SIZE, b]
+                    assert np.allclose(t.rows[mb.ELSEWHERE_NOW + later, o : o + k], expected, rtol=1e-14)
+    assert t.values[mb.KICK_NOW, 0] == 0.125**2  # (the middle's: at + 10 only)
 
 
 def test_the_periodogram_of_a_banks_ring_in_budget_tables_matches_numpy():
@@ -949,3 +1018,36 @@ def test_an_impact_inserted_live_into_a_started_period_sounds_on_a_struck_only_b
     full, budgeted = run(None), run(ModeBudget(max_modes=60))
     assert np.sum(full[insert_at:] ** 2) > 1.0
     assert error_db(budgeted[insert_at:], full[insert_at:]) <= -10.0
+
+
+def test_a_bank_with_no_mode_kept_outputs_zeros_and_hears_its_whole_force():
+    """A bank driven by a quiet white noise beside a loud struck bank, at a budget of 8 of
+    their 160 modes: whenever it keeps no mode (and does not ramp) its output over the
+    sub-block is zero and its ring of the period's force holds the period of its input
+    that ends the sub-block (frame t at t % period), as the compiled render leaves them
+    (ugens.modal_kept.none_kept, without a pass per flush period)."""
+    from ugens.modal_meta import ALLOWED, RAMP_LEFT
+    from ugens.noise import WhiteNoise
+
+    period = 512
+    quiet = ModalBank(
+        ModalModel(np.linspace(300.0, 2700.0, 10), np.full(10, 2.0), np.ones((1, 10))), name="q"
+    )
+    loud = ModalBank(bell_model(150), name="loud")(ImpactForce(name="hl"))
+    mix = Mixer(quiet(WhiteNoise(amp=1e-4, name="noise")), loud)
+    score = [Event(t, "hl", "impact", {"impulse": 1.0}) for t in (0.0, 0.2, 0.4)]
+    budget = ModeBudget(max_modes=8, period=period)
+    step, checked = budget.step, []
+
+    def watched(start, n):
+        step(start, n)
+        t, b = budget._tables, budget._slots[id(quiet)]
+        if t.meta[b, ALLOWED] == 0 and t.meta[b, RAMP_LEFT] == 0 and n >= period:
+            heard = quiet.sources["input"].out[n - period : n]
+            assert not np.any(quiet.out[:n])
+            assert np.array_equal(t.rings[b][np.arange(start + n - period, start + n) % period], heard)
+            checked.append(start)
+
+    budget.step = watched
+    render(Graph(mix, budget=budget), score, 0.6, FS, 4096, limiter=False)
+    assert len(checked) >= 2

@@ -142,3 +142,37 @@ def test_a_bank_dropping_to_four_kept_modes_renders_by_blocks_as_without():
         outs.append(out)
     assert np.max(np.abs(outs[0])) > 0
     assert np.max(np.abs(outs[1] - outs[0])) < 1e-12 * np.max(np.abs(outs[0]))
+
+
+def test_free_ringing_by_blocks_follows_the_decaying_sinusoids():
+    """With no force a bank of 1-4 modes rendered by blocks (its free ringing too) rings as
+    sum_k A_k R_k^n sin(n theta_k + phi_k) over spans of awkward lengths (flush frames
+    at 1024 and 2048 inside), its modes past ``live`` silent, its state the recursion's."""
+    rng = np.random.default_rng(13)
+    n = np.arange(3001)[:, None]
+    for live in (1, 2, 4):
+        bank = compact_bank(rng, live)
+        amp, phi = rng.uniform(0.5, 2.0, live), rng.uniform(0, 6, live)
+        radius = np.sqrt(bank[1, :live])
+        theta = np.arccos(bank[0, :live] / (2 * radius))
+        bank[4, :live] = amp / radius * np.sin(phi - theta)  # y[-1]
+        bank[5, :live] = amp / radius**2 * np.sin(phi - 2 * theta)  # y[-2]
+        expected = np.sum(amp * radius**n * np.sin(n * theta + phi), axis=1)
+        out, at, meta, last = np.zeros(3001), 0, np.array([live, 1, 8]), np.zeros(1)
+        table = line_aligned_zeros((BLOCK_TABLE,))
+        for size in (5, 8, 1000, 13, 1975):
+            kept_step(
+                np.zeros(size),
+                out[at : at + size],
+                at,
+                size,
+                bank[:BANK_ROWS],
+                meta,
+                1e-12,
+                last,
+                np.zeros(0),
+                table,
+            )
+            at += size
+        assert np.max(np.abs(out - expected)) < 1e-9 * np.max(np.abs(expected)), live
+        assert meta[0] == live and last[0] == 0.0 and not np.any(bank[4:6, live:])

@@ -212,3 +212,42 @@ def test_forced_passes_in_explicit_vectors_give_resonates_samples_and_state(mode
         else:
             assert np.max(np.abs(out - reference)) < 1e-12 * np.max(np.abs(reference))
             assert np.max(np.abs(ours - theirs)) < 1e-12 * np.max(np.abs(theirs))
+
+
+def test_hear_copies_the_last_period_of_any_span_into_the_ring():
+    """ugens.modal_kept.hear: frame t of a span goes to ring[t % size], spans shorter and
+    longer than the ring and wrapping around its end; samples outside it stay."""
+    from ugens.modal_kept import hear
+
+    rng = np.random.default_rng(4)
+    size = 64
+    for start, n in ((0, 10), (60, 9), (5, 64), (37, 200), (128, 64)):
+        ring = rng.normal(size=size)
+        want = ring.copy()
+        force = rng.normal(size=n)
+        frames = np.arange(start, start + n)[-size:]
+        want[frames % size] = force[-size:]
+        hear(force, n, ring, start)
+        assert np.array_equal(ring, want), (start, n)
+
+
+def test_silence_writes_zeros_past_the_known_ones_and_extends_them():
+    """ugens.modal_kept.silence on a buffer of non-zero samples whose first ``zeros[b]``
+    are known zero: the span [offset, offset + n) reads zero afterwards, the samples
+    before the known count and outside the span keep their values (were not written),
+    and the count reaches the span's end only if the span joins the known zeros."""
+    from jassy.jit import address
+    from ugens.modal_kept import silence
+
+    for known, offset, n, count in (
+        (100, 20, 50, 100),
+        (100, 80, 50, 130),
+        (100, 100, 8, 108),
+        (40, 60, 8, 40),
+    ):
+        out = np.arange(1.0, 201.0)  # none zero: a sample the call skips keeps its value
+        zeros = np.array([0, known])
+        silence(address(out), zeros, 1, offset, n)
+        want = np.arange(1.0, 201.0)
+        want[max(offset, known) : offset + n] = 0.0
+        assert np.array_equal(out, want) and zeros[1] == count, (known, offset, n)

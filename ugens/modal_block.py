@@ -20,8 +20,11 @@ coefficients change (a location jump, a new kept set: :func:`current_table`). Pe
 27 vector multiply-adds, no sum across lanes, and a chain of two multiply-adds from one
 pass's state to the next (the sample-by-sample recursion has eight). Exact in exact
 arithmetic; in floating point its outputs differ from ugens.modal.resonate's by rounding
-(the same products, grouped otherwise). Used where a force drives the bank: free ringing
-(ugens.modal_kept.ring, eight samples per pass already) was no faster in this form.
+(the same products, grouped otherwise). Used for the bank's free ringing too (a zero
+force): 0.66-0.68 ns per sample for 1-4 modes against ugens.modal_kept.ring's 1.3-1.5
+(its scalar chain per mode is latency-bound); its rounding drifts more over a long ring
+(after 4 s, of the peak: 2e-10 at 20 Hz, 2e-11 at 220 Hz, 4e-12 at 2 kHz; ring's 4e-12,
+2e-13, 3e-14), still far below anything heard.
 """
 
 from __future__ import annotations

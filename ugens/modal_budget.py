@@ -517,25 +517,25 @@ def periodogram(t, b, window_power, frame):
 
 @nb.njit(cache=True)
 def load_impacts(t, kicks, count, at, period):
-    """The impacts scheduled in this period [at, at + period) and the next (rows of the
-    first ``count`` of ``kicks``, jassy.anytime_rank.Kicks, in frame order) into the
-    tables: per bank struck, the sum of squared impulses at its current location
-    (KICK_NOW / KICK_NEXT) and, for impacts at other locations, the squared amplitude per
-    mode, (gain at the location * GAIN_LEVEL * impulse)^2 / SIZE, summed in the
-    ELSEWHERE_NOW / ELSEWHERE_NEXT rows (HAS_ELSEWHERE_* set). Returns whether some bank
-    is struck. Called with ``period`` 0 (a decision between period starts): no impact."""
+    """The impacts scheduled from frame ``at`` to the end of its period and in the next
+    period (``period`` frames; rows of the first ``count`` of ``kicks``,
+    jassy.anytime_rank.Kicks, in frame order) into the tables: per bank struck, the sum of
+    squared impulses at its current location (KICK_NOW / KICK_NEXT) and, for impacts at
+    other locations, the squared amplitude per mode, (gain at the location * GAIN_LEVEL *
+    impulse)^2 / SIZE, summed in the ELSEWHERE_NOW / ELSEWHERE_NEXT rows (HAS_ELSEWHERE_*
+    set). A decision between period starts (a force woke a bank) so still counts the rest
+    of its period's impacts. Returns whether some bank is struck."""
     values, rows = t.values, t.rows
     for field in range(KICK_NOW, HAS_ELSEWHERE_NEXT + 1):
         values[field, :] = 0.0
-    if period == 0:
-        return False
     kicked = False
+    next_period = at - at % period + period
     j = np.searchsorted(kicks.frames[:count], at)
-    while j < count and kicks.frames[j] < at + 2 * period:
+    while j < count and kicks.frames[j] < next_period + period:
         b = kicks.slots[j]
         if b >= 0 and kicks.positive[j]:
             kicked = True
-            later = 1 if kicks.frames[j] >= at + period else 0
+            later = 1 if kicks.frames[j] >= next_period else 0
             impulse = kicks.impulses[j]
             if kicks.located[j] < 0:
                 values[KICK_NOW + later, b] += impulse * impulse
