@@ -513,16 +513,28 @@ def test_an_impact_is_credited_to_the_bank_it_drives_and_passed_on_through_a_cha
 
 def test_the_compiled_real_fft_matches_numpy():
     """Every power-of-two length 4 .. 8192: an odd and an even count of radix-2 stages
-    after the first two, the vector butterflies at their narrowest blocks (4 points)."""
+    after the first two, the vector butterflies at their narrowest blocks (4 points); the
+    scratch and outputs of their exact sizes, followed by NaN guards that are neither read
+    (the result would be NaN) nor written. Other lengths and short arrays are refused."""
     from ugens.real_fft import real_spectrum, twiddles
 
+    guard = 16
     for n in 2 ** np.arange(2, 14):
         x = np.random.default_rng(n).normal(size=n) + 0.1
         cos, sin = twiddles(n)
-        re, im = np.zeros(n // 2 + 1), np.zeros(n // 2 + 1)
-        real_spectrum(x, cos, sin, np.zeros(n // 2), np.zeros(n // 2), re, im)
+        buffers = [np.full(size + guard, np.nan) for size in (n // 2, n // 2, n // 2 + 1, n // 2 + 1)]
+        zr, zi, re, im = (b[: b.size - guard] for b in buffers)
+        real_spectrum(x, cos, sin, zr, zi, re, im)
         expected = np.fft.rfft(x)
         assert np.max(np.abs(re + 1j * im - expected)) < 1e-13 * np.max(np.abs(expected))
+        assert all(np.isnan(b[b.size - guard :]).all() for b in buffers)
+    for n in (2, 6, 12):
+        cos, sin = twiddles(n)
+        with pytest.raises(ValueError, match="power of two"):
+            real_spectrum(np.ones(n), cos, sin, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+    cos, sin = twiddles(16)
+    with pytest.raises(ValueError, match="scratch of n/2"):
+        real_spectrum(np.ones(16), cos, sin, np.zeros(7), np.zeros(8), np.zeros(9), np.zeros(9))
 
 
 def test_the_compiled_periodogram_at_the_modes_bins_matches_numpy():

@@ -78,6 +78,8 @@ def radix4_lanes(typingctx, zr, zi, wr, wi, p, h, k):
     p + 3h): twiddles e^{-2 pi i k / 4h} at wr[k], wi[k] and e^{-2 pi i k / 2h} at wr[h + k],
     wi[h + k]."""
     signature = _typed(zr, zi, wr, wi, p, h, k)
+    if signature is None:
+        return None
 
     def codegen(context, builder, signature, args):
         rows, tw = _lanes(context, builder, signature, args, 4)
@@ -115,6 +117,8 @@ def radix2_lanes(typingctx, zr, zi, wr, wi, p, h, k):
     """One radix-2 stage (h points -> 2h) at butterflies k .. k + LANES - 1 of the block at
     p (halves at p, p + h): twiddles e^{-2 pi i k / 2h} at wr[h + k], wi[h + k]."""
     signature = _typed(zr, zi, wr, wi, p, h, k)
+    if signature is None:
+        return None
 
     def codegen(context, builder, signature, args):
         rows, tw = _lanes(context, builder, signature, args, 2)
@@ -173,9 +177,14 @@ def stage_twiddles(cos, sin, n, wr, wi, h, quarter):
 def real_spectrum(x, cos, sin, zr, zi, xr, xi):
     """The DFT of the real x (length n, a power of two >= 4) at bins 0 .. n/2: real parts
     into xr, imaginary into xi (n/2 + 1 each); zr, zi (n/2 each) are scratch; cos, sin:
-    :func:`twiddles` (n)."""
+    :func:`twiddles` (n). zr, zi, xr and xi are C-contiguous float64 (the passes run in
+    explicit vectors over them); other lengths or shorter arrays raise ValueError."""
     n = x.size
     m = n // 2
+    if n < 4 or n & (n - 1) or min(zr.size, zi.size) < m or min(xr.size, xi.size) < m + 1:
+        raise ValueError("real_spectrum: expected n a power of two >= 4, scratch of n/2, outputs of n/2 + 1")
+    if min(cos.size, sin.size) < m + 1:
+        raise ValueError("real_spectrum: expected twiddles of n/2 + 1")
     size = first_stages(x, zr, zi)
     stages = 0
     while size << stages < m:
