@@ -1063,3 +1063,49 @@ def test_a_bank_with_no_mode_kept_outputs_zeros_and_hears_its_whole_force():
     budget.step = watched
     render(Graph(mix, budget=budget), score, 0.6, FS, 4096, limiter=False)
     assert len(checked) >= 2
+
+
+def switching_scene(seed, period, fraction):
+    """Five small banks (1-6 modes), the even ones driven by noise switched between off,
+    faint and loud, the odd ones struck three times: banks go silent, keep no mode, keep
+    some and lose them again, and forces rise and fall between decisions."""
+    from ugens.noise import WhiteNoise
+
+    rng = np.random.default_rng(seed)
+    banks, score, total = [], [], 0
+    for i in range(5):
+        k = int(rng.choice([1, 2, 3, 4, 6]))
+        total += k
+        model = ModalModel(
+            np.sort(rng.uniform(20, 2000, k)), rng.uniform(0.0, 5.0, k), rng.uniform(0.1, 1, (2, k))
+        )
+        if i % 2 == 0:
+            source = WhiteNoise(amp=0.0, name=f"n{i}")
+            for t in np.sort(rng.uniform(0, 1.5, 6)):
+                amp = float(rng.choice([0.0, 1e-4, 1e-2]))
+                score.append(Event(float(t), f"n{i}", "set", {"amp": amp}, jump=True))
+        else:
+            source = ImpactForce(name=f"h{i}")
+            for t in rng.uniform(0, 1.5, 3):
+                score.append(Event(float(t), f"h{i}", "impact", {"impulse": float(rng.uniform(0.01, 1.0))}))
+        banks.append(ModalBank(model, name=f"b{i}")(source))
+    budget = ModeBudget(max_modes=max(1, int(fraction * total)), period=period)
+    return Graph(Mixer(*banks), budget=budget), sorted(score, key=lambda e: e.time)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_banks_hearing_forces_that_rise_and_fall_render_as_through_their_own_process(seed, monkeypatch):
+    """The compiled render of all banks against each bank rendering itself through its own
+    process (as banks with a size input do), on banks whose noise forces switch on and off:
+    the same decisions, so the same output within rounding. (A bank rendered after the
+    step once left its ring of the period's force behind the step's check for a steadily
+    heard force, which then skipped decisions the compiled render took: up to 1e-5 of the
+    peak apart.)"""
+    for period, block, fraction in ((512, 4096, 0.2), (512, 100, 0.3), (2048, 777, 0.15), (1024, 8192, 0.4)):
+        compiled = render(*switching_scene(seed, period, fraction), 1.5, FS, block, limiter=False).audio[0]
+        with monkeypatch.context() as patched:
+            patched.setattr(ModalBank, "anytime_compiled", lambda self: False)
+            own = render(*switching_scene(seed, period, fraction), 1.5, FS, block, limiter=False).audio[0]
+        peak = np.max(np.abs(own))
+        assert peak > 0.0
+        assert np.max(np.abs(compiled - own)) <= 1e-10 * peak, (period, block)

@@ -575,7 +575,9 @@ def silence(address, zeros, b, offset, n):
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
-    """Every budgeted bank b but those ``by_python`` over frames [start, start + n), from
+    """Every budgeted bank b but those ``by_python`` (rendered after the step: only their
+    force into their ring here, so that :func:`steady_forces` judges what they heard up to
+    this frame, as for the others) over frames [start, start + n), from
     samples [offset, offset + n) of its input (``h``: jassy.anytime_rank.Hearing) into
     its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
     (ugens.modal_budget); its force into its ring unless ``struck_only`` (never judged).
@@ -591,6 +593,10 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     work = 0
     for b in range(by_python.size):
         if by_python[b]:
+            if heard_lately(h, b) and not h.struck_only[b]:
+                hear(
+                    nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64), n, t.rings[b], start
+                )
             continue
         busy = heard_lately(h, b)
         ramping = t.meta[b, RAMP_LEFT] > 0
