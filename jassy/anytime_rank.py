@@ -91,16 +91,22 @@ def threshold_of(score, limit, ranked, bins):
     return threshold, limit - above
 
 
+@nb.njit(inline="always", cache=True)
+def in_top(score, threshold, ties):
+    """(whether ``score``, met in index order, is among the highest by :func:`threshold_of`'s
+    threshold and ties left, the ties left after it)."""
+    if ties > 0 and score == threshold:
+        return True, ties - 1
+    return score > threshold, ties
+
+
 @nb.njit(cache=True)
 def top_mask(score, limit, keep):
     """keep[k] = True for the ``limit`` highest positive scores (ties broken by index);
     none for ``limit`` <= 0."""
     threshold, ties = threshold_of(score, limit, np.empty(score.size), np.empty(1 << DIGIT_BITS, np.int64))
     for k in range(score.size):
-        keep[k] = score[k] > threshold
-        if ties > 0 and score[k] == threshold:
-            keep[k] = True
-            ties -= 1
+        keep[k], ties = in_top(score[k], threshold, ties)
 
 
 @nb.njit(cache=True)
@@ -115,14 +121,8 @@ def rank_modes(scores, limit, keep, fade, later_top):
     later, ties_later = threshold_of(scores[1], limit, ranked, bins)
     any_fade = False
     for k in range(n):
-        top = scores[0, k] > now
-        if ties_now > 0 and scores[0, k] == now:
-            top = True
-            ties_now -= 1
-        top_later = scores[1, k] > later
-        if ties_later > 0 and scores[1, k] == later:
-            top_later = True
-            ties_later -= 1
+        top, ties_now = in_top(scores[0, k], now, ties_now)
+        top_later, ties_later = in_top(scores[1, k], later, ties_later)
         later_top[k] = top_later
         f = top and not top_later and scores[2, k] > 0.0
         fade[k] = f

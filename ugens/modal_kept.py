@@ -592,17 +592,15 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     after its span)."""
     work = 0
     for b in range(by_python.size):
-        if by_python[b]:
-            if heard_lately(h, b) and not h.struck_only[b]:
-                hear(
-                    nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64), n, t.rings[b], start
-                )
-            continue
         busy = heard_lately(h, b)
-        ramping = t.meta[b, RAMP_LEFT] > 0
-        idle = not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0
         force = nb.carray(void_pointer(h.inputs[b] + 8 * offset), (n,), np.float64)
         ring_of_force = t.rings[b] if busy and not h.struck_only[b] else t.rings[b, :0]
+        if by_python[b]:
+            if ring_of_force.size:
+                hear(force, n, ring_of_force, start)
+            continue
+        ramping = t.meta[b, RAMP_LEFT] > 0
+        idle = not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0
         if not ramping and (idle or t.meta[b, ALLOWED] == 0):
             if not idle:
                 none_kept(t, b, force, start, n, ring_of_force)
