@@ -4,9 +4,11 @@ At multiples of ``period`` frames on the clock (the banks' sub-blocks are split 
 a decision is taken, so the result does not depend on the block size) the budget ranks
 all modes of all banks by
 
-    I_k = w(f_k) * (A_k^2 + (a_k J_b)^2 + a_k^2 S_b(f_k) (1 - e^{-2 d_k tau}) / (2 d_k))
+    I_k = w(f_k) * (max(F_k A_k^2, a_k^2 S_b(f_k) (1 - e^{-2 d_k tau}) / (2 d_k)) + F_k (a_k J_b)^2)
 
-where A_k is the mode's current amplitude (from its two state samples), a_k its amplitude
+(ugens.modal_budget gives it in full) where A_k is the mode's current amplitude (from its
+two state samples), F_k the share of the period its free decay fills (so that ringing and
+impacts count by their energy over the period), a_k its amplitude
 per unit impulse at the point struck, (a_k J_b)^2 summed over the impacts scheduled
 upstream of bank b in this period, S_b the power spectral density (N^2/Hz, Hann-windowed periodogram, mean
 removed) of the force the bank heard in the last period, and w = 1 (the budget minimises

@@ -207,10 +207,11 @@ def has_force(force, begin, end):
 
 class Hearing(NamedTuple):
     """What a budget knows of each bank's force: its input (float64 arrays of ``size`` at
-    ``inputs``, kept alive by their nodes), whether it is rendered after the budget
-    (``unseen``: its force counts as heard), an impact expected in this period, a force
-    heard in this and in the last period, a force in the current stretch, a force nobody
-    scheduled waking it (``onset``), a force since it was last rendered, and whether its
+    ``inputs``, kept alive by their nodes), whether its input is rendered after the
+    budget's step (``unseen``: a bank fed by a bank; its force counts as heard), an impact
+    expected in this period, a force heard in this and in the last period, a force in the
+    current stretch, a force nobody scheduled waking it (``onset``), a force since it was
+    last rendered, and whether its
     force is the score's impacts alone (``struck_only``: an ImpactForce's; ranked from the
     score, it never counts as heard nor wakes the bank)."""
 

@@ -767,7 +767,8 @@ class ModalBank(ModelParams, UGen):
 
     def _refresh_forcing(self) -> None:
         """Per mode (internal order), in the budget's rows: sin^2 theta, 1 / (R^2 sin^2
-        theta), the energy decay over a period R^(2 period), the build-up under a steady
+        theta), the energy decay over a period R^(2 period), the share of the period a free
+        decay fills (FILL, ugens.modal_budget), the build-up under a steady
         force over the budget's horizon tau, (1 - e^{-2 d tau}) / (2 d) in s (the
         amplitude^2 a stationary force of power spectral density S gives it is unit2 S
         times this), and the DFT bin of its frequency in a budget period."""

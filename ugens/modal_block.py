@@ -42,7 +42,7 @@ from jassy.jit import drop_stale_cache
 from ugens import cells, kernels, vector_ir
 from ugens.cells import two_pole
 from ugens.kernels import FASTMATH
-from ugens.vector_ir import DOUBLE, INDEX, broadcast, contiguous, fma, row_pointer, shuffle
+from ugens.vector_ir import DOUBLE, INDEX, UPDATE_FLAGS, broadcast, contiguous, fma, row_pointer, shuffle
 
 drop_stale_cache(__file__, [cells, kernels, vector_ir])  # its cache holds their kernels and code
 
@@ -57,9 +57,6 @@ BASIS, TOEPLITZ, NEXT_Y1, NEXT_Y2, NEXT_INPUT, MADE_FROM = 0, 8, 16, 17, 18, 26
 BLOCK_ROWS = MADE_FROM + 2
 #: Floats of a block table (rows of BLOCK lanes, flat).
 BLOCK_TABLE = BLOCK_ROWS * BLOCK
-
-#: The passes' adds and multiplies: contracted to fused multiply-adds where written so.
-_FLAGS = ("contract", "nsz", "arcp")
 
 
 @nb.njit(cache=True)
@@ -106,10 +103,10 @@ def _accumulated(builder, terms, chains):
     sums = [None] * chains
     for t, (a, b) in enumerate(terms):
         c = t % chains
-        sums[c] = builder.fmul(a, b, flags=_FLAGS) if sums[c] is None else fma(builder, a, b, sums[c])
+        sums[c] = builder.fmul(a, b, flags=UPDATE_FLAGS) if sums[c] is None else fma(builder, a, b, sums[c])
     sums = [x for x in sums if x is not None]
     while len(sums) > 1:
-        pairs = [builder.fadd(a, b, flags=_FLAGS) for a, b in zip(sums[::2], sums[1::2], strict=False)]
+        pairs = [builder.fadd(a, b, flags=UPDATE_FLAGS) for a, b in zip(sums[::2], sums[1::2], strict=False)]
         sums = pairs + ([sums[-1]] if len(sums) % 2 else [])
     return sums[0]
 
@@ -136,20 +133,16 @@ def block_passes(typingctx, table, y1, y2, force, out, passes, fp, direct):
         table, y1, y2, force, out, passes, fp, direct = args
         kinds = signature.args
         vector, half = ir.VectorType(DOUBLE, BLOCK), ir.VectorType(DOUBLE, BLOCK_MODES)
-        base = row_pointer(context, builder, kinds[0], table, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK))
+        base = row_pointer(context, builder, kinds[0], table, cgutils.intp_t(0), vector)
 
         # the rows, loaded once before the passes: held in registers, not reloaded
         rows = [builder.load(builder.gep(base, [cgutils.intp_t(r)]), align=8) for r in range(MADE_FROM)]
 
-        low = row_pointer(
-            context, builder, kinds[1], y1, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK_MODES)
-        )
-        high = row_pointer(
-            context, builder, kinds[2], y2, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK_MODES)
-        )
+        low = row_pointer(context, builder, kinds[1], y1, cgutils.intp_t(0), half)
+        high = row_pointer(context, builder, kinds[2], y2, cgutils.intp_t(0), half)
         scalars = [builder.bitcast(p, DOUBLE.as_pointer()) for p in (low, high)]
         force_at = context.make_array(kinds[3])(context, builder, force).data
-        out_at = row_pointer(context, builder, kinds[4], out, cgutils.intp_t(0), ir.VectorType(DOUBLE, BLOCK))
+        out_at = row_pointer(context, builder, kinds[4], out, cgutils.intp_t(0), vector)
         before_slot = cgutils.alloca_once_value(builder, fp)
         direct_lanes = broadcast(builder, direct, BLOCK)
         with cgutils.for_range(builder, builder.sext(passes, cgutils.intp_t)) as loop:

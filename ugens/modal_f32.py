@@ -564,9 +564,9 @@ def resonate_chunks(force, out, n, rows, active, wide, wide_active, last, delta_
         if wide is not None:
             if 0 < wide_active <= 2 * WIDE_LANES:
                 wide_forces = (force[i - 1] if i > 0 else last[0], force[i], force[i + 1], force[i + 2])
-                vector_pass.add_wide_chunk(WIDE_LANES, wide, 0, wide_forces, sums)
+                vector_pass.add_wide_chunk(wide, 0, wide_forces, sums)
                 if wide_active > WIDE_LANES:
-                    vector_pass.add_wide_chunk(WIDE_LANES, wide, WIDE_LANES, wide_forces, sums)
+                    vector_pass.add_wide_chunk(wide, WIDE_LANES, wide_forces, sums)
             elif wide_active > 0:
                 t0, t1, t2, t3 = _wide_pass(wide, wide_active, force, i, last)
         for k in range(0, split, LANES):

@@ -53,7 +53,7 @@ from ugens import (
 from ugens.cells import ModeRows, is_flush_frame, mode_rows, two_pole, until_flush
 from ugens.kernels import FASTMATH
 from ugens.modal import Ramp, flush_silent, resonate, resonate_ramp
-from ugens.modal_block import _FLAGS, BLOCK_MODES, block_resonate, current_table
+from ugens.modal_block import BLOCK_MODES, block_resonate, current_table
 from ugens.modal_budget import (
     BANK_ROWS,
     COEF_ROWS,
@@ -73,7 +73,7 @@ from ugens.modal_budget import (
 )
 from ugens.modal_meta import ACTIVE, ALLOWED, RAMP_LEFT, WIDTH
 from ugens.modal_retune import COEF_C1, COEF_C2, COEF_DIRECT, COEF_GAIN
-from ugens.vector_ir import DOUBLE, broadcast, contiguous, fma, row_pointer, shuffle
+from ugens.vector_ir import DOUBLE, UPDATE_FLAGS, broadcast, contiguous, fma, row_pointer, shuffle
 
 drop_stale_cache(
     __file__,
@@ -154,7 +154,7 @@ def _transposed_sum(builder, sums):
         first = [i if (i // width) % 2 == 0 else i - width + KEPT_LANES for i in range(KEPT_LANES)]
         second = [i + width if (i // width) % 2 == 0 else i + KEPT_LANES for i in range(KEPT_LANES)]
         level = [
-            builder.fadd(shuffle(builder, a, b, first), shuffle(builder, a, b, second), flags=_FLAGS)
+            builder.fadd(shuffle(builder, a, b, first), shuffle(builder, a, b, second), flags=UPDATE_FLAGS)
             for a, b in zip(level[::2], level[1::2], strict=True)
         ]
         width *= 2
@@ -169,15 +169,15 @@ RING_CHUNK, RING_COEFFICIENTS = 8, 6
 def _ring_coefficients(builder, c1, c2):
     """The coefficients of :func:`_free_response` for modes (vectors) c1, c2: c1, c1^2 - c2,
     -c2, -c1 c2, c1^2 - 2 c2 and -c2^2."""
-    minus_c2 = builder.fneg(c2, flags=_FLAGS)
-    c1_squared = builder.fmul(c1, c1, flags=_FLAGS)
+    minus_c2 = builder.fneg(c2, flags=UPDATE_FLAGS)
+    c1_squared = builder.fmul(c1, c1, flags=UPDATE_FLAGS)
     return [
         c1,
-        builder.fadd(c1_squared, minus_c2, flags=_FLAGS),
+        builder.fadd(c1_squared, minus_c2, flags=UPDATE_FLAGS),
         minus_c2,
-        builder.fmul(minus_c2, c1, flags=_FLAGS),
+        builder.fmul(minus_c2, c1, flags=UPDATE_FLAGS),
         fma(builder, minus_c2, ir.Constant(c1.type, [2.0] * KEPT_LANES), c1_squared),
-        builder.fneg(builder.fmul(c2, c2, flags=_FLAGS), flags=_FLAGS),
+        builder.fneg(builder.fmul(c2, c2, flags=UPDATE_FLAGS), flags=UPDATE_FLAGS),
     ]
 
 
@@ -190,14 +190,14 @@ def _free_response(builder, coefficients, y1, y2):
     units busy (the same samples in exact arithmetic)."""
     c1, first, minus_c2, mixed, twice, minus_squared = coefficients
     samples = [
-        fma(builder, c1, y1, builder.fmul(minus_c2, y2, flags=_FLAGS)),
-        fma(builder, first, y1, builder.fmul(mixed, y2, flags=_FLAGS)),
+        fma(builder, c1, y1, builder.fmul(minus_c2, y2, flags=UPDATE_FLAGS)),
+        fma(builder, first, y1, builder.fmul(mixed, y2, flags=UPDATE_FLAGS)),
     ]
     before = [y2, y1]  # y[-2], y[-1]
     for j in range(2, KEPT_LANES):
         four_back = samples[j - 4] if j >= 4 else before[j - 2]
         samples.append(
-            fma(builder, twice, samples[j - 2], builder.fmul(minus_squared, four_back, flags=_FLAGS))
+            fma(builder, twice, samples[j - 2], builder.fmul(minus_squared, four_back, flags=UPDATE_FLAGS))
         )
     return samples
 
@@ -249,12 +249,12 @@ def ring_passes(typingctx, out, c1, c2, y1, y2, passes, vectors, adding):
                 held_now = [builder.load(coefficient(each_vector.index, i)) for i in range(RING_COEFFICIENTS)]
                 samples = _free_response(builder, held_now, *(builder.load(x, align=8) for x in at))
                 for s, v in zip(sums, samples, strict=True):
-                    builder.store(builder.fadd(builder.load(s), v, flags=_FLAGS), s)
+                    builder.store(builder.fadd(builder.load(s), v, flags=UPDATE_FLAGS), s)
                 builder.store(samples[-2], at[1], align=8)
                 builder.store(samples[-1], at[0], align=8)
             total = _transposed_sum(builder, [builder.load(s) for s in sums])
             where = builder.gep(out_at, [each_pass.index])
-            added = builder.fadd(builder.load(where, align=8), total, flags=_FLAGS)
+            added = builder.fadd(builder.load(where, align=8), total, flags=UPDATE_FLAGS)
             builder.store(builder.select(args[7], added, total), where, align=8)
         return context.get_dummy_value()
 
@@ -302,11 +302,11 @@ def resonate_passes(typingctx, force, out, c1, c2, g, y1, y2, passes, vectors, b
             with cgutils.for_range(builder, builder.sext(args[8], cgutils.intp_t)) as each_vector:
                 at = [builder.gep(row, [each_vector.index]) for row in rows]
                 p, q, gain, old, older = (builder.load(x, align=8) for x in at)
-                minus_q = builder.fneg(q, flags=_FLAGS)
+                minus_q = builder.fneg(q, flags=UPDATE_FLAGS)
                 for s, x in zip(sums, inputs, strict=True):
-                    driven = fma(builder, minus_q, older, builder.fmul(gain, x, flags=_FLAGS))
+                    driven = fma(builder, minus_q, older, builder.fmul(gain, x, flags=UPDATE_FLAGS))
                     v = fma(builder, p, old, driven)
-                    builder.store(builder.fadd(builder.load(s), v, flags=_FLAGS), s)
+                    builder.store(builder.fadd(builder.load(s), v, flags=UPDATE_FLAGS), s)
                     older, old = old, v
                 builder.store(older, at[4], align=8)
                 builder.store(old, at[3], align=8)
@@ -729,9 +729,10 @@ def kept_span(a, b, force, out, start, n):
     """Budgeted bank b (its rows in the tables of handle ``a``, jassy.record_views) over
     force[:n] into out[:n], frames [start, start + n), as :func:`render_kept` renders it
     (for a bank that renders through its own ``process``): :func:`render_bank`, the force
-    into its ring."""
+    into its ring unless the step renders (its :func:`render_kept` copied it already)."""
     t = tables_at(a, 0)
-    render_bank(t, b, force, out, start, n, t.rings[b])
+    renders = int_row(a, STATE_AT)[RENDERS] > 0
+    render_bank(t, b, force, out, start, n, t.rings[b, :0] if renders else t.rings[b])
 
 
 @nb.njit(cache=True)

@@ -1,8 +1,8 @@
 """Building blocks of the explicit-vector intrinsics (llvmlite IR inside numba intrinsics):
 the fused multiply-add, lane shuffles and broadcasts, the address of an array element as a
-vector pointer and the argument check they share. Used by ugens.vector_pass (float32 modal
-passes), ugens.modal_block (block kernels of small banks) and ugens.modal_kept (a mode
-budget's kept modes)."""
+vector pointer, the argument check and the fast-math flags of their state updates they share.
+Used by ugens.vector_pass (float32 modal passes), ugens.modal_block (block kernels of small
+banks), ugens.modal_kept (a mode budget's kept modes) and ugens.real_fft (its butterflies)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,10 @@ from numba.core import cgutils, types
 DOUBLE = ir.DoubleType()
 FLOAT = ir.FloatType()
 INDEX = ir.IntType(32)
+
+#: Fast-math flags of a state update's multiplies and adds (as ugens.modal_f32's numba
+#: kernels): contraction into fused multiply-adds, no reassociation.
+UPDATE_FLAGS = ("contract", "nsz", "arcp")
 
 
 def fma(builder, a, b, c):

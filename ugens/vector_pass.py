@@ -26,13 +26,20 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from ugens.vector_ir import FLOAT, INDEX, broadcast, contiguous, fma, row_pointer, shuffle
+from ugens.vector_ir import (
+    DOUBLE,
+    FLOAT,
+    INDEX,
+    UPDATE_FLAGS,
+    broadcast,
+    contiguous,
+    fma,
+    row_pointer,
+    shuffle,
+)
 
 #: float32 lanes of one AVX-512 vector: the reduction first folds wider rows to this.
 VECTOR = 16
-
-#: Flags of the update's adds (as ugens.modal_f32's: contraction, no reassociation).
-_UPDATE_FLAGS = ("contract", "nsz", "arcp")
 
 #: Flags of the reduction's adds: any order (the sums of a pass are independent of its
 #: state, so the order only moves their float32 rounding).
@@ -87,18 +94,18 @@ def _pass(builder, lanes, c0v, bv, p, v, forces, by_factor=True):
         force = fma(builder, minus_c0, older if by_factor else newer, broadcast(builder, f, lanes))
         if by_factor:
             return fma(builder, bv, v, force)
-        return builder.fadd(force, fma(builder, minus_b, v, v), flags=_UPDATE_FLAGS)
+        return builder.fadd(force, fma(builder, minus_b, v, v), flags=UPDATE_FLAGS)
 
     fp, f0, f1, f2 = forces
-    u = builder.fadd(p, v, flags=_UPDATE_FLAGS)
+    u = builder.fadd(p, v, flags=UPDATE_FLAGS)
     v = next_delta(v, p, u, fp)
-    u0 = builder.fadd(u, v, flags=_UPDATE_FLAGS)
+    u0 = builder.fadd(u, v, flags=UPDATE_FLAGS)
     v = next_delta(v, u, u0, f0)
-    u1 = builder.fadd(u0, v, flags=_UPDATE_FLAGS)
+    u1 = builder.fadd(u0, v, flags=UPDATE_FLAGS)
     v = next_delta(v, u0, u1, f1)
-    u2 = builder.fadd(u1, v, flags=_UPDATE_FLAGS)
+    u2 = builder.fadd(u1, v, flags=UPDATE_FLAGS)
     v = next_delta(v, u1, u2, f2)
-    u3 = builder.fadd(u2, v, flags=_UPDATE_FLAGS)
+    u3 = builder.fadd(u2, v, flags=UPDATE_FLAGS)
     return u2, v, (u0, u1, u2, u3)
 
 
@@ -108,7 +115,7 @@ def _is_literal_width(width) -> bool:
 
 
 def _contiguous_arrays(record, count: int, dtype) -> bool:
-    """Whether ``record`` is a tuple type of ``count`` arrays passing :func:`_contiguous`."""
+    """Whether ``record`` is a tuple type of ``count`` arrays passing :func:`ugens.vector_ir.contiguous`."""
     return (
         isinstance(record, types.BaseTuple)
         and len(record) == count
@@ -124,7 +131,7 @@ def _scalars(record, count: int, dtype) -> bool:
 
 
 def _row_pointers(context, builder, record_type, record, at, vector):
-    """:func:`_row_pointer` of each array of a record (a tuple of arrays)."""
+    """:func:`ugens.vector_ir.row_pointer` of each array of a record (a tuple of arrays)."""
     values = cgutils.unpack_tuple(builder, record, len(record_type))
     return [
         row_pointer(context, builder, t, v, at, vector)
@@ -156,7 +163,7 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
     def codegen(context, builder, signature, args):
         _, rows, fp, force, out, at, direct = args
         vector = ir.VectorType(FLOAT, lanes)
-        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        four_doubles = ir.VectorType(DOUBLE, 4)
         pointers = _row_pointers(context, builder, signature.args[1], rows, cgutils.intp_t(0), vector)
         c0v, bv, gv, p, v = (builder.load(row, align=64) for row in pointers)
         samples = row_pointer(context, builder, signature.args[3], force, at, four_doubles)
@@ -165,7 +172,7 @@ def write_four(typingctx, width, rows, fp, force, out, i, direct):
         y_next, v, outputs = _pass(builder, lanes, c0v, bv, p, v, (fp, f0, f1, f2))
         builder.store(y_next, pointers[3], align=64)
         builder.store(v, pointers[4], align=64)
-        terms = [builder.fmul(gv, uj, flags=_UPDATE_FLAGS) for uj in outputs]
+        terms = [builder.fmul(gv, uj, flags=UPDATE_FLAGS) for uj in outputs]
         total = _sum_four(builder, *(_fold(builder, t, lanes) for t in terms))
         total = fma(builder, broadcast(builder, builder.fptrunc(direct, FLOAT), 4), forces, total)
         target = row_pointer(context, builder, signature.args[4], out, at, four_doubles)
@@ -236,7 +243,7 @@ def write_sums(typingctx, width, sums, out, i, wide):
     def codegen(context, builder, signature, args):
         _, sums, out, at, wide = args
         vector = ir.VectorType(FLOAT, lanes)
-        four_doubles = ir.VectorType(ir.DoubleType(), 4)
+        four_doubles = ir.VectorType(DOUBLE, 4)
         pointers = _row_pointers(context, builder, signature.args[1], sums, cgutils.intp_t(0), vector)
         rows = [_fold(builder, builder.load(row, align=64), lanes) for row in pointers]
         total = builder.fpext(_sum_four(builder, *rows), four_doubles)
@@ -255,20 +262,18 @@ WIDE_VECTOR = 8
 
 
 @intrinsic
-def add_wide_chunk(typingctx, width, wide, k, forces, sums):
-    """Advance the float64 modes [k, k + WIDE_VECTOR) of ``wide`` (``width`` the literal
-    WIDE_VECTOR; the rows c1, c2, g, d, y1 = y[n-1], y2 = y[n-2] of ugens.cells.ModeRows,
-    float64, at least k + WIDE_VECTOR long) by four samples of the two-pole recursion y[n]
-    = c1 y[n-1] - c2 y[n-2] + g F[n-1] (ugens.cells.two_pole, as c1 y[n-1] + (g F - c2
-    y[n-2])) whose preceding forces are ``forces`` (four float64, N), storing y1 and y2, and
-    add sample j's outputs, rounded to float32, to the first WIDE_VECTOR lanes of sums[j]
-    (:func:`add_chunk`'s four float32 rows, on 64-byte lines): no reduction of their own.
+def add_wide_chunk(typingctx, wide, k, forces, sums):
+    """Advance the float64 modes [k, k + WIDE_VECTOR) of ``wide`` (the rows c1, c2, g, d,
+    y1 = y[n-1], y2 = y[n-2] of ugens.cells.ModeRows, float64, at least k + WIDE_VECTOR
+    long) by four samples of the two-pole recursion y[n] = c1 y[n-1] - c2 y[n-2] + g F[n-1]
+    (ugens.cells.two_pole, as c1 y[n-1] + (g F - c2 y[n-2])) whose preceding forces are
+    ``forces`` (four float64, N), storing y1 and y2, and add sample j's outputs, rounded to
+    float32, to the first WIDE_VECTOR lanes of sums[j] (:func:`add_chunk`'s four float32
+    rows, on 64-byte lines): no reduction of their own.
     As scalars, two float64 modes took 10-12 % of the time of 254 float32 modes (an FMA
     unit's slot per mode and operation)."""
     if not (
-        isinstance(width, types.IntegerLiteral)
-        and width.literal_value == WIDE_VECTOR
-        and _contiguous_arrays(wide, 6, types.float64)
+        _contiguous_arrays(wide, 6, types.float64)
         and isinstance(k, types.Integer)
         and _scalars(forces, 4, types.float64)
         and _contiguous_arrays(sums, 4, types.float32)
@@ -276,16 +281,16 @@ def add_wide_chunk(typingctx, width, wide, k, forces, sums):
         return None
 
     def codegen(context, builder, signature, args):
-        _, wide, at, forces, sums = args
-        vector = ir.VectorType(ir.DoubleType(), WIDE_VECTOR)
-        pointers = _row_pointers(context, builder, signature.args[1], wide, at, vector)
+        wide, at, forces, sums = args
+        vector = ir.VectorType(DOUBLE, WIDE_VECTOR)
+        pointers = _row_pointers(context, builder, signature.args[0], wide, at, vector)
         c1v, c2v, gv = (builder.load(row, align=8) for row in pointers[:3])
         y1, y2 = (builder.load(row, align=8) for row in pointers[4:])
         minus_c2 = builder.fneg(c2v)
         narrow = ir.VectorType(FLOAT, WIDE_VECTOR)
-        rows = _row_pointers(context, builder, signature.args[4], sums, cgutils.intp_t(0), narrow)
+        rows = _row_pointers(context, builder, signature.args[3], sums, cgutils.intp_t(0), narrow)
         for f, row in zip(cgutils.unpack_tuple(builder, forces, 4), rows, strict=True):
-            drive = builder.fmul(gv, broadcast(builder, f, WIDE_VECTOR), flags=_UPDATE_FLAGS)
+            drive = builder.fmul(gv, broadcast(builder, f, WIDE_VECTOR), flags=UPDATE_FLAGS)
             y1, y2 = fma(builder, c1v, y1, fma(builder, minus_c2, y2, drive)), y1
             total = builder.fadd(builder.load(row, align=32), builder.fptrunc(y1, narrow), flags=_SUM_FLAGS)
             builder.store(total, row, align=32)
@@ -293,4 +298,4 @@ def add_wide_chunk(typingctx, width, wide, k, forces, sums):
         builder.store(y2, pointers[5], align=8)
         return context.get_dummy_value()
 
-    return types.none(width, wide, k, forces, sums), codegen
+    return types.none(wide, k, forces, sums), codegen
