@@ -527,10 +527,9 @@ def ramp_kept(t, b, force, out, start, n, ring_of_force):
 def none_kept(t, b, force, start, n, ring_of_force):
     """Budgeted bank b with no mode kept (and no ramp) over force[:n], frames
     [start, start + n), as :func:`render_bank` leaves it but for its output (zeros, which
-    the caller writes): its compact bank gathered (no columns), nothing active, no force
-    sample before the next span, the force into ``ring_of_force`` (empty: it is zero)."""
-    compact_bank(t, b)  # (none kept: no columns)
-    t.compact_meta[b, ACTIVE] = 0
+    the caller writes) and its compact bank, left as it is (it would gather no column:
+    nothing reads one while none is kept): nothing active, no force sample before the next
+    span, the force into ``ring_of_force`` (empty: it is zero)."""
     t.meta[b, ACTIVE] = 0
     t.last[b] = 0.0
     if ring_of_force.size:
