@@ -234,10 +234,11 @@ def scan_forces(h, begin, end, rotate):
     banks ``unseen`` count as forced. First the stretch scanned before is folded into
     ``heard_now`` and ``unrendered``. ``rotate`` (a period starts): the last period's
     ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected no
-    impact and heard nothing in this or the last period. A bank ``struck_only`` is
-    scanned (a force renders it) but neither hears nor is woken. Returns (any
-    heard_before, any onset). A bank that heard a force in this period already is not
-    scanned."""
+    impact and heard nothing in this or the last period. A bank ``struck_only`` neither
+    hears nor is woken, so it is not scanned (ugens.modal_kept.render_kept looks for its
+    force where it has modes kept and nothing sounding: 40 % of the wok scene's scanned
+    samples). Returns (any heard_before, any onset). A bank that heard a force in this
+    period already is not scanned."""
     any_before = False
     any_onset = False
     heard_now, heard_before, forced = h.heard_now, h.heard_before, h.forced
@@ -249,7 +250,7 @@ def scan_forces(h, begin, end, rotate):
             heard_now[b] = False
         any_before |= heard_before[b]
         loud = h.unseen[b]
-        if not loud and not heard_now[b]:
+        if not loud and not heard_now[b] and not h.struck_only[b]:
             loud = has_force(nb.carray(void_pointer(h.inputs[b]), (h.size,), np.float64), begin, end)
         forced[b] = loud
         quiet = h.expected[b] or heard_now[b] or heard_before[b] or h.unseen[b] or h.struck_only[b]

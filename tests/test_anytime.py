@@ -757,6 +757,27 @@ def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     assert steady_forces(h, rings, ramp_left, state)
 
 
+def test_the_force_scan_leaves_a_struck_only_bank_unscanned():
+    """jassy.anytime_rank.scan_forces on two banks hearing the same pulse: the one
+    ``struck_only`` is neither forced, nor heard, nor woken (its force is found where it
+    renders, ugens.modal_kept.render_kept); the other is forced in the stretch with the
+    pulse, wakes (no impact expected) and hears it once the next stretch is scanned."""
+    from jassy.anytime_rank import Hearing, scan_forces
+
+    force = np.zeros(2048)
+    force[700] = 0.5
+    flags = [np.zeros(2, dtype=bool) for _ in range(8)]
+    h = Hearing(np.array([force.ctypes.data] * 2, dtype=np.intp), force.size, *flags, np.zeros(2))
+    h.struck_only[0] = True
+    assert scan_forces(h, 0, 512, True) == (False, False)
+    assert not h.forced.any()
+    assert scan_forces(h, 512, 1024, False) == (False, True)
+    assert list(h.forced) == [False, True] and list(h.onset) == [False, True]
+    scan_forces(h, 1024, 2048, False)
+    assert list(h.heard_now) == [False, True] and list(h.unrendered) == [False, True]
+    assert not h.forced.any()  # (bank 1 heard this period already: not scanned again)
+
+
 def test_a_sub_block_in_one_compiled_call_gives_the_stepwise_renders_bits(monkeypatch):
     """ModeBudget.step renders a sub-block without a queued change in one call of the
     compiled step when the step takes every decision itself; the general loop around

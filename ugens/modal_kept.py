@@ -440,7 +440,8 @@ def kept_step(force, out, start, n, compact, meta, floor, last, heard, blocks=No
 def heard_lately(h, b):
     """Whether bank b hears a force in this stretch, heard one since it was last rendered,
     or in this or the last period (``h``: jassy.anytime_rank.Hearing): else its ring of
-    the period's force holds zeros and keeps them."""
+    the period's force holds zeros and keeps them. (Never for a ``struck_only`` bank,
+    whose force jassy.anytime_rank.scan_forces leaves unscanned.)"""
     return h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
 
 
@@ -581,7 +582,9 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
     (ugens.modal_budget); its force into its ring unless ``struck_only`` (never judged).
     A bank with nothing to compute (no ramp, and no mode kept, or not
-    :func:`heard_lately` with no mode sounding and no force sample before) writes zeros
+    :func:`heard_lately` with no mode sounding and no force sample before; a
+    ``struck_only`` bank, which scan_forces does not scan, by no force sample in the span)
+    writes zeros
     (:func:`silence`), and not even those where its output already holds them: ``zeros[b]``
     counts the samples from the start of its output buffer known to be zero (most of the
     wok scene's fourteen 4-mode banks are silent most of the time: writing 4096 zeros
@@ -600,6 +603,8 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
             continue
         ramping = t.meta[b, RAMP_LEFT] > 0
         idle = not busy and t.meta[b, ACTIVE] == 0 and t.last[b] == 0.0
+        if idle and h.struck_only[b] and t.meta[b, ALLOWED] > 0 and not ramping:
+            idle = not has_force(force, 0, n)  # (scan_forces leaves it unscanned)
         if not ramping and (idle or t.meta[b, ALLOWED] == 0):
             if not idle:
                 none_kept(t, b, force, start, n, ring_of_force)
