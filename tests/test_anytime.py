@@ -713,6 +713,26 @@ def test_a_steady_force_is_not_decided_every_period():
     assert abs(results["steady"][1] - results["creeping"][1]) < 1.0
 
 
+def test_centred_power_is_numpys_variance_and_zero_for_a_steady_force():
+    """centred_power (one pass, shifted by the first sample) against numpy's variance on
+    noise, noise on a large steady load, a steady force with one spike (first, last or
+    inside) and a slow ramp; exactly 0 for a steady force of any value (a 100 % budget
+    stays the full banks' bits)."""
+    from jassy.anytime_rank import centred_power
+
+    rng = np.random.default_rng(3)
+    noise = rng.normal(size=2048)
+    spiky = []
+    for at in (0, 1000, 2047):
+        ring = np.full(2048, 3.7)
+        ring[at] = -50.0
+        spiky.append(ring)
+    for ring in (noise, 1e6 + 1e-3 * noise, 1e-9 * noise, *spiky, np.linspace(-2.0, 5.0, 2048), noise[:7]):
+        assert centred_power(ring) == pytest.approx(np.var(ring), rel=1e-9)
+    for value in (0.0, 1.0, -3.3, 1e300, 5e-324):
+        assert centred_power(np.full(2048, value)) == 0.0
+
+
 def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():
     """The policy alone on two banks' rings: a period is left undecided while each heard
     force's power is at most STEADY_POWER times its power at the last decision (a weaker
