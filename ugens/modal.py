@@ -1060,9 +1060,8 @@ class ModalBank(ModelParams, UGen):
         """A budgeted bank's jump to the fresh design with its current poles
         (:meth:`_jumps_gains_only`): the design, the budget's tables and the kept modes in
         place (ugens.modal_budget.jump_to_fresh); no ramp left. (The poles are the same, so
-        the per-mode rows of :meth:`_refresh_forcing` are too.)"""
-        self._fresh = self._design()
-        self._design_to_tables()
+        :meth:`_refresh_forcing` finds its per-mode rows current and returns.)"""
+        self._refresh_design_cache()
         self._anytime_entry("jump")(self._tables_handle, self._slot)
         self.meta[RAMP_LEFT] = 0
         self._ramping = False
