@@ -411,7 +411,9 @@ class ModeBudget:
         applied at ``frame``, the render at frame ``now``: the next step lists its impacts
         again. An event in the period already started (its impacts were expected at its
         start) ends ``struck_only`` for the render: the bank it strikes must be woken by
-        the force it hears, as every bank is; one in a later period is foreseen there."""
+        the force it hears, as every bank is; one in a later period is foreseen there. (A
+        pulse of the score already credited at the period's start that runs on past the
+        insert then wakes its bank as an onset.)"""
         self._same_score = False
         if self._flags is not None and frame < (now // self.period + 1) * self.period:
             self._flags[STRUCK_ONLY] = False

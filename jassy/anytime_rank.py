@@ -219,7 +219,8 @@ class Hearing(NamedTuple):
     current stretch, a force nobody scheduled waking it (``onset``), a force since it was
     last rendered, and whether its
     force is the score's impacts alone (``struck_only``: an ImpactForce's; ranked from the
-    score, it never counts as heard nor wakes the bank)."""
+    score, it never counts as heard nor wakes the bank: its input is not scanned, so its
+    ``forced``, ``unrendered`` and ``onset`` stay False)."""
 
     inputs: np.ndarray
     size: int
@@ -241,10 +242,10 @@ def scan_forces(h, begin, end, rotate):
     ``heard_now`` and ``unrendered``. ``rotate`` (a period starts): the last period's
     ``heard_now`` becomes ``heard_before``. ``onset``: forced banks that expected no
     impact and heard nothing in this or the last period. A bank ``struck_only`` neither
-    hears nor is woken, so it is not scanned (ugens.modal_kept.render_kept looks for its
-    force where it has modes kept and nothing sounding: 40 % of the wok scene's scanned
-    samples). Returns (any heard_before, any onset). A bank that heard a force in this
-    period already is not scanned."""
+    hears nor is woken, so it is not scanned (the wok scene's ImpactForce inputs were 40 %
+    of the samples scanned; ugens.modal_kept.render_kept looks for such a bank's force
+    itself where it has modes kept and nothing sounding). Returns (any heard_before, any
+    onset). A bank that heard a force in this period already is not scanned."""
     any_before = False
     any_onset = False
     heard_now, heard_before, forced = h.heard_now, h.heard_before, h.forced

@@ -798,6 +798,39 @@ def test_the_force_scan_leaves_a_struck_only_bank_unscanned():
     assert not h.forced.any()  # (bank 1 heard this period already: not scanned again)
 
 
+def test_a_struck_only_bank_silent_with_modes_kept_sounds_from_its_impacts_first_sample(monkeypatch):
+    """A bank driven by an ImpactForce alone, its modes kept for two impacts of one period,
+    gone silent after the first (they decay in ms) when a sub-block starts, struck again
+    within that sub-block: its force is found by the render itself
+    (jassy.anytime_rank.scan_forces leaves it unscanned), so the second impact sounds from
+    its first sample, and as it does rendering through its own process."""
+    period, block, again = 2048, 512, (1700, 5800, 9900)  # each within a period, a block in
+    model = ModalModel(np.linspace(400.0, 4000.0, 12), np.full(12, 3000.0), np.ones((1, 12)))
+
+    def scene(budget):
+        hit = ImpactForce(name="hit", duration=0.0003)
+        frames = sorted([*again, *(f - 1600 for f in again)])  # the first of each pair
+        score = [Event(f / FS, "hit", "impact", {"impulse": 0.3}) for f in frames]
+        return Graph(ModalBank(model, name="b")(hit), budget=budget), score
+
+    def budget():
+        return ModeBudget(max_modes=6, period=period)
+
+    full = render(*scene(None), 0.25, FS, block, limiter=False).audio[0]
+    budgeted = render(*scene(budget()), 0.25, FS, block, limiter=False).audio[0]
+    with monkeypatch.context() as patched:
+        patched.setattr(ModalBank, "anytime_compiled", lambda self: False)
+        own = render(*scene(budget()), 0.25, FS, block, limiter=False).audio[0]
+    for start in again:  # silent before, sounding at once, about as loud as the full's
+        before, here = slice(start - 200, start), slice(start, start + 48)
+        assert (
+            not np.any(budgeted[before])
+            and np.flatnonzero(budgeted[start:])[0] == np.flatnonzero(full[start:])[0]
+        )
+        assert np.sum(budgeted[here] ** 2) > 0.1 * np.sum(full[here] ** 2)  # (6 of its 12 modes)
+    assert np.max(np.abs(budgeted - own)) <= 1e-10 * np.max(np.abs(own))
+
+
 def test_a_sub_block_in_one_compiled_call_gives_the_stepwise_renders_bits(monkeypatch):
     """ModeBudget.step renders a sub-block without a queued change in one call of the
     compiled step when the step takes every decision itself; the general loop around
