@@ -717,7 +717,7 @@ def test_centred_power_is_numpys_variance_and_zero_for_a_steady_force():
     """centred_power (one pass, shifted by the first sample) against numpy's variance on
     noise, noise on a large steady load, a steady force with one spike (first, last or
     inside) and a slow ramp; exactly 0 for a steady force of any value (a 100 % budget
-    stays the full banks' bits)."""
+    stays the full banks' bits) and for no sample."""
     from jassy.anytime_rank import centred_power
 
     rng = np.random.default_rng(3)
@@ -731,6 +731,7 @@ def test_centred_power_is_numpys_variance_and_zero_for_a_steady_force():
         assert centred_power(ring) == pytest.approx(np.var(ring), rel=1e-9)
     for value in (0.0, 1.0, -3.3, 1e300, 5e-324):
         assert centred_power(np.full(2048, value)) == 0.0
+    assert centred_power(np.empty(0)) == 0.0
 
 
 def test_steady_forces_skips_only_weaker_or_slightly_stronger_forces():

@@ -268,20 +268,23 @@ def rows_in(store, at, rows, columns):
     """store[at : at + rows * columns] (float64, C-contiguous, that long) as a C-contiguous
     (rows, columns) view, made from its address: numba's reshape calls a C helper, ~17 ns
     (three to five of them were a third of a small bank's importance and kept-set
-    change)."""
+    change). For compiled callers only, as jassy.record_views' fields: the view neither
+    keeps ``store`` alive nor checks its length (the tables' layout gives every bank
+    room for its rows and a compact bank of all its modes)."""
     return nb.carray(void_pointer(store[at:].ctypes.data), (rows, columns), np.float64)
 
 
 @nb.njit(cache=True)
 def bank_rows(t, b):
-    """Bank b's (BANK_ROWS, modes) rows c1, c2, g, d, y1, y2 in the tables ``t``."""
+    """Bank b's (BANK_ROWS, modes) rows c1, c2, g, d, y1, y2 in the tables ``t`` (a view
+    for compiled callers: :func:`rows_in`)."""
     return rows_in(t.bank, t.layout[BANK_AT, b], BANK_ROWS, t.layout[MODES, b])
 
 
 @nb.njit(cache=True)
 def coef_rows(store, t, b):
     """Bank b's (COEF_ROWS, modes) rows c1, c2, g, d in ``store`` (the tables' target,
-    delta or fresh)."""
+    delta or fresh; a view for compiled callers: :func:`rows_in`)."""
     return rows_in(store, t.layout[COEF_AT, b], COEF_ROWS, t.layout[MODES, b])
 
 
@@ -312,7 +315,8 @@ def gather_kept(bank, delta, target, kept, compact):
 @nb.njit(cache=True)
 def compact_bank(t, b):
     """Bank b's compact bank, gathered from its rows first if stale (its width: the kept
-    modes rounded up to whole vectors of KEPT_LANES)."""
+    modes rounded up to whole vectors of KEPT_LANES; a view for compiled callers:
+    :func:`rows_in`)."""
     meta = t.compact_meta[b]
     at = t.layout[COMPACT_AT, b]
     if meta[GATHERED]:
