@@ -87,12 +87,13 @@ def lasting(transfer: np.ndarray, fed_fill: np.ndarray, feeder_fill: np.ndarray)
 
 def unit_power(tables, b: int, sample_rate: float) -> np.ndarray:
     """Bank b's squared mode amplitudes per unit impulse (N s) at its gains' ramp targets."""
-    from ugens.modal_budget import COEF_AT, FIRST, INV, MODES
+    from ugens.modal_budget import COEF_AT, INV, MODES
+    from ugens.modal_retune import COEF_GAIN
 
-    k, first = tables.layout[MODES, b], tables.layout[FIRST, b]
-    gains = tables.layout[COEF_AT, b] + 2 * k  # row g of the ramp targets
+    k = tables.layout[MODES, b]
+    gains = tables.layout[COEF_AT, b] + COEF_GAIN * k  # row g of the ramp targets
     g = tables.target[gains : gains + k] * sample_rate
-    return g * g * tables.rows[INV, first : first + k]
+    return g * g * bank_row(tables, INV, b)
 
 
 def credit_fed_banks(tables, fed: list[FedBank], fields: tuple[int, int, int], sample_rate: float) -> None:

@@ -109,10 +109,10 @@ def mark_top(score, threshold, ties, top):
 
 
 @nb.njit(cache=True)
-def top_mask(score, limit, keep):
+def top_mask(score, limit, keep, ranked, bins):
     """keep[k] = True for the ``limit`` highest positive scores (ties broken by index);
-    none for ``limit`` <= 0."""
-    threshold, ties = threshold_of(score, limit, np.empty(score.size), np.empty(1 << DIGIT_BITS, np.int64))
+    none for ``limit`` <= 0. ``ranked`` and ``bins``: :func:`threshold_of`'s scratch."""
+    threshold, ties = threshold_of(score, limit, ranked, bins)
     mark_top(score, threshold, ties, keep)
 
 
@@ -124,10 +124,8 @@ def rank_modes(scores, limit, keep, fade, later_top):
     scores[2] > 0). Returns whether some mode fades."""
     n = scores.shape[1]
     ranked, bins = np.empty(n), np.empty(1 << DIGIT_BITS, np.int64)
-    now, ties_now = threshold_of(scores[0], limit, ranked, bins)
-    mark_top(scores[0], now, ties_now, keep)
-    later, ties_later = threshold_of(scores[1], limit, ranked, bins)
-    mark_top(scores[1], later, ties_later, later_top)
+    top_mask(scores[0], limit, keep, ranked, bins)
+    top_mask(scores[1], limit, later_top, ranked, bins)
     any_fade = False
     for k in range(n):
         f = keep[k] and not later_top[k] and scores[2, k] > 0.0
@@ -220,7 +218,8 @@ class Hearing(NamedTuple):
     last rendered, and whether its
     force is the score's impacts alone (``struck_only``: an ImpactForce's; ranked from the
     score, it never counts as heard nor wakes the bank: its input is not scanned, so its
-    ``forced``, ``unrendered`` and ``onset`` stay False)."""
+    ``forced``, ``unrendered`` and ``onset`` stay False, unless it is also ``unseen``, a
+    bank upstream of it through another source, when it counts as forced)."""
 
     inputs: np.ndarray
     size: int

@@ -310,14 +310,14 @@ def test_a_contact_nobody_scheduled_sounds_from_its_first_sample():
 def test_ranking_keeps_exactly_the_highest_positive_scores():
     """The compiled ranking against a sort: the ``limit`` highest positive scores (ties at
     the threshold filled up to the limit), all positive ones when fewer."""
-    from jassy.anytime_rank import top_mask
+    from jassy.anytime_rank import DIGIT_BITS, top_mask
 
     rng = np.random.default_rng(1)
     for size, limit in ((835, 209), (40, 7), (12, 30)):
         score = np.where(rng.random(size) < 0.3, 0.0, rng.random(size))
         score[:5] = score[5]  # ties
         keep = np.zeros(size, dtype=bool)
-        top_mask(score, limit, keep)
+        top_mask(score, limit, keep, np.empty(score.size), np.empty(1 << DIGIT_BITS, np.int64))
         positive = np.sort(score[score > 0])[::-1]
         assert keep.sum() == min(limit, positive.size)
         assert np.all(score[keep] > 0)
@@ -374,12 +374,12 @@ def test_selection_gives_numpys_partition_value():
         score = rng.random(40)
         score[3] = np.nan if unordered else score[3]
         keep = np.ones(40, dtype=bool)
-        top_mask(score, 0, keep)
+        top_mask(score, 0, keep, np.empty(score.size), np.empty(1 << DIGIT_BITS, np.int64))
         assert not keep.any()
     score = rng.random(50)
     score[7] = np.nan
     keep = np.zeros(50, dtype=bool)
-    top_mask(score, 10, keep)
+    top_mask(score, 10, keep, np.empty(score.size), np.empty(1 << DIGIT_BITS, np.int64))
     threshold = np.partition(score, 40)[40]  # (numpy sorts NaN last: 9 numbers above it, then it)
     np.testing.assert_array_equal(keep, score >= threshold)
 

@@ -352,9 +352,7 @@ def settle_compact(t, b):
     meta = t.compact_meta[b]
     if meta[GATHERED]:
         k, o = t.layout[MODES, b], t.layout[FIRST, b]
-        width, at = meta[WIDTH], t.layout[COMPACT_AT, b]
-        compact = rows_in(t.compact, at, COMPACT_ROWS, width)
-        scatter_kept(compact, t.kept[o : o + k], bank_rows(t, b))
+        scatter_kept(compact_bank(t, b), t.kept[o : o + k], bank_rows(t, b))
         meta[GATHERED] = 0
 
 
@@ -370,10 +368,8 @@ def jump_to_fresh(t, b):
         for i in range(k):
             bank[r, i] = fresh[r, i]
             target[r, i] = fresh[r, i]
-    meta = t.compact_meta[b]
-    if meta[GATHERED]:
-        width, at = meta[WIDTH], t.layout[COMPACT_AT, b]
-        compact = rows_in(t.compact, at, COMPACT_ROWS, width)
+    if t.compact_meta[b, GATHERED]:
+        compact = compact_bank(t, b)  # (gathered: its view)
         kept, j = t.kept[o : o + k], 0
         for i in range(k):
             if kept[i]:

@@ -441,7 +441,8 @@ def heard_lately(h, b):
     """Whether bank b hears a force in this stretch, heard one since it was last rendered,
     or in this or the last period (``h``: jassy.anytime_rank.Hearing): else its ring of
     the period's force holds zeros and keeps them. (Never for a ``struck_only`` bank,
-    whose force jassy.anytime_rank.scan_forces leaves unscanned.)"""
+    whose force jassy.anytime_rank.scan_forces leaves unscanned, unless it is also
+    ``unseen``.)"""
     return h.forced[b] or h.unrendered[b] or h.heard_now[b] or h.heard_before[b]
 
 
@@ -582,9 +583,10 @@ def render_kept(t, h, outputs, by_python, zeros, start, n, offset):
     its output (float64 arrays at ``outputs``) by :func:`render_bank` from the tables ``t``
     (ugens.modal_budget); its force into its ring unless ``struck_only`` (never judged).
     A bank with nothing to compute (no ramp, and no mode kept, or not
-    :func:`heard_lately` with no mode sounding and no force sample before) writes zeros (a
-    ``struck_only`` bank, which scan_forces leaves unscanned: when its span also holds no
-    force sample) (:func:`silence`), and not even those where its output already holds them: ``zeros[b]``
+    :func:`heard_lately` with no mode sounding and no force sample before) writes zeros
+    (:func:`silence`; a ``struck_only`` bank only when its span holds no force sample
+    either, since scan_forces leaves it unscanned), and not even those where its output
+    already holds them: ``zeros[b]``
     counts the samples from the start of its output buffer known to be zero (most of the
     wok scene's fourteen 4-mode banks are silent most of the time: writing 4096 zeros
     costs about as much as the kernel's bookkeeping); one with no mode kept only copies
