@@ -442,6 +442,10 @@ def test_two_down_one_up_staircase_follows_the_rules():
         ({"sigma_ms": -1.0}, "sigma_ms"),
         ({"trial_duration": -1}, "trial_duration"),
         ({"kind": "staircase", "rule": "4down"}, "rule"),
+        ({"kind": []}, "kind"),  # (values a dict cannot hold: a list or a table, not a crash)
+        ({"task": ["toj"]}, "task"),
+        ({"kind": "staircase", "rule": {"a": 1}}, "rule"),
+        ({"kind": "staircase", "tracks": [["audio_first"]]}, "tracks"),
     ],
 )
 def test_bad_designs_are_rejected_with_the_key(over, match):

@@ -546,6 +546,12 @@ def _stimulus_path(spec: str, base: Path | None) -> str:
     return spec
 
 
+def _named(value: Any, choices) -> bool:
+    """Whether ``value`` is one of the names ``choices`` (a TOML value of any type: a list
+    or table is no name, and cannot be looked up in a dict)."""
+    return isinstance(value, str) and value in choices
+
+
 def _string(table: dict, key: str, where: str, default: str = "") -> str:
     value = table.get(key, default)
     if not isinstance(value, str):
@@ -563,10 +569,9 @@ def parse_design(data: dict[str, Any], where: str = "design", base: Path | None 
     _unknown(study, STUDY_KEYS, w)
     if not isinstance(study.get("stimulus"), str) or not study["stimulus"]:
         raise DesignError(f"{w}: stimulus: expected a patch name or .toml path")
-    task = study.get(
-        "task", QUESTION_ALIASES.get(study.get("question", "which_first"), study.get("question"))
-    )
-    if task not in TASKS:
+    question = study.get("question", "which_first")
+    task = study.get("task", QUESTION_ALIASES[question] if _named(question, QUESTION_ALIASES) else question)
+    if not _named(task, TASKS):
         raise DesignError(
             f"{w}: task: expected one of {', '.join(TASKS)}, got {task!r}{suggest(task, TASKS)}"
         )
@@ -621,7 +626,7 @@ def _parse_method(method: Any, where: str, task: str) -> dict[str, Any]:
             f"{where}: missing [method] table (kind = 'constant', 'staircase', 'quest' or 'quest_plus')"
         )
     kind = method.get("kind", "constant")
-    if kind not in METHOD_KEYS:
+    if not _named(kind, METHOD_KEYS):
         raise DesignError(
             f"{where}: kind: expected one of {', '.join(METHOD_KEYS)}, got {kind!r}"
             f"{suggest(kind, METHOD_KEYS)}"
@@ -638,12 +643,12 @@ def _parse_method(method: Any, where: str, task: str) -> dict[str, Any]:
         )
     elif kind == "staircase":
         rule = method.get("rule", "2down1up")
-        if rule not in RULES:
+        if not _named(rule, RULES):
             raise DesignError(
                 f"{where}: rule: expected one of {', '.join(RULES)}, got {rule!r}{suggest(rule, RULES)}"
             )
         tracks = method.get("tracks", ["audio_first", "haptic_first"])
-        if not isinstance(tracks, list) or not tracks or any(t not in TRACKS for t in tracks):
+        if not isinstance(tracks, list) or not tracks or any(not _named(t, TRACKS) for t in tracks):
             raise DesignError(f"{where}: tracks: expected a list of {', '.join(TRACKS)}, got {tracks!r}")
         if len(set(tracks)) != len(tracks):
             raise DesignError(f"{where}: tracks: each track at most once")
@@ -791,7 +796,7 @@ def _parse_conditions(data, study, where, base, stimulus) -> list[Condition]:
         force = _number(force, "force_level", w, 1e-6, 1000.0)
         sign = None
         if "leading" in row:
-            if row["leading"] not in LEADING:
+            if not _named(row["leading"], LEADING):
                 raise DesignError(f"{w}: leading: expected 'audio' or 'haptic', got {row['leading']!r}")
             sign = LEADING[row["leading"]]
         labels = {k: v for k, v in row.items() if "." not in k}
